@@ -1,0 +1,1 @@
+"""Controllers: PID loop shaping, notch, control allocation, rigid-body feedforward (to come)."""

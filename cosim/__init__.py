@@ -1,0 +1,1 @@
+"""Co-simulation master: run configurations, stepping, recording, metrics and plots (to come)."""

@@ -1,0 +1,3 @@
+from flexff.cli import main
+
+raise SystemExit(main())

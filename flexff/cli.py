@@ -1,0 +1,65 @@
+"""The `flexff` command line: parses arguments and calls package functions, nothing more."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Callable, Sequence
+
+from plant.model import VARIANTS
+
+
+def _plant_info(args: argparse.Namespace) -> int:
+    from plant.analysis import plant_info
+
+    info = plant_info(args.variant)
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"plant variant: {info['variant']} (parasitic mode: {info['parasitic_mode']})")
+    print(f"workspace radius: {info['workspace_radius_m']} m")
+    for f, z in zip(info["natural_frequencies_hz"], info["damping_ratios"]):
+        print(f"mode at the centre: {f:.4f} Hz, damping ratio {z:.4f}")
+    for row in info["parameters"]:
+        print(f"  {row['name']:<16} {row['value']:<12.6g} {row['unit']:<10} {row['description']}")
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from flexff.demo import run_demo
+
+    return run_demo(args.output)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="flexff", description="Learned feedforward for a flexure manipulator, as FMI "
+                                   "co-simulation.")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    plant = commands.add_parser("plant", help="the manipulator plant model")
+    plant_commands = plant.add_subparsers(dest="plant_command", required=True)
+    info = plant_commands.add_parser("info", help="parameters, natural frequencies, workspace")
+    info.add_argument("--variant", choices=sorted(VARIANTS), default="nominal")
+    info.add_argument("--json", action="store_true", help="print JSON instead of text")
+    info.set_defaults(handler=_plant_info)
+
+    demo = commands.add_parser("demo", help="the whole pipeline on the embedded defaults")
+    demo.add_argument("-o", "--output", default="flexff-demo", help="output folder")
+    demo.set_defaults(handler=_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    handler: Callable[[argparse.Namespace], int] = args.handler
+    try:
+        return handler(args)
+    except (ValueError, FileNotFoundError) as error:
+        print(f"flexff: error: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""Learning pipeline: data collection, preprocessing, models, training, ONNX export (to come)."""

@@ -1,0 +1,1 @@
+"""The manipulator plant: parameters, kinematics, Lagrangian dynamics, actuators and sensors."""

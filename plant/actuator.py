@@ -1,0 +1,45 @@
+"""Motor, amplifier and encoder models: what lies between the controller's numbers and the arm."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import casadi as ca
+
+from plant.parameters import PlantParameters
+
+
+def saturated_current(p: PlantParameters, current: Any) -> Any:
+    """The amplifier delivers the commanded current clipped to +-i_max [A]."""
+    return ca.fmin(ca.fmax(current, -p.i_max), p.i_max)
+
+
+def motor_torque(p: PlantParameters, current: Any) -> ca.SX:
+    """Shoulder torques [N m] = torque constant * saturated current, per motor."""
+    return ca.vertcat(*[p.k_t[i] * saturated_current(p, current[i]) for i in range(3)])
+
+
+def friction_torque(p: PlantParameters, speed: Any) -> ca.SX:
+    """Motor friction [N m] opposing the rotor speed: smooth Coulomb (tanh) plus viscous.
+
+    The tanh keeps the right-hand side smooth for fixed-step RK4; w_stribeck sets how sharp.
+    """
+    return ca.vertcat(*[
+        -p.tau_coulomb[i] * ca.tanh(speed[i] / p.w_stribeck) - p.b_viscous[i] * speed[i]
+        for i in range(3)])
+
+
+def encoder_resolution(p: PlantParameters) -> Any:
+    """Angle of one encoder count [rad]."""
+    return 2 * math.pi / p.encoder_counts
+
+
+def encoder_reading(p: PlantParameters, angle: Any, home: Any, noise: Any) -> Any:
+    """Quantized encoder angle [rad]: counts from the home angle, plus noise before counting.
+
+    `noise` is a standard normal sample scaled by noise_std; the incremental encoder is zeroed
+    at the home pose (the workspace centre), so the reading is home + resolution * counts.
+    """
+    resolution = encoder_resolution(p)
+    return home + resolution * ca.floor((angle + p.noise_std * noise - home) / resolution + 0.5)

@@ -1,0 +1,135 @@
+"""Kinematics of the three-chain manipulator, written once for numbers and CasADi symbols.
+
+Chain i: a motor at M_i on a circle of radius r_mount (90, -30 and 210 degrees) turns the
+upper arm to absolute angle theta_si; the elbow hinge E_i = M_i + l_up u(theta_si) carries the
+lower arm at absolute angle theta_si + theta_ei (theta_ei is the elbow's relative angle, as in
+the seed's appendix C); the three lower arms meet at the wrist hinge (x_ee, y_ee), whose
+rotation theta_ee is the mean of the three lower-arm angles. The elbows bend the same way in
+every chain (the branch that holds at the centre: each upper arm turned clockwise from the
+line motor -> end effector).
+
+The 21 generalized coordinates follow eq. (2.1): per chain (x_up, y_up, theta_s, x_low, y_low,
+theta_e), then (x_ee, y_ee, theta_ee); arm positions are centres of mass.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from plant.parameters import PlantParameters
+
+MOUNT_ANGLES_DEG = (90.0, -30.0, 210.0)
+COORDINATE_NAMES = tuple(
+    f"{name}{i}" for i in (1, 2, 3)
+    for name in ("x_up", "y_up", "theta_s", "x_low", "y_low", "theta_e")
+) + ("x_ee", "y_ee", "theta_ee")
+N_COORDINATES = len(COORDINATE_NAMES)  # 21
+SHOULDER_INDEX = (2, 8, 14)
+ELBOW_INDEX = (5, 11, 17)
+EE_INDEX = (18, 19, 20)
+
+
+def mount(p: PlantParameters, chain: int) -> tuple[Any, Any]:
+    """Position of motor (shoulder hinge) `chain` (0-based) in m."""
+    a = math.radians(MOUNT_ANGLES_DEG[chain])
+    return p.r_mount * math.cos(a), p.r_mount * math.sin(a)
+
+
+def shoulder_angles(p: PlantParameters, x: Any, y: Any) -> list[Any]:
+    """Absolute upper-arm angles theta_s1..3 [rad] that put the wrist at (x, y)."""
+    angles = []
+    for i in range(3):
+        mx, my = mount(p, i)
+        dx, dy = x - mx, y - my
+        reach = ca.sqrt(dx**2 + dy**2)
+        alpha = ca.acos((p.l_up**2 + reach**2 - p.l_low**2) / (2 * p.l_up * reach))
+        angles.append(ca.atan2(dy, dx) - alpha)
+    return angles
+
+
+def generalized_coordinates(p: PlantParameters, x: Any, y: Any) -> Any:
+    """Inverse kinematics: the 21 coordinates of eq. (2.1) for the wrist at (x, y)."""
+    q, lower_angles = [], []
+    for i, theta_s in enumerate(shoulder_angles(p, x, y)):
+        mx, my = mount(p, i)
+        ex, ey = mx + p.l_up * ca.cos(theta_s), my + p.l_up * ca.sin(theta_s)
+        psi = ca.atan2(y - ey, x - ex)  # absolute lower-arm angle
+        theta_e = _wrap(psi - theta_s)
+        lower_angles.append(theta_s + theta_e)
+        q += [mx + p.c_up[i] * ca.cos(theta_s), my + p.c_up[i] * ca.sin(theta_s), theta_s,
+              ex + p.c_low[i] * ca.cos(psi), ey + p.c_low[i] * ca.sin(psi), theta_e]
+    q += [x, y, (lower_angles[0] + lower_angles[1] + lower_angles[2]) / 3]
+    return ca.vertcat(*q)
+
+
+def _wrap(angle: Any) -> Any:
+    """Wrap to (-pi, pi]; the elbow angle stays far from the cut in the workspace."""
+    return ca.atan2(ca.sin(angle), ca.cos(angle))
+
+
+def _elbow(p: PlantParameters, chain: int, theta_s: Any) -> tuple[Any, Any]:
+    mx, my = mount(p, chain)
+    return mx + p.l_up * ca.cos(theta_s), my + p.l_up * ca.sin(theta_s)
+
+
+@functools.lru_cache(maxsize=None)
+def _branch_sign() -> float:
+    """Which of the two circle intersections is the wrist: fixed by the assembly branch.
+
+    Evaluated once on the design geometry: the two intersections only swap where the two
+    elbows coincide, far outside any reachable configuration.
+    """
+    from plant.parameters import NOMINAL
+
+    t1, t2, _ = (float(a) for a in shoulder_angles(NOMINAL, 0.0, 0.0))
+    guess = _intersection(NOMINAL, t1, t2, 1.0)
+    return 1.0 if float(ca.norm_2(ca.vertcat(*guess))) < 1e-9 else -1.0
+
+
+def _intersection(p: PlantParameters, theta_s1: Any, theta_s2: Any, sign: float) -> tuple:
+    (ax, ay), (bx, by) = _elbow(p, 0, theta_s1), _elbow(p, 1, theta_s2)
+    dx, dy = bx - ax, by - ay
+    dist = ca.sqrt(dx**2 + dy**2)
+    height = ca.sqrt(p.l_low**2 - (dist / 2) ** 2)
+    return ((ax + bx) / 2 - sign * height * dy / dist, (ay + by) / 2 + sign * height * dx / dist)
+
+
+def forward_kinematics_2(p: PlantParameters, theta_s1: Any, theta_s2: Any) -> tuple[Any, Any]:
+    """Wrist position from the encoders of chains 1 and 2 (the thesis's choice)."""
+    return _intersection(p, theta_s1, theta_s2, _branch_sign())
+
+
+def forward_kinematics_3(p: PlantParameters, thetas: Any, iterations: int = 4) -> tuple[Any, Any]:
+    """Least-squares wrist position from all three encoders (CasADi SX in and out).
+
+    Minimizes sum_i (theta_si(x, y) - measured_i)^2 by Gauss-Newton, started from the
+    2-encoder solution; a fixed iteration count keeps it a plain expression for code generation.
+    With consistent angles it returns the exact position; with quantized ones it averages.
+    """
+    z = ca.SX.sym("z", 2)
+    residual = ca.vertcat(*shoulder_angles(p, z[0], z[1])) - ca.vertcat(*[thetas[k] for k in range(3)])
+    jac = ca.jacobian(residual, z)
+    update = z - ca.solve(jac.T @ jac, jac.T @ residual)
+    pos = ca.vertcat(*forward_kinematics_2(p, thetas[0], thetas[1]))
+    for _ in range(iterations):
+        pos = ca.substitute(update, z, pos)
+    return pos[0], pos[1]
+
+
+def check_workspace(p: PlantParameters, x: Any, y: Any, what: str = "point") -> None:
+    """Raise ValueError if any (x, y) [m] lies outside the workspace disc or is not finite."""
+    xs, ys = np.atleast_1d(np.asarray(x, dtype=float)), np.atleast_1d(np.asarray(y, dtype=float))
+    if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ys))):
+        raise ValueError(f"{what} has non-finite coordinates")
+    radius = np.hypot(xs, ys)
+    k = int(np.argmax(radius))
+    if radius[k] > float(p.workspace_radius):
+        raise ValueError(
+            f"{what} ({xs[k]:.6g}, {ys[k]:.6g}) m lies outside the workspace: its distance "
+            f"{radius[k]:.6g} m from the centre exceeds the workspace radius "
+            f"{float(p.workspace_radius):.6g} m")

@@ -1,0 +1,199 @@
+"""The plant as CasADi Functions of (state, currents, parameters), per variant.
+
+`nominal` is the ideal model the controllers are designed on: rotors rigid on the arms, no
+friction, no noise. `hardware` stands in for the real machine: mismatched parameters, motor
+friction, a compliant rotor-to-arm coupling (a parasitic resonance; three rotor angles and
+speeds join the state) and encoder noise. Each effect is a parameter: zero friction or noise
+switches it off; the coupling is structural (`parasitic_mode`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import casadi as ca
+import numpy as np
+
+from plant.actuator import encoder_reading, friction_torque, motor_torque
+from plant.dynamics import ReducedDynamics, reduced_dynamics
+from plant.kinematics import forward_kinematics_2, forward_kinematics_3
+from plant.kinematics import generalized_coordinates, shoulder_angles
+from plant.parameters import HARDWARE, NOMINAL, PlantParameters
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A named plant: its true parameter values and whether the parasitic mode is modelled."""
+
+    name: str
+    parameters: PlantParameters
+    parasitic_mode: bool
+
+
+VARIANTS = {
+    "nominal": Variant("nominal", NOMINAL, parasitic_mode=False),
+    "hardware": Variant("hardware", HARDWARE, parasitic_mode=True),
+}
+
+
+def get_variant(name: str) -> Variant:
+    """The variant called `name`, or a ValueError listing the known ones."""
+    try:
+        return VARIANTS[name]
+    except KeyError:
+        raise ValueError(
+            f"unknown plant variant {name!r}: choose one of {', '.join(VARIANTS)}") from None
+
+
+class PlantModel:
+    """Symbolic plant of one variant; every Function takes the flat parameter vector last.
+
+    Functions (inputs -> outputs):
+      forward_dynamics (x, i, p) -> dx/dt         output (x, i, p, w) -> y
+      inverse_dynamics (pos, vel, acc, p) -> F    terms (pos, vel, p) -> M, C, Q, D, A
+      energy (x, p) -> E                          coordinates (pos, p) -> q (21)
+      fk2 (theta_s1..2, p) -> pos                 fk3 (theta_s1..3, p) -> pos
+      initial_state (pos, p) -> x (at rest)
+    """
+
+    def __init__(self, variant: Variant | str = "nominal") -> None:
+        self.variant = get_variant(variant) if isinstance(variant, str) else variant
+        self.p = ca.vertcat(*[ca.SX.sym(n) for n in PlantParameters.names()])
+        self.params = PlantParameters.from_vector(self.p)
+        self.rigid = reduced_dynamics(self.params, rotor_on_arm=True)
+        self.arm = (reduced_dynamics(self.params, rotor_on_arm=False)
+                    if self.variant.parasitic_mode else self.rigid)
+
+    # -- signals ------------------------------------------------------------------------------
+    @property
+    def state_names(self) -> list[str]:
+        names = ["x", "y", "vx", "vy"]
+        if self.variant.parasitic_mode:
+            names += [f"phi_r{i}" for i in (1, 2, 3)] + [f"omega_r{i}" for i in (1, 2, 3)]
+        return names
+
+    input_names = ["i1", "i2", "i3"]
+    output_names = ["theta_s1", "theta_s2", "theta_s3", "x", "y", "vx", "vy",
+                    "tau1", "tau2", "tau3"]
+
+    @property
+    def n_states(self) -> int:
+        return len(self.state_names)
+
+    def parameter_values(self, **overrides: float) -> np.ndarray:
+        """Flat numeric parameter vector of this variant, with validated overrides by name."""
+        return np.array(self.variant.parameters.with_values(**overrides).vector())
+
+    # -- symbolic building blocks -------------------------------------------------------------
+    @cached_property
+    def _x(self) -> ca.SX:
+        return ca.SX.sym("x", self.n_states)
+
+    @cached_property
+    def _i(self) -> ca.SX:
+        return ca.SX.sym("i", 3)
+
+    def _substitute_state(self, dyn: ReducedDynamics, expr: ca.SX) -> ca.SX:
+        return ca.substitute(expr, ca.vertcat(dyn.pos, dyn.vel), self._x[:4])
+
+    def _rotors(self) -> tuple[ca.SX, ca.SX]:
+        return self._x[4:7], self._x[7:10]
+
+    def _coupling_torque(self) -> ca.SX:
+        """Torque the compliant coupling passes from each rotor to its upper arm."""
+        phi, omega = self._rotors()
+        pp, dyn = self.params, self.arm
+        arm_angle = ca.vertcat(*[dyn.q[s] for s in (2, 8, 14)])
+        arm_speed = dyn.A @ dyn.vel
+        torque = ca.vertcat(*[pp.k_coupling[i] * (phi[i] - arm_angle[i])
+                              + pp.d_coupling[i] * (omega[i] - arm_speed[i]) for i in range(3)])
+        return self._substitute_state(dyn, torque)
+
+    # -- Functions ----------------------------------------------------------------------------
+    @cached_property
+    def forward_dynamics(self) -> ca.Function:
+        pp, x, i = self.params, self._x, self._i
+        if not self.variant.parasitic_mode:
+            dyn = self.rigid
+            torque = motor_torque(pp, i) + friction_torque(pp, dyn.A @ dyn.vel)
+            acc = self._substitute_state(dyn, dyn.acceleration(dyn.A.T @ torque))
+            rhs = ca.vertcat(x[2:4], acc)
+        else:
+            dyn, coupling = self.arm, self._coupling_torque()
+            acc = self._substitute_state(dyn, dyn.acceleration(dyn.A.T @ coupling))
+            _, omega = self._rotors()
+            rotor_acc = (motor_torque(pp, i) + friction_torque(pp, omega) - coupling) / \
+                ca.vertcat(*pp.j_rotor)
+            rhs = ca.vertcat(x[2:4], acc, omega, rotor_acc)
+        return ca.Function("forward_dynamics", [x, i, self.p], [rhs],
+                           ["x", "i", "p"], ["xdot"])
+
+    @cached_property
+    def output(self) -> ca.Function:
+        pp, x, i = self.params, self._x, self._i
+        noise = ca.SX.sym("w", 3)
+        if self.variant.parasitic_mode:
+            angle = self._rotors()[0]  # the encoder sits on the motor
+        else:
+            angle = ca.vertcat(*shoulder_angles(pp, x[0], x[1]))
+        home = ca.vertcat(*shoulder_angles(pp, 0.0, 0.0))
+        theta = ca.vertcat(*[encoder_reading(pp, angle[k], home[k], noise[k]) for k in range(3)])
+        y = ca.vertcat(theta, x[0:4], motor_torque(pp, i))
+        return ca.Function("output", [x, i, self.p, noise], [y], ["x", "i", "p", "w"], ["y"])
+
+    @cached_property
+    def initial_state(self) -> ca.Function:
+        """The state at rest at wrist position pos (rotors aligned with their arms)."""
+        pos = ca.SX.sym("pos", 2)
+        x0 = ca.vertcat(pos, 0, 0)
+        if self.variant.parasitic_mode:
+            x0 = ca.vertcat(x0, *shoulder_angles(self.params, pos[0], pos[1]), 0, 0, 0)
+        return ca.Function("initial_state", [pos, self.p], [x0], ["pos", "p"], ["x0"])
+
+    @cached_property
+    def inverse_dynamics(self) -> ca.Function:
+        """Eq. (2.4): end-effector force [N] for position, velocity, acceleration (rigid model)."""
+        dyn, acc = self.rigid, ca.SX.sym("acc", 2)
+        return ca.Function("inverse_dynamics", [dyn.pos, dyn.vel, acc, self.p],
+                           [dyn.inverse(acc)], ["pos", "vel", "acc", "p"], ["F"])
+
+    @cached_property
+    def terms(self) -> ca.Function:
+        dyn = self.rigid
+        return ca.Function("terms", [dyn.pos, dyn.vel, self.p],
+                           [dyn.M, dyn.C, dyn.Q, dyn.D, dyn.A],
+                           ["pos", "vel", "p"], ["M", "C", "Q", "D", "A"])
+
+    @cached_property
+    def energy(self) -> ca.Function:
+        """Total mechanical energy [J]: bodies, rotors and flexures (and coupling springs)."""
+        dyn = self.arm
+        energy = self._substitute_state(dyn, dyn.kinetic + dyn.potential)
+        if self.variant.parasitic_mode:
+            phi, omega = self._rotors()
+            pp = self.params
+            arm_angle = self._substitute_state(dyn, ca.vertcat(*[dyn.q[s] for s in (2, 8, 14)]))
+            for k in range(3):
+                energy += 0.5 * pp.j_rotor[k] * omega[k] ** 2
+                energy += 0.5 * pp.k_coupling[k] * (phi[k] - arm_angle[k]) ** 2
+        return ca.Function("energy", [self._x, self.p], [energy], ["x", "p"], ["E"])
+
+    @cached_property
+    def coordinates(self) -> ca.Function:
+        pos = ca.SX.sym("pos", 2)
+        return ca.Function("coordinates", [pos, self.p],
+                           [generalized_coordinates(self.params, pos[0], pos[1])],
+                           ["pos", "p"], ["q"])
+
+    @cached_property
+    def fk2(self) -> ca.Function:
+        theta = ca.SX.sym("theta", 2)
+        pos = ca.vertcat(*forward_kinematics_2(self.params, theta[0], theta[1]))
+        return ca.Function("fk2", [theta, self.p], [pos], ["theta", "p"], ["pos"])
+
+    @cached_property
+    def fk3(self) -> ca.Function:
+        theta = ca.SX.sym("theta", 3)
+        pos = ca.vertcat(*forward_kinematics_3(self.params, theta))
+        return ca.Function("fk3", [theta, self.p], [pos], ["theta", "p"], ["pos"])
