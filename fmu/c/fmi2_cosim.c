@@ -1,0 +1,853 @@
+/*
+ * fmi2_cosim.c -- generic FMI 2.0 co-simulation wrapper of flexff.
+ *
+ * One hand-written implementation of the whole FMI 2.0 co-simulation API, compiled together
+ * with per-model generated code (the layout of the Reference-FMUs):
+ *   - config.h:  sizes, value references, names, start values and flags of one model;
+ *   - model.c/h: CasADi-generated functions <id>_initial_state(p), <id>_dynamics(x, u, p)
+ *                and <id>_output(x, u, p, w), reached through the MODEL_FN() macro.
+ *
+ * Real value references are laid out in contiguous blocks (see config.h):
+ *   [VR_P, +N_P) parameters, [VR_MS, +N_MS) max_substep (continuous systems only),
+ *   [VR_U, +N_U) inputs, [VR_Y, +N_Y) outputs, [VR_X, +N_X) states; the Integer `seed` is VR_SEED.
+ *
+ * Everything an instance computes with lives in one plain struct (Data) so that FMU states are
+ * a copy of it and serialization is a header plus its bytes.
+ */
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+#include "config.h"
+
+/* C99 has no zero-length arrays: size buffers of empty blocks as one element. */
+#define DIM(n) ((n) > 0 ? (n) : 1)
+#define MAX2(a, b) ((a) > (b) ? (a) : (b))
+#define MAX3(a, b, c) MAX2(MAX2(a, b), c)
+
+/* CasADi work sizes, known at compile time from the generated header. */
+#define SZ_ARG MAX3(MODEL_FN(initial_state_SZ_ARG), MODEL_FN(dynamics_SZ_ARG), MODEL_FN(output_SZ_ARG))
+#define SZ_RES MAX3(MODEL_FN(initial_state_SZ_RES), MODEL_FN(dynamics_SZ_RES), MODEL_FN(output_SZ_RES))
+#define SZ_IW MAX3(MODEL_FN(initial_state_SZ_IW), MODEL_FN(dynamics_SZ_IW), MODEL_FN(output_SZ_IW))
+#define SZ_W MAX3(MODEL_FN(initial_state_SZ_W), MODEL_FN(dynamics_SZ_W), MODEL_FN(output_SZ_W))
+
+/* output(x, u, p, w) has four arguments, so eval() may always fill arg[0..3]. */
+typedef char assert_sz_arg[SZ_ARG >= 4 ? 1 : -1];
+
+#define INSTANCE_MAGIC 0x464c5846u /* "FLXF" */
+#define STATE_MAGIC 0x464c5853u    /* "FLXS" */
+#define SERIAL_MAGIC "FLXFSTA"     /* 7 characters + NUL = 8 bytes */
+#define SERIAL_VERSION 1u
+#define TIME_TOL 1e-9              /* relative tolerance on communication times */
+#define MAX_SUBSTEPS 1000000000.0  /* refuse steps that would need more RK4 sub-steps */
+
+typedef int (*CasadiFn)(const casadi_real **arg, casadi_real **res, casadi_int *iw,
+                        casadi_real *w, int mem);
+
+/* ---------------------------------------------------------------------------------------- */
+/* Machine states as bit flags, so that each function lists where it is allowed.             */
+
+typedef enum {
+    MODE_INSTANTIATED = 1 << 0,
+    MODE_INIT = 1 << 1,     /* initialization mode */
+    MODE_STEPPING = 1 << 2, /* slave initialized: fmi2DoStep allowed */
+    MODE_TERMINATED = 1 << 3,
+    MODE_ERROR = 1 << 4     /* after a failed step: only getters, reset, FMU states, free */
+} Mode;
+
+#define ANY_MODE (MODE_INSTANTIATED | MODE_INIT | MODE_STEPPING | MODE_TERMINATED | MODE_ERROR)
+#define READABLE (MODE_INIT | MODE_STEPPING | MODE_TERMINATED | MODE_ERROR)
+
+static const char *mode_name(int mode) {
+    switch (mode) {
+    case MODE_INSTANTIATED: return "instantiated";
+    case MODE_INIT: return "initialization mode";
+    case MODE_STEPPING: return "stepping (initialized)";
+    case MODE_TERMINATED: return "terminated";
+    case MODE_ERROR: return "error";
+    default: return "unknown";
+    }
+}
+
+/* Log categories, as declared in modelDescription.xml. */
+enum { LOG_ERROR, LOG_WARNING, LOG_ALL, N_CATEGORIES };
+static const char *const CATEGORY_NAMES[N_CATEGORIES] = {"logStatusError", "logStatusWarning",
+                                                         "logAll"};
+
+/* ---------------------------------------------------------------------------------------- */
+/* Random numbers: xoshiro256** seeded by splitmix64, normals by Box-Muller (cached pair).    */
+
+typedef struct {
+    uint64_t s[4];
+    double spare;  /* second sample of the last Box-Muller pair */
+    int has_spare;
+} Rng;
+
+static uint64_t splitmix64(uint64_t *x) {
+    uint64_t z = (*x += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+}
+
+static uint64_t rotl(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
+
+static uint64_t xoshiro_next(Rng *r) {
+    const uint64_t result = rotl(r->s[1] * 5, 7) * 9;
+    const uint64_t t = r->s[1] << 17;
+    r->s[2] ^= r->s[0];
+    r->s[3] ^= r->s[1];
+    r->s[1] ^= r->s[2];
+    r->s[0] ^= r->s[3];
+    r->s[2] ^= t;
+    r->s[3] = rotl(r->s[3], 45);
+    return result;
+}
+
+static void rng_seed(Rng *r, fmi2Integer seed) {
+    uint64_t x = (uint64_t)(int64_t)seed;
+    for (int i = 0; i < 4; i++) r->s[i] = splitmix64(&x);
+    r->spare = 0.0;
+    r->has_spare = 0;
+}
+
+/* Uniform in the open interval (0, 1): 53 random bits, centred in their cell. */
+static double rng_uniform(Rng *r) {
+    return ((double)(xoshiro_next(r) >> 11) + 0.5) * 0x1.0p-53;
+}
+
+static double rng_normal(Rng *r) {
+    if (r->has_spare) {
+        r->has_spare = 0;
+        return r->spare;
+    }
+    const double radius = sqrt(-2.0 * log(rng_uniform(r)));
+    const double angle = 2.0 * 3.14159265358979323846 * rng_uniform(r);
+    r->spare = radius * sin(angle);
+    r->has_spare = 1;
+    return radius * cos(angle);
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Instance data                                                                             */
+
+/* Everything that defines where a simulation is: copied by fmi2GetFMUstate. */
+typedef struct {
+    int mode;
+    fmi2Real time;
+    fmi2Real stop_time;
+    int stop_time_defined;
+    fmi2Real p[DIM(N_P)];
+    fmi2Real max_substep;
+    fmi2Integer seed;
+    fmi2Real u[DIM(N_U)];
+    fmi2Real x[DIM(N_X)];
+    fmi2Real w[DIM(N_W)];
+    Rng rng;
+} Data;
+
+typedef struct {
+    uint32_t magic;
+    Data d;
+} State;
+
+typedef struct {
+    uint32_t magic;
+    Data d;
+    fmi2CallbackFunctions cb;
+    char *name;
+    int log_on[N_CATEGORIES];
+    int mem[3]; /* CasADi memory of initial_state, dynamics, output */
+    /* scratch: CasADi work arrays, RK4 stages, step result, outputs */
+    const casadi_real *arg[DIM(SZ_ARG)];
+    casadi_real *res[DIM(SZ_RES)];
+    casadi_int iw[DIM(SZ_IW)];
+    casadi_real w[DIM(SZ_W)];
+    fmi2Real k1[DIM(N_X)], k2[DIM(N_X)], k3[DIM(N_X)], k4[DIM(N_X)], xs[DIM(N_X)];
+    fmi2Real xn[DIM(N_X)];
+    fmi2Real y[DIM(N_Y)];
+} Instance;
+
+/* Serialized FMU state: this header, then the bytes of Data. */
+typedef struct {
+    char magic[8];
+    uint32_t version;
+    uint32_t data_size;
+    uint64_t model_hash; /* FNV-1a of the GUID: a blob of another model is refused */
+} SerialHeader;
+
+/* ---------------------------------------------------------------------------------------- */
+/* Logging                                                                                   */
+
+/* Send a formatted message to the logger; '%' is doubled since loggers treat it as a format. */
+static void vlog_to(const fmi2CallbackFunctions *cb, fmi2String name, fmi2Status status,
+                    int category, const char *fmt, va_list ap) {
+    char text[1024], escaped[2048];
+    size_t j = 0;
+    if (cb == NULL || cb->logger == NULL) return;
+    vsnprintf(text, sizeof text, fmt, ap);
+    for (size_t i = 0; text[i] != '\0' && j + 2 < sizeof escaped; i++) {
+        if (text[i] == '%') escaped[j++] = '%';
+        escaped[j++] = text[i];
+    }
+    escaped[j] = '\0';
+    cb->logger(cb->componentEnvironment, name, status, CATEGORY_NAMES[category], escaped);
+}
+
+static void log_msg(Instance *c, fmi2Status status, int category, const char *fmt, ...) {
+    va_list ap;
+    if (!c->log_on[category]) return;
+    va_start(ap, fmt);
+    vlog_to(&c->cb, c->name, status, category, fmt, ap);
+    va_end(ap);
+}
+
+/* Log an error and return fmi2Error, for one-line early exits. */
+static fmi2Status fail(Instance *c, const char *fmt, ...) {
+    va_list ap;
+    if (!c->log_on[LOG_ERROR]) return fmi2Error;
+    va_start(ap, fmt);
+    vlog_to(&c->cb, c->name, fmi2Error, LOG_ERROR, fmt, ap);
+    va_end(ap);
+    return fmi2Error;
+}
+
+/* The instance behind `comp` if it is valid and `fname` is allowed in its mode, else NULL. */
+static Instance *enter(fmi2Component comp, const char *fname, int allowed) {
+    Instance *c = (Instance *)comp;
+    if (c == NULL || c->magic != INSTANCE_MAGIC) return NULL;
+    if (!(c->d.mode & allowed)) {
+        fail(c, "%s() is not allowed in state '%s'.", fname, mode_name(c->d.mode));
+        return NULL;
+    }
+    log_msg(c, fmi2OK, LOG_ALL, "%s()", fname);
+    return c;
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Model evaluation                                                                          */
+
+/* Evaluate one generated function with up to four dense inputs and one dense output. */
+static int eval(Instance *c, CasadiFn f, int mem, const fmi2Real *a0, const fmi2Real *a1,
+                const fmi2Real *a2, const fmi2Real *a3, fmi2Real *r0) {
+    c->arg[0] = a0;
+    c->arg[1] = a1;
+    c->arg[2] = a2;
+    c->arg[3] = a3;
+    c->res[0] = r0;
+    return f(c->arg, c->res, c->iw, c->w, mem);
+}
+
+static int eval_initial_state(Instance *c, fmi2Real *x) {
+    return eval(c, MODEL_FN(initial_state), c->mem[0], c->d.p, NULL, NULL, NULL, x);
+}
+
+static int eval_dynamics(Instance *c, const fmi2Real *x, fmi2Real *out) {
+    return eval(c, MODEL_FN(dynamics), c->mem[1], x, c->d.u, c->d.p, NULL, out);
+}
+
+static int eval_output(Instance *c) {
+    return eval(c, MODEL_FN(output), c->mem[2], c->d.x, c->d.u, c->d.p, c->d.w, c->y);
+}
+
+static void draw_noise(Instance *c) {
+    for (int i = 0; i < N_W; i++) c->d.w[i] = rng_normal(&c->d.rng);
+}
+
+/* The initial state and the first noise sample, from the current parameters and seed. */
+static int compute_initial(Instance *c) {
+    rng_seed(&c->d.rng, c->d.seed);
+    draw_noise(c);
+    return eval_initial_state(c, c->d.x);
+}
+
+/* Index of the first non-finite entry of v[0..n), or -1. */
+static int first_nonfinite(const fmi2Real *v, int n) {
+    for (int i = 0; i < n; i++)
+        if (!isfinite(v[i])) return i;
+    return -1;
+}
+
+/* One RK4 step of length dt from c->xn, in place, inputs held constant. */
+static int rk4_step(Instance *c, fmi2Real dt) {
+    fmi2Real *x = c->xn;
+    int err = eval_dynamics(c, x, c->k1);
+    for (int i = 0; i < N_X; i++) c->xs[i] = x[i] + 0.5 * dt * c->k1[i];
+    err |= eval_dynamics(c, c->xs, c->k2);
+    for (int i = 0; i < N_X; i++) c->xs[i] = x[i] + 0.5 * dt * c->k2[i];
+    err |= eval_dynamics(c, c->xs, c->k3);
+    for (int i = 0; i < N_X; i++) c->xs[i] = x[i] + dt * c->k3[i];
+    err |= eval_dynamics(c, c->xs, c->k4);
+    for (int i = 0; i < N_X; i++)
+        x[i] = x[i] + dt / 6.0 * (c->k1[i] + 2.0 * c->k2[i] + 2.0 * c->k3[i] + c->k4[i]);
+    return err;
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Variables                                                                                 */
+
+static int in_block(fmi2ValueReference vr, unsigned first, unsigned n) {
+    return vr >= first && vr - first < n;
+}
+static int is_parameter(fmi2ValueReference vr) { return in_block(vr, VR_P, N_P); }
+static int is_max_substep(fmi2ValueReference vr) { return in_block(vr, VR_MS, N_MS); }
+static int is_input(fmi2ValueReference vr) { return in_block(vr, VR_U, N_U); }
+static int is_output(fmi2ValueReference vr) { return in_block(vr, VR_Y, N_Y); }
+static int is_state(fmi2ValueReference vr) { return in_block(vr, VR_X, N_X); }
+
+/* Why `value` is not acceptable for parameter `vr` (max_substep included), or NULL. */
+static const char *parameter_problem(fmi2ValueReference vr, fmi2Real value) {
+    if (!isfinite(value)) return "must be finite";
+    if (is_max_substep(vr) && value <= 0.0) return "must be > 0";
+    if (is_parameter(vr) && P_POSITIVE[vr - VR_P] && value <= 0.0) return "must be > 0";
+    return NULL;
+}
+
+/* Check every parameter (max_substep follows them); logs and fails at the first bad one. */
+static fmi2Status check_parameters(Instance *c) {
+    for (int i = 0; i < N_P + N_MS; i++) {
+        const fmi2ValueReference vr = (fmi2ValueReference)(VR_P + i);
+        const fmi2Real value = is_parameter(vr) ? c->d.p[i] : c->d.max_substep;
+        const char *why = parameter_problem(vr, value);
+        if (why) return fail(c, "Parameter '%s' = %g %s.", REAL_NAMES[vr], value, why);
+    }
+    return fmi2OK;
+}
+
+static fmi2Status check_arrays(Instance *c, const char *fname, const void *vr, size_t nvr,
+                               const void *value) {
+    if (nvr > 0 && (vr == NULL || value == NULL))
+        return fail(c, "%s(): null value reference or value array with nvr = %zu.", fname, nvr);
+    return fmi2OK;
+}
+
+/* Restore what fmi2Instantiate sets: start values, time 0, mode instantiated. */
+static void set_defaults(Instance *c) {
+    memset(&c->d, 0, sizeof c->d);
+    c->d.mode = MODE_INSTANTIATED;
+    for (int i = 0; i < N_P; i++) c->d.p[i] = P_START[i];
+    for (int i = 0; i < N_U; i++) c->d.u[i] = U_START[i];
+    c->d.max_substep = MAX_SUBSTEP_START;
+    c->d.seed = SEED_START;
+}
+
+/* FNV-1a hash of the GUID, stamped into serialized states. */
+static uint64_t model_hash(void) {
+    uint64_t h = 0xcbf29ce484222325ull;
+    for (const char *s = MODEL_GUID; *s; s++) h = (h ^ (uint64_t)(unsigned char)*s) * 0x100000001b3ull;
+    return h;
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Inquire version numbers and set debug logging                                             */
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[]) {
+    Instance *c = enter(comp, "fmi2SetDebugLogging", ANY_MODE);
+    if (!c) return fmi2Error;
+    if (nCategories > 0 && categories == NULL)
+        return fail(c, "fmi2SetDebugLogging(): null categories with nCategories = %zu.", nCategories);
+    for (size_t i = 0; i < nCategories; i++) {
+        int known = 0;
+        for (int k = 0; k < N_CATEGORIES; k++)
+            known |= categories[i] != NULL && strcmp(categories[i], CATEGORY_NAMES[k]) == 0;
+        if (!known)
+            return fail(c, "fmi2SetDebugLogging(): unknown log category '%s'.",
+                        categories[i] ? categories[i] : "(null)");
+    }
+    for (int k = 0; k < N_CATEGORIES; k++) {
+        int selected = nCategories == 0;
+        for (size_t i = 0; i < nCategories; i++) selected |= strcmp(categories[i], CATEGORY_NAMES[k]) == 0;
+        if (selected) c->log_on[k] = loggingOn != fmi2False;
+    }
+    return fmi2OK;
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Creation and destruction                                                                  */
+
+static void log_early(const fmi2CallbackFunctions *cb, fmi2String name, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    vlog_to(cb, name ? name : "?", fmi2Error, LOG_ERROR, fmt, ap);
+    va_end(ap);
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation,
+                              const fmi2CallbackFunctions *functions, fmi2Boolean visible,
+                              fmi2Boolean loggingOn) {
+    (void)fmuResourceLocation; /* the model needs no resources */
+    (void)visible;
+    if (functions == NULL) return NULL;
+    if (functions->allocateMemory == NULL || functions->freeMemory == NULL) {
+        log_early(functions, instanceName, "fmi2Instantiate(): allocateMemory and freeMemory are required.");
+        return NULL;
+    }
+    if (instanceName == NULL || instanceName[0] == '\0') {
+        log_early(functions, instanceName, "fmi2Instantiate(): instanceName must be a non-empty string.");
+        return NULL;
+    }
+    if (fmuType != fmi2CoSimulation) {
+        log_early(functions, instanceName, "fmi2Instantiate(): this FMU supports co-simulation only.");
+        return NULL;
+    }
+    if (fmuGUID == NULL || strcmp(fmuGUID, MODEL_GUID) != 0) {
+        log_early(functions, instanceName, "fmi2Instantiate(): GUID '%s' does not match '%s'.",
+                  fmuGUID ? fmuGUID : "(null)", MODEL_GUID);
+        return NULL;
+    }
+    Instance *c = (Instance *)functions->allocateMemory(1, sizeof(Instance));
+    size_t len = strlen(instanceName) + 1;
+    char *name = c ? (char *)functions->allocateMemory(len, 1) : NULL;
+    if (name == NULL) {
+        if (c) functions->freeMemory(c);
+        log_early(functions, instanceName, "fmi2Instantiate(): out of memory.");
+        return NULL;
+    }
+    memset(c, 0, sizeof *c);
+    memcpy(name, instanceName, len);
+    c->magic = INSTANCE_MAGIC;
+    c->cb = *functions;
+    c->name = name;
+    c->log_on[LOG_ERROR] = 1; /* errors are reported unless switched off explicitly */
+    c->log_on[LOG_WARNING] = loggingOn != fmi2False;
+    c->log_on[LOG_ALL] = loggingOn != fmi2False;
+    MODEL_FN(initial_state_incref)();
+    MODEL_FN(dynamics_incref)();
+    MODEL_FN(output_incref)();
+    c->mem[0] = MODEL_FN(initial_state_checkout)();
+    c->mem[1] = MODEL_FN(dynamics_checkout)();
+    c->mem[2] = MODEL_FN(output_checkout)();
+    set_defaults(c);
+    log_msg(c, fmi2OK, LOG_ALL, "fmi2Instantiate()");
+    return c;
+}
+
+void fmi2FreeInstance(fmi2Component comp) {
+    Instance *c = enter(comp, "fmi2FreeInstance", ANY_MODE);
+    if (!c) return;
+    MODEL_FN(initial_state_release)(c->mem[0]);
+    MODEL_FN(dynamics_release)(c->mem[1]);
+    MODEL_FN(output_release)(c->mem[2]);
+    MODEL_FN(initial_state_decref)();
+    MODEL_FN(dynamics_decref)();
+    MODEL_FN(output_decref)();
+    c->magic = 0; /* make use after free detectable */
+    c->cb.freeMemory(c->name);
+    c->cb.freeMemory(c);
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Initialization, termination, reset                                                        */
+
+fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined,
+                               fmi2Real tolerance, fmi2Real startTime,
+                               fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
+    Instance *c = enter(comp, "fmi2SetupExperiment", MODE_INSTANTIATED);
+    (void)toleranceDefined; /* fixed-step RK4: the tolerance does not apply */
+    (void)tolerance;
+    if (!c) return fmi2Error;
+    if (!isfinite(startTime)) return fail(c, "fmi2SetupExperiment(): startTime must be finite.");
+    if (stopTimeDefined && !(stopTime >= startTime))
+        return fail(c, "fmi2SetupExperiment(): stopTime %g is before startTime %g.", stopTime, startTime);
+    c->d.time = startTime;
+    c->d.stop_time = stopTime;
+    c->d.stop_time_defined = stopTimeDefined != fmi2False;
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
+    Instance *c = enter(comp, "fmi2EnterInitializationMode", MODE_INSTANTIATED);
+    if (!c) return fmi2Error;
+    c->d.mode = MODE_INIT;
+    return fmi2OK;
+}
+
+/* Validates the parameters (staying in initialization mode if one is bad), then computes the
+ * initial state and seeds the noise. */
+fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
+    Instance *c = enter(comp, "fmi2ExitInitializationMode", MODE_INIT);
+    if (!c) return fmi2Error;
+    if (check_parameters(c) != fmi2OK) return fmi2Error;
+    if (compute_initial(c) != 0) return fail(c, "Evaluating the initial state failed.");
+    int bad = first_nonfinite(c->d.x, N_X);
+    if (bad >= 0) return fail(c, "Initial state '%s' is not finite.", REAL_NAMES[VR_X + bad]);
+    c->d.mode = MODE_STEPPING;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Terminate(fmi2Component comp) {
+    Instance *c = enter(comp, "fmi2Terminate", MODE_STEPPING);
+    if (!c) return fmi2Error;
+    c->d.mode = MODE_TERMINATED;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component comp) {
+    Instance *c = enter(comp, "fmi2Reset", ANY_MODE);
+    if (!c) return fmi2Error;
+    set_defaults(c);
+    return fmi2OK;
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Getting and setting variable values                                                       */
+
+fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                       fmi2Real value[]) {
+    Instance *c = enter(comp, "fmi2GetReal", READABLE);
+    if (!c || check_arrays(c, "fmi2GetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++)
+        if (vr[i] >= N_REAL) return fail(c, "fmi2GetReal(): unknown value reference %u.", vr[i]);
+    /* In initialization mode the state follows the parameters set so far. */
+    if (c->d.mode == MODE_INIT && compute_initial(c) != 0)
+        return fail(c, "Evaluating the initial state failed.");
+    int outputs_ready = 0;
+    for (size_t i = 0; i < nvr; i++) {
+        const fmi2ValueReference r = vr[i];
+        if (is_output(r) && !outputs_ready) {
+            if (eval_output(c) != 0) return fail(c, "Evaluating the outputs failed.");
+            outputs_ready = 1;
+        }
+        if (is_parameter(r)) value[i] = c->d.p[r - VR_P];
+        else if (is_max_substep(r)) value[i] = c->d.max_substep;
+        else if (is_input(r)) value[i] = c->d.u[r - VR_U];
+        else if (is_output(r)) value[i] = c->y[r - VR_Y];
+        else value[i] = c->d.x[r - VR_X];
+    }
+    return fmi2OK;
+}
+
+/* Parameters and inputs can be set before and after initialization; the whole call is
+ * checked first and applied only if every value is acceptable. */
+fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                       const fmi2Real value[]) {
+    Instance *c = enter(comp, "fmi2SetReal", MODE_INSTANTIATED | MODE_INIT | MODE_STEPPING);
+    if (!c || check_arrays(c, "fmi2SetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        const fmi2ValueReference r = vr[i];
+        if (r >= N_REAL) return fail(c, "fmi2SetReal(): unknown value reference %u.", r);
+        if (is_output(r) || is_state(r))
+            return fail(c, "fmi2SetReal(): '%s' is an %s and cannot be set.", REAL_NAMES[r],
+                        is_output(r) ? "output" : "internal state");
+        if (is_input(r) && !isfinite(value[i]))
+            return fail(c, "fmi2SetReal(): input '%s' = %g is not finite.", REAL_NAMES[r], value[i]);
+        if (!is_input(r) && c->d.mode == MODE_STEPPING) {
+            const char *why = parameter_problem(r, value[i]);
+            if (why) return fail(c, "fmi2SetReal(): parameter '%s' = %g %s.", REAL_NAMES[r], value[i], why);
+        }
+    }
+    for (size_t i = 0; i < nvr; i++) {
+        const fmi2ValueReference r = vr[i];
+        if (is_parameter(r)) c->d.p[r - VR_P] = value[i];
+        else if (is_max_substep(r)) c->d.max_substep = value[i];
+        else c->d.u[r - VR_U] = value[i];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                          fmi2Integer value[]) {
+    Instance *c = enter(comp, "fmi2GetInteger", READABLE);
+    if (!c || check_arrays(c, "fmi2GetInteger", vr, nvr, value) != fmi2OK) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        if (vr[i] != VR_SEED) return fail(c, "fmi2GetInteger(): unknown value reference %u.", vr[i]);
+        value[i] = c->d.seed;
+    }
+    return fmi2OK;
+}
+
+/* `seed` is a fixed parameter: it seeds the generator at fmi2ExitInitializationMode. */
+fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                          const fmi2Integer value[]) {
+    Instance *c = enter(comp, "fmi2SetInteger", MODE_INSTANTIATED | MODE_INIT | MODE_STEPPING);
+    if (!c || check_arrays(c, "fmi2SetInteger", vr, nvr, value) != fmi2OK) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        if (vr[i] != VR_SEED) return fail(c, "fmi2SetInteger(): unknown value reference %u.", vr[i]);
+        if (c->d.mode == MODE_STEPPING)
+            return fail(c, "fmi2SetInteger(): 'seed' is fixed after initialization.");
+    }
+    for (size_t i = 0; i < nvr; i++) c->d.seed = value[i];
+    return fmi2OK;
+}
+
+static fmi2Status no_variables(fmi2Component comp, const char *fname, int allowed,
+                               const fmi2ValueReference vr[], size_t nvr, const void *value,
+                               const char *type) {
+    Instance *c = enter(comp, fname, allowed);
+    if (!c || check_arrays(c, fname, vr, nvr, value) != fmi2OK) return fmi2Error;
+    if (nvr > 0) return fail(c, "%s(): this FMU has no %s variables (value reference %u).", fname, type, vr[0]);
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                          fmi2Boolean value[]) {
+    return no_variables(comp, "fmi2GetBoolean", READABLE, vr, nvr, value, "Boolean");
+}
+
+fmi2Status fmi2GetString(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                         fmi2String value[]) {
+    return no_variables(comp, "fmi2GetString", READABLE, vr, nvr, value, "String");
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                          const fmi2Boolean value[]) {
+    return no_variables(comp, "fmi2SetBoolean", MODE_INSTANTIATED | MODE_INIT | MODE_STEPPING, vr,
+                        nvr, value, "Boolean");
+}
+
+fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                         const fmi2String value[]) {
+    return no_variables(comp, "fmi2SetString", MODE_INSTANTIATED | MODE_INIT | MODE_STEPPING, vr,
+                        nvr, value, "String");
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* FMU states                                                                                */
+
+static State *as_state(Instance *c, fmi2FMUstate s, const char *fname) {
+    State *st = (State *)s;
+    if (st == NULL || st->magic != STATE_MAGIC) {
+        fail(c, "%s(): invalid FMU state.", fname);
+        return NULL;
+    }
+    return st;
+}
+
+/* Reuse *FMUstate if the caller passes one, else allocate a new state. */
+static State *state_for_writing(Instance *c, fmi2FMUstate *FMUstate, const char *fname) {
+    if (FMUstate == NULL) {
+        fail(c, "%s(): null FMUstate pointer.", fname);
+        return NULL;
+    }
+    if (*FMUstate != NULL) return as_state(c, *FMUstate, fname);
+    State *st = (State *)c->cb.allocateMemory(1, sizeof(State));
+    if (st == NULL) {
+        fail(c, "%s(): out of memory.", fname);
+        return NULL;
+    }
+    st->magic = STATE_MAGIC;
+    *FMUstate = st;
+    return st;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
+    Instance *c = enter(comp, "fmi2GetFMUstate", ANY_MODE);
+    if (!c) return fmi2Error;
+    State *st = state_for_writing(c, FMUstate, "fmi2GetFMUstate");
+    if (!st) return fmi2Error;
+    memcpy(&st->d, &c->d, sizeof c->d);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
+    Instance *c = enter(comp, "fmi2SetFMUstate", ANY_MODE);
+    if (!c) return fmi2Error;
+    State *st = as_state(c, FMUstate, "fmi2SetFMUstate");
+    if (!st) return fmi2Error;
+    memcpy(&c->d, &st->d, sizeof c->d);
+    return fmi2OK;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
+    Instance *c = enter(comp, "fmi2FreeFMUstate", ANY_MODE);
+    if (!c) return fmi2Error;
+    if (FMUstate == NULL || *FMUstate == NULL) return fmi2OK;
+    State *st = as_state(c, *FMUstate, "fmi2FreeFMUstate");
+    if (!st) return fmi2Error;
+    st->magic = 0;
+    c->cb.freeMemory(st);
+    *FMUstate = NULL;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate FMUstate, size_t *size) {
+    Instance *c = enter(comp, "fmi2SerializedFMUstateSize", ANY_MODE);
+    if (!c || !as_state(c, FMUstate, "fmi2SerializedFMUstateSize")) return fmi2Error;
+    if (size == NULL) return fail(c, "fmi2SerializedFMUstateSize(): null size pointer.");
+    *size = sizeof(SerialHeader) + sizeof(Data);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate FMUstate,
+                                 fmi2Byte serializedState[], size_t size) {
+    Instance *c = enter(comp, "fmi2SerializeFMUstate", ANY_MODE);
+    if (!c) return fmi2Error;
+    State *st = as_state(c, FMUstate, "fmi2SerializeFMUstate");
+    if (!st) return fmi2Error;
+    if (serializedState == NULL || size != sizeof(SerialHeader) + sizeof(Data))
+        return fail(c, "fmi2SerializeFMUstate(): expected a buffer of %zu bytes.",
+                    sizeof(SerialHeader) + sizeof(Data));
+    SerialHeader h;
+    memset(&h, 0, sizeof h);
+    memcpy(h.magic, SERIAL_MAGIC, sizeof h.magic);
+    h.version = SERIAL_VERSION;
+    h.data_size = (uint32_t)sizeof(Data);
+    h.model_hash = model_hash();
+    memcpy(serializedState, &h, sizeof h);
+    memcpy(serializedState + sizeof h, &st->d, sizeof(Data));
+    return fmi2OK;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serializedState[],
+                                   size_t size, fmi2FMUstate *FMUstate) {
+    Instance *c = enter(comp, "fmi2DeSerializeFMUstate", ANY_MODE);
+    if (!c) return fmi2Error;
+    SerialHeader h;
+    Data d;
+    if (serializedState == NULL || size != sizeof h + sizeof d)
+        return fail(c, "fmi2DeSerializeFMUstate(): expected %zu bytes, got %zu.", sizeof h + sizeof d, size);
+    memcpy(&h, serializedState, sizeof h);
+    memcpy(&d, serializedState + sizeof h, sizeof d);
+    if (memcmp(h.magic, SERIAL_MAGIC, sizeof h.magic) != 0 || h.version != SERIAL_VERSION ||
+        h.data_size != sizeof d)
+        return fail(c, "fmi2DeSerializeFMUstate(): not a serialized state of this FMU version.");
+    if (h.model_hash != model_hash())
+        return fail(c, "fmi2DeSerializeFMUstate(): the state belongs to another model (GUID mismatch).");
+    if (!(d.mode & ANY_MODE) || (d.mode & (d.mode - 1)) != 0)
+        return fail(c, "fmi2DeSerializeFMUstate(): corrupt machine state %d.", d.mode);
+    State *st = state_for_writing(c, FMUstate, "fmi2DeSerializeFMUstate");
+    if (!st) return fmi2Error;
+    st->d = d;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueReference vUnknown_ref[],
+                                        size_t nUnknown, const fmi2ValueReference vKnown_ref[],
+                                        size_t nKnown, const fmi2Real dvKnown[],
+                                        fmi2Real dvUnknown[]) {
+    Instance *c = enter(comp, "fmi2GetDirectionalDerivative", ANY_MODE);
+    (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown, (void)dvUnknown;
+    if (!c) return fmi2Error;
+    return fail(c, "fmi2GetDirectionalDerivative(): not provided by this FMU.");
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Co-simulation                                                                             */
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueReference vr[],
+                                       size_t nvr, const fmi2Integer order[],
+                                       const fmi2Real value[]) {
+    Instance *c = enter(comp, "fmi2SetRealInputDerivatives", ANY_MODE);
+    (void)vr, (void)nvr, (void)order, (void)value;
+    if (!c) return fmi2Error;
+    return fail(c, "fmi2SetRealInputDerivatives(): inputs are held constant (canInterpolateInputs=false).");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueReference vr[],
+                                        size_t nvr, const fmi2Integer order[], fmi2Real value[]) {
+    Instance *c = enter(comp, "fmi2GetRealOutputDerivatives", ANY_MODE);
+    (void)vr, (void)nvr, (void)order, (void)value;
+    if (!c) return fmi2Error;
+    return fail(c, "fmi2GetRealOutputDerivatives(): not provided (maxOutputDerivativeOrder=0).");
+}
+
+/* Advance from the master's time t by h with the inputs held; then draw the next noise sample.
+ * A failed step leaves the state as it was before the step. */
+fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
+    Instance *c = enter(comp, "fmi2DoStep", MODE_STEPPING);
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!c) return fmi2Error;
+    if (!isfinite(h) || h <= 0.0)
+        return fail(c, "fmi2DoStep(): communicationStepSize = %g must be positive and finite.", h);
+    if (!(fabs(t - c->d.time) <= TIME_TOL * fmax(1.0, fabs(t))))
+        return fail(c, "fmi2DoStep(): currentCommunicationPoint = %.17g but the FMU is at time %.17g.",
+                    t, c->d.time);
+    if (c->d.stop_time_defined && t + h > c->d.stop_time + TIME_TOL * fmax(1.0, fabs(c->d.stop_time)))
+        return fail(c, "fmi2DoStep(): the step to %.17g passes stopTime = %.17g.", t + h, c->d.stop_time);
+    memcpy(c->xn, c->d.x, sizeof c->xn);
+    int err;
+    if (IS_DISCRETE) {
+        if (fabs(h - SAMPLE_TIME) > TIME_TOL * SAMPLE_TIME)
+            return fail(c, "fmi2DoStep(): communicationStepSize = %.17g differs from the sample time "
+                           "%.17g of this discrete system.", h, SAMPLE_TIME);
+        err = eval_dynamics(c, c->d.x, c->xn);
+    } else {
+        const double ratio = h / c->d.max_substep - 1e-12;
+        if (!(ratio < MAX_SUBSTEPS))
+            return fail(c, "fmi2DoStep(): step %g needs too many sub-steps of max_substep = %g.", h,
+                        c->d.max_substep);
+        const long n = ratio < 1.0 ? 1 : (long)ceil(ratio);
+        const fmi2Real dt = h / (fmi2Real)n;
+        err = 0;
+        for (long k = 0; k < n; k++) err |= rk4_step(c, dt);
+    }
+    if (err) {
+        c->d.mode = MODE_ERROR;
+        return fail(c, "fmi2DoStep(): evaluating the dynamics failed.");
+    }
+    int bad = first_nonfinite(c->xn, N_X);
+    if (bad >= 0) {
+        c->d.mode = MODE_ERROR;
+        return fail(c, "fmi2DoStep(): state '%s' became %g in the step from t = %.17g.",
+                    REAL_NAMES[VR_X + bad], c->xn[bad], t);
+    }
+    memcpy(c->d.x, c->xn, sizeof c->xn);
+    c->d.time = t + h;
+    draw_noise(c);
+    return fmi2OK;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component comp) {
+    Instance *c = enter(comp, "fmi2CancelStep", ANY_MODE);
+    if (!c) return fmi2Error;
+    return fail(c, "fmi2CancelStep(): fmi2DoStep is synchronous, there is no step to cancel.");
+}
+
+fmi2Status fmi2GetStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Status *value) {
+    Instance *c = enter(comp, "fmi2GetStatus", READABLE);
+    (void)s, (void)value;
+    if (!c) return fmi2Error;
+    log_msg(c, fmi2Discard, LOG_WARNING, "fmi2GetStatus(): no asynchronous step, no status to report.");
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Real *value) {
+    Instance *c = enter(comp, "fmi2GetRealStatus", READABLE);
+    if (!c) return fmi2Error;
+    if (value == NULL) return fail(c, "fmi2GetRealStatus(): null value pointer.");
+    if (s != fmi2LastSuccessfulTime) {
+        log_msg(c, fmi2Discard, LOG_WARNING, "fmi2GetRealStatus(): status kind %d not available.", (int)s);
+        return fmi2Discard;
+    }
+    *value = c->d.time;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Integer *value) {
+    Instance *c = enter(comp, "fmi2GetIntegerStatus", READABLE);
+    (void)s, (void)value;
+    if (!c) return fmi2Error;
+    log_msg(c, fmi2Discard, LOG_WARNING, "fmi2GetIntegerStatus(): no integer status available.");
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Boolean *value) {
+    Instance *c = enter(comp, "fmi2GetBooleanStatus", READABLE);
+    if (!c) return fmi2Error;
+    if (value == NULL) return fail(c, "fmi2GetBooleanStatus(): null value pointer.");
+    if (s != fmi2Terminated) {
+        log_msg(c, fmi2Discard, LOG_WARNING, "fmi2GetBooleanStatus(): status kind %d not available.", (int)s);
+        return fmi2Discard;
+    }
+    *value = fmi2False; /* the slave never asks to end the simulation */
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component comp, const fmi2StatusKind s, fmi2String *value) {
+    Instance *c = enter(comp, "fmi2GetStringStatus", READABLE);
+    (void)s, (void)value;
+    if (!c) return fmi2Error;
+    log_msg(c, fmi2Discard, LOG_WARNING, "fmi2GetStringStatus(): no string status available.");
+    return fmi2Discard;
+}

@@ -1,0 +1,47 @@
+"""The C compiler step: FMI headers from fmpy, flags, and one gcc call per shared library.
+
+`-fvisibility=hidden` keeps everything but the fmi2 functions private, so two FMUs loaded in one
+process cannot bind to each other's CasADi symbols; `-ffp-contract=off` keeps floating point
+results identical to CasADi's own evaluation on machines with fused multiply-add.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import subprocess
+from pathlib import Path
+
+import fmpy
+
+FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+CFLAGS = ("-O2", "-std=c99", "-fPIC", "-fvisibility=hidden", "-ffp-contract=off")
+
+
+def compiler() -> str:
+    """The C compiler command: $CC or gcc."""
+    return os.environ.get("CC", "gcc")
+
+
+@functools.cache
+def compiler_version() -> str:
+    """First line of `$CC --version`, part of every cache key."""
+    out = subprocess.run([compiler(), "--version"], capture_output=True, text=True, check=True)
+    return out.stdout.splitlines()[0]
+
+
+def fmi_headers() -> dict[str, str]:
+    """The FMI 2.0 headers shipped with fmpy, by file name."""
+    folder = Path(fmpy.__file__).parent / "c-code"
+    return {name: (folder / name).read_text() for name in FMI_HEADERS}
+
+
+def run_compiler(sources: list[Path], output: Path, include_dirs: list[Path],
+                 extra_flags: tuple[str, ...] = ("-shared",),
+                 libraries: tuple[str, ...] = ("-lm",)) -> None:
+    """Compile `sources` into `output` (a shared library by default); raise with gcc's messages."""
+    cmd = [compiler(), *CFLAGS, *extra_flags, *(f"-I{d}" for d in include_dirs),
+           *map(str, sources), "-o", str(output), *libraries]
+    result = subprocess.run(cmd, capture_output=True, text=True)
+    if result.returncode != 0:
+        raise RuntimeError(f"compilation failed: {' '.join(cmd)}\n{result.stderr}")

@@ -1,0 +1,119 @@
+"""modelDescription.xml (FMI 2.0, co-simulation) of a System's FMU.
+
+Output dependencies come from the structural sparsity of d output / d u, so a master can tell
+direct feedthrough (an algebraic path from inputs to outputs) from outputs that only depend on
+the state.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+from fmu.layout import Layout
+from fmu.system import System
+
+LOG_CATEGORIES = {
+    "logStatusError": "errors (on unless switched off with fmi2SetDebugLogging)",
+    "logStatusWarning": "warnings and unavailable status requests",
+    "logAll": "every FMI call",
+}
+
+
+def output_dependencies(system: System) -> list[list[int]]:
+    """For each output, the indices of the inputs it depends on structurally."""
+    ny, nu = len(system.outputs), len(system.inputs)
+    if nu == 0:
+        return [[] for _ in range(ny)]
+    jac = system.output.sparsity_jac(1, 0)
+    rows, cols = jac.get_triplet()
+    deps: list[list[int]] = [[] for _ in range(ny)]
+    for r, c in sorted(zip(rows, cols, strict=True)):
+        deps[r].append(c)
+    return deps
+
+
+def _fmt(value: float | int) -> str:
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def model_description_xml(system: System, layout: Layout, identifier: str, guid: str,
+                          source_files: list[str]) -> str:
+    """The XML text; `guid` ties it to the binary, `source_files` are the sources/ to compile."""
+    discrete = system.kind == "discrete"
+    root = ET.Element("fmiModelDescription", {
+        "fmiVersion": "2.0",
+        "modelName": system.name,
+        "guid": guid,
+        "description": system.description,
+        "generationTool": "flexff",
+        "variableNamingConvention": "flat",
+        "numberOfEventIndicators": "0",
+    })
+    cs = ET.SubElement(root, "CoSimulation", {
+        "modelIdentifier": identifier,
+        "needsExecutionTool": "false",
+        "canHandleVariableCommunicationStepSize": "false" if discrete else "true",
+        "canInterpolateInputs": "false",
+        "maxOutputDerivativeOrder": "0",
+        "canRunAsynchronuously": "false",
+        "canBeInstantiatedOnlyOncePerProcess": "false",
+        "canNotUseMemoryManagementFunctions": "false",
+        "canGetAndSetFMUstate": "true",
+        "canSerializeFMUstate": "true",
+        "providesDirectionalDerivative": "false",
+    })
+    files = ET.SubElement(cs, "SourceFiles")
+    for name in source_files:
+        ET.SubElement(files, "File", {"name": name})
+
+    units = sorted({v.unit for v in layout.variables if v.unit})
+    if units:
+        unit_defs = ET.SubElement(root, "UnitDefinitions")
+        for unit in units:
+            ET.SubElement(unit_defs, "Unit", {"name": unit})
+
+    categories = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES.items():
+        ET.SubElement(categories, "Category", {"name": name, "description": text})
+
+    step = system.sample_time if discrete else 1e-3
+    ET.SubElement(root, "DefaultExperiment", {"startTime": "0.0", "stepSize": repr(float(step))})
+
+    if system.extra:
+        tool = ET.SubElement(ET.SubElement(root, "VendorAnnotations"), "Tool", {"name": "flexff"})
+        for key in sorted(system.extra):
+            ET.SubElement(tool, "Annotation", {"name": key, "value": system.extra[key]})
+
+    model_vars = ET.SubElement(root, "ModelVariables")
+    index = {}
+    for i, v in enumerate(layout.variables, start=1):
+        index[v.name] = i
+        attrs = {"name": v.name, "valueReference": str(v.value_reference)}
+        if v.description:
+            attrs["description"] = v.description
+        attrs["causality"] = v.causality
+        attrs["variability"] = v.variability
+        if v.role in ("parameter", "max_substep", "seed"):
+            attrs["initial"] = "exact"
+        elif v.role in ("output", "state"):
+            attrs["initial"] = "calculated"
+        sv = ET.SubElement(model_vars, "ScalarVariable", attrs)
+        type_attrs = {}
+        if v.unit:
+            type_attrs["unit"] = v.unit
+        if v.start is not None:
+            type_attrs["start"] = _fmt(v.start)
+        ET.SubElement(sv, v.type, type_attrs)
+
+    structure = ET.SubElement(root, "ModelStructure")
+    inputs = layout.block("input")
+    if layout.block("output"):  # the schema forbids empty Outputs / InitialUnknowns
+        outputs = ET.SubElement(structure, "Outputs")
+        initial = ET.SubElement(structure, "InitialUnknowns")
+    for y, deps in zip(layout.block("output"), output_dependencies(system), strict=True):
+        dep_text = " ".join(str(index[inputs[j].name]) for j in deps)
+        ET.SubElement(outputs, "Unknown", {"index": str(index[y.name]), "dependencies": dep_text})
+        ET.SubElement(initial, "Unknown", {"index": str(index[y.name])})
+
+    ET.indent(root, space="  ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
