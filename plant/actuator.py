@@ -35,11 +35,11 @@ def encoder_resolution(p: PlantParameters) -> Any:
     return 2 * math.pi / p.encoder_counts
 
 
-def encoder_reading(p: PlantParameters, angle: Any, home: Any, noise: Any) -> Any:
-    """Quantized encoder angle [rad]: counts from the home angle, plus noise before counting.
+def encoder_reading(p: PlantParameters, rotation: Any, home: Any, noise: Any) -> Any:
+    """Encoder angle [rad]: the home angle plus the counted rotation from home.
 
-    `noise` is a standard normal sample scaled by noise_std; the incremental encoder is zeroed
-    at the home pose (the workspace centre), so the reading is home + resolution * counts.
+    The incremental encoder is zeroed at the home pose (wrist at the centre); `noise` is a
+    standard normal sample, scaled by noise_std and added before counting.
     """
     resolution = encoder_resolution(p)
-    return home + resolution * ca.floor((angle + p.noise_std * noise - home) / resolution + 0.5)
+    return home + resolution * ca.floor((rotation + p.noise_std * noise) / resolution + 0.5)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import casadi as ca
 
 from plant.kinematics import ELBOW_INDEX, EE_INDEX, N_COORDINATES, SHOULDER_INDEX
-from plant.kinematics import generalized_coordinates
+from plant.kinematics import flexure_deflections, generalized_coordinates
 from plant.parameters import PlantParameters
 
 
@@ -43,17 +43,6 @@ def body_mass_matrix(p: PlantParameters, rotor_on_arm: bool) -> ca.SX:
     return m
 
 
-def flexure_deflections(q: ca.SX, q_rest: ca.SX) -> ca.SX:
-    """The nine flexure rotations from the rest pose: shoulders, elbows, wrists (chains 1-3)."""
-    def wrist(qq: ca.SX, i: int) -> ca.SX:
-        return qq[SHOULDER_INDEX[i]] + qq[ELBOW_INDEX[i]] - qq[EE_INDEX[2]]
-
-    shoulders = [q[s] - q_rest[s] for s in SHOULDER_INDEX]
-    elbows = [q[e] - q_rest[e] for e in ELBOW_INDEX]
-    wrists = [wrist(q, i) - wrist(q_rest, i) for i in range(3)]
-    return ca.vertcat(*shoulders, *elbows, *wrists)
-
-
 def flexure_stiffness(p: PlantParameters) -> ca.SX:
     return ca.vertcat(*p.k_s, *p.k_e, *p.k_w)
 
@@ -70,7 +59,8 @@ class ReducedDynamics:
     vel: ca.SX
     q: ca.SX  # the 21 coordinates as functions of pos
     M: ca.SX  # mass matrix, 2x2
-    C: ca.SX  # Coriolis matrix (Christoffel form: dM/dt - 2C is skew), 2x2
+    C: ca.SX  # Coriolis matrix J^T M21 dJ/dt (so dM/dt - 2C is skew), 2x2
+    coriolis: ca.SX  # C @ vel, formed as J^T M21 (dJ/dt vel): one directional derivative
     Q: ca.SX  # flexure stiffness force dV/dpos, 2
     D: ca.SX  # flexure damping force dR/dvel, 2
     A: ca.SX  # d theta_s / d pos, 3x2: end-effector force = A^T tau
@@ -79,39 +69,28 @@ class ReducedDynamics:
 
     def inverse(self, acc: ca.SX) -> ca.SX:
         """Eq. (2.4) with flexure damping: the end-effector force for pos, vel, acc."""
-        return self.M @ acc + self.C @ self.vel + self.Q + self.D
+        return self.M @ acc + self.coriolis + self.Q + self.D
 
     def acceleration(self, force: ca.SX) -> ca.SX:
         """Eq. (2.2) solved for the acceleration under an end-effector force."""
-        return ca.solve(self.M, force - self.C @ self.vel - self.Q - self.D)
+        return ca.solve(self.M, force - self.coriolis - self.Q - self.D)
 
 
 def reduced_dynamics(p: PlantParameters, rotor_on_arm: bool) -> ReducedDynamics:
     """Euler-Lagrange on the reduced kinetic and potential energy."""
     pos, vel = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2)
     q = generalized_coordinates(p, pos[0], pos[1])
-    q_rest = generalized_coordinates(p, 0.0, 0.0)
     jac = ca.jacobian(q, pos)
-    mass = jac.T @ body_mass_matrix(p, rotor_on_arm) @ jac
-    deflection = flexure_deflections(q, q_rest)
+    body_mass = body_mass_matrix(p, rotor_on_arm)
+    mass = jac.T @ body_mass @ jac
+    deflection = flexure_deflections(p, pos[0], pos[1])
     potential = 0.5 * ca.dot(flexure_stiffness(p), deflection**2)
     deflection_rate = ca.jtimes(deflection, pos, vel)
     rayleigh = 0.5 * ca.dot(flexure_damping(p), deflection_rate**2)
     return ReducedDynamics(
-        pos=pos, vel=vel, q=q, M=mass, C=_christoffel(mass, pos, vel),
+        pos=pos, vel=vel, q=q, M=mass, C=jac.T @ body_mass @ ca.jtimes(jac, pos, vel),
+        coriolis=jac.T @ (body_mass @ ca.jtimes(jac @ vel, pos, vel)),
         Q=ca.gradient(potential, pos), D=ca.gradient(rayleigh, vel),
         A=ca.jacobian(ca.vertcat(*[q[s] for s in SHOULDER_INDEX]), pos),
         kinetic=0.5 * vel.T @ mass @ vel, potential=potential,
     )
-
-
-def _christoffel(mass: ca.SX, pos: ca.SX, vel: ca.SX) -> ca.SX:
-    """C[k, j] = sum_i 1/2 (dM_kj/dq_i + dM_ki/dq_j - dM_ij/dq_k) qd_i."""
-    n = mass.shape[0]
-    dm = [ca.jacobian(mass[:, j], pos) for j in range(n)]  # dm[j][k, i] = dM_kj / dq_i
-    c = ca.SX.zeros(n, n)
-    for k in range(n):
-        for j in range(n):
-            c[k, j] = sum(0.5 * (dm[j][k, i] + dm[i][k, j] - dm[j][i, k]) * vel[i]
-                          for i in range(n))
-    return c

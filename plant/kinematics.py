@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
@@ -40,36 +41,76 @@ def mount(p: PlantParameters, chain: int) -> tuple[Any, Any]:
     return p.r_mount * math.cos(a), p.r_mount * math.sin(a)
 
 
-def shoulder_angles(p: PlantParameters, x: Any, y: Any) -> list[Any]:
-    """Absolute upper-arm angles theta_s1..3 [rad] that put the wrist at (x, y)."""
-    angles = []
+@dataclass(frozen=True)
+class ChainPose:
+    """One chain for the wrist at a given point: elbow position and arm directions (unit)."""
+
+    mount: tuple[Any, Any]
+    elbow: tuple[Any, Any]
+    upper: tuple[Any, Any]  # unit vector shoulder -> elbow
+    lower: tuple[Any, Any]  # unit vector elbow -> wrist
+
+
+def chain_poses(p: PlantParameters, x: Any, y: Any) -> list[ChainPose]:
+    """Inverse kinematics of the three chains, algebraically (law of cosines, no trigonometry).
+
+    The upper arm is the motor -> wrist direction turned clockwise by the angle alpha between
+    upper arm and that line; this is the elbow branch that holds at the centre.
+    """
+    poses = []
     for i in range(3):
         mx, my = mount(p, i)
         dx, dy = x - mx, y - my
         reach = ca.sqrt(dx**2 + dy**2)
-        alpha = ca.acos((p.l_up**2 + reach**2 - p.l_low**2) / (2 * p.l_up * reach))
-        angles.append(ca.atan2(dy, dx) - alpha)
-    return angles
+        cos_a = (p.l_up**2 + reach**2 - p.l_low**2) / (2 * p.l_up * reach)
+        sin_a = ca.sqrt(1 - cos_a**2)
+        ux, uy = (cos_a * dx + sin_a * dy) / reach, (cos_a * dy - sin_a * dx) / reach
+        ex, ey = mx + p.l_up * ux, my + p.l_up * uy
+        poses.append(ChainPose((mx, my), (ex, ey), (ux, uy),
+                               ((x - ex) / p.l_low, (y - ey) / p.l_low)))
+    return poses
+
+
+def _angle(u: tuple[Any, Any]) -> Any:
+    return ca.atan2(u[1], u[0])
+
+
+def _angle_between(a: tuple[Any, Any], b: tuple[Any, Any]) -> Any:
+    """Signed rotation [rad] that turns unit vector a into unit vector b."""
+    return ca.atan2(a[0] * b[1] - a[1] * b[0], a[0] * b[0] + a[1] * b[1])
+
+
+def shoulder_angles(p: PlantParameters, x: Any, y: Any) -> list[Any]:
+    """Absolute upper-arm angles theta_s1..3 [rad] that put the wrist at (x, y)."""
+    return [_angle(pose.upper) for pose in chain_poses(p, x, y)]
 
 
 def generalized_coordinates(p: PlantParameters, x: Any, y: Any) -> Any:
     """Inverse kinematics: the 21 coordinates of eq. (2.1) for the wrist at (x, y)."""
     q, lower_angles = [], []
-    for i, theta_s in enumerate(shoulder_angles(p, x, y)):
-        mx, my = mount(p, i)
-        ex, ey = mx + p.l_up * ca.cos(theta_s), my + p.l_up * ca.sin(theta_s)
-        psi = ca.atan2(y - ey, x - ex)  # absolute lower-arm angle
-        theta_e = _wrap(psi - theta_s)
+    for i, pose in enumerate(chain_poses(p, x, y)):
+        (mx, my), (ex, ey), up, low = pose.mount, pose.elbow, pose.upper, pose.lower
+        theta_s, theta_e = _angle(up), _angle_between(up, low)
         lower_angles.append(theta_s + theta_e)
-        q += [mx + p.c_up[i] * ca.cos(theta_s), my + p.c_up[i] * ca.sin(theta_s), theta_s,
-              ex + p.c_low[i] * ca.cos(psi), ey + p.c_low[i] * ca.sin(psi), theta_e]
+        q += [mx + p.c_up[i] * up[0], my + p.c_up[i] * up[1], theta_s,
+              ex + p.c_low[i] * low[0], ey + p.c_low[i] * low[1], theta_e]
     q += [x, y, (lower_angles[0] + lower_angles[1] + lower_angles[2]) / 3]
     return ca.vertcat(*q)
 
 
-def _wrap(angle: Any) -> Any:
-    """Wrap to (-pi, pi]; the elbow angle stays far from the cut in the workspace."""
-    return ca.atan2(ca.sin(angle), ca.cos(angle))
+def flexure_deflections(p: PlantParameters, x: Any, y: Any) -> ca.SX:
+    """The nine flexure rotations [rad] from the rest pose (wrist at the centre).
+
+    Shoulders 1-3, elbows 1-3 (lower arm relative to upper arm), wrists 1-3 (lower arm
+    relative to the wrist body, which turns by the mean lower-arm rotation, eq. C.3).
+    """
+    shoulders, lowers = [], []
+    for pose, rest in zip(chain_poses(p, x, y), chain_poses(p, 0.0, 0.0)):
+        shoulders.append(_angle_between(rest.upper, pose.upper))
+        lowers.append(_angle_between(rest.lower, pose.lower))
+    wrist = (lowers[0] + lowers[1] + lowers[2]) / 3
+    return ca.vertcat(*shoulders, *[lw - sh for lw, sh in zip(lowers, shoulders)],
+                      *[lw - wrist for lw in lowers])
 
 
 def _elbow(p: PlantParameters, chain: int, theta_s: Any) -> tuple[Any, Any]:

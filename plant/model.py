@@ -3,7 +3,7 @@
 `nominal` is the ideal model the controllers are designed on: rotors rigid on the arms, no
 friction, no noise. `hardware` stands in for the real machine: mismatched parameters, motor
 friction, a compliant rotor-to-arm coupling (a parasitic resonance; three rotor angles and
-speeds join the state) and encoder noise. Each effect is a parameter: zero friction or noise
+speeds join the state) and encoder noise. Friction acts at the shoulder joints. Each effect is a parameter: zero friction or noise
 switches it off; the coupling is structural (`parasitic_mode`).
 """
 
@@ -17,7 +17,7 @@ import numpy as np
 
 from plant.actuator import encoder_reading, friction_torque, motor_torque
 from plant.dynamics import ReducedDynamics, reduced_dynamics
-from plant.kinematics import forward_kinematics_2, forward_kinematics_3
+from plant.kinematics import flexure_deflections, forward_kinematics_2, forward_kinematics_3
 from plant.kinematics import generalized_coordinates, shoulder_angles
 from plant.parameters import HARDWARE, NOMINAL, PlantParameters
 
@@ -68,7 +68,7 @@ class PlantModel:
     # -- signals ------------------------------------------------------------------------------
     @property
     def state_names(self) -> list[str]:
-        names = ["x", "y", "vx", "vy"]
+        names = ["q_x", "q_y", "qd_x", "qd_y"]
         if self.variant.parasitic_mode:
             names += [f"phi_r{i}" for i in (1, 2, 3)] + [f"omega_r{i}" for i in (1, 2, 3)]
         return names
@@ -100,12 +100,15 @@ class PlantModel:
     def _rotors(self) -> tuple[ca.SX, ca.SX]:
         return self._x[4:7], self._x[7:10]
 
+    def _shoulder_rotation(self, dyn: ReducedDynamics) -> ca.SX:
+        """Rotation of the three upper arms from their home angles, in dyn's symbols."""
+        return flexure_deflections(self.params, dyn.pos[0], dyn.pos[1])[:3]
+
     def _coupling_torque(self) -> ca.SX:
         """Torque the compliant coupling passes from each rotor to its upper arm."""
         phi, omega = self._rotors()
         pp, dyn = self.params, self.arm
-        arm_angle = ca.vertcat(*[dyn.q[s] for s in (2, 8, 14)])
-        arm_speed = dyn.A @ dyn.vel
+        arm_angle, arm_speed = self._shoulder_rotation(dyn), dyn.A @ dyn.vel
         torque = ca.vertcat(*[pp.k_coupling[i] * (phi[i] - arm_angle[i])
                               + pp.d_coupling[i] * (omega[i] - arm_speed[i]) for i in range(3)])
         return self._substitute_state(dyn, torque)
@@ -121,10 +124,10 @@ class PlantModel:
             rhs = ca.vertcat(x[2:4], acc)
         else:
             dyn, coupling = self.arm, self._coupling_torque()
-            acc = self._substitute_state(dyn, dyn.acceleration(dyn.A.T @ coupling))
+            torque = coupling + friction_torque(pp, dyn.A @ dyn.vel)
+            acc = self._substitute_state(dyn, dyn.acceleration(dyn.A.T @ torque))
             _, omega = self._rotors()
-            rotor_acc = (motor_torque(pp, i) + friction_torque(pp, omega) - coupling) / \
-                ca.vertcat(*pp.j_rotor)
+            rotor_acc = (motor_torque(pp, i) - coupling) / ca.vertcat(*pp.j_rotor)
             rhs = ca.vertcat(x[2:4], acc, omega, rotor_acc)
         return ca.Function("forward_dynamics", [x, i, self.p], [rhs],
                            ["x", "i", "p"], ["xdot"])
@@ -134,11 +137,12 @@ class PlantModel:
         pp, x, i = self.params, self._x, self._i
         noise = ca.SX.sym("w", 3)
         if self.variant.parasitic_mode:
-            angle = self._rotors()[0]  # the encoder sits on the motor
+            rotation = self._rotors()[0]  # the encoder sits on the motor
         else:
-            angle = ca.vertcat(*shoulder_angles(pp, x[0], x[1]))
+            rotation = self._substitute_state(self.rigid, self._shoulder_rotation(self.rigid))
         home = ca.vertcat(*shoulder_angles(pp, 0.0, 0.0))
-        theta = ca.vertcat(*[encoder_reading(pp, angle[k], home[k], noise[k]) for k in range(3)])
+        theta = ca.vertcat(*[encoder_reading(pp, rotation[k], home[k], noise[k])
+                             for k in range(3)])
         y = ca.vertcat(theta, x[0:4], motor_torque(pp, i))
         return ca.Function("output", [x, i, self.p, noise], [y], ["x", "i", "p", "w"], ["y"])
 
@@ -148,7 +152,7 @@ class PlantModel:
         pos = ca.SX.sym("pos", 2)
         x0 = ca.vertcat(pos, 0, 0)
         if self.variant.parasitic_mode:
-            x0 = ca.vertcat(x0, *shoulder_angles(self.params, pos[0], pos[1]), 0, 0, 0)
+            x0 = ca.vertcat(x0, flexure_deflections(self.params, pos[0], pos[1])[:3], 0, 0, 0)
         return ca.Function("initial_state", [pos, self.p], [x0], ["pos", "p"], ["x0"])
 
     @cached_property
@@ -173,7 +177,7 @@ class PlantModel:
         if self.variant.parasitic_mode:
             phi, omega = self._rotors()
             pp = self.params
-            arm_angle = self._substitute_state(dyn, ca.vertcat(*[dyn.q[s] for s in (2, 8, 14)]))
+            arm_angle = self._substitute_state(dyn, self._shoulder_rotation(dyn))
             for k in range(3):
                 energy += 0.5 * pp.j_rotor[k] * omega[k] ** 2
                 energy += 0.5 * pp.k_coupling[k] * (phi[k] - arm_angle[k]) ** 2

@@ -180,19 +180,15 @@ def test_power_balance(variant, nominal, hardware, rng):
         xdot = np.array(model.forward_dynamics(x0, current, p)).ravel()
         power = float(np.array(e_dot(x0)).ravel() @ xdot)
         prm = model.variant.parameters
-        if model.n_states == 4:
-            speed = np.array(nominal.terms(x0[:2], x0[2:4], p)[4]) @ x0[2:4]
-        else:
-            speed = x0[7:10]
+        arm_speed = np.array(model.terms(x0[:2], x0[2:4], p)[4]) @ x0[2:4]
+        motor_speed = arm_speed if model.n_states == 4 else x0[7:10]
         torque = np.array(prm.k_t) * current
-        friction = -(np.array(prm.tau_coulomb) * np.tanh(speed / prm.w_stribeck)
-                     + np.array(prm.b_viscous) * speed)
-        damping = np.array(model.terms(x0[:2], x0[2:4], p)[3]).ravel() @ x0[2:4]
+        friction = -(np.array(prm.tau_coulomb) * np.tanh(arm_speed / prm.w_stribeck)
+                     + np.array(prm.b_viscous) * arm_speed)
+        damping = _arm_damping_power(model, x0, p)
         if model.n_states > 4:
-            arm_speed = np.array(model.terms(x0[:2], x0[2:4], p)[4]) @ x0[2:4]
-            damping = _arm_damping_power(model, x0, p) + np.dot(prm.d_coupling,
-                                                                (speed - arm_speed) ** 2)
-        expected = float(torque @ speed + friction @ speed - damping)
+            damping += np.dot(prm.d_coupling, (motor_speed - arm_speed) ** 2)
+        expected = float(torque @ motor_speed + friction @ arm_speed - damping)
         assert power == pytest.approx(expected, rel=1e-9, abs=1e-12)
 
 

@@ -1,0 +1,67 @@
+"""The plant described for fmu/: named signals, tunable parameters and CasADi functions."""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from fmu.system import Parameter, System, Variable
+from plant.model import PlantModel, Variant
+
+_STATE_INFO = {
+    "q_x": ("m", "end-effector x position"), "q_y": ("m", "end-effector y position"),
+    "qd_x": ("m/s", "end-effector x velocity"), "qd_y": ("m/s", "end-effector y velocity"),
+    "phi_r": ("rad", "rotor rotation from its home angle, motor"), "omega_r": ("rad/s", "rotor speed of motor"),
+}
+_OUTPUT_INFO = {
+    "theta_s": ("rad", "encoder angle (quantized) of motor"),
+    "x": ("m", "true end-effector x position (evaluation only)"),
+    "y": ("m", "true end-effector y position (evaluation only)"),
+    "vx": ("m/s", "true end-effector x velocity (evaluation only)"),
+    "vy": ("m/s", "true end-effector y velocity (evaluation only)"),
+    "tau": ("N*m", "motor torque after current saturation, motor"),
+}
+
+
+def _variable(name: str, info: dict[str, tuple[str, str]]) -> Variable:
+    stem = name.rstrip("123")
+    unit, description = info[stem]
+    if stem != name:
+        description += f" {name[len(stem):]}"
+    return Variable(name, unit, description)
+
+
+def plant_system(variant: Variant | str = "nominal") -> System:
+    """The plant of one variant as a continuous System with every physical parameter tunable.
+
+    Parameters the variant's equations do not use (the coupling of the nominal plant, the
+    workspace radius) are left out; `x_start`, `y_start` set the initial rest position.
+    """
+    model = PlantModel(variant)
+    x, i, w = ca.SX.sym("x", model.n_states), ca.SX.sym("i", 3), ca.SX.sym("w", 3)
+    start = ca.SX.sym("start", 2)
+    outputs = [model.forward_dynamics(x, i, model.p), model.output(x, i, model.p, w)]
+    used = {sym.name() for sym in ca.symvar(ca.vertcat(*outputs))}
+    symbols, rows = ca.vertsplit(model.p), model.variant.parameters.describe()
+    kept = ca.vertcat(*[s for s in symbols if s.name() in used])
+    full = ca.vertcat(*[s if s.name() in used else row[1] for s, row in zip(symbols, rows)])
+    rows = [row for row in rows if row[0] in used]
+    p = ca.vertcat(kept, start)
+    parameters = tuple(Parameter(n, u, d, float(v), positive) for n, v, u, d, positive in rows)
+    parameters += (Parameter("x_start", "m", "initial end-effector x position (at rest)"),
+                   Parameter("y_start", "m", "initial end-effector y position (at rest)"))
+    return System(
+        name=f"plant_{model.variant.name}",
+        description=f"flexure manipulator plant, {model.variant.name} variant: Lagrangian "
+                    "dynamics in minimal coordinates, current saturation, encoders",
+        kind="continuous",
+        states=tuple(_variable(n, _STATE_INFO) for n in model.state_names),
+        inputs=tuple(Variable(n, "A", f"commanded current of motor {n[1]}")
+                     for n in model.input_names),
+        outputs=tuple(_variable(n, _OUTPUT_INFO) for n in model.output_names),
+        parameters=parameters,
+        initial_state=ca.Function("initial_state", [p], [model.initial_state(start, full)]),
+        dynamics=ca.Function("dynamics", [x, i, p], [model.forward_dynamics(x, i, full)]),
+        output=ca.Function("output", [x, i, p, w], [model.output(x, i, full, w)]),
+        n_noise=3,
+        max_substep=1e-3,
+    )
