@@ -26,6 +26,39 @@ def _plant_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fmu_build(args: argparse.Namespace) -> int:
+    from fmu.build import build_fmu
+    from plant.system import plant_system
+
+    path = build_fmu(plant_system(args.variant), args.output)
+    print(f"wrote {path}")
+    return 0
+
+
+def _fmu_validate(args: argparse.Namespace) -> int:
+    from fmu.validation import validate_fmu
+
+    status = 0
+    for path in args.files:
+        problems = validate_fmu(path)
+        print(f"{path}: {'OK' if not problems else f'{len(problems)} problem(s)'}")
+        for problem in problems:
+            print(f"  - {problem}")
+        status |= bool(problems)
+    return status
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from flexff.bench import run_benchmarks
+
+    text = json.dumps(run_benchmarks(steps=args.steps), indent=2)
+    print(text)
+    if args.output:
+        with open(args.output, "w") as f:
+            f.write(text + "\n")
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from flexff.demo import run_demo
 
@@ -44,6 +77,22 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--variant", choices=sorted(VARIANTS), default="nominal")
     info.add_argument("--json", action="store_true", help="print JSON instead of text")
     info.set_defaults(handler=_plant_info)
+
+    fmu = commands.add_parser("fmu", help="build and validate FMUs")
+    fmu_commands = fmu.add_subparsers(dest="fmu_command", required=True)
+    build = fmu_commands.add_parser("build", help="build an FMU")
+    build.add_argument("kind", choices=["plant"], help="what to build")
+    build.add_argument("--variant", choices=sorted(VARIANTS), default="nominal")
+    build.add_argument("-o", "--output", required=True, help="the .fmu file to write")
+    build.set_defaults(handler=_fmu_build)
+    validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")
+    validate.add_argument("files", nargs="+", help=".fmu files")
+    validate.set_defaults(handler=_fmu_validate)
+
+    bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON")
+    bench.add_argument("--steps", type=int, default=20000, help="steps per timed loop")
+    bench.add_argument("-o", "--output", help="also write the JSON to this file")
+    bench.set_defaults(handler=_bench)
 
     demo = commands.add_parser("demo", help="the whole pipeline on the embedded defaults")
     demo.add_argument("-o", "--output", default="flexff-demo", help="output folder")

@@ -99,3 +99,53 @@ def run_fmu(path: str | Path, steps: int, step: float = 1e-3,
     result = {"time": np.arange(steps + 1) * step}
     result.update({n: out[:, i] for i, n in enumerate(record)})
     return result
+
+
+def run_fmu_libcosim(path: str | Path, steps: int, step: float = 1e-3,
+                     inputs: Mapping[str, float | Sequence[float]] | None = None,
+                     parameters: Mapping[str, float | int] | None = None,
+                     record: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+    """The same run under libcosim (the second importer), through libcosimpy's own master.
+
+    Parameters (the Integer `seed` included) are initial values, inputs are overridden before
+    every step and `record` is read by a last-value observer after every step, so sample k is
+    at t = (k + 1) * step: compare with run_fmu's samples 1..steps for variables without direct
+    feedthrough.
+    """
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimManipulator import CosimManipulator
+    from libcosimpy.CosimObserver import CosimObserver
+    from libcosimpy.CosimSlave import CosimLocalSlave
+
+    log_output_level(CosimLogLevel.WARNING)  # libcosim traces every FMI call otherwise
+    variables = {v.name: v for v in read_model_description(str(path)).modelVariables}
+    record = list(record) if record is not None else [
+        n for n, v in variables.items() if v.causality == "output"]
+    series = {n: np.broadcast_to(np.asarray(u, dtype=float), (steps,))
+              for n, u in (inputs or {}).items()}
+    execution = CosimExecution.from_step_size(int(round(step * 1e9)))
+    index = execution.add_local_slave(CosimLocalSlave(fmu_path=str(path), instance_name="slave"))
+    for name, value in (parameters or {}).items():
+        v = variables[name]
+        ok = (execution.integer_initial_value(index, v.valueReference, int(value))
+              if v.type == "Integer" else
+              execution.real_initial_value(index, v.valueReference, float(value)))
+        if not ok:
+            raise RuntimeError(f"libcosim rejected the initial value {name} = {value}")
+    manipulator, observer = CosimManipulator.create_override(), CosimObserver.create_last_value()
+    execution.add_manipulator(manipulator)
+    execution.add_observer(observer)
+    input_refs = [variables[n].valueReference for n in series]
+    record_refs = [variables[n].valueReference for n in record]
+    out = np.empty((steps, len(record)))
+    for k in range(steps):
+        if input_refs and not manipulator.slave_real_values(
+                index, input_refs, [float(u[k]) for u in series.values()]):
+            raise RuntimeError(f"libcosim rejected the inputs of step {k}")
+        if not execution.step(1):
+            raise RuntimeError(f"libcosim failed in step {k}")
+        out[k] = observer.last_real_values(index, record_refs)
+    result = {"time": (np.arange(steps) + 1) * step}
+    result.update({n: out[:, i] for i, n in enumerate(record)})
+    return result

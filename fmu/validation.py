@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import zipfile
 from pathlib import Path
 
 import fmpy.validation
@@ -70,6 +71,10 @@ def _run_problems(path: Path, steps: int = 20) -> list[str]:
 def validate_fmu(path: str | Path) -> list[str]:
     """Problems found in the FMU at `path`; an empty list means it passed every check."""
     path = Path(path)
+    if not path.is_file():
+        return [f"{path} does not exist or is not a file"]
+    if not zipfile.is_zipfile(path):
+        return [f"{path} is not an FMU: an FMU is a zip archive, this file is not one"]
     problems = fmpy.validation.validate_fmu(str(path))
     if problems:
         return problems

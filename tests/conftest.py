@@ -19,3 +19,14 @@ def hardware() -> PlantModel:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20261121)
+
+
+@pytest.fixture(scope="session")
+def plant_fmus(tmp_path_factory) -> dict:
+    """The plant FMU of each variant, built once per test session."""
+    from fmu.build import build_fmu
+    from plant.system import plant_system
+
+    folder = tmp_path_factory.mktemp("plant_fmus")
+    return {v: build_fmu(plant_system(v), folder / f"plant_{v}.fmu")
+            for v in ("nominal", "hardware")}

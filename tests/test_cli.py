@@ -29,3 +29,37 @@ def test_unknown_variant_is_a_clear_error():
     result = flexff("plant", "info", "--variant", "real")
     assert result.returncode == 2
     assert "invalid choice: 'real'" in result.stderr and "nominal" in result.stderr
+
+
+def test_fmu_build_and_validate(tmp_path):
+    target = tmp_path / "plant.fmu"
+    result = flexff("fmu", "build", "plant", "--variant", "hardware", "-o", str(target))
+    assert result.returncode == 0, result.stderr
+    assert target.is_file()
+    result = flexff("fmu", "validate", str(target))
+    assert result.returncode == 0 and "OK" in result.stdout
+
+
+def test_fmu_validate_reports_bad_files(tmp_path):
+    junk = tmp_path / "junk.fmu"
+    junk.write_text("not a zip")
+    result = flexff("fmu", "validate", str(junk), str(tmp_path / "missing.fmu"))
+    assert result.returncode == 1
+    assert "is not an FMU" in result.stdout and "does not exist" in result.stdout
+
+
+def test_bench_prints_json(tmp_path):
+    result = flexff("bench", "--steps", "200", "-o", str(tmp_path / "bench.json"))
+    assert result.returncode == 0, result.stderr
+    figures = json.loads((tmp_path / "bench.json").read_text())
+    for variant in ("nominal", "hardware"):
+        plant = figures["plant_step"][variant]
+        assert plant["same_outputs"] and plant["c_us_per_step"] > 0
+        assert plant["python_us_per_step"] > plant["python_us_per_do_step"] > 0
+
+
+def test_demo_runs(tmp_path):
+    result = flexff("demo", "-o", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert "plant_nominal.fmu     yes" in result.stdout
+    assert (tmp_path / "plant_hardware.fmu").is_file()

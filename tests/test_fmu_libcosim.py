@@ -7,11 +7,8 @@ the FMU does not depend on fmpy's particular call sequence.
 
 import numpy as np
 import pytest
-from libcosimpy.CosimExecution import CosimExecution
-from libcosimpy.CosimManipulator import CosimManipulator
-from libcosimpy.CosimObserver import CosimObserver
-from libcosimpy.CosimSlave import CosimLocalSlave
 
+from fmu.runner import run_fmu_libcosim
 from tests.fmu_toys import LoggedSlave, build_toy, discrete_pi, duffing
 
 STEPS = 300
@@ -19,26 +16,10 @@ H = 1e-3
 
 
 def run_libcosim(fmu, parameters, seed, inputs, record):
-    """Set parameters (and the Integer seed) as initial values, override the inputs before every
-    step, and read `record` after every step."""
-    execution = CosimExecution.from_step_size(int(round(H * 1e9)))
-    index = execution.add_local_slave(CosimLocalSlave(fmu_path=str(fmu), instance_name="toy"))
-    vr = {v.name.decode(): v.reference for v in execution.slave_variables(index)}
-    for name, value in parameters.items():
-        assert execution.real_initial_value(index, vr[name], value)
-    if seed is not None:
-        assert execution.integer_initial_value(index, vr["seed"], seed)
-    manipulator = CosimManipulator.create_override()
-    observer = CosimObserver.create_last_value()
-    execution.add_manipulator(manipulator)
-    execution.add_observer(observer)
-    out = []
-    for k in range(STEPS):
-        assert manipulator.slave_real_values(index, [vr[n] for n in inputs],
-                                             [float(inputs[n][k]) for n in inputs])
-        assert execution.step(1)
-        out.append(observer.last_real_values(index, [vr[n] for n in record]))
-    return np.array(out)
+    """libcosim's samples after every step, as a (steps x len(record)) array."""
+    parameters = dict(parameters, **({"seed": seed} if seed is not None else {}))
+    result = run_fmu_libcosim(fmu, STEPS, H, inputs, parameters, record)
+    return np.column_stack([result[n] for n in record])
 
 
 def run_fmpy(fmu, parameters, seed, inputs, record):

@@ -1,0 +1,147 @@
+"""The plant FMU against the CasADi model it came from, a tight-tolerance reference and libcosim."""
+
+import fmpy.validation
+import numpy as np
+import pytest
+
+from fmu.runner import Slave, run_fmu, run_fmu_libcosim
+from fmu.validation import validate_fmu
+from plant.system import plant_system
+from tests.fmu_toys import LoggedSlave
+from tests.helpers import simulate
+
+STEPS = 1500
+H = 1e-3
+START = {"x_start": 0.02, "y_start": -0.01}
+
+
+def driven_currents(steps=STEPS):
+    """Piecewise-constant currents that change every 100 ms (so a reference can integrate
+    each constant piece exactly), strong enough to cross the whole workspace."""
+    t = np.repeat(np.arange(steps // 100 + 1) * 0.1, 100)[:steps]
+    return {f"i{k}": 1.5 * np.sin(2 * np.pi * 0.7 * t + 2.1 * k) for k in (1, 2, 3)}
+
+
+def python_rk4(system, x0, currents, params, substeps):
+    """RK4 with the FMU's sub-steps on the very CasADi functions the FMU was generated from."""
+    xs, x = [x0], np.array(x0, dtype=float)
+    dt = H / substeps
+    f = system.dynamics
+    for k in range(len(currents[0])):
+        u = [c[k] for c in currents]
+        for _ in range(substeps):
+            k1 = np.array(f(x, u, params)).ravel()
+            k2 = np.array(f(x + 0.5 * dt * k1, u, params)).ravel()
+            k3 = np.array(f(x + 0.5 * dt * k2, u, params)).ravel()
+            k4 = np.array(f(x + dt * k3, u, params)).ravel()
+            x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        xs.append(x)
+    return np.array(xs)
+
+
+@pytest.mark.parametrize("variant", ["nominal", "hardware"])
+def test_fmpy_validation_passes(plant_fmus, variant):
+    assert fmpy.validation.validate_fmu(str(plant_fmus[variant])) == []
+    assert validate_fmu(plant_fmus[variant]) == []
+
+
+@pytest.mark.parametrize("variant", ["nominal", "hardware"])
+@pytest.mark.parametrize("driven", [False, True], ids=["free", "driven"])
+def test_fmu_equals_casadi_rk4(plant_fmus, variant, driven):
+    system = plant_system(variant)
+    params = [p.start for p in system.parameters]
+    index = {p.name: k for k, p in enumerate(system.parameters)}
+    for name, value in START.items():
+        params[index[name]] = value
+    steps = 400
+    currents = driven_currents(steps) if driven else {f"i{k}": np.zeros(steps) for k in (1, 2, 3)}
+    states = [s.name for s in system.states]
+    fmu = run_fmu(plant_fmus[variant], steps, H, inputs=currents, parameters=START, record=states)
+    x0 = np.array(system.initial_state(params)).ravel()
+    reference = python_rk4(system, x0, list(currents.values()), params, substeps=1)
+    ours = np.column_stack([fmu[n] for n in states])
+    assert np.abs(ours - reference).max() <= 1e-12
+    assert np.ptp(ours[:, 0]) > 1e-3  # it really moved
+
+
+@pytest.mark.parametrize("variant", ["nominal", "hardware"])
+def test_fmu_matches_tight_tolerance_reference(plant_fmus, variant):
+    """With sub-steps of 0.1 ms the FMU's RK4 agrees with CVODES (rtol 1e-12) to 1e-8."""
+    system = plant_system(variant)
+    from plant.model import PlantModel
+
+    model = PlantModel(variant)
+    params = model.parameter_values()
+    currents = driven_currents()
+    fmu = run_fmu(plant_fmus[variant], STEPS, H, inputs=currents,
+                  parameters={**START, "max_substep": 1e-4}, record=["x", "y", "vx", "vy"])
+    x = np.array(model.initial_state([START["x_start"], START["y_start"]], params)).ravel()
+    reference = [x[:4]]
+    for piece in range(STEPS // 100):
+        u = [c[piece * 100] for c in currents.values()]
+        segment = simulate(model, x, params, np.linspace(0, 0.1, 101), current=u)
+        reference += list(segment[:4, 1:].T)
+        x = segment[:, -1]
+    reference = np.array(reference)
+    ours = np.column_stack([fmu[n] for n in ("x", "y", "vx", "vy")])
+    assert np.abs(ours[:, :2] - reference[:, :2]).max() < 1e-8  # m
+    assert np.abs(ours[:, 2:] - reference[:, 2:]).max() < 1e-8  # m/s
+    assert np.ptp(ours[:, 0]) > 0.01
+    assert len(system.states) == model.n_states
+
+
+@pytest.mark.parametrize("variant", ["nominal", "hardware"])
+def test_libcosim_equals_fmpy(plant_fmus, variant):
+    record = ["theta_s1", "theta_s2", "theta_s3", "x", "y", "vx", "vy"]
+    parameters = {**START, "seed": 5}
+    currents = driven_currents(600)
+    ours = run_fmu(plant_fmus[variant], 600, H, currents, parameters, record)
+    theirs = run_fmu_libcosim(plant_fmus[variant], 600, H, currents, parameters, record)
+    for name in record:
+        assert np.abs(theirs[name] - ours[name][1:]).max() <= 1e-12, name
+
+
+def test_outputs_are_quantized_encoders_and_saturated_torques(plant_fmus):
+    currents = {"i1": 14.0, "i2": -3.0, "i3": -20.0}
+    out = run_fmu(plant_fmus["nominal"], 50, H, inputs=currents, parameters=START)
+    system = plant_system("nominal")
+    start = {p.name: p.start for p in system.parameters}
+    resolution = 2 * np.pi / start["encoder_counts"]
+    for k in (1, 2, 3):
+        counts = (out[f"theta_s{k}"] - out[f"theta_s{k}"][0]) / resolution
+        assert np.abs(counts - np.round(counts)).max() < 1e-6
+        assert np.ptp(counts) > 0.5  # the arm moved by at least one count
+    limit = start["i_max"]
+    for k, i in enumerate(currents.values(), start=1):
+        expected = start[f"k_t{k}"] * np.clip(i, -limit, limit)
+        assert out[f"tau{k}"][-1] == pytest.approx(expected, rel=1e-15)
+
+
+def test_encoder_noise_is_seeded_and_survives_state_round_trip(plant_fmus):
+    path = plant_fmus["hardware"]
+    with Slave(path) as s:
+        s.initialize({"seed": 3, **START})
+        for k in range(100):
+            s.fmu.doStep(k * H, H)
+        saved = s.fmu.getFMUstate()
+        first = []
+        for k in range(100, 300):
+            s.set({"i1": 1.0})
+            s.fmu.doStep(k * H, H)
+            first.append(s.get(["theta_s1", "theta_s2", "x"]))
+        s.fmu.setFMUstate(saved)
+        again = []
+        for k in range(100, 300):
+            s.set({"i1": 1.0})
+            s.fmu.doStep(k * H, H)
+            again.append(s.get(["theta_s1", "theta_s2", "x"]))
+    assert np.array_equal(np.array(first), np.array(again))
+
+
+@pytest.mark.parametrize("name", ["m_up2", "k_e1", "encoder_counts"])
+def test_bad_physical_parameter_is_rejected_by_name(plant_fmus, name):
+    slave = LoggedSlave(str(plant_fmus["nominal"]))
+    with pytest.raises(Exception):
+        slave.initialize(**{name: 0.0})
+    assert name in slave.log()
+    slave.free()
