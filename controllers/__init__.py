@@ -1,1 +1,3 @@
-"""Controllers: PID loop shaping, notch, control allocation, rigid-body feedforward (to come)."""
+"""Controllers, each described as an fmu.system.System: the feedback controller (PID loop
+shaping per axis, notch, encoder kinematics and control allocation) and the rigid-body
+feedforward of the nominal model."""

@@ -1,0 +1,345 @@
+"""Reference trajectories: analytic position, velocity and acceleration on a fixed time grid.
+
+A path is built from segments, each an exact function of its own time: skew-sine lines
+(eq. 4.2) and circles (eq. 4.1), which start and end at rest with zero acceleration, holds,
+and periodic cubic splines through given points. `Chain` joins segments end to start (position
+must be continuous) and `sample` evaluates a path on the communication grid. Tables from CSV
+files are resampled onto the grid, with missing derivatives from a Savitzky-Golay filter.
+
+Every segment checks its arguments and that it stays inside the nominal workspace, and raises
+ValueError naming the offending point otherwise.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar, Sequence
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.signal import savgol_filter
+
+from plant.kinematics import check_workspace
+from plant.parameters import NOMINAL
+
+# evaluation reference of the thesis (section 5.7)
+THESIS_LINE_END = (0.0098, -0.0098)
+THESIS_LINE_TIME = 3.0
+THESIS_RADIUS = 0.014
+THESIS_TURNS = 11.5
+THESIS_CIRCLE_TIME = 12.0
+
+JOIN_TOLERANCE = 1e-9  # m: largest position jump accepted between chained segments
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """A sampled reference: times [s], positions [m], velocities [m/s], accelerations [m/s^2]."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    vx: np.ndarray
+    vy: np.ndarray
+    ax: np.ndarray
+    ay: np.ndarray
+
+    SIGNALS: ClassVar[tuple[str, ...]] = ("x_ref", "y_ref", "vx_ref", "vy_ref", "ax_ref",
+                                          "ay_ref")
+
+    def __post_init__(self) -> None:
+        arrays = self._arrays()
+        if any(a.ndim != 1 or a.shape != arrays[0].shape for a in arrays):
+            raise ValueError("reference arrays must be one-dimensional and of equal length")
+
+    def _arrays(self) -> list[np.ndarray]:
+        return [self.t, self.x, self.y, self.vx, self.vy, self.ax, self.ay]
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    def signals(self) -> dict[str, np.ndarray]:
+        """The reference signals by their co-simulation names (x_ref ... ay_ref)."""
+        return dict(zip(self.SIGNALS, self._arrays()[1:]))
+
+    def to_csv(self, path: str | Path) -> None:
+        """Write a table with columns t, x_ref, y_ref, vx_ref, vy_ref, ax_ref, ay_ref."""
+        with open(path, "w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(("t",) + self.SIGNALS)
+            writer.writerows(np.column_stack(self._arrays()).tolist())
+
+
+class Segment:
+    """A path piece: `duration` [s] and `evaluate(t)` for 0 <= t <= duration.
+
+    `evaluate` returns a (6, n) array: x, y, vx, vy, ax, ay at the local times t.
+    """
+
+    duration: float
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    @property
+    def start(self) -> np.ndarray:
+        return self.evaluate(np.zeros(1))[:2, 0]
+
+    @property
+    def end(self) -> np.ndarray:
+        return self.evaluate(np.array([self.duration]))[:2, 0]
+
+    def _validate(self) -> None:
+        """Positive finite duration and, on a dense grid, the whole path in the workspace."""
+        _positive("duration", self.duration, "s")
+        dense = self.evaluate(np.linspace(0.0, self.duration, max(2001, int(self.duration * 2000))))
+        check_workspace(NOMINAL, dense[0], dense[1], f"{type(self).__name__} point")
+
+
+@dataclass(frozen=True)
+class Line(Segment):
+    """Skew-sine straight line (eq. 4.2) from `start_point` to `end_point` [m], at rest at both."""
+
+    start_point: tuple[float, float]
+    end_point: tuple[float, float]
+    duration: float
+
+    def __post_init__(self) -> None:
+        _finite_point("start_point", self.start_point)
+        _finite_point("end_point", self.end_point)
+        self._validate()
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        s, ds, dds = _skew_sine(t, self.duration)
+        a, b = np.asarray(self.start_point, float), np.asarray(self.end_point, float)
+        stroke = (b - a)[:, None]
+        return np.vstack([a[:, None] + stroke * s, stroke * ds, stroke * dds])
+
+
+@dataclass(frozen=True)
+class Circle(Segment):
+    """Skew-sine circle (eq. 4.1): `turns` revolutions (negative: clockwise) about `centre`.
+
+    The angle runs from `start_angle` [rad] to start_angle + 2 pi turns, at rest at both ends.
+    """
+
+    centre: tuple[float, float]
+    radius: float
+    start_angle: float
+    turns: float
+    duration: float
+
+    def __post_init__(self) -> None:
+        _finite_point("centre", self.centre)
+        _positive("radius", self.radius, "m")
+        if not (math.isfinite(self.start_angle) and math.isfinite(self.turns) and self.turns):
+            raise ValueError(f"start_angle ({self.start_angle}) must be finite and turns "
+                             f"({self.turns}) finite and nonzero")
+        self._validate()
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        s, ds, dds = _skew_sine(t, self.duration)
+        sweep = 2 * math.pi * self.turns
+        angle, rate, accel = self.start_angle + sweep * s, sweep * ds, sweep * dds
+        c, n, r = np.cos(angle), np.sin(angle), self.radius
+        return np.vstack([self.centre[0] + r * c, self.centre[1] + r * n,
+                          -r * n * rate, r * c * rate,
+                          -r * c * rate**2 - r * n * accel, -r * n * rate**2 + r * c * accel])
+
+
+@dataclass(frozen=True)
+class Hold(Segment):
+    """Standing still at `point` [m] for `duration` [s]."""
+
+    point: tuple[float, float]
+    duration: float
+
+    def __post_init__(self) -> None:
+        _finite_point("point", self.point)
+        self._validate()
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        n = np.size(t)
+        return np.vstack([np.full(n, float(self.point[0])), np.full(n, float(self.point[1])),
+                          np.zeros((4, n))])
+
+
+@dataclass(frozen=True)
+class Spline(Segment):
+    """Closed periodic cubic spline through `points` [m], traversed once in `duration` [s].
+
+    Knot times are proportional to the chord lengths (including the closing chord), so the
+    speed is roughly even; velocity and acceleration are the spline's own derivatives and are
+    continuous around the loop, but not zero at the start.
+    """
+
+    points: tuple[tuple[float, float], ...]
+    duration: float
+    _spline: CubicSpline = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        pts = np.asarray(self.points, dtype=float)
+        if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2 or not np.all(np.isfinite(pts)):
+            raise ValueError(f"points must be at least two finite (x, y) pairs, got {self.points}")
+        closed = np.vstack([pts, pts[:1]])
+        chords = np.hypot(*np.diff(closed, axis=0).T)
+        if np.any(chords == 0):
+            k = int(np.argmin(chords))
+            raise ValueError(f"consecutive spline points {k} and {(k + 1) % len(pts)} coincide "
+                             f"at {tuple(pts[k])}")
+        _positive("duration", self.duration, "s")
+        knots = np.concatenate([[0.0], np.cumsum(chords)]) / chords.sum() * self.duration
+        object.__setattr__(self, "_spline", CubicSpline(knots, closed, bc_type="periodic"))
+        self._validate()
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        return np.vstack([self._spline(t, nu).T for nu in (0, 1, 2)])
+
+
+@dataclass(frozen=True)
+class Chain(Segment):
+    """Segments one after the other; each must start where the previous one ends."""
+
+    segments: tuple[Segment, ...]
+
+    def __post_init__(self) -> None:
+        if not self.segments:
+            raise ValueError("a chain needs at least one segment")
+        for k, (a, b) in enumerate(zip(self.segments[:-1], self.segments[1:])):
+            jump = np.linalg.norm(b.start - a.end)
+            if jump > JOIN_TOLERANCE:
+                raise ValueError(
+                    f"segment {k + 1} ({type(b).__name__}) starts at {tuple(b.start)} m but "
+                    f"segment {k} ({type(a).__name__}) ends at {tuple(a.end)} m: a jump of "
+                    f"{jump:.3g} m")
+
+    @property
+    def duration(self) -> float:
+        return float(sum(s.duration for s in self.segments))
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        starts = np.concatenate([[0.0], np.cumsum([s.duration for s in self.segments])[:-1]])
+        index = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(starts) - 1)
+        out = np.empty((6, t.size))
+        for k, segment in enumerate(self.segments):
+            mine = index == k
+            out[:, mine] = segment.evaluate(np.minimum(t[mine] - starts[k], segment.duration))
+        return out
+
+
+def sample(path: Segment, step: float = 1e-3) -> Reference:
+    """`path` on the grid 0, step, 2 step, ... up to its duration."""
+    _positive("step", step, "s")
+    t = np.arange(int(math.floor(path.duration / step + 1e-9)) + 1) * step
+    return Reference(t, *path.evaluate(t))
+
+
+def thesis_evaluation_path() -> Chain:
+    """The evaluation reference of the thesis (sec. 5.7), 15 s.
+
+    A skew-sine line from the centre to (0.0098, -0.0098) m in 3 s, then 11.5 counter-clockwise
+    turns of radius 0.014 m in 12 s. The line ends 0.01386 m from the centre, not 0.014, so the
+    circle's centre is shifted by 0.1 mm along the -45 degree diagonal to start exactly there:
+    the radius and the line's end point stay as given, and the path stays continuous.
+    """
+    end = np.array(THESIS_LINE_END)
+    start_angle = math.atan2(end[1], end[0])
+    centre = end - THESIS_RADIUS * np.array([math.cos(start_angle), math.sin(start_angle)])
+    return Chain((Line((0.0, 0.0), THESIS_LINE_END, THESIS_LINE_TIME),
+                  Circle(tuple(centre), THESIS_RADIUS, start_angle, THESIS_TURNS,
+                         THESIS_CIRCLE_TIME)))
+
+
+def thesis_evaluation(step: float = 1e-3) -> Reference:
+    """The thesis's evaluation reference sampled at `step`."""
+    return sample(thesis_evaluation_path(), step)
+
+
+def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.025) -> Reference:
+    """A reference from a CSV table with columns t, x_ref, y_ref (and optionally vx_ref, vy_ref,
+    ax_ref, ay_ref), resampled onto the grid t0, t0 + step, ... by cubic interpolation.
+
+    Missing velocities and accelerations come from a cubic Savitzky-Golay filter over
+    `smoothing_window` seconds of the resampled positions, which also smooths measured data.
+    """
+    _positive("step", step, "s")
+    _positive("smoothing_window", smoothing_window, "s")
+    columns = _read_columns(Path(path))
+    t = columns["t"]
+    if np.any(np.diff(t) <= 0):
+        k = int(np.argmax(np.diff(t) <= 0)) + 1
+        raise ValueError(f"{path}: time column t is not strictly increasing at data row {k + 1} "
+                         f"(t = {t[k - 1]:.9g} then {t[k]:.9g})")
+    check_workspace(NOMINAL, columns["x_ref"], columns["y_ref"], f"{path}: point")
+    grid = t[0] + np.arange(int(math.floor((t[-1] - t[0]) / step + 1e-9)) + 1) * step
+    window = 2 * int(round(smoothing_window / step / 2)) + 1
+    if grid.size < max(window, 4):
+        raise ValueError(f"{path}: the table spans {t[-1] - t[0]:.6g} s, too short for the "
+                         f"{smoothing_window} s smoothing window at the {step} s step")
+    resampled = {name: CubicSpline(t, values)(grid) for name, values in columns.items()
+                 if name != "t"}
+    for axis in ("x", "y"):
+        for order, prefix in ((1, "v"), (2, "a")):
+            name = f"{prefix}{axis}_ref"
+            if name not in resampled:
+                resampled[name] = savgol_filter(resampled[f"{axis}_ref"], window, 3, deriv=order,
+                                                delta=step)
+    check_workspace(NOMINAL, resampled["x_ref"], resampled["y_ref"],
+                    f"{path}: resampled point")
+    return Reference(grid, *(resampled[name] for name in Reference.SIGNALS))
+
+
+def _read_columns(path: Path) -> dict[str, np.ndarray]:
+    """The known columns of a CSV table, checked to be present, numeric and finite."""
+    with open(path, newline="") as handle:
+        rows = list(csv.reader(handle))
+    if not rows:
+        raise ValueError(f"{path}: empty file")
+    header = [name.strip() for name in rows[0]]
+    missing = [name for name in ("t", "x_ref", "y_ref") if name not in header]
+    if missing:
+        raise ValueError(f"{path}: missing column(s) {', '.join(missing)} (found: "
+                         f"{', '.join(header)})")
+    body = [row for row in rows[1:] if any(cell.strip() for cell in row)]  # blank lines
+    if len(body) < 2:
+        raise ValueError(f"{path}: needs at least two data rows, found {len(body)}")
+    columns = {}
+    for name in ("t",) + Reference.SIGNALS:
+        if name not in header:
+            continue
+        j, values = header.index(name), []
+        for k, row in enumerate(body):
+            try:
+                value = float(row[j])
+            except (IndexError, ValueError):
+                value = math.nan
+            if not math.isfinite(value):
+                raise ValueError(f"{path}: column {name} has a missing, non-numeric or "
+                                 f"non-finite value at data row {k + 1}")
+            values.append(value)
+        columns[name] = np.array(values)
+    return columns
+
+
+def _skew_sine(t: np.ndarray, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normalized skew-sine profile s(t) from 0 to 1 in `duration`, with s' and s''."""
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    phase = 2 * math.pi * t / duration
+    return (t / duration - np.sin(phase) / (2 * math.pi), (1 - np.cos(phase)) / duration,
+            2 * math.pi * np.sin(phase) / duration**2)
+
+
+def _positive(name: str, value: float, unit: str) -> None:
+    if not (isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value)
+            and value > 0):
+        raise ValueError(f"{name} must be a positive finite number of {unit}, got {value!r}")
+
+
+def _finite_point(name: str, point: Sequence[float]) -> None:
+    if len(point) != 2 or not all(math.isfinite(float(v)) for v in point):
+        raise ValueError(f"{name} must be a finite (x, y) pair in m, got {point!r}")
