@@ -80,9 +80,11 @@ def model_description_xml(system: System, layout: Layout, identifier: str, guid:
     ET.SubElement(root, "DefaultExperiment", {"startTime": "0.0", "stepSize": repr(float(step))})
 
     if system.extra:
+        # the FMI 2.0 schema allows one element inside <Tool>: wrap the entries in it
         tool = ET.SubElement(ET.SubElement(root, "VendorAnnotations"), "Tool", {"name": "flexff"})
+        annotations = ET.SubElement(tool, "Annotations")
         for key in sorted(system.extra):
-            ET.SubElement(tool, "Annotation", {"name": key, "value": system.extra[key]})
+            ET.SubElement(annotations, "Annotation", {"name": key, "value": system.extra[key]})
 
     model_vars = ET.SubElement(root, "ModelVariables")
     index = {}

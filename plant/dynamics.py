@@ -22,11 +22,11 @@ from plant.kinematics import flexure_deflections, generalized_coordinates
 from plant.parameters import PlantParameters
 
 
-def body_mass_matrix(p: PlantParameters, rotor_on_arm: bool) -> ca.SX:
+def body_mass_matrix(p: PlantParameters) -> ca.SX:
     """Constant 21x21 mass matrix: T = 1/2 qd^T M21 qd for the coordinates of eq. (2.1).
 
     Arm positions are centres of mass; the lower arm turns at theta_s + theta_e, which couples
-    the two angles. With `rotor_on_arm` the motor rotor turns rigidly with the upper arm.
+    the two angles. The motor rotor turns rigidly with the upper arm (direct drive).
     """
     m = ca.SX.zeros(N_COORDINATES, N_COORDINATES)
     for i, (s, e) in enumerate(zip(SHOULDER_INDEX, ELBOW_INDEX)):
@@ -34,7 +34,7 @@ def body_mass_matrix(p: PlantParameters, rotor_on_arm: bool) -> ca.SX:
             m[k, k] = p.m_up[i]
         for k in (e - 2, e - 1):
             m[k, k] = p.m_low[i]
-        m[s, s] = p.j_up[i] + (p.j_rotor[i] if rotor_on_arm else 0)
+        m[s, s] = p.j_up[i] + p.j_rotor[i]
         lower = ca.SX.zeros(1, N_COORDINATES)
         lower[s], lower[e] = 1, 1  # angular velocity of the lower arm
         m += p.j_low[i] * (lower.T @ lower)
@@ -76,12 +76,12 @@ class ReducedDynamics:
         return ca.solve(self.M, force - self.coriolis - self.Q - self.D)
 
 
-def reduced_dynamics(p: PlantParameters, rotor_on_arm: bool) -> ReducedDynamics:
+def reduced_dynamics(p: PlantParameters) -> ReducedDynamics:
     """Euler-Lagrange on the reduced kinetic and potential energy."""
     pos, vel = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2)
     q = generalized_coordinates(p, pos[0], pos[1])
     jac = ca.jacobian(q, pos)
-    body_mass = body_mass_matrix(p, rotor_on_arm)
+    body_mass = body_mass_matrix(p)
     mass = jac.T @ body_mass @ jac
     deflection = flexure_deflections(p, pos[0], pos[1])
     potential = 0.5 * ca.dot(flexure_stiffness(p), deflection**2)

@@ -16,7 +16,7 @@ import casadi as ca
 import numpy as np
 
 from plant.actuator import encoder_reading, friction_torque, motor_torque
-from plant.dynamics import ReducedDynamics, reduced_dynamics
+from plant.dynamics import reduced_dynamics
 from plant.kinematics import flexure_deflections, forward_kinematics_2, forward_kinematics_3
 from plant.kinematics import generalized_coordinates, shoulder_angles
 from plant.parameters import HARDWARE, NOMINAL, PlantParameters
@@ -61,16 +61,14 @@ class PlantModel:
         self.variant = get_variant(variant) if isinstance(variant, str) else variant
         self.p = ca.vertcat(*[ca.SX.sym(n) for n in PlantParameters.names()])
         self.params = PlantParameters.from_vector(self.p)
-        self.rigid = reduced_dynamics(self.params, rotor_on_arm=True)
-        self.arm = (reduced_dynamics(self.params, rotor_on_arm=False)
-                    if self.variant.parasitic_mode else self.rigid)
+        self.rigid = reduced_dynamics(self.params)
 
     # -- signals ------------------------------------------------------------------------------
     @property
     def state_names(self) -> list[str]:
         names = ["q_x", "q_y", "qd_x", "qd_y"]
         if self.variant.parasitic_mode:
-            names += [f"phi_r{i}" for i in (1, 2, 3)] + [f"omega_r{i}" for i in (1, 2, 3)]
+            names += ["tool_dx", "tool_dy", "tool_vx", "tool_vy"]
         return names
 
     input_names = ["i1", "i2", "i3"]
@@ -94,41 +92,29 @@ class PlantModel:
     def _i(self) -> ca.SX:
         return ca.SX.sym("i", 3)
 
-    def _substitute_state(self, dyn: ReducedDynamics, expr: ca.SX) -> ca.SX:
+    def _substitute_state(self, expr: ca.SX) -> ca.SX:
+        """Express terms written in (pos, vel) of the reduced dynamics in the state symbols."""
+        dyn = self.rigid
         return ca.substitute(expr, ca.vertcat(dyn.pos, dyn.vel), self._x[:4])
 
-    def _rotors(self) -> tuple[ca.SX, ca.SX]:
-        return self._x[4:7], self._x[7:10]
-
-    def _shoulder_rotation(self, dyn: ReducedDynamics) -> ca.SX:
-        """Rotation of the three upper arms from their home angles, in dyn's symbols."""
-        return flexure_deflections(self.params, dyn.pos[0], dyn.pos[1])[:3]
-
-    def _coupling_torque(self) -> ca.SX:
-        """Torque the compliant coupling passes from each rotor to its upper arm."""
-        phi, omega = self._rotors()
-        pp, dyn = self.params, self.arm
-        arm_angle, arm_speed = self._shoulder_rotation(dyn), dyn.A @ dyn.vel
-        torque = ca.vertcat(*[pp.k_coupling[i] * (phi[i] - arm_angle[i])
-                              + pp.d_coupling[i] * (omega[i] - arm_speed[i]) for i in range(3)])
-        return self._substitute_state(dyn, torque)
+    def _tool(self) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """Tool deflection from the wrist, its rate, and the force the mount puts on the wrist."""
+        pp, x = self.params, self._x
+        deflection, rate = x[4:6], x[6:8]
+        return deflection, rate, pp.k_tool * deflection + pp.d_tool * rate
 
     # -- Functions ----------------------------------------------------------------------------
     @cached_property
     def forward_dynamics(self) -> ca.Function:
-        pp, x, i = self.params, self._x, self._i
+        pp, x, i, dyn = self.params, self._x, self._i, self.rigid
+        torque = motor_torque(pp, i) + friction_torque(pp, dyn.A @ dyn.vel)
+        force = dyn.A.T @ torque
         if not self.variant.parasitic_mode:
-            dyn = self.rigid
-            torque = motor_torque(pp, i) + friction_torque(pp, dyn.A @ dyn.vel)
-            acc = self._substitute_state(dyn, dyn.acceleration(dyn.A.T @ torque))
-            rhs = ca.vertcat(x[2:4], acc)
+            rhs = ca.vertcat(x[2:4], self._substitute_state(dyn.acceleration(force)))
         else:
-            dyn, coupling = self.arm, self._coupling_torque()
-            torque = coupling + friction_torque(pp, dyn.A @ dyn.vel)
-            acc = self._substitute_state(dyn, dyn.acceleration(dyn.A.T @ torque))
-            _, omega = self._rotors()
-            rotor_acc = (motor_torque(pp, i) - coupling) / ca.vertcat(*pp.j_rotor)
-            rhs = ca.vertcat(x[2:4], acc, omega, rotor_acc)
+            deflection, rate, mount = self._tool()
+            acc = self._substitute_state(dyn.acceleration(force + mount))
+            rhs = ca.vertcat(x[2:4], acc, rate, -mount / pp.m_tool - acc)
         return ca.Function("forward_dynamics", [x, i, self.p], [rhs],
                            ["x", "i", "p"], ["xdot"])
 
@@ -136,10 +122,8 @@ class PlantModel:
     def output(self) -> ca.Function:
         pp, x, i = self.params, self._x, self._i
         noise = ca.SX.sym("w", 3)
-        if self.variant.parasitic_mode:
-            rotation = self._rotors()[0]  # the encoder sits on the motor
-        else:
-            rotation = self._substitute_state(self.rigid, self._shoulder_rotation(self.rigid))
+        rotation = self._substitute_state(
+            flexure_deflections(pp, self.rigid.pos[0], self.rigid.pos[1])[:3])
         home = ca.vertcat(*shoulder_angles(pp, 0.0, 0.0))
         theta = ca.vertcat(*[encoder_reading(pp, rotation[k], home[k], noise[k])
                              for k in range(3)])
@@ -148,11 +132,9 @@ class PlantModel:
 
     @cached_property
     def initial_state(self) -> ca.Function:
-        """The state at rest at wrist position pos (rotors aligned with their arms)."""
+        """The state at rest at wrist position pos (tool undeflected)."""
         pos = ca.SX.sym("pos", 2)
-        x0 = ca.vertcat(pos, 0, 0)
-        if self.variant.parasitic_mode:
-            x0 = ca.vertcat(x0, flexure_deflections(self.params, pos[0], pos[1])[:3], 0, 0, 0)
+        x0 = ca.vertcat(pos, ca.SX.zeros(self.n_states - 2))
         return ca.Function("initial_state", [pos, self.p], [x0], ["pos", "p"], ["x0"])
 
     @cached_property
@@ -171,16 +153,14 @@ class PlantModel:
 
     @cached_property
     def energy(self) -> ca.Function:
-        """Total mechanical energy [J]: bodies, rotors and flexures (and coupling springs)."""
-        dyn = self.arm
-        energy = self._substitute_state(dyn, dyn.kinetic + dyn.potential)
+        """Total mechanical energy [J]: bodies, rotors, flexures (and the tool and its mount)."""
+        dyn = self.rigid
+        energy = self._substitute_state(dyn.kinetic + dyn.potential)
         if self.variant.parasitic_mode:
-            phi, omega = self._rotors()
-            pp = self.params
-            arm_angle = self._substitute_state(dyn, self._shoulder_rotation(dyn))
-            for k in range(3):
-                energy += 0.5 * pp.j_rotor[k] * omega[k] ** 2
-                energy += 0.5 * pp.k_coupling[k] * (phi[k] - arm_angle[k]) ** 2
+            pp, (deflection, rate, _) = self.params, self._tool()
+            tool_speed = self._x[2:4] + rate
+            energy += 0.5 * pp.m_tool * ca.sumsqr(tool_speed)
+            energy += 0.5 * pp.k_tool * ca.sumsqr(deflection)
         return ca.Function("energy", [self._x, self.p], [energy], ["x", "p"], ["E"])
 
     @cached_property

@@ -10,7 +10,9 @@ from plant.model import PlantModel, Variant
 _STATE_INFO = {
     "q_x": ("m", "end-effector x position"), "q_y": ("m", "end-effector y position"),
     "qd_x": ("m/s", "end-effector x velocity"), "qd_y": ("m/s", "end-effector y velocity"),
-    "phi_r": ("rad", "rotor rotation from its home angle, motor"), "omega_r": ("rad/s", "rotor speed of motor"),
+    "tool_dx": ("m", "tool deflection from the wrist, x"),
+    "tool_dy": ("m", "tool deflection from the wrist, y"),
+    "tool_vx": ("m/s", "tool deflection rate, x"), "tool_vy": ("m/s", "tool deflection rate, y"),
 }
 _OUTPUT_INFO = {
     "theta_s": ("rad", "encoder angle (quantized) of motor"),
@@ -33,7 +35,7 @@ def _variable(name: str, info: dict[str, tuple[str, str]]) -> Variable:
 def plant_system(variant: Variant | str = "nominal") -> System:
     """The plant of one variant as a continuous System with every physical parameter tunable.
 
-    Parameters the variant's equations do not use (the coupling of the nominal plant, the
+    Parameters the variant's equations do not use (the tool of the nominal plant, the
     workspace radius) are left out; `x_start`, `y_start` set the initial rest position.
     """
     model = PlantModel(variant)

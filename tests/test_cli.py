@@ -14,7 +14,7 @@ def test_plant_info_json():
     assert result.returncode == 0, result.stderr
     info = json.loads(result.stdout)
     assert info["variant"] == "hardware"
-    assert len(info["natural_frequencies_hz"]) == 5
+    assert len(info["natural_frequencies_hz"]) == 4
     units = {row["name"]: row["unit"] for row in info["parameters"]}
     assert units["k_t1"] == "N*m/A" and units["l_up"] == "m"
 

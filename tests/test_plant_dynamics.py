@@ -9,18 +9,18 @@ from plant.analysis import FRICTION_FREE, modes
 from plant.parameters import NOMINAL
 from tests.helpers import simulate, workspace_points
 
-NO_DAMPING = {f"{d}{i}": 0.0 for d in ("d_s", "d_e", "d_w", "d_coupling") for i in (1, 2, 3)}
+NO_DAMPING = {f"{d}{i}": 0.0 for d in ("d_s", "d_e", "d_w") for i in (1, 2, 3)} | {"d_tool": 0.0}
 
 
 def random_states(model, rng, n, p):
-    """n states at random workspace positions with random velocities (and rotor offsets)."""
+    """n states at random workspace positions with random velocities (and tool deflections)."""
     states = []
     for pos in workspace_points(rng, n, radius=0.045).T:
         x = np.array(model.initial_state(pos, p)).ravel()
         x[2:4] = rng.normal(0, 0.1, 2)
         if model.n_states > 4:
-            x[4:7] += rng.normal(0, 1e-3, 3)
-            x[7:10] = rng.normal(0, 1.0, 3)
+            x[4:6] = rng.normal(0, 1e-4, 2)
+            x[6:8] = rng.normal(0, 0.02, 2)
         states.append(x)
     return states
 
@@ -180,23 +180,15 @@ def test_power_balance(variant, nominal, hardware, rng):
         xdot = np.array(model.forward_dynamics(x0, current, p)).ravel()
         power = float(np.array(e_dot(x0)).ravel() @ xdot)
         prm = model.variant.parameters
-        arm_speed = np.array(model.terms(x0[:2], x0[2:4], p)[4]) @ x0[2:4]
-        motor_speed = arm_speed if model.n_states == 4 else x0[7:10]
+        speed = np.array(model.terms(x0[:2], x0[2:4], p)[4]) @ x0[2:4]
         torque = np.array(prm.k_t) * current
-        friction = -(np.array(prm.tau_coulomb) * np.tanh(arm_speed / prm.w_stribeck)
-                     + np.array(prm.b_viscous) * arm_speed)
-        damping = _arm_damping_power(model, x0, p)
+        friction = -(np.array(prm.tau_coulomb) * np.tanh(speed / prm.w_stribeck)
+                     + np.array(prm.b_viscous) * speed)
+        damping = np.array(model.terms(x0[:2], x0[2:4], p)[3]).ravel() @ x0[2:4]
         if model.n_states > 4:
-            damping += np.dot(prm.d_coupling, (motor_speed - arm_speed) ** 2)
-        expected = float(torque @ motor_speed + friction @ arm_speed - damping)
+            damping += prm.d_tool * np.sum(x0[6:8] ** 2)
+        expected = float(torque @ speed + friction @ speed - damping)
         assert power == pytest.approx(expected, rel=1e-9, abs=1e-12)
-
-
-def _arm_damping_power(model, x0, p):
-    """Flexure damping power of the arm alone (rotor inertia not on the arm)."""
-    dyn = model.arm
-    f = ca.Function("d", [dyn.pos, dyn.vel, model.p], [dyn.D])
-    return float(np.array(f(x0[:2], x0[2:4], p)).ravel() @ x0[2:4])
 
 
 @pytest.mark.parametrize("variant", ["nominal", "hardware"])
