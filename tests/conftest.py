@@ -30,3 +30,19 @@ def plant_fmus(tmp_path_factory) -> dict:
     folder = tmp_path_factory.mktemp("plant_fmus")
     return {v: build_fmu(plant_system(v), folder / f"plant_{v}.fmu")
             for v in ("nominal", "hardware")}
+
+
+@pytest.fixture(scope="session")
+def duffing_fmu(tmp_path_factory):
+    """The nonlinear continuous toy System of tests/fmu_toys.py as an FMU."""
+    from tests.fmu_toys import build_toy, duffing
+
+    return build_toy(duffing(), tmp_path_factory)
+
+
+@pytest.fixture(scope="session")
+def pi_fmu(tmp_path_factory):
+    """The discrete PI toy System of tests/fmu_toys.py as an FMU."""
+    from tests.fmu_toys import build_toy, discrete_pi
+
+    return build_toy(discrete_pi(), tmp_path_factory)

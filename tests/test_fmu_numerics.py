@@ -14,8 +14,6 @@ from fmu.runner import run_fmu
 from tests.fmu_toys import (
     DUFFING_PARAMS,
     LoggedSlave,
-    build_toy,
-    discrete_pi,
     duffing,
     normals,
     rk4_reference,
@@ -24,16 +22,6 @@ from tests.fmu_toys import (
 H = 1e-3
 STEPS = 1000
 FORCE = 2.0 * np.sin(30.0 * H * np.arange(STEPS)) + 0.5
-
-
-@pytest.fixture(scope="module")
-def duffing_fmu(tmp_path_factory):
-    return build_toy(duffing(), tmp_path_factory)
-
-
-@pytest.fixture(scope="module")
-def pi_fmu(tmp_path_factory):
-    return build_toy(discrete_pi(), tmp_path_factory)
 
 
 def states(run):

@@ -21,19 +21,9 @@ from fmpy.fmi2 import (
     fmi2Terminated,
 )
 
-from tests.fmu_toys import LoggedSlave, build_toy, discrete_pi, duffing, status_of
+from tests.fmu_toys import LoggedSlave, status_of
 
 H = 1e-3
-
-
-@pytest.fixture(scope="module")
-def duffing_fmu(tmp_path_factory):
-    return build_toy(duffing(), tmp_path_factory)
-
-
-@pytest.fixture(scope="module")
-def pi_fmu(tmp_path_factory):
-    return build_toy(discrete_pi(), tmp_path_factory)
 
 
 @pytest.fixture
