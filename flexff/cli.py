@@ -59,6 +59,68 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run(args: argparse.Namespace) -> int:
+    from cosim.batch import run_batch, sweep
+    from cosim.run import run_config
+
+    configs = args.configs
+    if args.sweep:
+        if len(configs) != 1:
+            raise ValueError("--sweep takes exactly one configuration")
+        key, values = _sweep_values(args.sweep)
+        configs = sweep(configs[0], key, values)
+    elif len(configs) == 1 and args.scheduler is None:
+        try:
+            metrics = run_config(configs[0], args.output)
+        except (NotImplementedError, RuntimeError) as error:
+            print(f"flexff: error: {configs[0]}: {error}", file=sys.stderr)
+            return 1
+        print(f"{configs[0]}: {_summary(metrics)} -> {args.output}")
+        return 0
+    status = 0
+    for result in run_batch(configs, args.output, args.workers, args.scheduler,
+                            subfolders=len(configs) > 1 or bool(args.sweep)):
+        if result.ok:
+            print(f"{result.name}: {_summary(result.metrics)} -> {result.output_dir}")
+        else:
+            print(f"{result.name}: FAILED: {result.error}", file=sys.stderr)
+            status = 1
+    return status
+
+
+def _sweep_values(text: str) -> tuple[str, list]:
+    """`table.key=v1,v2,...` -> (table.key, [values]), the values read as TOML."""
+    import tomllib
+
+    key, sep, values = text.partition("=")
+    if not sep or not values:
+        raise ValueError(f"--sweep expects TABLE.KEY=V1,V2,..., got {text!r}")
+    try:
+        return key.strip(), tomllib.loads(f"v = [{values}]")["v"]
+    except tomllib.TOMLDecodeError:
+        raise ValueError(f"--sweep values must be TOML values (strings quoted): {values!r}") \
+            from None
+
+
+def _summary(metrics: dict) -> str:
+    x, y = metrics["x"], metrics["y"]
+    return (f"e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), einf = ({x['einf']:.4g}, "
+            f"{y['einf']:.4g}) m, real-time factor {metrics['real_time_factor']:.0f}")
+
+
+def _config_example(args: argparse.Namespace) -> int:
+    from cosim.config import config_examples
+
+    examples = config_examples()
+    if args.name is None:
+        print("\n".join(examples))
+        return 0
+    if args.name not in examples:
+        raise ValueError(f"no example {args.name!r}; examples: {', '.join(examples)}")
+    print(examples[args.name], end="")
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from flexff.demo import run_demo
 
@@ -88,6 +150,23 @@ def build_parser() -> argparse.ArgumentParser:
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")
     validate.add_argument("files", nargs="+", help=".fmu files")
     validate.set_defaults(handler=_fmu_validate)
+
+    run = commands.add_parser("run", help="run co-simulations from TOML configurations")
+    run.add_argument("configs", nargs="+", metavar="CONFIG.toml", help="run configurations")
+    run.add_argument("-o", "--output", required=True,
+                     help="output folder (several configurations: one subfolder each)")
+    run.add_argument("--workers", type=int, help="parallel local processes (default: CPUs)")
+    run.add_argument("--scheduler", help="address of a Dask scheduler to run on instead")
+    run.add_argument("--sweep", metavar="TABLE.KEY=V1,V2,...",
+                     help="run one configuration once per value of a key")
+    run.set_defaults(handler=_run)
+
+    config = commands.add_parser("config", help="run configurations")
+    config_commands = config.add_subparsers(dest="config_command", required=True)
+    example = config_commands.add_parser("example", help="print an example configuration "
+                                                         "(no name: list them)")
+    example.add_argument("name", nargs="?", help="the example's name")
+    example.set_defaults(handler=_config_example)
 
     bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON")
     bench.add_argument("--steps", type=int, default=20000, help="steps per timed loop")

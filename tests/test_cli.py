@@ -56,6 +56,10 @@ def test_bench_prints_json(tmp_path):
         plant = figures["plant_step"][variant]
         assert plant["same_outputs"] and plant["c_us_per_step"] > 0
         assert plant["python_us_per_step"] > plant["python_us_per_do_step"] > 0
+    loop = figures["closed_loop"]
+    assert loop["c_equals_master"] and loop["steps"] == 15000
+    assert set(loop["real_time_factor"]) == {"master", "libcosim", "libcosim_engine", "c"}
+    assert loop["ratio_master_over_c"] > 1
 
 
 def test_demo_runs(tmp_path):

@@ -1,0 +1,73 @@
+"""The speed floor: cosim/c/cosim_loop.c runs the master's loop in plain C.
+
+It loads the FMU libraries a Master has extracted, follows the Master's bus layout and call
+plan exactly (same calls, same order, same times), and returns its record of the bus, which
+must equal the Master's bit for bit, with the best time per step over a few repeats.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from cosim.master import Master
+from fmu import cache
+from fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler
+
+SOURCE = Path(__file__).parent / "c" / "cosim_loop.c"
+
+
+def loop_program() -> Path:
+    """The compiled C loop, from the fmu/ cache when its source and compiler are unchanged."""
+    text = SOURCE.read_text()
+    key = cache.digest({"cosim_loop.c": text, "cflags": " ".join(CFLAGS),
+                        "compiler": compiler_version()})
+    program = cache.cached_path(key, ".cosim_loop")
+    if not program.exists():
+        with tempfile.TemporaryDirectory() as tmp:
+            for name, header in fmi_headers().items():
+                (Path(tmp) / name).write_text(header)
+            exe = Path(tmp) / "cosim_loop"
+            run_compiler([SOURCE], exe, [Path(tmp)], extra_flags=(), libraries=("-ldl",))
+            cache.store(key, ".cosim_loop", exe)
+    return program
+
+
+def _plan_text(layout: dict, steps: int) -> str:
+    lines = ["flexff-cosim-plan 1",
+             f"{layout['step']!r} {len(layout['signals'])} {layout['n_sources']} {steps} "
+             f"{len(layout['slaves'])}"]
+    for s in layout["slaves"]:
+        lines += [s["library"], s["guid"], s["name"], str(len(s["parameters"]))]
+        lines += [f"{vr} {'I' if kind == 'Integer' else 'R'} {float(value)!r}"
+                  for vr, kind, value in s["parameters"]]
+        lines += [str(len(s["inputs"]))] + [f"{vr} {index}" for vr, index in s["inputs"]]
+        lines += [f"{len(s['outputs'])} {s['output_offset']}"] + [str(vr) for vr in s["outputs"]]
+        lines.append(f"{int(s['read_before'])} {int(s['read_after'])}")
+    return "\n".join(lines) + "\n"
+
+
+def run_c_loop(master: Master, sources: Mapping[str, np.ndarray | float], steps: int,
+               repeats: int = 3) -> tuple[dict[str, np.ndarray], float]:
+    """The bus at every point (by signal name) and the best microseconds per step of the C
+    loop on `master`'s FMUs and plan; `master` need not have run."""
+    layout = master.layout()
+    table = np.empty((steps + 1, layout["n_sources"]))
+    for j, name in enumerate(layout["signals"][:layout["n_sources"]]):
+        table[:, j] = np.broadcast_to(np.asarray(sources[name], dtype=float), (steps + 1,))
+    with tempfile.TemporaryDirectory() as tmp:
+        plan, src, rec = (Path(tmp) / n for n in ("plan.txt", "sources.bin", "record.bin"))
+        plan.write_text(_plan_text(layout, steps))
+        table.tofile(src)
+        result = subprocess.run([str(loop_program()), str(plan), str(src), str(rec),
+                                 str(repeats)], capture_output=True, text=True)
+        if result.returncode != 0:
+            raise RuntimeError(f"the C loop failed: {result.stderr.strip()}")
+        bus = np.fromfile(rec).reshape(steps + 1, len(layout["signals"]))
+    us_per_step = json.loads(result.stdout)["us_per_step"]
+    return {n: bus[:, j].copy() for j, n in enumerate(layout["signals"])}, us_per_step

@@ -1,0 +1,130 @@
+"""The same co-simulation under libcosim (through libcosimpy), the second FMI importer.
+
+FMUs, parameters and connections are those of cosim.master (connected by name); libcosim's
+own fixed-step master runs them. Source signals that vary are written by an override
+manipulator before each step, constant ones are initial values, and a last-value observer
+reads every FMU's outputs after each step.
+
+libcosim's algorithm is Jacobi-like: all FMUs step from t_k with the inputs transferred at the
+end of the previous step, then outputs are read and transferred. The value a connection
+carries into the step from t_k is what its source output read at t_k, after its step, with the
+inputs of that previous step. For outputs with direct feedthrough (the controller's currents,
+the feedforward's forces) that is one step behind cosim.master, which evaluates them at t_k
+with the inputs of t_k: the closed loop is then not the same discrete system, and the two
+masters differ by more than round-off. (libcosim's clock counts integer nanoseconds, so its
+step lengths in seconds differ from `step` by round-off.)
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from fmpy import read_model_description
+
+from cosim.connections import SOURCE, Port, connect
+from cosim.master import SlaveSpec
+from cosim.recording import Recording
+
+
+class _Execution:
+    """A libcosim execution of the FMUs, connected by name, with parameters and constant
+    sources as initial values; `varying` lists the inputs fed from time-varying sources."""
+
+    def __init__(self, slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
+                 step: float) -> None:
+        from libcosimpy.CosimExecution import CosimExecution
+        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+        from libcosimpy.CosimSlave import CosimLocalSlave
+
+        log_output_level(CosimLogLevel.WARNING)  # libcosim traces every FMI call otherwise
+        self.variables, self.ports = {}, []
+        for s in slaves:
+            md = read_model_description(str(s.fmu))
+            self.variables[s.name] = {v.name: v for v in md.modelVariables}
+            signals = {c: tuple(v.name for v in md.modelVariables if v.causality == c)
+                       for c in ("input", "output")}
+            self.ports.append(Port(s.name, signals["input"], signals["output"], frozenset(
+                u.variable.name for u in md.outputs if u.dependencies)))
+        self.execution = execution = CosimExecution.from_step_size(int(round(step * 1e9)))
+        self.index = {s.name: execution.add_local_slave(
+            CosimLocalSlave(fmu_path=str(s.fmu), instance_name=s.name)) for s in slaves}
+        for s in slaves:
+            for name, value in s.parameters.items():
+                self.initial_value(s.name, name, value)
+        self.varying: dict[str, list[tuple[int, str]]] = {}  # slave -> (value ref., source)
+        for c in connect(list(sources), self.ports):
+            if c.source != SOURCE:
+                status = execution.connect_real_variables(
+                    self.index[c.source], self.vr(c.source, c.signal),
+                    self.index[c.target], self.vr(c.target, c.signal))
+                if not (status is True or (type(status) is int and status == 0)):  # int in 0.0.6
+                    raise RuntimeError(f"libcosim refused to connect {c.source}.{c.signal}")
+            elif np.ndim(sources[c.signal]) == 0:
+                self.initial_value(c.target, c.signal, sources[c.signal])
+            else:
+                self.varying.setdefault(c.target, []).append(
+                    (self.vr(c.target, c.signal), c.signal))
+
+    def vr(self, slave: str, name: str) -> int:
+        return self.variables[slave][name].valueReference
+
+    def initial_value(self, slave: str, name: str, value: float | int) -> None:
+        i, vr = self.index[slave], self.vr(slave, name)
+        ok = (self.execution.integer_initial_value(i, vr, int(value))
+              if self.variables[slave][name].type == "Integer" else
+              self.execution.real_initial_value(i, vr, float(value)))
+        if not ok:
+            raise RuntimeError(f"libcosim rejected {slave}.{name} = {value!r}")
+
+
+def run_libcosim(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
+                 step: float, steps: int, record: Sequence[str] | None = None) -> Recording:
+    """Run `steps` steps; the recording holds the FMU outputs (all, or `record`) at
+    t_1 .. t_steps, read after each step, and the source signals at those points.
+
+    Its wall time includes libcosimpy's per-step calls (manipulator and observer), which
+    build their ctypes prototypes on every call: see `time_libcosim_engine` for the rest.
+    """
+    from libcosimpy.CosimManipulator import CosimManipulator
+    from libcosimpy.CosimObserver import CosimObserver
+
+    ex = _Execution(slaves, sources, step)
+    manipulator, observer = CosimManipulator.create_override(), CosimObserver.create_last_value()
+    ex.execution.add_manipulator(manipulator)
+    ex.execution.add_observer(observer)
+    by_slave = {p.name: [n for n in p.outputs if record is None or n in record]
+                for p in ex.ports}
+    by_slave = {s: names for s, names in by_slave.items() if names}
+    refs = {s: [ex.vr(s, n) for n in names] for s, names in by_slave.items()}
+    out = {s: np.empty((steps, len(names))) for s, names in by_slave.items()}
+    table = {n: np.broadcast_to(np.asarray(v, dtype=float), (steps + 1,))
+             for n, v in sources.items()}
+    start = time.perf_counter()
+    for k in range(steps):
+        for slave, inputs in ex.varying.items():
+            if not manipulator.slave_real_values(ex.index[slave], [r for r, _ in inputs],
+                                                 [float(table[n][k]) for _, n in inputs]):
+                raise RuntimeError(f"libcosim rejected the inputs of {slave} at step {k}")
+        if not ex.execution.step(1):
+            raise RuntimeError(f"libcosim failed in the step from t = {k * step:.9g} s")
+        for slave, values in out.items():
+            values[k] = observer.last_real_values(ex.index[slave], refs[slave])
+    wall = time.perf_counter() - start
+    signals = {n: np.ascontiguousarray(table[n][1:]) for n in sources
+               if record is None or n in record}
+    for slave, names in by_slave.items():
+        signals.update({n: np.ascontiguousarray(out[slave][:, j]) for j, n in enumerate(names)})
+    return Recording((np.arange(steps) + 1) * step, signals, wall)
+
+
+def time_libcosim_engine(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
+                         step: float, steps: int) -> float:
+    """Seconds libcosim takes for `steps` steps of the connected FMUs in one call, the
+    varying sources held at their first sample: the engine's cost without per-step Python."""
+    ex = _Execution(slaves, {n: float(np.ravel(v)[0]) for n, v in sources.items()}, step)
+    start = time.perf_counter()
+    if not ex.execution.step(steps):
+        raise RuntimeError("libcosim failed")
+    return time.perf_counter() - start

@@ -1,0 +1,69 @@
+"""Plots of a run, as PNG files (matplotlib's Agg backend, no display needed).
+
+  path.png    the true x-y path against the reference
+  error.png   tracking error e = reference - true position over time, per axis
+  forces.png  feedback, feedforward and total end-effector force over time, per axis
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (after selecting the backend)
+
+from cosim.recording import Recording, atomic_write  # noqa: E402
+
+SIGNALS = ("x_ref", "y_ref", "x", "y", "Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
+MM = 1e3
+
+
+def _save(figure, path: Path) -> Path:
+    figure.tight_layout()
+    atomic_write(path, lambda tmp: figure.savefig(tmp, dpi=120, format="png"))
+    plt.close(figure)
+    return path
+
+
+def plot_path(rec: Recording, path: Path) -> Path:
+    figure, ax = plt.subplots(figsize=(5.5, 5.5))
+    ax.plot(rec["x_ref"] * MM, rec["y_ref"] * MM, "k--", lw=1, label="reference")
+    ax.plot(rec["x"] * MM, rec["y"] * MM, lw=1, label="end effector")
+    ax.set(xlabel="x [mm]", ylabel="y [mm]", aspect="equal", title="x-y path")
+    ax.legend(loc="best")
+    return _save(figure, path)
+
+
+def plot_error(rec: Recording, path: Path) -> Path:
+    figure, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+    for ax, axis in zip(axes, ("x", "y")):
+        ax.plot(rec.time, (rec[f"{axis}_ref"] - rec[axis]) * MM, lw=0.8)
+        ax.set(ylabel=f"e_{axis} [mm]")
+        ax.grid(True, alpha=0.3)
+    axes[0].set_title("tracking error (reference - true position)")
+    axes[-1].set_xlabel("time [s]")
+    return _save(figure, path)
+
+
+def plot_forces(rec: Recording, path: Path) -> Path:
+    figure, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+    for ax, axis in zip(axes, ("x", "y")):
+        fb, ff = rec[f"F{axis}_fb"], rec[f"F{axis}_ff"]
+        ax.plot(rec.time, fb, lw=0.8, label="feedback")
+        ax.plot(rec.time, ff, lw=0.8, label="feedforward")
+        ax.plot(rec.time, fb + ff, "k", lw=0.6, label="total")
+        ax.set(ylabel=f"F_{axis} [N]")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="upper right", ncol=3, fontsize="small")
+    axes[0].set_title("end-effector force")
+    axes[-1].set_xlabel("time [s]")
+    return _save(figure, path)
+
+
+def write_plots(rec: Recording, folder: str | Path) -> list[Path]:
+    """Write path.png, error.png and forces.png into `folder`; return their paths."""
+    folder = Path(folder)
+    return [plot_path(rec, folder / "path.png"), plot_error(rec, folder / "error.png"),
+            plot_forces(rec, folder / "forces.png")]

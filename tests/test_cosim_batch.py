@@ -1,0 +1,110 @@
+"""Batches (local processes; Dask only when installed), sweeps, and the `flexff run` and
+`flexff config example` commands."""
+
+import importlib.util
+import json
+import subprocess
+import sys
+from dataclasses import replace
+
+import pytest
+
+from cosim.batch import run_batch, sweep
+from cosim.config import config_examples, parse_config
+
+SHORT = """
+[run]
+stop = 1.0
+
+[reference]
+kind = "line-circle"
+line_duration = 0.5
+radius = 0.005
+circle_duration = 0.5
+"""
+
+
+def flexff(*args):
+    return subprocess.run([sys.executable, "-m", "flexff", *args], capture_output=True, text=True)
+
+
+def test_a_broken_run_is_reported_and_the_others_finish(tmp_path):
+    good = tmp_path / "good.toml"
+    good.write_text(SHORT + '[feedforward]\nkind = "model"\n')
+    broken = tmp_path / "broken.toml"
+    broken.write_text(SHORT + "[plant]\nk_t1 = -1.0\n")
+    results = run_batch([broken, good], tmp_path / "out", workers=2)
+    assert [r.name for r in results] == ["broken", "good"]
+    assert not results[0].ok and "plant.k_t1" in results[0].error
+    assert results[1].ok and results[1].metrics["x"]["einf"] < 1e-3
+    assert json.loads((tmp_path / "out" / "good" / "metrics.json").read_text()) == \
+        results[1].metrics
+    assert not (tmp_path / "out" / "broken" / "metrics.json").exists()
+
+
+def test_a_failure_inside_an_fmu_is_reported(tmp_path):
+    config = parse_config(SHORT, name="good")
+    unchecked = replace(config, name="bad", plant=replace(  # past the configuration checks
+        config.plant, parameters={**config.plant.parameters, "k_s1": -5.0}))
+    results = run_batch([config, unchecked], tmp_path, workers=1)
+    assert results[0].ok
+    assert "CosimError" in results[1].error and "k_s1" in results[1].error
+
+
+def test_sweep(tmp_path):
+    path = tmp_path / "base.toml"
+    path.write_text(SHORT)
+    configs = sweep(path, "controller.crossover_hz", [2.0, 3.0])
+    assert [c.name for c in configs] == ["base-controller.crossover_hz=2.0",
+                                         "base-controller.crossover_hz=3.0"]
+    assert [c.controller.crossover_hz for c in configs] == [2.0, 3.0]
+    with pytest.raises(ValueError, match="controller.crossover_hz: expected a number"):
+        sweep(path, "controller.crossover_hz", ["fast"])
+
+
+def test_names_must_differ(tmp_path):
+    config = parse_config(SHORT, name="same")
+    with pytest.raises(ValueError, match="share the name"):
+        run_batch([config, config], tmp_path)
+
+
+def test_dask_is_optional(tmp_path):
+    if importlib.util.find_spec("dask") is not None:
+        pytest.skip("dask is installed: the missing-dependency message cannot be shown")
+    with pytest.raises(RuntimeError, match="needs dask.distributed"):
+        run_batch([parse_config(SHORT)], tmp_path, scheduler="tcp://127.0.0.1:1")
+
+
+def test_cli_config_examples(tmp_path):
+    listed = flexff("config", "example")
+    assert listed.returncode == 0 and listed.stdout.split() == list(config_examples())
+    shown = flexff("config", "example", "thesis-eval-model-ff")
+    assert shown.returncode == 0 and shown.stdout == config_examples()["thesis-eval-model-ff"]
+    missing = flexff("config", "example", "nope")
+    assert missing.returncode == 2 and "no example 'nope'" in missing.stderr
+
+
+def test_cli_run_one_and_several(tmp_path):
+    one = tmp_path / "one.toml"
+    one.write_text(SHORT)
+    result = flexff("run", str(one), "-o", str(tmp_path / "single"))
+    assert result.returncode == 0, result.stderr
+    assert "e2 = (" in result.stdout
+    for name in ("signals.npz", "signals.csv", "metrics.json", "run.json", "path.png",
+                 "error.png", "forces.png"):
+        assert (tmp_path / "single" / name).is_file(), name
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SHORT.replace("stop = 1.0", "stop = 1.0\nstep = 0.0007"))
+    result = flexff("run", str(one), str(bad), "-o", str(tmp_path / "many"), "--workers", "2")
+    assert result.returncode == 1
+    assert "bad: FAILED: ConfigError" in result.stderr and "run.stop" in result.stderr
+    assert (tmp_path / "many" / "one" / "metrics.json").is_file()
+    result = flexff("run", str(bad), "-o", str(tmp_path / "x"))
+    assert result.returncode == 2 and "run.stop" in result.stderr
+    result = flexff("run", str(one), "-o", str(tmp_path / "sweep"), "--sweep",
+                    "controller.encoders=2,3")
+    assert result.returncode == 0, result.stderr
+    for encoders in (2, 3):
+        run = json.loads((tmp_path / "sweep" / f"one-controller.encoders={encoders}" /
+                          "run.json").read_text())
+        assert run["controller"]["encoders"] == encoders

@@ -1,0 +1,149 @@
+"""The master against a monolithic closed loop, the C loop, and its load-time and run-time errors.
+
+The monolithic loop is plain Python on the same CasADi functions: the feedforward's output,
+the controller's output and update, the plant's output (encoders) and its dynamics under the
+FMU's RK4 sub-steps, stepped in the master's order at every communication point.
+"""
+
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from controllers.feedback import controller_system
+from controllers.feedforward import rigid_body_feedforward_system
+from cosim.connections import Port, connect
+from cosim.floor import run_c_loop
+from cosim.master import CosimError, Master, SlaveSpec
+from cosim.references import thesis_evaluation
+from cosim.scenario import reference_samples
+from fmu.build import build_fmu
+from plant.system import plant_system
+
+STEP, STOP = 1e-3, 15.0
+STEPS = int(round(STOP / STEP))
+MAX_SUBSTEP = 2.5e-4  # four RK4 sub-steps per communication step
+
+
+@pytest.fixture(scope="module")
+def systems():
+    return {"feedforward": rigid_body_feedforward_system(STEP),
+            "controller": controller_system("nominal", step=STEP),
+            "plant": plant_system("nominal")}
+
+
+@pytest.fixture(scope="module")
+def fmus(systems, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cosim_fmus")
+    return {name: build_fmu(system, folder / f"{name}.fmu") for name, system in systems.items()}
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return reference_samples(thesis_evaluation(STEP), STEPS)
+
+
+def monolithic(systems, reference, steps, max_substep):
+    """x, y, currents and feedback forces of the closed loop, every point 0 .. steps.
+
+    One CasADi Function per communication point, composed of the Systems' own functions,
+    accumulated over the run (mapaccum) so that the test stays fast.
+    """
+    ff, ctrl, plant = systems["feedforward"], systems["controller"], systems["plant"]
+    p_plant = ca.DM([p.start for p in plant.parameters])
+    p_ctrl = ca.DM([p.start for p in ctrl.parameters])
+    empty = ca.SX(0, 1)
+    xp, xc = ca.SX.sym("xp", len(plant.states)), ca.SX.sym("xc", len(ctrl.states))
+    ref = ca.SX.sym("ref", 6)
+    force_ff = ff.output(empty, ref, empty, empty)
+    encoders = plant.output(xp, ca.DM.zeros(3), p_plant, ca.DM.zeros(3))[:3]
+    u = ca.vertcat(ref[:2], encoders, force_ff)
+    y = ctrl.output(xc, u, p_ctrl, empty)
+    n = max(1, math.ceil(STEP / max_substep - 1e-12))
+    dt, x = STEP / n, xp
+    for _ in range(n):  # the wrapper's RK4, operation for operation
+        k1 = plant.dynamics(x, y[:3], p_plant)
+        k2 = plant.dynamics(x + 0.5 * dt * k1, y[:3], p_plant)
+        k3 = plant.dynamics(x + 0.5 * dt * k2, y[:3], p_plant)
+        k4 = plant.dynamics(x + dt * k3, y[:3], p_plant)
+        x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    state = ca.vertcat(xp, xc)
+    step = ca.Function("step", [state, ref], [ca.vertcat(x, ctrl.dynamics(xc, u, p_ctrl)),
+                                              ca.vertcat(xp[:2], y)])
+    x0 = ca.vertcat(plant.initial_state(p_plant), ctrl.initial_state(p_ctrl))
+    refs = np.vstack([reference[n][:steps + 1] for n in ("x_ref", "y_ref", "vx_ref", "vy_ref",
+                                                          "ax_ref", "ay_ref")])
+    _, out = step.mapaccum(steps + 1)(x0, refs)
+    return dict(zip(("x", "y", "i1", "i2", "i3", "Fx_fb", "Fy_fb"), np.array(out)))
+
+
+def slaves(fmus, plant_parameters=None):
+    return [SlaveSpec("feedforward", fmus["feedforward"]),
+            SlaveSpec("controller", fmus["controller"]),
+            SlaveSpec("plant", fmus["plant"], plant_parameters or {})]
+
+
+def test_closed_loop_equals_the_monolithic_simulation(systems, fmus, reference):
+    expected = monolithic(systems, reference, STEPS, MAX_SUBSTEP)
+    with Master(slaves(fmus, {"max_substep": MAX_SUBSTEP}), list(reference), STEP) as master:
+        rec = master.run(reference, STEPS)
+    for name, values in expected.items():
+        assert np.abs(rec[name] - values).max() <= 1e-9, name
+    assert np.ptp(rec["x"]) > 0.02  # it really followed the 28 mm circle
+    assert rec.time[-1] == pytest.approx(STOP) and rec.time.size == STEPS + 1
+
+
+def test_the_c_loop_records_the_same_numbers(fmus, reference):
+    sources = {n: v[:2001] for n, v in reference.items()}
+    with Master(slaves(fmus), list(sources), STEP) as master:
+        c_record, us_per_step = run_c_loop(master, sources, 2000, repeats=1)
+        rec = master.run(sources, 2000)
+    assert us_per_step > 0
+    for name in rec.signals:
+        assert np.array_equal(c_record[name], rec[name]), name
+
+
+def test_connections_by_name():
+    ports = [Port("ff", ("x_ref",), ("F",), frozenset({"F"})),
+             Port("ctrl", ("x_ref", "F", "theta"), ("i",), frozenset({"i"})),
+             Port("plant", ("i",), ("theta", "tau"), frozenset({"tau"}))]
+    by_input = {(c.target, c.signal): c for c in connect(["x_ref"], ports)}
+    assert by_input["ctrl", "F"].source == "ff" and not by_input["ctrl", "F"].feedback
+    assert by_input["ctrl", "theta"].source == "plant" and by_input["ctrl", "theta"].feedback
+    assert by_input["ff", "x_ref"].source == "sources"
+    with pytest.raises(ValueError, match="input 'y_ref' of 'ff' is not connected"):
+        connect(["x_ref"], [Port("ff", ("x_ref", "y_ref"), ("F",))])
+    with pytest.raises(ValueError, match="algebraic loop"):
+        connect(["x_ref"], [Port("ctrl", ("x_ref", "tau"), ("i",)), ports[2]])
+    with pytest.raises(ValueError, match="'theta' is produced by both 'sources' and 'plant'"):
+        connect(["x_ref", "theta"], ports)
+
+
+def test_an_unconnected_input_fails_at_load_time(fmus):
+    with pytest.raises(ValueError, match="input 'Fx_ff' of 'controller' is not connected"):
+        Master([SlaveSpec("controller", fmus["controller"]), SlaveSpec("plant", fmus["plant"])],
+               ["x_ref", "y_ref"], STEP)
+
+
+def test_unknown_parameter_fails_at_load_time(fmus):
+    with pytest.raises(ValueError, match="plant: unknown parameter 'm_upper'"):
+        Master(slaves(fmus, {"m_upper": 0.3}), ["x_ref", "y_ref"], STEP)
+
+
+def test_a_failing_fmu_call_carries_the_fmu_message(fmus, reference):
+    with Master(slaves(fmus, {"k_t1": -1.0}), list(reference), STEP) as master:
+        with pytest.raises(CosimError, match=r"plant: fmi2ExitInitializationMode failed: "
+                                             r"\[Error\] Parameter 'k_t1' = -1 must be > 0"):
+            master.run(reference, STEPS)
+
+
+def test_recording_a_selection(fmus, reference):
+    sources = {n: v[:101] for n, v in reference.items()}
+    with Master(slaves(fmus), list(sources), STEP) as master:
+        rec = master.run(sources, 100, record=["y", "x_ref", "i2"])
+    assert list(rec.signals) == ["y", "x_ref", "i2"]
+    assert np.array_equal(rec["x_ref"], sources["x_ref"])
+    with Master(slaves(fmus), list(sources), STEP) as master:
+        with pytest.raises(ValueError, match="cannot record unknown signal"):
+            master.run(sources, 100, record=["z"])

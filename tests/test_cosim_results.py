@@ -1,0 +1,94 @@
+"""Metrics against hand-computed values, the recording's round trip and atomic writes, plots."""
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.metrics import error_norms, run_metrics, tracking_metrics
+from cosim.plots import write_plots
+from cosim.recording import CSV_NAME, NPZ_NAME, Recording, atomic_write, load_recording
+from cosim.recording import save_recording
+
+
+def synthetic():
+    """Four points 0.5 s apart: e_x = (0, 1, -2, 2) mm, e_y = (3, 3, 3, 3) mm."""
+    time = np.array([0.0, 0.5, 1.0, 1.5])
+    x_ref = np.array([0.010, 0.011, 0.012, 0.013])
+    y_ref = np.array([-0.02, -0.01, 0.0, 0.01])
+    signals = {"x_ref": x_ref, "y_ref": y_ref,
+               "x": x_ref - np.array([0.0, 1e-3, -2e-3, 2e-3]), "y": y_ref - 3e-3}
+    return Recording(time, signals, wall_s=0.25)
+
+
+def test_metrics_by_hand():
+    m = tracking_metrics(synthetic())
+    # e_x: sum e^2 = (0 + 1 + 4 + 4) mm^2 = 9e-6 m^2, dt = 0.5 s, T = 1.5 s
+    assert m["x"]["e2"] == pytest.approx(math.sqrt(9e-6 * 0.5) / 1.5, rel=1e-12)
+    assert m["x"]["einf"] == pytest.approx(2e-3, rel=1e-12)
+    assert m["x"]["rms"] == pytest.approx(1.5e-3, rel=1e-12)
+    # e_y: constant 3 mm
+    assert m["y"]["e2"] == pytest.approx(math.sqrt(4 * 9e-6 * 0.5) / 1.5, rel=1e-12)
+    assert m["y"]["einf"] == pytest.approx(3e-3, rel=1e-12)
+    assert m["y"]["rms"] == pytest.approx(3e-3, rel=1e-12)
+    full = run_metrics(synthetic())
+    assert list(full) == ["x", "y", "wall_s", "real_time_factor"]
+    assert full["real_time_factor"] == pytest.approx(1.5 / 0.25)
+    with pytest.raises(ValueError, match="two samples"):
+        error_norms(np.zeros(1), 1e-3)
+
+
+def test_recording_round_trip_is_bit_exact(tmp_path, rng):
+    time = np.arange(1001) * 1e-3
+    signals = {name: rng.standard_normal(1001) * 10.0 ** rng.integers(-12, 3)
+               for name in ("x_ref", "theta_s1", "i1", "Fx_ff")}
+    signals["i1"][5] = np.nextafter(0.0, 1.0)  # a subnormal survives too
+    paths = save_recording(Recording(time, signals), tmp_path)
+    assert [p.name for p in paths] == [NPZ_NAME, CSV_NAME]
+    back = load_recording(tmp_path)
+    assert list(back.signals) == list(signals)
+    assert back.time.tobytes() == time.tobytes()
+    for name, values in signals.items():
+        assert back[name].dtype == np.float64 and back[name].tobytes() == values.tobytes()
+    table = np.loadtxt(tmp_path / CSV_NAME, delimiter=",", skiprows=1)
+    header = (tmp_path / CSV_NAME).read_text().splitlines()[0]
+    assert header == "time,x_ref,theta_s1,i1,Fx_ff"
+    assert np.array_equal(table, np.column_stack([time, *signals.values()]))
+
+
+def test_an_interrupted_write_leaves_no_file(tmp_path):
+    target = tmp_path / "signals.npz"
+
+    def half_write(tmp):
+        tmp.write_bytes(b"half a file")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write(target, half_write)
+    assert list(tmp_path.iterdir()) == []
+    target.write_bytes(b"old")
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write(target, half_write)
+    assert target.read_bytes() == b"old"  # the previous file is untouched
+    assert [p.name for p in tmp_path.iterdir()] == ["signals.npz"]
+
+
+def test_recording_checks_its_shape():
+    with pytest.raises(ValueError, match="has \\(3,\\) samples"):
+        Recording(np.arange(4.0), {"x": np.zeros(3)})
+    with pytest.raises(ValueError, match="reserved"):
+        Recording(np.arange(4.0), {"time": np.zeros(4)})
+
+
+def test_plots_are_written(tmp_path):
+    t = np.arange(2001) * 1e-3
+    angle = 2 * np.pi * t / 2.0
+    signals = {"x_ref": 0.01 * np.cos(angle), "y_ref": 0.01 * np.sin(angle),
+               "x": 0.009 * np.cos(angle - 0.1), "y": 0.009 * np.sin(angle - 0.1),
+               "Fx_fb": np.sin(angle), "Fy_fb": np.cos(angle),
+               "Fx_ff": 0.5 * np.sin(3 * angle), "Fy_ff": np.zeros_like(t)}
+    paths = write_plots(Recording(t, signals), tmp_path)
+    assert [p.name for p in paths] == ["path.png", "error.png", "forces.png"]
+    for path in paths:
+        data = path.read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
