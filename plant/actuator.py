@@ -36,10 +36,13 @@ def encoder_resolution(p: PlantParameters) -> Any:
 
 
 def encoder_reading(p: PlantParameters, rotation: Any, home: Any, noise: Any) -> Any:
-    """Encoder angle [rad]: the home angle plus the counted rotation from home.
+    """Encoder angle [rad]: the home angle plus the rotation from home, counted in whole
+    counts when `encoder_quantization` is on (> 0.5), exact when it is off.
 
     The incremental encoder is zeroed at the home pose (wrist at the centre); `noise` is a
     standard normal sample, scaled by noise_std and added before counting.
     """
     resolution = encoder_resolution(p)
-    return home + resolution * ca.floor((rotation + p.noise_std * noise) / resolution + 0.5)
+    measured = rotation + p.noise_std * noise
+    counted = resolution * ca.floor(measured / resolution + 0.5)
+    return home + ca.if_else(p.encoder_quantization > 0.5, counted, measured)

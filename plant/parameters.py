@@ -59,6 +59,9 @@ class PlantParameters:
     i_max: float = _param("A", "amplifier current limit (saturation)")
     # encoder
     encoder_counts: float = _param("1/rev", "encoder resolution in counts per revolution")
+    encoder_quantization: float = _param(
+        "1", "1: the encoder reads whole counts; 0: the exact angle (the ideal sensor of the "
+        "thesis's simulation model)", positive=False)
     # non-ideal effects (zero switches them off, except the tool mount, which is structural)
     tau_coulomb: tuple = _param("N*m", "Coulomb friction torque at the motor", positive=False)
     b_viscous: tuple = _param("N*m*s/rad", "viscous friction at the motor", positive=False)
@@ -138,6 +141,8 @@ class PlantParameters:
                 problems.append(f"{name} = {value} {unit} must be positive")
             elif value < 0:
                 problems.append(f"{name} = {value} {unit} must not be negative")
+        if self.encoder_quantization not in (0.0, 1.0):
+            problems.append(f"encoder_quantization = {self.encoder_quantization} must be 0 or 1")
         if self.l_up + self.l_low <= self.r_mount + self.workspace_radius:
             problems.append("l_up + l_low must exceed r_mount + workspace_radius (reach)")
         if problems:
@@ -197,7 +202,7 @@ NOMINAL = PlantParameters(
     k_s=_three(_K_FLEX), k_e=_three(_K_FLEX), k_w=_three(_K_FLEX),
     d_s=_three(_D_FLEX), d_e=_three(_D_FLEX), d_w=_three(_D_FLEX),
     j_rotor=_three(1.81e-5), k_t=_three(36.9e-3), i_max=10.0,
-    encoder_counts=2048.0,
+    encoder_counts=2048.0, encoder_quantization=0.0,
     tau_coulomb=_three(0.0), b_viscous=_three(0.0), w_stribeck=0.01,
     m_tool=_M_TOOL, k_tool=_K_TOOL, d_tool=_D_TOOL,
     noise_std=0.0,
@@ -223,5 +228,5 @@ HARDWARE_MISMATCH = dict(
 HARDWARE = replace(
     NOMINAL.scaled(**HARDWARE_MISMATCH),
     tau_coulomb=_three(7.0e-3), b_viscous=_three(2.0e-4),
-    noise_std=1.0e-3,
+    encoder_quantization=1.0, noise_std=1.0e-3,
 )

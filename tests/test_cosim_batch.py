@@ -1,7 +1,6 @@
 """Batches (local processes; Dask only when installed), sweeps, and the `flexff run` and
 `flexff config example` commands."""
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -68,11 +67,21 @@ def test_names_must_differ(tmp_path):
         run_batch([config, config], tmp_path)
 
 
-def test_dask_is_optional(tmp_path):
-    if importlib.util.find_spec("dask") is not None:
-        pytest.skip("dask is installed: the missing-dependency message cannot be shown")
-    with pytest.raises(RuntimeError, match="needs dask.distributed"):
-        run_batch([parse_config(SHORT)], tmp_path, scheduler="tcp://127.0.0.1:1")
+def test_batch_on_a_dask_cluster(tmp_path):
+    """A local Dask cluster (threads, one worker) stands in for a remote one: the runs go
+    through its scheduler address, and a broken one is reported while the other finishes."""
+    from dask.distributed import LocalCluster
+
+    broken = SHORT.replace("radius = 0.005", "radius = 0.2")
+    good = parse_config(SHORT, name="good")
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        bad = tmp_path / "bad.toml"
+        bad.write_text(broken)
+        results = run_batch([good, bad], tmp_path / "out", scheduler=cluster.scheduler_address)
+    assert [r.ok for r in results] == [True, False]
+    assert "outside the workspace" in results[1].error
+    assert (tmp_path / "out" / "good" / "metrics.json").is_file()
 
 
 def test_cli_config_examples(tmp_path):

@@ -15,7 +15,6 @@ from cosim.run import simulate_config
 
 THESIS_E2 = (42.93e-4, 42.94e-4)
 THESIS_EINF = (142.23e-4, 140.00e-4)
-FINE_ENCODERS = 2.0**24  # counts per revolution: quantization out of the way
 
 
 def metrics(name, plant="", controller=""):
@@ -75,19 +74,19 @@ def test_pid_alone_on_the_thesis_reference_has_a_large_error(thesis_runs):
 
 
 def test_rigid_body_feedforward_removes_most_of_the_error(thesis_runs):
-    """With the real 2048-count encoders the ratio is about 30-45: the error left is the
-    encoder quantization fed back through the PID. With fine encoders it is far above 50."""
+    """The nominal plant's encoders are ideal, as in the thesis's simulation model: the
+    feedforward cuts e2 far more than 50 times. Counting whole 2048-count encoder steps in the
+    loop (the hardware's sensor) leaves the quantization fed back through the PID: about 30-45."""
     pid, ff = thesis_runs["pid"], thesis_runs["model-ff"]
-    fine = f"encoder_counts = {FINE_ENCODERS}\n"
-    pid_fine, ff_fine = metrics("thesis-eval-pid", fine), metrics("thesis-eval-model-ff", fine)
+    counted = "encoder_quantization = 1.0\n"
+    pid_q, ff_q = metrics("thesis-eval-pid", counted), metrics("thesis-eval-model-ff", counted)
     print(f"\nrigid-body feedforward, nominal plant (x, y):\n"
           f"  e2 = {e2(ff) * 1e4} 1e-4 m/sqrt(s), einf = {einf(ff) * 1e4} 1e-4 m, "
           f"e2 ratio PID / FF = {e2(pid) / e2(ff)}\n"
-          f"  with 2^24-count encoders: e2 = {e2(ff_fine) * 1e4}, ratio = "
-          f"{e2(pid_fine) / e2(ff_fine)}")
-    assert np.all(e2(pid) / e2(ff) > 25)
-    assert np.all(einf(ff) < 0.6e-3)  # below one encoder count of an arm (0.95 mm)
-    assert np.all(e2(pid_fine) / e2(ff_fine) > 50)
+          f"  with whole encoder counts: e2 = {e2(ff_q) * 1e4}, ratio = {e2(pid_q) / e2(ff_q)}")
+    assert np.all(e2(pid) / e2(ff) > 50)
+    assert np.all(e2(pid_q) / e2(ff_q) > 25)
+    assert np.all(einf(ff_q) < 0.6e-3)  # below one encoder count of an arm (0.95 mm)
 
 
 def test_metrics_of_the_run_match_the_recording():

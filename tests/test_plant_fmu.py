@@ -100,20 +100,29 @@ def test_libcosim_equals_fmpy(plant_fmus, variant):
         assert np.abs(theirs[name] - ours[name][1:]).max() <= 1e-12, name
 
 
-def test_outputs_are_quantized_encoders_and_saturated_torques(plant_fmus):
+def test_outputs_are_encoders_and_saturated_torques(plant_fmus):
+    """Quantization on: whole counts from home; off (the nominal default): the exact angle."""
     currents = {"i1": 14.0, "i2": -3.0, "i3": -20.0}
-    out = run_fmu(plant_fmus["nominal"], 50, H, inputs=currents, parameters=START)
-    system = plant_system("nominal")
-    start = {p.name: p.start for p in system.parameters}
+    counted = run_fmu(plant_fmus["nominal"], 50, H, inputs=currents,
+                      parameters={**START, "encoder_quantization": 1.0})
+    exact = run_fmu(plant_fmus["nominal"], 50, H, inputs=currents, parameters=START)
+    model = PlantModel("nominal")
+    p = model.parameter_values()
+    start = dict(zip(model.variant.parameters.names(), p))
     resolution = 2 * np.pi / start["encoder_counts"]
+    home = np.array(model.coordinates([0.0, 0.0], p)).ravel()[[2, 8, 14]]
     for k in (1, 2, 3):
-        counts = (out[f"theta_s{k}"] - out[f"theta_s{k}"][0]) / resolution
+        counts = (counted[f"theta_s{k}"] - home[k - 1]) / resolution
         assert np.abs(counts - np.round(counts)).max() < 1e-6
         assert np.ptp(counts) > 0.5  # the arm moved by at least one count
+        angles = [float(model.coordinates([x, y], p)[[2, 8, 14][k - 1]])
+                  for x, y in zip(exact["x"], exact["y"])]
+        assert np.abs(exact[f"theta_s{k}"] - angles).max() < 1e-12
+        assert np.abs(counted[f"theta_s{k}"] - angles).max() <= resolution / 2 + 1e-12
     limit = start["i_max"]
     for k, i in enumerate(currents.values(), start=1):
         expected = start[f"k_t{k}"] * np.clip(i, -limit, limit)
-        assert out[f"tau{k}"][-1] == pytest.approx(expected, rel=1e-15)
+        assert counted[f"tau{k}"][-1] == pytest.approx(expected, rel=1e-15)
 
 
 def test_encoder_noise_is_seeded_and_survives_state_round_trip(plant_fmus):
