@@ -4,13 +4,25 @@ Tables and keys (SI units; every table but [reference] may be left out):
 
   [run]          step (s, default 0.001), stop (s, default: the reference's duration; a longer
                  run holds the reference's last position at rest)
-  [reference]    kind = "thesis-eval" | "circle" | "line-circle" | "spline" | "csv", and its keys:
+  [reference]    kind = "thesis-eval" | "circle" | "line-circle" | "spline" | "segments" | "csv",
+                 and its keys:
                    circle: radius, duration, centre = [x, y] (default [0, 0]), turns (default 1,
                            negative runs clockwise), start_angle (rad, default 0)
                    line-circle: a skew-sine line from `start` (default [0, 0]) in line_duration
                            to the circle's start point, then the circle (keys as for circle,
                            with circle_duration instead of duration)
                    spline: points = [[x, y], ...] (closed, periodic), duration
+                   segments: start = [x, y] (default [0, 0]) and segments = a list of tables,
+                           run in order, each from the point where the previous one ended:
+                             {kind = "line", to = [x, y], duration}   skew-sine line
+                             {kind = "hold", duration}                at rest
+                             {kind = "circle", centre = [x, y] (default [0, 0]), turns
+                              (default 1, negative runs clockwise), duration}: radius and start
+                              angle follow from the current point and the centre
+                             {kind = "spline", points = [[x, y], ...], duration}: one lap of
+                              the closed periodic spline through the current point, then the
+                              points (its velocity does not start at zero)
+                           keys are named `reference.segments[k].key` in errors
                    csv: path (relative to the configuration's folder), smoothing_window (s)
   [plant]        variant = "nominal" | "hardware", seed (encoder noise), and any plant FMU
                  parameter by name (m_up1 = 0.25, noise_std, max_substep, x_start, ...);
@@ -28,7 +40,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,9 +53,13 @@ from cosim import references
 from cosim.references import Reference
 from plant.kinematics import check_workspace
 from plant.model import VARIANTS, PlantModel
+from plant.parameters import NOMINAL
 from plant.system import plant_system
 
-REFERENCE_KINDS = ("thesis-eval", "circle", "line-circle", "spline", "csv")
+REFERENCE_KINDS = ("thesis-eval", "circle", "line-circle", "spline", "segments", "csv")
+SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
+                "circle": ("kind", "centre", "turns", "duration"),
+                "spline": ("kind", "points", "duration")}
 FEEDFORWARD_KINDS = ("none", "model", "onnx")
 STEP_TOLERANCE = 1e-9  # relative: stop / step must be this close to a whole number
 PLANT_EXTRA = ("max_substep",)  # FMU parameters beyond the System's own
@@ -76,6 +92,8 @@ class ReferenceConfig:
 
     def _path(self) -> references.Segment:
         o = self.options
+        if self.kind == "segments":
+            return _segment_chain(o["start"], o["segments"])
         if self.kind == "spline":
             return references.Spline(tuple(map(tuple, o["points"])), o["duration"])
         circle = references.Circle(tuple(o["centre"]), o["radius"], o["start_angle"], o["turns"],
@@ -84,6 +102,47 @@ class ReferenceConfig:
             return circle
         line = references.Line(tuple(o["start"]), tuple(circle.start), o["line_duration"])
         return references.Chain((line, circle))
+
+
+class _SegmentError(ValueError):
+    """A segment of a `segments` reference that cannot be built; `index` says which."""
+
+    def __init__(self, index: int, message: str) -> None:
+        super().__init__(message)
+        self.index = index
+
+
+def _segment_chain(start: tuple[float, float], segments: Sequence[Mapping[str, Any]]
+                  ) -> references.Chain:
+    """The checked segment tables of a `segments` reference as one Chain from `start`."""
+    point, pieces = (float(start[0]), float(start[1])), []
+    for k, spec in enumerate(segments):
+        try:
+            piece = _segment(point, spec)
+        except ValueError as error:
+            raise _SegmentError(k, str(error)) from None
+        pieces.append(piece)
+        point = (float(piece.end[0]), float(piece.end[1]))
+    return references.Chain(tuple(pieces))
+
+
+def _segment(point: tuple[float, float], spec: Mapping[str, Any]) -> references.Segment:
+    """One segment starting at `point`; circles and splines take their geometry from it."""
+    kind, duration = spec["kind"], spec["duration"]
+    if kind == "line":
+        return references.Line(point, tuple(spec["to"]), duration)
+    if kind == "hold":
+        return references.Hold(point, duration)
+    if kind == "circle":
+        centre = spec["centre"]
+        dx, dy = point[0] - centre[0], point[1] - centre[1]
+        radius = math.hypot(dx, dy)
+        if radius == 0:
+            raise ValueError(f"the circle starts at its centre {tuple(centre)} m (radius 0): "
+                             f"move the centre or the point before it")
+        return references.Circle(tuple(centre), radius, math.atan2(dy, dx), spec["turns"],
+                                 duration)
+    return references.Spline((point, *map(tuple, spec["points"])), duration)
 
 
 @dataclass(frozen=True)
@@ -179,6 +238,8 @@ class _Parser:
         reference = self.reference(tables["reference"])
         try:
             signal = reference.build(step)
+        except _SegmentError as error:
+            raise self.error(f"reference.segments[{error.index}]", str(error)) from None
         except (ValueError, OSError) as error:
             given = [f"reference.{k}" for k in tables["reference"] if k != "kind"]
             keys = ", ".join(given) or "reference.kind"
@@ -206,6 +267,14 @@ class _Parser:
             return ReferenceConfig(kind, {
                 "path": self.path(t, r, "path"),
                 "smoothing_window": self.number(t, r, "smoothing_window", 0.025, positive=True)})
+        if kind == "segments":
+            self.keys(t, r, ("kind", "start", "segments"))
+            start = self.point(t, r, "start", (0.0, 0.0))
+            try:
+                check_workspace(NOMINAL, *start, "the start point")
+            except ValueError as error:
+                raise self.error("reference.start", str(error)) from None
+            return ReferenceConfig(kind, {"start": start, "segments": self.segments(t)})
         if kind == "spline":
             self.keys(t, r, ("kind", "points", "duration"))
             return ReferenceConfig(kind, {"points": self.points(t, r, "points"),
@@ -223,6 +292,33 @@ class _Parser:
             **circle, "start": self.point(t, r, "start", (0.0, 0.0)),
             "line_duration": self.number(t, r, "line_duration", None, True),
             "circle_duration": self.number(t, r, "circle_duration", None, True)})
+
+    def segments(self, t: Mapping[str, Any]) -> tuple[dict[str, Any], ...]:
+        """The checked tables of reference.segments (geometry is checked when built)."""
+        specs = t.get("segments")
+        if not isinstance(specs, list) or not specs:
+            raise self.error("reference.segments", f"expected a list of segment tables, got "
+                                                   f"{specs!r}")
+        checked = []
+        for k, spec in enumerate(specs):
+            where = f"reference.segments[{k}]"
+            if not isinstance(spec, dict):
+                raise self.error(where, f"expected a table {{kind = ..., ...}}, got {spec!r}")
+            kind = self.choice(spec, where, "kind", tuple(SEGMENT_KEYS), None)
+            self.keys(spec, where, SEGMENT_KEYS[kind])
+            values: dict[str, Any] = {"kind": kind}
+            if kind == "line":
+                values["to"] = self.point(spec, where, "to", None)
+            elif kind == "circle":
+                values["centre"] = self.point(spec, where, "centre", (0.0, 0.0))
+                values["turns"] = self.number(spec, where, "turns", 1.0)
+                if values["turns"] == 0:
+                    raise self.error(f"{where}.turns", "must not be zero")
+            elif kind == "spline":
+                values["points"] = self.points(spec, where, "points", minimum=2)
+            values["duration"] = self.number(spec, where, "duration", None, positive=True)
+            checked.append(values)
+        return tuple(checked)
 
     def plant(self, t: Mapping[str, Any], start: tuple[float, float]) -> PlantConfig:
         variant = self.choice(t, "plant", "variant", tuple(VARIANTS), "nominal")
@@ -347,18 +443,20 @@ class _Parser:
         return path
 
     def point(self, t: Mapping[str, Any], table: str, key: str,
-              default: tuple[float, float]) -> tuple[float, float]:
-        value = t.get(key, list(default))
+              default: tuple[float, float] | None) -> tuple[float, float]:
+        if key not in t and default is None:
+            raise self.error(f"{table}.{key}", "required: [x, y] in m")
+        value = t.get(key, list(default or ()))
         if not (isinstance(value, list) and len(value) == 2 and all(
                 isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
                 for v in value)):
             raise self.error(f"{table}.{key}", f"expected [x, y] in m, got {value!r}")
         return float(value[0]), float(value[1])
 
-    def points(self, t: Mapping[str, Any], table: str, key: str) -> tuple:
+    def points(self, t: Mapping[str, Any], table: str, key: str, minimum: int = 3) -> tuple:
         value = t.get(key)
-        if not isinstance(value, list) or len(value) < 3:
-            raise self.error(f"{table}.{key}", f"expected at least three [x, y] points, got "
+        if not isinstance(value, list) or len(value) < minimum:
+            raise self.error(f"{table}.{key}", f"expected at least {minimum} [x, y] points, got "
                                                f"{value!r}")
         return tuple(self.point({key: v}, table, key, (0.0, 0.0)) for v in value)
 
@@ -447,6 +545,25 @@ seed = 1
 
 [feedforward]
 kind = "model"
+""",
+    "line-hold-circle": """\
+# The thesis's hardware evaluation path (sec. 6.6), 100 s on the hardware plant under PID: a
+# skew-sine line from the centre to (8.2, 8.2) mm in 21 s, 1 s at rest, 9 turns in 75 s (0.12 Hz)
+# about the centre, which makes the radius 11.6 mm and passes through the line's end, then 3 s
+# at rest.
+[reference]
+kind = "segments"
+start = [0.0, 0.0]
+segments = [
+    {kind = "line", to = [0.0082, 0.0082], duration = 21.0},
+    {kind = "hold", duration = 1.0},
+    {kind = "circle", centre = [0.0, 0.0], turns = 9.0, duration = 75.0},
+    {kind = "hold", duration = 3.0},
+]
+
+[plant]
+variant = "hardware"
+seed = 1
 """,
     "spline-model-ff": """\
 # A closed periodic spline through four points in 6 s, from rest at its first point.

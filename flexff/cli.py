@@ -7,6 +7,7 @@ import json
 import sys
 from typing import Callable, Sequence
 
+from learning.dataset import SETS
 from plant.model import VARIANTS
 
 
@@ -121,6 +122,24 @@ def _config_example(args: argparse.Namespace) -> int:
     return 0
 
 
+def _data_collect(args: argparse.Namespace) -> int:
+    from learning.collect import run_collection
+
+    report = run_collection(args.set, args.output, args.workers, args.scheduler)
+    for outcome in report.failed:
+        print(f"{outcome.name}: FAILED: {outcome.error}", file=sys.stderr)
+    print(f"{report.set_name}: {report.total} trajectories -> {report.path}: {len(report.ran)} "
+          f"run, {len(report.skipped)} skipped (already there), {len(report.failed)} failed, "
+          f"{report.seconds:.1f} s")
+    if report.ran:
+        top = max(report.ran, key=lambda o: o.max_current)
+        print(f"largest commanded motor current: {top.max_current:.2f} A ({top.name})")
+    if not report.ok:
+        print("manifest.json not written: run the same command again to retry the failed "
+              "trajectories", file=sys.stderr)
+    return 0 if report.ok else 1
+
+
 def _demo(args: argparse.Namespace) -> int:
     from flexff.demo import run_demo
 
@@ -167,6 +186,17 @@ def build_parser() -> argparse.ArgumentParser:
                                                          "(no name: list them)")
     example.add_argument("name", nargs="?", help="the example's name")
     example.set_defaults(handler=_config_example)
+
+    data = commands.add_parser("data", help="training data")
+    data_commands = data.add_subparsers(dest="data_command", required=True)
+    collect = data_commands.add_parser(
+        "collect", help="co-simulate a trajectory set under PID into a dataset folder "
+                        "(resumes an interrupted collection)")
+    collect.add_argument("--set", required=True, choices=SETS, help="the trajectory set")
+    collect.add_argument("-o", "--output", required=True, help="the dataset folder")
+    collect.add_argument("--workers", type=int, help="parallel local processes (default: CPUs)")
+    collect.add_argument("--scheduler", help="address of a Dask scheduler to run on instead")
+    collect.set_defaults(handler=_data_collect)
 
     bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON")
     bench.add_argument("--steps", type=int, default=20000, help="steps per timed loop")

@@ -177,28 +177,30 @@ def _three(value: float) -> tuple[float, float, float]:
 # Chosen values and why:
 #  - r_mount = sqrt(2) * l: the elbows stand at 90 degrees at the centre, the best-conditioned
 #    pose of a symmetric five-bar-like chain (equal arms); every mount is 0.436 m from the centre.
-#  - arms: thin aluminium beams, 0.20 kg (upper, with the hub) and 0.12 kg (lower), centres of
-#    mass at mid length; the wrist carries a small hinge block and tool, 0.10 kg.
+#  - arms: thin-walled aluminium tubes, 0.10 kg (upper, with its hub) and 0.06 kg (lower),
+#    centres of mass at mid length; the wrist hinge block weighs 0.05 kg. Light arms keep the
+#    flexure stiffness, and so the current that holds the wrist off-centre, within the motors'
+#    reach: 8.1 A at the 0.05 m workspace edge in the worst direction.
 #  - rotor inertia 181 g*cm^2: EC 45 flat class rotor (the 36.9 mNm/A, 0.128 Nm motor).
 #  - current limit 10 A: below the 15 A peak of the Escon 50/5 amplifier the seed names, and
-#    above the 4.1 A the fastest evaluation reference (section 5.7) needs on the nominal model.
+#    above the 8.1 A that holds the wrist at the workspace edge.
 #  - all nine flexures share one stiffness, solved for a 1.70 Hz lowest mode at the centre;
 #    damping is stiffness-proportional for about 1 % modal damping at that mode ("light").
 _L = 0.3086
-_M_UP, _M_LOW = 0.20, 0.12
-_K_FLEX = 0.79732
+_M_UP, _M_LOW = 0.10, 0.06
+_K_FLEX = 0.39892
 _D_FLEX = _K_FLEX * 2 * 0.01 / (2 * math.pi * 1.70)
-# the tool mount (hardware variant only): 50 g on a mount tuned to 38 Hz alone, about 40 Hz
+# the tool mount (hardware variant only): 50 g on a mount tuned to 36.4 Hz alone, 40 Hz
 # against the moving wrist, 2 % damped
 _M_TOOL = 0.05
-_K_TOOL = _M_TOOL * (2 * math.pi * 38.0) ** 2
+_K_TOOL = _M_TOOL * (2 * math.pi * 36.4) ** 2
 _D_TOOL = 2 * 0.02 * math.sqrt(_K_TOOL * _M_TOOL)
 
 NOMINAL = PlantParameters(
     l_up=_L, l_low=_L, r_mount=math.sqrt(2) * _L, workspace_radius=0.05,
     m_up=_three(_M_UP), j_up=_three(_rod(_M_UP, _L)), c_up=_three(_L / 2),
     m_low=_three(_M_LOW), j_low=_three(_rod(_M_LOW, _L)), c_low=_three(_L / 2),
-    m_ee=0.10, j_ee=1.0e-4,
+    m_ee=0.05, j_ee=5.0e-5,
     k_s=_three(_K_FLEX), k_e=_three(_K_FLEX), k_w=_three(_K_FLEX),
     d_s=_three(_D_FLEX), d_e=_three(_D_FLEX), d_w=_three(_D_FLEX),
     j_rotor=_three(1.81e-5), k_t=_three(36.9e-3), i_max=10.0,
