@@ -8,13 +8,42 @@ feedthrough shows up as it would in a Gauss-Seidel master.
 from __future__ import annotations
 
 import shutil
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from ctypes import CFUNCTYPE, c_int, c_void_p, cast
+from dataclasses import dataclass
 from pathlib import Path
 
 import fmpy
 import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+
+
+@dataclass(frozen=True)
+class BareCalls:
+    """fmi2SetReal, fmi2GetReal and fmi2DoStep of one instantiated FMU as bare C pointers.
+
+    They are the C functions fmpy loaded, called without fmpy's Python wrapper and without
+    ctypes' per-argument conversion, which halves the cost of a call (~0.4 us): every argument
+    must be a ctypes object of the exact C type (c_void_p component, c_uint arrays, c_size_t
+    counts, c_double arrays and times, c_int flags). Each returns the fmi2Status as an int.
+    """
+
+    component: c_void_p
+    set_real: Callable[..., int]
+    get_real: Callable[..., int]
+    do_step: Callable[..., int]
+
+
+def bare_calls(fmu: FMU2Slave) -> BareCalls:
+    """The hot-loop calls of an instantiated FMU2Slave (see BareCalls)."""
+    prototype = CFUNCTYPE(c_int)
+
+    def pointer(name: str) -> Callable[..., int]:
+        return prototype(cast(getattr(fmu.dll, name), c_void_p).value)
+
+    return BareCalls(c_void_p(fmu.component), pointer("fmi2SetReal"), pointer("fmi2GetReal"),
+                     pointer("fmi2DoStep"))
 
 
 class Slave:
