@@ -1,0 +1,105 @@
+"""Windows, the validation split and mini-batches over prepared trajectories.
+
+Training trajectories are cut into consecutive windows of `window` samples; a seeded shuffle
+of all windows picks the validation share (the seed holds out 12.5 % of its training data).
+Every sample carries a role: train, validation or padding. The networks always run over
+whole trajectories or consecutive chunks of them, so the recurrent state and the
+convolutions' history are those of deployment; a sample's role only decides which loss it
+enters.
+
+Recurrent networks train by truncated backpropagation through time: a batch of trajectories
+runs chunk by chunk (`window` samples), the state carried across chunks and detached, so
+gradients reach back at most one chunk. Convolutional networks train on random windows: the
+`window` outputs of one window plus the `history` inputs before it (zeros before the start,
+as the zero initial buffer at deployment).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+PAD, TRAIN, VALIDATION = 0, 1, 2
+
+
+def window_roles(lengths: list[int], window: int, val_fraction: float,
+                 rng: np.random.Generator) -> list[np.ndarray]:
+    """Per trajectory, the role of each sample (TRAIN or VALIDATION), by whole windows."""
+    blocks = [(i, start) for i, n in enumerate(lengths) for start in range(0, n, window)]
+    n_val = int(round(val_fraction * len(blocks)))
+    if n_val < 1 or n_val >= len(blocks):
+        raise ValueError(
+            f"the training trajectories give {len(blocks)} window(s) of {window} samples, too few "
+            f"to hold out {val_fraction:.1%} for validation: collect more or longer training "
+            f"trajectories, or lower `window`")
+    roles = [np.full(n, TRAIN, dtype=np.int64) for n in lengths]
+    for k in rng.permutation(len(blocks))[:n_val]:
+        i, start = blocks[k]
+        roles[i][start:start + window] = VALIDATION
+    return roles
+
+
+@dataclass
+class SequenceSet:
+    """Trajectories padded to one length: x (n, T, F), y (n, T, 2), role (n, T), on a device."""
+
+    x: torch.Tensor
+    y: torch.Tensor
+    role: torch.Tensor
+
+    @classmethod
+    def build(cls, xs: list[np.ndarray], ys: list[np.ndarray], roles: list[np.ndarray],
+              device: torch.device) -> "SequenceSet":
+        length = max(len(x) for x in xs)
+        x = np.zeros((len(xs), length, xs[0].shape[1]), dtype=np.float32)
+        y = np.zeros((len(xs), length, ys[0].shape[1]), dtype=np.float32)
+        role = np.full((len(xs), length), PAD, dtype=np.int64)
+        for i, (xi, yi, ri) in enumerate(zip(xs, ys, roles)):
+            x[i, :len(xi)], y[i, :len(yi)], role[i, :len(ri)] = xi, yi, ri
+        return cls(torch.from_numpy(x).to(device), torch.from_numpy(y).to(device),
+                   torch.from_numpy(role).to(device))
+
+    def __len__(self) -> int:
+        return self.x.shape[0]
+
+    def groups(self, batch_size: int, rng: np.random.Generator) -> list[np.ndarray]:
+        """The trajectory indices in shuffled groups of at most batch_size."""
+        order = rng.permutation(len(self))
+        return [order[k:k + batch_size] for k in range(0, len(order), batch_size)]
+
+
+class WindowSampler:
+    """Random windows of the TRAIN samples for convolutional networks.
+
+    Each item is (history (B, history, F), x (B, window, F), y (B, window, 2), mask (B, window)).
+    """
+
+    def __init__(self, data: SequenceSet, window: int, history: int) -> None:
+        self.data, self.window, self.history = data, window, history
+        role = data.role.cpu().numpy()
+        self.starts = [(i, s) for i in range(len(data)) for s in range(0, role.shape[1], window)
+                       if (role[i, s:s + window] == TRAIN).any()]
+        n, length, width = data.x.shape
+        self._x = torch.cat([data.x.new_zeros(n, history, width), data.x,
+                             data.x.new_zeros(n, window, width)], dim=1)
+        self._y = torch.cat([data.y, data.y.new_zeros(n, window, data.y.shape[2])], dim=1)
+        self._mask = torch.cat([data.role == TRAIN,
+                                data.role.new_zeros(n, window, dtype=torch.bool)], dim=1)
+
+    def batches(self, batch_size: int, rng: np.random.Generator):
+        """Yield shuffled batches covering every training window once."""
+        order = rng.permutation(len(self.starts))
+        span = torch.arange(self.history + self.window, device=self._x.device)
+        for k in range(0, len(order), batch_size):
+            items = np.array([self.starts[j] for j in order[k:k + batch_size]])
+            traj = torch.as_tensor(items[:, 0], device=self._x.device)
+            start = torch.as_tensor(items[:, 1], device=self._x.device)
+            x = self._x[traj[:, None], start[:, None] + span]
+            out = start[:, None] + span[:self.window]
+            yield (x[:, :self.history], x[:, self.history:], self._y[traj[:, None], out],
+                   self._mask[traj[:, None], out])
+
+    def __len__(self) -> int:
+        return len(self.starts)

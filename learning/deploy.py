@@ -1,0 +1,77 @@
+"""A trained run as a model in SI units: what the exported ONNX graph computes.
+
+Scaling and unscaling live inside the module, so it takes features in SI units and returns
+forces in newtons; for the pgnn it adds the network's residual to the rigid-body force. With
+`inputs="reference"` it also computes the features from the six reference signals
+x_ref ... ay_ref in the graph (the nominal kinematics replayed in torch), so a runner only
+needs the reference.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from learning.casadi_torch import TorchFunction
+from learning.dataset import REFERENCE_SIGNALS
+from learning.features import feature_units, motion_function
+from learning.models import uses_prior
+from learning.rigid import RigidBodyForce
+from learning.run_folder import Run
+from learning.threads import torch_threads
+
+INPUT_KINDS = ("features", "reference")
+REFERENCE_UNITS = ["m", "m", "m/s", "m/s", "m/s2", "m/s2"]
+
+
+class SIModel(nn.Module):
+    """(inputs (T, n_inputs), *state) -> (forces (T, 2) [N], *new state).
+
+    Inputs and forces are float64, and so is everything outside the network (features from the
+    reference, scaling, the rigid-body prior): some features sit far from zero with a tiny
+    training span (theta_ee: 1.309 rad +- 0.5 mrad), which float32 would resolve to only 1e-4
+    of the span. The network and its state (batch size 1, zeros at the start) are float32.
+    """
+
+    def __init__(self, run: Run, inputs: str = "features") -> None:
+        super().__init__()
+        if inputs not in INPUT_KINDS:
+            raise ValueError(f"inputs must be one of {INPUT_KINDS}, got {inputs!r}")
+        feature_set = run.config.features.feature_set
+        self.network = run.network.eval()
+        self.inputs = inputs
+        self.input_names = list(REFERENCE_SIGNALS) if inputs == "reference" else run.feature_names
+        self.input_units = REFERENCE_UNITS if inputs == "reference" else feature_units(feature_set)
+        self.reference = (TorchFunction(motion_function(feature_set))
+                          if inputs == "reference" else None)
+        self.prior = RigidBodyForce(feature_set) if uses_prior(run.config.model) else None
+        for name, value in (("feature_low", run.feature_scaler.low),
+                            ("feature_span", run.feature_scaler.span),
+                            ("label_low", run.label_scaler.low),
+                            ("label_span", run.label_scaler.span)):
+            self.register_buffer(name, torch.tensor(np.asarray(value), dtype=torch.float64))
+
+    def forward(self, inputs: torch.Tensor, *state: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        inputs = inputs.double()
+        if self.reference is not None:
+            features = self.reference(inputs[:, 0:2], inputs[:, 2:4], inputs[:, 4:6])[0]
+        else:
+            features = inputs
+        scaled = ((features - self.feature_low) / self.feature_span).float().unsqueeze(0)
+        out, new_state = self.network(scaled, tuple(state) if state else None)
+        out = out.squeeze(0).double() * self.label_span
+        forces = out + (self.prior(features) if self.prior is not None else self.label_low)
+        return (forces, *new_state)
+
+    def initial_state(self) -> tuple[torch.Tensor, ...]:
+        return self.network.initial_state(1)
+
+
+@torch.no_grad()
+def predict(run: Run, inputs: np.ndarray, kind: str = "features") -> np.ndarray:
+    """Forces (T, 2) [N] for a whole sequence of SI inputs (T, n_inputs), from the zero state."""
+    model = SIModel(run, kind)
+    with torch_threads():
+        return model(torch.as_tensor(inputs, dtype=torch.float64),
+                     *model.initial_state())[0].numpy()

@@ -1,0 +1,162 @@
+"""ONNX export of a training run: SI signals in, forces in newtons out, state explicit.
+
+One graph serves both ways of running the model (`inputs` and `forces` are float64, the state
+tensors float32):
+
+- sequence form: `inputs` (T, n_inputs) for any T with the state inputs at zero gives the
+  forces (T, 2) for the whole sequence;
+- single-step form: T = 1 per call, each call fed the state outputs of the previous one
+  (zeros at the first call).
+
+State tensors (batch size 1): LSTM `h`, `c` (layers, 1, hidden); TCN and pgnn
+`input_buffer` (1, n_features, receptive field - 1) holding the last scaled inputs; CNN-LSTM
+both. Each state input `NAME` has the output `NAME_out`.
+
+The model runs at its own sample rate (metadata `sample_rate_hz`, e.g. 100 Hz when trained
+down-sampled): a runner at a higher rate, such as the feedforward FMU at 1 kHz, calls it once
+every 1/sample_rate_hz seconds with the current inputs and holds the forces in between (or
+interpolates them, at the cost of one model period of delay).
+
+The metadata (onnx metadata_props, strings; lists and objects as JSON) names everything a
+runner needs: input and output signal names and units, the state tensors and their shapes,
+the sample rate, the model kind and feature set, the flexff version.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+import torch
+
+from learning.deploy import SIModel
+from learning.run_folder import Run, flexff_version, load_run
+from learning.threads import torch_threads
+
+FORMAT = "flexff-feedforward"
+VERSION = 1
+OPSET = 17
+OUTPUT_SIGNALS = ["Fx_ff", "Fy_ff"]
+TOLERANCE = 1e-5  # largest |onnxruntime - torch| relative to the largest |force|
+
+
+def export(run: str | Path, out: str | Path, inputs: str = "features") -> Path:
+    """Write the ONNX graph of the run folder `run` to the file `out`; return its path.
+
+    `inputs="features"` (default): the graph takes the run's features in SI units (63 or 6);
+    `inputs="reference"`: it takes x_ref, y_ref, vx_ref, vy_ref, ax_ref, ay_ref and computes
+    the features itself. The export is checked: onnxruntime must reproduce PyTorch in both
+    forms to within 1e-5 (relative to the largest force), or a RuntimeError is raised.
+    """
+    with torch_threads():
+        return _export(load_run(run), Path(out), inputs)
+
+
+def _export(loaded: Run, out: Path, inputs: str) -> Path:
+    model = SIModel(loaded, inputs).eval()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    state = model.initial_state()
+    state_names = loaded.network.state_names()
+    example = torch.as_tensor(_probe(loaded, inputs, 8), dtype=torch.float64)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(
+            model, (example, *state), str(out), dynamo=False, opset_version=OPSET,
+            input_names=["inputs", *state_names],
+            output_names=["forces", *[f"{n}_out" for n in state_names]],
+            dynamic_axes={"inputs": {0: "time"}, "forces": {0: "time"}})
+    graph = onnx.load(str(out))
+    metadata = {
+        "format": FORMAT, "format_version": str(VERSION), "flexff_version": flexff_version(),
+        "model_kind": loaded.config.model, "preset": loaded.config.preset,
+        "feature_set": loaded.config.features.feature_set, "input_kind": inputs,
+        "input_signals": json.dumps(model.input_names),
+        "input_units": json.dumps(model.input_units),
+        "output_signals": json.dumps(OUTPUT_SIGNALS), "output_units": json.dumps(["N", "N"]),
+        "sample_rate_hz": repr(float(loaded.model_rate_hz)),
+        "state": json.dumps([{"input": n, "output": f"{n}_out", "shape": list(s.shape),
+                              "initial": "zeros"} for n, s in zip(state_names, state)]),
+        "history_samples": str(loaded.network.history),
+        "usage": ("inputs (T, n_inputs) float64 in SI units -> forces (T, 2) float64 [N]; "
+                  "state tensors float32. "
+                  "Whole sequence: T samples, state inputs zero. Step by step: T = 1 every "
+                  "1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
+                  "hold the forces between calls when the host runs faster."),
+    }
+    onnx.helper.set_model_props(graph, metadata)
+    onnx.checker.check_model(graph)
+    onnx.save(graph, str(out))
+    check_export(model, out, _probe(loaded, inputs, 60))
+    return out
+
+
+def read_metadata(path: str | Path) -> dict[str, str]:
+    """The metadata_props of an exported graph as a dict of strings."""
+    return {p.key: p.value for p in onnx.load(str(path)).metadata_props}
+
+
+def session(path: str | Path) -> ort.InferenceSession:
+    """An onnxruntime CPU session with one thread: the graphs are small, and spare threads
+    waiting for busy cores slow every call down (see learning.train.cpu_threads)."""
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    options.inter_op_num_threads = 1
+    return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+
+def run_sequence(session: ort.InferenceSession, inputs: np.ndarray) -> np.ndarray:
+    """Forces (T, 2) for a whole sequence, from the zero state."""
+    feed = {"inputs": inputs.astype(np.float64), **_zero_state(session)}
+    return session.run(["forces"], feed)[0]
+
+
+def run_steps(session: ort.InferenceSession, inputs: np.ndarray) -> np.ndarray:
+    """Forces (T, 2) computed one sample per call, the state passed from call to call."""
+    state = _zero_state(session)
+    names = [o.name for o in session.get_outputs()]
+    forces = []
+    for row in inputs.astype(np.float64):
+        result = session.run(names, {"inputs": row[None, :], **state})
+        forces.append(result[0][0])
+        state = {n[:-len("_out")]: v for n, v in zip(names[1:], result[1:])}
+    return np.array(forces)
+
+
+def check_export(model: SIModel, path: Path, inputs: np.ndarray) -> float:
+    """Largest relative deviation of onnxruntime (both forms) from PyTorch on `inputs`;
+    RuntimeError if above TOLERANCE."""
+    with torch.no_grad():
+        expected = model(torch.as_tensor(inputs, dtype=torch.float64),
+                         *model.initial_state())[0].numpy()
+    runtime = session(path)
+    scale = max(float(np.abs(expected).max()), 1e-12)
+    worst = max(float(np.abs(run(runtime, inputs) - expected).max()) / scale
+                for run in (run_sequence, run_steps))
+    if not worst <= TOLERANCE:
+        raise RuntimeError(f"{path}: onnxruntime deviates from PyTorch by {worst:.3g} (relative), "
+                           f"more than {TOLERANCE:g}; the export is not usable")
+    return worst
+
+
+def _zero_state(session: ort.InferenceSession) -> dict[str, np.ndarray]:
+    return {i.name: np.zeros(i.shape, dtype=np.float32)
+            for i in session.get_inputs() if i.name != "inputs"}
+
+
+def _probe(run: Run, inputs: str, length: int) -> np.ndarray:
+    """Plausible inputs for tracing and checking: a slow circle (reference) or features
+    drifting smoothly across the training range."""
+    t = np.linspace(0.0, 1.0, length)[:, None]
+    if inputs == "reference":
+        w = 2 * np.pi
+        r = 0.02
+        return np.column_stack([r * np.cos(w * t), r * np.sin(w * t), -r * w * np.sin(w * t),
+                                r * w * np.cos(w * t), -r * w * w * np.cos(w * t),
+                                -r * w * w * np.sin(w * t)])
+    low, high = run.feature_scaler.low, run.feature_scaler.high
+    phase = np.linspace(0.0, 2 * np.pi, low.size)[None, :]
+    return low + (high - low) * (0.5 + 0.4 * np.sin(2 * np.pi * t + phase))

@@ -1,0 +1,206 @@
+"""Preprocessing: from recorded signals (or a reference) to network features and labels.
+
+As the seed: the encoder angles counted in whole counts of the 2048 counts/rev encoders about
+their home angles (the seed quantizes its ideal simulated angles so; angles already counted,
+as the hardware's, stay as they are), the wrist position from them by forward kinematics (two
+encoders as the thesis; three as an option), optional white noise on positions and forces
+(training data only), a 4th-order Butterworth low-pass at 1.8 Hz run forwards and backwards
+(zero phase, as MATLAB's filtfilt; second-order sections keep a 1.8 Hz corner at 1 kHz well
+conditioned), and velocities and accelerations by central differences of the filtered
+positions.
+
+The features are then a function of (position, velocity, acceleration) only, `motion_features`,
+used both for training data and at evaluation time on the reference signals x_ref ... ay_ref
+(the feedforward runs on the reference). The full set is the 21 coordinates of eq. (2.1) and
+their first and second time derivatives, obtained exactly by the chain rule
+(qd = J v, qdd = J a + (dJ/dt) v, with J = dq/dpos) rather than by differentiating 21 noisy
+signals; the compact set is (x, y, vx, vy, ax, ay). Kinematics are the nominal model's: the
+feedforward knows nothing better.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+from scipy.signal import butter, sosfiltfilt
+
+from learning.dataset import ENCODER_SIGNALS, LABEL_SIGNALS, REFERENCE_SIGNALS, Trajectory
+from plant.kinematics import COORDINATE_NAMES, EE_INDEX, SHOULDER_INDEX
+from plant.model import PlantModel
+
+FEATURE_SETS = ("full", "compact")
+COMPACT_NAMES = ("x", "y", "vx", "vy", "ax", "ay")
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Everything that turns a recorded trajectory into features and labels."""
+
+    feature_set: str = "full"  # "full": 63 coordinates/velocities/accelerations; or "compact"
+    encoders: int = 2  # forward kinematics from theta_s1..2 (thesis) or all three
+    quantize_encoders: bool = True  # count the angles in whole encoder counts first (seed)
+    cutoff_hz: float = 1.8  # low-pass corner, slightly above the 1.7 Hz first mode (seed)
+    filter_order: int = 4
+    filter_forces: bool = True  # the seed filters the force labels with the same filter
+    position_noise_m: float = 1e-4  # white noise std added to training positions [m]
+    force_noise_n: float = 1e-2  # white noise std added to training forces [N]
+    model_rate_hz: float | None = None  # down-sample to this rate; None keeps the data rate
+
+    def __post_init__(self) -> None:
+        if self.feature_set not in FEATURE_SETS:
+            raise ValueError(f"unknown feature set {self.feature_set!r}: choose one of "
+                             f"{', '.join(FEATURE_SETS)}")
+        if self.encoders not in (2, 3):
+            raise ValueError(f"encoders must be 2 or 3, got {self.encoders!r}")
+        if not (self.cutoff_hz > 0 and self.filter_order >= 1):
+            raise ValueError("cutoff_hz must be positive and filter_order at least 1")
+        if self.position_noise_m < 0 or self.force_noise_n < 0:
+            raise ValueError("noise levels must not be negative")
+
+
+def feature_names(feature_set: str) -> list[str]:
+    """Signal names of the features, in column order."""
+    if feature_set == "compact":
+        return list(COMPACT_NAMES)
+    if feature_set == "full":
+        return (list(COORDINATE_NAMES) + [f"{n}_dot" for n in COORDINATE_NAMES]
+                + [f"{n}_ddot" for n in COORDINATE_NAMES])
+    raise ValueError(f"unknown feature set {feature_set!r}: choose one of "
+                     f"{', '.join(FEATURE_SETS)}")
+
+
+def feature_units(feature_set: str) -> list[str]:
+    """SI units of the features, in column order."""
+    if feature_set == "compact":
+        return ["m", "m", "m/s", "m/s", "m/s2", "m/s2"]
+    base = ["rad" if n.startswith("theta") else "m" for n in COORDINATE_NAMES]
+    return base + [f"{u}/s" for u in base] + [f"{u}/s2" for u in base]
+
+
+def motion_columns(feature_set: str) -> tuple[list[int], list[int], list[int]]:
+    """Columns of the features holding (x, y), (vx, vy) and (ax, ay) of the wrist."""
+    if feature_set == "compact":
+        return [0, 1], [2, 3], [4, 5]
+    n = len(COORDINATE_NAMES)
+    pos = list(EE_INDEX[:2])
+    return pos, [n + k for k in pos], [2 * n + k for k in pos]
+
+
+@functools.lru_cache(maxsize=None)
+def nominal_model() -> PlantModel:
+    """The nominal plant model (built once: its symbolic construction takes a moment)."""
+    return PlantModel("nominal")
+
+
+@functools.lru_cache(maxsize=None)
+def motion_function(feature_set: str) -> ca.Function:
+    """CasADi Function (pos, vel, acc) -> features of one sample, nominal kinematics built in."""
+    model = nominal_model()
+    pos, vel, acc = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2), ca.SX.sym("acc", 2)
+    if feature_set == "compact":
+        out = ca.vertcat(pos, vel, acc)
+    elif feature_set == "full":
+        q = model.coordinates(pos, model.parameter_values())
+        jac = ca.jacobian(q, pos)
+        out = ca.vertcat(q, jac @ vel, jac @ acc + ca.jtimes(jac @ vel, pos, vel))
+    else:
+        feature_names(feature_set)  # raises with the list of known sets
+    return ca.Function(f"features_{feature_set}", [pos, vel, acc], [out],
+                       ["pos", "vel", "acc"], ["features"])
+
+
+def motion_features(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,
+                    feature_set: str) -> np.ndarray:
+    """Features (n, n_features) of n samples of wrist position, velocity, acceleration (n, 2)."""
+    return _map(motion_function(feature_set), pos, vel, acc)
+
+
+def reference_features(signals: dict[str, np.ndarray], feature_set: str) -> np.ndarray:
+    """Features computed from the reference x_ref ... ay_ref: what the feedforward sees."""
+    ref = np.column_stack([np.asarray(signals[s], dtype=float) for s in REFERENCE_SIGNALS])
+    return motion_features(ref[:, 0:2], ref[:, 2:4], ref[:, 4:6], feature_set)
+
+
+def quantize_encoders(theta: np.ndarray) -> np.ndarray:
+    """Angles (n, 3) counted in whole encoder counts from the home angles (wrist at the centre),
+    as the plant's encoders count; angles already on that grid are returned unchanged."""
+    model = nominal_model()
+    p = model.parameter_values()
+    home = np.asarray(model.coordinates([0.0, 0.0], p), dtype=float).ravel()[list(SHOULDER_INDEX)]
+    count = 2 * np.pi / model.variant.parameters.encoder_counts
+    return home + count * np.floor((np.asarray(theta, dtype=float) - home) / count + 0.5)
+
+
+def encoder_positions(theta: np.ndarray, encoders: int = 2) -> np.ndarray:
+    """Wrist positions (n, 2) from encoder angles (n, 3) by the nominal forward kinematics."""
+    return _map(_forward_kinematics(encoders), np.asarray(theta, dtype=float)[:, :encoders])
+
+
+@functools.lru_cache(maxsize=None)
+def _forward_kinematics(encoders: int) -> ca.Function:
+    model = nominal_model()
+    fk = model.fk2 if encoders == 2 else model.fk3
+    symbol = ca.SX.sym("theta", encoders)
+    return ca.Function(f"fk{encoders}", [symbol], [fk(symbol, model.parameter_values())])
+
+
+def lowpass(signal: np.ndarray, rate_hz: float, cutoff_hz: float = 1.8,
+            order: int = 4) -> np.ndarray:
+    """Zero-phase Butterworth low-pass of `signal` along axis 0 (forwards and backwards)."""
+    if cutoff_hz >= rate_hz / 2:
+        raise ValueError(f"cutoff {cutoff_hz} Hz must lie below the Nyquist frequency "
+                         f"{rate_hz / 2} Hz")
+    sos = butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
+    return sosfiltfilt(sos, signal, axis=0)
+
+
+def differentiate(pos: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity and acceleration by second-order central differences (np.gradient)."""
+    dt = 1.0 / rate_hz
+    vel = np.gradient(pos, dt, axis=0)
+    return vel, np.gradient(vel, dt, axis=0)
+
+
+def decimation(rate_hz: float, model_rate_hz: float | None) -> int:
+    """Integer down-sampling factor from the data rate to the model rate."""
+    if model_rate_hz is None:
+        return 1
+    factor = rate_hz / model_rate_hz
+    if model_rate_hz <= 0 or factor < 1 or abs(factor - round(factor)) > 1e-9:
+        raise ValueError(f"model_rate_hz {model_rate_hz} must divide the data rate {rate_hz} Hz "
+                         f"by a whole number")
+    return int(round(factor))
+
+
+def prepare_trajectory(traj: Trajectory, rate_hz: float, config: FeatureConfig,
+                       rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Features (n, n_features) and labels (n, 2) at the model rate from a recorded trajectory.
+
+    With `rng` (training trajectories only) white noise is added to positions and forces
+    before filtering.
+    """
+    theta = np.column_stack([traj.signals[s] for s in ENCODER_SIGNALS])
+    if config.quantize_encoders:
+        theta = quantize_encoders(theta)
+    pos = encoder_positions(theta, config.encoders)
+    forces = np.column_stack([traj.signals[s] for s in LABEL_SIGNALS])
+    if rng is not None:
+        pos = pos + config.position_noise_m * rng.standard_normal(pos.shape)
+        forces = forces + config.force_noise_n * rng.standard_normal(forces.shape)
+    pos = lowpass(pos, rate_hz, config.cutoff_hz, config.filter_order)
+    if config.filter_forces:
+        forces = lowpass(forces, rate_hz, config.cutoff_hz, config.filter_order)
+    vel, acc = differentiate(pos, rate_hz)
+    step = decimation(rate_hz, config.model_rate_hz)
+    features = motion_features(pos[::step], vel[::step], acc[::step], config.feature_set)
+    return features, forces[::step]
+
+
+def _map(function: ca.Function, *columns: np.ndarray) -> np.ndarray:
+    """Evaluate a one-sample Function on n samples given as (n, k) arrays; returns (n, m)."""
+    n = columns[0].shape[0]
+    result = function.map(n, "thread", 2)(*[np.asarray(c, dtype=float).T for c in columns])
+    return np.asarray(result, dtype=float).T.reshape(n, -1)

@@ -1,0 +1,251 @@
+"""The networks: LSTM, CNN-LSTM and TCN as in the seed, and the residual net of the pgnn.
+
+Every network maps scaled features (batch, time, n_features) to scaled outputs
+(batch, time, 2) and is causal. Each one takes and returns an explicit state, a tuple of
+tensors, so that the same forward serves training (truncated backpropagation through time
+carries the state from one chunk to the next), whole sequences (zero initial state) and the
+step-by-step form exported to ONNX (one sample per call):
+
+- LSTM: (h, c), each (layers, batch, hidden);
+- TCN: a buffer of the last `history` = receptive field - 1 inputs, (batch, features, history);
+- CNN-LSTM: the convolutions' input buffer, then the LSTM's (h, c).
+
+Causal padding is done once, at the input (`CausalHistory`): the buffer (zeros at the start)
+is put in front of the new samples, and every convolution after it is unpadded ("valid"), so
+an output never sees a later input and nothing needs chomping.
+
+TCN receptive field (samples of input one output depends on, the current one included), for
+kernel size k and one dilated convolution per level with dilations d_i = 1, 2, 4, ...:
+    R = 1 + (k - 1) * sum_i d_i = 1 + (k - 1) * (2^L - 1)
+The thesis preset (k = 3, L = 6, dilations 1 ... 32) gives R = 127. The seed's eq. (3.4),
+R = 2^L (k - 1) = 128, counts one sample more than the network can see.
+
+Initialization as Keras (the seed's framework) does by default: Glorot-uniform input weights
+(convolutions, dense layers, LSTM input kernels), orthogonal recurrent kernels, zero biases
+and a unit forget-gate bias.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import torch
+from torch import nn
+
+State = tuple[torch.Tensor, ...]
+N_OUTPUTS = 2
+
+
+class SequenceNetwork(nn.Module):
+    """Base class: causal sequence network with explicit state."""
+
+    history: int = 0  # past input samples kept in the state (0: none)
+
+    def initial_state(self, batch: int, device: torch.device | str = "cpu",
+                      dtype: torch.dtype = torch.float32) -> State:
+        """The zero state every sequence starts from."""
+        return tuple(torch.zeros(shape, device=device, dtype=dtype)
+                     for shape in self.state_shapes(batch))
+
+    def _zero_state(self, x: torch.Tensor) -> State:
+        return self.initial_state(x.shape[0], x.device, x.dtype)
+
+    def state_shapes(self, batch: int) -> list[tuple[int, ...]]:
+        raise NotImplementedError
+
+    def state_names(self) -> list[str]:
+        raise NotImplementedError
+
+    def forward(self, x: torch.Tensor, state: State | None = None) -> tuple[torch.Tensor, State]:
+        raise NotImplementedError
+
+
+class CausalHistory(nn.Module):
+    """The causal pad: prepends the last `length` inputs (zeros at first) to a chunk.
+
+    Input (batch, channels, time) and a buffer (batch, channels, length); returns the padded
+    input (batch, channels, length + time) and the new buffer, its last `length` samples.
+    """
+
+    def __init__(self, length: int) -> None:
+        super().__init__()
+        self.length = length
+
+    def forward(self, x: torch.Tensor, buffer: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        padded = torch.cat([buffer, x], dim=2)
+        return padded, padded[:, :, -self.length:]
+
+
+class TemporalBlock(nn.Module):
+    """One TCN level: dilated causal convolution, ReLU, dropout, plus a residual connection.
+
+    Unpadded: the output is (kernel - 1) * dilation samples shorter than the input, and the
+    residual is cropped to match (a 1x1 convolution when the channel count changes).
+    """
+
+    def __init__(self, n_in: int, n_out: int, kernel: int, dilation: int, dropout: float) -> None:
+        super().__init__()
+        self.conv = nn.Conv1d(n_in, n_out, kernel, dilation=dilation)
+        self.dropout = nn.Dropout(dropout)
+        self.residual = nn.Conv1d(n_in, n_out, 1) if n_in != n_out else nn.Identity()
+        self.shrink = (kernel - 1) * dilation
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        out = self.dropout(torch.relu(self.conv(x)))
+        return torch.relu(out + self.residual(x[:, :, self.shrink:]))
+
+
+class TemporalConvNet(SequenceNetwork):
+    """TCN (Bai et al., locuslab style): `levels` temporal blocks, dilations 1, 2, 4, ...,
+    `channels` filters each, then a linear head per time step."""
+
+    def __init__(self, n_features: int, channels: int = 200, levels: int = 6, kernel: int = 3,
+                 dropout: float = 0.05) -> None:
+        super().__init__()
+        if levels < 1 or kernel < 2:
+            raise ValueError(f"a TCN needs levels >= 1 and kernel >= 2, got {levels}, {kernel}")
+        dilations = [2 ** i for i in range(levels)]
+        self.receptive_field = receptive_field(kernel, dilations)
+        self.history = self.receptive_field - 1
+        self.n_features = n_features
+        self.pad = CausalHistory(self.history)
+        self.blocks = nn.Sequential(*[
+            TemporalBlock(n_features if i == 0 else channels, channels, kernel, d, dropout)
+            for i, d in enumerate(dilations)])
+        self.head = nn.Linear(channels, N_OUTPUTS)
+        glorot_init(self)
+
+    def state_shapes(self, batch: int) -> list[tuple[int, ...]]:
+        return [(batch, self.n_features, self.history)]
+
+    def state_names(self) -> list[str]:
+        return ["input_buffer"]
+
+    def forward(self, x: torch.Tensor, state: State | None = None) -> tuple[torch.Tensor, State]:
+        (buffer,) = state if state is not None else self._zero_state(x)
+        padded, buffer = self.pad(x.transpose(1, 2), buffer)
+        hidden = self.blocks(padded).transpose(1, 2)
+        return self.head(hidden), (buffer,)
+
+
+class LSTMNet(SequenceNetwork):
+    """Stacked LSTM, dropout, linear head (the seed's 2 x 100 network)."""
+
+    def __init__(self, n_features: int, hidden: int = 100, layers: int = 2,
+                 dropout: float = 0.05) -> None:
+        super().__init__()
+        self.hidden, self.layers = hidden, layers
+        self.lstm = nn.LSTM(n_features, hidden, layers, batch_first=True,
+                            dropout=dropout if layers > 1 else 0.0)
+        self.dropout = nn.Dropout(dropout)
+        self.head = nn.Linear(hidden, N_OUTPUTS)
+        glorot_init(self)
+
+    def state_shapes(self, batch: int) -> list[tuple[int, ...]]:
+        return [(self.layers, batch, self.hidden)] * 2
+
+    def state_names(self) -> list[str]:
+        return ["h", "c"]
+
+    def forward(self, x: torch.Tensor, state: State | None = None) -> tuple[torch.Tensor, State]:
+        h, c = state if state is not None else self._zero_state(x)
+        out, (h, c) = self.lstm(x, (h, c))
+        return self.head(self.dropout(out)), (h, c)
+
+
+class CNNLSTM(SequenceNetwork):
+    """Causal 1-D convolutions (ReLU between them) extracting a few features for an LSTM."""
+
+    def __init__(self, n_features: int, conv_channels: Sequence[int] = (40, 16, 4),
+                 conv_kernels: Sequence[int] = (10, 4, 2), hidden: int = 100, layers: int = 2,
+                 dropout: float = 0.05) -> None:
+        super().__init__()
+        if len(conv_channels) != len(conv_kernels) or not conv_channels or min(conv_kernels) < 1:
+            raise ValueError("conv_channels and conv_kernels must be non-empty and of equal length")
+        if sum(k - 1 for k in conv_kernels) < 1:
+            raise ValueError("the convolutions must span more than one sample (some kernel > 1)")
+        self.n_features = n_features
+        self.history = sum(k - 1 for k in conv_kernels)
+        self.pad = CausalHistory(self.history)
+        convs: list[nn.Module] = []
+        for i, (n_out, k) in enumerate(zip(conv_channels, conv_kernels)):
+            if i:
+                convs.append(nn.ReLU())
+            convs.append(nn.Conv1d(n_features if i == 0 else conv_channels[i - 1], n_out, k))
+        self.convs = nn.Sequential(*convs)
+        self.lstm = LSTMNet(conv_channels[-1], hidden, layers, dropout)
+        glorot_init(self)
+
+    def state_shapes(self, batch: int) -> list[tuple[int, ...]]:
+        return [(batch, self.n_features, self.history)] + self.lstm.state_shapes(batch)
+
+    def state_names(self) -> list[str]:
+        return ["input_buffer"] + self.lstm.state_names()
+
+    def forward(self, x: torch.Tensor, state: State | None = None) -> tuple[torch.Tensor, State]:
+        buffer, h, c = state if state is not None else self._zero_state(x)
+        padded, buffer = self.pad(x.transpose(1, 2), buffer)
+        y, (h, c) = self.lstm(self.convs(padded).transpose(1, 2), (h, c))
+        return y, (buffer, h, c)
+
+
+# kind -> (class, whether its target is the residual over the rigid-body prior)
+NETWORKS: dict[str, tuple[type[SequenceNetwork], bool]] = {
+    "lstm": (LSTMNet, False),
+    "cnn-lstm": (CNNLSTM, False),
+    "tcn": (TemporalConvNet, False),
+    "pgnn": (TemporalConvNet, True),
+}
+RECURRENT = ("lstm", "cnn-lstm")
+
+
+def check_kind(kind: str) -> None:
+    """Raise ValueError naming the known model kinds if `kind` is not one."""
+    if kind not in NETWORKS:
+        raise ValueError(f"unknown model {kind!r}: choose one of {', '.join(NETWORKS)}")
+
+
+def build_network(kind: str, n_features: int, **architecture) -> SequenceNetwork:
+    """A fresh network of `kind` ('lstm', 'cnn-lstm', 'tcn', 'pgnn') for n_features inputs."""
+    check_kind(kind)
+    cls, prior = NETWORKS[kind]
+    network = cls(n_features, **architecture)
+    if prior:  # a zero head: training starts from the rigid-body model itself
+        nn.init.zeros_(network.head.weight)
+    return network
+
+
+def uses_prior(kind: str) -> bool:
+    """Whether the network learns only the residual over the rigid-body prior (the pgnn)."""
+    check_kind(kind)
+    return NETWORKS[kind][1]
+
+
+def receptive_field(kernel: int, dilations: Sequence[int]) -> int:
+    """Input samples one output of a stack of unpadded dilated convolutions depends on."""
+    return 1 + (kernel - 1) * sum(dilations)
+
+
+def parameter_count(network: nn.Module) -> int:
+    """Number of trainable parameters."""
+    return sum(p.numel() for p in network.parameters() if p.requires_grad)
+
+
+def glorot_init(module: nn.Module) -> None:
+    """Keras defaults: Glorot-uniform kernels, orthogonal recurrent kernels, zero biases,
+    forget-gate bias 1 (PyTorch's LSTM has two bias vectors; the first carries it)."""
+    for sub in module.modules():
+        if isinstance(sub, (nn.Conv1d, nn.Linear)):
+            nn.init.xavier_uniform_(sub.weight)
+            nn.init.zeros_(sub.bias)
+        elif isinstance(sub, nn.LSTM):
+            for name, param in sub.named_parameters():
+                if name.startswith("weight_ih"):
+                    nn.init.xavier_uniform_(param)
+                elif name.startswith("weight_hh"):
+                    for gate in param.data.chunk(4, dim=0):
+                        nn.init.orthogonal_(gate)
+                else:
+                    nn.init.zeros_(param)
+                    if name.startswith("bias_ih"):
+                        param.data[sub.hidden_size:2 * sub.hidden_size] = 1.0

@@ -1,0 +1,47 @@
+"""Min-max scaling to [0, 1] (eq. 4.3 of the seed), fitted on training data only.
+
+The seed normalizes features and labels separately, with coefficients from the training set
+applied unchanged to validation and test data; the test MSE it reports is in these units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class MinMaxScaler:
+    """Per-column affine map x -> (x - low) / (high - low); constant columns keep a unit span."""
+
+    low: np.ndarray
+    high: np.ndarray
+
+    @classmethod
+    def fit(cls, arrays: Iterable[np.ndarray]) -> "MinMaxScaler":
+        """Fit on the rows of all `arrays` (each (n_i, k))."""
+        stacked = np.concatenate([np.asarray(a, dtype=float) for a in arrays], axis=0)
+        if stacked.size == 0:
+            raise ValueError("cannot fit a scaler on no data")
+        return cls(low=stacked.min(axis=0), high=stacked.max(axis=0))
+
+    @property
+    def span(self) -> np.ndarray:
+        span = self.high - self.low
+        return np.where(span > 0, span, 1.0)
+
+    def transform(self, x: np.ndarray) -> np.ndarray:
+        return (np.asarray(x, dtype=float) - self.low) / self.span
+
+    def inverse(self, z: np.ndarray) -> np.ndarray:
+        return np.asarray(z, dtype=float) * self.span + self.low
+
+    def to_dict(self) -> dict[str, list[float]]:
+        return {"low": self.low.tolist(), "high": self.high.tolist()}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, list[float]]) -> "MinMaxScaler":
+        return cls(low=np.asarray(data["low"], dtype=float),
+                   high=np.asarray(data["high"], dtype=float))

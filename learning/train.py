@@ -1,0 +1,292 @@
+"""Training: a dataset folder in, a run folder out (weights, run.json, metrics.json, loss.png).
+
+Adam on the MSE of min-max-scaled labels (the seed's normalized units; for the pgnn the
+residual F - F_rigid divided by the same label span, which gives the same MSE), truncated
+backpropagation through time for the recurrent networks, random windows for the convolutional
+ones (`learning.batches`), the epoch with the lowest validation loss kept. Seeded: the same
+configuration, data, device and thread count give the same weights.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+import torch
+from matplotlib.figure import Figure
+from tqdm import tqdm
+
+from learning.batches import TRAIN, VALIDATION, SequenceSet, WindowSampler, window_roles
+from learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
+from learning.features import decimation, feature_names, prepare_trajectory
+from learning.models import RECURRENT, SequenceNetwork, build_network, parameter_count, uses_prior
+from learning.presets import TrainConfig, make_config
+from learning.rigid import rigid_forces
+from learning.run_folder import save_run
+from learning.scaling import MinMaxScaler
+from learning.threads import torch_threads
+
+MSE_UNITS = "MSE of min-max scaled labels Fx, Fy (the seed's normalized units)"
+
+
+def train(model: str, preset: str, data: str | Path, out: str | Path, progress: bool = True,
+          **overrides: Any) -> dict[str, Any]:
+    """Train `model` ('lstm', 'cnn-lstm', 'tcn', 'pgnn') with `preset` ('thesis', 'fast') on the
+    dataset folder `data`; write the run folder `out`; return the metrics.
+
+    `overrides` replace preset settings by name (see `learning.presets.make_config`), e.g.
+    `epochs=5`, `feature_set="compact"`, `model_rate_hz=200`, `hidden=50`.
+    """
+    config = make_config(model, preset, **overrides)
+    return fit(config, load_dataset(data), Path(out), progress)
+
+
+def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True) -> dict[str, Any]:
+    """Train with a ready configuration on a loaded dataset; see `train`."""
+    train_set, test_set = _splits(dataset)
+    rate = dataset.sample_rate_hz
+    model_rate = rate / decimation(rate, config.features.model_rate_hz)
+    rng = np.random.default_rng(config.seed)
+    train_x, train_f = _prepare(train_set, rate, config, rng)
+    test_x, test_f = _prepare(test_set, rate, config, None)
+    feature_scaler, label_scaler = MinMaxScaler.fit(train_x), MinMaxScaler.fit(train_f)
+    prior = uses_prior(config.model)
+
+    def targets(xs: list[np.ndarray], fs: list[np.ndarray]) -> list[np.ndarray]:
+        if prior:  # the residual over the rigid-body model, in label spans
+            return [(f - rigid_forces(x, config.features.feature_set)) / label_scaler.span
+                    for x, f in zip(xs, fs)]
+        return [label_scaler.transform(f) for f in fs]
+
+    roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng)
+    device = pick_device(config.device)
+    with reproducible(config.seed, config.threads):
+        network = build_network(config.model, train_x[0].shape[1], **config.architecture)
+        network.to(device)
+        train_data = SequenceSet.build([feature_scaler.transform(x) for x in train_x],
+                                       targets(train_x, train_f), roles, device)
+        test_data = SequenceSet.build([feature_scaler.transform(x) for x in test_x],
+                                      targets(test_x, test_f),
+                                      [np.full(len(x), TRAIN) for x in test_x], device)
+        history = _fit_loop(network, config, train_data, rng, progress)
+        metrics = {
+            "model": config.model, "preset": config.preset, "units": MSE_UNITS,
+            "train_mse": evaluate(network, train_data, TRAIN),
+            "val_mse": evaluate(network, train_data, VALIDATION),
+            "test_mse": evaluate(network, test_data, TRAIN),
+            "test_mse_per_trajectory": {
+                t.name: evaluate(network, test_data, TRAIN, only=[i])
+                for i, t in enumerate(test_set)},
+            "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, config),
+            "parameters": parameter_count(network),
+            "seconds_per_epoch": float(np.mean(history["seconds"])),
+            "epochs": config.epochs, "best_epoch": history["best_epoch"],
+            "model_rate_hz": model_rate, "device": str(device),
+            "threads": torch.get_num_threads() if device.type == "cpu" else None,
+            "history": {k: history[k] for k in ("train", "val", "seconds")},
+        }
+    network.cpu()
+    save_run(out, config, network, feature_scaler, label_scaler,
+             feature_names(config.features.feature_set), model_rate,
+             {"data": {"path": str(Path(dataset.path).resolve()), "set": dataset.set,
+                       "sample_rate_hz": rate, "plant": dict(dataset.plant),
+                       "train": [t.name for t in train_set], "test": [t.name for t in test_set]},
+              "parameters": metrics["parameters"]})
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    plot_losses(history, out / "loss.png", f"{config.model} ({config.preset})")
+    return {**metrics, "run": str(out)}
+
+
+def _splits(dataset: Dataset) -> tuple[list[Trajectory], list[Trajectory]]:
+    train_set, test_set = dataset.split("train"), dataset.split("test")
+    for name, split in (("train", train_set), ("test", test_set)):
+        if not split:
+            raise DatasetError(f"{dataset.path}: the '{name}' split is empty; mark some "
+                               f"trajectories '{name}' in manifest.json or collect more data")
+    return train_set, test_set
+
+
+def _prepare(trajectories: list[Trajectory], rate: float, config: TrainConfig,
+             rng: np.random.Generator | None) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    pairs = [prepare_trajectory(t, rate, config.features, rng) for t in trajectories]
+    return [x for x, _ in pairs], [f for _, f in pairs]
+
+
+def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,
+               config: TrainConfig) -> float:
+    """The nominal rigid-body model's test MSE in the same units: the baseline to beat."""
+    errors = [(f - rigid_forces(x, config.features.feature_set)) / scaler.span
+              for x, f in zip(xs, fs)]
+    return float(np.mean(np.concatenate(errors) ** 2))
+
+
+def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
+              rng: np.random.Generator, progress: bool) -> dict[str, Any]:
+    optimizer = torch.optim.Adam(network.parameters(), lr=config.learning_rate)
+    recurrent = config.model in RECURRENT
+    sampler = None if recurrent else WindowSampler(data, config.window, network.history)
+    history: dict[str, Any] = {"train": [], "val": [], "seconds": []}
+    best, best_state = math.inf, None
+    bar = tqdm(range(config.epochs), desc=f"{config.model}", disable=not progress, unit="epoch")
+    for epoch in bar:
+        start = time.perf_counter()
+        network.train()
+        if recurrent:
+            loss = _recurrent_epoch(network, config, data, optimizer, rng, epoch)
+        else:
+            loss = _window_epoch(network, config, sampler, optimizer, rng, epoch)
+        val = evaluate(network, data, VALIDATION)
+        history["seconds"].append(time.perf_counter() - start)
+        history["train"].append(loss)
+        history["val"].append(val)
+        if val < best:
+            best, best_state = val, copy.deepcopy(network.state_dict())
+            history["best_epoch"] = epoch + 1
+        bar.set_postfix(train=f"{loss:.3g}", val=f"{val:.3g}", best=history.get("best_epoch"))
+    if best_state is None:
+        raise RuntimeError(f"training diverged (validation loss {val}): lower learning_rate "
+                           f"(now {config.learning_rate:g}) or grad_clip")
+    network.load_state_dict(best_state)
+    return history
+
+
+def _recurrent_epoch(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
+                     optimizer: torch.optim.Optimizer, rng: np.random.Generator,
+                     epoch: int) -> float:
+    """One TBPTT pass: each group of trajectories chunk by chunk, the state carried on."""
+    groups = data.groups(config.batch_size, rng)
+    chunks = range(0, data.x.shape[1], config.window)
+    total, count, k = 0.0, 0, 0
+    for group in groups:
+        x, y, role = data.x[group], data.y[group], data.role[group]
+        state = None
+        for start in chunks:
+            _set_learning_rate(optimizer, config, epoch + k / (len(groups) * len(chunks)))
+            k += 1
+            part = slice(start, start + config.window)
+            pred, state = network(x[:, part], state)
+            state = tuple(s.detach() for s in state)
+            mask = role[:, part] == TRAIN
+            if mask.any():
+                loss = _step(optimizer, network, config, pred, y[:, part], mask)
+                total, count = total + loss * int(mask.sum()), count + int(mask.sum())
+    return total / count
+
+
+def _window_epoch(network: SequenceNetwork, config: TrainConfig, sampler: WindowSampler,
+                  optimizer: torch.optim.Optimizer, rng: np.random.Generator,
+                  epoch: int) -> float:
+    """One pass over random training windows, each with its history as the initial buffer."""
+    n_batches = math.ceil(len(sampler) / config.batch_size)
+    total, count = 0.0, 0
+    for k, (hist, x, y, mask) in enumerate(sampler.batches(config.batch_size, rng)):
+        _set_learning_rate(optimizer, config, epoch + k / n_batches)
+        pred, _ = network(x, (hist.transpose(1, 2),))
+        loss = _step(optimizer, network, config, pred, y, mask)
+        total, count = total + loss * int(mask.sum()), count + int(mask.sum())
+    return total / count
+
+
+def _step(optimizer: torch.optim.Optimizer, network: SequenceNetwork, config: TrainConfig,
+          pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
+    loss = masked_mse(pred, target, mask)
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    if config.grad_clip:
+        torch.nn.utils.clip_grad_norm_(network.parameters(), config.grad_clip)
+    optimizer.step()
+    return loss.item()
+
+
+def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Mean squared error over the samples where mask is true (both outputs)."""
+    weight = mask.unsqueeze(-1).to(pred.dtype)
+    return ((pred - target) ** 2 * weight).sum() / (weight.sum() * pred.shape[-1])
+
+
+def _set_learning_rate(optimizer: torch.optim.Optimizer, config: TrainConfig,
+                       epochs_done: float) -> None:
+    for group in optimizer.param_groups:
+        group["lr"] = learning_rate(config, epochs_done / config.epochs)
+
+
+def learning_rate(config: TrainConfig, fraction: float) -> float:
+    """The learning rate at `fraction` (0 to 1) of training.
+
+    onecycle: cosine warm-up over the first 30 % from peak/25 to the peak, then cosine
+    annealing to peak/1e4 (PyTorch's OneCycleLR defaults); cosine: from the peak to zero.
+    """
+    peak = config.learning_rate
+    if config.schedule == "constant":
+        return peak
+    if config.schedule == "cosine":
+        return peak * 0.5 * (1 + math.cos(math.pi * fraction))
+    warm = 0.3
+    if fraction < warm:
+        low = peak / 25
+        return low + (peak - low) * 0.5 * (1 - math.cos(math.pi * fraction / warm))
+    low = peak / 25 / 1e4
+    return low + (peak - low) * 0.5 * (1 + math.cos(math.pi * (fraction - warm) / (1 - warm)))
+
+
+@torch.no_grad()
+def evaluate(network: SequenceNetwork, data: SequenceSet, role: int,
+             only: list[int] | None = None, batch: int = 8) -> float:
+    """MSE over the samples of `role`, each trajectory run whole from the zero state."""
+    network.eval()
+    indices = list(range(len(data))) if only is None else only
+    total, count = 0.0, 0
+    for k in range(0, len(indices), batch):
+        group = indices[k:k + batch]
+        pred, _ = network(data.x[group])
+        mask = data.role[group] == role
+        weight = mask.unsqueeze(-1).to(pred.dtype)
+        total += float(((pred - data.y[group]) ** 2 * weight).sum())
+        count += int(mask.sum()) * pred.shape[-1]
+    return total / count if count else math.nan
+
+
+def pick_device(name: str) -> torch.device:
+    """'auto': CUDA when available, else CPU; or the named device."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(f"device {name!r} asked for, but CUDA is not available: "
+                         f"use 'cpu' or 'auto'")
+    return torch.device(name)
+
+
+@contextmanager
+def reproducible(seed: int, threads: int = 0) -> Iterator[None]:
+    """Seed torch, prefer deterministic kernels, set the CPU threads (learning.threads);
+    restore after."""
+    deterministic = torch.are_deterministic_algorithms_enabled()
+    torch.manual_seed(seed)
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    try:
+        with torch_threads(threads):
+            yield
+    finally:
+        torch.use_deterministic_algorithms(deterministic)
+
+
+def plot_losses(history: dict[str, Any], path: Path, title: str) -> None:
+    """Training and validation loss per epoch on a log scale, the kept epoch marked."""
+    figure = Figure(figsize=(6, 4), tight_layout=True)
+    axes = figure.subplots()
+    epochs = np.arange(1, len(history["train"]) + 1)
+    axes.semilogy(epochs, history["train"], label="training (running mean, dropout on)")
+    axes.semilogy(epochs, history["val"], label="validation")
+    axes.axvline(history["best_epoch"], color="grey", linestyle=":",
+                 label=f"kept: epoch {history['best_epoch']}")
+    axes.set_xlabel("epoch")
+    axes.set_ylabel("MSE (scaled labels)")
+    axes.set_title(title)
+    axes.legend()
+    figure.savefig(path, dpi=120)

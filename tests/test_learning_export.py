@@ -1,0 +1,121 @@
+"""ONNX export: onnxruntime reproduces PyTorch in both forms, on test trajectories, for every
+model kind; the metadata tells a runner what it needs; the graph is in SI units."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from learning.dataset import REFERENCE_SIGNALS, load_dataset
+from learning.deploy import SIModel, predict
+from learning.export import (TOLERANCE, export, read_metadata, run_sequence, run_steps,
+                             session)
+from learning.features import prepare_trajectory, reference_features
+from learning.run_folder import load_run
+from learning.synthetic import synthetic_dataset
+from learning.threads import torch_threads
+from learning.train import train
+
+TINY = {
+    "lstm": {"hidden": 12},
+    "cnn-lstm": {"hidden": 12, "conv_channels": [8, 6, 4]},
+    "tcn": {"channels": 8, "levels": 4},
+    "pgnn": {"channels": 8, "levels": 3},
+}
+
+
+@pytest.fixture(autouse=True, scope="module")
+def few_threads():
+    """Small tensors: spare threads only wait for busy cores (see learning.threads)."""
+    with torch_threads():
+        yield
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return synthetic_dataset(tmp_path_factory.mktemp("export") / "data", n_train=3, n_test=1,
+                             duration=3.0, rate_hz=100.0, seed=11)
+
+
+@pytest.fixture(scope="module")
+def runs(data, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("runs")
+    for kind, sizes in TINY.items():
+        train(kind, "fast", data, folder / kind, progress=False, epochs=1, val_fraction=0.2,
+              **sizes)
+    return folder
+
+
+def _test_inputs(data, run):
+    dataset = load_dataset(data)
+    traj = dataset.split("test")[0]
+    features, _ = prepare_trajectory(traj, dataset.sample_rate_hz, run.config.features)
+    return features, traj
+
+
+def _relative(a, b):
+    return float(np.abs(a - b).max() / np.abs(b).max())
+
+
+@pytest.mark.parametrize("kind", list(TINY))
+def test_onnxruntime_matches_pytorch_in_both_forms(data, runs, tmp_path, kind):
+    path = export(runs / kind, tmp_path / f"{kind}.onnx")
+    run = load_run(runs / kind)
+    features, _ = _test_inputs(data, run)
+    expected = predict(run, features)
+    runtime = session(path)
+    whole = run_sequence(runtime, features)
+    steps = run_steps(runtime, features)
+    assert whole.shape == expected.shape == (len(features), 2) and whole.dtype == np.float64
+    assert _relative(whole, expected) < TOLERANCE
+    assert _relative(steps, expected) < TOLERANCE
+    assert _relative(steps, whole) < TOLERANCE
+
+
+@pytest.mark.parametrize("kind", ["lstm", "pgnn"])
+def test_reference_inputs_compute_the_features_in_the_graph(data, runs, tmp_path, kind):
+    path = export(runs / kind, tmp_path / f"{kind}_ref.onnx", inputs="reference")
+    run = load_run(runs / kind)
+    _, traj = _test_inputs(data, run)
+    reference = np.column_stack([traj.signals[s] for s in REFERENCE_SIGNALS])
+    expected = predict(run, reference_features(traj.signals, run.config.features.feature_set))
+    assert _relative(run_sequence(session(path), reference), expected) < TOLERANCE
+    assert read_metadata(path)["input_signals"] == json.dumps(list(REFERENCE_SIGNALS))
+
+
+def test_metadata_names_everything_a_runner_needs(runs, tmp_path):
+    path = export(runs / "cnn-lstm", tmp_path / "model.onnx")
+    meta = read_metadata(path)
+    run = load_run(runs / "cnn-lstm")
+    assert meta["format"] == "flexff-feedforward" and meta["model_kind"] == "cnn-lstm"
+    assert json.loads(meta["input_signals"]) == run.feature_names
+    assert len(json.loads(meta["input_units"])) == 63
+    assert json.loads(meta["output_signals"]) == ["Fx_ff", "Fy_ff"]
+    assert float(meta["sample_rate_hz"]) == 100.0 and meta["feature_set"] == "full"
+    assert meta["flexff_version"] and "hold" in meta["usage"]
+    state = json.loads(meta["state"])
+    assert [s["input"] for s in state] == ["input_buffer", "h", "c"]
+    assert state[0]["shape"] == [1, 63, 13] and state[1]["shape"] == [2, 1, 12]
+    runtime = session(path)
+    inputs = {i.name: i.shape for i in runtime.get_inputs()}
+    assert inputs["inputs"][1] == 63 and isinstance(inputs["inputs"][0], str)  # dynamic time
+    assert {o.name for o in runtime.get_outputs()} == {"forces", "input_buffer_out", "h_out",
+                                                       "c_out"}
+
+
+def test_scaling_lives_inside_the_graph(runs):
+    """SI in, newtons out: the SI model equals unscale(network(scale(features)))."""
+    run = load_run(runs / "tcn")
+    x = np.random.default_rng(0).uniform(run.feature_scaler.low, run.feature_scaler.high, (20, 63))
+    scaled = torch.as_tensor(run.feature_scaler.transform(x), dtype=torch.float32)[None]
+    with torch.no_grad():
+        network_out = run.network(scaled)[0][0].double().numpy()
+    np.testing.assert_allclose(predict(run, x), run.label_scaler.inverse(network_out), rtol=1e-6)
+    with pytest.raises(ValueError, match="inputs must be one of"):
+        SIModel(run, "currents")
+
+
+def test_export_of_a_missing_run_says_what_to_do(tmp_path):
+    with pytest.raises(FileNotFoundError, match="train one"):
+        export(tmp_path / "nothing", tmp_path / "x.onnx")

@@ -1,0 +1,157 @@
+"""Training on a tiny synthetic set: it learns, keeps the best epoch, is reproducible, and
+bad requests fail with a message that says what to do."""
+
+import copy
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import learning.train as training
+from learning.batches import TRAIN, VALIDATION, window_roles
+from learning.dataset import DatasetError, load_dataset
+from learning.deploy import predict
+from learning.features import prepare_trajectory
+from learning.presets import make_config
+from learning.run_folder import load_run
+from learning.synthetic import synthetic_dataset
+from learning.threads import cpu_threads, torch_threads
+from learning.train import learning_rate, train
+
+TINY = {"lstm": {"hidden": 16}, "pgnn": {"channels": 8, "levels": 3}, "tcn": {"channels": 8}}
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return synthetic_dataset(tmp_path_factory.mktemp("tiny") / "data", n_train=4, n_test=1,
+                             duration=4.0, rate_hz=200.0, seed=7)
+
+
+def test_tiny_training_reduces_the_loss_and_writes_the_run_folder(data, tmp_path):
+    metrics = train("lstm", "fast", data, tmp_path / "run", progress=False, epochs=6,
+                    **TINY["lstm"])
+    history = metrics["history"]
+    assert history["train"][-1] < 0.5 * history["train"][0]
+    assert min(history["val"]) < history["val"][0]
+    for name in ("run.json", "model.pt", "loss.png", "metrics.json"):
+        assert (tmp_path / "run" / name).is_file()
+    saved = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    for key in ("train_mse", "val_mse", "test_mse", "parameters", "seconds_per_epoch", "epochs",
+                "best_epoch"):
+        assert key in saved
+    assert saved["epochs"] == 6 and saved["model_rate_hz"] == 100.0
+    assert saved["parameters"] == 4 * 16 * (63 + 16 + 2) + 4 * 16 * (16 + 16 + 2) + 16 * 2 + 2
+
+
+def test_the_epoch_with_the_lowest_validation_loss_is_kept(data, tmp_path, monkeypatch):
+    scripted, snapshots = [5.0, 3.0, 1.0, 2.0, 4.0], []
+    real = training.evaluate
+
+    def scripted_evaluate(network, data_set, role, **kwargs):
+        if role == VALIDATION and scripted and not kwargs:
+            snapshots.append(copy.deepcopy(network.state_dict()))
+            return scripted.pop(0)
+        return real(network, data_set, role, **kwargs)
+
+    monkeypatch.setattr(training, "evaluate", scripted_evaluate)
+    metrics = train("tcn", "fast", data, tmp_path / "run", progress=False, epochs=5,
+                    **TINY["tcn"])
+    assert metrics["best_epoch"] == 3 and metrics["history"]["val"] == [5.0, 3.0, 1.0, 2.0, 4.0]
+    kept = load_run(tmp_path / "run").network.state_dict()
+    for name, value in snapshots[2].items():
+        torch.testing.assert_close(kept[name], value.cpu(), rtol=0, atol=0)
+    assert not all(torch.equal(kept[n], v.cpu()) for n, v in snapshots[4].items())
+
+
+def test_training_is_reproducible(data, tmp_path):
+    runs = [train("pgnn", "fast", data, tmp_path / f"run{k}", progress=False, epochs=2,
+                  **TINY["pgnn"]) for k in range(2)]
+    assert runs[0]["history"]["train"] == runs[1]["history"]["train"]
+    a, b = (load_run(tmp_path / f"run{k}").network.state_dict() for k in range(2))
+    assert all(torch.equal(a[n], b[n]) for n in a)
+
+
+@pytest.mark.parametrize("kind", ["lstm", "pgnn"])
+def test_reported_test_mse_is_that_of_the_si_model(data, tmp_path, kind):
+    """The metric's units, end to end: min-max-scaled labels, from the deployed forces."""
+    metrics = train(kind, "fast", data, tmp_path / "run", progress=False, epochs=2, **TINY[kind])
+    run = load_run(tmp_path / "run")
+    dataset = load_dataset(data)
+    features, forces = prepare_trajectory(dataset.split("test")[0], dataset.sample_rate_hz,
+                                          run.config.features)
+    predicted = predict(run, features)
+    scaled = (predicted - forces) / run.label_scaler.span
+    assert np.mean(scaled**2) == pytest.approx(metrics["test_mse"], rel=1e-4)
+
+
+def test_validation_windows_are_a_seeded_shuffle():
+    roles = window_roles([250, 300], 100, 0.25, np.random.default_rng(0))
+    assert [len(r) for r in roles] == [250, 300]
+    windows = [r[s] for r in roles for s in range(0, len(r), 100)]
+    assert windows.count(VALIDATION) == 2 and windows.count(TRAIN) == 4
+    again = window_roles([250, 300], 100, 0.25, np.random.default_rng(0))
+    assert all(np.array_equal(a, b) for a, b in zip(roles, again))
+    with pytest.raises(ValueError, match="too few"):
+        window_roles([100], 100, 0.125, np.random.default_rng(0))
+
+
+def test_learning_rate_schedules():
+    one = make_config("tcn", "fast", learning_rate=1.0, schedule="onecycle")
+    assert learning_rate(one, 0.0) == pytest.approx(1 / 25)
+    assert learning_rate(one, 0.3) == pytest.approx(1.0)
+    assert learning_rate(one, 1.0) == pytest.approx(1 / 25 / 1e4)
+    cos = make_config("tcn", "fast", learning_rate=1.0, schedule="cosine")
+    assert learning_rate(cos, 0.5) == pytest.approx(0.5)
+    assert learning_rate(make_config("lstm", "thesis"), 0.7) == 2e-5
+
+
+def test_thesis_preset_follows_the_seed():
+    lstm, tcn = make_config("lstm", "thesis"), make_config("tcn", "thesis")
+    assert (lstm.epochs, lstm.learning_rate, lstm.window, lstm.val_fraction) == (1000, 2e-5, 100,
+                                                                                 0.125)
+    assert lstm.architecture == {"hidden": 100, "layers": 2, "dropout": 0.05}
+    assert (tcn.epochs, tcn.learning_rate, tcn.architecture["channels"]) == (1500, 2e-4, 200)
+    assert lstm.features.model_rate_hz is None and lstm.features.cutoff_hz == 1.8
+
+
+@pytest.mark.parametrize("args,overrides,message", [
+    (("gru", "fast"), {}, "unknown model 'gru'"),
+    (("lstm", "slow"), {}, "unknown preset 'slow'"),
+    (("lstm", "fast"), {"epoch": 3}, "unknown setting 'epoch'.*'epochs'"),
+    (("lstm", "fast"), {"feature_set": "big"}, "unknown feature set 'big'"),
+    (("tcn", "fast"), {"schedule": "step"}, "unknown schedule"),
+])
+def test_bad_requests_are_refused(data, tmp_path, args, overrides, message):
+    with pytest.raises(ValueError, match=message):
+        train(*args, data, tmp_path / "run", progress=False, **overrides)
+
+
+def test_empty_split_and_bad_data_are_refused(data, tmp_path):
+    manifest = json.loads((data / "manifest.json").read_text())
+    copy_dir = tmp_path / "data"
+    copy_dir.mkdir()
+    for entry in manifest["trajectories"]:
+        (copy_dir / entry["file"]).write_bytes((data / entry["file"]).read_bytes())
+        entry["split"] = "train"
+    (copy_dir / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(DatasetError, match="'test' split is empty.*manifest.json"):
+        train("lstm", "fast", copy_dir, tmp_path / "run", progress=False)
+    manifest["version"] = 0
+    (copy_dir / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(DatasetError, match="collect the data again"):
+        train("lstm", "fast", copy_dir, tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
+
+
+def test_run_folder_must_exist(tmp_path):
+    with pytest.raises(FileNotFoundError, match="not a training run folder"):
+        load_run(tmp_path)
+
+
+def test_thread_policy_and_restoration():
+    before = torch.get_num_threads()
+    assert cpu_threads(3) == 3 and cpu_threads(0) >= 1
+    with torch_threads(1) as inside:
+        assert inside == 1 == torch.get_num_threads()
+    assert torch.get_num_threads() == before
