@@ -10,6 +10,9 @@ from typing import Callable, Sequence
 from learning.dataset import SETS
 from plant.model import VARIANTS
 
+MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to keep torch unloaded
+PRESETS = ("fast", "thesis")
+
 
 def _plant_info(args: argparse.Namespace) -> int:
     from plant.analysis import plant_info
@@ -140,6 +143,22 @@ def _data_collect(args: argparse.Namespace) -> int:
     return 0 if report.ok else 1
 
 
+def _train(args: argparse.Namespace) -> int:
+    from learning.train import train
+
+    overrides = {"epochs": args.epochs} if args.epochs is not None else {}
+    metrics = train(args.model, args.preset, args.data, args.output, **overrides)
+    print(json.dumps(metrics, indent=2, default=str))
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from learning.export import export
+
+    print(f"wrote {export(args.run, args.output, inputs=args.inputs)}")
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from flexff.demo import run_demo
 
@@ -197,6 +216,23 @@ def build_parser() -> argparse.ArgumentParser:
     collect.add_argument("--workers", type=int, help="parallel local processes (default: CPUs)")
     collect.add_argument("--scheduler", help="address of a Dask scheduler to run on instead")
     collect.set_defaults(handler=_data_collect)
+
+    train = commands.add_parser("train", help="train a feedforward model on a dataset folder")
+    train.add_argument("--model", required=True, choices=MODELS, help="the network")
+    train.add_argument("--preset", default="fast", choices=PRESETS,
+                       help="fast: minutes on a laptop CPU; thesis: the seed's sizes (GPU)")
+    train.add_argument("--data", required=True, help="a dataset folder (flexff data collect)")
+    train.add_argument("-o", "--output", required=True, help="the run folder to write")
+    train.add_argument("--epochs", type=int, help="override the preset's number of epochs")
+    train.set_defaults(handler=_train)
+
+    export = commands.add_parser("export", help="export a training run to ONNX")
+    export.add_argument("run", help="the run folder (flexff train)")
+    export.add_argument("-o", "--output", required=True, help="the .onnx file to write")
+    export.add_argument("--inputs", default="features", choices=("features", "reference"),
+                        help="graph inputs: the SI features, or the reference signals "
+                             "(x_ref .. ay_ref) with the features computed in the graph")
+    export.set_defaults(handler=_export)
 
     bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON")
     bench.add_argument("--steps", type=int, default=20000, help="steps per timed loop")

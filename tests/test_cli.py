@@ -67,3 +67,34 @@ def test_demo_runs(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "plant_nominal.fmu     yes" in result.stdout
     assert (tmp_path / "plant_hardware.fmu").is_file()
+
+
+def test_train_and_export_from_the_command_line(tmp_path):
+    from learning.synthetic import synthetic_dataset
+
+    data = synthetic_dataset(tmp_path / "data", n_train=3, n_test=1, duration=3.0, rate_hz=200.0,
+                             seed=4)
+    run = tmp_path / "run"
+    result = flexff("train", "--model", "tcn", "--data", str(data), "-o", str(run),
+                    "--epochs", "1")
+    assert result.returncode == 0, result.stderr
+    assert json.loads((run / "metrics.json").read_text())["test_mse"] > 0
+    result = flexff("export", str(run), "-o", str(tmp_path / "tcn.onnx"))
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "tcn.onnx").is_file()
+
+
+def test_train_refuses_a_folder_that_is_not_a_dataset(tmp_path):
+    result = flexff("train", "--model", "lstm", "--data", str(tmp_path), "-o", str(tmp_path / "r"))
+    assert result.returncode == 2
+    assert "flexff data collect" in result.stderr
+
+
+def test_cli_model_names_are_the_library_s():
+    from learning.models import check_kind
+    from flexff.cli import MODELS, PRESETS
+    from learning.presets import PRESETS as LIBRARY_PRESETS
+
+    for name in MODELS:
+        check_kind(name)
+    assert set(PRESETS) == set(LIBRARY_PRESETS)
