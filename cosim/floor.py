@@ -16,26 +16,14 @@ from pathlib import Path
 import numpy as np
 
 from cosim.master import Master
-from fmu import cache
-from fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler
+from fmu.compile import cached_program
 
 SOURCE = Path(__file__).parent / "c" / "cosim_loop.c"
 
 
 def loop_program() -> Path:
     """The compiled C loop, from the fmu/ cache when its source and compiler are unchanged."""
-    text = SOURCE.read_text()
-    key = cache.digest({"cosim_loop.c": text, "cflags": " ".join(CFLAGS),
-                        "compiler": compiler_version()})
-    program = cache.cached_path(key, ".cosim_loop")
-    if not program.exists():
-        with tempfile.TemporaryDirectory() as tmp:
-            for name, header in fmi_headers().items():
-                (Path(tmp) / name).write_text(header)
-            exe = Path(tmp) / "cosim_loop"
-            run_compiler([SOURCE], exe, [Path(tmp)], extra_flags=(), libraries=("-ldl",))
-            cache.store(key, ".cosim_loop", exe)
-    return program
+    return cached_program(SOURCE, "cosim_loop")
 
 
 def _plan_text(layout: dict, steps: int) -> str:

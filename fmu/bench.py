@@ -10,34 +10,16 @@ from __future__ import annotations
 
 import json
 import subprocess
-import tempfile
 import time
 from ctypes import c_double, c_int, c_size_t, c_uint
 from pathlib import Path
 
 import numpy as np
 
-from fmu import cache
-from fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler
+from fmu.compile import cached_program
 from fmu.runner import Slave, bare_calls
 
 BENCH_SOURCE = Path(__file__).parent / "c" / "bench_loop.c"
-
-
-def _bench_program() -> Path:
-    """The compiled C bench loop, from the cache when its source and compiler are unchanged."""
-    source = BENCH_SOURCE.read_text()
-    key = cache.digest({"bench_loop.c": source, "cflags": " ".join(CFLAGS),
-                        "compiler": compiler_version()})
-    program = cache.cached_path(key, ".bench")
-    if not program.exists():
-        with tempfile.TemporaryDirectory() as tmp:
-            for name, text in fmi_headers().items():
-                (Path(tmp) / name).write_text(text)
-            exe = Path(tmp) / "bench_loop"
-            run_compiler([BENCH_SOURCE], exe, [Path(tmp)], extra_flags=(), libraries=("-ldl",))
-            cache.store(key, ".bench", exe)
-    return program
 
 
 def _python_loop(s: Slave, steps: int, step: float, repeats: int) -> dict[str, float]:
@@ -102,7 +84,7 @@ def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3, repeats:
         args = [str(len(inputs)), *(str(s.variables[n].valueReference) for n in inputs),
                 *(repr(float(s.variables[n].start)) for n in inputs),
                 str(len(outputs)), *(str(s.variables[n].valueReference) for n in outputs)]
-        run = subprocess.run([str(_bench_program()), str(s.library), s.model_description.guid,
+        run = subprocess.run([str(cached_program(BENCH_SOURCE, "bench")), str(s.library), s.model_description.guid,
                               str(steps), repr(step), str(repeats), *args],
                              capture_output=True, text=True, check=True)
     c_result = json.loads(run.stdout)

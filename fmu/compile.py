@@ -10,9 +10,12 @@ from __future__ import annotations
 import functools
 import os
 import subprocess
+import tempfile
 from pathlib import Path
 
 import fmpy
+
+from fmu import cache
 
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = ("-O2", "-std=c99", "-fPIC", "-fvisibility=hidden", "-ffp-contract=off")
@@ -45,3 +48,20 @@ def run_compiler(sources: list[Path], output: Path, include_dirs: list[Path],
     result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:
         raise RuntimeError(f"compilation failed: {' '.join(cmd)}\n{result.stderr}")
+
+
+def cached_program(source: Path, name: str) -> Path:
+    """A stand-alone C program (FMI headers on the include path, linked with -ldl) compiled
+    from `source` into the build cache; rebuilt only when the source or the compiler changes."""
+    text = source.read_text()
+    key = cache.digest({source.name: text, "cflags": " ".join(CFLAGS),
+                        "compiler": compiler_version()})
+    program = cache.cached_path(key, f".{name}")
+    if not program.exists():
+        with tempfile.TemporaryDirectory() as tmp:
+            for header, header_text in fmi_headers().items():
+                (Path(tmp) / header).write_text(header_text)
+            exe = Path(tmp) / name
+            run_compiler([source], exe, [Path(tmp)], extra_flags=(), libraries=("-ldl",))
+            cache.store(key, f".{name}", exe)
+    return program
