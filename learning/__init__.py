@@ -1,6 +1,7 @@
 """Learning pipeline: datasets, preprocessing, networks, training and ONNX export.
 
 Public entry points (kept free of argument parsing so the CLI can call them):
+  learning.collect.collect(set_name, out, workers, scheduler) -> dataset folder (co-simulated)
   learning.train.train(model, preset, data, out, **overrides) -> metrics dict
   learning.export.export(run, out, inputs="features") -> path of the ONNX graph
   learning.dataset.load_dataset(path) / write_dataset(...)
