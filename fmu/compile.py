@@ -50,17 +50,22 @@ def run_compiler(sources: list[Path], output: Path, include_dirs: list[Path],
         raise RuntimeError(f"compilation failed: {' '.join(cmd)}\n{result.stderr}")
 
 
+HOST_HEADER = Path(__file__).parent / "c" / "fmi2_host_logger.h"
+
+
 def cached_program(source: Path, name: str) -> Path:
-    """A stand-alone C program (FMI headers on the include path, linked with -ldl) compiled
-    from `source` into the build cache; rebuilt only when the source or the compiler changes."""
+    """A stand-alone C program (FMI headers and fmi2_host_logger.h on the include path, linked
+    with -ldl) compiled from `source` into the build cache; rebuilt only when the source, the
+    header or the compiler changes."""
     text = source.read_text()
-    key = cache.digest({source.name: text, "cflags": " ".join(CFLAGS),
-                        "compiler": compiler_version()})
+    key = cache.digest({source.name: text, HOST_HEADER.name: HOST_HEADER.read_text(),
+                        "cflags": " ".join(CFLAGS), "compiler": compiler_version()})
     program = cache.cached_path(key, f".{name}")
     if not program.exists():
         with tempfile.TemporaryDirectory() as tmp:
             for header, header_text in fmi_headers().items():
                 (Path(tmp) / header).write_text(header_text)
+            (Path(tmp) / HOST_HEADER.name).write_text(HOST_HEADER.read_text())
             exe = Path(tmp) / name
             run_compiler([source], exe, [Path(tmp)], extra_flags=(), libraries=("-ldl",))
             cache.store(key, f".{name}", exe)

@@ -26,6 +26,7 @@
 #include <time.h>
 
 #include "fmi2Functions.h"
+#include "fmi2_host_logger.h"
 
 typedef struct {
     void *lib;
@@ -57,17 +58,6 @@ static void die(const char *fmt, ...) {
     va_end(ap);
     fputc('\n', stderr);
     exit(1);
-}
-
-static void fmu_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
-                       fmi2String category, fmi2String message, ...) {
-    va_list ap;
-    (void)env;
-    fprintf(stderr, "[%s] %s (status %d): ", name, category, (int)status);
-    va_start(ap, message);
-    vfprintf(stderr, message, ap);
-    va_end(ap);
-    fputc('\n', stderr);
 }
 
 static void *symbol(Slave *s, const char *name) {
@@ -147,7 +137,7 @@ static void check(fmi2Status status, const Slave *s, const char *what, double t)
     if (status > fmi2Warning) die("%s: %s failed at t = %.9g s", s->name, what, t);
 }
 
-static fmi2CallbackFunctions callbacks = {fmu_logger, calloc, free, NULL, NULL};
+static fmi2CallbackFunctions callbacks = {fmi2_host_logger, calloc, free, NULL, NULL};
 
 static void instantiate(Slave *s, double stop_time) {
     s->c = s->instantiate(s->name, fmi2CoSimulation, s->guid, "", &callbacks, fmi2False, fmi2False);

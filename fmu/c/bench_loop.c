@@ -13,23 +13,12 @@
 #define _POSIX_C_SOURCE 200809L
 
 #include <dlfcn.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
 
 #include "fmi2Functions.h"
-
-static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
-                   fmi2String category, fmi2String message, ...) {
-    va_list ap;
-    (void)env;
-    fprintf(stderr, "[%s] %s (status %d): ", name, category, (int)status);
-    va_start(ap, message);
-    vfprintf(stderr, message, ap);
-    va_end(ap);
-    fputc('\n', stderr);
-}
+#include "fmi2_host_logger.h"
 
 /* Look a function up; exits if the library lacks it. */
 static void *symbol(void *lib, const char *name) {
@@ -92,7 +81,7 @@ int main(int argc, char **argv) {
     LOAD(fmi2TerminateTYPE, terminate, "fmi2Terminate");
     LOAD(fmi2FreeInstanceTYPE, free_instance, "fmi2FreeInstance");
 
-    fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
+    fmi2CallbackFunctions cb = {fmi2_host_logger, calloc, free, NULL, NULL};
     fmi2Component c = instantiate("bench", fmi2CoSimulation, argv[2], "", &cb, fmi2False, fmi2False);
     if (c == NULL) return 1;
     CHECK(setup(c, fmi2False, 0.0, 0.0, fmi2False, 0.0));
