@@ -18,6 +18,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.allocation import measured_position, motor_currents
+from controllers.feedforward import FORCE_OUTPUTS, REFERENCE_INPUTS
 from controllers.loop_shaping import PIDDesign, StateSpace, design_pid
 from fmu.system import Parameter, System, Variable
 from plant.analysis import plant_info
@@ -44,12 +45,10 @@ DEFAULTS = {
 # encoder inputs start at the angles of the centre pose, where the controller is at rest
 HOME_ANGLES = tuple(float(a) for a in shoulder_angles(NOMINAL, 0.0, 0.0))
 INPUTS = (
-    Variable("x_ref", "m", "reference position, x"),
-    Variable("y_ref", "m", "reference position, y"),
+    *REFERENCE_INPUTS[:2],  # x_ref, y_ref
     *(Variable(f"theta_s{k + 1}", "rad", f"encoder angle, motor {k + 1}", start=HOME_ANGLES[k])
       for k in range(3)),
-    Variable("Fx_ff", "N", "feedforward end-effector force, x"),
-    Variable("Fy_ff", "N", "feedforward end-effector force, y"),
+    *FORCE_OUTPUTS,  # the feedforward's Fx_ff, Fy_ff
 )
 OUTPUTS = (
     Variable("i1", "A", "commanded current, motor 1"),

@@ -57,7 +57,6 @@ class ReducedDynamics:
 
     pos: ca.SX
     vel: ca.SX
-    q: ca.SX  # the 21 coordinates as functions of pos
     M: ca.SX  # mass matrix, 2x2
     C: ca.SX  # Coriolis matrix J^T M21 dJ/dt (so dM/dt - 2C is skew), 2x2
     coriolis: ca.SX  # C @ vel, formed as J^T M21 (dJ/dt vel): one directional derivative
@@ -88,7 +87,7 @@ def reduced_dynamics(p: PlantParameters) -> ReducedDynamics:
     deflection_rate = ca.jtimes(deflection, pos, vel)
     rayleigh = 0.5 * ca.dot(flexure_damping(p), deflection_rate**2)
     return ReducedDynamics(
-        pos=pos, vel=vel, q=q, M=mass, C=jac.T @ body_mass @ ca.jtimes(jac, pos, vel),
+        pos=pos, vel=vel, M=mass, C=jac.T @ body_mass @ ca.jtimes(jac, pos, vel),
         coriolis=jac.T @ (body_mass @ ca.jtimes(jac @ vel, pos, vel)),
         Q=ca.gradient(potential, pos), D=ca.gradient(rayleigh, vel),
         A=ca.jacobian(ca.vertcat(*[q[s] for s in SHOULDER_INDEX]), pos),

@@ -6,11 +6,11 @@ table's "mm" is a typo: the workspace radius is 0.05 m), the motor (torque const
 the Escon 50/5 amplifiers and the lowest natural frequency at the centre, about 1.7 Hz. The
 remaining values are chosen as plausible for light aluminium arms on a thin steel base; the
 flexure stiffness is then set so that the lowest natural frequency at the centre is 1.70 Hz
-(checked by `plant.analysis.natural_frequencies` and the tests).
+(checked by `plant.analysis.modes` and the tests).
 
 Every field is a float or a 3-tuple of floats (one entry per kinematic chain), so the same
-dataclass can hold CasADi symbols: `symbolic()` returns an instance whose entries are SX
-scalars, and the dynamics are written once for numbers and symbols alike.
+dataclass can hold CasADi symbols: `from_vector` of an SX vector gives an instance whose entries
+are SX scalars, and the dynamics are written once for numbers and symbols alike.
 """
 
 from __future__ import annotations
@@ -18,8 +18,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, Iterator
-
-import casadi as ca
 
 CHAINS = (1, 2, 3)
 
@@ -72,11 +70,6 @@ class PlantParameters:
     noise_std: float = _param("rad", "standard deviation of the encoder noise", positive=False)
 
     # -- construction -------------------------------------------------------------------------
-    @classmethod
-    def symbolic(cls) -> "PlantParameters":
-        """An instance whose entries are CasADi SX symbols named as in `names()`."""
-        return cls.from_vector(ca.vertcat(*[ca.SX.sym(n) for n in cls.names()]))
-
     @classmethod
     def from_vector(cls, vector: Any) -> "PlantParameters":
         """Rebuild from a flat vector ordered as `names()` (numbers or CasADi expressions)."""
