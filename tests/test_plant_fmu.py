@@ -9,7 +9,7 @@ from fmu.runner import Slave, run_fmu, run_fmu_libcosim
 from fmu.validation import validate_fmu
 from plant.model import PlantModel
 from plant.system import plant_system
-from tests.fmu_toys import LoggedSlave
+from tests.fmu_toys import LoggedSlave, rk4_reference
 
 STEPS = 1500
 H = 1e-3
@@ -23,23 +23,6 @@ def driven_currents(steps=STEPS):
     return {f"i{k}": 1.5 * np.sin(2 * np.pi * 0.7 * t + 2.1 * k) for k in (1, 2, 3)}
 
 
-def python_rk4(system, x0, currents, params, substeps):
-    """RK4 with the FMU's sub-steps on the very CasADi functions the FMU was generated from."""
-    xs, x = [x0], np.array(x0, dtype=float)
-    dt = H / substeps
-    f = system.dynamics
-    for k in range(len(currents[0])):
-        u = [c[k] for c in currents]
-        for _ in range(substeps):
-            k1 = np.array(f(x, u, params)).ravel()
-            k2 = np.array(f(x + 0.5 * dt * k1, u, params)).ravel()
-            k3 = np.array(f(x + 0.5 * dt * k2, u, params)).ravel()
-            k4 = np.array(f(x + dt * k3, u, params)).ravel()
-            x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        xs.append(x)
-    return np.array(xs)
-
-
 @pytest.mark.parametrize("variant", ["nominal", "hardware"])
 def test_fmpy_validation_passes(plant_fmus, variant):
     assert fmpy.validation.validate_fmu(str(plant_fmus[variant])) == []
@@ -50,16 +33,12 @@ def test_fmpy_validation_passes(plant_fmus, variant):
 @pytest.mark.parametrize("driven", [False, True], ids=["free", "driven"])
 def test_fmu_equals_casadi_rk4(plant_fmus, variant, driven):
     system = plant_system(variant)
-    params = [p.start for p in system.parameters]
-    index = {p.name: k for k, p in enumerate(system.parameters)}
-    for name, value in START.items():
-        params[index[name]] = value
     steps = 400
     currents = driven_currents(steps) if driven else {f"i{k}": np.zeros(steps) for k in (1, 2, 3)}
     states = [s.name for s in system.states]
     fmu = run_fmu(plant_fmus[variant], steps, H, inputs=currents, parameters=START, record=states)
-    x0 = np.array(system.initial_state(params)).ravel()
-    reference = python_rk4(system, x0, list(currents.values()), params, substeps=1)
+    reference = rk4_reference(system, START, np.column_stack(list(currents.values())),
+                              [(H, 1)] * steps)
     ours = np.column_stack([fmu[n] for n in states])
     assert np.abs(ours - reference).max() <= 1e-12
     assert np.ptp(ours[:, 0]) > 1e-3  # it really moved
