@@ -2,8 +2,10 @@
 
 The FMU holds modelDescription.xml, binaries/<platform>/<id>.so and sources/ (wrapper, generated
 code, config.h and the FMI headers, listed in the XML's SourceFiles) so it can be rebuilt
-elsewhere with `cc -shared -fPIC -Isources sources/*.c -lm`. Builds are cached by a hash of all
-their inputs; the GUID is derived from the same hash, so equal inputs give a bit-equal FMU.
+elsewhere with `cc -shared -fPIC -Isources sources/*.c -lm -ldl`. A System with an embedded
+network also gets its graph (and precomputation table) in resources/ and onnxruntime's library
+beside its own in binaries/<platform>/. Builds are cached by a hash of all their inputs; the
+GUID is derived from the same hash, so equal inputs give a bit-equal FMU.
 """
 
 from __future__ import annotations
@@ -17,37 +19,63 @@ from pathlib import Path
 import fmpy
 
 from fmu import cache
-from fmu.codegen import generate_config_h, generate_model_c
+from fmu.codegen import NET_MODEL_FILE, NET_TABLE_FILE, generate_config_h, generate_model_c
 from fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler
 from fmu.layout import make_layout, model_identifier
 from fmu.model_description import model_description_xml
+from fmu.network import Network, runtime_library
 from fmu.system import System
 
-WRAPPER = Path(__file__).parent / "c" / "fmi2_cosim.c"
-SOURCE_FILES = ["fmi2_cosim.c", "model.c"]
+C_DIR = Path(__file__).parent / "c"
+NETWORK_SOURCES = ("onnx_network.c", "onnx_network.h")
 GUID_PLACEHOLDER = "{00000000-0000-0000-0000-000000000000}"
 GUID_FILES = ("modelDescription.xml", "sources/config.h")
 ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps keep the archive reproducible
 
 
-def _files(system: System, guid: str) -> dict[str, str]:
-    """Every text file of the FMU, by archive path."""
+def _source_files(system: System) -> list[str]:
+    """The C files compiled into the FMU's library."""
+    return ["fmi2_cosim.c", "model.c", *(["onnx_network.c"] if system.network else [])]
+
+
+def _files(system: System, guid: str) -> dict[str, str | bytes]:
+    """Every file of the FMU but its compiled library, by archive path."""
     identifier = model_identifier(system)
     layout = make_layout(system)
     sources = {
-        "fmi2_cosim.c": WRAPPER.read_text(),
+        "fmi2_cosim.c": (C_DIR / "fmi2_cosim.c").read_text(),
         "config.h": generate_config_h(system, layout, identifier, guid),
         **generate_model_c(system, identifier),
         **fmi_headers(),
+        **({name: (C_DIR / name).read_text() for name in NETWORK_SOURCES}
+           if system.network else {}),
     }
-    files = {f"sources/{name}": text for name, text in sources.items()}
+    files: dict[str, str | bytes] = {f"sources/{name}": text for name, text in sources.items()}
     files["modelDescription.xml"] = model_description_xml(system, layout, identifier, guid,
-                                                          SOURCE_FILES)
+                                                          _source_files(system))
+    if system.network:
+        files.update(_network_files(system.network, [u.name for u in system.inputs]))
     return files
 
 
-def _key(files: dict[str, str]) -> str:
-    parts: dict[str, str | bytes] = dict(files)
+def _network_files(net: Network, input_names: list[str]) -> dict[str, bytes]:
+    """The graph, the precomputation table and onnxruntime's library."""
+    files = {f"resources/{NET_MODEL_FILE}": net.model.read_bytes()}
+    if net.table is not None:
+        if net.table.shape[1] != 1 + len(input_names):
+            raise ValueError(f"the precomputation table needs {1 + len(input_names)} columns "
+                             f"(time, {', '.join(input_names)}), got {net.table.shape[1]}")
+        lines = [",".join(["time", *input_names])]
+        lines += [",".join(map(repr, map(float, row))) for row in net.table]
+        files[f"resources/{NET_TABLE_FILE}"] = ("\n".join(lines) + "\n").encode()
+    library = runtime_library()
+    files[f"binaries/{fmpy.platform}/{library.name}"] = library.read_bytes()
+    return files
+
+
+def _key(files: dict[str, str | bytes]) -> str:
+    parts = {name: (f"{len(data)} bytes" if name.startswith("binaries/") else data)
+             for name, data in files.items()}  # the runtime library is named by its version
     parts["cflags"] = " ".join(CFLAGS)
     parts["compiler"] = compiler_version()
     return cache.digest(parts)
@@ -58,14 +86,15 @@ def fmu_key(system: System) -> str:
     return _key(_files(system, GUID_PLACEHOLDER))
 
 
-def _with_guid(files: dict[str, str], key: str) -> dict[str, str]:
+def _with_guid(files: dict[str, str | bytes], key: str) -> dict[str, str | bytes]:
     """The files with the placeholder replaced by the GUID derived from the key."""
     guid = "{" + str(uuid.UUID(key[:32])) + "}"
     return {name: text.replace(GUID_PLACEHOLDER, guid) if name in GUID_FILES else text
             for name, text in files.items()}
 
 
-def _write_fmu(files: dict[str, str], identifier: str, target: Path) -> None:
+def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: str,
+               target: Path) -> None:
     """Compile the sources and zip the FMU into `target`."""
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "sources"
@@ -74,13 +103,15 @@ def _write_fmu(files: dict[str, str], identifier: str, target: Path) -> None:
             if name.startswith("sources/"):
                 (src / name.removeprefix("sources/")).write_text(text)
         library = Path(tmp) / f"{identifier}{fmpy.sharedLibraryExtension}"
-        run_compiler([src / name for name in SOURCE_FILES], library, [src])
+        run_compiler([src / name for name in sources], library, [src],
+                     libraries=("-lm", "-ldl"))
+        files = {**files, f"binaries/{fmpy.platform}/{library.name}": library.read_bytes()}
         with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as zf:
             for name in sorted(files):
-                zf.writestr(zipfile.ZipInfo(name, ZIP_DATE), files[name], zipfile.ZIP_DEFLATED)
-            info = zipfile.ZipInfo(f"binaries/{fmpy.platform}/{library.name}", ZIP_DATE)
-            info.external_attr = 0o755 << 16
-            zf.writestr(info, library.read_bytes(), zipfile.ZIP_DEFLATED)
+                info = zipfile.ZipInfo(name, ZIP_DATE)
+                if name.startswith("binaries/"):
+                    info.external_attr = 0o755 << 16
+                zf.writestr(info, files[name], zipfile.ZIP_DEFLATED)
 
 
 def build_fmu(system: System, path: str | Path) -> Path:
@@ -92,7 +123,8 @@ def build_fmu(system: System, path: str | Path) -> Path:
     if not cached.exists():
         with tempfile.TemporaryDirectory() as tmp:
             fresh = Path(tmp) / "model.fmu"
-            _write_fmu(_with_guid(files, key), model_identifier(system), fresh)
+            _write_fmu(_with_guid(files, key), _source_files(system), model_identifier(system),
+                       fresh)
             cache.store(key, ".fmu", fresh)
     path.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(cached, path)

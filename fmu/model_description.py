@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
+import numpy as np
+
 from fmu.layout import Layout
 from fmu.system import System
 
@@ -20,16 +22,19 @@ LOG_CATEGORIES = {
 
 
 def output_dependencies(system: System) -> list[list[int]]:
-    """For each output, the indices of the inputs it depends on structurally."""
+    """For each output, the indices of the inputs it depends on structurally (through an
+    embedded network's result too)."""
     ny, nu = len(system.outputs), len(system.inputs)
     if nu == 0:
         return [[] for _ in range(ny)]
-    jac = system.output.sparsity_jac(1, 0)
-    rows, cols = jac.get_triplet()
-    deps: list[list[int]] = [[] for _ in range(ny)]
-    for r, c in sorted(zip(rows, cols, strict=True)):
-        deps[r].append(c)
-    return deps
+    direct = np.array(system.output.sparsity_jac(1, 0), dtype=bool)
+    net = system.network
+    if net is not None and net.n_outputs > 0:
+        via_result = np.array(system.output.sparsity_jac(4, 0), dtype=bool)
+        of_input = np.array(net.input_function.sparsity_jac(1, 0), dtype=bool)
+        # each result of the graph may depend on each of its inputs
+        direct |= via_result.any(axis=1)[:, None] & of_input.any(axis=0)[None, :]
+    return [np.flatnonzero(row).tolist() for row in direct]
 
 
 def _fmt(value: float | int) -> str:

@@ -12,6 +12,8 @@ from typing import Literal
 
 import casadi as ca
 
+from fmu.network import Network
+
 
 @dataclass(frozen=True)
 class Variable:
@@ -42,7 +44,11 @@ class System:
         equal `sample_time`;
       - `output(x, u, p, w) -> y`: the outputs at the current communication point, where `w`
         holds `n_noise` independent standard normal samples drawn by the FMU's seeded random
-        number generator once per communication step (w is empty when n_noise == 0).
+        number generator once per communication step (w is empty when n_noise == 0);
+      - with a `network` (an embedded ONNX graph, see fmu.network), `output(x, u, p, w, r)`
+        takes a fifth argument: the network's result at this communication point, computed
+        every `network.period` steps from `network.input_function(x, u, p)` and extrapolated
+        linearly from its last two results in between.
     """
 
     name: str
@@ -59,3 +65,4 @@ class System:
     sample_time: float | None = None
     max_substep: float = 1e-3
     extra: dict[str, str] = field(default_factory=dict)
+    network: Network | None = None

@@ -4,8 +4,14 @@
  * One hand-written implementation of the whole FMI 2.0 co-simulation API, compiled together
  * with per-model generated code (the layout of the Reference-FMUs):
  *   - config.h:  sizes, value references, names, start values and flags of one model;
- *   - model.c/h: CasADi-generated functions <id>_initial_state(p), <id>_dynamics(x, u, p)
- *                and <id>_output(x, u, p, w), reached through the MODEL_FN() macro.
+ *   - model.c/h: CasADi-generated functions <id>_initial_state(p), <id>_dynamics(x, u, p),
+ *                <id>_output(x, u, p, w, r) and <id>_network_input(x, u, p), reached through
+ *                the MODEL_FN() macro;
+ *   - onnx_network.c/h, for models with an embedded network (HAS_NETWORK): an ONNX graph run
+ *     by onnxruntime every NET_PERIOD communication steps on network_input(x, u, p); its
+ *     result r enters output(); between calls r is extrapolated linearly from the last two
+ *     results. With NET_PRECOMPUTED the graph runs once at initialization over a table of the
+ *     inputs in resources/ (each step's inputs are checked against it), with equal results.
  *
  * Real value references are laid out in contiguous blocks (see config.h):
  *   [VR_P, +N_P) parameters, [VR_MS, +N_MS) max_substep (continuous systems only),
@@ -15,6 +21,7 @@
  * a copy of it and serialization is a header plus its bytes.
  */
 
+#define _GNU_SOURCE /* dladdr, for models with a network */
 #include <math.h>
 #include <stdarg.h>
 #include <stdint.h>
@@ -23,20 +30,27 @@
 
 #include "fmi2Functions.h"
 #include "config.h"
+#if HAS_NETWORK
+#include <dlfcn.h>
+#include <stdlib.h>
+#include "onnx_network.h"
+#endif
 
 /* C99 has no zero-length arrays: size buffers of empty blocks as one element. */
 #define DIM(n) ((n) > 0 ? (n) : 1)
 #define MAX2(a, b) ((a) > (b) ? (a) : (b))
-#define MAX3(a, b, c) MAX2(MAX2(a, b), c)
+#define MAX4(a, b, c, d) MAX2(MAX2(a, b), MAX2(c, d))
 
 /* CasADi work sizes, known at compile time from the generated header. */
-#define SZ_ARG MAX3(MODEL_FN(initial_state_SZ_ARG), MODEL_FN(dynamics_SZ_ARG), MODEL_FN(output_SZ_ARG))
-#define SZ_RES MAX3(MODEL_FN(initial_state_SZ_RES), MODEL_FN(dynamics_SZ_RES), MODEL_FN(output_SZ_RES))
-#define SZ_IW MAX3(MODEL_FN(initial_state_SZ_IW), MODEL_FN(dynamics_SZ_IW), MODEL_FN(output_SZ_IW))
-#define SZ_W MAX3(MODEL_FN(initial_state_SZ_W), MODEL_FN(dynamics_SZ_W), MODEL_FN(output_SZ_W))
+#define SZ(what) MAX4(MODEL_FN(initial_state_##what), MODEL_FN(dynamics_##what), \
+                      MODEL_FN(output_##what), MODEL_FN(network_input_##what))
+#define SZ_ARG SZ(SZ_ARG)
+#define SZ_RES SZ(SZ_RES)
+#define SZ_IW SZ(SZ_IW)
+#define SZ_W SZ(SZ_W)
 
-/* output(x, u, p, w) has four arguments, so eval() may always fill arg[0..3]. */
-typedef char assert_sz_arg[SZ_ARG >= 4 ? 1 : -1];
+/* output(x, u, p, w, r) has five arguments, so eval() may always fill arg[0..4]. */
+typedef char assert_sz_arg[SZ_ARG >= 5 ? 1 : -1];
 
 #define INSTANCE_MAGIC 0x464c5846u /* "FLXF" */
 #define STATE_MAGIC 0x464c5853u    /* "FLXS" */
@@ -148,6 +162,16 @@ typedef struct {
     fmi2Real x[DIM(N_X)];
     fmi2Real w[DIM(N_W)];
     Rng rng;
+#if HAS_NETWORK
+    long net_step;                /* communication points since initialization */
+    int net_pending;              /* the network ran at this call point; committed by DoStep */
+    fmi2Real net_u[DIM(N_U)];     /* the inputs it ran with */
+    fmi2Real net_new[N_R];        /* its result at this call point */
+    fmi2Real net_last[N_R];       /* results of the last two committed calls */
+    fmi2Real net_before[N_R];
+    float net_state[DIM(NET_STATE_SIZE)];     /* recurrent state after the last committed call */
+    float net_state_new[DIM(NET_STATE_SIZE)]; /* ... and after the call at this point */
+#endif
 } Data;
 
 typedef struct {
@@ -161,7 +185,7 @@ typedef struct {
     fmi2CallbackFunctions cb;
     char *name;
     int log_on[N_CATEGORIES];
-    int mem[3]; /* CasADi memory of initial_state, dynamics, output */
+    int mem[4]; /* CasADi memory of initial_state, dynamics, output, network_input */
     /* scratch: CasADi work arrays, RK4 stages, step result, outputs */
     const casadi_real *arg[DIM(SZ_ARG)];
     casadi_real *res[DIM(SZ_RES)];
@@ -170,6 +194,14 @@ typedef struct {
     fmi2Real k1[DIM(N_X)], k2[DIM(N_X)], k3[DIM(N_X)], k4[DIM(N_X)], xs[DIM(N_X)];
     fmi2Real xn[DIM(N_X)];
     fmi2Real y[DIM(N_Y)];
+    fmi2Real r[DIM(N_R)]; /* the network's result at the current point (output argument) */
+#if HAS_NETWORK
+    Network *net;
+    fmi2Real features[NET_N_IN];
+    double *table;       /* NET_PRECOMPUTED: rows of time and the N_U inputs */
+    long table_rows;
+    double *precomputed; /* NET_PRECOMPUTED: the result of every call point of the table */
+#endif
 } Instance;
 
 /* Serialized FMU state: this header, then the bytes of Data. */
@@ -231,27 +263,28 @@ static Instance *enter(fmi2Component comp, const char *fname, int allowed) {
 /* ---------------------------------------------------------------------------------------- */
 /* Model evaluation                                                                          */
 
-/* Evaluate one generated function with up to four dense inputs and one dense output. */
+/* Evaluate one generated function with up to five dense inputs and one dense output. */
 static int eval(Instance *c, CasadiFn f, int mem, const fmi2Real *a0, const fmi2Real *a1,
-                const fmi2Real *a2, const fmi2Real *a3, fmi2Real *r0) {
+                const fmi2Real *a2, const fmi2Real *a3, const fmi2Real *a4, fmi2Real *r0) {
     c->arg[0] = a0;
     c->arg[1] = a1;
     c->arg[2] = a2;
     c->arg[3] = a3;
+    c->arg[4] = a4;
     c->res[0] = r0;
     return f(c->arg, c->res, c->iw, c->w, mem);
 }
 
 static int eval_initial_state(Instance *c, fmi2Real *x) {
-    return eval(c, MODEL_FN(initial_state), c->mem[0], c->d.p, NULL, NULL, NULL, x);
+    return eval(c, MODEL_FN(initial_state), c->mem[0], c->d.p, NULL, NULL, NULL, NULL, x);
 }
 
 static int eval_dynamics(Instance *c, const fmi2Real *x, fmi2Real *out) {
-    return eval(c, MODEL_FN(dynamics), c->mem[1], x, c->d.u, c->d.p, NULL, out);
+    return eval(c, MODEL_FN(dynamics), c->mem[1], x, c->d.u, c->d.p, NULL, NULL, out);
 }
 
 static int eval_output(Instance *c) {
-    return eval(c, MODEL_FN(output), c->mem[2], c->d.x, c->d.u, c->d.p, c->d.w, c->y);
+    return eval(c, MODEL_FN(output), c->mem[2], c->d.x, c->d.u, c->d.p, c->d.w, c->r, c->y);
 }
 
 static void draw_noise(Instance *c) {
@@ -285,6 +318,246 @@ static int rk4_step(Instance *c, fmi2Real dt) {
     for (int i = 0; i < N_X; i++)
         x[i] = x[i] + dt / 6.0 * (c->k1[i] + 2.0 * c->k2[i] + 2.0 * c->k3[i] + c->k4[i]);
     return err;
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Embedded network                                                                          */
+
+#if HAS_NETWORK
+static const NetSpec NET_SPEC = {NET_INPUT, NET_OUTPUT, NET_N_IN, N_R, NET_N_STATES,
+                                 NET_STATE_INPUTS, NET_STATE_OUTPUTS, NET_STATE_RANK,
+                                 NET_STATE_DIMS, NET_STATE_OFFSET};
+
+static int eval_network_input(Instance *c, const fmi2Real *u, fmi2Real *features) {
+    return eval(c, MODEL_FN(network_input), c->mem[3], c->d.x, u, c->d.p, NULL, NULL, features);
+}
+
+/* The local path of file `name` in the resources folder given as a file URI. */
+static int resource_path(const char *uri, const char *name, char *path, size_t size) {
+    const char *s = uri;
+    size_t j = 0;
+    if (s == NULL || strncmp(s, "file:", 5) != 0) return -1;
+    s += 5;
+    if (strncmp(s, "///", 3) == 0) s += 2;
+    else if (strncmp(s, "//localhost/", 12) == 0) s += 11;
+    for (; *s && j + 1 < size; s++) { /* percent-decode */
+        unsigned int byte;
+        if (s[0] == '%' && s[1] && s[2] && sscanf(s + 1, "%2x", &byte) == 1) {
+            path[j++] = (char)byte;
+            s += 2;
+        } else {
+            path[j++] = *s;
+        }
+    }
+    if (j > 0 && path[j - 1] == '/') j--;
+    path[j] = '\0';
+    return snprintf(path + j, size - j, "/%s", name) < (int)(size - j) ? 0 : -1;
+}
+
+/* resources/NET_TABLE_FILE: a header "time,<inputs>" and one row per communication point. */
+static int load_table(Instance *c, const char *path, char *error, size_t size) {
+    FILE *f = fopen(path, "r");
+    char line[4096] = "", header[4096] = "time";
+    long capacity = 1024;
+    if (f == NULL) {
+        snprintf(error, size, "cannot open the precomputation table %s", path);
+        return -1;
+    }
+    for (int i = 0; i < N_U; i++) {
+        strncat(header, ",", sizeof header - strlen(header) - 1);
+        strncat(header, REAL_NAMES[VR_U + i], sizeof header - strlen(header) - 1);
+    }
+    if (fgets(line, sizeof line, f) != NULL) line[strcspn(line, "\r\n")] = '\0';
+    if (strcmp(line, header) != 0) {
+        snprintf(error, size, "%s must start with the header line '%s'", path, header);
+        fclose(f);
+        return -1;
+    }
+    c->table = (double *)malloc(sizeof(double) * (size_t)capacity * (1 + N_U));
+    c->table_rows = 0;
+    while (c->table != NULL && fgets(line, sizeof line, f) != NULL) {
+        char *s = line, *end;
+        if (c->table_rows == capacity) {
+            double *grown = (double *)realloc(c->table, sizeof(double) * (size_t)(2 * capacity) * (1 + N_U));
+            if (grown == NULL) break;
+            c->table = grown;
+            capacity *= 2;
+        }
+        double *row = c->table + c->table_rows * (1 + N_U);
+        for (int k = 0; k < 1 + N_U; k++) {
+            row[k] = strtod(s, &end);
+            if (end == s || !isfinite(row[k]) || (k < N_U && *end != ',')) {
+                snprintf(error, size, "%s, line %ld: expected %d finite numbers separated by commas",
+                         path, c->table_rows + 2, 1 + N_U);
+                fclose(f);
+                return -1;
+            }
+            s = end + 1;
+        }
+        c->table_rows++;
+    }
+    fclose(f);
+    if (c->table == NULL || c->table_rows < 1) {
+        snprintf(error, size, c->table ? "%s has no rows" : "out of memory reading %s", path);
+        return -1;
+    }
+    return 0;
+}
+
+/* Open the network (and the table) from the FMU's binaries and resources; NULL error text on
+ * success. */
+static int net_load(Instance *c, fmi2String resources, char *error, size_t size) {
+    char library[4096], model[4096];
+    Dl_info self;
+    if (!dladdr((void *)&net_load, &self) || self.dli_fname == NULL) {
+        snprintf(error, size, "cannot locate the FMU's own shared library");
+        return -1;
+    }
+    const char *slash = strrchr(self.dli_fname, '/');
+    const int dir_len = slash ? (int)(slash - self.dli_fname) : 1;
+    snprintf(library, sizeof library, "%.*s/%s", dir_len, slash ? self.dli_fname : ".",
+             NET_RUNTIME_FILE);
+    if (resource_path(resources, NET_MODEL_FILE, model, sizeof model) != 0) {
+        snprintf(error, size, "fmuResourceLocation '%s' is not a file URI",
+                 resources ? resources : "(null)");
+        return -1;
+    }
+    c->net = net_open(library, model, &NET_SPEC, error, size);
+    if (c->net == NULL) return -1;
+    if (NET_PRECOMPUTED) {
+        char table[4096];
+        resource_path(resources, NET_TABLE_FILE, table, sizeof table);
+        return load_table(c, table, error, size);
+    }
+    return 0;
+}
+
+static void net_unload(Instance *c) {
+    net_close(c->net);
+    free(c->table);
+    free(c->precomputed);
+    c->net = NULL;
+    c->table = c->precomputed = NULL;
+}
+
+static fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t) {
+    int bad = first_nonfinite(r, N_R);
+    if (bad >= 0)
+        return fail(c, "The network returned %g (result %d of %d) at t = %.17g: not finite.",
+                    r[bad], bad + 1, N_R, t);
+    return fmi2OK;
+}
+
+/* Run the network once over the table's call points (every NET_PERIOD-th row), from the zero
+ * state: the precomputed results. */
+static fmi2Status net_precompute(Instance *c) {
+    const long calls = (c->table_rows + NET_PERIOD - 1) / NET_PERIOD;
+    char error[1024];
+    if (fabs(c->table[0] - c->d.time) > TIME_TOL * fmax(1.0, fabs(c->d.time)) ||
+        (c->table_rows > 1 && fabs(c->table[1 + N_U] - c->table[0] - SAMPLE_TIME) > TIME_TOL))
+        return fail(c, "The precomputation table must start at the start time %g and advance by "
+                       "the sample time %g per row.", c->d.time, SAMPLE_TIME);
+    double *features = (double *)malloc(sizeof(double) * (size_t)(calls * NET_N_IN));
+    float *state = (float *)calloc(2 * DIM(NET_STATE_SIZE), sizeof(float));
+    free(c->precomputed);
+    c->precomputed = (double *)malloc(sizeof(double) * (size_t)(calls * N_R));
+    fmi2Status status = fmi2OK;
+    if (features == NULL || state == NULL || c->precomputed == NULL) {
+        status = fail(c, "Out of memory precomputing %ld network calls.", calls);
+    } else {
+        for (long k = 0; k < calls && status == fmi2OK; k++)
+            if (eval_network_input(c, c->table + k * NET_PERIOD * (1 + N_U) + 1,
+                                   features + k * NET_N_IN) != 0)
+                status = fail(c, "Evaluating the network's inputs failed.");
+        if (status == fmi2OK && net_run(c->net, features, calls, state, c->precomputed,
+                                        state + DIM(NET_STATE_SIZE), error, sizeof error) != 0)
+            status = fail(c, "%s", error);
+        for (long k = 0; k < calls && status == fmi2OK; k++)
+            status = check_finite_result(c, c->precomputed + k * N_R,
+                                         c->table[k * NET_PERIOD * (1 + N_U)]);
+    }
+    free(features);
+    free(state);
+    return status;
+}
+
+/* Precomputed: the inputs a step starts from must be the table's (outputs may be read with
+ * the inputs of the previous point, as a Jacobi master does). */
+static fmi2Status check_table_inputs(Instance *c) {
+    if (c->d.net_step >= c->table_rows)
+        return fail(c, "The precomputation table ends at t = %.17g; the run went past it.",
+                    c->table[(c->table_rows - 1) * (1 + N_U)]);
+    const double *row = c->table + c->d.net_step * (1 + N_U) + 1;
+    for (int i = 0; i < N_U; i++)
+        if (fabs(c->d.u[i] - row[i]) > 1e-9 * (1.0 + fabs(row[i])))
+            return fail(c, "Input '%s' = %.17g at t = %.17g differs from the precomputation "
+                           "table (%.17g): this FMU was built for another reference.",
+                        REAL_NAMES[VR_U + i], c->d.u[i], c->d.time, row[i]);
+    return fmi2OK;
+}
+
+/* The network's result for the call point at the current time, into net_new. */
+static fmi2Status net_call(Instance *c) {
+    const long call = c->d.net_step / NET_PERIOD;
+    char error[1024];
+    if (NET_PRECOMPUTED && c->d.mode != MODE_INIT) {
+        memcpy(c->d.net_new, c->precomputed + call * N_R, sizeof c->d.net_new);
+    } else {
+        if (eval_network_input(c, c->d.u, c->features) != 0)
+            return fail(c, "Evaluating the network's inputs failed.");
+        if (net_run(c->net, c->features, 1, c->d.net_state, c->d.net_new, c->d.net_state_new,
+                    error, sizeof error) != 0)
+            return fail(c, "%s", error);
+    }
+    return check_finite_result(c, c->d.net_new, c->d.time);
+}
+
+/* c->r at the current point: at a call point the network runs on the current inputs (again
+ * only if they changed since), in between its last two results are extrapolated. */
+static fmi2Status net_prepare(Instance *c) {
+    const long phase = c->d.net_step % NET_PERIOD;
+    if (phase == 0) {
+        if (!c->d.net_pending || memcmp(c->d.net_u, c->d.u, sizeof c->d.u) != 0) {
+            if (net_call(c) != fmi2OK) return fmi2Error;
+            memcpy(c->d.net_u, c->d.u, sizeof c->d.u);
+            c->d.net_pending = 1;
+        }
+        memcpy(c->r, c->d.net_new, sizeof c->r);
+    } else {
+        const double s = (double)phase / NET_PERIOD;
+        for (int i = 0; i < N_R; i++)
+            c->r[i] = c->d.net_last[i] + s * (c->d.net_last[i] - c->d.net_before[i]);
+    }
+    return fmi2OK;
+}
+
+/* A successful step: a call point's result and state become the committed ones. */
+static void net_commit(Instance *c) {
+    if (c->d.net_step % NET_PERIOD == 0) {
+        memcpy(c->d.net_before, c->d.net_step == 0 ? c->d.net_new : c->d.net_last,
+               sizeof c->d.net_before);
+        memcpy(c->d.net_last, c->d.net_new, sizeof c->d.net_last);
+        memcpy(c->d.net_state, c->d.net_state_new, sizeof c->d.net_state);
+        c->d.net_pending = 0;
+    }
+    c->d.net_step++;
+}
+
+/* Back to the first call point with the zero state (the other fields are zero already). */
+static void net_restart(Instance *c) {
+    c->d.net_step = 0;
+    c->d.net_pending = 0;
+    memset(c->d.net_state, 0, sizeof c->d.net_state);
+}
+#endif
+
+/* The outputs at the current point into c->y (the network's result first, if there is one). */
+static fmi2Status compute_outputs(Instance *c) {
+#if HAS_NETWORK
+    if (net_prepare(c) != fmi2OK) return fmi2Error;
+#endif
+    if (eval_output(c) != 0) return fail(c, "Evaluating the outputs failed.");
+    return fmi2OK;
 }
 
 /* ---------------------------------------------------------------------------------------- */
@@ -385,7 +658,6 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               fmi2String fmuResourceLocation,
                               const fmi2CallbackFunctions *functions, fmi2Boolean visible,
                               fmi2Boolean loggingOn) {
-    (void)fmuResourceLocation; /* the model needs no resources */
     (void)visible;
     if (functions == NULL) return NULL;
     if (functions->allocateMemory == NULL || functions->freeMemory == NULL) {
@@ -424,10 +696,22 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     MODEL_FN(initial_state_incref)();
     MODEL_FN(dynamics_incref)();
     MODEL_FN(output_incref)();
+    MODEL_FN(network_input_incref)();
     c->mem[0] = MODEL_FN(initial_state_checkout)();
     c->mem[1] = MODEL_FN(dynamics_checkout)();
     c->mem[2] = MODEL_FN(output_checkout)();
+    c->mem[3] = MODEL_FN(network_input_checkout)();
     set_defaults(c);
+#if HAS_NETWORK
+    char error[1024];
+    if (net_load(c, fmuResourceLocation, error, sizeof error) != 0) {
+        log_early(functions, instanceName, "fmi2Instantiate(): %s.", error);
+        fmi2FreeInstance(c);
+        return NULL;
+    }
+#else
+    (void)fmuResourceLocation; /* the model needs no resources */
+#endif
     log_msg(c, fmi2OK, LOG_ALL, "fmi2Instantiate()");
     return c;
 }
@@ -435,12 +719,17 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 void fmi2FreeInstance(fmi2Component comp) {
     Instance *c = enter(comp, "fmi2FreeInstance", ANY_MODE);
     if (!c) return;
+#if HAS_NETWORK
+    net_unload(c);
+#endif
     MODEL_FN(initial_state_release)(c->mem[0]);
     MODEL_FN(dynamics_release)(c->mem[1]);
     MODEL_FN(output_release)(c->mem[2]);
+    MODEL_FN(network_input_release)(c->mem[3]);
     MODEL_FN(initial_state_decref)();
     MODEL_FN(dynamics_decref)();
     MODEL_FN(output_decref)();
+    MODEL_FN(network_input_decref)();
     c->magic = 0; /* make use after free detectable */
     c->cb.freeMemory(c->name);
     c->cb.freeMemory(c);
@@ -481,6 +770,10 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     if (compute_initial(c) != 0) return fail(c, "Evaluating the initial state failed.");
     int bad = first_nonfinite(c->d.x, N_X);
     if (bad >= 0) return fail(c, "Initial state '%s' is not finite.", REAL_NAMES[VR_X + bad]);
+#if HAS_NETWORK
+    net_restart(c);
+    if (NET_PRECOMPUTED && net_precompute(c) != fmi2OK) return fmi2Error;
+#endif
     c->d.mode = MODE_STEPPING;
     return fmi2OK;
 }
@@ -515,7 +808,7 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
     for (size_t i = 0; i < nvr; i++) {
         const fmi2ValueReference r = vr[i];
         if (is_output(r) && !outputs_ready) {
-            if (eval_output(c) != 0) return fail(c, "Evaluating the outputs failed.");
+            if (compute_outputs(c) != fmi2OK) return fmi2Error;
             outputs_ready = 1;
         }
         if (is_parameter(r)) value[i] = c->d.p[r - VR_P];
@@ -771,6 +1064,12 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h,
         if (fabs(h - SAMPLE_TIME) > TIME_TOL * SAMPLE_TIME)
             return fail(c, "fmi2DoStep(): communicationStepSize = %.17g differs from the sample time "
                            "%.17g of this discrete system.", h, SAMPLE_TIME);
+#if HAS_NETWORK
+        if ((NET_PRECOMPUTED && check_table_inputs(c) != fmi2OK) || net_prepare(c) != fmi2OK) {
+            c->d.mode = MODE_ERROR;
+            return fmi2Error;
+        }
+#endif
         err = eval_dynamics(c, c->d.x, c->xn);
     } else {
         const double ratio = h / c->d.max_substep - 1e-12;
@@ -793,6 +1092,9 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h,
                     REAL_NAMES[VR_X + bad], c->xn[bad], t);
     }
     memcpy(c->d.x, c->xn, sizeof c->xn);
+#if HAS_NETWORK
+    net_commit(c);
+#endif
     c->d.time = t + h;
     draw_noise(c);
     return fmi2OK;

@@ -1,0 +1,345 @@
+/*
+ * onnx_network.c -- see onnx_network.h.
+ *
+ * onnxruntime's C API is a table of function pointers (struct OrtApi) that only ever grows at
+ * its end, returned by OrtGetApiBase()->GetApi(version). The slots used here are declared by
+ * their index in onnxruntime_c_api.h; they all exist since API version 1, and the version
+ * asked for below is the oldest onnxruntime flexff supports.
+ */
+
+#define _GNU_SOURCE /* dladdr */
+#include <dlfcn.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "onnx_network.h"
+
+#define ORT_API_VERSION_USED 17 /* onnxruntime 1.17 */
+
+typedef struct OrtEnv OrtEnv;
+typedef struct OrtStatus OrtStatus;
+typedef struct OrtSession OrtSession;
+typedef struct OrtSessionOptions OrtSessionOptions;
+typedef struct OrtValue OrtValue;
+typedef struct OrtMemoryInfo OrtMemoryInfo;
+typedef struct OrtTypeInfo OrtTypeInfo;
+typedef struct OrtTensorTypeAndShapeInfo OrtTensorTypeAndShapeInfo;
+typedef struct OrtAllocator OrtAllocator;
+typedef struct OrtRunOptions OrtRunOptions;
+
+enum { ORT_LOGGING_LEVEL_ERROR = 3 };
+enum { ELEMENT_FLOAT = 1, ELEMENT_DOUBLE = 11 };
+enum { ORT_ARENA_ALLOCATOR = 1, ORT_MEM_TYPE_DEFAULT = 0 };
+
+typedef struct {
+    const void *(*GetApi)(uint32_t version);
+    const char *(*GetVersionString)(void);
+} OrtApiBase;
+
+/* Slot indices in struct OrtApi (onnxruntime_c_api.h). */
+enum {
+    SLOT_GetErrorMessage = 2,
+    SLOT_CreateEnv = 3,
+    SLOT_CreateSession = 7,
+    SLOT_Run = 9,
+    SLOT_CreateSessionOptions = 10,
+    SLOT_SetIntraOpNumThreads = 24,
+    SLOT_SetInterOpNumThreads = 25,
+    SLOT_SessionGetInputCount = 30,
+    SLOT_SessionGetOutputCount = 31,
+    SLOT_SessionGetInputTypeInfo = 33,
+    SLOT_SessionGetOutputTypeInfo = 34,
+    SLOT_SessionGetInputName = 36,
+    SLOT_SessionGetOutputName = 37,
+    SLOT_CreateTensorWithDataAsOrtValue = 49,
+    SLOT_CastTypeInfoToTensorInfo = 55,
+    SLOT_GetTensorElementType = 60,
+    SLOT_GetDimensionsCount = 61,
+    SLOT_GetDimensions = 62,
+    SLOT_CreateCpuMemoryInfo = 69,
+    SLOT_AllocatorFree = 76,
+    SLOT_GetAllocatorWithDefaultOptions = 78,
+    SLOT_ReleaseEnv = 92,
+    SLOT_ReleaseStatus = 93,
+    SLOT_ReleaseMemoryInfo = 94,
+    SLOT_ReleaseSession = 95,
+    SLOT_ReleaseValue = 96,
+    SLOT_ReleaseTypeInfo = 98,
+    SLOT_ReleaseSessionOptions = 100
+};
+
+typedef const char *(*GetErrorMessageFn)(const OrtStatus *);
+typedef OrtStatus *(*CreateEnvFn)(int, const char *, OrtEnv **);
+typedef OrtStatus *(*CreateSessionFn)(const OrtEnv *, const char *, const OrtSessionOptions *,
+                                      OrtSession **);
+typedef OrtStatus *(*RunFn)(OrtSession *, const OrtRunOptions *, const char *const *,
+                            const OrtValue *const *, size_t, const char *const *, size_t,
+                            OrtValue **);
+typedef OrtStatus *(*CreateSessionOptionsFn)(OrtSessionOptions **);
+typedef OrtStatus *(*SetIntraOpNumThreadsFn)(OrtSessionOptions *, int);
+typedef OrtStatus *(*SetInterOpNumThreadsFn)(OrtSessionOptions *, int);
+typedef OrtStatus *(*SessionGetInputCountFn)(const OrtSession *, size_t *);
+typedef OrtStatus *(*SessionGetOutputCountFn)(const OrtSession *, size_t *);
+typedef OrtStatus *(*SessionGetInputTypeInfoFn)(const OrtSession *, size_t, OrtTypeInfo **);
+typedef OrtStatus *(*SessionGetOutputTypeInfoFn)(const OrtSession *, size_t, OrtTypeInfo **);
+typedef OrtStatus *(*SessionGetInputNameFn)(const OrtSession *, size_t, OrtAllocator *, char **);
+typedef OrtStatus *(*SessionGetOutputNameFn)(const OrtSession *, size_t, OrtAllocator *, char **);
+typedef OrtStatus *(*CreateTensorWithDataAsOrtValueFn)(const OrtMemoryInfo *, void *, size_t,
+                                                       const int64_t *, size_t, int, OrtValue **);
+typedef OrtStatus *(*CastTypeInfoToTensorInfoFn)(const OrtTypeInfo *,
+                                                 const OrtTensorTypeAndShapeInfo **);
+typedef OrtStatus *(*GetTensorElementTypeFn)(const OrtTensorTypeAndShapeInfo *, int *);
+typedef OrtStatus *(*GetDimensionsCountFn)(const OrtTensorTypeAndShapeInfo *, size_t *);
+typedef OrtStatus *(*GetDimensionsFn)(const OrtTensorTypeAndShapeInfo *, int64_t *, size_t);
+typedef OrtStatus *(*CreateCpuMemoryInfoFn)(int, int, OrtMemoryInfo **);
+typedef OrtStatus *(*AllocatorFreeFn)(OrtAllocator *, void *);
+typedef OrtStatus *(*GetAllocatorWithDefaultOptionsFn)(OrtAllocator **);
+typedef void (*ReleaseEnvFn)(OrtEnv *);
+typedef void (*ReleaseStatusFn)(OrtStatus *);
+typedef void (*ReleaseMemoryInfoFn)(OrtMemoryInfo *);
+typedef void (*ReleaseSessionFn)(OrtSession *);
+typedef void (*ReleaseValueFn)(OrtValue *);
+typedef void (*ReleaseTypeInfoFn)(OrtTypeInfo *);
+typedef void (*ReleaseSessionOptionsFn)(OrtSessionOptions *);
+
+typedef void (*AnyFn)(void);
+
+/* The function in slot SLOT_<name> of the table, with its type. */
+#define ORT(net, name) ((name##Fn)((net)->api[SLOT_##name]))
+
+#define MAX_TENSORS 16 /* inputs or outputs of one graph */
+
+struct Network {
+    void *library;
+    const AnyFn *api;
+    const NetSpec *spec;
+    OrtEnv *env;
+    OrtSession *session;
+    OrtMemoryInfo *memory;
+};
+
+static void set_error(char *error, size_t size, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(error, size, fmt, ap);
+    va_end(ap);
+}
+
+/* 0 if `status` is NULL (success); else the message into `error`, the status released, -1. */
+static int check(Network *net, OrtStatus *status, const char *what, char *error, size_t size) {
+    if (status == NULL) return 0;
+    set_error(error, size, "onnxruntime: %s: %s", what, ORT(net, GetErrorMessage)(status));
+    ORT(net, ReleaseStatus)(status);
+    return -1;
+}
+
+/* Check one tensor of the graph: element type and shape (a wanted dimension < 0 matches any
+ * size; a dimension the graph leaves dynamic matches any wanted size, onnxruntime checks it
+ * when it writes the tensor). */
+static int check_tensor(Network *net, OrtTypeInfo *info, const char *name, int want_type,
+                        int want_rank, const int64_t *want_dims, char *error, size_t size) {
+    const OrtTensorTypeAndShapeInfo *tensor = NULL;
+    int type = 0;
+    size_t rank = 0;
+    int64_t dims[NET_MAX_RANK];
+    if (check(net, ORT(net, CastTypeInfoToTensorInfo)(info, &tensor), name, error, size) ||
+        tensor == NULL) {
+        if (tensor == NULL) set_error(error, size, "graph tensor '%s' is not a tensor", name);
+        return -1;
+    }
+    if (check(net, ORT(net, GetTensorElementType)(tensor, &type), name, error, size) ||
+        check(net, ORT(net, GetDimensionsCount)(tensor, &rank), name, error, size))
+        return -1;
+    if (type != want_type) {
+        set_error(error, size, "graph tensor '%s' holds element type %d, expected %s", name, type,
+                  want_type == ELEMENT_DOUBLE ? "float64" : "float32");
+        return -1;
+    }
+    if ((int)rank != want_rank) {
+        set_error(error, size, "graph tensor '%s' has rank %zu, expected %d", name, rank, want_rank);
+        return -1;
+    }
+    if (check(net, ORT(net, GetDimensions)(tensor, dims, rank), name, error, size)) return -1;
+    for (int i = 0; i < want_rank; i++) {
+        if (want_dims[i] >= 0 && dims[i] >= 0 && dims[i] != want_dims[i]) {
+            set_error(error, size, "graph tensor '%s' has size %lld in dimension %d, expected %lld",
+                      name, (long long)dims[i], i, (long long)want_dims[i]);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+/* The tensor that `name` denotes: its type, rank and dims as the spec wants them. */
+static int wanted(const NetSpec *s, const char *name, int is_input, int *type, int *rank,
+                  int64_t *dims) {
+    const char *sequence = is_input ? s->input : s->output;
+    if (strcmp(name, sequence) == 0) {
+        *type = ELEMENT_DOUBLE;
+        *rank = 2;
+        dims[0] = -1;
+        dims[1] = is_input ? s->n_in : s->n_out;
+        return 1;
+    }
+    for (int k = 0; k < s->n_states; k++) {
+        if (strcmp(name, is_input ? s->state_inputs[k] : s->state_outputs[k]) == 0) {
+            *type = ELEMENT_FLOAT;
+            *rank = s->state_rank[k];
+            memcpy(dims, s->state_dims[k], sizeof(int64_t) * (size_t)s->state_rank[k]);
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Every input (or output) of the graph is one the spec names, of the right type and shape,
+ * and there are exactly as many as the spec names. */
+static int check_signature(Network *net, int is_input, char *error, size_t size) {
+    const NetSpec *s = net->spec;
+    size_t count = 0;
+    OrtAllocator *allocator = NULL;
+    const char *kind = is_input ? "input" : "output";
+    OrtStatus *status = is_input ? ORT(net, SessionGetInputCount)(net->session, &count)
+                                 : ORT(net, SessionGetOutputCount)(net->session, &count);
+    if (check(net, status, "counting the graph's tensors", error, size) ||
+        check(net, ORT(net, GetAllocatorWithDefaultOptions)(&allocator), "allocator", error, size))
+        return -1;
+    if (count != (size_t)(1 + s->n_states)) {
+        set_error(error, size, "the graph has %zu %ss, the FMU was built for %d (%s and %d "
+                  "state tensors)", count, kind, 1 + s->n_states, is_input ? s->input : s->output,
+                  s->n_states);
+        return -1;
+    }
+    for (size_t i = 0; i < count; i++) {
+        char *name = NULL;
+        OrtTypeInfo *info = NULL;
+        int type = 0, rank = 0, result = -1;
+        int64_t dims[NET_MAX_RANK];
+        status = is_input ? ORT(net, SessionGetInputName)(net->session, i, allocator, &name)
+                          : ORT(net, SessionGetOutputName)(net->session, i, allocator, &name);
+        if (check(net, status, "reading a tensor name", error, size)) return -1;
+        if (!wanted(s, name, is_input, &type, &rank, dims)) {
+            set_error(error, size, "the graph has an %s '%s' the FMU was not built for", kind, name);
+        } else {
+            status = is_input ? ORT(net, SessionGetInputTypeInfo)(net->session, i, &info)
+                              : ORT(net, SessionGetOutputTypeInfo)(net->session, i, &info);
+            if (!check(net, status, name, error, size)) {
+                result = check_tensor(net, info, name, type, rank, dims, error, size);
+                ORT(net, ReleaseTypeInfo)(info);
+            }
+        }
+        ORT(net, AllocatorFree)(allocator, name);
+        if (result != 0) return -1;
+    }
+    return 0;
+}
+
+Network *net_open(const char *library_path, const char *model_path, const NetSpec *spec,
+                  char *error, size_t size) {
+    Network *net = (Network *)calloc(1, sizeof *net);
+    OrtSessionOptions *options = NULL;
+    if (net == NULL) {
+        set_error(error, size, "out of memory");
+        return NULL;
+    }
+    net->spec = spec;
+    net->library = dlopen(library_path, RTLD_NOW | RTLD_LOCAL);
+    if (net->library == NULL) {
+        set_error(error, size, "cannot load the onnxruntime library %s: %s", library_path, dlerror());
+        free(net);
+        return NULL;
+    }
+    const OrtApiBase *(*get_base)(void) = NULL;
+    *(void **)&get_base = dlsym(net->library, "OrtGetApiBase");
+    const OrtApiBase *base = get_base ? get_base() : NULL;
+    net->api = base ? (const AnyFn *)base->GetApi(ORT_API_VERSION_USED) : NULL;
+    if (net->api == NULL) {
+        set_error(error, size, "%s (onnxruntime %s) does not provide the C API version %d "
+                  "(onnxruntime >= 1.17 is needed)", library_path,
+                  base ? base->GetVersionString() : "?", ORT_API_VERSION_USED);
+        net_close(net);
+        return NULL;
+    }
+    if (check(net, ORT(net, CreateEnv)(ORT_LOGGING_LEVEL_ERROR, "flexff", &net->env),
+              "creating the environment", error, size) ||
+        check(net, ORT(net, CreateSessionOptions)(&options), "session options", error, size) ||
+        check(net, ORT(net, SetIntraOpNumThreads)(options, 1), "threads", error, size) ||
+        check(net, ORT(net, SetInterOpNumThreads)(options, 1), "threads", error, size) ||
+        check(net, ORT(net, CreateSession)(net->env, model_path, options, &net->session),
+              model_path, error, size) ||
+        check(net, ORT(net, CreateCpuMemoryInfo)(ORT_ARENA_ALLOCATOR, ORT_MEM_TYPE_DEFAULT,
+                                                  &net->memory), "memory info", error, size) ||
+        check_signature(net, 1, error, size) || check_signature(net, 0, error, size)) {
+        if (options) ORT(net, ReleaseSessionOptions)(options);
+        net_close(net);
+        return NULL;
+    }
+    ORT(net, ReleaseSessionOptions)(options);
+    return net;
+}
+
+/* An OrtValue over caller memory: `data` of `count` elements of the element type. */
+static int wrap(Network *net, void *data, size_t count, int type, const int64_t *dims, int rank,
+                OrtValue **value, char *error, size_t size) {
+    size_t bytes = count * (type == ELEMENT_DOUBLE ? sizeof(double) : sizeof(float));
+    return check(net, ORT(net, CreateTensorWithDataAsOrtValue)(net->memory, data, bytes, dims,
+                                                               (size_t)rank, type, value),
+                 "wrapping a tensor", error, size);
+}
+
+static int64_t element_count(const int64_t *dims, int rank) {
+    int64_t n = 1;
+    for (int i = 0; i < rank; i++) n *= dims[i];
+    return n;
+}
+
+int net_run(Network *net, const double *inputs, int64_t steps, float *state_in,
+            double *outputs, float *state_out, char *error, size_t size) {
+    const NetSpec *s = net->spec;
+    const int n = 1 + s->n_states;
+    const char *in_names[MAX_TENSORS], *out_names[MAX_TENSORS];
+    OrtValue *in_values[MAX_TENSORS] = {NULL}, *out_values[MAX_TENSORS] = {NULL};
+    const int64_t in_dims[2] = {steps, s->n_in}, out_dims[2] = {steps, s->n_out};
+    int err = n > MAX_TENSORS;
+    if (err) set_error(error, size, "more than %d tensors", MAX_TENSORS);
+    in_names[0] = s->input;
+    out_names[0] = s->output;
+    if (!err)
+        err = wrap(net, (void *)inputs, (size_t)(steps * s->n_in), ELEMENT_DOUBLE, in_dims, 2,
+                   &in_values[0], error, size) ||
+              wrap(net, outputs, (size_t)(steps * s->n_out), ELEMENT_DOUBLE, out_dims, 2,
+                   &out_values[0], error, size);
+    for (int k = 0; k < s->n_states && !err; k++) {
+        const size_t count = (size_t)element_count(s->state_dims[k], s->state_rank[k]);
+        in_names[1 + k] = s->state_inputs[k];
+        out_names[1 + k] = s->state_outputs[k];
+        err = wrap(net, state_in + s->state_offset[k], count, ELEMENT_FLOAT, s->state_dims[k],
+                   s->state_rank[k], &in_values[1 + k], error, size) ||
+              wrap(net, state_out + s->state_offset[k], count, ELEMENT_FLOAT, s->state_dims[k],
+                   s->state_rank[k], &out_values[1 + k], error, size);
+    }
+    if (!err)
+        err = check(net, ORT(net, Run)(net->session, NULL, in_names,
+                                       (const OrtValue *const *)in_values, (size_t)n, out_names,
+                                       (size_t)n, out_values),
+                    "running the graph", error, size);
+    for (int k = 0; k < n; k++) {
+        if (in_values[k]) ORT(net, ReleaseValue)(in_values[k]);
+        if (out_values[k]) ORT(net, ReleaseValue)(out_values[k]);
+    }
+    return err ? -1 : 0;
+}
+
+void net_close(Network *net) {
+    if (net == NULL) return;
+    if (net->api != NULL) {
+        if (net->memory) ORT(net, ReleaseMemoryInfo)(net->memory);
+        if (net->session) ORT(net, ReleaseSession)(net->session);
+        if (net->env) ORT(net, ReleaseEnv)(net->env);
+    }
+    /* The library stays loaded: onnxruntime keeps process-wide state (threads, the
+     * environment's singletons) that does not survive being unloaded and loaded again. */
+    free(net);
+}
