@@ -29,7 +29,8 @@ Tables and keys (SI units; every table but [reference] may be left out):
                  x_start, y_start default to the reference's first point
   [controller]   crossover_hz, notch (true / false / Hz), encoders (2 or 3); defaults follow
                  the plant variant (controllers.feedback.DEFAULTS)
-  [feedforward]  kind = "none" | "model" (rigid-body) | "onnx" (with model = "file.onnx")
+  [feedforward]  kind = "none" | "model" (rigid-body) | "onnx" (with model = "file.onnx", an
+                 exported learned model, and mode = "step" (default) | "precomputed")
   [record]       signals = [names] (default: all), csv (bool, default true)
 
 Any problem (unknown table or key, wrong type, missing file, a reference outside the workspace,
@@ -49,6 +50,7 @@ from typing import Any
 from controllers.allocation import ENCODER_CHOICES
 from controllers.feedback import OUTPUTS as CONTROLLER_OUTPUTS
 from controllers.feedforward import FORCE_OUTPUTS
+from controllers.learned_feedforward import model_metadata
 from cosim import references
 from cosim.references import Reference
 from plant.kinematics import check_workspace
@@ -61,6 +63,7 @@ SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration")
                 "circle": ("kind", "centre", "turns", "duration"),
                 "spline": ("kind", "points", "duration")}
 FEEDFORWARD_KINDS = ("none", "model", "onnx")
+FEEDFORWARD_MODES = ("step", "precomputed")
 STEP_TOLERANCE = 1e-9  # relative: stop / step must be this close to a whole number
 PLANT_EXTRA = ("max_substep",)  # FMU parameters beyond the System's own
 
@@ -163,6 +166,7 @@ class ControllerConfig:
 class FeedforwardConfig:
     kind: str = "none"
     model: Path | None = None
+    mode: str = "step"  # onnx: run step by step, or precomputed over the whole reference
 
 
 @dataclass(frozen=True)
@@ -363,11 +367,16 @@ class _Parser:
         if kind != "onnx":
             self.keys(t, "feedforward", ("kind",))
             return FeedforwardConfig(kind)
-        self.keys(t, "feedforward", ("kind", "model"))
+        self.keys(t, "feedforward", ("kind", "model", "mode"))
         model = self.path(t, "feedforward", "model")
         if model.suffix.lower() != ".onnx":
             raise self.error("feedforward.model", f"{model} is not an .onnx file")
-        return FeedforwardConfig(kind, model)
+        try:
+            model_metadata(model)
+        except ValueError as exc:
+            raise self.error("feedforward.model", str(exc)) from None
+        mode = self.choice(t, "feedforward", "mode", FEEDFORWARD_MODES, "step")
+        return FeedforwardConfig(kind, model, mode)
 
     def record(self, t: Mapping[str, Any]) -> RecordConfig:
         self.keys(t, "record", ("signals", "csv"))

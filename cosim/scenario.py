@@ -1,6 +1,7 @@
 """From a checked RunConfig to what the master runs: the FMUs in order and the source signals.
 
-The order is feedforward (if any) -> controller -> plant; the reference signals are the
+The order is feedforward (if any: rigid-body, or a learned ONNX model step by step or
+precomputed over the run's reference) -> controller -> plant; the reference signals are the
 external sources. Without a feedforward FMU, Fx_ff and Fy_ff are constant zero sources, so the
 controller's inputs stay connected by name either way. FMUs come from fmu.build.build_fmu,
 which keeps a cache by content hash: a run rebuilds only what changed.
@@ -14,6 +15,7 @@ import numpy as np
 
 from controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
 from controllers.feedforward import FORCE_OUTPUTS, rigid_body_feedforward_system
+from controllers.learned_feedforward import learned_feedforward_system
 from cosim.config import RunConfig
 from cosim.master import SlaveSpec
 from cosim.references import Reference
@@ -38,12 +40,11 @@ def build_slaves(config: RunConfig, folder: str | Path) -> list[SlaveSpec]:
     folder = Path(folder)
     slaves = []
     ff = config.feedforward
-    if ff.kind == "onnx":
-        raise NotImplementedError(
-            f"feedforward.kind = 'onnx' (model {ff.model}) is not available yet: the ONNX "
-            f"feedforward FMU comes with the learning workflow")
-    if ff.kind == "model":
-        system = rigid_body_feedforward_system(config.step)
+    if ff.kind != "none":
+        system = (rigid_body_feedforward_system(config.step) if ff.kind == "model" else
+                  learned_feedforward_system(ff.model, config.step, reference_samples(
+                      config.reference.build(config.step), config.steps)
+                      if ff.mode == "precomputed" else None))
         slaves.append(SlaveSpec("feedforward", build_fmu(system, folder / "feedforward.fmu")))
     controller = build_fmu(controller_for(config), folder / "controller.fmu")
     slaves.append(SlaveSpec("controller", controller))

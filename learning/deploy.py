@@ -1,7 +1,9 @@
 """A trained run as a model in SI units: what the exported ONNX graph computes.
 
 Scaling and unscaling live inside the module, so it takes features in SI units and returns
-forces in newtons; for the pgnn it adds the network's residual to the rigid-body force. With
+forces in newtons; for the pgnn it adds the network's residual to the rigid-body force (or,
+with `prior=False`, returns the residual alone: the feedforward FMU adds the rigid-body force
+from generated C). With
 `inputs="reference"` it also computes the features from the six reference signals
 x_ref ... ay_ref in the graph (the nominal kinematics replayed in torch), so a runner only
 needs the reference.
@@ -13,9 +15,9 @@ import numpy as np
 import torch
 from torch import nn
 
+from controllers.features import feature_units, motion_function
 from learning.casadi_torch import TorchFunction
 from learning.dataset import REFERENCE_SIGNALS
-from learning.features import feature_units, motion_function
 from learning.models import uses_prior
 from learning.rigid import RigidBodyForce
 from learning.run_folder import Run
@@ -34,7 +36,7 @@ class SIModel(nn.Module):
     of the span. The network and its state (batch size 1, zeros at the start) are float32.
     """
 
-    def __init__(self, run: Run, inputs: str = "features") -> None:
+    def __init__(self, run: Run, inputs: str = "features", prior: bool = True) -> None:
         super().__init__()
         if inputs not in INPUT_KINDS:
             raise ValueError(f"inputs must be one of {INPUT_KINDS}, got {inputs!r}")
@@ -45,7 +47,8 @@ class SIModel(nn.Module):
         self.input_units = REFERENCE_UNITS if inputs == "reference" else feature_units(feature_set)
         self.reference = (TorchFunction(motion_function(feature_set))
                           if inputs == "reference" else None)
-        self.prior = RigidBodyForce(feature_set) if uses_prior(run.config.model) else None
+        self.residual = uses_prior(run.config.model)
+        self.prior = RigidBodyForce(feature_set) if self.residual and prior else None
         for name, value in (("feature_low", run.feature_scaler.low),
                             ("feature_span", run.feature_scaler.span),
                             ("label_low", run.label_scaler.low),
@@ -61,7 +64,9 @@ class SIModel(nn.Module):
         scaled = ((features - self.feature_low) / self.feature_span).float().unsqueeze(0)
         out, new_state = self.network(scaled, tuple(state) if state else None)
         out = out.squeeze(0).double() * self.label_span
-        forces = out + (self.prior(features) if self.prior is not None else self.label_low)
+        if not self.residual:
+            return (out + self.label_low, *new_state)
+        forces = out + self.prior(features) if self.prior is not None else out
         return (forces, *new_state)
 
     def initial_state(self) -> tuple[torch.Tensor, ...]:

@@ -14,12 +14,16 @@ both. Each state input `NAME` has the output `NAME_out`.
 
 The model runs at its own sample rate (metadata `sample_rate_hz`, e.g. 100 Hz when trained
 down-sampled): a runner at a higher rate, such as the feedforward FMU at 1 kHz, calls it once
-every 1/sample_rate_hz seconds with the current inputs and holds the forces in between (or
-interpolates them, at the cost of one model period of delay).
+every 1/sample_rate_hz seconds with the current inputs and extrapolates the forces linearly
+from the last two calls in between (holding them instead would lag by half a model period).
+
+The physics-guided model is exported as its residual: the graph's forces plus the rigid-body
+feedforward of the nominal model (eq. 2.4, controllers.feedforward) on the same reference are
+the model's forces; the metadata says so (`prior` = "rigid-body", else "none").
 
 The metadata (onnx metadata_props, strings; lists and objects as JSON) names everything a
 runner needs: input and output signal names and units, the state tensors and their shapes,
-the sample rate, the model kind and feature set, the flexff version.
+the sample rate, the prior, the model kind and feature set, the flexff version.
 """
 
 from __future__ import annotations
@@ -57,7 +61,7 @@ def export(run: str | Path, out: str | Path, inputs: str = "features") -> Path:
 
 
 def _export(loaded: Run, out: Path, inputs: str) -> Path:
-    model = SIModel(loaded, inputs).eval()
+    model = SIModel(loaded, inputs, prior=False).eval()
     out.parent.mkdir(parents=True, exist_ok=True)
     state = model.initial_state()
     state_names = loaded.network.state_names()
@@ -74,6 +78,7 @@ def _export(loaded: Run, out: Path, inputs: str) -> Path:
         "format": FORMAT, "format_version": str(VERSION), "flexff_version": flexff_version(),
         "model_kind": loaded.config.model, "preset": loaded.config.preset,
         "feature_set": loaded.config.features.feature_set, "input_kind": inputs,
+        "prior": "rigid-body" if model.residual else "none",
         "input_signals": json.dumps(model.input_names),
         "input_units": json.dumps(model.input_units),
         "output_signals": json.dumps(OUTPUT_SIGNALS), "output_units": json.dumps(["N", "N"]),
@@ -81,11 +86,13 @@ def _export(loaded: Run, out: Path, inputs: str) -> Path:
         "state": json.dumps([{"input": n, "output": f"{n}_out", "shape": list(s.shape),
                               "initial": "zeros"} for n, s in zip(state_names, state)]),
         "history_samples": str(loaded.network.history),
-        "usage": ("inputs (T, n_inputs) float64 in SI units -> forces (T, 2) float64 [N]; "
+        "usage": ("inputs (T, n_inputs) float64 in SI units -> forces (T, 2) float64 [N] "
+                  "(plus the rigid-body feedforward when prior = rigid-body); "
                   "state tensors float32. "
                   "Whole sequence: T samples, state inputs zero. Step by step: T = 1 every "
                   "1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
-                  "hold the forces between calls when the host runs faster."),
+                  "extrapolate the forces from the last two calls when the host runs "
+                  "faster."),
     }
     onnx.helper.set_model_props(graph, metadata)
     onnx.checker.check_model(graph)

@@ -9,13 +9,10 @@ encoders as the thesis; three as an option), optional white noise on positions a
 conditioned), and velocities and accelerations by central differences of the filtered
 positions.
 
-The features are then a function of (position, velocity, acceleration) only, `motion_features`,
-used both for training data and at evaluation time on the reference signals x_ref ... ay_ref
-(the feedforward runs on the reference). The full set is the 21 coordinates of eq. (2.1) and
-their first and second time derivatives, obtained exactly by the chain rule
-(qd = J v, qdd = J a + (dJ/dt) v, with J = dq/dpos) rather than by differentiating 21 noisy
-signals; the compact set is (x, y, vx, vy, ax, ay). Kinematics are the nominal model's: the
-feedforward knows nothing better.
+The features are then a function of (position, velocity, acceleration) only,
+`motion_features`, used both for training data and at evaluation time on the reference signals
+x_ref ... ay_ref (the feedforward runs on the reference); their definition lives in
+controllers.features, which the feedforward FMU generates into C.
 """
 
 from __future__ import annotations
@@ -27,12 +24,10 @@ import casadi as ca
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
+from controllers.features import FEATURE_SETS, motion_function, nominal_model
 from learning.dataset import ENCODER_SIGNALS, LABEL_SIGNALS, REFERENCE_SIGNALS, Trajectory
-from plant.kinematics import COORDINATE_NAMES, EE_INDEX, SHOULDER_INDEX
-from plant.model import PlantModel
+from plant.kinematics import SHOULDER_INDEX
 
-FEATURE_SETS = ("full", "compact")
-COMPACT_NAMES = ("x", "y", "vx", "vy", "ax", "ay")
 
 
 @dataclass(frozen=True)
@@ -59,57 +54,6 @@ class FeatureConfig:
             raise ValueError("cutoff_hz must be positive and filter_order at least 1")
         if self.position_noise_m < 0 or self.force_noise_n < 0:
             raise ValueError("noise levels must not be negative")
-
-
-def feature_names(feature_set: str) -> list[str]:
-    """Signal names of the features, in column order."""
-    if feature_set == "compact":
-        return list(COMPACT_NAMES)
-    if feature_set == "full":
-        return (list(COORDINATE_NAMES) + [f"{n}_dot" for n in COORDINATE_NAMES]
-                + [f"{n}_ddot" for n in COORDINATE_NAMES])
-    raise ValueError(f"unknown feature set {feature_set!r}: choose one of "
-                     f"{', '.join(FEATURE_SETS)}")
-
-
-def feature_units(feature_set: str) -> list[str]:
-    """SI units of the features, in column order."""
-    if feature_set == "compact":
-        return ["m", "m", "m/s", "m/s", "m/s2", "m/s2"]
-    base = ["rad" if n.startswith("theta") else "m" for n in COORDINATE_NAMES]
-    return base + [f"{u}/s" for u in base] + [f"{u}/s2" for u in base]
-
-
-def motion_columns(feature_set: str) -> tuple[list[int], list[int], list[int]]:
-    """Columns of the features holding (x, y), (vx, vy) and (ax, ay) of the wrist."""
-    if feature_set == "compact":
-        return [0, 1], [2, 3], [4, 5]
-    n = len(COORDINATE_NAMES)
-    pos = list(EE_INDEX[:2])
-    return pos, [n + k for k in pos], [2 * n + k for k in pos]
-
-
-@functools.lru_cache(maxsize=None)
-def nominal_model() -> PlantModel:
-    """The nominal plant model (built once: its symbolic construction takes a moment)."""
-    return PlantModel("nominal")
-
-
-@functools.lru_cache(maxsize=None)
-def motion_function(feature_set: str) -> ca.Function:
-    """CasADi Function (pos, vel, acc) -> features of one sample, nominal kinematics built in."""
-    model = nominal_model()
-    pos, vel, acc = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2), ca.SX.sym("acc", 2)
-    if feature_set == "compact":
-        out = ca.vertcat(pos, vel, acc)
-    elif feature_set == "full":
-        q = model.coordinates(pos, model.parameter_values())
-        jac = ca.jacobian(q, pos)
-        out = ca.vertcat(q, jac @ vel, jac @ acc + ca.jtimes(jac @ vel, pos, vel))
-    else:
-        feature_names(feature_set)  # raises with the list of known sets
-    return ca.Function(f"features_{feature_set}", [pos, vel, acc], [out],
-                       ["pos", "vel", "acc"], ["features"])
 
 
 def motion_features(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,

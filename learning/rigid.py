@@ -16,8 +16,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from controllers.features import motion_columns, nominal_model
 from learning.casadi_torch import TorchFunction, frozen
-from learning.features import motion_columns, nominal_model
 
 
 @functools.lru_cache(maxsize=None)

@@ -22,7 +22,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from learning.dataset import ENCODER_SIGNALS, REFERENCE_SIGNALS, Trajectory, write_dataset
-from learning.features import nominal_model
+from controllers.features import nominal_model
 from plant.kinematics import SHOULDER_INDEX
 from plant.parameters import HARDWARE
 

@@ -22,9 +22,10 @@ import torch
 from matplotlib.figure import Figure
 from tqdm import tqdm
 
+from controllers.features import feature_names
 from learning.batches import TRAIN, VALIDATION, SequenceSet, WindowSampler, window_roles
 from learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
-from learning.features import decimation, feature_names, prepare_trajectory
+from learning.features import decimation, prepare_trajectory
 from learning.models import RECURRENT, SequenceNetwork, build_network, parameter_count, uses_prior
 from learning.presets import TrainConfig, make_config
 from learning.rigid import rigid_forces

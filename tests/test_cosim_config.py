@@ -106,16 +106,13 @@ def test_a_reference_outside_the_workspace_in_a_csv_file(tmp_path):
         load_config(write(tmp_path, '[reference]\nkind = "csv"\npath = "far.csv"\n'))
 
 
-def test_onnx_feedforward_is_checked_then_not_available_yet(tmp_path):
+def test_onnx_feedforward_model_is_checked(tmp_path):
     text = GOOD + '[feedforward]\nkind = "onnx"\nmodel = "ff.onnx"\n'
     with pytest.raises(ConfigError, match="feedforward.model: no such file"):
         load_config(write(tmp_path, text))
     (tmp_path / "ff.onnx").write_bytes(b"")
-    config = load_config(write(tmp_path, text))
-    assert config.feedforward.model == (tmp_path / "ff.onnx").resolve()
-    with pytest.raises(NotImplementedError, match="not available yet"):
-        run_config(config, tmp_path / "out")
-    assert not (tmp_path / "out" / "signals.npz").exists()
+    with pytest.raises(ConfigError, match="feedforward.model: .*not a flexff feedforward model"):
+        load_config(write(tmp_path, text))
 
 
 def test_bad_configuration_fails_before_anything_is_written(tmp_path):

@@ -12,6 +12,7 @@ from learning.deploy import SIModel, predict
 from learning.export import (TOLERANCE, export, read_metadata, run_sequence, run_steps,
                              session)
 from learning.features import prepare_trajectory, reference_features
+from learning.rigid import rigid_forces
 from learning.run_folder import load_run
 from learning.synthetic import synthetic_dataset
 from learning.threads import torch_threads
@@ -58,12 +59,22 @@ def _relative(a, b):
     return float(np.abs(a - b).max() / np.abs(b).max())
 
 
+def _graph_forces(run, features):
+    """What the graph returns: the model's forces, less the rigid-body prior for the pgnn
+    (its graph is the residual; the feedforward FMU adds the prior)."""
+    forces = predict(run, features)
+    if run.config.model == "pgnn":
+        forces = forces - rigid_forces(features, run.config.features.feature_set)
+    return forces
+
+
 @pytest.mark.parametrize("kind", list(TINY))
 def test_onnxruntime_matches_pytorch_in_both_forms(data, runs, tmp_path, kind):
     path = export(runs / kind, tmp_path / f"{kind}.onnx")
     run = load_run(runs / kind)
     features, _ = _test_inputs(data, run)
-    expected = predict(run, features)
+    expected = _graph_forces(run, features)
+    assert read_metadata(path)["prior"] == ("rigid-body" if kind == "pgnn" else "none")
     runtime = session(path)
     whole = run_sequence(runtime, features)
     steps = run_steps(runtime, features)
@@ -79,7 +90,8 @@ def test_reference_inputs_compute_the_features_in_the_graph(data, runs, tmp_path
     run = load_run(runs / kind)
     _, traj = _test_inputs(data, run)
     reference = np.column_stack([traj.signals[s] for s in REFERENCE_SIGNALS])
-    expected = predict(run, reference_features(traj.signals, run.config.features.feature_set))
+    expected = _graph_forces(run, reference_features(traj.signals,
+                                                     run.config.features.feature_set))
     assert _relative(run_sequence(session(path), reference), expected) < TOLERANCE
     assert read_metadata(path)["input_signals"] == json.dumps(list(REFERENCE_SIGNALS))
 
@@ -93,7 +105,7 @@ def test_metadata_names_everything_a_runner_needs(runs, tmp_path):
     assert len(json.loads(meta["input_units"])) == 63
     assert json.loads(meta["output_signals"]) == ["Fx_ff", "Fy_ff"]
     assert float(meta["sample_rate_hz"]) == 100.0 and meta["feature_set"] == "full"
-    assert meta["flexff_version"] and "hold" in meta["usage"]
+    assert meta["flexff_version"] and "extrapolate" in meta["usage"]
     state = json.loads(meta["state"])
     assert [s["input"] for s in state] == ["input_buffer", "h", "c"]
     assert state[0]["shape"] == [1, 63, 13] and state[1]["shape"] == [2, 1, 12]

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
+from controllers.features import feature_names, feature_units, motion_columns
 from learning.dataset import REFERENCE_SIGNALS
 from learning.features import (FeatureConfig, decimation, differentiate, encoder_positions,
-                               feature_names, feature_units, lowpass, motion_columns,
-                               motion_features, prepare_trajectory, quantize_encoders,
+                               lowpass, motion_features, prepare_trajectory, quantize_encoders,
                                reference_features)
 from learning.scaling import MinMaxScaler
 from learning.synthetic import skew_sine_circle, synthetic_trajectory

@@ -1,0 +1,73 @@
+"""Network inputs computed from the wrist's motion: what a learned feedforward sees.
+
+A function of (position, velocity, acceleration) only, the same for training data (the
+filtered measured motion) and for deployment (the reference x_ref ... ay_ref). The full set
+is the 21 coordinates of eq. (2.1) and their first and second time derivatives, obtained
+exactly by the chain rule (qd = J v, qdd = J a + (dJ/dt) v, with J = dq/dpos) rather than by
+differentiating 21 noisy signals; the compact set is (x, y, vx, vy, ax, ay). Kinematics are
+the nominal model's: the feedforward knows nothing better. As a CasADi Function it is both
+evaluated in numpy (learning/) and generated into C inside the feedforward FMU.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import casadi as ca
+
+from plant.kinematics import COORDINATE_NAMES, EE_INDEX
+from plant.model import PlantModel
+
+FEATURE_SETS = ("full", "compact")
+COMPACT_NAMES = ("x", "y", "vx", "vy", "ax", "ay")
+
+
+def feature_names(feature_set: str) -> list[str]:
+    """Signal names of the features, in column order."""
+    if feature_set == "compact":
+        return list(COMPACT_NAMES)
+    if feature_set == "full":
+        return (list(COORDINATE_NAMES) + [f"{n}_dot" for n in COORDINATE_NAMES]
+                + [f"{n}_ddot" for n in COORDINATE_NAMES])
+    raise ValueError(f"unknown feature set {feature_set!r}: choose one of "
+                     f"{', '.join(FEATURE_SETS)}")
+
+
+def feature_units(feature_set: str) -> list[str]:
+    """SI units of the features, in column order."""
+    if feature_set == "compact":
+        return ["m", "m", "m/s", "m/s", "m/s2", "m/s2"]
+    base = ["rad" if n.startswith("theta") else "m" for n in COORDINATE_NAMES]
+    return base + [f"{u}/s" for u in base] + [f"{u}/s2" for u in base]
+
+
+def motion_columns(feature_set: str) -> tuple[list[int], list[int], list[int]]:
+    """Columns of the features holding (x, y), (vx, vy) and (ax, ay) of the wrist."""
+    if feature_set == "compact":
+        return [0, 1], [2, 3], [4, 5]
+    n = len(COORDINATE_NAMES)
+    pos = list(EE_INDEX[:2])
+    return pos, [n + k for k in pos], [2 * n + k for k in pos]
+
+
+@functools.lru_cache(maxsize=None)
+def nominal_model() -> PlantModel:
+    """The nominal plant model (built once: its symbolic construction takes a moment)."""
+    return PlantModel("nominal")
+
+
+@functools.lru_cache(maxsize=None)
+def motion_function(feature_set: str) -> ca.Function:
+    """CasADi Function (pos, vel, acc) -> features of one sample, nominal kinematics built in."""
+    model = nominal_model()
+    pos, vel, acc = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2), ca.SX.sym("acc", 2)
+    if feature_set == "compact":
+        out = ca.vertcat(pos, vel, acc)
+    elif feature_set == "full":
+        q = model.coordinates(pos, model.parameter_values())
+        jac = ca.jacobian(q, pos)
+        out = ca.vertcat(q, jac @ vel, jac @ acc + ca.jtimes(jac @ vel, pos, vel))
+    else:
+        feature_names(feature_set)  # raises with the list of known sets
+    return ca.Function(f"features_{feature_set}", [pos, vel, acc], [out],
+                       ["pos", "vel", "acc"], ["features"])

@@ -1,0 +1,132 @@
+"""The learned feedforward as a System: reference in, an exported ONNX model inside, F_ff out.
+
+The FMU takes the reference signals (x_ref ... ay_ref) every 1 ms step, computes the model's
+inputs from them in generated C (the 63 features of eq. 2.1 and their derivatives by the
+nominal inverse kinematics, or the reference itself), runs the ONNX graph with onnxruntime at
+the model's own rate (metadata `sample_rate_hz`) and extrapolates its forces linearly in
+between. A physics-guided model's graph is a residual: the rigid-body feedforward (eq. 2.4 on
+the nominal model) is added in generated C at every step.
+
+Two modes with equal results: step by step (the graph's recurrent state carried in the FMU
+state) and precomputed (the whole reference given at build time, run through the graph in
+one call at initialization, as the seed's offline feedforward).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import onnx
+
+from controllers.features import feature_names, motion_function, nominal_model
+from controllers.feedforward import FORCE_OUTPUTS, REFERENCE_INPUTS
+from fmu.network import read_network
+from fmu.system import System
+
+FORMAT = "flexff-feedforward"  # metadata "format" written by learning.export
+PRIORS = ("none", "rigid-body")
+REFERENCE_NAMES = [v.name for v in REFERENCE_INPUTS]
+
+
+def model_metadata(model: str | Path) -> dict[str, str]:
+    """The flexff metadata of an exported feedforward model; ValueError (what to do) if the
+    file is not one."""
+    path = Path(model)
+    if not path.is_file():
+        raise ValueError(f"ONNX model {path} does not exist")
+    try:
+        props = {p.key: p.value for p in onnx.load(str(path), load_external_data=False)
+                 .metadata_props}
+    except Exception as exc:  # onnx raises DecodeError and others for a broken file
+        raise ValueError(f"{path} is not a readable ONNX model: {exc}") from exc
+    if props.get("format") != FORMAT:
+        raise ValueError(f"{path} is not a flexff feedforward model (metadata format "
+                         f"{props.get('format')!r}, expected {FORMAT!r}): export a trained run "
+                         f"with `flexff export RUN -o MODEL.onnx`")
+    missing = [k for k in ("input_kind", "feature_set", "input_signals", "sample_rate_hz")
+               if k not in props]
+    if missing:
+        raise ValueError(f"{path}: metadata lacks {', '.join(missing)}; export it again with "
+                         f"`flexff export`")
+    return props
+
+
+def learned_feedforward_system(model: str | Path, step: float = 1e-3,
+                               reference: Mapping[str, np.ndarray] | None = None) -> System:
+    """The System of the feedforward FMU running `model`; with `reference` (x_ref ... ay_ref
+    at every step from t = 0) it is built in the precomputed mode for that reference."""
+    meta = model_metadata(model)
+    period = _period(meta, step, model)
+    u = ca.SX.sym("u", len(REFERENCE_NAMES))
+    pos, vel, acc = u[0:2], u[2:4], u[4:6]
+    if meta["input_kind"] == "reference":
+        expected, inputs = REFERENCE_NAMES, u
+    else:
+        expected = feature_names(meta["feature_set"])
+        inputs = motion_function(meta["feature_set"])(pos, vel, acc)
+    if json.loads(meta["input_signals"]) != expected:
+        raise ValueError(f"{model}: its input signals {json.loads(meta['input_signals'])} are not "
+                         f"the {meta['input_kind']} signals {expected} the FMU computes")
+    prior = meta.get("prior", "none")
+    if prior not in PRIORS:
+        raise ValueError(f"{model}: unknown prior {prior!r} (known: {', '.join(PRIORS)})")
+    x, p, w = ca.SX.sym("x", 0), ca.SX.sym("p", 0), ca.SX.sym("w", 0)
+    network = read_network(model, ca.Function("network_input", [x, u, p], [inputs]), period,
+                           None if reference is None else _table(reference, step))
+    if network.n_outputs != len(FORCE_OUTPUTS):
+        raise ValueError(f"{model}: the graph returns {network.n_outputs} values per step, the "
+                         f"feedforward needs {len(FORCE_OUTPUTS)} (Fx_ff, Fy_ff)")
+    r = ca.SX.sym("r", network.n_outputs)
+    force = r
+    if prior == "rigid-body":
+        nominal = nominal_model()
+        force = r + nominal.inverse_dynamics(pos, vel, acc, nominal.parameter_values())
+    mode = "step" if reference is None else "precomputed"
+    return System(
+        name="learned_feedforward",
+        description=(f"learned feedforward: {meta.get('model_kind', 'ONNX')} model at "
+                     f"{float(meta['sample_rate_hz']):g} Hz in onnxruntime"
+                     f"{' plus the rigid-body feedforward' if prior == 'rigid-body' else ''}, "
+                     f"{mode} mode"),
+        kind="discrete",
+        states=(),
+        inputs=REFERENCE_INPUTS,
+        outputs=FORCE_OUTPUTS,
+        parameters=(),
+        initial_state=ca.Function("initial_state", [p], [ca.SX(0, 1)]),
+        dynamics=ca.Function("dynamics", [x, u, p], [ca.SX(0, 1)]),
+        output=ca.Function("output", [x, u, p, w, r], [force]),
+        sample_time=step,
+        extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": prior,
+               **{f"flexff.model.{k}": meta[k] for k in ("model_kind", "preset", "feature_set",
+                                                           "input_kind", "sample_rate_hz")
+                  if k in meta}},
+        network=network,
+    )
+
+
+def _period(meta: Mapping[str, str], step: float, model: str | Path) -> int:
+    """Communication steps per model call: the step must divide the model's sample period."""
+    rate = float(meta["sample_rate_hz"])
+    if not (step > 0 and rate > 0):
+        raise ValueError(f"step ({step}) and the model's sample rate ({rate}) must be positive")
+    ratio = 1.0 / (rate * step)
+    if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
+        raise ValueError(f"{model}: the model runs at {rate:g} Hz; the step {step:g} s must "
+                         f"divide its period {1 / rate:g} s by a whole number")
+    return int(round(ratio))
+
+
+def _table(reference: Mapping[str, np.ndarray], step: float) -> np.ndarray:
+    missing = [n for n in REFERENCE_NAMES if n not in reference]
+    if missing:
+        raise ValueError(f"the precomputed reference lacks {', '.join(missing)}")
+    columns = [np.asarray(reference[n], dtype=float).ravel() for n in REFERENCE_NAMES]
+    n = columns[0].size
+    if any(c.size != n for c in columns) or n < 1:
+        raise ValueError("the reference signals must have one and the same length")
+    return np.column_stack([np.arange(n) * step, *columns])

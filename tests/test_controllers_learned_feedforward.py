@@ -1,0 +1,155 @@
+"""The learned feedforward FMU against an independent runner of the same exported graph:
+onnxruntime's Python API at the model's rate, its forces extrapolated linearly between calls,
+the rigid-body force (numpy, CasADi) added for the physics-guided model. Both modes, state
+restore, libcosim, validation, closed loop, and the errors for models that do not fit."""
+
+import numpy as np
+import pytest
+
+from controllers.learned_feedforward import learned_feedforward_system, model_metadata
+from cosim.config import config_examples, parse_config
+from cosim.references import thesis_evaluation
+from cosim.run import run_config
+from fmu.build import build_fmu
+from fmu.runner import run_fmu, run_fmu_libcosim
+from fmu.validation import validate_fmu
+from learning.dataset import REFERENCE_SIGNALS
+from learning.export import export, session
+from learning.features import reference_features
+from learning.rigid import rigid_forces
+from learning.synthetic import synthetic_dataset
+from learning.threads import torch_threads
+from learning.train import train
+from tests.fmu_toys import LoggedSlave
+from tests.test_fmu_network import running_sum_graph
+
+STEPS = 600  # 0.6 s of the thesis evaluation reference at 1 kHz
+TINY = {"lstm": {"hidden": 12}, "pgnn": {"channels": 8, "levels": 3}}
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("learned")
+    data = synthetic_dataset(folder / "data", n_train=3, n_test=1, duration=3.0, rate_hz=100.0,
+                             seed=5)
+    with torch_threads():
+        for kind, sizes in TINY.items():
+            train(kind, "fast", data, folder / kind, progress=False, epochs=1, val_fraction=0.2,
+                  **sizes)
+            export(folder / kind, folder / f"{kind}.onnx")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def reference():
+    signals = thesis_evaluation().signals()
+    return {name: signals[name][5000:5000 + STEPS + 1] for name in REFERENCE_SIGNALS}
+
+
+def independent_forces(model, reference) -> np.ndarray:
+    """The documented scheme with onnxruntime's Python API, step by step at the model rate."""
+    meta = model_metadata(model)
+    period = int(round(1e3 / float(meta["sample_rate_hz"])))
+    features = reference_features(reference, meta["feature_set"])
+    runtime = session(model)
+    names = [o.name for o in runtime.get_outputs()]
+    state = {i.name: np.zeros(i.shape, np.float32) for i in runtime.get_inputs()
+             if i.name != "inputs"}
+    calls = []
+    for row in features[::period]:
+        result = runtime.run(names, {"inputs": row[None, :], **state})
+        calls.append(result[0][0])
+        state = {n[:-len("_out")]: v for n, v in zip(names[1:], result[1:])}
+    calls = np.array(calls)
+    forces = np.empty((len(features), 2))
+    for k in range(len(features)):
+        j, phase = divmod(k, period)
+        forces[k] = calls[j] + phase / period * (calls[j] - calls[max(j - 1, 0)])
+    if meta["prior"] == "rigid-body":
+        forces += rigid_forces(features, meta["feature_set"])
+    return forces
+
+
+def fmu_forces(fmu, reference, runner=run_fmu) -> np.ndarray:
+    inputs = {n: reference[n][:STEPS] for n in REFERENCE_SIGNALS}
+    out = runner(fmu, STEPS, 1e-3, inputs)
+    return np.column_stack([out["Fx_ff"], out["Fy_ff"]])
+
+
+@pytest.fixture(scope="module")
+def fmus(models, reference, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("ff-fmus")
+    held = {n: np.append(reference[n][:STEPS], reference[n][STEPS - 1]) for n in reference}
+    return {(kind, mode): build_fmu(learned_feedforward_system(
+        models / f"{kind}.onnx", 1e-3, held if mode == "precomputed" else None),
+        folder / f"{kind}-{mode}.fmu") for kind in TINY for mode in ("step", "precomputed")}
+
+
+@pytest.mark.parametrize("kind", list(TINY))
+def test_fmu_forces_equal_an_independent_runner(models, fmus, reference, kind):
+    expected = independent_forces(models / f"{kind}.onnx", reference)[:STEPS]
+    got = fmu_forces(fmus[kind, "step"], reference)[:STEPS]
+    scale = np.abs(expected).max()
+    assert np.abs(got - expected).max() <= 1e-9 * scale
+
+
+@pytest.mark.parametrize("kind", list(TINY))
+def test_precomputed_mode_equals_step_by_step(fmus, reference, kind):
+    step = fmu_forces(fmus[kind, "step"], reference)
+    precomputed = fmu_forces(fmus[kind, "precomputed"], reference)
+    assert np.abs(step - precomputed).max() <= 1e-6 * np.abs(step).max()  # float32 rounding
+
+
+def test_fmus_validate_and_run_under_libcosim(fmus, reference):
+    for fmu in fmus.values():
+        assert validate_fmu(fmu) == []
+    for mode in ("step", "precomputed"):
+        fmu = fmus["pgnn", mode]
+        s = LoggedSlave(fmu)  # libcosim's order: set the inputs, step, read
+        s.initialize()
+        ours = []
+        for k in range(STEPS):
+            s.set(**{n: float(reference[n][k]) for n in REFERENCE_SIGNALS})
+            s.slave.doStep(k * 1e-3, 1e-3)
+            ours.append(s.get("Fx_ff", "Fy_ff"))
+        s.free()
+        assert np.array_equal(fmu_forces(fmu, reference, run_fmu_libcosim), ours)
+
+
+def test_restored_state_continues_exactly(fmus, reference):
+    s = LoggedSlave(fmus["lstm", "step"])
+    s.initialize()
+
+    def steps(ks):
+        out = []
+        for k in ks:
+            s.set(**{n: float(reference[n][k]) for n in REFERENCE_SIGNALS})
+            out.append(s.get("Fx_ff", "Fy_ff"))
+            s.slave.doStep(k * 1e-3, 1e-3)
+        return out
+
+    steps(range(123))
+    saved = s.slave.getFMUstate()
+    straight = steps(range(123, 300))
+    s.slave.setFMUstate(saved)
+    assert steps(range(123, 300)) == straight
+    s.slave.freeFMUstate(saved)
+    s.free()
+
+
+def test_closed_loop_with_the_learned_feedforward(models, tmp_path):
+    text = config_examples()["thesis-eval-pid"].replace(
+        'kind = "none"', f'kind = "onnx"\nmodel = "{models / "pgnn.onnx"}"').replace(
+        "stop = 15.0", "stop = 0.5")
+    metrics = run_config(parse_config(text, name="pgnn"), tmp_path / "run")
+    assert (tmp_path / "run" / "forces.png").is_file()
+    assert np.isfinite(metrics["x"]["e2"]) and metrics["real_time_factor"] > 1
+
+
+def test_models_that_do_not_fit_are_refused(models, tmp_path):
+    with pytest.raises(ValueError, match="not a flexff feedforward model"):
+        learned_feedforward_system(running_sum_graph(tmp_path / "toy.onnx"))
+    with pytest.raises(ValueError, match="must divide its period"):
+        learned_feedforward_system(models / "lstm.onnx", step=3e-3)
+    with pytest.raises(ValueError, match="does not exist"):
+        learned_feedforward_system(tmp_path / "none.onnx")
