@@ -1,0 +1,295 @@
+"""The evaluation report of `flexff evaluate`: flexff's version of the thesis's Tables 5.2 / 6.2.
+
+Every scenario (PID alone, then PID with each feedforward) runs the thesis's evaluation
+reference; this module compares their tracking errors with each other and with the thesis's
+published numbers. Into the output folder go
+
+  summary.json  e2, einf, rms and the improvement ratios (PID alone / scenario) per scenario
+                and axis, with the thesis's table for the same environment, in SI units
+  table.md      the same as a Markdown table, in the thesis's scale (1e-4 or 1e-3)
+  paths.png     reference and each scenario's x-y path, with a zoom on where PID alone errs most
+  errors.png    tracking error over time per axis, one line per scenario
+  forces.png    feedback, feedforward and total force per axis of each feedforward scenario
+
+"sim" compares with Table 5.2 (nominal simulation), "hardware" with Table 6.2 (the real
+machine; flexff's "hardware" is the simulated plant with the real machine's non-ideal effects).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (after selecting the backend)
+from matplotlib.patches import Rectangle  # noqa: E402
+
+from cosim.metrics import AXES, tracking_metrics  # noqa: E402
+from cosim.recording import Recording, atomic_write  # noqa: E402
+
+SCENARIO_LABELS: dict[str, str] = {
+    "pid": "PID alone",
+    "rigid-body": "rigid-body FF",
+    "lstm": "LSTM FF",
+    "cnn-lstm": "CNN-LSTM FF",
+    "tcn": "TCN FF",
+    "pgnn": "physics-guided FF",
+}
+
+
+def _thesis(exponent: int, rows: Mapping[str, tuple[float, float, float, float]]) -> dict:
+    """A thesis table in SI units from its printed rows (e2 x, e2 y, einf x, einf y), which
+    are in units of 10**exponent; read as decimal literals so 42.930 x 1e-4 is 0.004293."""
+    def si(value: float) -> float:
+        return float(f"{value!r}e{exponent}")
+
+    return {name: {"x": {"e2": si(e2x), "einf": si(einfx)},
+                   "y": {"e2": si(e2y), "einf": si(einfy)}}
+            for name, (e2x, e2y, einfx, einfy) in rows.items()}
+
+
+# e2 in m/sqrt(s), einf in m, as printed (x 1e-4 in Table 5.2, x 1e-3 in Table 6.2)
+THESIS_TABLES: dict[str, dict] = {
+    "sim": _thesis(-4, {"pid": (42.930, 42.940, 142.23, 140.00),
+                        "lstm": (0.457, 1.102, 3.467, 4.032),
+                        "cnn-lstm": (10.550, 16.648, 42.146, 72.34),
+                        "tcn": (1.257, 1.367, 5.861, 6.372)}),
+    "hardware": _thesis(-3, {"pid": (3.585, 3.517, 7.82, 8.24),
+                             "lstm": (1.985, 2.624, 5.15, 6.952),
+                             "tcn": (1.742, 3.446, 4.736, 9.361)}),
+}
+
+# env -> (the thesis table's scale as a power of ten, which table and what it measured)
+_ENVS = {"sim": (-4, "thesis Table 5.2 (nominal simulation)"),
+         "hardware": (-3, "thesis Table 6.2 (the real machine)")}
+_ROWS = (("e2", "x", "‖E_x‖₂"), ("e2", "y", "‖E_y‖₂"),
+         ("einf", "x", "‖E_x‖∞"), ("einf", "y", "‖E_y‖∞"))
+UNITS = {"e2": "m/sqrt(s)", "einf": "m", "rms": "m",
+         "e2_ratio": "PID alone / scenario", "einf_ratio": "PID alone / scenario"}
+TRACKING = ("x_ref", "y_ref", "x", "y")
+FORCES = ("Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
+MM = 1e3
+
+
+def _check_env(env: str) -> None:
+    if env not in _ENVS:
+        raise ValueError(f"unknown environment {env!r}: use 'sim' (compared with thesis Table "
+                         f"5.2) or 'hardware' (Table 6.2)")
+
+
+def _check_pid(names: Mapping[str, object], what: str) -> None:
+    if "pid" not in names:
+        raise ValueError(f"the {what} have no 'pid' scenario (got {sorted(names)}): the "
+                         f"improvement ratios are PID alone / scenario, so include the PID-alone "
+                         f"run under the name 'pid'")
+
+
+def _ratios(norms: Mapping[str, float], pid: Mapping[str, float]) -> dict[str, float | None]:
+    """e2_ratio and einf_ratio of one axis: PID alone / scenario, None where the scenario's
+    error is exactly zero (no finite ratio)."""
+    return {f"{key}_ratio": pid[key] / norms[key] if norms[key] > 0 else None
+            for key in ("e2", "einf")}
+
+
+def _pid_first(names: Mapping[str, object]) -> list[str]:
+    return ["pid", *(name for name in names if name != "pid")]
+
+
+def summarize(metrics: dict[str, dict]) -> dict[str, dict]:
+    """Per scenario and axis: e2, einf, rms and the improvement ratios e2_ratio, einf_ratio
+    (PID alone / scenario, so the PID's are 1.0 and higher is better), PID alone first.
+
+    `metrics` maps a scenario name to a cosim.metrics.tracking_metrics dict
+    {"x": {"e2", "einf", "rms"}, "y": {...}}; it must hold "pid", the base of every ratio.
+    """
+    _check_pid(metrics, "metrics")
+    summary: dict[str, dict] = {}
+    for name in _pid_first(metrics):
+        summary[name] = {}
+        for axis in AXES:
+            norms = {key: float(metrics[name][axis][key]) for key in ("e2", "einf", "rms")}
+            summary[name][axis] = {**norms, **_ratios(norms, metrics["pid"][axis])}
+    return summary
+
+
+def _number(value: float) -> str:
+    """A scaled table value: at least three decimals and at least three significant digits."""
+    if value == 0:
+        return "0.000"
+    return f"{value:.{max(3, 2 - math.floor(math.log10(abs(value))))}f}"
+
+
+def _cell(norms: Mapping[str, float | None], norm: str, scale: float, with_ratio: bool) -> str:
+    """One table entry: the value in the table's scale, with its improvement ratio."""
+    text = _number(norms[norm] / scale)
+    if not with_ratio:
+        return text
+    ratio = norms[f"{norm}_ratio"]
+    if ratio is None:
+        return f"{text} (n/a)"
+    return f"{text} ({ratio:.0f}x)" if ratio >= 10 else f"{text} ({ratio:.2g}x)"
+
+
+def markdown_table(summary: dict[str, dict], env: str) -> str:
+    """The thesis's table for `env` ("sim" or "hardware") as Markdown: rows ‖E_x‖₂, ‖E_y‖₂,
+    ‖E_x‖∞, ‖E_y‖∞; a column per flexff scenario of `summary` (from `summarize`), then the
+    thesis's columns for the same environment, values in the thesis's scale and each
+    feedforward's improvement ratio in parentheses, so both can be read side by side."""
+    _check_env(env)
+    exponent, source = _ENVS[env]
+    scale = 10.0**exponent
+    thesis = THESIS_TABLES[env]
+    columns = [(SCENARIO_LABELS.get(name, name), summary[name], name != "pid")
+               for name in summary]
+    columns += [(f"thesis: {SCENARIO_LABELS[name]}",
+                 {axis: {**table[axis], **_ratios(table[axis], thesis["pid"][axis])}
+                  for axis in AXES}, name != "pid")
+                for name, table in thesis.items()]
+    lines = [f"Tracking error on the evaluation reference, flexff env {env!r} next to {source}: "
+             f"values x 1e{exponent}, ‖E‖₂ in m/√s, ‖E‖∞ in m.",
+             "",
+             f"| error (x 1e{exponent}) | " + " | ".join(label for label, _, _ in columns) + " |",
+             "|---" + "|---:" * len(columns) + "|"]
+    for norm, axis, row in _ROWS:
+        cells = [_cell(table[axis], norm, scale, with_ratio) for _, table, with_ratio in columns]
+        lines.append(f"| {row} | " + " | ".join(cells) + " |")
+    lines += ["", "Ratios in parentheses: PID alone / scenario on the same reference (higher "
+                  "is better; the thesis's from its own PID-alone column)."]
+    return "\n".join(lines) + "\n"
+
+
+def _check_recordings(recordings: Mapping[str, Recording]) -> None:
+    _check_pid(recordings, "recordings")
+    for name, rec in recordings.items():
+        needed = TRACKING if name == "pid" else TRACKING + FORCES
+        missing = [s for s in needed if s not in rec.signals]
+        if missing:
+            raise ValueError(f"recording {name!r} lacks {missing} (it has "
+                             f"{sorted(rec.signals)}): record {list(needed)} in its run")
+    base = recordings["pid"]
+    for name, rec in recordings.items():
+        if rec.time.size != base.time.size:
+            raise ValueError(f"recording {name!r} has {rec.time.size} points, 'pid' has "
+                             f"{base.time.size}: run every scenario with the same reference, "
+                             f"step and stop time")
+        if not math.isclose(rec.step, base.step, rel_tol=1e-9):
+            raise ValueError(f"recording {name!r} steps {rec.step:g} s, 'pid' {base.step:g} s: "
+                             f"run every scenario with the same communication step")
+
+
+def _save(figure, path: Path) -> Path:
+    figure.tight_layout()
+    atomic_write(path, lambda tmp: figure.savefig(tmp, dpi=120, format="png"))
+    plt.close(figure)
+    return path
+
+
+def _colors(recordings: Mapping[str, Recording]) -> dict[str, str]:
+    """One colour per scenario, the same in every figure."""
+    return {name: f"C{k}" for k, name in enumerate(recordings)}
+
+
+def plot_paths(recordings: Mapping[str, Recording], path: Path) -> Path:
+    """Reference and every scenario's x-y path (left), and a zoom (right) centred on the
+    reference point where PID alone errs most, wide enough to hold that error twice over."""
+    ref = recordings["pid"]
+    colors = _colors(recordings)
+    figure, (full, zoom) = plt.subplots(1, 2, figsize=(11, 5.5))
+    for ax in (full, zoom):
+        ax.plot(ref["x_ref"] * MM, ref["y_ref"] * MM, "k--", lw=1, label="reference", zorder=3)
+        for name, rec in recordings.items():
+            ax.plot(rec["x"] * MM, rec["y"] * MM, color=colors[name], lw=0.9,
+                    label=SCENARIO_LABELS.get(name, name))
+        ax.set(xlabel="x [mm]", ylabel="y [mm]", aspect="equal")
+    miss = np.hypot(ref["x_ref"] - ref["x"], ref["y_ref"] - ref["y"]) * MM
+    worst = int(np.argmax(miss))
+    extent = max(np.ptp(ref["x_ref"]), np.ptp(ref["y_ref"])) * MM
+    half = max(2.0 * miss[worst], 0.02 * extent, 1e-6)
+    cx, cy = ref["x_ref"][worst] * MM, ref["y_ref"][worst] * MM
+    zoom.set(xlim=(cx - half, cx + half), ylim=(cy - half, cy + half),
+             title=f"zoom at t = {ref.time[worst]:.3f} s (largest PID-alone error)")
+    full.add_patch(Rectangle((cx - half, cy - half), 2 * half, 2 * half, fill=False, lw=1,
+                             edgecolor="0.3"))
+    full.set_title("x-y path")
+    full.legend(loc="best", fontsize="small")
+    return _save(figure, path)
+
+
+def plot_errors(recordings: Mapping[str, Recording], path: Path) -> Path:
+    """Tracking error per axis over time, one line per scenario. The scale is symmetric log
+    (linear up to the power of ten at or above the smallest scenario's peak error, logarithmic
+    beyond) so a feedforward that cuts the error fifty-fold is still readable next to PID
+    alone; lines with smaller errors are drawn on top."""
+    colors = _colors(recordings)
+    figure, axes = plt.subplots(2, 1, sharex=True, figsize=(9, 6))
+    for ax, axis in zip(axes, AXES):
+        errors = {name: (rec[f"{axis}_ref"] - rec[axis]) * MM for name, rec in recordings.items()}
+        peaks = {name: float(np.max(np.abs(e))) for name, e in errors.items()}
+        for name, error in errors.items():
+            ax.plot(recordings[name].time, error, color=colors[name], lw=0.8,
+                    zorder=-peaks[name], label=SCENARIO_LABELS.get(name, name))
+        smallest, largest = min(peaks.values()), max(peaks.values())
+        if smallest > 0:
+            ax.set_yscale("symlog", linthresh=10.0 ** math.ceil(math.log10(smallest)))
+        if largest > 0:
+            ax.set_ylim(-1.1 * largest, 1.1 * largest)
+        ax.set(ylabel=f"e_{axis} [mm]")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    axes[0].set_title("tracking error (reference - true position)")
+    axes[-1].set_xlabel("time [s]")
+    return _save(figure, path)
+
+
+def plot_force_split(recordings: Mapping[str, Recording], path: Path) -> Path:
+    """Feedback, feedforward and total force per axis, a row of panels per scenario."""
+    figure, axes = plt.subplots(len(recordings), 2, sharex=True, squeeze=False,
+                                figsize=(11, 2.6 * len(recordings) + 0.6))
+    for row, (name, rec) in zip(axes, recordings.items()):
+        for ax, axis in zip(row, AXES):
+            fb, ff = rec[f"F{axis}_fb"], rec[f"F{axis}_ff"]
+            ax.plot(rec.time, fb, lw=0.8, label="feedback")
+            ax.plot(rec.time, ff, lw=0.8, label="feedforward")
+            ax.plot(rec.time, fb + ff, "k", lw=0.6, label="total")
+            ax.set(ylabel=f"F_{axis} [N]", title=f"{SCENARIO_LABELS.get(name, name)}: {axis}")
+            ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(loc="upper right", ncol=3, fontsize="small")
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    return _save(figure, path)
+
+
+def write_report(recordings: dict[str, Recording], env: str, out: str | Path) -> dict:
+    """Write summary.json, table.md, paths.png, errors.png and forces.png into `out`; return
+    the summary.json content.
+
+    `recordings` maps a scenario name ("pid" required; see SCENARIO_LABELS) to the Recording
+    of its run on the thesis's evaluation reference, in display order: x_ref, y_ref, x, y for
+    every scenario, and Fx_fb, Fy_fb, Fx_ff, Fy_ff for every one but "pid", which is left out
+    of forces.png (no forces.png when "pid" is the only scenario). Every run must have the
+    same step and length. Everything is checked before a file is written.
+    """
+    _check_env(env)
+    _check_recordings(recordings)
+    ordered = {name: recordings[name] for name in _pid_first(recordings)}
+    summary = summarize({name: tracking_metrics(rec) for name, rec in ordered.items()})
+    content = {"env": env, "scenarios": summary, "thesis": copy.deepcopy(THESIS_TABLES[env]),
+               "units": dict(UNITS)}
+    out = Path(out)
+    atomic_write(out / "summary.json",
+                 lambda tmp: tmp.write_text(json.dumps(content, indent=2) + "\n", "utf-8"))
+    atomic_write(out / "table.md",
+                 lambda tmp: tmp.write_text(markdown_table(summary, env), "utf-8"))
+    plot_paths(ordered, out / "paths.png")
+    plot_errors(ordered, out / "errors.png")
+    feedforward = {name: rec for name, rec in ordered.items() if name != "pid"}
+    if feedforward:
+        plot_force_split(feedforward, out / "forces.png")
+    return content
