@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import Callable, Sequence
 
 from learning.dataset import SETS
@@ -32,10 +33,18 @@ def _plant_info(args: argparse.Namespace) -> int:
 
 def _fmu_build(args: argparse.Namespace) -> int:
     from fmu.build import build_fmu
-    from plant.system import plant_system
 
-    path = build_fmu(plant_system(args.variant), args.output)
-    print(f"wrote {path}")
+    if args.kind == "feedforward":
+        from controllers.learned_feedforward import learned_feedforward_system
+
+        if args.model is None:
+            raise ValueError("fmu build feedforward needs --model M.onnx (flexff export)")
+        system = learned_feedforward_system(args.model, args.step)
+    else:
+        from plant.system import plant_system
+
+        system = plant_system(args.variant)
+    print(f"wrote {build_fmu(system, args.output)}")
     return 0
 
 
@@ -55,7 +64,12 @@ def _fmu_validate(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     from flexff.bench import run_benchmarks
 
-    text = json.dumps(run_benchmarks(steps=args.steps), indent=2)
+    models = None
+    if args.models:
+        models = {p.stem: p for p in sorted(Path(args.models).glob("*.onnx"))}
+        if not models:
+            raise ValueError(f"no .onnx files in {args.models}")
+    text = json.dumps(run_benchmarks(steps=args.steps, models=models), indent=2)
     print(text)
     if args.output:
         with open(args.output, "w") as f:
@@ -159,6 +173,16 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _evaluate(args: argparse.Namespace) -> int:
+    from learning.evaluate import evaluate
+
+    evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs)
+    print((Path(args.output) / "table.md").read_text())
+    print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
+          f"forces.png, the .onnx models)")
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from flexff.demo import run_demo
 
@@ -181,8 +205,13 @@ def build_parser() -> argparse.ArgumentParser:
     fmu = commands.add_parser("fmu", help="build and validate FMUs")
     fmu_commands = fmu.add_subparsers(dest="fmu_command", required=True)
     build = fmu_commands.add_parser("build", help="build an FMU")
-    build.add_argument("kind", choices=["plant"], help="what to build")
-    build.add_argument("--variant", choices=sorted(VARIANTS), default="nominal")
+    build.add_argument("kind", choices=["plant", "feedforward"],
+                       help="the plant, or a learned feedforward from an exported ONNX model")
+    build.add_argument("--variant", choices=sorted(VARIANTS), default="nominal",
+                       help="plant variant")
+    build.add_argument("--model", help="feedforward: the .onnx file (flexff export)")
+    build.add_argument("--step", type=float, default=1e-3,
+                       help="feedforward: communication step [s] (default 0.001)")
     build.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     build.set_defaults(handler=_fmu_build)
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")
@@ -237,7 +266,21 @@ def build_parser() -> argparse.ArgumentParser:
     bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON")
     bench.add_argument("--steps", type=int, default=20000, help="steps per timed loop")
     bench.add_argument("-o", "--output", help="also write the JSON to this file")
+    bench.add_argument("--models", help="a folder of exported .onnx models (e.g. flexff "
+                                        "evaluate's) for the feedforward figures; default: "
+                                        "untrained exports of each model kind")
     bench.set_defaults(handler=_bench)
+
+    evaluation = commands.add_parser(
+        "evaluate", help="the thesis's Table 5.2 (sim) or 6.2 (hardware) for flexff: collect, "
+                         "train, export, co-simulate with each feedforward, report")
+    evaluation.add_argument("--env", default="sim", choices=("sim", "hardware"))
+    evaluation.add_argument("-o", "--output", required=True, help="the output folder")
+    evaluation.add_argument("--preset", default="fast", choices=PRESETS)
+    evaluation.add_argument("--models", nargs="+", default=list(MODELS), choices=MODELS)
+    evaluation.add_argument("--data", help="a collected dataset folder to use")
+    evaluation.add_argument("--epochs", type=int, help="override the preset's number of epochs")
+    evaluation.set_defaults(handler=_evaluate)
 
     demo = commands.add_parser("demo", help="the whole pipeline on the embedded defaults")
     demo.add_argument("-o", "--output", default="flexff-demo", help="output folder")

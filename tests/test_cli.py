@@ -62,15 +62,38 @@ def test_bench_prints_json(tmp_path):
     assert loop["c_equals_master"] and loop["steps"] == 15000
     assert set(loop["real_time_factor"]) == {"master", "libcosim", "libcosim_engine", "c"}
     assert loop["ratio_master_over_c"] > 1
+    learned = figures["learned_feedforward"]
+    for kind in ("lstm", "cnn-lstm", "tcn", "pgnn"):
+        for mode in ("step", "precomputed"):
+            assert learned[f"{kind}_{mode}"]["ratio_over_without_feedforward"] > 1
 
 
 @pytest.mark.slow
 def test_demo_runs(tmp_path):
-    """The whole demo (about a minute on 2 cores): FMUs, data, training, export, evaluation."""
+    """The whole demo (about ten minutes on 2 cores): FMUs, data, training of the four models,
+    export, the evaluation with every feedforward."""
     result = flexff("demo", "-o", str(tmp_path))
     assert result.returncode == 0, result.stderr
-    assert "| rigid-body FF |" in result.stdout
-    assert (tmp_path / "pgnn.onnx").is_file() and (tmp_path / "comparison.md").is_file()
+    assert "physics-guided FF" in result.stdout
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "lstm", "cnn-lstm", "tcn", "pgnn"]
+    best = max(("lstm", "cnn-lstm", "tcn", "pgnn"),
+               key=lambda m: min(summary["scenarios"][m][a]["e2_ratio"] for a in "xy"))
+    for axis in ("x", "y"):
+        assert summary["scenarios"][best][axis]["e2_ratio"] >= 100
+        assert summary["scenarios"][best][axis]["einf_ratio"] >= 40
+    assert all((tmp_path / f"{m}.onnx").is_file() for m in ("lstm", "cnn-lstm", "tcn", "pgnn"))
+
+
+def test_feedforward_fmu_build_needs_a_flexff_model(tmp_path):
+    from tests.test_fmu_network import running_sum_graph
+
+    result = flexff("fmu", "build", "feedforward", "-o", str(tmp_path / "ff.fmu"))
+    assert result.returncode == 2 and "needs --model" in result.stderr
+    toy = running_sum_graph(tmp_path / "toy.onnx")
+    result = flexff("fmu", "build", "feedforward", "--model", toy, "-o", str(tmp_path / "ff.fmu"))
+    assert result.returncode == 2 and "not a flexff feedforward model" in result.stderr
+    assert not (tmp_path / "ff.fmu").exists()
 
 
 def test_train_and_export_from_the_command_line(tmp_path):
