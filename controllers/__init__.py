@@ -1,3 +1,4 @@
 """Controllers, each described as an fmu.system.System: the feedback controller (PID loop
-shaping per axis, notch, encoder kinematics and control allocation) and the rigid-body
-feedforward of the nominal model."""
+shaping per axis, notch, encoder kinematics and control allocation), the rigid-body
+feedforward of the nominal model, and the learned feedforward (an exported ONNX model run by
+onnxruntime inside the FMU, its inputs from `features`: the motion features of eq. 2.1)."""
