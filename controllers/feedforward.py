@@ -7,10 +7,12 @@ mismatch, friction or the parasitic mode of the real machine.
 
 from __future__ import annotations
 
+from typing import Any
+
 import casadi as ca
 
+from controllers.features import nominal_model
 from fmu.system import System, Variable
-from plant.model import PlantModel
 
 REFERENCE_INPUTS = (
     Variable("x_ref", "m", "reference position, x"),
@@ -26,23 +28,41 @@ FORCE_OUTPUTS = (
 )
 
 
-def rigid_body_feedforward_system(step: float = 1e-3) -> System:
-    """Discrete, stateless System: reference (position, velocity, acceleration) -> F_ff."""
-    if not step > 0:
-        raise ValueError(f"step must be positive, got {step}")
-    model = PlantModel("nominal")
-    x, u, p, w = ca.SX.sym("x", 0), ca.SX.sym("u", 6), ca.SX.sym("p", 0), ca.SX.sym("w", 0)
-    force = model.inverse_dynamics(u[0:2], u[2:4], u[4:6], model.parameter_values())
+def rigid_body_force(reference: ca.SX) -> ca.SX:
+    """F = M a + C v + Q + D of the nominal model along the reference (x, y, vx, vy, ax, ay)."""
+    model = nominal_model()
+    return model.inverse_dynamics(reference[0:2], reference[2:4], reference[4:6],
+                                  model.parameter_values())
+
+
+def feedforward_system(name: str, description: str, reference: ca.SX, force: ca.SX,
+                       step: float, result: ca.SX | None = None, **options: Any) -> System:
+    """A discrete, stateless System from the reference signals to F_ff: `force` is an
+    expression of the symbol `reference` (the six REFERENCE_INPUTS) and, for a System with an
+    embedded network (`options["network"]`), of the network's `result`."""
+    x, p, w = ca.SX.sym("x", 0), ca.SX.sym("p", 0), ca.SX.sym("w", 0)
+    arguments = [x, reference, p, w, *([] if result is None else [result])]
     return System(
-        name="rigid_body_feedforward",
-        description="rigid-body feedforward, eq. (2.4) on the nominal plant model",
+        name=name,
+        description=description,
         kind="discrete",
         states=(),
         inputs=REFERENCE_INPUTS,
         outputs=FORCE_OUTPUTS,
         parameters=(),
         initial_state=ca.Function("initial_state", [p], [ca.SX(0, 1)]),
-        dynamics=ca.Function("dynamics", [x, u, p], [ca.SX(0, 1)]),
-        output=ca.Function("output", [x, u, p, w], [force]),
+        dynamics=ca.Function("dynamics", [x, reference, p], [ca.SX(0, 1)]),
+        output=ca.Function("output", arguments, [force]),
         sample_time=step,
+        **options,
     )
+
+
+def rigid_body_feedforward_system(step: float = 1e-3) -> System:
+    """Discrete, stateless System: reference (position, velocity, acceleration) -> F_ff."""
+    if not step > 0:
+        raise ValueError(f"step must be positive, got {step}")
+    reference = ca.SX.sym("u", len(REFERENCE_INPUTS))
+    return feedforward_system(
+        "rigid_body_feedforward", "rigid-body feedforward, eq. (2.4) on the nominal plant model",
+        reference, rigid_body_force(reference), step)

@@ -22,8 +22,9 @@ import casadi as ca
 import numpy as np
 import onnx
 
-from controllers.features import feature_names, motion_function, nominal_model
-from controllers.feedforward import FORCE_OUTPUTS, REFERENCE_INPUTS
+from controllers.features import feature_names, motion_function
+from controllers.feedforward import (FORCE_OUTPUTS, REFERENCE_INPUTS, feedforward_system,
+                                     rigid_body_force)
 from fmu.network import read_network
 from fmu.system import System
 
@@ -62,45 +63,32 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     meta = model_metadata(model)
     period = _period(meta, step, model)
     u = ca.SX.sym("u", len(REFERENCE_NAMES))
-    pos, vel, acc = u[0:2], u[2:4], u[4:6]
     if meta["input_kind"] == "reference":
         expected, inputs = REFERENCE_NAMES, u
     else:
         expected = feature_names(meta["feature_set"])
-        inputs = motion_function(meta["feature_set"])(pos, vel, acc)
+        inputs = motion_function(meta["feature_set"])(u[0:2], u[2:4], u[4:6])
     if json.loads(meta["input_signals"]) != expected:
         raise ValueError(f"{model}: its input signals {json.loads(meta['input_signals'])} are not "
                          f"the {meta['input_kind']} signals {expected} the FMU computes")
     prior = meta.get("prior", "none")
     if prior not in PRIORS:
         raise ValueError(f"{model}: unknown prior {prior!r} (known: {', '.join(PRIORS)})")
-    x, p, w = ca.SX.sym("x", 0), ca.SX.sym("p", 0), ca.SX.sym("w", 0)
+    x, p = ca.SX.sym("x", 0), ca.SX.sym("p", 0)
     network = read_network(model, ca.Function("network_input", [x, u, p], [inputs]), period,
                            None if reference is None else _table(reference, step))
     if network.n_outputs != len(FORCE_OUTPUTS):
         raise ValueError(f"{model}: the graph returns {network.n_outputs} values per step, the "
                          f"feedforward needs {len(FORCE_OUTPUTS)} (Fx_ff, Fy_ff)")
     r = ca.SX.sym("r", network.n_outputs)
-    force = r
-    if prior == "rigid-body":
-        nominal = nominal_model()
-        force = r + nominal.inverse_dynamics(pos, vel, acc, nominal.parameter_values())
+    force = r + rigid_body_force(u) if prior == "rigid-body" else r
     mode = "step" if reference is None else "precomputed"
-    return System(
-        name="learned_feedforward",
-        description=(f"learned feedforward: {meta.get('model_kind', 'ONNX')} model at "
-                     f"{float(meta['sample_rate_hz']):g} Hz in onnxruntime"
-                     f"{' plus the rigid-body feedforward' if prior == 'rigid-body' else ''}, "
-                     f"{mode} mode"),
-        kind="discrete",
-        states=(),
-        inputs=REFERENCE_INPUTS,
-        outputs=FORCE_OUTPUTS,
-        parameters=(),
-        initial_state=ca.Function("initial_state", [p], [ca.SX(0, 1)]),
-        dynamics=ca.Function("dynamics", [x, u, p], [ca.SX(0, 1)]),
-        output=ca.Function("output", [x, u, p, w, r], [force]),
-        sample_time=step,
+    return feedforward_system(
+        "learned_feedforward",
+        (f"learned feedforward: {meta.get('model_kind', 'ONNX')} model at "
+         f"{float(meta['sample_rate_hz']):g} Hz in onnxruntime"
+         f"{' plus the rigid-body feedforward' if prior == 'rigid-body' else ''}, {mode} mode"),
+        u, force, step, r,
         extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": prior,
                **{f"flexff.model.{k}": meta[k] for k in ("model_kind", "preset", "feature_set",
                                                            "input_kind", "sample_rate_hz")

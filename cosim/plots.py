@@ -20,7 +20,8 @@ SIGNALS = ("x_ref", "y_ref", "x", "y", "Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
 MM = 1e3
 
 
-def _save(figure, path: Path) -> Path:
+def save_figure(figure, path: Path) -> Path:
+    """Lay out, write atomically as PNG and close `figure`."""
     figure.tight_layout()
     atomic_write(path, lambda tmp: figure.savefig(tmp, dpi=120, format="png"))
     plt.close(figure)
@@ -33,7 +34,7 @@ def plot_path(rec: Recording, path: Path) -> Path:
     ax.plot(rec["x"] * MM, rec["y"] * MM, lw=1, label="end effector")
     ax.set(xlabel="x [mm]", ylabel="y [mm]", aspect="equal", title="x-y path")
     ax.legend(loc="best")
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def plot_error(rec: Recording, path: Path) -> Path:
@@ -44,7 +45,7 @@ def plot_error(rec: Recording, path: Path) -> Path:
         ax.grid(True, alpha=0.3)
     axes[0].set_title("tracking error (reference - true position)")
     axes[-1].set_xlabel("time [s]")
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def plot_forces(rec: Recording, path: Path) -> Path:
@@ -59,7 +60,7 @@ def plot_forces(rec: Recording, path: Path) -> Path:
     axes[0].legend(loc="upper right", ncol=3, fontsize="small")
     axes[0].set_title("end-effector force")
     axes[-1].set_xlabel("time [s]")
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def write_plots(rec: Recording, folder: str | Path) -> list[Path]:

@@ -32,6 +32,7 @@ import matplotlib.pyplot as plt  # noqa: E402  (after selecting the backend)
 from matplotlib.patches import Rectangle  # noqa: E402
 
 from cosim.metrics import AXES, tracking_metrics  # noqa: E402
+from cosim.plots import MM, save_figure  # noqa: E402
 from cosim.recording import Recording, atomic_write  # noqa: E402
 
 SCENARIO_LABELS: dict[str, str] = {
@@ -75,7 +76,6 @@ UNITS = {"e2": "m/sqrt(s)", "einf": "m", "rms": "m",
          "e2_ratio": "PID alone / scenario", "einf_ratio": "PID alone / scenario"}
 TRACKING = ("x_ref", "y_ref", "x", "y")
 FORCES = ("Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
-MM = 1e3
 
 
 def _check_env(env: str) -> None:
@@ -184,13 +184,6 @@ def _check_recordings(recordings: Mapping[str, Recording]) -> None:
                              f"run every scenario with the same communication step")
 
 
-def _save(figure, path: Path) -> Path:
-    figure.tight_layout()
-    atomic_write(path, lambda tmp: figure.savefig(tmp, dpi=120, format="png"))
-    plt.close(figure)
-    return path
-
-
 def _colors(recordings: Mapping[str, Recording]) -> dict[str, str]:
     """One colour per scenario, the same in every figure."""
     return {name: f"C{k}" for k, name in enumerate(recordings)}
@@ -219,7 +212,7 @@ def plot_paths(recordings: Mapping[str, Recording], path: Path) -> Path:
                              edgecolor="0.3"))
     full.set_title("x-y path")
     full.legend(loc="best", fontsize="small")
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def plot_errors(recordings: Mapping[str, Recording], path: Path) -> Path:
@@ -245,7 +238,7 @@ def plot_errors(recordings: Mapping[str, Recording], path: Path) -> Path:
     axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
     axes[0].set_title("tracking error (reference - true position)")
     axes[-1].set_xlabel("time [s]")
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def plot_force_split(recordings: Mapping[str, Recording], path: Path) -> Path:
@@ -263,7 +256,7 @@ def plot_force_split(recordings: Mapping[str, Recording], path: Path) -> Path:
     axes[0, 0].legend(loc="upper right", ncol=3, fontsize="small")
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def write_report(recordings: dict[str, Recording], env: str, out: str | Path) -> dict:
