@@ -4,8 +4,11 @@ Tables and keys (SI units; every table but [reference] may be left out):
 
   [run]          step (s, default 0.001), stop (s, default: the reference's duration; a longer
                  run holds the reference's last position at rest)
-  [reference]    kind = "thesis-eval" | "circle" | "line-circle" | "spline" | "segments" | "csv",
-                 and its keys:
+  [reference]    kind = "thesis-eval" | "thesis-hardware-eval" | "circle" | "line-circle" |
+                 "spline" | "segments" | "csv", and its keys:
+                   thesis-eval: none (the thesis's evaluation reference, sec. 5.7, 15 s)
+                   thesis-hardware-eval: none (its evaluation reference on the real machine,
+                           sec. 6.6, 100 s)
                    circle: radius, duration, centre = [x, y] (default [0, 0]), turns (default 1,
                            negative runs clockwise), start_angle (rad, default 0)
                    line-circle: a skew-sine line from `start` (default [0, 0]) in line_duration
@@ -58,7 +61,7 @@ from plant.model import VARIANTS, PlantModel
 from plant.parameters import NOMINAL
 from plant.system import plant_system
 
-REFERENCE_KINDS = ("thesis-eval", "circle", "line-circle", "spline", "segments", "csv")
+REFERENCE_KINDS = ("thesis-eval", "thesis-hardware-eval", "circle", "line-circle", "spline", "segments", "csv")
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
                 "circle": ("kind", "centre", "turns", "duration"),
                 "spline": ("kind", "points", "duration")}
@@ -88,6 +91,8 @@ class ReferenceConfig:
         o = self.options
         if self.kind == "thesis-eval":
             return references.thesis_evaluation(step)
+        if self.kind == "thesis-hardware-eval":
+            return references.thesis_hardware_evaluation(step)
         if self.kind == "csv":
             ref = references.read_csv(o["path"], step, o["smoothing_window"])
             return Reference(ref.t - ref.t[0], ref.x, ref.y, ref.vx, ref.vy, ref.ax, ref.ay)
@@ -263,7 +268,7 @@ class _Parser:
     def reference(self, t: Mapping[str, Any]) -> ReferenceConfig:
         kind = self.choice(t, "reference", "kind", REFERENCE_KINDS, None)
         r = "reference"
-        if kind == "thesis-eval":
+        if kind in ("thesis-eval", "thesis-hardware-eval"):
             self.keys(t, r, ("kind",))
             return ReferenceConfig(kind)
         if kind == "csv":
@@ -540,13 +545,11 @@ seed = 1
 notch = true
 """,
     "hardware-thesis-eval-model-ff": """\
-# The rigid-body feedforward of the nominal model on the hardware plant: what model mismatch
-# leaves for a learned feedforward to remove.
-[run]
-stop = 15.0
-
+# The rigid-body feedforward of the nominal model on the hardware plant, along the thesis's
+# evaluation reference for the real machine: what model mismatch and friction leave for a
+# learned feedforward to remove.
 [reference]
-kind = "thesis-eval"
+kind = "thesis-hardware-eval"
 
 [plant]
 variant = "hardware"
@@ -556,10 +559,10 @@ seed = 1
 kind = "model"
 """,
     "line-hold-circle": """\
-# The thesis's hardware evaluation path (sec. 6.6), 100 s on the hardware plant under PID: a
-# skew-sine line from the centre to (8.2, 8.2) mm in 21 s, 1 s at rest, 9 turns in 75 s (0.12 Hz)
-# about the centre, which makes the radius 11.6 mm and passes through the line's end, then 3 s
-# at rest.
+# The thesis's hardware evaluation path (sec. 6.6; kind = "thesis-hardware-eval" names it) as
+# segments, 100 s on the hardware plant under PID: a skew-sine line from the centre to
+# (8.2, 8.2) mm in 21 s, 1 s at rest, 9 turns in 75 s (0.12 Hz) about the centre, which makes
+# the radius 11.6 mm and passes through the line's end, then 3 s at rest.
 [reference]
 kind = "segments"
 start = [0.0, 0.0]

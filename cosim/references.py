@@ -31,6 +31,10 @@ THESIS_LINE_TIME = 3.0
 THESIS_RADIUS = 0.014
 THESIS_TURNS = 11.5
 THESIS_CIRCLE_TIME = 12.0
+# evaluation reference of the thesis on the real machine (section 6.6)
+THESIS_HW_LINE_END = (0.0082, 0.0082)
+THESIS_HW_LINE_TIME, THESIS_HW_REST, THESIS_HW_CIRCLE_TIME, THESIS_HW_END = 21.0, 1.0, 75.0, 3.0
+THESIS_HW_TURNS = 9.0
 
 JOIN_TOLERANCE = 1e-9  # m: largest position jump accepted between chained segments
 
@@ -258,6 +262,25 @@ def thesis_evaluation_path() -> Chain:
 def thesis_evaluation(step: float = 1e-3) -> Reference:
     """The thesis's evaluation reference sampled at `step`."""
     return sample(thesis_evaluation_path(), step)
+
+
+def thesis_hardware_evaluation_path() -> Chain:
+    """The thesis's evaluation reference on the real machine (sec. 6.6, Table 6.2), 100 s.
+
+    A skew-sine line from the centre to (8.2, 8.2) mm in 21 s, 1 s at rest, 9 counter-clockwise
+    turns about the centre in 75 s (0.12 Hz on average; the radius, 11.6 mm, is the line end's
+    distance from the centre), 3 s at rest.
+    """
+    end = THESIS_HW_LINE_END
+    return Chain((Line((0.0, 0.0), end, THESIS_HW_LINE_TIME), Hold(end, THESIS_HW_REST),
+                  Circle((0.0, 0.0), math.hypot(*end), math.atan2(end[1], end[0]),
+                         THESIS_HW_TURNS, THESIS_HW_CIRCLE_TIME),
+                  Hold(end, THESIS_HW_END)))
+
+
+def thesis_hardware_evaluation(step: float = 1e-3) -> Reference:
+    """The thesis's evaluation reference on the real machine sampled at `step`."""
+    return sample(thesis_hardware_evaluation_path(), step)
 
 
 def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.025) -> Reference:

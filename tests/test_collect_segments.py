@@ -72,6 +72,16 @@ def test_line_hold_circle_example():
     assert ref.x[0] == ref.y[0] == 0.0 and np.hypot(ref.vx[-3000:], ref.vy[-3000:]).max() == 0
 
 
+def test_thesis_hardware_eval_kind_is_the_segment_example():
+    """The named reference (cosim.references) and the segments written out in TOML agree."""
+    named = parse_config({"reference": {"kind": "thesis-hardware-eval"}})
+    segments = parse_config(config_examples()["line-hold-circle"])
+    assert named.stop == segments.stop == pytest.approx(100.0)
+    a, b = named.reference.build(STEP), segments.reference.build(STEP)
+    for signal in ("t", "x", "y", "vx", "vy", "ax", "ay"):
+        np.testing.assert_allclose(getattr(a, signal), getattr(b, signal), rtol=0, atol=1e-15)
+
+
 @pytest.mark.parametrize("segments, key, message", [
     ([], "reference.segments", "expected a list of segment tables"),
     ([3], "reference.segments[0]", "expected a table"),
