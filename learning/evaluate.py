@@ -2,47 +2,62 @@
 
 1. collect the environment's trajectory set under PID (resumes what is there);
 2. train each model (reuses a finished run of the same preset) and export it to ONNX;
-3. co-simulate the thesis's evaluation reference on the environment's plant: PID alone, with
-   the rigid-body feedforward, and with each learned model as an ONNX feedforward FMU;
+3. co-simulate the environment's evaluation reference on its plant: PID alone, with the
+   rigid-body feedforward, and with each learned model as an ONNX feedforward FMU. As in the
+   seed, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
+   100 s reference of sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz
+   circles) on the hardware plant;
 4. write the report (cosim.report): summary.json, table.md and the figures.
 
-Preprocessing beyond the seed (FEATURES): the seed low-passes the measured motion and forces
-at 1.8 Hz and re-quantizes its ideal simulated encoders. The evaluation reference's circle
-runs at up to 1.8 Hz, where that filter halves the signals and the training forces differ
-from the inverse dynamics of the filtered motion by about 1 %; with a 5 Hz corner and the
-simulated encoders left ideal, the residual of the nominal model falls to 0.2 % and the
-feedforward error with it. The hardware environment's encoders are counted by the plant, so
-only the corner changes there.
+Preprocessing beyond the seed (Environment.features): the seed low-passes the measured motion
+and forces at 1.8 Hz and re-quantizes its ideal simulated encoders. The sim evaluation
+reference's circle runs at up to 1.8 Hz, where that filter halves the signals and the training
+forces differ from the inverse dynamics of the filtered motion by about 1 %; with a 5 Hz corner
+and the simulated encoders left ideal, the residual of the nominal model falls to 0.2 % and the
+feedforward error with it. The hardware environment keeps the seed's preprocessing: its
+reference is slow and its encoders noisy.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from cosim.config import RunConfig, parse_config
 from cosim.recording import Recording, load_recording
 from cosim.report import write_report
-from cosim.run import run_config
+from cosim.run import range_warning, run_config
 from learning.collect import collect
 from learning.export import export
 from learning.models import NETWORKS, check_kind
 from learning.train import train
 
-ENVIRONMENTS = {"sim": ("sim", "nominal"), "hardware": ("hardware", "hardware")}  # set, plant
-MODELS = tuple(NETWORKS)
-FEATURES: dict[str, dict[str, Any]] = {
-    "sim": {"cutoff_hz": 5.0, "quantize_encoders": False},
-    "hardware": {"cutoff_hz": 5.0},
+@dataclass(frozen=True)
+class Environment:
+    """What `flexff evaluate --env` runs: the trajectory set trained on, the plant variant and
+    reference kind evaluated on, and the preprocessing overrides (learning.features)."""
+
+    trajectory_set: str
+    plant: str
+    reference: str
+    features: dict[str, Any] = field(default_factory=dict)
+
+
+ENVIRONMENTS = {
+    "sim": Environment("sim", "nominal", "thesis-eval",
+                       {"cutoff_hz": 5.0, "quantize_encoders": False}),
+    "hardware": Environment("hardware", "hardware", "thesis-hardware-eval"),
 }
+MODELS = tuple(NETWORKS)
 
 
 def scenario_config(env: str, name: str, model: Path | None = None,
                     mode: str = "step") -> RunConfig:
-    """The thesis evaluation reference on the environment's plant, with the feedforward of
-    scenario `name`: "pid" (none), "rigid-body", or a learned model (the ONNX file `model`)."""
+    """The environment's evaluation reference on its plant, with the feedforward of scenario
+    `name`: "pid" (none), "rigid-body", or a learned model (the ONNX file `model`)."""
     feedforward: dict[str, str] = {"kind": "none"}
     if name == "rigid-body":
         feedforward = {"kind": "model"}
@@ -50,8 +65,9 @@ def scenario_config(env: str, name: str, model: Path | None = None,
         if model is None:
             raise ValueError(f"scenario {name!r} needs an ONNX model")
         feedforward = {"kind": "onnx", "model": str(model), "mode": mode}
-    return parse_config({"reference": {"kind": "thesis-eval"},
-                         "plant": {"variant": ENVIRONMENTS[env][1], "seed": 1},
+    environment = ENVIRONMENTS[env]
+    return parse_config({"reference": {"kind": environment.reference},
+                         "plant": {"variant": environment.plant, "seed": 1},
                          "feedforward": feedforward}, name=f"{env}-{name}")
 
 
@@ -65,7 +81,8 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     for kind in models:
         check_kind(kind)
     out = Path(out)
-    set_name = ENVIRONMENTS[env][0]
+    environment = ENVIRONMENTS[env]
+    set_name = environment.trajectory_set
     if data is None:
         say(f"collecting the {set_name} set (PID only) into {out / f'data-{set_name}'}")
         data = collect(set_name, out / f"data-{set_name}")
@@ -73,7 +90,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     for kind in models:
         run = out / "runs" / kind
         metrics = _finished(run, preset) or train(
-            kind, preset, data, run, **FEATURES[env], **({"epochs": epochs} if epochs else {}))
+            kind, preset, data, run, **environment.features, **({"epochs": epochs} if epochs else {}))
         onnx_files[kind] = export(run, out / f"{kind}.onnx")
         say(f"{kind}: test MSE {metrics['test_mse']:.3g} ({metrics['parameters']} parameters, "
             f"{metrics['seconds_per_epoch']:.2f} s per epoch) -> {onnx_files[kind]}")
@@ -84,6 +101,8 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         recordings[name] = load_recording(folder)
         say(f"{name}: e2 = ({metrics['x']['e2']:.3g}, {metrics['y']['e2']:.3g}) m/sqrt(s), "
             f"real-time factor {metrics['real_time_factor']:.0f}")
+        if warning := range_warning(metrics):
+            say(f"{name}: {warning}")
     return write_report(recordings, env, out)
 
 

@@ -3,6 +3,7 @@ report written, and the rigid-body feedforward as good as the exact model makes 
 
 import json
 
+import numpy as np
 import pytest
 
 from learning.evaluate import evaluate, scenario_config
@@ -51,3 +52,17 @@ def test_bad_requests_are_refused(tmp_path):
         evaluate("sim", tmp_path, models=["mlp"])
     with pytest.raises(ValueError, match="needs an ONNX model"):
         scenario_config("sim", "lstm")
+
+
+@pytest.mark.parametrize("env, variant, duration", [("sim", "nominal", 15.0),
+                                                     ("hardware", "hardware", 100.0)])
+def test_each_environment_runs_the_seeds_own_evaluation_reference(env, variant, duration):
+    """Table 5.2 comes from the 15 s reference of sec. 5.7 on the nominal plant, Table 6.2 from
+    the 100 s one of sec. 6.6 (line to (8.2, 8.2) mm, 9 turns of 11.6 mm) on the real machine."""
+    config = scenario_config(env, "rigid-body")
+    assert config.plant.variant == variant and config.stop == pytest.approx(duration)
+    assert config.feedforward.kind == "model"
+    reference = config.reference.build(config.step)
+    if env == "hardware":
+        circle = (reference.t >= 22.0) & (reference.t <= 97.0)
+        assert np.hypot(reference.x[circle], reference.y[circle]) == pytest.approx(0.0116, abs=1e-5)
