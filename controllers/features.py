@@ -14,11 +14,13 @@ from __future__ import annotations
 import functools
 
 import casadi as ca
+import numpy as np
 
 from plant.kinematics import COORDINATE_NAMES, EE_INDEX
 from plant.model import PlantModel
 
 FEATURE_SETS = ("full", "compact")
+REFERENCE_SIGNALS = ("x_ref", "y_ref", "vx_ref", "vy_ref", "ax_ref", "ay_ref")
 COMPACT_NAMES = ("x", "y", "vx", "vy", "ax", "ay")
 
 
@@ -71,3 +73,23 @@ def motion_function(feature_set: str) -> ca.Function:
         feature_names(feature_set)  # raises with the list of known sets
     return ca.Function(f"features_{feature_set}", [pos, vel, acc], [out],
                        ["pos", "vel", "acc"], ["features"])
+
+
+def motion_features(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,
+                    feature_set: str) -> np.ndarray:
+    """Features (n, n_features) of n samples of wrist position, velocity, acceleration (n, 2)."""
+    return evaluate_samples(motion_function(feature_set), pos, vel, acc)
+
+
+def reference_features(signals: dict[str, np.ndarray], feature_set: str) -> np.ndarray:
+    """Features computed from the reference x_ref ... ay_ref: what the feedforward sees."""
+    ref = np.column_stack([np.asarray(signals[s], dtype=float).ravel()
+                           for s in REFERENCE_SIGNALS])
+    return motion_features(ref[:, 0:2], ref[:, 2:4], ref[:, 4:6], feature_set)
+
+
+def evaluate_samples(function: ca.Function, *columns: np.ndarray) -> np.ndarray:
+    """Evaluate a one-sample Function on n samples given as (n, k) arrays; returns (n, m)."""
+    n = columns[0].shape[0]
+    result = function.map(n, "thread", 2)(*[np.asarray(c, dtype=float).T for c in columns])
+    return np.asarray(result, dtype=float).T.reshape(n, -1)

@@ -121,9 +121,13 @@ def _sweep_values(text: str) -> tuple[str, list]:
 
 
 def _summary(metrics: dict) -> str:
+    from cosim.run import range_warning
+
     x, y = metrics["x"], metrics["y"]
+    warning = range_warning(metrics)
     return (f"e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), einf = ({x['einf']:.4g}, "
-            f"{y['einf']:.4g}) m, real-time factor {metrics['real_time_factor']:.0f}")
+            f"{y['einf']:.4g}) m, real-time factor {metrics['real_time_factor']:.0f}"
+            + (f"\n  {warning}" if warning else ""))
 
 
 def _config_example(args: argparse.Namespace) -> int:

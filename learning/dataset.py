@@ -14,12 +14,13 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from controllers.features import REFERENCE_SIGNALS
+
 FORMAT = "flexff-dataset"
 VERSION = 1
 MANIFEST = "manifest.json"
 SETS = ("sim", "hardware")
 SPLITS = ("train", "test")
-REFERENCE_SIGNALS = ("x_ref", "y_ref", "vx_ref", "vy_ref", "ax_ref", "ay_ref")
 ENCODER_SIGNALS = ("theta_s1", "theta_s2", "theta_s3")
 POSITION_SIGNALS = ("x", "y")
 LABEL_SIGNALS = ("Fx", "Fy")

@@ -23,7 +23,8 @@ the model's forces; the metadata says so (`prior` = "rigid-body", else "none").
 
 The metadata (onnx metadata_props, strings; lists and objects as JSON) names everything a
 runner needs: input and output signal names and units, the state tensors and their shapes,
-the sample rate, the prior, the model kind and feature set, the flexff version.
+the sample rate, the prior, the model kind and feature set, the range of every feature in the
+training data (`feature_range`, for controllers.training_range), the flexff version.
 """
 
 from __future__ import annotations
@@ -81,6 +82,9 @@ def _export(loaded: Run, out: Path, inputs: str) -> Path:
         "prior": "rigid-body" if model.residual else "none",
         "input_signals": json.dumps(model.input_names),
         "input_units": json.dumps(model.input_units),
+        "feature_range": json.dumps({"signals": loaded.feature_names,
+                                     "low": loaded.feature_scaler.low.tolist(),
+                                     "high": loaded.feature_scaler.high.tolist()}),
         "output_signals": json.dumps(OUTPUT_SIGNALS), "output_units": json.dumps(["N", "N"]),
         "sample_rate_hz": repr(float(loaded.model_rate_hz)),
         "state": json.dumps([{"input": n, "output": f"{n}_out", "shape": list(s.shape),

@@ -24,8 +24,8 @@ import casadi as ca
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from controllers.features import FEATURE_SETS, motion_function, nominal_model
-from learning.dataset import ENCODER_SIGNALS, LABEL_SIGNALS, REFERENCE_SIGNALS, Trajectory
+from controllers.features import FEATURE_SETS, evaluate_samples, motion_features, nominal_model
+from learning.dataset import ENCODER_SIGNALS, LABEL_SIGNALS, Trajectory
 from plant.kinematics import SHOULDER_INDEX
 
 
@@ -56,18 +56,6 @@ class FeatureConfig:
             raise ValueError("noise levels must not be negative")
 
 
-def motion_features(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,
-                    feature_set: str) -> np.ndarray:
-    """Features (n, n_features) of n samples of wrist position, velocity, acceleration (n, 2)."""
-    return _map(motion_function(feature_set), pos, vel, acc)
-
-
-def reference_features(signals: dict[str, np.ndarray], feature_set: str) -> np.ndarray:
-    """Features computed from the reference x_ref ... ay_ref: what the feedforward sees."""
-    ref = np.column_stack([np.asarray(signals[s], dtype=float) for s in REFERENCE_SIGNALS])
-    return motion_features(ref[:, 0:2], ref[:, 2:4], ref[:, 4:6], feature_set)
-
-
 def quantize_encoders(theta: np.ndarray) -> np.ndarray:
     """Angles (n, 3) counted in whole encoder counts from the home angles (wrist at the centre),
     as the plant's encoders count; angles already on that grid are returned unchanged."""
@@ -80,7 +68,7 @@ def quantize_encoders(theta: np.ndarray) -> np.ndarray:
 
 def encoder_positions(theta: np.ndarray, encoders: int = 2) -> np.ndarray:
     """Wrist positions (n, 2) from encoder angles (n, 3) by the nominal forward kinematics."""
-    return _map(_forward_kinematics(encoders), np.asarray(theta, dtype=float)[:, :encoders])
+    return evaluate_samples(_forward_kinematics(encoders), np.asarray(theta, dtype=float)[:, :encoders])
 
 
 @functools.lru_cache(maxsize=None)
@@ -142,9 +130,3 @@ def prepare_trajectory(traj: Trajectory, rate_hz: float, config: FeatureConfig,
     features = motion_features(pos[::step], vel[::step], acc[::step], config.feature_set)
     return features, forces[::step]
 
-
-def _map(function: ca.Function, *columns: np.ndarray) -> np.ndarray:
-    """Evaluate a one-sample Function on n samples given as (n, k) arrays; returns (n, m)."""
-    n = columns[0].shape[0]
-    result = function.map(n, "thread", 2)(*[np.asarray(c, dtype=float).T for c in columns])
-    return np.asarray(result, dtype=float).T.reshape(n, -1)

@@ -3,19 +3,22 @@ onnxruntime's Python API at the model's rate, its forces extrapolated linearly b
 the rigid-body force (numpy, CasADi) added for the physics-guided model. Both modes, state
 restore, libcosim, validation, closed loop, and the errors for models that do not fit."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from controllers.features import reference_features
 from controllers.learned_feedforward import learned_feedforward_system, model_metadata
+from controllers.training_range import MARGIN, RangeExcess
 from cosim.config import config_examples, parse_config
 from cosim.references import thesis_evaluation
-from cosim.run import run_config
+from cosim.run import range_warning, run_config
 from fmu.build import build_fmu
 from fmu.runner import run_fmu, run_fmu_libcosim
 from fmu.validation import validate_fmu
 from learning.dataset import REFERENCE_SIGNALS
 from learning.export import export, session
-from learning.features import reference_features
 from learning.rigid import rigid_forces
 from learning.synthetic import synthetic_dataset
 from learning.threads import torch_threads
@@ -140,10 +143,19 @@ def test_restored_state_continues_exactly(fmus, reference):
 def test_closed_loop_with_the_learned_feedforward(models, tmp_path):
     text = config_examples()["thesis-eval-pid"].replace(
         'kind = "none"', f'kind = "onnx"\nmodel = "{models / "pgnn.onnx"}"').replace(
-        "stop = 15.0", "stop = 0.5")
+        "stop = 15.0", "stop = 4.0")  # into the circle
     metrics = run_config(parse_config(text, name="pgnn"), tmp_path / "run")
     assert (tmp_path / "run" / "forces.png").is_file()
     assert np.isfinite(metrics["x"]["e2"]) and metrics["real_time_factor"] > 1
+    # the synthetic set's random motion covers the reference: nothing to warn of
+    assert metrics["feedforward_range"] == {"margin": MARGIN, "outside": []}
+    assert range_warning(metrics) is None
+
+
+def test_a_run_outside_the_training_range_is_warned_of():
+    excess = RangeExcess("theta_s1_ddot", "rad/s2", -0.25, 0.24, -6.2, 6.9, 14.0, 0.52)
+    metrics = {"feedforward_range": {"margin": MARGIN, "outside": [dataclasses.asdict(excess)]}}
+    assert "1 features (worst: theta_s1_ddot, 14 spans beyond)" in range_warning(metrics)
 
 
 def test_models_that_do_not_fit_are_refused(models, tmp_path):

@@ -5,9 +5,8 @@ import numpy as np
 import pytest
 import torch
 
-from controllers.features import motion_function
+from controllers.features import motion_features, motion_function
 from learning.casadi_torch import TorchFunction, atan2, frozen
-from learning.features import motion_features
 from learning.rigid import RigidBodyForce, rigid_forces
 from learning.threads import torch_threads
 

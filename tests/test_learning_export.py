@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 import torch
 
+from controllers.features import reference_features
 from learning.dataset import REFERENCE_SIGNALS, load_dataset
 from learning.deploy import SIModel, predict
 from learning.export import (TOLERANCE, export, read_metadata, run_sequence, run_steps,
                              session)
-from learning.features import prepare_trajectory, reference_features
+from learning.features import prepare_trajectory
 from learning.rigid import rigid_forces
 from learning.run_folder import load_run
 from learning.synthetic import synthetic_dataset
@@ -103,6 +104,9 @@ def test_metadata_names_everything_a_runner_needs(runs, tmp_path):
     assert meta["format"] == "flexff-feedforward" and meta["model_kind"] == "cnn-lstm"
     assert json.loads(meta["input_signals"]) == run.feature_names
     assert len(json.loads(meta["input_units"])) == 63
+    assert json.loads(meta["feature_range"]) == {"signals": run.feature_names,
+                                                 "low": run.feature_scaler.low.tolist(),
+                                                 "high": run.feature_scaler.high.tolist()}
     assert json.loads(meta["output_signals"]) == ["Fx_ff", "Fy_ff"]
     assert float(meta["sample_rate_hz"]) == 100.0 and meta["feature_set"] == "full"
     assert meta["flexff_version"] and "extrapolate" in meta["usage"]

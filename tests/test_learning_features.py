@@ -3,11 +3,10 @@
 import numpy as np
 import pytest
 
-from controllers.features import feature_names, feature_units, motion_columns
-from learning.dataset import REFERENCE_SIGNALS
+from controllers.features import (REFERENCE_SIGNALS, feature_names, feature_units,
+                                  motion_columns, motion_features, reference_features)
 from learning.features import (FeatureConfig, decimation, differentiate, encoder_positions,
-                               lowpass, motion_features, prepare_trajectory, quantize_encoders,
-                               reference_features)
+                               lowpass, prepare_trajectory, quantize_encoders)
 from learning.scaling import MinMaxScaler
 from learning.synthetic import skew_sine_circle, synthetic_trajectory
 from plant.kinematics import COORDINATE_NAMES, SHOULDER_INDEX

@@ -1,0 +1,63 @@
+"""Does a reference stay where a learned feedforward was trained?
+
+A network fed inputs outside its training range extrapolates, and a residual network can then
+add forces many times the rigid-body force (measured: up to 1 N against 0.1 N when the hardware
+models, trained on circles up to 0.29 Hz, ran the 1.8 Hz sim evaluation reference). The export
+stores the range of every feature in the training data (metadata `feature_range`); this module
+computes the features of a reference with the nominal kinematics, as the FMU does, and names
+those that leave that range by more than MARGIN of its span.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from controllers.features import feature_units, reference_features
+from controllers.learned_feedforward import model_metadata
+
+MARGIN = 0.1  # of a feature's training span: how far beyond it counts as extrapolating
+
+
+@dataclass(frozen=True)
+class RangeExcess:
+    """One feature the reference drives outside the training range [low, high]."""
+
+    signal: str
+    unit: str
+    low: float
+    high: float
+    reached_low: float
+    reached_high: float
+    spans: float  # how far beyond the range, in training spans
+    fraction: float  # of the reference's samples outside [low, high]
+
+    def describe(self) -> str:
+        return (f"{self.signal} reaches [{self.reached_low:.4g}, {self.reached_high:.4g}] "
+                f"{self.unit}, trained on [{self.low:.4g}, {self.high:.4g}] "
+                f"({self.spans:.2g} spans beyond, {100 * self.fraction:.0f} % of samples)")
+
+
+def training_range_excess(model: str | Path,
+                          reference: Mapping[str, np.ndarray]) -> list[RangeExcess] | None:
+    """The features of `model` that `reference` drives more than MARGIN spans outside the
+    training range, farthest first; None for a model exported without its range."""
+    meta = model_metadata(model)
+    if "feature_range" not in meta:
+        return None
+    trained = json.loads(meta["feature_range"])
+    low, high = np.asarray(trained["low"]), np.asarray(trained["high"])
+    span = np.where(high > low, high - low, 1.0)
+    features = reference_features(reference, meta["feature_set"])
+    below, above = features.min(axis=0), features.max(axis=0)
+    spans = np.maximum(low - below, above - high) / span
+    outside = ((features < low) | (features > high)).mean(axis=0)
+    units = feature_units(meta["feature_set"])
+    found = [RangeExcess(trained["signals"][k], units[k], float(low[k]), float(high[k]),
+                         float(below[k]), float(above[k]), float(spans[k]), float(outside[k]))
+             for k in np.flatnonzero(spans > MARGIN)]
+    return sorted(found, key=lambda e: -e.spans)
