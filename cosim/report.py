@@ -7,7 +7,8 @@ published numbers. Into the output folder go
   summary.json  e2, einf, rms and the improvement ratios (PID alone / scenario) per scenario
                 and axis, with the thesis's table for the same environment, in SI units
   table.md      the same as a Markdown table, in the thesis's scale (1e-4 or 1e-3)
-  paths.png     reference and each scenario's x-y path, with a zoom on where PID alone errs most
+  paths.png     reference and each scenario's x-y path, with a zoom on where the feedforwards err
+                most
   errors.png    tracking error over time per axis, one line per scenario
   forces.png    feedback, feedforward and total force per axis of each feedforward scenario
 
@@ -191,7 +192,8 @@ def _colors(recordings: Mapping[str, Recording]) -> dict[str, str]:
 
 def plot_paths(recordings: Mapping[str, Recording], path: Path) -> Path:
     """Reference and every scenario's x-y path (left), and a zoom (right) centred on the
-    reference point where PID alone errs most, wide enough to hold that error twice over."""
+    reference point where the feedforwards (PID alone if there are none) err most, wide enough
+    to hold that error three times over: the view that tells the feedforwards apart."""
     ref = recordings["pid"]
     colors = _colors(recordings)
     figure, (full, zoom) = plt.subplots(1, 2, figsize=(11, 5.5))
@@ -201,13 +203,17 @@ def plot_paths(recordings: Mapping[str, Recording], path: Path) -> Path:
             ax.plot(rec["x"] * MM, rec["y"] * MM, color=colors[name], lw=0.9,
                     label=SCENARIO_LABELS.get(name, name))
         ax.set(xlabel="x [mm]", ylabel="y [mm]", aspect="equal")
-    miss = np.hypot(ref["x_ref"] - ref["x"], ref["y_ref"] - ref["y"]) * MM
+    focus = [name for name in recordings if name != "pid"] or ["pid"]
+    miss = np.max([np.hypot(recordings[n]["x_ref"] - recordings[n]["x"],
+                            recordings[n]["y_ref"] - recordings[n]["y"]) for n in focus],
+                  axis=0) * MM
     worst = int(np.argmax(miss))
     extent = max(np.ptp(ref["x_ref"]), np.ptp(ref["y_ref"])) * MM
-    half = max(2.0 * miss[worst], 0.02 * extent, 1e-6)
+    half = max(3.0 * miss[worst], 0.02 * extent, 1e-6)
     cx, cy = ref["x_ref"][worst] * MM, ref["y_ref"][worst] * MM
+    which = "PID-alone" if focus == ["pid"] else "feedforward"
     zoom.set(xlim=(cx - half, cx + half), ylim=(cy - half, cy + half),
-             title=f"zoom at t = {ref.time[worst]:.3f} s (largest PID-alone error)")
+             title=f"zoom at t = {ref.time[worst]:.3f} s (largest {which} error)")
     full.add_patch(Rectangle((cx - half, cy - half), 2 * half, 2 * half, fill=False, lw=1,
                              edgecolor="0.3"))
     full.set_title("x-y path")
@@ -248,9 +254,9 @@ def plot_force_split(recordings: Mapping[str, Recording], path: Path) -> Path:
     for row, (name, rec) in zip(axes, recordings.items()):
         for ax, axis in zip(row, AXES):
             fb, ff = rec[f"F{axis}_fb"], rec[f"F{axis}_ff"]
-            ax.plot(rec.time, fb, lw=0.8, label="feedback")
-            ax.plot(rec.time, ff, lw=0.8, label="feedforward")
             ax.plot(rec.time, fb + ff, "k", lw=0.6, label="total")
+            ax.plot(rec.time, ff, "C1--", lw=1.0, label="feedforward")
+            ax.plot(rec.time, fb, "C0", lw=0.6, label="feedback")
             ax.set(ylabel=f"F_{axis} [N]", title=f"{SCENARIO_LABELS.get(name, name)}: {axis}")
             ax.grid(True, alpha=0.3)
     axes[0, 0].legend(loc="upper right", ncol=3, fontsize="small")
