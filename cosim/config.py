@@ -61,7 +61,8 @@ from plant.model import VARIANTS, PlantModel
 from plant.parameters import NOMINAL
 from plant.system import plant_system
 
-REFERENCE_KINDS = ("thesis-eval", "thesis-hardware-eval", "circle", "line-circle", "spline", "segments", "csv")
+REFERENCE_KINDS = ("thesis-eval", "thesis-hardware-eval", "circle", "line-circle", "spline",
+                   "segments", "csv")
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
                 "circle": ("kind", "centre", "turns", "duration"),
                 "spline": ("kind", "points", "duration")}

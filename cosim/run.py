@@ -2,9 +2,9 @@
 
 The folder gets signals.npz (and signals.csv, see cosim.recording), metrics.json
 (cosim.metrics; with a learned feedforward also `feedforward_range`, where the reference
-leaves the model's training range), path.png, error.png, forces.png (cosim.plots) and run.json, the checked
-configuration as plain data. The FMUs are built into the fmu/ cache and loaded from a
-temporary copy.
+leaves the model's training range), path.png, error.png, forces.png (cosim.plots) and
+run.json, the checked configuration as plain data. The FMUs are built into the fmu/ cache
+and loaded from a temporary copy.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """`flexff evaluate`: the seed's Table 5.2 (sim) or 6.2 (hardware) for flexff, end to end.
 
 1. collect the environment's trajectory set under PID (resumes what is there);
-2. train each model (reuses a finished run of the same preset) and export it to ONNX;
+2. train each model (reuses a finished run with the same settings) and export it to ONNX;
 3. co-simulate the environment's evaluation reference on its plant: PID alone, with the
    rigid-body feedforward, and with each learned model as an ONNX feedforward FMU. As in the
    seed, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
@@ -33,6 +33,7 @@ from cosim.run import range_warning, run_config
 from learning.collect import collect
 from learning.export import export
 from learning.models import NETWORKS, check_kind
+from learning.presets import TrainConfig, make_config
 from learning.train import train
 
 @dataclass(frozen=True)
@@ -89,8 +90,9 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     onnx_files = {}
     for kind in models:
         run = out / "runs" / kind
-        metrics = _finished(run, preset) or train(
-            kind, preset, data, run, **environment.features, **({"epochs": epochs} if epochs else {}))
+        overrides = {**environment.features, **({"epochs": epochs} if epochs else {})}
+        wanted = make_config(kind, preset, **overrides)
+        metrics = _finished(run, wanted) or train(kind, preset, data, run, **overrides)
         onnx_files[kind] = export(run, out / f"{kind}.onnx")
         say(f"{kind}: test MSE {metrics['test_mse']:.3g} ({metrics['parameters']} parameters, "
             f"{metrics['seconds_per_epoch']:.2f} s per epoch) -> {onnx_files[kind]}")
@@ -106,11 +108,15 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     return write_report(recordings, env, out)
 
 
-def _finished(run: Path, preset: str) -> dict | None:
-    """The metrics of a finished training run of `preset` in `run`, or None."""
+def _finished(run: Path, wanted: TrainConfig) -> dict | None:
+    """The metrics of a finished training run in `run` with the settings of `wanted` (where it
+    ran, on which device and threads, aside), or None."""
     try:
         config = json.loads((run / "run.json").read_text())["config"]
         metrics = json.loads((run / "metrics.json").read_text())
     except (OSError, ValueError, KeyError):
         return None
-    return metrics if config.get("preset") == preset else None
+    settings = json.loads(json.dumps(wanted.to_dict()))
+    same = all(config.get(key) == value for key, value in settings.items()
+               if key not in ("device", "threads"))
+    return metrics if same else None

@@ -68,7 +68,8 @@ def quantize_encoders(theta: np.ndarray) -> np.ndarray:
 
 def encoder_positions(theta: np.ndarray, encoders: int = 2) -> np.ndarray:
     """Wrist positions (n, 2) from encoder angles (n, 3) by the nominal forward kinematics."""
-    return evaluate_samples(_forward_kinematics(encoders), np.asarray(theta, dtype=float)[:, :encoders])
+    return evaluate_samples(_forward_kinematics(encoders),
+                            np.asarray(theta, dtype=float)[:, :encoders])
 
 
 @functools.lru_cache(maxsize=None)

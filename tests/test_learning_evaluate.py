@@ -2,6 +2,7 @@
 report written, and the rigid-body feedforward as good as the exact model makes it."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -43,6 +44,16 @@ def test_a_finished_training_run_is_reused(evaluation):
     stamp = (out / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns
     evaluate("sim", out, models=["pgnn"], data=out / "data", epochs=1, say=lambda _: None)
     assert (out / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns == stamp
+
+
+def test_a_run_with_other_settings_is_trained_again(evaluation, tmp_path):
+    out, _, _ = evaluation
+    copy = tmp_path / "copy"
+    shutil.copytree(out / "runs", copy / "runs")
+    stamp = (copy / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns
+    evaluate("sim", copy, models=["pgnn"], data=out / "data", epochs=2, say=lambda _: None)
+    assert (copy / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns != stamp
+    assert json.loads((copy / "runs" / "pgnn" / "run.json").read_text())["config"]["epochs"] == 2
 
 
 def test_bad_requests_are_refused(tmp_path):
