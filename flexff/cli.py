@@ -93,13 +93,13 @@ def _run(args: argparse.Namespace) -> int:
         except (NotImplementedError, RuntimeError) as error:
             print(f"flexff: error: {configs[0]}: {error}", file=sys.stderr)
             return 1
-        print(f"{configs[0]}: {_summary(metrics)} -> {args.output}")
+        _print_result(configs[0], metrics, args.output)
         return 0
     status = 0
     for result in run_batch(configs, args.output, args.workers, args.scheduler,
                             subfolders=len(configs) > 1 or bool(args.sweep)):
         if result.ok:
-            print(f"{result.name}: {_summary(result.metrics)} -> {result.output_dir}")
+            _print_result(result.name, result.metrics, result.output_dir)
         else:
             print(f"{result.name}: FAILED: {result.error}", file=sys.stderr)
             status = 1
@@ -120,14 +120,15 @@ def _sweep_values(text: str) -> tuple[str, list]:
             from None
 
 
-def _summary(metrics: dict) -> str:
+def _print_result(name: object, metrics: dict, output: object) -> None:
+    """One line per run, and a second where its learned feedforward extrapolates."""
     from cosim.run import range_warning
 
     x, y = metrics["x"], metrics["y"]
-    warning = range_warning(metrics)
-    return (f"e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), einf = ({x['einf']:.4g}, "
-            f"{y['einf']:.4g}) m, real-time factor {metrics['real_time_factor']:.0f}"
-            + (f"\n  {warning}" if warning else ""))
+    print(f"{name}: e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), einf = ({x['einf']:.4g}, "
+          f"{y['einf']:.4g}) m, real-time factor {metrics['real_time_factor']:.0f} -> {output}")
+    if warning := range_warning(metrics):
+        print(f"  {name}: {warning}")
 
 
 def _config_example(args: argparse.Namespace) -> int:
