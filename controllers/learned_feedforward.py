@@ -61,7 +61,7 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     """The System of the feedforward FMU running `model`; with `reference` (x_ref ... ay_ref
     at every step from t = 0) it is built in the precomputed mode for that reference."""
     meta = model_metadata(model)
-    period = _period(meta, step, model)
+    period = model_period(meta, step, model)
     u = ca.SX.sym("u", len(REFERENCE_NAMES))
     if meta["input_kind"] == "reference":
         expected, inputs = REFERENCE_NAMES, u
@@ -97,7 +97,7 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     )
 
 
-def _period(meta: Mapping[str, str], step: float, model: str | Path) -> int:
+def model_period(meta: Mapping[str, str], step: float, model: str | Path) -> int:
     """Communication steps per model call: the step must divide the model's sample period."""
     rate = float(meta["sample_rate_hz"])
     if not (step > 0 and rate > 0):

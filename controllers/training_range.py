@@ -4,8 +4,9 @@ A network fed inputs outside its training range extrapolates, and a residual net
 add forces many times the rigid-body force (measured: up to 1 N against 0.1 N when the hardware
 models, trained on circles up to 0.29 Hz, ran the 1.8 Hz sim evaluation reference). The export
 stores the range of every feature in the training data (metadata `feature_range`); this module
-computes the features of a reference with the nominal kinematics, as the FMU does, and names
-those that leave that range by more than MARGIN of its span.
+computes the features of a reference with the nominal kinematics, as the FMU does, at the
+samples the FMU feeds the network (one per model period), and names those that leave that range
+by more than MARGIN of its span.
 """
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.features import feature_units, reference_features
-from controllers.learned_feedforward import model_metadata
+from controllers.features import REFERENCE_SIGNALS, feature_units, reference_features
+from controllers.learned_feedforward import model_metadata, model_period
 
 MARGIN = 0.1  # of a feature's training span: how far beyond it counts as extrapolating
 
@@ -42,17 +43,20 @@ class RangeExcess:
                 f"({self.spans:.2g} spans beyond, {100 * self.fraction:.0f} % of samples)")
 
 
-def training_range_excess(model: str | Path,
-                          reference: Mapping[str, np.ndarray]) -> list[RangeExcess] | None:
-    """The features of `model` that `reference` drives more than MARGIN spans outside the
-    training range, farthest first; None for a model exported without its range."""
+def training_range_excess(model: str | Path, reference: Mapping[str, np.ndarray],
+                          step: float = 1e-3) -> list[RangeExcess] | None:
+    """The features of `model` that `reference` (sampled every `step` s from t = 0) drives more
+    than MARGIN spans outside the training range, farthest first; None for a model exported
+    without its range."""
     meta = model_metadata(model)
     if "feature_range" not in meta:
         return None
+    every = model_period(meta, step, model)  # the FMU runs the network on every n-th sample
+    seen = {n: np.asarray(reference[n], dtype=float).ravel()[::every] for n in REFERENCE_SIGNALS}
     trained = json.loads(meta["feature_range"])
     low, high = np.asarray(trained["low"]), np.asarray(trained["high"])
     span = np.where(high > low, high - low, 1.0)
-    features = reference_features(reference, meta["feature_set"])
+    features = reference_features(seen, meta["feature_set"])
     below, above = features.min(axis=0), features.max(axis=0)
     spans = np.maximum(low - below, above - high) / span
     outside = ((features < low) | (features > high)).mean(axis=0)

@@ -42,7 +42,7 @@ def feedforward_range(config: RunConfig) -> dict | None:
     (controllers.training_range): {"margin", "outside": [features, farthest first]}, or None
     for a model exported without its range."""
     reference = reference_samples(config.reference.build(config.step), config.steps)
-    excess = training_range_excess(config.feedforward.model, reference)
+    excess = training_range_excess(config.feedforward.model, reference, config.step)
     if excess is None:
         return None
     return {"margin": MARGIN, "outside": [dataclasses.asdict(e) for e in excess]}

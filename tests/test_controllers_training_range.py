@@ -24,16 +24,17 @@ def circle(rate: float, radius: float = RADIUS) -> dict[str, np.ndarray]:
     return dict(zip(REFERENCE_SIGNALS, values))
 
 
-def model_file(path, feature_set: str, trained_on: dict | None) -> str:
-    """A flexff-format ONNX file (an identity graph) trained, says its metadata, on the
-    features of `trained_on`."""
+def model_file(path, feature_set: str, trained_on: dict | None, rate_hz: float = 1000.0) -> str:
+    """A flexff-format ONNX file (an identity graph) run at `rate_hz` and trained, says its
+    metadata, on the features of `trained_on`."""
     n = len(feature_names(feature_set))
     x = onnx.helper.make_tensor_value_info("inputs", onnx.TensorProto.DOUBLE, ["time", n])
     y = onnx.helper.make_tensor_value_info("forces", onnx.TensorProto.DOUBLE, ["time", n])
     model = onnx.helper.make_model(onnx.helper.make_graph(
         [onnx.helper.make_node("Identity", ["inputs"], ["forces"])], "identity", [x], [y]))
     meta = {"format": "flexff-feedforward", "input_kind": "features", "feature_set": feature_set,
-            "input_signals": json.dumps(feature_names(feature_set)), "sample_rate_hz": "100.0"}
+            "input_signals": json.dumps(feature_names(feature_set)),
+            "sample_rate_hz": repr(rate_hz)}
     if trained_on is not None:
         features = reference_features(trained_on, feature_set)
         meta["feature_range"] = json.dumps({"signals": feature_names(feature_set),
@@ -77,6 +78,18 @@ def test_a_small_excess_within_the_margin_is_not_reported(tmp_path):
     model = model_file(tmp_path / "compact.onnx", "compact", circle(RATE))
     faster = 1 + MARGIN / 2  # acceleration 1.1025 times the trained: 0.05 spans beyond
     assert training_range_excess(model, circle(RATE * faster)) == []
+
+
+def test_only_the_samples_the_network_sees_are_judged(tmp_path):
+    """A 100 Hz model in a 1 kHz loop runs on every 10th sample: a one-sample excursion in
+    between never reaches it."""
+    model = model_file(tmp_path / "compact.onnx", "compact", circle(RATE), rate_hz=100.0)
+    for k, flagged in ((1205, False), (1200, True)):
+        reference = circle(RATE)
+        reference["ax_ref"] = reference["ax_ref"].copy()
+        reference["ax_ref"][k] = 1.0  # m/s2: ten times the circle's
+        assert [e.signal for e in training_range_excess(model, reference)] == (
+            ["ax"] if flagged else [])
 
 
 def test_a_model_exported_without_its_range_is_not_judged(tmp_path):
