@@ -1,0 +1,425 @@
+"""The FMU importer: any FMI 2.0 or 3.0 co-simulation FMU read into its ports and typed start
+values, and instantiated with a log of its own.
+
+One layer for everything that loads FMUs (the co-simulation master, the libcosim runner,
+validation, the bench), in FMPy's way: each FMI call is declared once (by fmpy), values of every
+type are set and read through one pair of functions (`FmuInstance.set` / `get`), and problems
+are FmuError messages that name the file, never tracebacks.
+
+Types: FMI 2.0 has Real, Integer, Boolean, String and Enumeration; FMI 3.0 Float32/64, (U)Int8 to
+(U)Int64, Boolean, String, Binary, Enumeration and Clock. `TYPE_KINDS` maps each to the kind
+of value it carries, so that an FMI 2.0 Real and an FMI 3.0 Float64 agree (both "float64").
+The hot path of a run, float64 values, goes through `FastCalls`: the bare C functions with
+ctypes arguments built once.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import zipfile
+from collections.abc import Callable, Mapping, Sequence
+from ctypes import CFUNCTYPE, byref, c_bool, c_double, c_int, c_size_t, c_uint, c_void_p, cast
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import fmpy
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.fmi3 import FMU3Slave
+from fmpy.logging import addLoggerProxy
+
+TYPE_KINDS = {
+    "Real": "float64", "Float64": "float64", "Float32": "float32",
+    "Integer": "int32", "Int32": "int32", "Int8": "int8", "UInt8": "uint8", "Int16": "int16",
+    "UInt16": "uint16", "UInt32": "uint32", "Int64": "int64", "UInt64": "uint64",
+    "Enumeration": "enumeration", "Boolean": "boolean", "String": "string",
+    "Binary": "binary", "Clock": "clock",
+}
+INTEGER_RANGES = {"int8": (-2**7, 2**7), "uint8": (0, 2**8), "int16": (-2**15, 2**15),
+                  "uint16": (0, 2**16), "int32": (-2**31, 2**31), "uint32": (0, 2**32),
+                  "int64": (-2**63, 2**63), "uint64": (0, 2**64),
+                  "enumeration": (-2**63, 2**63)}
+STATUS_LABELS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+
+
+class FmuError(ValueError):
+    """An FMU that cannot be read, loaded or used as asked; the message names the file."""
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One scalar variable of an FMU, with its start value in its Python type."""
+
+    name: str
+    value_reference: int
+    type: str  # the FMI type name (Real, Float64, Int32, Boolean, ...)
+    causality: str
+    variability: str
+    unit: str | None = None
+    start: Any = None
+    description: str = ""
+    scalar: bool = True  # False for an FMI 3.0 array variable (not connectable here)
+
+    @property
+    def kind(self) -> str:
+        """The kind of value it carries (TYPE_KINDS); equal kinds can be connected."""
+        return TYPE_KINDS[self.type]
+
+
+@dataclass(frozen=True)
+class FmuInfo:
+    """What a master needs to know of an FMU before loading it."""
+
+    path: Path
+    fmi_version: str  # "2.0" or "3.0"
+    model_name: str
+    identifier: str  # the co-simulation model identifier (name of the binary)
+    token: str  # FMI 2.0 guid or FMI 3.0 instantiationToken
+    variables: Mapping[str, Variable]
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    parameters: tuple[str, ...]  # causality parameter (and structuralParameter)
+    dependencies: Mapping[str, frozenset[str]]  # output -> the inputs it depends on directly
+    default_step: float | None = None
+    default_stop: float | None = None
+    model_description: Any = field(default=None, compare=False, repr=False)
+
+    @property
+    def feedthrough(self) -> frozenset[str]:
+        """Outputs that depend directly on an input."""
+        return frozenset(n for n, deps in self.dependencies.items() if deps)
+
+    def variable(self, name: str) -> Variable:
+        return self.variables[name]
+
+
+def _start_value(v: Any) -> Any:
+    """A model variable's start value in its Python type (None if it has none)."""
+    if v.start is None:
+        return None
+    try:
+        return typed_value(TYPE_KINDS.get(v.type, "string"), v.start)
+    except ValueError:
+        return v.start
+
+
+def read_fmu(path: str | Path) -> FmuInfo:
+    """Read the model description of a co-simulation FMU; FmuError if it is none."""
+    path = Path(path)
+    if not path.is_file():
+        raise FmuError(f"{path}: no such FMU file")
+    if not zipfile.is_zipfile(path):
+        raise FmuError(f"{path}: not an FMU (an FMU is a zip archive; this file is not one)")
+    try:
+        md = read_model_description(str(path), validate=False)
+    except Exception as error:  # fmpy raises plain Exceptions and XML errors
+        raise FmuError(f"{path}: cannot read modelDescription.xml: {error}") from None
+    if md.fmiVersion not in ("2.0", "3.0"):
+        raise FmuError(f"{path}: FMI {md.fmiVersion} is not supported (FMI 2.0 and 3.0 are)")
+    if md.coSimulation is None:
+        raise FmuError(f"{path}: the FMU has no co-simulation interface (only model exchange)")
+    variables = {}
+    for v in md.modelVariables:
+        if v.type not in TYPE_KINDS:
+            continue
+        unit = v.unit or (v.declaredType.unit if v.declaredType is not None
+                          and hasattr(v.declaredType, "unit") else None)
+        variables[v.name] = Variable(
+            v.name, int(v.valueReference), v.type, v.causality or "local",
+            v.variability or "continuous", unit or None, _start_value(v), v.description or "",
+            not v.dimensions)
+    inputs = tuple(n for n, v in variables.items() if v.causality == "input")
+    outputs = tuple(n for n, v in variables.items() if v.causality == "output")
+    parameters = tuple(n for n, v in variables.items()
+                       if v.causality in ("parameter", "structuralParameter"))
+    dependencies = {n: frozenset(inputs) for n in outputs}  # absent: depends on all (FMI)
+    for unknown in md.outputs:
+        if unknown.variable is not None and unknown.dependencies is not None:
+            dependencies[unknown.variable.name] = frozenset(
+                d.name for d in unknown.dependencies if d.name in inputs)
+    experiment = md.defaultExperiment
+    step = float(experiment.stepSize) if experiment and experiment.stepSize else None
+    stop = float(experiment.stopTime) if experiment and experiment.stopTime else None
+    token = md.guid if md.fmiVersion == "2.0" else md.instantiationToken
+    return FmuInfo(path, md.fmiVersion, md.modelName or path.stem,
+                   md.coSimulation.modelIdentifier, token or "", variables, inputs, outputs,
+                   parameters, dependencies, step, stop, md)
+
+
+def typed_value(kind: str, value: Any) -> Any:
+    """`value` (a TOML value, or a start value as written in XML) as a value of `kind`
+    (TYPE_KINDS); ValueError saying what was expected."""
+    if kind in ("float64", "float32"):
+        if isinstance(value, str):
+            try:
+                return float(value)
+            except ValueError:
+                pass
+        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise ValueError(f"expected a number, got {value!r}")
+    if kind in INTEGER_RANGES:
+        if isinstance(value, str):
+            try:
+                value = int(value)
+            except ValueError:
+                raise ValueError(f"expected an integer, got {value!r}") from None
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"expected an integer, got {value!r}")
+        low, high = INTEGER_RANGES[kind]
+        if not low <= value < high:
+            raise ValueError(f"{value} is outside the range of {kind} [{low}, {high - 1}]")
+        return value
+    if kind in ("boolean", "clock"):
+        if isinstance(value, str) and value in ("true", "false", "1", "0"):
+            return value in ("true", "1")
+        if not isinstance(value, bool):
+            raise ValueError(f"expected true or false, got {value!r}")
+        return value
+    if kind == "string":
+        if not isinstance(value, str):
+            raise ValueError(f"expected a string, got {value!r}")
+        return value
+    if kind == "binary":
+        if isinstance(value, bytes):
+            return value
+        if isinstance(value, str):
+            try:
+                return bytes.fromhex(value)
+            except ValueError:
+                pass
+        raise ValueError(f"expected bytes as a hexadecimal string, got {value!r}")
+    raise ValueError(f"values of kind {kind!r} cannot be set")
+
+
+# -- instances ------------------------------------------------------------------------------
+class _Fmi2Log:
+    """The one fmi2 logger of the process, routing each message to its instance.
+
+    fmpy's logger proxy (which formats the variadic message in C) keeps a single Python
+    callback for the whole process; every instance's callbacks carry its own
+    componentEnvironment, by which the messages are sorted to the instance that sent them.
+    """
+
+    def __init__(self) -> None:
+        self.sinks: dict[int, list[str]] = {}
+        self.callback = fmi2CallbackLoggerTYPE(self._log)
+        self._next = 1
+
+    def _log(self, env, instance, status, category, message) -> None:
+        sink = self.sinks.get(env or 0)
+        if sink is not None:
+            sink.append(_message(status, message))
+
+    def callbacks(self, sink: list[str]) -> tuple[fmi2CallbackFunctions, int]:
+        key, self._next = self._next, self._next + 1
+        self.sinks[key] = sink
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = self.callback
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
+        callbacks.componentEnvironment = c_void_p(key)
+        addLoggerProxy(byref(callbacks))
+        return callbacks, key
+
+
+_FMI2_LOG = _Fmi2Log()
+
+
+def _message(status: int, message: bytes | None) -> str:
+    label = STATUS_LABELS[status] if 0 <= status < len(STATUS_LABELS) else str(status)
+    return f"[{label}] {(message or b'').decode('utf-8', 'replace')}"
+
+
+@dataclass(frozen=True)
+class FastCalls:
+    """Float64 set, get and step of one instance as bare C calls with prebuilt arguments.
+
+    `set_args(vr, n, values)` and `get_args(...)` give the argument tuple of fmi2SetReal /
+    fmi3SetFloat64 (FMI 3.0 adds the number of values); `step_args` is the argument tuple
+    of fmi2DoStep / fmi3DoStep with `time` (a c_double to update before each call) and the
+    fixed step size. Each call returns the status as an int.
+    """
+
+    set_float64: Callable[..., int]
+    get_float64: Callable[..., int]
+    do_step: Callable[..., int]
+    set_args: Callable[[Any, int, Any], tuple]
+    get_args: Callable[[Any, int, Any], tuple]
+    time: c_double
+    step_args: Callable[[float], tuple]
+
+
+class FmuInstance:
+    """One instantiated co-simulation FMU (FMI 2.0 or 3.0) with its own message log."""
+
+    def __init__(self, info: FmuInfo, name: str) -> None:
+        self.info, self.name = info, name
+        self.messages: list[str] = []
+        self.initialized = False
+        self._unzipdir = extract(str(info.path))
+        cwd = os.getcwd()
+        try:
+            self.library = self._library_path()
+            kwargs = dict(guid=info.token, unzipDirectory=self._unzipdir,
+                          modelIdentifier=info.identifier, instanceName=name)
+            if info.fmi_version == "2.0":
+                self.fmu = FMU2Slave(**kwargs)
+                self._callbacks, self._log_key = _FMI2_LOG.callbacks(self.messages)
+                self.fmu.instantiate(callbacks=self._callbacks)
+            else:
+                self.fmu = FMU3Slave(**kwargs)
+                self.fmu.instantiate(logMessage=self._log3)
+        except FmuError:
+            self._remove()
+            raise
+        except Exception as error:  # fmpy: a library that does not load or instantiate
+            os.chdir(cwd)  # fmpy changes to the binary's folder to load it, and stays on failure
+            self._remove()
+            raise FmuError(f"{info.path}: {name}: cannot instantiate: {error}"
+                           f"{self._log_text()}") from None
+        self.component = c_void_p(self.fmu.component)
+
+    def _library_path(self) -> Path:
+        folder = fmpy.platform if self.info.fmi_version == "2.0" else fmpy.platform_tuple
+        path = (Path(self._unzipdir) / "binaries" / folder
+                / f"{self.info.identifier}{fmpy.sharedLibraryExtension}")
+        if not path.is_file():
+            raise FmuError(f"{self.info.path}: no binary for this platform "
+                           f"(binaries/{folder}/{path.name} is missing)")
+        return path
+
+    def _log3(self, env, status, category, message) -> None:
+        self.messages.append(_message(status, message))
+
+    def _log_text(self) -> str:
+        return f" ({'; '.join(self.messages[-5:])})" if self.messages else ""
+
+    def fail(self, what: str) -> FmuError:
+        """The error for a failed call, with the FMU's last messages."""
+        log = "; ".join(self.messages[-5:]) or "no message from the FMU"
+        return FmuError(f"{self.name}: {what} failed: {log}")
+
+    def call(self, what: str, function: Callable[[], Any]) -> Any:
+        """Run one fmpy call; an error status or exception becomes FmuError naming `what`."""
+        try:
+            return function()
+        except Exception:
+            raise self.fail(what) from None
+
+    # -- values of every type ------------------------------------------------------------
+    def set(self, values: Mapping[str, Any]) -> None:
+        """Set variables by name, each in its own type (values checked by typed_value)."""
+        for name, value in values.items():
+            v = self.info.variables[name]
+            value = typed_value(v.kind, value)
+            self.call(f"setting {name} = {value!r}",
+                      lambda v=v, value=value: self._setter(v)([v.value_reference], [value]))
+
+    def get(self, names: Sequence[str]) -> list[Any]:
+        """Values by name, each in its Python type."""
+        out = []
+        for name in names:
+            v = self.info.variables[name]
+            value = self.call(f"getting {name}",
+                              lambda v=v: self._getter(v)([v.value_reference])[0])
+            if v.kind == "boolean":
+                value = bool(value)
+            elif v.kind == "string" and isinstance(value, bytes):
+                value = value.decode("utf-8", "replace")
+            out.append(value)
+        return out
+
+    def _setter(self, v: Variable) -> Callable:
+        return getattr(self.fmu, "set" + self._type_name(v))
+
+    def _getter(self, v: Variable) -> Callable:
+        return getattr(self.fmu, "get" + self._type_name(v))
+
+    def _type_name(self, v: Variable) -> str:
+        if self.info.fmi_version == "2.0":
+            return "Integer" if v.type == "Enumeration" else v.type
+        return "Int64" if v.type == "Enumeration" else v.type
+
+    # -- life cycle -----------------------------------------------------------------------
+    def initialize(self, values: Mapping[str, Any] | None = None, start_time: float = 0.0,
+                   stop_time: float | None = None) -> None:
+        """Set `values` (parameters, inputs' start values) in initialization mode, leave it."""
+        fmu = self.fmu
+        if self.info.fmi_version == "2.0":
+            self.call("fmi2SetupExperiment",
+                      lambda: fmu.setupExperiment(startTime=start_time, stopTime=stop_time))
+            self.call("fmi2EnterInitializationMode", fmu.enterInitializationMode)
+        else:
+            self.call("fmi3EnterInitializationMode", lambda: fmu.enterInitializationMode(
+                startTime=start_time, stopTime=stop_time))
+        self.set(values or {})
+        self.call(f"fmi{self.info.fmi_version[0]}ExitInitializationMode",
+                  fmu.exitInitializationMode)
+        self.initialized = True
+
+    def do_step(self, time: float, step: float) -> None:
+        """One communication step through fmpy (FastCalls for the hot loop)."""
+        if self.info.fmi_version == "2.0":
+            self.call(f"fmi2DoStep from t = {time:.9g} s",
+                      lambda: self.fmu.doStep(currentCommunicationPoint=time,
+                                              communicationStepSize=step))
+        else:
+            self.call(f"fmi3DoStep from t = {time:.9g} s",
+                      lambda: self.fmu.doStep(currentCommunicationPoint=time,
+                                              communicationStepSize=step))
+
+    def fast_calls(self) -> FastCalls:
+        """The bare float64 and step calls of this instance (see FastCalls)."""
+        prototype = CFUNCTYPE(c_int)
+        dll, c = self.fmu.dll, self.component
+
+        def pointer(name: str) -> Callable[..., int]:
+            return prototype(cast(getattr(dll, name), c_void_p).value)
+
+        time = c_double(0.0)
+        if self.info.fmi_version == "2.0":
+            return FastCalls(
+                pointer("fmi2SetReal"), pointer("fmi2GetReal"), pointer("fmi2DoStep"),
+                lambda vr, n, values: (c, vr, c_size_t(n), values),
+                lambda vr, n, values: (c, vr, c_size_t(n), values),
+                time, lambda h: (c, time, c_double(h), c_int(1)))
+        flags = [c_bool(False) for _ in range(3)]
+        last = c_double(0.0)
+        return FastCalls(
+            pointer("fmi3SetFloat64"), pointer("fmi3GetFloat64"), pointer("fmi3DoStep"),
+            lambda vr, n, values: (c, vr, c_size_t(n), values, c_size_t(n)),
+            lambda vr, n, values: (c, vr, c_size_t(n), values, c_size_t(n)),
+            time, lambda h: (c, time, c_double(h), c_bool(True), *map(byref, flags),
+                             byref(last)))
+
+    def close(self) -> None:
+        """Terminate (if initialized), free the instance, delete the extracted files."""
+        try:
+            if self.initialized:
+                try:
+                    self.fmu.terminate()
+                except Exception:
+                    pass  # the run's own error, if any, is the one to report
+            self.fmu.freeInstance()
+        finally:
+            self._remove()
+
+    def _remove(self) -> None:
+        if getattr(self, "_log_key", None) is not None:
+            _FMI2_LOG.sinks.pop(self._log_key, None)
+        shutil.rmtree(self._unzipdir, ignore_errors=True)
+
+    def __enter__(self) -> FmuInstance:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def uint_array(values: Sequence[int]):
+    """A ctypes array of value references."""
+    return (c_uint * len(values))(*values)
