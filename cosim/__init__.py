@@ -1,8 +1,10 @@
-"""Co-simulation: run configurations (TOML), the fixed-step master over fmpy, recording,
-metrics, plots, the evaluation report, batches, and the same runs under libcosim and as a
-plain C loop.
+"""Co-simulation: run configurations (TOML or SSP), their resolution into FMUs and wiring, the
+fixed-step master over fmpy (FMI 2.0 and 3.0), recording, metrics, plots, the evaluation report,
+batches, and the same runs under libcosim and as a plain C loop.
 
-Public API: `config.load_config` / `parse_config` / `config_examples`, `run.run_config`,
-`batch.run_batch` / `sweep`, `master.Master` / `SlaveSpec`, `recording.load_recording`,
-`metrics.run_metrics`, `report.write_report`, `references` (reference trajectories).
+Public API: `config.load_config` / `parse_config` / `config_examples` / `expanded`,
+`schema.RunConfig` (the configuration as data), `scenario.resolve`, `run.run_config`,
+`ssp.export_ssp` / `load_ssp`, `batch.run_batch` / `sweep`, `master.Master` / `SlaveSpec`,
+`wiring.wire`, `recording.load_recording`, `metrics.run_metrics`, `report.write_report`,
+`references` (reference trajectories).
 """

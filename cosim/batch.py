@@ -7,6 +7,7 @@ must see the same file system as this process (configuration files and output fo
 
 from __future__ import annotations
 
+import copy
 import tomllib
 import traceback
 from collections.abc import Sequence
@@ -15,8 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cosim.config import ConfigError, RunConfig, parse_config
+from cosim.config import parse_config
 from cosim.run import run_config
+from cosim.schema import ConfigError, RunConfig
 
 
 @dataclass(frozen=True)
@@ -84,18 +86,23 @@ def _run_dask(configs: list, folders: list[Path], scheduler: str) -> list[BatchR
 
 
 def sweep(path: str | Path, key: str, values: Sequence[Any]) -> list[RunConfig]:
-    """Copies of the configuration file at `path` with `table.key` set to each value, named
-    <stem>-<key>=<value>; each copy is checked like any configuration."""
+    """Copies of the configuration file at `path` with the key `key` (dotted: `plant.m_up1`,
+    `fmu.vdp.parameters.mu`) set to each value, named <stem>-<key>=<value>; each copy is
+    checked like any configuration."""
     path = Path(path)
-    table, _, name = key.partition(".")
-    if not table or not name:
+    *tables, name = key.split(".")
+    if not tables or not all(tables) or not name:
         raise ValueError(f"a sweep key is table.key (e.g. plant.m_up1), got {key!r}")
     base = tomllib.loads(path.read_text())
     configs = []
     for value in values:
-        data = {t: dict(v) if isinstance(v, dict) else v for t, v in base.items()}
-        data.setdefault(table, {})[name] = value
+        data = copy.deepcopy(base)
+        table = data
+        for part in tables:
+            table = table.setdefault(part, {})
+            if not isinstance(table, dict):
+                raise ValueError(f"--sweep {key}: {part!r} is not a table in {path}")
+        table[name] = value
         configs.append(parse_config(data, name=f"{path.stem}-{key}={value}",
                                     base=path.resolve().parent, source=str(path)))
     return configs
-

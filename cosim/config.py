@@ -1,9 +1,9 @@
-"""Run configurations: a TOML file parsed and checked into plain dataclasses before anything runs.
+"""Run configurations: a TOML file parsed and checked into cosim.schema's plain data before
+anything is built or run, and written back out in the general form (`flexff config expand`).
 
-Tables and keys (SI units; every table but [reference] may be left out):
+The tables of the general form are listed in cosim.schema. The reference and the manipulator's
+short form:
 
-  [run]          step (s, default 0.001), stop (s, default: the reference's duration; a longer
-                 run holds the reference's last position at rest)
   [reference]    kind = "thesis-eval" | "thesis-hardware-eval" | "circle" | "line-circle" |
                  "spline" | "segments" | "csv", and its keys:
                    thesis-eval: none (the thesis's evaluation reference, sec. 5.7, 15 s)
@@ -34,10 +34,16 @@ Tables and keys (SI units; every table but [reference] may be left out):
                  the plant variant (controllers.feedback.DEFAULTS)
   [feedforward]  kind = "none" | "model" (rigid-body) | "onnx" (with model = "file.onnx", an
                  exported learned model, and mode = "step" (default) | "precomputed")
-  [record]       signals = [names] (default: all), csv (bool, default true)
 
-Any problem (unknown table or key, wrong type, missing file, a reference outside the workspace,
-a step that does not divide the stop time, ...) raises ConfigError naming `table.key`.
+A configuration without [fmu.*] tables is the manipulator's loop: the short form, with the
+defaults of its tables. The same keys (variant, seed, crossover_hz, notch, encoders, model,
+mode) are the options of the built-in FMUs in the general form, with the plant's physical
+parameters in `parameters`.
+
+Any problem (unknown table or key, wrong type, missing file, an FMU variable that does not
+exist or has another type, a reference outside the workspace, a step that does not divide the
+stop time, ...) raises ConfigError naming `table.key`; the wiring (cosim.wiring) is checked
+when the FMUs are resolved, before anything runs.
 """
 
 from __future__ import annotations
@@ -45,159 +51,37 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import tomli_w
 
 from controllers.allocation import ENCODER_CHOICES
-from controllers.feedback import OUTPUTS as CONTROLLER_OUTPUTS
 from controllers.feedforward import FORCE_OUTPUTS
 from controllers.learned_feedforward import model_metadata
-from cosim import references
-from cosim.references import Reference
+from cosim.references import REFERENCE_KINDS, SegmentError, build_reference
+from cosim.schema import (ALGORITHMS, BUILTIN_OPTIONS, SOURCE_KINDS, UNCONNECTED, ConfigError,
+                          ConnectionConfig, FmuConfig, RecordConfig, ReferenceConfig,
+                          RunConfig, SourceConfig)
+from fmu.importer import FmuError, read_fmu, typed_value
 from plant.kinematics import check_workspace
-from plant.model import VARIANTS, PlantModel
+from plant.model import VARIANTS
 from plant.parameters import NOMINAL
 from plant.system import plant_system
 
-REFERENCE_KINDS = ("thesis-eval", "thesis-hardware-eval", "circle", "line-circle", "spline",
-                   "segments", "csv")
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
                 "circle": ("kind", "centre", "turns", "duration"),
                 "spline": ("kind", "points", "duration")}
 FEEDFORWARD_KINDS = ("none", "model", "onnx")
+FEEDFORWARD_BUILTINS = {"model": "rigid-body-feedforward", "onnx": "learned-feedforward"}
 FEEDFORWARD_MODES = ("step", "precomputed")
+SHORT_FORM = ("plant", "controller", "feedforward")
+TABLES = ("run", "reference", "source", "fmu", "connection", "record", *SHORT_FORM)
 STEP_TOLERANCE = 1e-9  # relative: stop / step must be this close to a whole number
-PLANT_EXTRA = ("max_substep",)  # FMU parameters beyond the System's own
-
-
-class ConfigError(ValueError):
-    """A configuration problem, naming the file and the `table.key` at fault."""
-
-    def __init__(self, source: str, key: str, message: str) -> None:
-        super().__init__(f"{source}: {key}: {message}")
-        self.key = key
-
-
-@dataclass(frozen=True)
-class ReferenceConfig:
-    """The reference's kind and its checked keys (paths absolute)."""
-
-    kind: str = "thesis-eval"
-    options: Mapping[str, Any] = field(default_factory=dict)
-
-    def build(self, step: float) -> Reference:
-        """The reference sampled every `step` seconds from t = 0."""
-        o = self.options
-        if self.kind == "thesis-eval":
-            return references.thesis_evaluation(step)
-        if self.kind == "thesis-hardware-eval":
-            return references.thesis_hardware_evaluation(step)
-        if self.kind == "csv":
-            ref = references.read_csv(o["path"], step, o["smoothing_window"])
-            return Reference(ref.t - ref.t[0], ref.x, ref.y, ref.vx, ref.vy, ref.ax, ref.ay)
-        return references.sample(self._path(), step)
-
-    def _path(self) -> references.Segment:
-        o = self.options
-        if self.kind == "segments":
-            return _segment_chain(o["start"], o["segments"])
-        if self.kind == "spline":
-            return references.Spline(tuple(map(tuple, o["points"])), o["duration"])
-        circle = references.Circle(tuple(o["centre"]), o["radius"], o["start_angle"], o["turns"],
-                                   o["duration" if self.kind == "circle" else "circle_duration"])
-        if self.kind == "circle":
-            return circle
-        line = references.Line(tuple(o["start"]), tuple(circle.start), o["line_duration"])
-        return references.Chain((line, circle))
-
-
-class _SegmentError(ValueError):
-    """A segment of a `segments` reference that cannot be built; `index` says which."""
-
-    def __init__(self, index: int, message: str) -> None:
-        super().__init__(message)
-        self.index = index
-
-
-def _segment_chain(start: tuple[float, float], segments: Sequence[Mapping[str, Any]]
-                  ) -> references.Chain:
-    """The checked segment tables of a `segments` reference as one Chain from `start`."""
-    point, pieces = (float(start[0]), float(start[1])), []
-    for k, spec in enumerate(segments):
-        try:
-            piece = _segment(point, spec)
-        except ValueError as error:
-            raise _SegmentError(k, str(error)) from None
-        pieces.append(piece)
-        point = (float(piece.end[0]), float(piece.end[1]))
-    return references.Chain(tuple(pieces))
-
-
-def _segment(point: tuple[float, float], spec: Mapping[str, Any]) -> references.Segment:
-    """One segment starting at `point`; circles and splines take their geometry from it."""
-    kind, duration = spec["kind"], spec["duration"]
-    if kind == "line":
-        return references.Line(point, tuple(spec["to"]), duration)
-    if kind == "hold":
-        return references.Hold(point, duration)
-    if kind == "circle":
-        centre = spec["centre"]
-        dx, dy = point[0] - centre[0], point[1] - centre[1]
-        radius = math.hypot(dx, dy)
-        if radius == 0:
-            raise ValueError(f"the circle starts at its centre {tuple(centre)} m (radius 0): "
-                             f"move the centre or the point before it")
-        return references.Circle(tuple(centre), radius, math.atan2(dy, dx), spec["turns"],
-                                 duration)
-    return references.Spline((point, *map(tuple, spec["points"])), duration)
-
-
-@dataclass(frozen=True)
-class PlantConfig:
-    variant: str = "nominal"
-    parameters: Mapping[str, float] = field(default_factory=dict)
-    seed: int | None = None
-
-
-@dataclass(frozen=True)
-class ControllerConfig:
-    crossover_hz: float | None = None  # None: the variant's default
-    notch: bool | float | None = None  # None: the variant's default; a float is in Hz
-    encoders: int = 2
-
-
-@dataclass(frozen=True)
-class FeedforwardConfig:
-    kind: str = "none"
-    model: Path | None = None
-    mode: str = "step"  # onnx: run step by step, or precomputed over the whole reference
-
-
-@dataclass(frozen=True)
-class RecordConfig:
-    signals: tuple[str, ...] | None = None  # None: every signal
-    csv: bool = True
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    """A checked run configuration."""
-
-    name: str
-    step: float
-    stop: float
-    reference: ReferenceConfig
-    plant: PlantConfig = PlantConfig()
-    controller: ControllerConfig = ControllerConfig()
-    feedforward: FeedforwardConfig = FeedforwardConfig()
-    record: RecordConfig = RecordConfig()
-    source: str = "<config>"
-
-    @property
-    def steps(self) -> int:
-        return int(round(self.stop / self.step))
+PLANT_EXTRA = ("max_substep",)  # plant FMU parameters beyond the System's own
+START_PARAMETERS = ("x_start", "y_start")
+SETTABLE = ("parameter", "structuralParameter", "input")  # causalities `parameters` may set
 
 
 def load_config(path: str | Path) -> RunConfig:
@@ -223,10 +107,59 @@ def parse_config(data: Mapping[str, Any] | str, name: str = "config",
     return _Parser(source, Path(base)).parse(data, name)
 
 
+def config_examples() -> dict[str, str]:
+    """Example configurations (TOML text) by name, shipped in cosim/examples/."""
+    folder = resources.files("cosim") / "examples"
+    return {Path(f.name).stem: f.read_text() for f in sorted(folder.iterdir(),
+                                                              key=lambda f: f.name)
+            if f.name.endswith(".toml")}
+
+
+def expanded(config: RunConfig) -> dict[str, Any]:
+    """The configuration in the general form, as TOML tables (paths absolute)."""
+    run = {"step": config.step, "stop": config.stop, "algorithm": config.algorithm,
+           "order": [f.name for f in config.fmus]}
+    data: dict[str, Any] = {"run": run}
+    if config.reference is not None:
+        data["reference"] = {"kind": config.reference.kind, **_plain(config.reference.options)}
+    if config.sources:
+        data["source"] = [{"kind": s.kind, **({"path": str(s.path)} if s.path else {}),
+                           **({"values": dict(s.values)} if s.values else {})}
+                          for s in config.sources]
+    data["fmu"] = {f.name: {**({"path": str(f.path)} if f.path else {}),
+                            **({"builtin": f.builtin} if f.builtin else {}),
+                            **_plain(f.options),
+                            **({"parameters": dict(f.parameters)} if f.parameters else {}),
+                            **({"unconnected": f.unconnected}
+                               if f.unconnected != "error" else {})}
+                   for f in config.fmus}
+    if config.connections:
+        data["connection"] = [{"from": c.source, "to": c.target,
+                               **({"gain": c.gain} if c.gain != 1.0 else {}),
+                               **({"offset": c.offset} if c.offset != 0.0 else {})}
+                              for c in config.connections]
+    data["record"] = {**({"signals": list(config.record.signals)}
+                         if config.record.signals is not None else {}),
+                      "csv": config.record.csv}
+    return data
+
+
+def expanded_text(config: RunConfig) -> str:
+    """`expanded` as TOML text, with a comment naming where it came from."""
+    return f"# {config.source}, in the general form\n" + tomli_w.dumps(expanded(config))
+
+
+def _plain(value: Any) -> Any:
+    """Tuples as lists and paths as strings, for TOML."""
+    if isinstance(value, Mapping):
+        return {k: _plain(v) for k, v in value.items() if v is not None}
+    if isinstance(value, (tuple, list)):
+        return [_plain(v) for v in value]
+    return str(value) if isinstance(value, Path) else value
+
+
 class _Parser:
     """Checks one configuration; every error names the file and `table.key`."""
-
-    TABLES = ("run", "reference", "plant", "controller", "feedforward", "record")
 
     def __init__(self, source: str, base: Path) -> None:
         self.source, self.base = source, base
@@ -236,36 +169,296 @@ class _Parser:
 
     def parse(self, data: Mapping[str, Any], name: str) -> RunConfig:
         for table in data:
-            if table not in self.TABLES:
-                raise self.error(table, f"unknown table [{table}] (known: "
-                                        f"{', '.join(self.TABLES)})")
-        tables = {t: self.table(data, t) for t in self.TABLES}
-        if "reference" not in data:
-            raise self.error("reference", "the [reference] table is required")
-        run = tables["run"]
-        self.keys(run, "run", ("step", "stop"))
+            if table not in TABLES:
+                raise self.error(table, f"unknown table [{table}] (known: {', '.join(TABLES)})")
+        general = "fmu" in data
+        short = any(t in data for t in SHORT_FORM) or not general
+        run = self.table(data, "run")
+        self.keys(run, "run", ("step", "stop", "algorithm", "order"))
         step = self.number(run, "run", "step", 1e-3, positive=True)
-        reference = self.reference(tables["reference"])
+        if short and "reference" not in data:
+            raise self.error("reference", "the [reference] table is required")
+        reference, signal = None, None
+        if "reference" in data:
+            reference = self.reference(self.table(data, "reference"))
+            signal = self.sampled(reference, self.table(data, "reference"), step)
+        fmus: list[FmuConfig] = []
+        sources: list[SourceConfig] = []
+        start = (float(signal.x[0]), float(signal.y[0])) if signal is not None else None
+        if short:
+            fmus, sources = self.short_form(data, start)
+        for fmu_name, table in self.table(data, "fmu").items():
+            if any(f.name == fmu_name for f in fmus):
+                raise self.error(f"fmu.{fmu_name}", f"the FMU {fmu_name!r} is also given by the "
+                                                    f"short form [{fmu_name}]: give it once")
+            fmus.append(self.fmu(fmu_name, table, start))
+        if not fmus:
+            raise self.error("fmu", "no FMU to run: add an [fmu.NAME] table")
+        stop = self.stop(run, signal, fmus, step)
+        sources += self.sources(data.get("source", []))
+        return RunConfig(
+            name=name, step=step, stop=stop, fmus=self.order(run, fmus), reference=reference,
+            sources=tuple(sources), connections=self.connections(data.get("connection", []),
+                                                                 fmus),
+            algorithm=self.choice(run, "run", "algorithm", ALGORITHMS, "gauss-seidel"),
+            record=self.record(self.table(data, "record")), source=self.source)
+
+    # -- run ----------------------------------------------------------------------------
+    def sampled(self, reference: ReferenceConfig, table: Mapping[str, Any], step: float):
         try:
-            signal = reference.build(step)
-        except _SegmentError as error:
+            return build_reference(reference.kind, reference.options, step)
+        except SegmentError as error:
             raise self.error(f"reference.segments[{error.index}]", str(error)) from None
         except (ValueError, OSError) as error:
-            given = [f"reference.{k}" for k in tables["reference"] if k != "kind"]
-            keys = ", ".join(given) or "reference.kind"
-            raise self.error(keys, str(error)) from None
-        stop = self.number(run, "run", "stop", signal.duration, positive=True)
+            given = [f"reference.{k}" for k in table if k != "kind"]
+            raise self.error(", ".join(given) or "reference.kind", str(error)) from None
+
+    def stop(self, run: Mapping[str, Any], signal, fmus: Sequence[FmuConfig],
+             step: float) -> float:
+        """run.stop; default the reference's duration, else the first FMU's experiment."""
+        default = signal.duration if signal is not None else None
+        if default is None:
+            default = next((read_fmu(f.path).default_stop for f in fmus if f.path), None)
+        stop = self.number(run, "run", "stop", default, positive=True)
         if abs(stop / step - round(stop / step)) > STEP_TOLERANCE * max(1.0, stop / step):
             raise self.error("run.stop", f"{stop!r} s is not a whole number of steps of "
                                          f"{step!r} s (run.step)")
-        plant = self.plant(tables["plant"], (float(signal.x[0]), float(signal.y[0])))
-        return RunConfig(
-            name=name, step=step, stop=stop, reference=reference, plant=plant,
-            controller=self.controller(tables["controller"]),
-            feedforward=self.feedforward(tables["feedforward"]),
-            record=self.record(tables["record"]), source=self.source)
+        return stop
 
-    # -- tables -------------------------------------------------------------------------------
+    def order(self, run: Mapping[str, Any], fmus: list[FmuConfig]) -> tuple[FmuConfig, ...]:
+        if "order" not in run:
+            return tuple(fmus)
+        order, names = run["order"], [f.name for f in fmus]
+        if (not isinstance(order, list) or sorted(map(str, order)) != sorted(names)
+                or len(set(order)) != len(order)):
+            raise self.error("run.order", f"expected every FMU name once, in stepping order "
+                                          f"(the FMUs: {', '.join(names)}), got {order!r}")
+        return tuple(next(f for f in fmus if f.name == n) for n in order)
+
+    # -- the manipulator's short form ---------------------------------------------------
+    def short_form(self, data: Mapping[str, Any], start: tuple[float, float]
+                   ) -> tuple[list[FmuConfig], list[SourceConfig]]:
+        """[feedforward], [controller], [plant] as built-in FMUs in that order; without a
+        feedforward, its forces are constant zero sources."""
+        plant = self.table(data, "plant")
+        variant = self.choice(plant, "plant", "variant", tuple(VARIANTS), "nominal")
+        fmus, sources = [], []
+        ff = self.table(data, "feedforward")
+        kind = self.choice(ff, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
+        self.keys(ff, "feedforward", ("kind", "model", "mode") if kind == "onnx" else ("kind",))
+        if kind == "none":
+            sources.append(SourceConfig("constant", {v.name: 0.0 for v in FORCE_OUTPUTS}))
+        else:
+            fmus.append(FmuConfig("feedforward", builtin=FEEDFORWARD_BUILTINS[kind],
+                                  options=self.feedforward_options(ff, "feedforward")))
+        controller = self.table(data, "controller")
+        self.keys(controller, "controller", ("crossover_hz", "notch", "encoders"))
+        fmus.append(FmuConfig("controller", builtin="controller", options={
+            "variant": variant, **self.controller_options(controller, "controller")}))
+        self.keys(plant, "plant", ("variant", "seed", *self.plant_parameter_names(variant)))
+        values = {k: v for k, v in plant.items() if k not in ("variant", "seed")}
+        fmus.append(FmuConfig("plant", builtin="plant", options={
+            "variant": variant, **self.seed(plant, "plant")},
+            parameters=self.plant_parameters(values, variant, "plant", start)))
+        return fmus, sources
+
+    # -- [fmu.NAME] ---------------------------------------------------------------------
+    def fmu(self, name: str, t: Any, start: tuple[float, float] | None) -> FmuConfig:
+        where = f"fmu.{name}"
+        if not isinstance(t, dict):
+            raise self.error(where, f"expected a table [fmu.{name}], got {t!r}")
+        if "." in name or not name:
+            raise self.error(where, "an FMU name must not be empty or contain a dot")
+        if ("path" in t) == ("builtin" in t):
+            raise self.error(where, "give either path = \"file.fmu\" or builtin = one of "
+                                    f"{', '.join(BUILTIN_OPTIONS)}")
+        unconnected = self.choice(t, where, "unconnected", UNCONNECTED, "error")
+        parameters = t.get("parameters", {})
+        if not isinstance(parameters, dict):
+            raise self.error(f"{where}.parameters", f"expected a table {{name = value}}, got "
+                                                    f"{parameters!r}")
+        if "path" in t:
+            self.keys(t, where, ("path", "parameters", "unconnected"))
+            path = self.path(t, where, "path")
+            return FmuConfig(name, path=path, parameters=self.fmu_parameters(path, parameters,
+                                                                             where),
+                             unconnected=unconnected)
+        builtin = self.choice(t, where, "builtin", tuple(BUILTIN_OPTIONS), None)
+        self.keys(t, where, ("builtin", "parameters", "unconnected", *BUILTIN_OPTIONS[builtin]))
+        options: dict[str, Any] = {}
+        if builtin == "plant":
+            variant = self.choice(t, where, "variant", tuple(VARIANTS), "nominal")
+            options = {"variant": variant, **self.seed(t, where)}
+            for key in parameters:
+                if key not in self.plant_parameter_names(variant):
+                    raise self.error(f"{where}.parameters.{key}", "unknown plant parameter "
+                                     f"(known: {', '.join(self.plant_parameter_names(variant))})")
+            parameters = self.plant_parameters(parameters, variant, f"{where}.parameters",
+                                               start or (0.0, 0.0))
+        elif builtin == "controller":
+            options = {"variant": self.choice(t, where, "variant", tuple(VARIANTS), "nominal"),
+                       **self.controller_options(t, where)}
+        elif builtin == "learned-feedforward":
+            options = self.feedforward_options(t, where)
+        return FmuConfig(name, builtin=builtin, options=options, parameters=dict(parameters),
+                         unconnected=unconnected)
+
+    def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str
+                       ) -> dict[str, Any]:
+        """Start values checked against the FMU's own variables and their types."""
+        try:
+            info = read_fmu(path)
+        except FmuError as error:
+            raise self.error(f"{where}.path", str(error)) from None
+        checked = {}
+        for key, value in values.items():
+            v = info.variables.get(key)
+            if v is None or v.causality not in SETTABLE:
+                settable = [n for n, w in info.variables.items() if w.causality in SETTABLE]
+                raise self.error(f"{where}.parameters.{key}", f"{path.name} has no parameter or "
+                                 f"input {key!r} (known: {', '.join(settable) or 'none'})")
+            try:
+                checked[key] = typed_value(v.kind, value)
+            except ValueError as error:
+                raise self.error(f"{where}.parameters.{key}", f"{v.type} variable: {error}"
+                                 ) from None
+        return checked
+
+    def plant_parameter_names(self, variant: str) -> tuple[str, ...]:
+        return (*(p.name for p in plant_system(variant).parameters), *PLANT_EXTRA)
+
+    def plant_parameters(self, t: Mapping[str, Any], variant: str, where: str,
+                         start: tuple[float, float]) -> dict[str, float]:
+        """Plant parameter values, checked physically; x_start, y_start default to `start`."""
+        known = {p.name: p for p in plant_system(variant).parameters}
+        values = dict(zip(START_PARAMETERS, start))
+        for key in t:
+            positive = key in PLANT_EXTRA or known[key].positive
+            values[key] = self.number(t, where, key, None, positive=positive)
+        physical = {k: v for k, v in values.items() if k not in (*START_PARAMETERS,
+                                                                 *PLANT_EXTRA)}
+        try:
+            VARIANTS[variant].parameters.with_values(**physical)
+            check_workspace(VARIANTS[variant].parameters, values["x_start"], values["y_start"],
+                            "the start position (x_start, y_start)")
+        except ValueError as error:
+            keys = ", ".join(f"{where}.{k}" for k in t) or where
+            raise self.error(keys, str(error)) from None
+        return values
+
+    def seed(self, t: Mapping[str, Any], where: str) -> dict[str, int]:
+        seed = self.integer(t, where, "seed", None)
+        if seed is None:
+            return {}
+        if not -2**31 <= seed < 2**31:
+            raise self.error(f"{where}.seed", f"{seed} does not fit a 32-bit FMI Integer")
+        return {"seed": seed}
+
+    def controller_options(self, t: Mapping[str, Any], where: str) -> dict[str, Any]:
+        options: dict[str, Any] = {}
+        if "notch" in t:
+            notch = t["notch"]
+            options["notch"] = notch if isinstance(notch, bool) else self.number(
+                t, where, "notch", None, positive=True)
+        encoders = self.integer(t, where, "encoders", 2)
+        if encoders not in ENCODER_CHOICES:
+            raise self.error(f"{where}.encoders", f"must be one of {ENCODER_CHOICES}, got "
+                                                  f"{encoders}")
+        options["encoders"] = encoders
+        if "crossover_hz" in t:
+            options["crossover_hz"] = self.number(t, where, "crossover_hz", None, positive=True)
+        return options
+
+    def feedforward_options(self, t: Mapping[str, Any], where: str) -> dict[str, Any]:
+        """A learned feedforward's model and mode (nothing for the rigid-body one)."""
+        if "model" not in t and t.get("builtin", t.get("kind")) in ("model",
+                                                                      "rigid-body-feedforward"):
+            return {}
+        model = self.path(t, where, "model")
+        if model.suffix.lower() != ".onnx":
+            raise self.error(f"{where}.model", f"{model} is not an .onnx file")
+        try:
+            model_metadata(model)
+        except ValueError as exc:
+            raise self.error(f"{where}.model", str(exc)) from None
+        return {"model": model,
+                "mode": self.choice(t, where, "mode", FEEDFORWARD_MODES, "step")}
+
+    # -- connections, sources, record ---------------------------------------------------
+    def connections(self, specs: Any, fmus: Sequence[FmuConfig]
+                    ) -> tuple[ConnectionConfig, ...]:
+        if not isinstance(specs, list):
+            raise self.error("connection", "expected [[connection]] tables")
+        names = {f.name for f in fmus}
+        out, targets = [], {}
+        for k, spec in enumerate(specs):
+            where = f"connection[{k}]"
+            if not isinstance(spec, dict):
+                raise self.error(where, f"expected a table {{from = ..., to = ...}}, got {spec!r}")
+            self.keys(spec, where, ("from", "to", "gain", "offset"))
+            for key in ("from", "to"):
+                value = spec.get(key)
+                if not isinstance(value, str) or not value:
+                    raise self.error(f"{where}.{key}", f"expected \"fmu.variable\""
+                                     f"{' or a source signal' if key == 'from' else ''}, got "
+                                     f"{value!r}")
+            target, source = spec["to"], spec["from"]
+            instance = target.partition(".")[0]
+            if "." not in target or instance not in names:
+                raise self.error(f"{where}.to", f"{target!r} is not \"fmu.input\" of an FMU of "
+                                                f"this run ({', '.join(sorted(names))})")
+            if "." in source and source.partition(".")[0] not in names:
+                raise self.error(f"{where}.from", f"no FMU {source.partition('.')[0]!r} in "
+                                                  f"this run ({', '.join(sorted(names))})")
+            if target in targets:
+                raise self.error(f"{where}.to", f"{target} is already connected by "
+                                                f"{targets[target]}: an input takes one signal")
+            targets[target] = where
+            out.append(ConnectionConfig(source, target, self.number(spec, where, "gain", 1.0),
+                                        self.number(spec, where, "offset", 0.0), where))
+        return tuple(out)
+
+    def sources(self, specs: Any) -> list[SourceConfig]:
+        if not isinstance(specs, list):
+            raise self.error("source", "expected [[source]] tables")
+        out = []
+        for k, spec in enumerate(specs):
+            where = f"source[{k}]"
+            if not isinstance(spec, dict):
+                raise self.error(where, f"expected a table {{kind = ..., ...}}, got {spec!r}")
+            kind = self.choice(spec, where, "kind", SOURCE_KINDS, None)
+            if kind == "csv":
+                self.keys(spec, where, ("kind", "path"))
+                out.append(SourceConfig(kind, path=self.path(spec, where, "path")))
+                continue
+            self.keys(spec, where, ("kind", "values"))
+            values = spec.get("values")
+            if not isinstance(values, dict) or not values:
+                raise self.error(f"{where}.values", f"expected a table {{name = number}}, got "
+                                                    f"{values!r}")
+            for name in values:
+                if "." in name:
+                    raise self.error(f"{where}.values.{name}", "a source signal's name has no "
+                                     "dot: name it plainly and add a [[connection]]")
+            out.append(SourceConfig(kind, {n: self.number(values, f"{where}.values", n, None)
+                                           for n in values}))
+        return out
+
+    def record(self, t: Mapping[str, Any]) -> RecordConfig:
+        self.keys(t, "record", ("signals", "csv"))
+        csv = t.get("csv", True)
+        if not isinstance(csv, bool):
+            raise self.error("record.csv", f"expected true or false, got {csv!r}")
+        if "signals" not in t:
+            return RecordConfig(None, csv)
+        names = t["signals"]
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise self.error("record.signals", f"expected a list of signal names, got {names!r}")
+        if len(set(names)) != len(names):
+            raise self.error("record.signals", "a signal is listed twice")
+        return RecordConfig(tuple(names), csv)
+
+    # -- [reference] ----------------------------------------------------------------------
     def reference(self, t: Mapping[str, Any]) -> ReferenceConfig:
         kind = self.choice(t, "reference", "kind", REFERENCE_KINDS, None)
         r = "reference"
@@ -330,87 +523,14 @@ class _Parser:
             checked.append(values)
         return tuple(checked)
 
-    def plant(self, t: Mapping[str, Any], start: tuple[float, float]) -> PlantConfig:
-        variant = self.choice(t, "plant", "variant", tuple(VARIANTS), "nominal")
-        system = plant_system(variant)
-        known = {p.name: p for p in system.parameters}
-        self.keys(t, "plant", ("variant", "seed", *known, *PLANT_EXTRA))
-        seed = self.integer(t, "plant", "seed", None)
-        if seed is not None and not -2**31 <= seed < 2**31:
-            raise self.error("plant.seed", f"{seed} does not fit a 32-bit FMI Integer")
-        values = {"x_start": start[0], "y_start": start[1]}
-        for key in t:
-            if key not in ("variant", "seed"):
-                positive = key in PLANT_EXTRA or known[key].positive
-                values[key] = self.number(t, "plant", key, None, positive=positive)
-        physical = {k: v for k, v in values.items()
-                    if k not in ("x_start", "y_start", *PLANT_EXTRA)}
-        try:
-            VARIANTS[variant].parameters.with_values(**physical)
-            check_workspace(VARIANTS[variant].parameters, values["x_start"], values["y_start"],
-                            "the start position (x_start, y_start)")
-        except ValueError as error:
-            keys = ", ".join(f"plant.{k}" for k in t if k not in ("variant", "seed")) or "plant"
-            raise self.error(keys, str(error)) from None
-        return PlantConfig(variant, values, seed)
-
-    def controller(self, t: Mapping[str, Any]) -> ControllerConfig:
-        self.keys(t, "controller", ("crossover_hz", "notch", "encoders"))
-        notch = t.get("notch")
-        if notch is not None and not isinstance(notch, bool):
-            notch = self.number(t, "controller", "notch", None, positive=True)
-        encoders = self.integer(t, "controller", "encoders", 2)
-        if encoders not in ENCODER_CHOICES:
-            raise self.error("controller.encoders", f"must be one of {ENCODER_CHOICES}, got "
-                                                    f"{encoders}")
-        crossover = t.get("crossover_hz")
-        if crossover is not None:
-            crossover = self.number(t, "controller", "crossover_hz", None, positive=True)
-        return ControllerConfig(crossover, notch, encoders)
-
-    def feedforward(self, t: Mapping[str, Any]) -> FeedforwardConfig:
-        kind = self.choice(t, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
-        if kind != "onnx":
-            self.keys(t, "feedforward", ("kind",))
-            return FeedforwardConfig(kind)
-        self.keys(t, "feedforward", ("kind", "model", "mode"))
-        model = self.path(t, "feedforward", "model")
-        if model.suffix.lower() != ".onnx":
-            raise self.error("feedforward.model", f"{model} is not an .onnx file")
-        try:
-            model_metadata(model)
-        except ValueError as exc:
-            raise self.error("feedforward.model", str(exc)) from None
-        mode = self.choice(t, "feedforward", "mode", FEEDFORWARD_MODES, "step")
-        return FeedforwardConfig(kind, model, mode)
-
-    def record(self, t: Mapping[str, Any]) -> RecordConfig:
-        self.keys(t, "record", ("signals", "csv"))
-        csv = t.get("csv", True)
-        if not isinstance(csv, bool):
-            raise self.error("record.csv", f"expected true or false, got {csv!r}")
-        if "signals" not in t:
-            return RecordConfig(None, csv)
-        names = t["signals"]
-        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-            raise self.error("record.signals", f"expected a list of signal names, got {names!r}")
-        known = all_signals()
-        unknown = [n for n in names if n not in known]
-        if unknown:
-            raise self.error("record.signals", f"unknown signal(s) {unknown} (known: "
-                                               f"{', '.join(known)})")
-        if len(set(names)) != len(names):
-            raise self.error("record.signals", "a signal is listed twice")
-        return RecordConfig(tuple(names), csv)
-
-    # -- values -------------------------------------------------------------------------------
+    # -- values -------------------------------------------------------------------------
     def table(self, data: Mapping[str, Any], name: str) -> Mapping[str, Any]:
         table = data.get(name, {})
         if not isinstance(table, dict):
             raise self.error(name, f"expected a table [{name}], got {table!r}")
         return table
 
-    def keys(self, t: Mapping[str, Any], table: str, allowed: tuple[str, ...]) -> None:
+    def keys(self, t: Mapping[str, Any], table: str, allowed: Sequence[str]) -> None:
         for key in t:
             if key not in allowed:
                 raise self.error(f"{table}.{key}", f"unknown key (known in [{table}]: "
@@ -474,126 +594,3 @@ class _Parser:
             raise self.error(f"{table}.{key}", f"expected at least {minimum} [x, y] points, got "
                                                f"{value!r}")
         return tuple(self.point({key: v}, table, key, (0.0, 0.0)) for v in value)
-
-
-def all_signals() -> tuple[str, ...]:
-    """Every signal a run can record, in the order recordings list them."""
-    return (*Reference.SIGNALS, *(v.name for v in FORCE_OUTPUTS),
-            *(v.name for v in CONTROLLER_OUTPUTS), *PlantModel.output_names)
-
-
-EXAMPLES = {
-    "thesis-eval-pid": """\
-# PID alone on the thesis's evaluation reference (sec. 5.7: a line, then 11.5 circles in 12 s),
-# nominal plant, 15 s.
-[run]
-step = 0.001
-stop = 15.0
-
-[reference]
-kind = "thesis-eval"
-
-[plant]
-variant = "nominal"
-
-[controller]
-encoders = 2          # crossover_hz and notch follow the plant variant unless given
-
-[feedforward]
-kind = "none"
-
-[record]
-# signals = ["x_ref", "y_ref", "x", "y"]   # default: every signal
-csv = true
-""",
-    "thesis-eval-model-ff": """\
-# The thesis's evaluation reference with the rigid-body feedforward of the nominal model,
-# nominal plant, 15 s.
-[run]
-step = 0.001
-stop = 15.0
-
-[reference]
-kind = "thesis-eval"
-
-[plant]
-variant = "nominal"
-
-[feedforward]
-kind = "model"
-""",
-    "hardware-circle-pid": """\
-# The "hardware" plant (mismatch, friction, parasitic mode, encoder noise) under PID with its
-# notch, on a line from the centre and two turns of a 20 mm circle; 1 s at rest at the end.
-[run]
-step = 0.001
-stop = 11.0
-
-[reference]
-kind = "line-circle"
-start = [0.0, 0.0]
-line_duration = 2.0
-centre = [0.0, 0.0]
-radius = 0.02
-turns = 2.0
-circle_duration = 8.0
-
-[plant]
-variant = "hardware"
-seed = 1
-
-[controller]
-notch = true
-""",
-    "hardware-thesis-eval-model-ff": """\
-# The rigid-body feedforward of the nominal model on the hardware plant, along the thesis's
-# evaluation reference for the real machine: what model mismatch and friction leave for a
-# learned feedforward to remove.
-[reference]
-kind = "thesis-hardware-eval"
-
-[plant]
-variant = "hardware"
-seed = 1
-
-[feedforward]
-kind = "model"
-""",
-    "line-hold-circle": """\
-# The thesis's hardware evaluation path (sec. 6.6; kind = "thesis-hardware-eval" names it) as
-# segments, 100 s on the hardware plant under PID: a skew-sine line from the centre to
-# (8.2, 8.2) mm in 21 s, 1 s at rest, 9 turns in 75 s (0.12 Hz) about the centre, which makes
-# the radius 11.6 mm and passes through the line's end, then 3 s at rest.
-[reference]
-kind = "segments"
-start = [0.0, 0.0]
-segments = [
-    {kind = "line", to = [0.0082, 0.0082], duration = 21.0},
-    {kind = "hold", duration = 1.0},
-    {kind = "circle", centre = [0.0, 0.0], turns = 9.0, duration = 75.0},
-    {kind = "hold", duration = 3.0},
-]
-
-[plant]
-variant = "hardware"
-seed = 1
-""",
-    "spline-model-ff": """\
-# A closed periodic spline through four points in 6 s, from rest at its first point.
-[run]
-stop = 6.0
-
-[reference]
-kind = "spline"
-points = [[0.0, 0.0], [0.02, 0.015], [0.0, 0.03], [-0.02, 0.015]]
-duration = 6.0
-
-[feedforward]
-kind = "model"
-""",
-}
-
-
-def config_examples() -> dict[str, str]:
-    """Example configurations (TOML text) by name."""
-    return dict(EXAMPLES)

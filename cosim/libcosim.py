@@ -21,32 +21,30 @@ import time
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from fmpy import read_model_description
 
-from cosim.connections import SOURCE, Port, connect
 from cosim.master import SlaveSpec
 from cosim.recording import Recording
+from cosim.wiring import SOURCE, Link, Port, wire
+from fmu.importer import read_fmu
 
 
 class _Execution:
-    """A libcosim execution of the FMUs, connected by name, with parameters and constant
-    sources as initial values; `varying` lists the inputs fed from time-varying sources."""
+    """A libcosim execution of the FMUs, wired as the master wires them (default: by name),
+    with parameters and constant sources as initial values; `varying` lists the inputs fed
+    from time-varying sources."""
 
     def __init__(self, slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
-                 step: float) -> None:
+                 step: float, links: Sequence[Link] | None = None) -> None:
         from libcosimpy.CosimExecution import CosimExecution
         from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
         from libcosimpy.CosimSlave import CosimLocalSlave
 
         log_output_level(CosimLogLevel.WARNING)  # libcosim traces every FMI call otherwise
-        self.variables, self.ports = {}, []
-        for s in slaves:
-            md = read_model_description(str(s.fmu))
-            self.variables[s.name] = {v.name: v for v in md.modelVariables}
-            signals = {c: tuple(v.name for v in md.modelVariables if v.causality == c)
-                       for c in ("input", "output")}
-            self.ports.append(Port(s.name, signals["input"], signals["output"], frozenset(
-                u.variable.name for u in md.outputs if u.dependencies)))
+        infos = {s.name: read_fmu(s.fmu) for s in slaves}
+        self.variables = {name: info.variables for name, info in infos.items()}
+        self.ports = [Port(s.name, infos[s.name]) for s in slaves]
+        if links is None:
+            links = wire(self.ports, list(sources), algorithm="jacobi")
         self.execution = execution = CosimExecution.from_step_size(int(round(step * 1e9)))
         self.index = {s.name: execution.add_local_slave(
             CosimLocalSlave(fmu_path=str(s.fmu), instance_name=s.name)) for s in slaves}
@@ -54,33 +52,37 @@ class _Execution:
             for name, value in s.parameters.items():
                 self.initial_value(s.name, name, value)
         self.varying: dict[str, list[tuple[int, str]]] = {}  # slave -> (value ref., source)
-        for c in connect(list(sources), self.ports):
+        for c in links:
+            if c.affine or c.kind != "float64":
+                raise ValueError(f"{c}: libcosim's API connects Real signals as they are; "
+                                 f"run the SSP export for linear transformations")
             if c.source != SOURCE:
                 status = execution.connect_real_variables(
                     self.index[c.source], self.vr(c.source, c.signal),
-                    self.index[c.target], self.vr(c.target, c.signal))
+                    self.index[c.target], self.vr(c.target, c.input))
                 if not (status is True or (type(status) is int and status == 0)):  # int in 0.0.6
-                    raise RuntimeError(f"libcosim refused to connect {c.source}.{c.signal}")
+                    raise RuntimeError(f"libcosim refused to connect {c}")
             elif np.ndim(sources[c.signal]) == 0:
-                self.initial_value(c.target, c.signal, sources[c.signal])
+                self.initial_value(c.target, c.input, sources[c.signal])
             else:
                 self.varying.setdefault(c.target, []).append(
-                    (self.vr(c.target, c.signal), c.signal))
+                    (self.vr(c.target, c.input), c.signal))
 
     def vr(self, slave: str, name: str) -> int:
-        return self.variables[slave][name].valueReference
+        return self.variables[slave][name].value_reference
 
     def initial_value(self, slave: str, name: str, value: float | int) -> None:
         i, vr = self.index[slave], self.vr(slave, name)
         ok = (self.execution.integer_initial_value(i, vr, int(value))
-              if self.variables[slave][name].type == "Integer" else
+              if self.variables[slave][name].kind == "int32" else
               self.execution.real_initial_value(i, vr, float(value)))
         if not ok:
             raise RuntimeError(f"libcosim rejected {slave}.{name} = {value!r}")
 
 
 def run_libcosim(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
-                 step: float, steps: int, record: Sequence[str] | None = None) -> Recording:
+                 step: float, steps: int, record: Sequence[str] | None = None,
+                 links: Sequence[Link] | None = None) -> Recording:
     """Run `steps` steps; the recording holds the FMU outputs (all, or `record`) at
     t_1 .. t_steps, read after each step, and the source signals at those points.
 
@@ -90,12 +92,12 @@ def run_libcosim(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray |
     from libcosimpy.CosimManipulator import CosimManipulator
     from libcosimpy.CosimObserver import CosimObserver
 
-    ex = _Execution(slaves, sources, step)
+    ex = _Execution(slaves, sources, step, links)
     manipulator, observer = CosimManipulator.create_override(), CosimObserver.create_last_value()
     ex.execution.add_manipulator(manipulator)
     ex.execution.add_observer(observer)
-    by_slave = {p.name: [n for n in p.outputs if record is None or n in record]
-                for p in ex.ports}
+    by_slave = {p.name: [n for n in p.info.outputs if record is None or n in record
+                         or f"{p.name}.{n}" in record] for p in ex.ports}
     by_slave = {s: names for s, names in by_slave.items() if names}
     refs = {s: [ex.vr(s, n) for n in names] for s, names in by_slave.items()}
     out = {s: np.empty((steps, len(names))) for s, names in by_slave.items()}
@@ -115,7 +117,8 @@ def run_libcosim(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray |
     signals = {n: np.ascontiguousarray(table[n][1:]) for n in sources
                if record is None or n in record}
     for slave, names in by_slave.items():
-        signals.update({n: np.ascontiguousarray(out[slave][:, j]) for j, n in enumerate(names)})
+        signals.update({f"{slave}.{n}": np.ascontiguousarray(out[slave][:, j])
+                        for j, n in enumerate(names)})
     return Recording((np.arange(steps) + 1) * step, signals, wall)
 
 

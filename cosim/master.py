@@ -1,285 +1,263 @@
-"""Fixed-step co-simulation master over fmpy's low-level FMI 2.0 co-simulation API.
+"""Fixed-step co-simulation master over fmpy's low-level FMI 2.0 and 3.0 co-simulation APIs.
 
-FMUs run in a fixed Gauss-Seidel order, connected by signal name (cosim.connections). All
-signals live in one float64 array, the bus: the external source signals first, then each FMU's
-outputs as one block, so that fmi2GetReal writes straight into the bus, and fmi2SetReal reads
-straight from it whenever an FMU's inputs form a block of the bus in order (otherwise they are
-gathered into a buffer first). Communication point k (t_k = k * step), for k = 0 .. steps:
+FMUs run in a fixed order, wired by cosim.wiring. Float64 signals live in one float64 array,
+the bus: the external source signals first, then each FMU's float64 outputs as one block
+(named `fmu.output`), so that fmi2GetReal / fmi3GetFloat64 write straight into the bus, and
+the set calls read straight from it whenever an FMU's inputs form a block of the bus in order
+with no gain or offset (otherwise they are gathered, scaled and shifted into a buffer first).
+Signals of other types (integers, booleans, strings, ...) go through fmpy's typed calls and a
+small table beside the bus. Communication point k (t_k = k * step), for k = 0 .. steps:
 
   1. the source signals of point k are copied into the bus;
-  2. in order, each FMU gets its inputs (fmi2SetReal) and, if a later FMU or no FMU reads its
-     outputs, gives them (fmi2GetReal): values at t_k with the inputs of t_k, so direct
-     feedthrough takes effect at once;
+  2. in order, each FMU gets its inputs and, if a later FMU or no FMU reads its outputs, gives
+     them: values at t_k with the inputs of t_k, so direct feedthrough takes effect at once;
   3. the bus is recorded as sample k; after the last point the run ends here;
-  4. each FMU steps to t_{k+1} (fmi2DoStep); an FMU whose outputs are fed back to an earlier
-     one gives them right after its step, values at t_{k+1} (they have no feedthrough, checked
-     at load time, so they equal what step 2 of the next point would read). Such outputs are
-     also read once after initialization, for point 0.
+  4. each FMU steps to t_{k+1}; an FMU whose outputs are fed back to an earlier one gives them
+     right after its step, values at t_{k+1} (they have no feedthrough, checked by the wiring,
+     so they equal what step 2 of the next point would read). Such outputs are also read once
+     after initialization, for point 0.
 
-So with the order feedforward -> controller -> plant, the controller at t_k sees the encoders
-at t_k and the plant holds the currents computed from them over [t_k, t_{k+1}], as a
-zero-order-hold digital controller does, with no extra delay. A recorded feedback-only output
-with feedthrough (the plant's torques) is the value at t_k with the inputs of the previous
-step. Each FMU costs one fmi2SetReal, one fmi2GetReal and one fmi2DoStep per step, called
-through the ctypes functions fmpy loaded (not fmpy's Python wrappers); every status is checked.
+That is Gauss-Seidel. With the order feedforward -> controller -> plant, the controller at t_k
+sees the encoders at t_k and the plant holds the currents computed from them over
+[t_k, t_{k+1}], as a zero-order-hold digital controller does, with no extra delay. Under
+Jacobi every output is read after the step and step 2 only sets inputs: every FMU steps from
+t_k on the values the others had at t_k, so an output with direct feedthrough reaches its
+consumers one step late (as in libcosim and FMPy's SSP runs). Before the first step, Jacobi
+carries the initial values through every connection (libcosim's initialization).
+
+Each float64 block costs one set, one get and one step call per FMU and step, called through
+the bare C functions (fmu.importer.FastCalls); every status is checked.
 """
 
 from __future__ import annotations
 
-import shutil
 import sys
 import time
+from ctypes import c_double
 from collections.abc import Mapping, Sequence
-from ctypes import byref, c_double, c_int, c_size_t, c_uint
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-import fmpy
 import numpy as np
-from fmpy import extract, read_model_description
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
-from fmpy.logging import addLoggerProxy
 from tqdm import tqdm
 
-from cosim.connections import SOURCE, Port, connect
-from fmu.runner import bare_calls
 from cosim.recording import Recording
+from cosim.wiring import SOURCE, Link, Port, wire
+from fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu, uint_array
 
 PROGRESS_MIN_STEPS = 100_000  # runs this long show a progress bar (on a terminal)
 PROGRESS_CHUNK = 1000  # steps between progress bar updates
-STATUS_LABELS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+ALGORITHMS = ("gauss-seidel", "jacobi")
 
 
 @dataclass(frozen=True)
 class SlaveSpec:
-    """One FMU of a co-simulation: its instance name, its file and parameter start values."""
+    """One FMU of a co-simulation: its instance name, its file and start values by name."""
 
     name: str
     fmu: Path
-    parameters: Mapping[str, float | int] = field(default_factory=dict)
+    parameters: Mapping[str, Any] = field(default_factory=dict)
 
 
 class CosimError(RuntimeError):
     """An FMI call failed during a co-simulation (the message carries the FMU's log)."""
 
 
-class _Slave:
-    """One instantiated FMU: its signals, its raw fmi2 functions and its log messages."""
-
-    def __init__(self, spec: SlaveSpec) -> None:
-        self.name = spec.name
-        self.parameters = dict(spec.parameters)
-        md = read_model_description(str(spec.fmu))
-        if md.fmiVersion != "2.0" or md.coSimulation is None:
-            raise ValueError(f"{spec.fmu}: {spec.name!r} is not an FMI 2.0 co-simulation FMU")
-        self.guid = md.guid
-        self.variables = {v.name: v for v in md.modelVariables}
-        self.inputs = tuple(v.name for v in md.modelVariables if v.causality == "input")
-        self.outputs = tuple(v.name for v in md.modelVariables if v.causality == "output")
-        self.feedthrough = frozenset(u.variable.name for u in md.outputs if u.dependencies)
-        for name in self.inputs + self.outputs:
-            if self.variables[name].type != "Real":
-                raise ValueError(f"{spec.name}: signal {name!r} is not Real")
-        for name in self.parameters:
-            v = self.variables.get(name)
-            if v is None or v.causality != "parameter":
-                known = ", ".join(n for n, w in self.variables.items()
-                                  if w.causality == "parameter")
-                raise ValueError(f"{spec.name}: unknown parameter {name!r} (known: {known})")
-        self.messages: list[str] = []
-        self._unzipdir = extract(str(spec.fmu))
-        self.library = (Path(self._unzipdir) / "binaries" / fmpy.platform
-                        / f"{md.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}")
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
-                             modelIdentifier=md.coSimulation.modelIdentifier,
-                             instanceName=spec.name)
-        self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
-        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
-        addLoggerProxy(byref(self._callbacks))  # formats the variadic messages in C
-        self.fmu.instantiate(callbacks=self._callbacks)
-        self.component = self.fmu.component
-        calls = bare_calls(self.fmu)  # exact C argument types only: see fmu.runner.BareCalls
-        self.c, self.set_real, self.get_real, self.do_step = (
-            calls.component, calls.set_real, calls.get_real, calls.do_step)
-        self.initialized = False
-
-    def _log(self, env, instance, status, category, message) -> None:
-        label = STATUS_LABELS[status] if 0 <= status < len(STATUS_LABELS) else str(status)
-        self.messages.append(f"[{label}] {message.decode('utf-8', 'replace')}")
-
-    def port(self) -> Port:
-        return Port(self.name, self.inputs, self.outputs, self.feedthrough)
-
-    def vr(self, name: str) -> int:
-        return self.variables[name].valueReference
-
-    def fail(self, what: str) -> CosimError:
-        log = "; ".join(self.messages[-5:]) or "no message from the FMU"
-        return CosimError(f"{self.name}: {what} failed: {log}")
-
-    def check(self, status: int, what: str) -> None:
-        if status > 1:
-            raise self.fail(what)
-
-    def initialize(self, stop_time: float) -> None:
-        """Set up the experiment from t = 0, set the parameters, leave initialization mode."""
-        dll, c = self.fmu.dll, self.component
-        self.check(dll.fmi2SetupExperiment(c, 0, 0.0, 0.0, 1, stop_time), "fmi2SetupExperiment")
-        self.check(dll.fmi2EnterInitializationMode(c), "fmi2EnterInitializationMode")
-        for name, value in self.parameters.items():
-            if self.variables[name].type == "Integer":
-                status = dll.fmi2SetInteger(c, (c_uint * 1)(self.vr(name)), 1,
-                                            (c_int * 1)(int(value)))
-            else:
-                status = dll.fmi2SetReal(c, (c_uint * 1)(self.vr(name)), 1,
-                                         (c_double * 1)(float(value)))
-            self.check(status, f"setting parameter {name} = {value!r}")
-        self.check(dll.fmi2ExitInitializationMode(c), "fmi2ExitInitializationMode")
-        self.initialized = True
-
-    def close(self) -> None:
-        """Terminate (if it ran), free the instance and delete the extracted files."""
-        try:
-            if self.initialized:
-                self.fmu.dll.fmi2Terminate(self.component)
-            self.fmu.freeInstance()
-        finally:
-            shutil.rmtree(self._unzipdir, ignore_errors=True)
-
-
-@dataclass
 class _Plan:
     """How one FMU reads its inputs from and writes its outputs to the bus."""
 
-    slave: _Slave
-    in_vr: object
-    in_values: object  # ctypes array: a view of the bus, or a gather buffer
-    gather: np.ndarray | None  # bus indices to gather into in_values, None if a view
-    gather_view: np.ndarray | None
-    out_vr: object
-    out_values: object  # ctypes view of the FMU's output block of the bus
-    out_offset: int
-    read_before: bool  # outputs read at t_k, before the step
-    read_after: bool  # outputs read at t_{k+1}, after the step (feedback)
+    def __init__(self, instance: FmuInstance, spec: SlaveSpec, links: Sequence[Link],
+                 bus_index: Mapping[str, int], bus: np.ndarray, out_offset: int,
+                 read_before: bool, read_after: bool) -> None:
+        info = instance.info
+        self.instance, self.name, self.parameters = instance, spec.name, dict(spec.parameters)
+        self.fast = fast = instance.fast_calls()
+        floats = [k for k in links if k.kind == "float64"]
+        self.typed_inputs = [(k.input, k.producer) for k in links if k.kind != "float64"]
+        self.inputs = tuple(k.input for k in floats)
+        self.outputs = tuple(n for n in info.outputs if info.variables[n].kind == "float64")
+        self.typed_outputs = [n for n in info.outputs if info.variables[n].kind != "float64"]
+        self.out_offset, self.read_before, self.read_after = out_offset, read_before, read_after
+        gather = np.array([bus_index[k.producer] for k in floats], dtype=np.intp)
+        gain = np.array([k.gain for k in floats])
+        offset = np.array([k.offset for k in floats])
+        affine = any(k.affine for k in floats)
+        contiguous = gather.size == 0 or np.array_equal(
+            gather, np.arange(gather[0], gather[0] + gather.size))
+        self.gather = self.gather_view = self.gain = self.offset = None
+        if contiguous and not affine:
+            in_values = _view(bus, int(gather[0]) if gather.size else 0, gather.size)
+        else:
+            in_values = (c_double * gather.size)()
+            self.gather, self.gather_view = gather, np.frombuffer(in_values)
+            if affine:
+                self.gain, self.offset = gain, offset
+        self.in_vr = uint_array([info.variables[n].value_reference for n in self.inputs])
+        self.out_vr = uint_array([info.variables[n].value_reference for n in self.outputs])
+        self.in_values = in_values
+        self.out_values = _view(bus, out_offset, len(self.outputs))
+        self.set_args = fast.set_args(self.in_vr, len(self.inputs), in_values)
+        self.get_args = fast.get_args(self.out_vr, len(self.outputs), self.out_values)
+
+    def fail(self, what: str) -> CosimError:
+        return CosimError(str(self.instance.fail(what)))
+
+
+def _view(bus: np.ndarray, offset: int, n: int):
+    """A ctypes array sharing the bus memory from `offset` (n values; n = 0: a dummy)."""
+    return (c_double * n).from_buffer(bus, 8 * offset) if n else (c_double * 1)()
 
 
 class Master:
-    """Loaded FMUs connected by name, ready for one run; use it as a context manager.
+    """Loaded FMUs wired together, ready for one run; use it as a context manager.
 
-    `sources` names the external signals (the reference, constants) given to `run`.
+    `sources` names the external signals (the reference, constants) given to `run`; `links`
+    is the wiring (cosim.wiring.wire; default: every input by name).
     """
 
-    def __init__(self, slaves: Sequence[SlaveSpec], sources: Sequence[str], step: float) -> None:
+    def __init__(self, slaves: Sequence[SlaveSpec], sources: Sequence[str], step: float,
+                 links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel") -> None:
         if not step > 0:
             raise ValueError(f"step must be positive, got {step}")
-        self.step = float(step)
+        if algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
+        self.step, self.algorithm = float(step), algorithm
         self.sources = tuple(sources)
-        self._slaves: list[_Slave] = []
+        self.specs = list(slaves)
+        self._plans: list[_Plan] = []
+        self._instances: list[FmuInstance] = []
+        infos = [read_fmu(s.fmu) for s in slaves]
+        for spec, info in zip(slaves, infos):
+            _check_parameters(spec, info)
+        if links is None:
+            links = wire([Port(s.name, i) for s, i in zip(slaves, infos)], self.sources,
+                         algorithm=algorithm)
+        self.links = tuple(links)
         try:
-            for spec in slaves:
-                self._slaves.append(_Slave(spec))
-            self.connections = connect(self.sources, [s.port() for s in self._slaves])
-            self._layout()
+            for spec, info in zip(slaves, infos):
+                self._instances.append(FmuInstance(info, spec.name))
+            self._layout(infos)
         except BaseException:
             self.close()
             raise
         self._ran = False
 
-    # -- layout -------------------------------------------------------------------------------
-    def _layout(self) -> None:
+    # -- layout -------------------------------------------------------------------------
+    def _layout(self, infos: Sequence[FmuInfo]) -> None:
         names = list(self.sources)
         offsets = {}
-        for s in self._slaves:
-            offsets[s.name] = len(names)
-            names += s.outputs
+        for spec, info in zip(self.specs, infos):
+            offsets[spec.name] = len(names)
+            names += [f"{spec.name}.{n}" for n in info.outputs
+                      if info.variables[n].kind == "float64"]
         self.signals = tuple(names)
         index = {n: i for i, n in enumerate(names)}
         self._bus = np.zeros(len(names))
-        feeds_later = {s.name: False for s in self._slaves}
+        self._typed: dict[str, Any] = {}
+        jacobi = self.algorithm == "jacobi"
+        feeds_later = {s.name: False for s in self.specs}
         feeds_back = dict(feeds_later)
-        for c in self.connections:
-            if c.source != SOURCE:
-                (feeds_back if c.feedback else feeds_later)[c.source] = True
-        self._plans = []
-        for s in self._slaves:
-            gather = np.array([index[n] for n in s.inputs], dtype=np.intp)
-            contiguous = gather.size == 0 or np.array_equal(
-                gather, np.arange(gather[0], gather[0] + gather.size))
-            if contiguous:
-                in_values = self._view(int(gather[0]) if gather.size else 0, gather.size)
-                gather_idx, gather_view = None, None
-            else:
-                in_values = (c_double * gather.size)()
-                gather_idx, gather_view = gather, np.frombuffer(in_values)
-            offset = offsets[s.name]
+        for link in self.links:
+            if link.source != SOURCE:
+                (feeds_back if link.feedback else feeds_later)[link.source] = True
+        for spec, instance in zip(self.specs, self._instances):
+            links = [k for k in self.links if k.target == spec.name]
             self._plans.append(_Plan(
-                slave=s,
-                in_vr=(c_uint * len(s.inputs))(*map(s.vr, s.inputs)),
-                in_values=in_values, gather=gather_idx, gather_view=gather_view,
-                out_vr=(c_uint * len(s.outputs))(*map(s.vr, s.outputs)),
-                out_values=self._view(offset, len(s.outputs)), out_offset=offset,
-                read_before=feeds_later[s.name] or not feeds_back[s.name],
-                read_after=feeds_back[s.name]))
-
-    def _view(self, offset: int, n: int):
-        """A ctypes array sharing the bus memory from `offset` (n values; n = 0: a dummy)."""
-        return (c_double * n).from_buffer(self._bus, 8 * offset) if n else (c_double * 1)()
+                instance, spec, links, index, self._bus, offsets[spec.name],
+                read_before=not jacobi and (feeds_later[spec.name] or not feeds_back[spec.name]),
+                read_after=jacobi or feeds_back[spec.name]))
+        self.typed_signals = tuple(f"{p.name}.{n}" for p in self._plans for n in p.typed_outputs)
 
     def layout(self) -> dict:
-        """The bus layout and every FMU's call plan, as plain data (for the C loop)."""
+        """The bus layout and every FMU's call plan, as plain data (for the C loop, which runs
+        FMI 2.0 FMUs with float inputs and outputs, no gains, Gauss-Seidel)."""
+        for p in self._plans:
+            if (p.instance.info.fmi_version != "2.0" or p.gain is not None or p.typed_inputs
+                    or p.typed_outputs or self.algorithm != "gauss-seidel"):
+                raise ValueError(f"the C loop runs FMI 2.0 FMUs with Real signals and no gains "
+                                 f"under Gauss-Seidel; {p.name} does not fit")
         index = {n: i for i, n in enumerate(self.signals)}
+        by_target = {(k.target, k.input): k.producer for k in self.links}
         return {
             "step": self.step, "signals": list(self.signals), "n_sources": len(self.sources),
             "slaves": [{
-                "name": p.slave.name, "library": str(p.slave.library), "guid": p.slave.guid,
-                "parameters": [(p.slave.vr(n), p.slave.variables[n].type, v)
-                               for n, v in p.slave.parameters.items()],
-                "inputs": [(p.slave.vr(n), index[n]) for n in p.slave.inputs],
-                "outputs": [p.slave.vr(n) for n in p.slave.outputs],
+                "name": p.name, "library": str(p.instance.library),
+                "guid": p.instance.info.token,
+                "parameters": [(p.instance.info.variables[n].value_reference,
+                                p.instance.info.variables[n].type, v)
+                               for n, v in p.parameters.items()],
+                "inputs": [(p.instance.info.variables[n].value_reference,
+                            index[by_target[(p.name, n)]]) for n in p.inputs],
+                "outputs": [p.instance.info.variables[n].value_reference for n in p.outputs],
                 "output_offset": p.out_offset,
                 "read_before": p.read_before, "read_after": p.read_after,
             } for p in self._plans]}
 
-    # -- running ------------------------------------------------------------------------------
+    # -- running ------------------------------------------------------------------------
     def run(self, sources: Mapping[str, np.ndarray | float], steps: int,
             record: Sequence[str] | None = None, progress: bool | None = None) -> Recording:
         """Run `steps` steps from t = 0; return the recorded signals at the steps + 1 points.
 
         `sources` gives every source signal as a constant or as steps + 1 samples; `record`
-        names the signals to keep (default: all); `progress` shows a tqdm bar (default: on a
+        names the signals to keep (default: all; `fmu.output`, a source, or an output's own
+        name where only one FMU has it); `progress` shows a tqdm bar (default: on a
         terminal, for runs of at least PROGRESS_MIN_STEPS steps).
         """
         if self._ran:
             raise RuntimeError("a Master runs once; load the FMUs again for another run")
         self._ran = True
         table = self._source_table(sources, steps)
-        record = list(self.signals if record is None else record)
-        unknown = [n for n in record if n not in self.signals]
-        if unknown:
-            raise ValueError(f"cannot record unknown signal(s) {unknown}; known: "
-                             f"{', '.join(self.signals)}")
-        columns = np.array([self.signals.index(n) for n in record], dtype=np.intp)
-        everything = np.array_equal(columns, np.arange(len(self.signals)))
-        out = np.empty((steps + 1, len(columns)))
-        for s in self._slaves:
-            s.initialize(stop_time=steps * self.step)
+        everything = (*self.signals, *self.typed_signals)
+        record = list(everything if record is None else record)
+        resolved = [self.resolve(n) for n in record]
+        floats = [(j, self.signals.index(q)) for j, q in enumerate(resolved)
+                  if q in self.signals]
+        typed = [(j, q) for j, q in enumerate(resolved) if q not in self.signals]
+        columns = np.array([i for _, i in floats], dtype=np.intp)
+        full = len(floats) == len(resolved) and np.array_equal(
+            columns, np.arange(len(self.signals)))
+        out = np.empty((steps + 1, len(floats)))
+        typed_out = [np.empty(steps + 1, dtype=object) for _ in typed]
         for p in self._plans:
+            try:
+                p.instance.initialize(p.parameters, 0.0, steps * self.step)
+            except FmuError as error:
+                raise CosimError(str(error)) from None
             if p.read_after:
-                p.slave.check(self._get(p), "fmi2GetReal after initialization")
+                self._read(p, "after initialization")
+        if self.algorithm == "jacobi":
+            self._propagate_initial_values(table[0])
         if progress is None:
             progress = sys.stderr.isatty() and steps >= PROGRESS_MIN_STEPS
         start = time.perf_counter()
         with tqdm(total=steps, unit="step", disable=not progress, leave=False) as bar:
             for k0 in range(0, steps + 1, PROGRESS_CHUNK):
                 k1 = min(k0 + PROGRESS_CHUNK, steps + 1)
-                self._loop(k0, k1, steps, table, out, None if everything else columns)
+                self._loop(k0, k1, steps, table, out, None if full else columns,
+                           [(col, q) for col, (_, q) in zip(typed_out, typed)])
                 bar.update(min(k1, steps) - k0)
         wall = time.perf_counter() - start
-        signals = {n: np.ascontiguousarray(out[:, j]) for j, n in enumerate(record)}
+        signals: dict[str, np.ndarray] = {}
+        float_columns = dict((j, c) for c, (j, _) in enumerate(floats))
+        typed_columns = dict((j, c) for c, (j, _) in enumerate(typed))
+        for j, name in enumerate(record):
+            signals[name] = (np.ascontiguousarray(out[:, float_columns[j]]) if j in float_columns
+                             else _typed_array(typed_out[typed_columns[j]]))
         return Recording(np.arange(steps + 1) * self.step, signals, wall)
+
+    def resolve(self, name: str) -> str:
+        """The full name of a signal: `fmu.output`, a source, or a unique output's own name."""
+        everything = (*self.signals, *self.typed_signals)
+        if name in everything:
+            return name
+        matches = [s for s in everything if s.partition(".")[2] == name]
+        if len(matches) == 1:
+            return matches[0]
+        if matches:
+            raise ValueError(f"signal {name!r} is ambiguous: {', '.join(matches)}")
+        raise ValueError(f"cannot record unknown signal {name!r}; known: "
+                         f"{', '.join(everything)}")
 
     def _source_table(self, values: Mapping[str, np.ndarray | float], steps: int) -> np.ndarray:
         missing = [n for n in self.sources if n not in values]
@@ -297,50 +275,97 @@ class Master:
             table[:, j] = column
         return table
 
-    def _get(self, p: _Plan) -> int:
-        return p.slave.get_real(p.slave.c, p.out_vr, c_size_t(len(p.slave.outputs)),
-                                p.out_values)
+    def _propagate_initial_values(self, sources: np.ndarray) -> None:
+        """Jacobi: carry the initial values through every connection before the first step
+        (inputs set, outputs read, once per FMU: through any chain), as libcosim does."""
+        self._bus[:len(self.sources)] = sources
+        for _ in self._plans:
+            for p in self._plans:
+                if p.gather is not None:
+                    np.take(self._bus, p.gather, out=p.gather_view)
+                    if p.gain is not None:
+                        p.gather_view[:] = p.gather_view * p.gain + p.offset
+                if p.inputs and p.fast.set_float64(*p.set_args) > 1:
+                    raise p.fail("setting its inputs before the first step")
+                if p.typed_inputs:
+                    self._set_typed(p, "before the first step")
+            for p in self._plans:
+                self._read(p, "before the first step")
+
+    def _read(self, p: _Plan, when: str) -> None:
+        """Read an FMU's outputs of every type into the bus and the typed table."""
+        if p.outputs and p.fast.get_float64(*p.get_args) > 1:
+            raise p.fail(f"getting its outputs {when}")
+        self._read_typed(p, when)
+
+    def _read_typed(self, p: _Plan, when: str) -> None:
+        if p.typed_outputs:
+            try:
+                values = p.instance.get(p.typed_outputs)
+            except FmuError:
+                raise p.fail(f"getting its outputs {when}") from None
+            self._typed.update((f"{p.name}.{n}", v) for n, v in zip(p.typed_outputs, values))
+
+    def _set_typed(self, p: _Plan, when: str) -> None:
+        try:
+            p.instance.set({name: self._typed[producer] for name, producer in p.typed_inputs})
+        except FmuError:
+            raise p.fail(f"setting its inputs {when}") from None
 
     def _loop(self, k0: int, k1: int, steps: int, table: np.ndarray, out: np.ndarray,
-              columns: np.ndarray | None) -> None:
+              columns: np.ndarray | None, typed: list[tuple[np.ndarray, str]]) -> None:
         """Communication points k0 .. k1 - 1 (see the module docstring); the hot loop."""
-        h, bus, take, double = self.step, self._bus, np.take, c_double
-        h_c, true = c_double(self.step), c_int(1)
+        h, bus, take = self.step, self._bus, np.take
+        multiply, add = np.multiply, np.add
         sources = bus[:len(self.sources)]
-        before = [(p.slave.c, p.slave.set_real if p.slave.inputs else None, p.in_vr,
-                   c_size_t(len(p.slave.inputs)), p.in_values, p.gather, p.gather_view,
-                   p.slave.get_real if p.read_before and p.slave.outputs else None, p.out_vr,
-                   c_size_t(len(p.slave.outputs)), p.out_values, p.slave) for p in self._plans]
-        after = [(p.slave.c, p.slave.do_step,
-                  p.slave.get_real if p.read_after and p.slave.outputs else None, p.out_vr,
-                  c_size_t(len(p.slave.outputs)), p.out_values, p.slave) for p in self._plans]
+        before = [(p.fast.set_float64 if p.inputs else None, p.set_args, p.gather,
+                   p.gather_view, p.gain, p.offset,
+                   p.fast.get_float64 if p.read_before and p.outputs else None, p.get_args,
+                   bool(p.typed_inputs), p.read_before and bool(p.typed_outputs), p)
+                  for p in self._plans]
+        after = [(p.fast.do_step, p.fast.time, p.fast.step_args(h),
+                  p.fast.get_float64 if p.read_after and p.outputs else None, p.get_args,
+                  p.read_after and bool(p.typed_outputs), p) for p in self._plans]
+        typed_record = self._typed
         for k in range(k0, k1):
             sources[:] = table[k]
-            for c, set_real, in_vr, n_in, u, gather, view, get_real, out_vr, n_out, y, s in before:
+            for set_f, set_args, gather, view, gain, offset, get_f, get_args, typed_in, \
+                    typed_out, p in before:
                 if gather is not None:
                     take(bus, gather, out=view)
-                if set_real is not None and set_real(c, in_vr, n_in, u) > 1:
-                    raise s.fail(f"fmi2SetReal at t = {k * h:.9g} s")
-                if get_real is not None and get_real(c, out_vr, n_out, y) > 1:
-                    raise s.fail(f"fmi2GetReal at t = {k * h:.9g} s")
+                    if gain is not None:
+                        multiply(view, gain, out=view)
+                        add(view, offset, out=view)
+                if set_f is not None and set_f(*set_args) > 1:
+                    raise p.fail(f"setting its inputs at t = {k * h:.9g} s")
+                if typed_in:
+                    self._set_typed(p, f"at t = {k * h:.9g} s")
+                if get_f is not None and get_f(*get_args) > 1:
+                    raise p.fail(f"getting its outputs at t = {k * h:.9g} s")
+                if typed_out:
+                    self._read_typed(p, f"at t = {k * h:.9g} s")
             if columns is None:
                 out[k] = bus
             else:
                 take(bus, columns, out=out[k])
+            for column, name in typed:
+                column[k] = typed_record[name]
             if k == steps:
                 return
             t = k * h
-            t_c = double(t)
-            for c, do_step, get_real, out_vr, n_out, y, s in after:
-                if do_step(c, t_c, h_c, true) > 1:
-                    raise s.fail(f"fmi2DoStep from t = {t:.9g} s")
-                if get_real is not None and get_real(c, out_vr, n_out, y) > 1:
-                    raise s.fail(f"fmi2GetReal at t = {t + h:.9g} s")
+            for do_step, clock, step_args, get_f, get_args, typed_out, p in after:
+                clock.value = t
+                if do_step(*step_args) > 1:
+                    raise p.fail(f"the step from t = {t:.9g} s")
+                if get_f is not None and get_f(*get_args) > 1:
+                    raise p.fail(f"getting its outputs at t = {t + h:.9g} s")
+                if typed_out:
+                    self._read_typed(p, f"at t = {t + h:.9g} s")
 
     def close(self) -> None:
         """Terminate and free every FMU (safe to call twice)."""
-        while self._slaves:
-            self._slaves.pop().close()
+        while self._instances:
+            self._instances.pop().close()
 
     def __enter__(self) -> Master:
         return self
@@ -348,3 +373,22 @@ class Master:
     def __exit__(self, *exc) -> None:
         self.close()
 
+
+def _check_parameters(spec: SlaveSpec, info: FmuInfo) -> None:
+    """Start values may be given to parameters and inputs the FMU has."""
+    settable = [n for n, v in info.variables.items()
+                if v.causality in ("parameter", "structuralParameter", "input")]
+    for name in spec.parameters:
+        if name not in settable:
+            raise ValueError(f"{spec.name}: unknown parameter {name!r} (known: "
+                             f"{', '.join(settable)})")
+
+
+def _typed_array(values: np.ndarray) -> np.ndarray:
+    """A recorded column of another type as a plain numpy array (binary as hex strings)."""
+    first = values[0]
+    if isinstance(first, bytes):
+        return np.array([v.hex() for v in values])
+    if isinstance(first, str):
+        return np.array(list(values), dtype=str)
+    return np.array(list(values))

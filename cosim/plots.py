@@ -3,6 +3,8 @@
   path.png    the true x-y path against the reference
   error.png   tracking error e = reference - true position over time, per axis
   forces.png  feedback, feedforward and total end-effector force over time, per axis
+  signals.png every recorded float signal over time, for a run without the manipulator's
+              signals (at most MAX_PANELS of them)
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ import matplotlib.pyplot as plt  # noqa: E402  (after selecting the backend)
 
 from cosim.recording import Recording, atomic_write  # noqa: E402
 
-SIGNALS = ("x_ref", "y_ref", "x", "y", "Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
+PLOT_SIGNALS = ("x_ref", "y_ref", "x", "y", "Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
+MAX_PANELS = 8
 MM = 1e3
 
 
@@ -63,8 +66,24 @@ def plot_forces(rec: Recording, path: Path) -> Path:
     return save_figure(figure, path)
 
 
+def plot_signals(rec: Recording, path: Path) -> Path:
+    """The first MAX_PANELS float signals, one panel each."""
+    names = [n for n, v in rec.signals.items() if v.dtype.kind == "f"][:MAX_PANELS]
+    figure, axes = plt.subplots(max(len(names), 1), 1, sharex=True, squeeze=False,
+                                figsize=(8, 1.2 + 1.4 * max(len(names), 1)))
+    for ax, name in zip(axes[:, 0], names):
+        ax.plot(rec.time, rec.signals[name], lw=0.8)
+        ax.set_ylabel(name, fontsize="small")
+        ax.grid(True, alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    return save_figure(figure, path)
+
+
 def write_plots(rec: Recording, folder: str | Path) -> list[Path]:
-    """Write path.png, error.png and forces.png into `folder`; return their paths."""
+    """Write path.png, error.png and forces.png into `folder` (signals.png for a run
+    without the manipulator's signals); return their paths."""
     folder = Path(folder)
+    if not all(name in rec for name in PLOT_SIGNALS):
+        return [plot_signals(rec, folder / "signals.png")]
     return [plot_path(rec, folder / "path.png"), plot_error(rec, folder / "error.png"),
             plot_forces(rec, folder / "forces.png")]

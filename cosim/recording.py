@@ -10,6 +10,7 @@ never leaves a half-written file behind.
 
 from __future__ import annotations
 
+import csv as csv_module
 import os
 import tempfile
 from collections.abc import Callable, Mapping
@@ -39,7 +40,23 @@ class Recording:
                                  f"{self.time.shape}")
 
     def __getitem__(self, name: str) -> np.ndarray:
-        return self.time if name == "time" else self.signals[name]
+        """A signal by its name, or by an output's own name where one FMU alone has it
+        (`x` for `plant.x`)."""
+        if name == "time":
+            return self.time
+        if name in self.signals:
+            return self.signals[name]
+        matches = [n for n in self.signals if n.partition(".")[2] == name]
+        if len(matches) != 1:
+            raise KeyError(name if not matches else f"{name!r} is ambiguous: {matches}")
+        return self.signals[matches[0]]
+
+    def __contains__(self, name: str) -> bool:
+        try:
+            self[name]
+        except KeyError:
+            return False
+        return True
 
     @property
     def step(self) -> float:
@@ -73,8 +90,16 @@ def save_recording(recording: Recording, folder: str | Path, csv: bool = True) -
             np.savez(handle, **arrays)
 
     def write_csv(tmp: Path) -> None:
-        np.savetxt(tmp, np.column_stack(list(arrays.values())), fmt="%.17g", delimiter=",",
-                   header=",".join(arrays), comments="")
+        if all(a.dtype == np.float64 for a in arrays.values()):
+            np.savetxt(tmp, np.column_stack(list(arrays.values())), fmt="%.17g", delimiter=",",
+                       header=",".join(arrays), comments="")
+            return
+        columns = [[f"{v:.17g}" if a.dtype.kind == "f" else str(v) for v in a]
+                   for a in arrays.values()]
+        with open(tmp, "w", newline="") as handle:
+            writer = csv_module.writer(handle)
+            writer.writerow(arrays)
+            writer.writerows(zip(*columns))
 
     paths = [atomic_write(folder / NPZ_NAME, write_npz)]
     if csv:

@@ -16,7 +16,8 @@ import csv
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -366,3 +367,71 @@ def _positive(name: str, value: float, unit: str) -> None:
 def _finite_point(name: str, point: Sequence[float]) -> None:
     if len(point) != 2 or not all(math.isfinite(float(v)) for v in point):
         raise ValueError(f"{name} must be a finite (x, y) pair in m, got {point!r}")
+
+
+REFERENCE_KINDS = ("thesis-eval", "thesis-hardware-eval", "circle", "line-circle", "spline",
+                   "segments", "csv")
+
+
+def build_reference(kind: str, options: Mapping[str, Any], step: float) -> Reference:
+    """The reference of a checked [reference] table (cosim.config), sampled every `step`
+    seconds from t = 0."""
+    o = options
+    if kind == "thesis-eval":
+        return thesis_evaluation(step)
+    if kind == "thesis-hardware-eval":
+        return thesis_hardware_evaluation(step)
+    if kind == "csv":
+        ref = read_csv(o["path"], step, o["smoothing_window"])
+        return Reference(ref.t - ref.t[0], ref.x, ref.y, ref.vx, ref.vy, ref.ax, ref.ay)
+    if kind == "segments":
+        return sample(segment_chain(o["start"], o["segments"]), step)
+    if kind == "spline":
+        return sample(Spline(tuple(map(tuple, o["points"])), o["duration"]), step)
+    circle = Circle(tuple(o["centre"]), o["radius"], o["start_angle"], o["turns"],
+                    o["duration" if kind == "circle" else "circle_duration"])
+    if kind == "circle":
+        return sample(circle, step)
+    line = Line(tuple(o["start"]), tuple(circle.start), o["line_duration"])
+    return sample(Chain((line, circle)), step)
+
+
+class SegmentError(ValueError):
+    """A segment of a `segments` reference that cannot be built; `index` says which."""
+
+    def __init__(self, index: int, message: str) -> None:
+        super().__init__(message)
+        self.index = index
+
+
+def segment_chain(start: tuple[float, float], segments: Sequence[Mapping[str, Any]]
+                  ) -> Chain:
+    """The checked segment tables of a `segments` reference as one Chain from `start`."""
+    point, pieces = (float(start[0]), float(start[1])), []
+    for k, spec in enumerate(segments):
+        try:
+            piece = _segment(point, spec)
+        except ValueError as error:
+            raise SegmentError(k, str(error)) from None
+        pieces.append(piece)
+        point = (float(piece.end[0]), float(piece.end[1]))
+    return Chain(tuple(pieces))
+
+
+def _segment(point: tuple[float, float], spec: Mapping[str, Any]) -> Segment:
+    """One segment starting at `point`; circles and splines take their geometry from it."""
+    kind, duration = spec["kind"], spec["duration"]
+    if kind == "line":
+        return Line(point, tuple(spec["to"]), duration)
+    if kind == "hold":
+        return Hold(point, duration)
+    if kind == "circle":
+        centre = spec["centre"]
+        dx, dy = point[0] - centre[0], point[1] - centre[1]
+        radius = math.hypot(dx, dy)
+        if radius == 0:
+            raise ValueError(f"the circle starts at its centre {tuple(centre)} m (radius 0): "
+                             f"move the centre or the point before it")
+        return Circle(tuple(centre), radius, math.atan2(dy, dx), spec["turns"],
+                                 duration)
+    return Spline((point, *map(tuple, spec["points"])), duration)

@@ -1,10 +1,12 @@
-"""run_config: one configured run, from TOML to a folder of results.
+"""run_config: one configured run, from TOML (or SSP) to a folder of results.
 
-The folder gets signals.npz (and signals.csv, see cosim.recording), metrics.json
-(cosim.metrics; with a learned feedforward also `feedforward_range`, where the reference
-leaves the model's training range), path.png, error.png, forces.png (cosim.plots) and
-run.json, the checked configuration as plain data. The FMUs are built into the fmu/ cache
-and loaded from a temporary copy.
+The folder gets signals.npz (and signals.csv, see cosim.recording) with every recorded signal
+named `fmu.output` (sources by their own names), and the manipulator's signals under their
+short names as well; metrics.json (cosim.metrics: wall time and real-time factor, and the
+tracking errors where the run has a reference and a true position; with a learned feedforward
+also `feedforward_range`, where the reference leaves the model's training range); the plots
+(cosim.plots); and run.json, the checked configuration in the general form. The built-in FMUs
+are built into the fmu/ cache and loaded from a temporary copy.
 """
 
 from __future__ import annotations
@@ -14,35 +16,68 @@ import json
 import tempfile
 from pathlib import Path
 
+from controllers.feedback import OUTPUTS as CONTROLLER_OUTPUTS
+from controllers.feedforward import FORCE_OUTPUTS
 from controllers.training_range import MARGIN, training_range_excess
-from cosim.config import RunConfig, load_config
-from cosim.master import Master
+from cosim.config import expanded, load_config
 from cosim.metrics import run_metrics
-from cosim.plots import SIGNALS as PLOT_SIGNALS
-from cosim.plots import write_plots
+from cosim.plots import PLOT_SIGNALS, write_plots
 from cosim.recording import Recording, atomic_write, save_recording
-from cosim.scenario import build_slaves, reference_samples, source_signals
+from cosim.references import Reference
+from cosim.scenario import Scenario, resolve
+from cosim.schema import ConfigError, RunConfig
+from plant.model import PlantModel
+
+# DESIGN.md's signals of the manipulator, kept under their short names in recordings
+MANIPULATOR_SIGNALS = (*Reference.SIGNALS, *(v.name for v in FORCE_OUTPUTS),
+                       *(v.name for v in CONTROLLER_OUTPUTS), *PlantModel.output_names)
+
+
+def load_run(path: str | Path) -> RunConfig:
+    """A run configuration from a TOML file or an SSP file (by its suffix)."""
+    if Path(path).suffix.lower() == ".ssp":
+        from cosim.ssp import load_ssp
+        return load_ssp(path)
+    return load_config(path)
+
+
+def simulate(scenario: Scenario, progress: bool | None = None) -> Recording:
+    """Run a resolved scenario; the recording holds its [record] signals (all by default)
+    plus those the metrics and plots need."""
+    wanted = scenario.config.record.signals
+    with scenario.master() as master:
+        if wanted is not None:
+            for name in wanted:
+                try:
+                    master.resolve(name)
+                except ValueError as error:
+                    raise ConfigError(scenario.config.source, "record.signals",
+                                      str(error)) from None
+            extra = [n for n in PLOT_SIGNALS if n not in wanted and _known(master, n)]
+            wanted = list(wanted) + extra
+        return master.run(scenario.sources, scenario.steps, wanted, progress)
+
+
+def _known(master, name: str) -> bool:
+    try:
+        master.resolve(name)
+    except ValueError:
+        return False
+    return True
 
 
 def simulate_config(config: RunConfig, progress: bool | None = None) -> Recording:
-    """Run a configuration; the recording holds its [record] signals plus those the metrics
-    and plots need."""
-    wanted = list(config.record.signals) if config.record.signals is not None else None
+    """Resolve a configuration (built-ins into a temporary folder) and run it."""
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
-        slaves = build_slaves(config, folder)
-        sources = source_signals(config)
-        with Master(slaves, list(sources), config.step) as master:
-            record = None if wanted is None else wanted + [
-                n for n in PLOT_SIGNALS if n not in wanted]
-            return master.run(sources, config.steps, record, progress)
+        return simulate(resolve(config, folder), progress)
 
 
-def feedforward_range(config: RunConfig) -> dict | None:
+def feedforward_range(scenario: Scenario) -> dict | None:
     """Where the reference of a learned-feedforward run leaves the model's training range
     (controllers.training_range): {"margin", "outside": [features, farthest first]}, or None
     for a model exported without its range."""
-    reference = reference_samples(config.reference.build(config.step), config.steps)
-    excess = training_range_excess(config.feedforward.model, reference, config.step)
+    model = scenario.config.learned_feedforward.options["model"]
+    excess = training_range_excess(model, scenario.reference(), scenario.step)
     if excess is None:
         return None
     return {"margin": MARGIN, "outside": [dataclasses.asdict(e) for e in excess]}
@@ -64,22 +99,34 @@ def _write_json(path: Path, data: dict) -> None:
     atomic_write(path, lambda tmp: tmp.write_text(text))
 
 
+def _kept(recording: Recording, config: RunConfig) -> Recording:
+    """The recorded signals the configuration asked for, with the manipulator's short
+    names beside their full ones."""
+    names = config.record.signals
+    signals = dict(recording.signals) if names is None else {n: recording[n] for n in names}
+    for short in MANIPULATOR_SIGNALS:
+        if short not in signals and short in recording and (names is None or any(
+                n.partition(".")[2] == short for n in names)):
+            signals[short] = recording[short]
+    return Recording(recording.time, signals)
+
+
 def run_config(config: RunConfig | str | Path, output_dir: str | Path,
                progress: bool | None = None) -> dict:
-    """Run one configuration (or the TOML file at that path) into `output_dir`; return the
-    metrics written to metrics.json."""
+    """Run one configuration (or the TOML / SSP file at that path) into `output_dir`; return
+    the metrics written to metrics.json."""
     if not isinstance(config, RunConfig):
-        config = load_config(config)
+        config = load_run(config)
     out = Path(output_dir)
     out.mkdir(parents=True, exist_ok=True)
-    recording = simulate_config(config, progress)
-    metrics = run_metrics(recording)
-    if config.feedforward.kind == "onnx":
-        metrics["feedforward_range"] = feedforward_range(config)
-    kept = recording.signals if config.record.signals is None else {
-        n: recording[n] for n in config.record.signals}
-    save_recording(Recording(recording.time, kept), out, csv=config.record.csv)
+    with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
+        scenario = resolve(config, folder)
+        recording = simulate(scenario, progress)
+        metrics = run_metrics(recording)
+        if config.learned_feedforward is not None:
+            metrics["feedforward_range"] = feedforward_range(scenario)
+    save_recording(_kept(recording, config), out, csv=config.record.csv)
     write_plots(recording, out)
-    _write_json(out / "run.json", dataclasses.asdict(config))
+    _write_json(out / "run.json", expanded(config))
     _write_json(out / "metrics.json", metrics)
     return metrics

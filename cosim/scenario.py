@@ -1,59 +1,103 @@
-"""From a checked RunConfig to what the master runs: the FMUs in order and the source signals.
+"""The resolved scenario: a checked RunConfig turned into what the master runs, once, for run,
+collection, bench and evaluation alike.
 
-The order is feedforward (if any: rigid-body, or a learned ONNX model step by step or
-precomputed over the run's reference) -> controller -> plant; the reference signals are the
-external sources. Without a feedforward FMU, Fx_ff and Fy_ff are constant zero sources, so the
-controller's inputs stay connected by name either way. FMUs come from fmu.build.build_fmu,
-which keeps a cache by content hash: a run rebuilds only what changed.
+resolve() samples every source signal once (the reference, constants, CSV series), builds the
+built-in FMUs (through fmu.build's cache: a run rebuilds only what changed; a learned
+feedforward in the precomputed mode is built for the run's own reference), reads every FMU's
+model description, and wires them (cosim.wiring). Wiring problems become ConfigErrors naming
+`table.key`, raised before any FMU is loaded.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
-from controllers.feedforward import FORCE_OUTPUTS, rigid_body_feedforward_system
+from controllers.feedforward import rigid_body_feedforward_system
 from controllers.learned_feedforward import learned_feedforward_system
-from cosim.config import RunConfig
-from cosim.master import SlaveSpec
-from cosim.references import Reference
+from cosim.master import Master, SlaveSpec
+from cosim.references import Reference, build_reference
+from cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
+from cosim.wiring import Link, Port, WiringError, wire
 from fmu.build import build_fmu
+from fmu.importer import FmuError, read_fmu
 from fmu.system import System
 from plant.system import plant_system
 
 
-def controller_for(config: RunConfig) -> System:
-    """The feedback controller the configuration asks for, sampled at the run's step."""
-    c, variant = config.controller, config.plant.variant
-    if c.notch is False and DEFAULTS[variant].notch:
-        # the variant's defaults would add the notch: design without it at its crossover
-        crossover = c.crossover_hz or DEFAULTS[variant].crossover_hz
-        return controller_system("nominal", crossover, None, c.encoders, config.step)
-    notch_hz = parasitic_mode_hz() if c.notch is True else (c.notch or None)
-    return controller_system(variant, c.crossover_hz, notch_hz, c.encoders, config.step)
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """Everything a run needs, resolved: FMU files in order, wiring, sampled sources."""
+
+    config: RunConfig
+    slaves: tuple[SlaveSpec, ...]
+    links: tuple[Link, ...]
+    sources: Mapping[str, np.ndarray | float]
+
+    @property
+    def step(self) -> float:
+        return self.config.step
+
+    @property
+    def steps(self) -> int:
+        return self.config.steps
+
+    def master(self) -> Master:
+        """The FMUs loaded and wired, ready to run (a context manager)."""
+        return Master(self.slaves, list(self.sources), self.step, self.links,
+                      self.config.algorithm)
+
+    def reference(self) -> dict[str, np.ndarray]:
+        """The sampled reference signals (empty without a [reference])."""
+        return {n: self.sources[n] for n in Reference.SIGNALS if n in self.sources}
 
 
-def build_slaves(config: RunConfig, folder: str | Path) -> list[SlaveSpec]:
-    """Build (or fetch from the cache) every FMU of the run into `folder`, in stepping order."""
+def resolve(config: RunConfig, folder: str | Path) -> Scenario:
+    """Build the built-in FMUs into `folder`, sample the sources, wire everything."""
     folder = Path(folder)
-    slaves = []
-    ff = config.feedforward
-    if ff.kind != "none":
-        system = (rigid_body_feedforward_system(config.step) if ff.kind == "model" else
-                  learned_feedforward_system(ff.model, config.step, reference_samples(
-                      config.reference.build(config.step), config.steps)
-                      if ff.mode == "precomputed" else None))
-        slaves.append(SlaveSpec("feedforward", build_fmu(system, folder / "feedforward.fmu")))
-    controller = build_fmu(controller_for(config), folder / "controller.fmu")
-    slaves.append(SlaveSpec("controller", controller))
-    parameters: dict[str, float | int] = dict(config.plant.parameters)
-    if config.plant.seed is not None:
-        parameters["seed"] = config.plant.seed
-    plant = build_fmu(plant_system(config.plant.variant), folder / "plant.fmu")
-    slaves.append(SlaveSpec("plant", plant, parameters))
-    return slaves
+    sources = source_signals(config)
+    slaves = tuple(SlaveSpec(f.name, _fmu_file(f, config, sources, folder), _start_values(f))
+                   for f in config.fmus)
+    ports = []
+    for f, s in zip(config.fmus, slaves):
+        try:
+            info = read_fmu(s.fmu)
+        except FmuError as error:
+            raise ConfigError(config.source, f"fmu.{f.name}", str(error)) from None
+        ports.append(Port(f.name, info, f.unconnected,
+                          frozenset(n for n in f.parameters if n in info.inputs)))
+    try:
+        links = wire(ports, list(sources), config.connections, config.algorithm)
+    except WiringError as error:
+        raise ConfigError(config.source, error.key, error.message) from None
+    return Scenario(config, slaves, tuple(links), sources)
+
+
+def source_signals(config: RunConfig) -> dict[str, np.ndarray | float]:
+    """Every external signal of the run, sampled at points 0 .. steps."""
+    out: dict[str, np.ndarray | float] = dict(reference_signals(config))
+    for k, source in enumerate(config.sources):
+        values = (dict(source.values) if source.kind == "constant" else
+                  _csv_series(source, config, f"source[{k}].path"))
+        for name, value in values.items():
+            if name in out:
+                raise ConfigError(config.source, f"source[{k}]",
+                                  f"source signal {name!r} is given twice")
+            out[name] = value
+    return out
+
+
+def reference_signals(config: RunConfig) -> dict[str, np.ndarray]:
+    """The run's reference signals at points 0 .. steps (none without a [reference])."""
+    if config.reference is None:
+        return {}
+    return reference_samples(build_reference(config.reference.kind, config.reference.options,
+                                             config.step), config.steps)
 
 
 def reference_samples(reference: Reference, steps: int) -> dict[str, np.ndarray]:
@@ -69,10 +113,74 @@ def reference_samples(reference: Reference, steps: int) -> dict[str, np.ndarray]
     return out
 
 
-def source_signals(config: RunConfig) -> dict[str, np.ndarray | float]:
-    """Every external signal of the run: the reference, and zero forces without feedforward."""
-    sources: dict[str, np.ndarray | float] = dict(
-        reference_samples(config.reference.build(config.step), config.steps))
-    if config.feedforward.kind == "none":
-        sources.update({v.name: 0.0 for v in FORCE_OUTPUTS})
-    return sources
+def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, np.ndarray]:
+    """The columns of a CSV source, linearly interpolated onto the run's points."""
+    def fail(message: str) -> ConfigError:
+        return ConfigError(config.source, key, f"{source.path}: {message}")
+
+    with open(source.path, encoding="utf-8-sig") as handle:
+        header = [h.strip() for h in handle.readline().strip().split(",")]
+        try:
+            data = np.loadtxt(handle, delimiter=",", ndmin=2)
+        except ValueError as error:
+            raise fail(f"not a table of numbers under its header: {error}") from None
+    if not header or header[0] != "time" or len(header) < 2:
+        raise fail("the header must be `time,<signal>,...`")
+    if data.shape[1] != len(header) or data.shape[0] < 2:
+        raise fail(f"expected at least two rows of {len(header)} numbers")
+    if not np.all(np.isfinite(data)):
+        raise fail("holds NaN or Inf values")
+    time = data[:, 0]
+    if np.any(np.diff(time) <= 0):
+        row = int(np.argmax(np.diff(time) <= 0)) + 2
+        raise fail(f"time is not strictly increasing at data row {row}")
+    for name in header[1:]:
+        if "." in name or not name:
+            raise fail(f"column {name!r}: a source signal's name is plain (no dot); "
+                       f"connect it with a [[connection]]")
+    grid = np.arange(config.steps + 1) * config.step
+    return {name: np.interp(grid, time, data[:, j + 1]) for j, name in enumerate(header[1:])}
+
+
+def _start_values(f: FmuConfig) -> dict[str, Any]:
+    values = dict(f.parameters)
+    if f.builtin == "plant" and "seed" in f.options:
+        values["seed"] = f.options["seed"]
+    return values
+
+
+def _fmu_file(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any], folder: Path
+              ) -> Path:
+    """The FMU file of `f`: its path, or the built-in built through the cache."""
+    if f.path is not None:
+        return f.path
+    return build_fmu(_builtin_system(f, config, sources), folder / f"{f.name}.fmu")
+
+
+def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any]) -> System:
+    o = f.options
+    if f.builtin == "plant":
+        return plant_system(o["variant"])
+    if f.builtin == "controller":
+        return controller_for(o, config.step)
+    if f.builtin == "rigid-body-feedforward":
+        return rigid_body_feedforward_system(config.step)
+    reference = None
+    if o["mode"] == "precomputed":
+        reference = {n: sources[n] for n in Reference.SIGNALS if n in sources}
+        if len(reference) != len(Reference.SIGNALS):
+            raise ConfigError(config.source, f"fmu.{f.name}.mode", "the precomputed mode needs "
+                              "a [reference] to precompute the feedforward over")
+    return learned_feedforward_system(o["model"], config.step, reference)
+
+
+def controller_for(options: Mapping[str, Any], step: float) -> System:
+    """The feedback controller of a built-in controller's options, sampled at `step`."""
+    variant, crossover = options["variant"], options.get("crossover_hz")
+    notch, encoders = options.get("notch"), options.get("encoders", 2)
+    if notch is False and DEFAULTS[variant].notch:
+        # the variant's defaults would add the notch: design without it at its crossover
+        return controller_system("nominal", crossover or DEFAULTS[variant].crossover_hz, None,
+                                 encoders, step)
+    notch_hz = parasitic_mode_hz() if notch is True else (notch or None)
+    return controller_system(variant, crossover, notch_hz, encoders, step)

@@ -9,19 +9,32 @@ from typing import Any
 
 import numpy as np
 
-from controllers.feedback import controller_system
-from controllers.learned_feedforward import learned_feedforward_system
+from cosim.config import parse_config
 from cosim.floor import run_c_loop
 from cosim.libcosim import run_libcosim, time_libcosim_engine
-from cosim.master import Master, SlaveSpec
-from cosim.references import thesis_evaluation
-from cosim.scenario import reference_samples
+from cosim.scenario import Scenario, resolve
 from fmu.bench import bench_fmu
 from fmu.build import build_fmu
 from plant.system import plant_system
 
-CLOSED_LOOP_STEP = 1e-3
-CLOSED_LOOP_STOP = 15.0  # the thesis's evaluation reference
+CLOSED_LOOP_REFERENCE = "thesis-eval"  # the thesis's evaluation reference, 15 s at 1 ms
+
+
+def closed_loop_scenario(folder: Path, feedforward: dict[str, str] | None = None) -> Scenario:
+    """PID + nominal plant (and `feedforward`, a [feedforward] table) on the thesis's
+    evaluation reference, resolved with its FMUs in `folder`."""
+    config = parse_config({"reference": {"kind": CLOSED_LOOP_REFERENCE},
+                           "feedforward": feedforward or {"kind": "none"}}, name="bench")
+    return resolve(config, folder)
+
+
+def _best_wall(scenario: Scenario, repeats: int) -> float:
+    """The fastest of `repeats` runs of the scenario through cosim.master (loop time)."""
+    walls = []
+    for _ in range(repeats):  # a Master runs once
+        with scenario.master() as master:
+            walls.append(master.run(scenario.sources, scenario.steps, progress=False).wall_s)
+    return min(walls)
 
 
 def closed_loop_benchmark(folder: Path, repeats: int = 3) -> dict[str, Any]:
@@ -32,32 +45,27 @@ def closed_loop_benchmark(folder: Path, repeats: int = 3) -> dict[str, Any]:
     Cross-checks: the C loop must record
     the master's numbers bit for bit; libcosim's Jacobi timing (cosim.libcosim) moves the
     end effector by up to `libcosim_max_position_gap_m`."""
-    steps = int(round(CLOSED_LOOP_STOP / CLOSED_LOOP_STEP))
-    slaves = [SlaveSpec("controller", build_fmu(controller_system("nominal"),
-                                                folder / "controller.fmu")),
-              SlaveSpec("plant", build_fmu(plant_system("nominal"), folder / "plant.fmu"))]
-    reference = reference_samples(thesis_evaluation(CLOSED_LOOP_STEP), steps)
-    sources = {"x_ref": reference["x_ref"], "y_ref": reference["y_ref"],
-               "Fx_ff": 0.0, "Fy_ff": 0.0}
+    scenario = closed_loop_scenario(folder)
+    steps, step, sources = scenario.steps, scenario.step, scenario.sources
     ours = []
     for _ in range(repeats):
-        with Master(slaves, list(sources), CLOSED_LOOP_STEP) as master:
+        with scenario.master() as master:
             if not ours:
                 c_record, c_us = run_c_loop(master, sources, steps, repeats)
             ours.append(master.run(sources, steps, progress=False))
     best = min(r.wall_s for r in ours)
-    theirs = [run_libcosim(slaves, sources, CLOSED_LOOP_STEP, steps, ["x", "y"])
+    theirs = [run_libcosim(scenario.slaves, sources, step, steps, ["x", "y"])
               for _ in range(repeats)]
-    engine_s = min(time_libcosim_engine(slaves, sources, CLOSED_LOOP_STEP, steps)
+    engine_s = min(time_libcosim_engine(scenario.slaves, sources, step, steps)
                    for _ in range(repeats))
     master_us, engine_us = 1e6 * best / steps, 1e6 * engine_s / steps
     libcosim_us = 1e6 * min(r.wall_s for r in theirs) / steps
     us = {"master": master_us, "libcosim": libcosim_us, "libcosim_engine": engine_us, "c": c_us}
     gap = max(float(np.abs(theirs[0][n] - ours[0][n][1:]).max()) for n in ("x", "y"))
     return {
-        "reference": "thesis-eval", "stop_s": CLOSED_LOOP_STOP, "steps": steps,
+        "reference": CLOSED_LOOP_REFERENCE, "stop_s": scenario.config.stop, "steps": steps,
         "us_per_step": us,
-        "real_time_factor": {k: CLOSED_LOOP_STEP / (v * 1e-6) for k, v in us.items()},
+        "real_time_factor": {k: step / (v * 1e-6) for k, v in us.items()},
         "ratio_master_over_c": master_us / c_us,
         "ratio_libcosim_over_master": libcosim_us / master_us,
         "ratio_libcosim_engine_over_master": engine_us / master_us,
@@ -88,32 +96,19 @@ def learned_feedforward_benchmark(folder: Path, models: dict[str, Path],
     """Real-time factor of the closed loop (feedforward FMU + PID + nominal plant, thesis
     evaluation reference, through cosim.master) with each learned model, step by step and
     precomputed, best of `repeats`; its cost over the loop without feedforward."""
-    steps = int(round(CLOSED_LOOP_STOP / CLOSED_LOOP_STEP))
-    reference = reference_samples(thesis_evaluation(CLOSED_LOOP_STEP), steps)
-    loop = [SlaveSpec("controller", build_fmu(controller_system("nominal"),
-                                              folder / "controller.fmu")),
-            SlaveSpec("plant", build_fmu(plant_system("nominal"), folder / "plant.fmu"))]
-
-    def seconds(slaves: list[SlaveSpec], sources: dict[str, Any]) -> float:
-        walls = []
-        for _ in range(repeats):  # a Master runs once
-            with Master(slaves, list(sources), CLOSED_LOOP_STEP) as master:
-                walls.append(master.run(sources, steps, progress=False).wall_s)
-        return min(walls)
-
-    base = seconds(loop, {"x_ref": reference["x_ref"], "y_ref": reference["y_ref"],
-                          "Fx_ff": 0.0, "Fy_ff": 0.0})
-    results: dict[str, Any] = {"reference": "thesis-eval", "steps": steps,
+    loop = closed_loop_scenario(folder)
+    steps, stop = loop.steps, loop.config.stop
+    base = _best_wall(loop, repeats)
+    results: dict[str, Any] = {"reference": CLOSED_LOOP_REFERENCE, "steps": steps,
                                "without_feedforward_us_per_step": 1e6 * base / steps}
     for kind, model in models.items():
         for mode in ("step", "precomputed"):
-            system = learned_feedforward_system(
-                model, CLOSED_LOOP_STEP, reference if mode == "precomputed" else None)
-            ff = SlaveSpec("feedforward", build_fmu(system, folder / f"{kind}-{mode}.fmu"))
-            wall = seconds([ff, *loop], dict(reference))
+            scenario = closed_loop_scenario(folder, {"kind": "onnx", "model": str(model),
+                                                     "mode": mode})
+            wall = _best_wall(scenario, repeats)
             results[f"{kind}_{mode}"] = {
                 "us_per_step": 1e6 * wall / steps,
-                "real_time_factor": CLOSED_LOOP_STOP / wall,
+                "real_time_factor": stop / wall,
                 "ratio_over_without_feedforward": wall / base}
     return results
 

@@ -124,9 +124,12 @@ def _print_result(name: object, metrics: dict, output: object) -> None:
     """One line per run, and a second where its learned feedforward extrapolates."""
     from cosim.run import range_warning
 
-    x, y = metrics["x"], metrics["y"]
-    print(f"{name}: e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), einf = ({x['einf']:.4g}, "
-          f"{y['einf']:.4g}) m, real-time factor {metrics['real_time_factor']:.0f} -> {output}")
+    tracking = ""
+    if "x" in metrics:
+        x, y = metrics["x"], metrics["y"]
+        tracking = (f"e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), einf = ({x['einf']:.4g}, "
+                    f"{y['einf']:.4g}) m, ")
+    print(f"{name}: {tracking}real-time factor {metrics['real_time_factor']:.0f} -> {output}")
     if warning := range_warning(metrics):
         print(f"  {name}: {warning}")
 
@@ -141,6 +144,22 @@ def _config_example(args: argparse.Namespace) -> int:
     if args.name not in examples:
         raise ValueError(f"no example {args.name!r}; examples: {', '.join(examples)}")
     print(examples[args.name], end="")
+    return 0
+
+
+def _config_expand(args: argparse.Namespace) -> int:
+    from cosim.config import expanded_text
+    from cosim.run import load_run
+
+    print(expanded_text(load_run(args.config)), end="")
+    return 0
+
+
+def _ssp_export(args: argparse.Namespace) -> int:
+    from cosim.run import load_run
+    from cosim.ssp import export_ssp
+
+    print(f"wrote {export_ssp(load_run(args.config), args.output)}")
     return 0
 
 
@@ -223,8 +242,10 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("files", nargs="+", help=".fmu files")
     validate.set_defaults(handler=_fmu_validate)
 
-    run = commands.add_parser("run", help="run co-simulations from TOML configurations")
-    run.add_argument("configs", nargs="+", metavar="CONFIG.toml", help="run configurations")
+    run = commands.add_parser("run", help="run co-simulations from TOML configurations or SSP "
+                                          "files")
+    run.add_argument("configs", nargs="+", metavar="CONFIG.toml|SYSTEM.ssp",
+                     help="run configurations (TOML) or SSP 1.0 systems")
     run.add_argument("-o", "--output", required=True,
                      help="output folder (several configurations: one subfolder each)")
     run.add_argument("--workers", type=int, help="parallel local processes (default: CPUs)")
@@ -239,6 +260,19 @@ def build_parser() -> argparse.ArgumentParser:
                                                          "(no name: list them)")
     example.add_argument("name", nargs="?", help="the example's name")
     example.set_defaults(handler=_config_example)
+    expand = config_commands.add_parser("expand", help="print a configuration in the general "
+                                                       "form ([fmu.*], [[connection]], ...)")
+    expand.add_argument("config", help="a run configuration (TOML) or SSP file")
+    expand.set_defaults(handler=_config_expand)
+
+    ssp = commands.add_parser("ssp", help="SSP 1.0 (System Structure and Parameterization)")
+    ssp_commands = ssp.add_subparsers(dest="ssp_command", required=True)
+    ssp_export = ssp_commands.add_parser(
+        "export", help="write a run configuration as an .ssp file (FMUs, connections, "
+                       "parameters, default experiment) for libcosim, FMPy, OMSimulator")
+    ssp_export.add_argument("config", help="a run configuration (TOML)")
+    ssp_export.add_argument("-o", "--output", required=True, help="the .ssp file to write")
+    ssp_export.set_defaults(handler=_ssp_export)
 
     data = commands.add_parser("data", help="training data")
     data_commands = data.add_subparsers(dest="data_command", required=True)

@@ -34,10 +34,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from cosim.config import ConfigError, RunConfig, parse_config
+from cosim.config import parse_config
 from cosim.recording import Recording, atomic_write
 from cosim.run import simulate_config
-from cosim.scenario import build_slaves, reference_samples
+from cosim.scenario import reference_signals, resolve
+from cosim.schema import ConfigError, RunConfig
 from learning.dataset import (ENCODER_SIGNALS, FORMAT, MANIFEST, POSITION_SIGNALS,
                               REFERENCE_SIGNALS, SIGNALS, VERSION)
 from learning.trajectories import TrajectorySet, TrajectorySpec, trajectory_set
@@ -206,8 +207,7 @@ def _present(job: _Job) -> bool:
     except Exception:  # noqa: BLE001  (missing, truncated, not a zip, lacks a signal: run it)
         return False
     c = job.config
-    expected = {n: v[::job.decimation] for n, v in reference_samples(
-        c.reference.build(c.step), c.steps).items()}
+    expected = {n: v[::job.decimation] for n, v in reference_signals(c).items()}
     expected["time"] = (np.arange(c.steps + 1) * c.step)[::job.decimation]
     if not all(np.array_equal(signals[n], v) for n, v in expected.items()):
         raise DataFolderError(f"{job.path} does not hold trajectory {c.name!r} as this flexff "
@@ -245,7 +245,8 @@ def _collect_one(job: _Job) -> Outcome:
 
         atomic_write(job.path, write)
         currents = np.abs(np.vstack([recording[n] for n in CURRENTS])).max(axis=0)
-        limit = float(VARIANTS[job.config.plant.variant].parameters.i_max)
+        variant = job.config.builtin("plant").options["variant"]
+        limit = float(VARIANTS[variant].parameters.i_max)
         return Outcome(name, recording.wall_s, float(currents.max()),
                        float(np.mean(currents >= limit)))
     except Exception as error:  # noqa: BLE001  (reported; the other trajectories go on)
@@ -273,7 +274,7 @@ def _on_processes(jobs: list[_Job], workers: int | None) -> Iterator[Outcome]:
     if not jobs:
         return
     with tempfile.TemporaryDirectory(prefix="flexff-warm-") as folder:
-        build_slaves(jobs[0].config, folder)  # fills the FMU cache once, not in every worker
+        resolve(jobs[0].config, folder)  # fills the FMU cache once, not in every worker
     workers = min(workers or os.cpu_count() or 1, len(jobs))
     with ProcessPoolExecutor(max_workers=workers) as pool:
         futures = {pool.submit(_collect_one, job): job for job in jobs}

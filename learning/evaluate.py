@@ -26,10 +26,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cosim.config import RunConfig, parse_config
+from cosim.config import parse_config
 from cosim.recording import Recording, load_recording
 from cosim.report import write_report
 from cosim.run import range_warning, run_config
+from cosim.schema import RunConfig
 from learning.collect import collect
 from learning.export import export
 from learning.models import NETWORKS, check_kind

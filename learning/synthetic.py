@@ -133,7 +133,7 @@ def synthetic_collection_set(path: str | Path, set_name: str = "sim", friction: 
     splits and rate that `flexff data collect` runs), followed exactly, with synthetic labels."""
     # imported here: the run configurations pull in the co-simulation (fmpy), which the
     # random datasets above do not need
-    from cosim.scenario import reference_samples
+    from cosim.scenario import reference_signals
     from learning.collect import run_config
     from learning.trajectories import trajectory_set
 
@@ -141,7 +141,7 @@ def synthetic_collection_set(path: str | Path, set_name: str = "sim", friction: 
     written = []
     for spec in trajectories.trajectories:
         config = run_config(spec, trajectories)
-        signals = reference_samples(config.reference.build(config.step), config.steps)
+        signals = reference_signals(config)
         motion = np.vstack([signals[s] for s in REFERENCE_SIGNALS])[:, ::trajectories.decimation]
         t = np.arange(motion.shape[1]) / trajectories.sample_rate_hz
         written.append(motion_trajectory(spec.name, spec.split, spec.seed, t, motion,

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from cosim.references import build_reference
 from cosim.config import ConfigError, config_examples, parse_config
 
 STEP = 1e-3
@@ -21,7 +22,7 @@ SEGMENTS = [
 def build(segments, start=(0.002, 0.003)):
     config = parse_config({"reference": {"kind": "segments", "start": list(start),
                                          "segments": segments}})
-    return config, config.reference.build(STEP)
+    return config, build_reference(config.reference.kind, config.reference.options, STEP)
 
 
 def index(t):
@@ -31,7 +32,7 @@ def index(t):
 def test_segments_chain_end_to_start_and_durations_add_up():
     config, ref = build(SEGMENTS)
     assert config.stop == pytest.approx(7.0) and ref.t[-1] == pytest.approx(7.0)
-    assert config.plant.parameters == {"x_start": 0.002, "y_start": 0.003}
+    assert config.builtin("plant").parameters == {"x_start": 0.002, "y_start": 0.003}
     xy = np.vstack([ref.x, ref.y])
     # positions are continuous everywhere: no step moves further than the top speed allows
     speed = np.hypot(ref.vx, ref.vy).max()
@@ -62,8 +63,9 @@ def test_spline_laps_repeat_the_same_loop():
 
 def test_line_hold_circle_example():
     config = parse_config(config_examples()["line-hold-circle"])
-    assert config.stop == pytest.approx(100.0) and config.plant.variant == "hardware"
-    ref = config.reference.build(STEP)
+    assert config.stop == pytest.approx(100.0)
+    assert config.builtin("plant").options["variant"] == "hardware"
+    ref = build_reference(config.reference.kind, config.reference.options, STEP)
     np.testing.assert_allclose([ref.x[index(21.0)], ref.y[index(21.0)]], [0.0082, 0.0082],
                                atol=1e-15)
     circle = slice(index(22.0), index(97.0) + 1)
@@ -77,7 +79,8 @@ def test_thesis_hardware_eval_kind_is_the_segment_example():
     named = parse_config({"reference": {"kind": "thesis-hardware-eval"}})
     segments = parse_config(config_examples()["line-hold-circle"])
     assert named.stop == segments.stop == pytest.approx(100.0)
-    a, b = named.reference.build(STEP), segments.reference.build(STEP)
+    a, b = (build_reference(c.reference.kind, c.reference.options, STEP)
+            for c in (named, segments))
     for signal in ("t", "x", "y", "vx", "vy", "ax", "ay"):
         np.testing.assert_allclose(getattr(a, signal), getattr(b, signal), rtol=0, atol=1e-15)
 

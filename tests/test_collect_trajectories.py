@@ -12,6 +12,7 @@ import pytest
 
 from controllers.allocation import motor_currents
 from cosim.config import parse_config
+from cosim.references import build_reference
 from learning import trajectories as T
 from learning.trajectories import R_MAX, R_MIN, trajectory_set
 from plant.model import PlantModel
@@ -51,7 +52,7 @@ def test_the_same_on_every_call(trajectory_sets):
 def test_every_reference_is_a_valid_run_inside_the_holdable_disc(trajectory_sets):
     for t in trajectory_sets.trajectories:
         config = parse_config({"reference": dict(t.reference), "plant": {"variant": t.variant}})
-        ref = config.reference.build(1e-3)
+        ref = build_reference(config.reference.kind, config.reference.options, 1e-3)
         assert ref.duration == pytest.approx(trajectory_sets.duration, abs=1e-9), t.name
         reach = np.hypot(ref.x, ref.y).max()
         if t.name != "test-circle-01" or trajectory_sets.name != "sim":

@@ -43,8 +43,9 @@ def test_a_broken_run_is_reported_and_the_others_finish(tmp_path):
 
 def test_a_failure_inside_an_fmu_is_reported(tmp_path):
     config = parse_config(SHORT, name="good")
-    unchecked = replace(config, name="bad", plant=replace(  # past the configuration checks
-        config.plant, parameters={**config.plant.parameters, "k_s1": -5.0}))
+    fmus = tuple(replace(f, parameters={**f.parameters, "k_s1": -5.0})  # past the checks
+                 if f.name == "plant" else f for f in config.fmus)
+    unchecked = replace(config, name="bad", fmus=fmus)
     results = run_batch([config, unchecked], tmp_path, workers=1)
     assert results[0].ok
     assert "CosimError" in results[1].error and "k_s1" in results[1].error
@@ -56,7 +57,7 @@ def test_sweep(tmp_path):
     configs = sweep(path, "controller.crossover_hz", [2.0, 3.0])
     assert [c.name for c in configs] == ["base-controller.crossover_hz=2.0",
                                          "base-controller.crossover_hz=3.0"]
-    assert [c.controller.crossover_hz for c in configs] == [2.0, 3.0]
+    assert [c.builtin("controller").options["crossover_hz"] for c in configs] == [2.0, 3.0]
     with pytest.raises(ValueError, match="controller.crossover_hz: expected a number"):
         sweep(path, "controller.crossover_hz", ["fast"])
 
@@ -116,4 +117,4 @@ def test_cli_run_one_and_several(tmp_path):
     for encoders in (2, 3):
         run = json.loads((tmp_path / "sweep" / f"one-controller.encoders={encoders}" /
                           "run.json").read_text())
-        assert run["controller"]["encoders"] == encoders
+        assert run["fmu"]["controller"]["encoders"] == encoders

@@ -38,10 +38,13 @@ def test_examples_are_valid(name):
 def test_defaults_and_resolution(tmp_path):
     config = load_config(write(tmp_path, GOOD))
     assert config.name == "run" and config.steps == 2000
-    assert config.plant.variant == "nominal" and config.feedforward.kind == "none"
-    assert config.controller.encoders == 2 and config.record.signals is None
+    plant, controller = config.builtin("plant"), config.builtin("controller")
+    assert [f.name for f in config.fmus] == ["controller", "plant"]  # no feedforward FMU
+    assert config.sources[0].values == {"Fx_ff": 0.0, "Fy_ff": 0.0}  # ... but zero forces
+    assert plant.options == {"variant": "nominal"} and controller.options["encoders"] == 2
+    assert controller.options["variant"] == "nominal" and config.record.signals is None
     # the plant starts at rest where the reference starts
-    assert config.plant.parameters == {"x_start": 0.01, "y_start": 0.0}
+    assert plant.parameters == {"x_start": 0.01, "y_start": 0.0}
     thesis = parse_config('[reference]\nkind = "thesis-eval"\n')
     assert thesis.stop == pytest.approx(thesis_evaluation().duration)
 
@@ -71,7 +74,6 @@ def test_csv_paths_are_relative_to_the_configuration(tmp_path):
     ({"plant": "x_start = 0.2"}, "plant.x_start", "outside the workspace"),
     ({"feedforward": 'kind = "lstm"'}, "feedforward.kind", "unknown kind 'lstm'"),
     ({"feedforward": 'kind = "model"\nmodel = "a.onnx"'}, "feedforward.model", "unknown key"),
-    ({"record": 'signals = ["x", "z"]'}, "record.signals", "unknown signal(s) ['z']"),
     ({"record": "signals = 3"}, "record.signals", "expected a list"),
 ])
 def test_mistakes_name_the_key(tmp_path, change, key, message):
@@ -122,6 +124,13 @@ def test_bad_configuration_fails_before_anything_is_written(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+def test_unknown_record_signal_fails_before_the_run(tmp_path):
+    path = write(tmp_path, GOOD + '[record]\nsignals = ["x", "z"]\n')
+    with pytest.raises(ConfigError, match="record.signals: cannot record unknown signal 'z'"):
+        run_config(path, tmp_path / "out")
+    assert not (tmp_path / "out" / "signals.npz").exists()
+
+
 def test_not_toml(tmp_path):
     with pytest.raises(ConfigError, match="file: not valid TOML"):
         load_config(write(tmp_path, "[run\nstep = 1"))
@@ -139,7 +148,8 @@ def test_not_toml(tmp_path):
 def test_controller_follows_the_configuration(variant, controller, crossover, notch):
     config = parse_config(f'[reference]\nkind = "thesis-eval"\n[plant]\nvariant = "{variant}"\n'
                           f'[controller]\n{controller}\nencoders = 3\n')
-    design = json.loads(controller_for(config).extra["design"])
+    design = json.loads(controller_for(config.builtin("controller").options,
+                                       config.step).extra["design"])
     assert design["requested_crossover_hz"] == pytest.approx(crossover)
     expected = parasitic_mode_hz() if notch is True else (notch or 0.0)
     assert design["notch_hz"] == pytest.approx(expected) and design["encoders"] == 3

@@ -13,11 +13,12 @@ import pytest
 
 from controllers.feedback import controller_system
 from controllers.feedforward import rigid_body_feedforward_system
-from cosim.connections import Port, connect
 from cosim.floor import run_c_loop
 from cosim.master import CosimError, Master, SlaveSpec
 from cosim.references import thesis_evaluation
 from cosim.scenario import reference_samples
+from cosim.wiring import SOURCE, Port, wire
+from fmu.importer import read_fmu
 from fmu.build import build_fmu
 from plant.system import plant_system
 
@@ -104,24 +105,25 @@ def test_the_c_loop_records_the_same_numbers(fmus, reference):
         assert np.array_equal(c_record[name], rec[name]), name
 
 
-def test_connections_by_name():
-    ports = [Port("ff", ("x_ref",), ("F",), frozenset({"F"})),
-             Port("ctrl", ("x_ref", "F", "theta"), ("i",), frozenset({"i"})),
-             Port("plant", ("i",), ("theta", "tau"), frozenset({"tau"}))]
-    by_input = {(c.target, c.signal): c for c in connect(["x_ref"], ports)}
-    assert by_input["ctrl", "F"].source == "ff" and not by_input["ctrl", "F"].feedback
-    assert by_input["ctrl", "theta"].source == "plant" and by_input["ctrl", "theta"].feedback
-    assert by_input["ff", "x_ref"].source == "sources"
-    with pytest.raises(ValueError, match="input 'y_ref' of 'ff' is not connected"):
-        connect(["x_ref"], [Port("ff", ("x_ref", "y_ref"), ("F",))])
-    with pytest.raises(ValueError, match="algebraic loop"):
-        connect(["x_ref"], [Port("ctrl", ("x_ref", "tau"), ("i",)), ports[2]])
-    with pytest.raises(ValueError, match="'theta' is produced by both 'sources' and 'plant'"):
-        connect(["x_ref", "theta"], ports)
+def test_connections_by_name(fmus):
+    ports = [Port(name, read_fmu(fmus[name])) for name in ("feedforward", "controller", "plant")]
+    sources = ["x_ref", "y_ref", "vx_ref", "vy_ref", "ax_ref", "ay_ref"]
+    by_input = {(c.target, c.input): c for c in wire(ports, sources)}
+    assert by_input["controller", "Fx_ff"].source == "feedforward"
+    assert not by_input["controller", "Fx_ff"].feedback
+    assert by_input["controller", "theta_s1"].source == "plant"
+    assert by_input["controller", "theta_s1"].feedback
+    assert by_input["feedforward", "x_ref"].source == SOURCE
+    with pytest.raises(ValueError, match="input 'Fx_ff' is not connected"):
+        wire(ports[1:], sources)
+    with pytest.raises(ValueError, match="algebraic loop"):  # the currents come back
+        wire([ports[2], ports[1]], sources + ["Fx_ff", "Fy_ff"])
+    with pytest.raises(ValueError, match="'theta_s1' matches theta_s1 and plant.theta_s1"):
+        wire(ports, sources + ["theta_s1"])
 
 
 def test_an_unconnected_input_fails_at_load_time(fmus):
-    with pytest.raises(ValueError, match="input 'Fx_ff' of 'controller' is not connected"):
+    with pytest.raises(ValueError, match="input 'Fx_ff' is not connected"):
         Master([SlaveSpec("controller", fmus["controller"]), SlaveSpec("plant", fmus["plant"])],
                ["x_ref", "y_ref"], STEP)
 

@@ -7,6 +7,7 @@ import shutil
 import numpy as np
 import pytest
 
+from cosim.references import build_reference
 from learning.evaluate import evaluate, scenario_config
 from learning.synthetic import synthetic_dataset
 
@@ -71,9 +72,10 @@ def test_each_environment_runs_the_seeds_own_evaluation_reference(env, variant, 
     """Table 5.2 comes from the 15 s reference of sec. 5.7 on the nominal plant, Table 6.2 from
     the 100 s one of sec. 6.6 (line to (8.2, 8.2) mm, 9 turns of 11.6 mm) on the real machine."""
     config = scenario_config(env, "rigid-body")
-    assert config.plant.variant == variant and config.stop == pytest.approx(duration)
-    assert config.feedforward.kind == "model"
-    reference = config.reference.build(config.step)
+    assert config.builtin("plant").options["variant"] == variant
+    assert config.stop == pytest.approx(duration)
+    assert config.builtin("rigid-body-feedforward") is not None
+    reference = build_reference(config.reference.kind, config.reference.options, config.step)
     if env == "hardware":
         circle = (reference.t >= 22.0) & (reference.t <= 97.0)
         assert np.hypot(reference.x[circle], reference.y[circle]) == pytest.approx(0.0116, abs=1e-5)

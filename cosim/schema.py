@@ -1,0 +1,127 @@
+"""The run configuration as plain data: what cosim.config parses a TOML file (or cosim.ssp an SSP
+file) into, before anything is built or run.
+
+General form (SI units):
+
+  [run]            step (s, default 0.001), stop (s; default: the reference's duration, else
+                   the first FMU's default experiment), algorithm = "gauss-seidel" (default) |
+                   "jacobi", order = [FMU names] (default: the order of the [fmu.*] tables)
+  [reference]      a reference trajectory, a source of x_ref .. ay_ref (cosim.references;
+                   the kinds are listed in cosim.config)
+  [[source]]       kind = "constant", values = {name = number, ...}: constant source signals
+                   kind = "csv", path = "file.csv": a header `time,<name>,...`, one source
+                   signal per column, linearly interpolated onto the step (held after its end)
+  [fmu.NAME]       path = "file.fmu" (any FMI 2.0 or 3.0 co-simulation FMU, relative to the
+                   configuration) or builtin = "plant" | "controller" |
+                   "rigid-body-feedforward" | "learned-feedforward" with the built-in's options
+                   (BUILTIN_OPTIONS); parameters = {variable = value} (start values of
+                   parameters or inputs, checked against the FMU's variables and types);
+                   unconnected = "error" (default) | "start" (inputs left unconnected keep
+                   their start values)
+  [[connection]]   from = "fmu.output" or a source signal, to = "fmu.input", optional gain and
+                   offset (SSP's LinearTransformation: to = gain * from + offset)
+  [record]         signals = [names] (default: all), csv (bool, default true)
+
+Inputs without a [[connection]] take, by name, the output of the same name of another FMU or
+the source signal of that name (cosim.wiring). The manipulator's short form ([plant],
+[controller], [feedforward]) is shorthand for the FMUs feedforward -> controller -> plant.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+ALGORITHMS = ("gauss-seidel", "jacobi")
+UNCONNECTED = ("error", "start")
+BUILTIN_OPTIONS = {  # built-in FMU -> its options
+    "plant": ("variant", "seed"),
+    "controller": ("variant", "crossover_hz", "notch", "encoders"),
+    "rigid-body-feedforward": (),
+    "learned-feedforward": ("model", "mode"),
+}
+SOURCE_KINDS = ("constant", "csv")
+
+
+class ConfigError(ValueError):
+    """A configuration problem, naming the file and the `table.key` at fault."""
+
+    def __init__(self, source: str, key: str, message: str) -> None:
+        super().__init__(f"{source}: {key}: {message}")
+        self.key = key
+
+
+@dataclass(frozen=True)
+class ReferenceConfig:
+    """The reference's kind and its checked keys (paths absolute)."""
+
+    kind: str = "thesis-eval"
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SourceConfig:
+    """Constant source signals (`values`) or a CSV table of them (`path`)."""
+
+    kind: str
+    values: Mapping[str, float] = field(default_factory=dict)
+    path: Path | None = None
+
+
+@dataclass(frozen=True)
+class FmuConfig:
+    """One FMU of the run: a file or a built-in, its start values, how unconnected inputs go."""
+
+    name: str
+    path: Path | None = None
+    builtin: str | None = None
+    options: Mapping[str, Any] = field(default_factory=dict)
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    unconnected: str = "error"
+
+
+@dataclass(frozen=True)
+class ConnectionConfig:
+    """An explicit connection; `key` names its table in errors (`connection[k]`)."""
+
+    source: str  # "fmu.output" or a source signal
+    target: str  # "fmu.input"
+    gain: float = 1.0
+    offset: float = 0.0
+    key: str = "connection"
+
+
+@dataclass(frozen=True)
+class RecordConfig:
+    signals: tuple[str, ...] | None = None  # None: every signal
+    csv: bool = True
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """A checked run configuration in the general form."""
+
+    name: str
+    step: float
+    stop: float
+    fmus: tuple[FmuConfig, ...]  # in stepping order
+    reference: ReferenceConfig | None = None
+    sources: tuple[SourceConfig, ...] = ()
+    connections: tuple[ConnectionConfig, ...] = ()
+    algorithm: str = "gauss-seidel"
+    record: RecordConfig = RecordConfig()
+    source: str = "<config>"
+
+    @property
+    def steps(self) -> int:
+        return int(round(self.stop / self.step))
+
+    def builtin(self, kind: str) -> FmuConfig | None:
+        """The first FMU that is the built-in `kind`, or None."""
+        return next((f for f in self.fmus if f.builtin == kind), None)
+
+    @property
+    def learned_feedforward(self) -> FmuConfig | None:
+        return self.builtin("learned-feedforward")
