@@ -1,0 +1,379 @@
+"""A run configuration as an SSP 1.0 system (.ssp), and back: the exchange format that libcosim,
+FMPy and OMSimulator read.
+
+export_ssp writes one ssd:Component per FMU (the FMU in resources/), every Link of the resolved
+wiring as an ssd:Connection (the by-name ones too, so the SSD is complete) with an
+ssc:LinearTransformation where gain or offset is not 1 or 0, the FMUs' start values as an inline
+ssv:ParameterSet, and the run's times in ssd:DefaultExperiment. SSP 1.0 has no step size there:
+it goes into two annotations, libcosim's own ("com.opensimulationplatform": osp:FixedStepAlgorithm
+baseStepSize, which CosimExecution.from_ssp_file uses) and ours ("org.flexff": step and
+algorithm). An SSP 1.0 system has no time-varying sources: a configuration whose inputs are fed
+by the reference or a CSV series cannot be exported; inputs fed by constant sources get the
+constant (with gain and offset applied) as their start value. The [record] list and source
+signals that feed no input are left out.
+
+Connectors (SSP requires only those that connections use): every connected variable, and the
+other outputs and parameters of type Real, Integer or Boolean. Unconnected inputs get none: FMPy
+(0.3.32) wires an unconnected input connector to the source of the input before it, or fails
+where there is none. String, Enumeration and Binary connectors only where a connection needs
+them: libcosim aborts the process on reading an ssc:Enumeration connector, and FMPy cannot get
+or set a String. Units are left to the FMUs (SSP 1.0 would need ssd:Units definitions for them).
+
+load_ssp reads such a file, or a flat system of FMU components from another tool, into a
+general-form RunConfig: FMUs from the archive (extracted once into the FMU cache, under the
+archive's sha256), start values from the parameter bindings, connections with their linear
+transformations, every FMU with unconnected = "start" (an SSP system leaves unconnected inputs
+at their start values), and the Jacobi algorithm unless our annotation says otherwise (SSP tools
+run Jacobi). Every problem is a ConfigError naming the SSD element at fault.
+
+The XML is written and read with lxml and checked against the SSP 1.0 schema that
+pyssp_standard ships; its own classes (0.9.1) drop ssc:LinearTransformation on reading and
+writing.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import shutil
+import tempfile
+import zipfile
+import zlib
+from collections.abc import Callable
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lxml import etree
+
+from cosim.config import STEP_TOLERANCE
+from cosim.recording import atomic_write
+from cosim.scenario import Scenario, resolve
+from cosim.schema import ALGORITHMS, ConfigError, ConnectionConfig, FmuConfig, RunConfig
+from cosim.wiring import SOURCE
+from fmu.cache import cache_dir
+from fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
+
+NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+      "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+      "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+      "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+      "flexff": "urn:flexff:ssp"}
+SSD = "SystemStructure.ssd"
+FMU_TYPE = "application/x-fmu-sharedlibrary"
+OSP, FLEXFF = "com.opensimulationplatform", "org.flexff"
+DEFAULT_STEP = 1e-3
+INTEGERS = ("int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64")
+SSP_TYPES = {"float64": "Real", "float32": "Real", "boolean": "Boolean", "string": "String",
+             "enumeration": "Enumeration", "binary": "Binary",
+             **dict.fromkeys(INTEGERS, "Integer")}
+ALWAYS = ("Real", "Integer", "Boolean")  # unconnected outputs and parameters of these types
+# get a connector too; parameter values of enumerations are written as ssv:Integer (libcosim
+# aborts on ssv:Enumeration as well, and an integer sets an FMI enumeration)
+VALUE_TYPES = {**SSP_TYPES, "enumeration": "Integer"}
+Fail = Callable[[str, str], ConfigError]  # (key, message) -> the error to raise
+
+
+def _q(name: str) -> str:
+    """'ssd:System' as lxml's qualified name."""
+    prefix, _, local = name.partition(":")
+    return f"{{{NS[prefix]}}}{local}"
+
+
+def _sub(parent: etree._Element, tag: str, /, **attrib: str) -> etree._Element:
+    return etree.SubElement(parent, _q(tag), attrib)
+
+
+# -- export ------------------------------------------------------------------------------
+def export_ssp(config: RunConfig, path: str | Path) -> Path:
+    """Write `config` as an SSP 1.0 archive at `path` (module doc); ValueError if it has
+    time-varying source signals feeding FMU inputs."""
+    with tempfile.TemporaryDirectory(prefix="flexff-ssp-") as folder:
+        scenario = resolve(config, folder)
+        varying = sorted({k.signal for k in scenario.links
+                          if k.source == SOURCE and np.ndim(scenario.sources[k.signal])})
+        if varying:
+            raise ValueError(f"{config.source}: SSP 1.0 cannot carry time-varying source "
+                             f"signals, and {', '.join(varying)} feed FMU inputs: an SSP system "
+                             f"holds FMUs, their connections and start values only")
+        ssd = etree.tostring(_ssd(scenario), xml_declaration=True, encoding="UTF-8",
+                             pretty_print=True)
+
+        def write(tmp: Path) -> None:
+            with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
+                archive.writestr(SSD, ssd)
+                for slave in scenario.slaves:
+                    archive.write(slave.fmu, f"resources/{slave.name}.fmu")
+
+        return atomic_write(path, write)
+
+
+def _ssd(scenario: Scenario) -> etree._Element:
+    """The SystemStructureDescription of a resolved scenario (module doc)."""
+    config = scenario.config
+    root = etree.Element(_q("ssd:SystemStructureDescription"), nsmap=NS,
+                         version="1.0", name=config.name, generationTool="flexff")
+    system = _sub(root, "ssd:System", name=config.name)
+    elements, enumerations = _sub(system, "ssd:Elements"), {}
+    links = [k for k in scenario.links if k.source != SOURCE]
+    used = {(k.source, k.signal) for k in links} | {(k.target, k.input) for k in links}
+    for slave in scenario.slaves:
+        info = read_fmu(slave.fmu)
+        component = _sub(elements, "ssd:Component", name=slave.name, type=FMU_TYPE,
+                         source=f"resources/{slave.name}.fmu", implementation="CoSimulation")
+        connectors = [n for n in (*info.inputs, *info.outputs, *info.parameters)
+                      if _has_connector(info, n, (slave.name, n) in used)]
+        if connectors:
+            _connectors(_sub(component, "ssd:Connectors"), info, connectors, enumerations)
+        values = {**slave.parameters, **{  # inputs fed by constant sources: start values
+            k.input: k.gain * float(scenario.sources[k.signal]) + k.offset
+            for k in scenario.links if k.target == slave.name and k.source == SOURCE}}
+        if values:
+            binding = _sub(_sub(component, "ssd:ParameterBindings"), "ssd:ParameterBinding")
+            _parameter_set(_sub(binding, "ssd:ParameterValues"), slave.name, info, values)
+    if links:
+        connections = _sub(system, "ssd:Connections")
+        for k in links:
+            connection = _sub(connections, "ssd:Connection", startElement=k.source,
+                              startConnector=k.signal, endElement=k.target, endConnector=k.input)
+            if k.affine:
+                _sub(connection, "ssc:LinearTransformation", factor=repr(float(k.gain)),
+                     offset=repr(float(k.offset)))
+    if enumerations:
+        _sub(root, "ssd:Enumerations").extend(enumerations.values())
+    experiment = _sub(root, "ssd:DefaultExperiment", startTime="0.0",
+                      stopTime=repr(float(config.stop)))
+    annotations = _sub(experiment, "ssd:Annotations")
+    osp = _sub(_sub(annotations, "ssc:Annotation", type=OSP), "osp:Algorithm")
+    _sub(osp, "osp:FixedStepAlgorithm", baseStepSize=repr(float(config.step)))
+    _sub(_sub(annotations, "ssc:Annotation", type=FLEXFF), "flexff:Run",
+         step=repr(float(config.step)), algorithm=config.algorithm)
+    return root
+
+
+def _has_connector(info: FmuInfo, name: str, connected: bool) -> bool:
+    """Whether the variable gets a connector (module doc)."""
+    v = info.variables[name]
+    kind = SSP_TYPES.get(v.kind)
+    return bool(kind and v.scalar and (connected or kind in ALWAYS and name not in info.inputs))
+
+
+def _connectors(parent: etree._Element, info: FmuInfo, names: list[str],
+                enumerations: dict[str, etree._Element]) -> None:
+    """ssd:Connector elements; enumeration types are collected into `enumerations`."""
+    for name in names:
+        v = info.variables[name]
+        connector = _sub(parent, "ssd:Connector", name=name,
+                         kind="parameter" if name in info.parameters else v.causality)
+        kind = SSP_TYPES[v.kind]
+        if kind == "Enumeration":
+            enum = _enumeration(info, name)
+            enumerations[enum.get("name")] = enum
+            _sub(connector, "ssc:Enumeration", name=enum.get("name"))
+        else:
+            _sub(connector, f"ssc:{kind}")
+
+
+def _enumeration(info: FmuInfo, name: str) -> etree._Element:
+    """The ssc:Enumeration of an enumeration variable's declared type."""
+    declared = next(v.declaredType for v in info.model_description.modelVariables
+                    if v.name == name)
+    enum = etree.Element(_q("ssc:Enumeration"), name=declared.name)
+    for item in declared.items:
+        _sub(enum, "ssc:Item", name=item.name, value=str(int(item.value)))
+    return enum
+
+
+def _parameter_set(parent: etree._Element, name: str, info: FmuInfo,
+                   values: dict[str, Any]) -> None:
+    parameters = _sub(_sub(parent, "ssv:ParameterSet", version="1.0", name=name),
+                      "ssv:Parameters")
+    for variable, value in values.items():
+        kind = info.variables[variable].kind
+        text = (repr(float(value)) if kind in ("float64", "float32") else
+                ("true" if value else "false") if kind == "boolean" else
+                value.hex() if kind == "binary" else str(value))
+        _sub(_sub(parameters, "ssv:Parameter", name=variable), f"ssv:{VALUE_TYPES[kind]}",
+             value=text)
+
+
+# -- import ------------------------------------------------------------------------------
+@lru_cache(maxsize=1)
+def _schema() -> etree.XMLSchema:
+    """The SSP 1.0 schema of the SSD (shipped with pyssp_standard)."""
+    xsd = resources.files("pyssp_standard") / "resources" / "SystemStructureDescription.xsd"
+    return etree.XMLSchema(etree.parse(str(xsd)))
+
+
+def load_ssp(path: str | Path) -> RunConfig:
+    """The run configuration of an SSP 1.0 file (module doc); ConfigError naming the SSD
+    element at fault."""
+    path = Path(path)
+    source = str(path)
+
+    def error(key: str, message: str) -> ConfigError:
+        return ConfigError(source, key, message)
+
+    if not path.is_file():
+        raise error("file", "no such SSP file")
+    try:
+        folder = _extracted(path).resolve()
+    except (zipfile.BadZipFile, zlib.error, EOFError) as exc:  # not a zip, or a damaged one
+        raise error("file", f"not an SSP archive (a zip file holding SystemStructure.ssd): "
+                            f"{exc}") from None
+    try:
+        root = etree.parse(str(folder / SSD)).getroot()
+    except OSError:
+        raise error(SSD, "the archive has no SystemStructure.ssd") from None
+    except etree.XMLSyntaxError as exc:
+        raise error(SSD, f"not well-formed XML: {exc}") from None
+    if not _schema().validate(root):
+        entry = _schema().error_log[0]
+        raise error(entry.path or SSD, f"not valid SSP 1.0 (line {entry.line}): "
+                                       f"{entry.message}")
+    system = root.find("ssd:System", NS)
+    if system.find("ssd:Connectors", NS) is not None:
+        raise error("ssd:System/ssd:Connectors", "system connectors are not supported: "
+                    "flexff runs a flat system of FMU components")
+    fmus = []
+    for element in system.iterfind("ssd:Elements/*", NS):
+        name = element.get("name")
+        key = f"ssd:{etree.QName(element).localname}[@name='{name}']"
+        if element.tag != _q("ssd:Component") or element.get("type", FMU_TYPE) != FMU_TYPE:
+            raise error(key, f"flexff runs a flat system of FMU components (type {FMU_TYPE}),"
+                             f" not {element.get('type') or etree.QName(element).localname}")
+        if "." in name:
+            raise error(key, "flexff names signals `fmu.variable`: a component name must "
+                             "not contain a dot")
+        fmu = _member(folder, element.get("source"))
+        if fmu is None:
+            raise error(key, f"its FMU {element.get('source')} is not in the archive")
+        try:
+            info = read_fmu(fmu)
+        except FmuError as exc:
+            raise error(key, str(exc)) from None
+        fmus.append(FmuConfig(name, path=fmu, unconnected="start",
+                              parameters=_bindings(element, info, folder, key, error)))
+    if not fmus:
+        raise error("ssd:System/ssd:Elements", "the system has no FMU component")
+    step, stop, algorithm = _experiment(root, fmus, error)
+    return RunConfig(name=path.stem, step=step, stop=stop, fmus=tuple(fmus),
+                     connections=_connections(system, {f.name for f in fmus}, error),
+                     algorithm=algorithm, source=source)
+
+
+def _extracted(path: Path) -> Path:
+    """The archive's files in the FMU cache, extracted once (by its sha256), so that the
+    configuration's FMU paths stay valid after load_ssp returns."""
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    folder = cache_dir() / "ssp" / digest
+    if not folder.is_dir():
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=".tmp-"))
+        try:
+            with zipfile.ZipFile(path) as archive:
+                archive.extractall(tmp)  # member names are sanitized (no "..", no root)
+            os.replace(tmp, folder)
+        except OSError:  # another process extracted it first
+            if not folder.is_dir():
+                raise
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return folder
+
+
+def _member(folder: Path, source: str) -> Path | None:
+    """The extracted file at the SSD-relative `source`, None if the archive has none."""
+    path = (folder / source).resolve()
+    return path if path.is_relative_to(folder) and path.is_file() else None
+
+
+def _bindings(element: etree._Element, info: FmuInfo, folder: Path, key: str, error: Fail
+              ) -> dict[str, Any]:
+    """The start values of a component's parameter bindings, typed for its FMU."""
+    values: dict[str, Any] = {}
+    for k, binding in enumerate(element.findall("ssd:ParameterBindings/ssd:ParameterBinding",
+                                                NS), 1):
+        where = f"{key}/ssd:ParameterBinding[{k}]"
+        if binding.find("ssd:ParameterMapping", NS) is not None:
+            raise error(where, "parameter mappings are not supported")
+        if binding.get("source"):
+            ssv = _member(folder, binding.get("source"))
+            try:
+                sets = [etree.parse(str(ssv)).getroot()]
+            except (OSError, TypeError, etree.XMLSyntaxError) as exc:
+                raise error(where, f"cannot read {binding.get('source')}: {exc}") from None
+        else:
+            sets = binding.findall("ssd:ParameterValues/ssv:ParameterSet", NS)
+        prefix = binding.get("prefix", "")
+        for parameter in (p for s in sets for p in s.findall("ssv:Parameters/ssv:Parameter", NS)):
+            name = parameter.get("name").removeprefix(prefix)
+            v = info.variables.get(name)
+            if v is None or v.causality not in ("parameter", "structuralParameter", "input"):
+                raise error(f"{where}/ssv:Parameter[@name='{name}']",
+                            f"{info.path.name} has no parameter or input {name!r}")
+            typed = parameter.find("ssv:*", NS)  # ssv:Real, ssv:Integer, ...
+            try:
+                values[name] = typed_value(v.kind, None if typed is None else typed.get("value"))
+            except ValueError as exc:
+                raise error(f"{where}/ssv:Parameter[@name='{name}']",
+                            f"{v.type} variable: {exc}") from None
+    return values
+
+
+def _experiment(root: etree._Element, fmus: list[FmuConfig], error: Fail
+                ) -> tuple[float, float, str]:
+    """Step, stop and algorithm: our annotation, else libcosim's, else the defaults."""
+    key = "ssd:DefaultExperiment"
+    experiment = root.find(key, NS)
+    attrib = experiment.attrib if experiment is not None else {}
+    ours = root.find(f"{key}/ssd:Annotations/ssc:Annotation[@type='{FLEXFF}']/flexff:Run", NS)
+    osp = root.find(f"{key}/ssd:Annotations/ssc:Annotation[@type='{OSP}']/osp:Algorithm/"
+                    f"osp:FixedStepAlgorithm", NS)
+    step = (ours.get("step") if ours is not None else
+            osp.get("baseStepSize") if osp is not None else DEFAULT_STEP)
+    algorithm = ours.get("algorithm", "jacobi") if ours is not None else "jacobi"
+    stop = attrib.get("stopTime") or read_fmu(fmus[0].path).default_stop
+    try:
+        step, stop = float(step), float(stop)
+    except (TypeError, ValueError):
+        raise error(key, f"no stop time (stopTime, or the first FMU's default experiment), "
+                         f"or a step that is not a number ({step!r})") from None
+    if float(attrib.get("startTime", 0.0)) != 0.0:
+        raise error(f"{key}/@startTime", "flexff runs from t = 0")
+    if not (math.isfinite(step) and step > 0 and math.isfinite(stop) and stop > 0):
+        raise error(key, f"step {step!r} and stop time {stop!r} must be positive and finite")
+    if abs(stop / step - round(stop / step)) > STEP_TOLERANCE * max(1.0, stop / step):
+        raise error(key, f"the stop time {stop!r} s is not a whole number of steps of {step!r} s")
+    if algorithm not in ALGORITHMS:
+        raise error(f"{key}/ssd:Annotations", f"unknown algorithm {algorithm!r} "
+                                              f"(known: {', '.join(ALGORITHMS)})")
+    return step, stop, algorithm
+
+
+def _connections(system: etree._Element, names: set[str], error: Fail
+                 ) -> tuple[ConnectionConfig, ...]:
+    """The connections between components, with gain and offset of a LinearTransformation."""
+    out, targets = [], {}
+    for k, c in enumerate(system.findall("ssd:Connections/ssd:Connection", NS), 1):
+        key = f"ssd:Connection[{k}]"
+        start, end = c.get("startElement"), c.get("endElement")
+        if start not in names or end not in names:
+            raise error(key, "flexff connects FMU components only (startElement and "
+                             f"endElement among {', '.join(sorted(names))})")
+        transformation = c.find("ssc:*", NS)
+        if transformation is not None and transformation.tag != _q("ssc:LinearTransformation"):
+            raise error(key, f"{etree.QName(transformation).localname} is not supported "
+                             f"(LinearTransformation is)")
+        scale = transformation.attrib if transformation is not None else {}
+        target = f"{end}.{c.get('endConnector')}"
+        if target in targets:
+            raise error(key, f"{target} is already connected by {targets[target]}")
+        targets[target] = key
+        out.append(ConnectionConfig(f"{start}.{c.get('startConnector')}", target,
+                                    float(scale.get("factor", 1.0)),
+                                    float(scale.get("offset", 0.0)), key))
+    return tuple(out)
