@@ -314,3 +314,22 @@ def test_manipulator_recording_has_short_names(tmp_path):
         assert np.array_equal(data["plant.x"], data["x"])
         assert np.array_equal(data["controller.Fx_fb"], data["Fx_fb"])
 
+
+
+def test_csv_source_feeds_an_input_by_connection(ref_fmu, tmp_path):
+    """A CSV series (linearly interpolated onto the step) drives Feedthrough through a
+    connection with a gain; a second column reaches an input of its own name."""
+    (tmp_path / "u.csv").write_text("time,u,Float64_discrete_input\n0,0,5\n1,2,5\n2,2,7\n")
+    data = {"run": {"step": 0.1, "stop": 3.0},
+            "source": [{"kind": "csv", "path": "u.csv"}],
+            "fmu": {"ft": {"path": str(ref_fmu("Feedthrough")), "unconnected": "start"}},
+            "connection": [link("u", FT_IN, gain=3.0)]}
+    recording = simulate_config(load_config(write_config(tmp_path, data)))
+    t = recording.time
+    u = np.interp(t, [0, 1, 2], [0, 2, 2])  # held at its last value after t = 2
+    assert np.array_equal(recording[FT_OUT], 3.0 * u)
+    assert np.array_equal(recording["ft.Float64_discrete_output"],
+                          np.interp(t, [0, 1, 2], [5, 5, 7]))
+    (tmp_path / "u.csv").write_text("time,u\n0,0\n0,1\n")
+    with pytest.raises(ConfigError, match=r"source\[0\].path: .*not strictly increasing"):
+        simulate_config(load_config(write_config(tmp_path, data)))
