@@ -219,6 +219,9 @@ class Master:
             columns, np.arange(len(self.signals)))
         out = np.empty((steps + 1, len(floats)))
         typed_out = [np.empty(steps + 1, dtype=object) for _ in typed]
+        needed = {q for _, q in typed} | {k.producer for k in self.links if k.kind != "float64"}
+        for p in self._plans:  # typed outputs cost a call each: read only those in use
+            p.typed_outputs = [n for n in p.typed_outputs if f"{p.name}.{n}" in needed]
         for p in self._plans:
             try:
                 p.instance.initialize(p.parameters, 0.0, steps * self.step)
