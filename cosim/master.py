@@ -43,12 +43,12 @@ import numpy as np
 from tqdm import tqdm
 
 from cosim.recording import Recording
+from cosim.schema import ALGORITHMS
 from cosim.wiring import SOURCE, Link, Port, wire
 from fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu, uint_array
 
 PROGRESS_MIN_STEPS = 100_000  # runs this long show a progress bar (on a terminal)
 PROGRESS_CHUNK = 1000  # steps between progress bar updates
-ALGORITHMS = ("gauss-seidel", "jacobi")
 
 
 @dataclass(frozen=True)

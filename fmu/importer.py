@@ -363,14 +363,9 @@ class FmuInstance:
 
     def do_step(self, time: float, step: float) -> None:
         """One communication step through fmpy (FastCalls for the hot loop)."""
-        if self.info.fmi_version == "2.0":
-            self.call(f"fmi2DoStep from t = {time:.9g} s",
-                      lambda: self.fmu.doStep(currentCommunicationPoint=time,
-                                              communicationStepSize=step))
-        else:
-            self.call(f"fmi3DoStep from t = {time:.9g} s",
-                      lambda: self.fmu.doStep(currentCommunicationPoint=time,
-                                              communicationStepSize=step))
+        self.call(f"fmi{self.info.fmi_version[0]}DoStep from t = {time:.9g} s",
+                  lambda: self.fmu.doStep(currentCommunicationPoint=time,
+                                          communicationStepSize=step))
 
     def fast_calls(self) -> FastCalls:
         """The bare float64 and step calls of this instance (see FastCalls)."""
