@@ -149,3 +149,13 @@ def test_recording_a_selection(fmus, reference):
     with Master(slaves(fmus), list(sources), STEP) as master:
         with pytest.raises(ValueError, match="cannot record unknown signal"):
             master.run(sources, 100, record=["z"])
+
+
+def test_each_fmu_keeps_its_own_messages(fmus):
+    """The failing plant is instantiated first: its message must not go to the controller."""
+    sources = {"x_ref": 0.0, "y_ref": 0.0, "Fx_ff": 0.0, "Fy_ff": 0.0}
+    with Master([SlaveSpec("plant", fmus["plant"], {"k_t1": -1.0}),
+                 SlaveSpec("controller", fmus["controller"])], list(sources), STEP,
+                algorithm="jacobi") as master:
+        with pytest.raises(CosimError, match=r"^plant: .*Parameter 'k_t1' = -1 must be > 0"):
+            master.run(sources, 10)
