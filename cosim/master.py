@@ -25,15 +25,21 @@ t_k on the values the others had at t_k, so an output with direct feedthrough re
 consumers one step late (as in libcosim and FMPy's SSP runs). Before the first step, Jacobi
 carries the initial values through every connection (libcosim's initialization).
 
-Each float64 block costs one set, one get and one step call per FMU and step, called through
-the bare C functions (fmu.importer.FastCalls); every status is checked.
+The loop runs in compiled code (cosim/engine.py, cosim/c/engine.c), in-process, with each FMU's
+own function pointers: each float64 block costs one set, one get and one step call per FMU and
+step, every status is checked, and every step is timed (cosim.timing). Values of other types
+go through a hook into Python where an FMU has them. Python only sets up, feeds the sources,
+collects the record and shows progress; the garbage collector is kept out of the loop, and
+the steps may be paced to the wall clock (cosim.timing.Pacing).
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from ctypes import c_double
+import gc
+import math
+from ctypes import byref, c_long, c_uint
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,10 +48,13 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from cosim.engine import (CALLS, FAILED, MAX_LISTED_OVERRUNS, OK, OVERRUN, TYPED_HOOK, EngineRun,
+                          EngineSlave, function_address, library, pointer, start_schedule)
 from cosim.recording import Recording
+from cosim.timing import Pacing, StepTiming
 from cosim.schema import ALGORITHMS
 from cosim.wiring import SOURCE, Link, Port, wire
-from fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu, uint_array
+from fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 
 PROGRESS_MIN_STEPS = 100_000  # runs this long show a progress bar (on a terminal)
 PROGRESS_CHUNK = 1000  # steps between progress bar updates
@@ -65,48 +74,61 @@ class CosimError(RuntimeError):
 
 
 class _Plan:
-    """How one FMU reads its inputs from and writes its outputs to the bus."""
+    """How one FMU reads its inputs from and writes its outputs to the bus (numpy arrays the
+    engine's EngineSlave points into)."""
 
     def __init__(self, instance: FmuInstance, spec: SlaveSpec, links: Sequence[Link],
                  bus_index: Mapping[str, int], bus: np.ndarray, out_offset: int,
                  read_before: bool, read_after: bool) -> None:
         info = instance.info
         self.instance, self.name, self.parameters = instance, spec.name, dict(spec.parameters)
-        self.fast = fast = instance.fast_calls()
         floats = [k for k in links if k.kind == "float64"]
         self.typed_inputs = [(k.input, k.producer) for k in links if k.kind != "float64"]
         self.inputs = tuple(k.input for k in floats)
         self.outputs = tuple(n for n in info.outputs if info.variables[n].kind == "float64")
         self.typed_outputs = [n for n in info.outputs if info.variables[n].kind != "float64"]
         self.out_offset, self.read_before, self.read_after = out_offset, read_before, read_after
-        gather = np.array([bus_index[k.producer] for k in floats], dtype=np.intp)
-        gain = np.array([k.gain for k in floats])
-        offset = np.array([k.offset for k in floats])
+        gather = np.array([bus_index[k.producer] for k in floats], dtype=np.int64)
         affine = any(k.affine for k in floats)
         contiguous = gather.size == 0 or np.array_equal(
             gather, np.arange(gather[0], gather[0] + gather.size))
-        self.gather = self.gather_view = self.gain = self.offset = None
+        self.gather = self.gain = self.offset = None
         if contiguous and not affine:
-            in_values = _view(bus, int(gather[0]) if gather.size else 0, gather.size)
+            start = int(gather[0]) if gather.size else 0
+            self.in_values = bus[start:start + gather.size]
         else:
-            in_values = (c_double * gather.size)()
-            self.gather, self.gather_view = gather, np.frombuffer(in_values)
+            self.in_values, self.gather = np.zeros(gather.size), gather
             if affine:
-                self.gain, self.offset = gain, offset
-        self.in_vr = uint_array([info.variables[n].value_reference for n in self.inputs])
-        self.out_vr = uint_array([info.variables[n].value_reference for n in self.outputs])
-        self.in_values = in_values
-        self.out_values = _view(bus, out_offset, len(self.outputs))
-        self.set_args = fast.set_args(self.in_vr, len(self.inputs), in_values)
-        self.get_args = fast.get_args(self.out_vr, len(self.outputs), self.out_values)
+                self.gain = np.array([k.gain for k in floats])
+                self.offset = np.array([k.offset for k in floats])
+        self.in_vr = np.array([info.variables[n].value_reference for n in self.inputs],
+                              dtype=np.uint32)
+        self.out_vr = np.array([info.variables[n].value_reference for n in self.outputs],
+                               dtype=np.uint32)
+        self.out_values = bus[out_offset:out_offset + len(self.outputs)]
+
+    def gathered(self, bus: np.ndarray) -> np.ndarray:
+        """The float inputs' values from the bus, scaled and shifted (as the engine does)."""
+        if self.gather is None:
+            return self.in_values
+        values = bus[self.gather]
+        return values if self.gain is None else values * self.gain + self.offset
+
+    def engine_slave(self) -> EngineSlave:
+        dll = self.instance.fmu.dll
+        fmi3 = self.instance.info.fmi_version == "3.0"
+        names = (("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep") if fmi3 else
+                 ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"))
+        return EngineSlave(
+            fmi3, self.instance.component.value, *(function_address(dll, n) for n in names),
+            len(self.inputs), pointer(self.in_vr, c_uint), pointer(self.gather, c_long),
+            pointer(self.gain), pointer(self.offset), pointer(self.in_values),
+            len(self.outputs), pointer(self.out_vr, c_uint), pointer(self.out_values),
+            self.read_before, self.read_after, bool(self.typed_inputs),
+            bool(self.typed_outputs))
 
     def fail(self, what: str) -> CosimError:
         return CosimError(str(self.instance.fail(what)))
-
-
-def _view(bus: np.ndarray, offset: int, n: int):
-    """A ctypes array sharing the bus memory from `offset` (n values; n = 0: a dummy)."""
-    return (c_double * n).from_buffer(bus, 8 * offset) if n else (c_double * 1)()
 
 
 class Master:
@@ -196,13 +218,16 @@ class Master:
 
     # -- running ------------------------------------------------------------------------
     def run(self, sources: Mapping[str, np.ndarray | float], steps: int,
-            record: Sequence[str] | None = None, progress: bool | None = None) -> Recording:
+            record: Sequence[str] | None = None, progress: bool | None = None,
+            pacing: Pacing | None = None) -> Recording:
         """Run `steps` steps from t = 0; return the recorded signals at the steps + 1 points.
 
         `sources` gives every source signal as a constant or as steps + 1 samples; `record`
         names the signals to keep (default: all; `fmu.output`, a source, or an output's own
         name where only one FMU has it); `progress` shows a tqdm bar (default: on a
-        terminal, for runs of at least PROGRESS_MIN_STEPS steps).
+        terminal, for runs of at least PROGRESS_MIN_STEPS steps); `pacing` paces the steps to
+        the wall clock. The recording's `timing` holds every step's execution time; a paced
+        run stopped by its overruns holds the points up to the last step it made.
         """
         if self._ran:
             raise RuntimeError("a Master runs once; load the FMUs again for another run")
@@ -214,7 +239,7 @@ class Master:
         floats = [(j, self.signals.index(q)) for j, q in enumerate(resolved)
                   if q in self.signals]
         typed = [(j, q) for j, q in enumerate(resolved) if q not in self.signals]
-        columns = np.array([i for _, i in floats], dtype=np.intp)
+        columns = np.array([i for _, i in floats], dtype=np.int64)
         full = len(floats) == len(resolved) and np.array_equal(
             columns, np.arange(len(self.signals)))
         out = np.empty((steps + 1, len(floats)))
@@ -231,23 +256,68 @@ class Master:
                 self._read(p, "after initialization")
         if self.algorithm == "jacobi":
             self._propagate_initial_values(table[0])
+        hook = _TypedHook(self, [(column, q) for column, (_, q) in zip(typed_out, typed)])
+        run = self._engine_run(table, out, None if full else columns, hook, steps, pacing)
         if progress is None:
             progress = sys.stderr.isatty() and steps >= PROGRESS_MIN_STEPS
-        start = time.perf_counter()
-        with tqdm(total=steps, unit="step", disable=not progress, leave=False) as bar:
-            for k0 in range(0, steps + 1, PROGRESS_CHUNK):
-                k1 = min(k0 + PROGRESS_CHUNK, steps + 1)
-                self._loop(k0, k1, steps, table, out, None if full else columns,
-                           [(col, q) for col, (_, q) in zip(typed_out, typed)])
-                bar.update(min(k1, steps) - k0)
-        wall = time.perf_counter() - start
+        engine = library()
+        status, end = OK, steps + 1
+        gc_was_enabled = gc.isenabled()
+        gc.disable()  # no collection pauses inside the loop
+        try:
+            if pacing is not None:
+                start_schedule(run)
+            start = time.perf_counter()
+            with tqdm(total=steps, unit="step", disable=not progress, leave=False) as bar:
+                for k0 in range(0, steps + 1, PROGRESS_CHUNK):
+                    k1 = min(k0 + PROGRESS_CHUNK, steps + 1)
+                    status = engine.engine_run(byref(run), k0, k1)
+                    if status != OK:
+                        break
+                    bar.update(min(k1, steps) - k0)
+            wall = time.perf_counter() - start
+        finally:
+            if gc_was_enabled:
+                gc.enable()
+        if status == FAILED:
+            raise hook.error or self._plans[run.failed_slave].fail(
+                f"{CALLS[run.failed_call]} at t = {run.failed_k * self.step:.9g} s")
+        if status == OVERRUN:
+            end = run.failed_k + 1  # points 0 .. failed_k were recorded, the step was made
         signals: dict[str, np.ndarray] = {}
         float_columns = dict((j, c) for c, (j, _) in enumerate(floats))
         typed_columns = dict((j, c) for c, (j, _) in enumerate(typed))
         for j, name in enumerate(record):
-            signals[name] = (np.ascontiguousarray(out[:, float_columns[j]]) if j in float_columns
-                             else _typed_array(typed_out[typed_columns[j]]))
-        return Recording(np.arange(steps + 1) * self.step, signals, wall)
+            signals[name] = (np.ascontiguousarray(out[:end, float_columns[j]])
+                             if j in float_columns
+                             else _typed_array(typed_out[typed_columns[j]][:end]))
+        made = end if status == OVERRUN else steps  # the steps the engine made
+        timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
+                            self._slave_tet[:made], self._lateness[:made], pacing, run.overruns,
+                            tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
+                            run.failed_k if status == OVERRUN else None)
+        return Recording(np.arange(end) * self.step, signals, wall, timing)
+
+    def _engine_run(self, table: np.ndarray, out: np.ndarray, columns: np.ndarray | None,
+                    hook: _TypedHook, steps: int, pacing: Pacing | None) -> EngineRun:
+        """The engine's plan and buffers, all allocated here, before the loop."""
+        self._slave_structs = (EngineSlave * len(self._plans))(
+            *(p.engine_slave() for p in self._plans))
+        self._tet = np.zeros(steps)
+        self._slave_tet = np.zeros((steps, len(self._plans)))
+        self._lateness = np.zeros(steps)
+        self._arrays = (table, out, columns)  # what the engine points into lives as long
+        self._hook = TYPED_HOOK(hook) if hook.needed else TYPED_HOOK()
+        return EngineRun(
+            step=self.step, steps=steps, n_slaves=len(self._plans), slaves=self._slave_structs,
+            bus=pointer(self._bus), n_bus=self._bus.size, n_sources=len(self.sources),
+            sources=pointer(table), record=pointer(out), columns=pointer(columns, c_long),
+            n_columns=out.shape[1], typed=self._hook, typed_record=bool(hook.columns),
+            tet=pointer(self._tet), slave_tet=pointer(self._slave_tet),
+            lateness=pointer(self._lateness), paced=pacing is not None,
+            period=self.step / pacing.rt_factor if pacing else self.step,
+            max_overruns=pacing.max_overruns if pacing else 0,
+            grace_steps=int(math.ceil(pacing.grace / self.step - 1e-9)) if pacing else 0)
 
     def resolve(self, name: str) -> str:
         """The full name of a signal: `fmu.output`, a source, or a unique output's own name."""
@@ -284,21 +354,20 @@ class Master:
         self._bus[:len(self.sources)] = sources
         for _ in self._plans:
             for p in self._plans:
-                if p.gather is not None:
-                    np.take(self._bus, p.gather, out=p.gather_view)
-                    if p.gain is not None:
-                        p.gather_view[:] = p.gather_view * p.gain + p.offset
-                if p.inputs and p.fast.set_float64(*p.set_args) > 1:
-                    raise p.fail("setting its inputs before the first step")
-                if p.typed_inputs:
-                    self._set_typed(p, "before the first step")
+                try:
+                    p.instance.set(dict(zip(p.inputs, p.gathered(self._bus).tolist())))
+                except FmuError:
+                    raise p.fail("setting its inputs before the first step") from None
+                self._set_typed(p, "before the first step")
             for p in self._plans:
                 self._read(p, "before the first step")
 
     def _read(self, p: _Plan, when: str) -> None:
         """Read an FMU's outputs of every type into the bus and the typed table."""
-        if p.outputs and p.fast.get_float64(*p.get_args) > 1:
-            raise p.fail(f"getting its outputs {when}")
+        try:
+            p.out_values[:] = p.instance.get(p.outputs)
+        except FmuError:
+            raise p.fail(f"getting its outputs {when}") from None
         self._read_typed(p, when)
 
     def _read_typed(self, p: _Plan, when: str) -> None:
@@ -310,60 +379,12 @@ class Master:
             self._typed.update((f"{p.name}.{n}", v) for n, v in zip(p.typed_outputs, values))
 
     def _set_typed(self, p: _Plan, when: str) -> None:
-        try:
-            p.instance.set({name: self._typed[producer] for name, producer in p.typed_inputs})
-        except FmuError:
-            raise p.fail(f"setting its inputs {when}") from None
-
-    def _loop(self, k0: int, k1: int, steps: int, table: np.ndarray, out: np.ndarray,
-              columns: np.ndarray | None, typed: list[tuple[np.ndarray, str]]) -> None:
-        """Communication points k0 .. k1 - 1 (see the module docstring); the hot loop."""
-        h, bus, take = self.step, self._bus, np.take
-        multiply, add = np.multiply, np.add
-        sources = bus[:len(self.sources)]
-        before = [(p.fast.set_float64 if p.inputs else None, p.set_args, p.gather,
-                   p.gather_view, p.gain, p.offset,
-                   p.fast.get_float64 if p.read_before and p.outputs else None, p.get_args,
-                   bool(p.typed_inputs), p.read_before and bool(p.typed_outputs), p)
-                  for p in self._plans]
-        after = [(p.fast.do_step, p.fast.time, p.fast.step_args(h),
-                  p.fast.get_float64 if p.read_after and p.outputs else None, p.get_args,
-                  p.read_after and bool(p.typed_outputs), p) for p in self._plans]
-        typed_record = self._typed
-        for k in range(k0, k1):
-            sources[:] = table[k]
-            for set_f, set_args, gather, view, gain, offset, get_f, get_args, typed_in, \
-                    typed_out, p in before:
-                if gather is not None:
-                    take(bus, gather, out=view)
-                    if gain is not None:
-                        multiply(view, gain, out=view)
-                        add(view, offset, out=view)
-                if set_f is not None and set_f(*set_args) > 1:
-                    raise p.fail(f"setting its inputs at t = {k * h:.9g} s")
-                if typed_in:
-                    self._set_typed(p, f"at t = {k * h:.9g} s")
-                if get_f is not None and get_f(*get_args) > 1:
-                    raise p.fail(f"getting its outputs at t = {k * h:.9g} s")
-                if typed_out:
-                    self._read_typed(p, f"at t = {k * h:.9g} s")
-            if columns is None:
-                out[k] = bus
-            else:
-                take(bus, columns, out=out[k])
-            for column, name in typed:
-                column[k] = typed_record[name]
-            if k == steps:
-                return
-            t = k * h
-            for do_step, clock, step_args, get_f, get_args, typed_out, p in after:
-                clock.value = t
-                if do_step(*step_args) > 1:
-                    raise p.fail(f"the step from t = {t:.9g} s")
-                if get_f is not None and get_f(*get_args) > 1:
-                    raise p.fail(f"getting its outputs at t = {t + h:.9g} s")
-                if typed_out:
-                    self._read_typed(p, f"at t = {t + h:.9g} s")
+        if p.typed_inputs:
+            try:
+                p.instance.set({name: self._typed[producer]
+                                for name, producer in p.typed_inputs})
+            except FmuError:
+                raise p.fail(f"setting its inputs {when}") from None
 
     def close(self) -> None:
         """Terminate and free every FMU (safe to call twice)."""
@@ -375,6 +396,32 @@ class Master:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class _TypedHook:
+    """The engine's hook for values of other types than float64: called where an FMU with
+    such inputs sets them (phase 0) or reads such outputs (phase 1), and to record them at a
+    point (phase 2). An exception is kept in `error` (it cannot cross the C frames)."""
+
+    def __init__(self, master: Master, columns: list[tuple[np.ndarray, str]]) -> None:
+        self.master, self.columns, self.error = master, columns, None
+        self.needed = bool(columns) or any(p.typed_inputs or p.typed_outputs
+                                           for p in master._plans)
+
+    def __call__(self, slave: int, phase: int, k: int) -> int:
+        try:
+            when = f"at t = {k * self.master.step:.9g} s"
+            if phase == 0:
+                self.master._set_typed(self.master._plans[slave], when)
+            elif phase == 1:
+                self.master._read_typed(self.master._plans[slave], when)
+            else:
+                for column, name in self.columns:
+                    column[k] = self.master._typed[name]
+        except Exception as error:  # noqa: BLE001  (re-raised by Master.run)
+            self.error = error
+            return 1
+        return 0
 
 
 def _check_parameters(spec: SlaveSpec, info: FmuInfo) -> None:

@@ -5,6 +5,8 @@
   forces.png  feedback, feedforward and total end-effector force over time, per axis
   signals.png every recorded float signal over time, for a run without the manipulator's
               signals (at most MAX_PANELS of them)
+  tet.png     a paced run's task execution time per step, each FMU's share, the period and
+              the overruns
 """
 
 from __future__ import annotations
@@ -16,7 +18,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after selecting the backend)
 
+import numpy as np  # noqa: E402
+
 from cosim.recording import Recording, atomic_write  # noqa: E402
+from cosim.timing import US, StepTiming  # noqa: E402
 
 PLOT_SIGNALS = ("x_ref", "y_ref", "x", "y", "Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
 MAX_PANELS = 8
@@ -76,6 +81,25 @@ def plot_signals(rec: Recording, path: Path) -> Path:
         ax.set_ylabel(name, fontsize="small")
         ax.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel("time [s]")
+    return save_figure(figure, path)
+
+
+def plot_tet(timing: StepTiming, path: Path) -> Path:
+    """TET over time (total and per FMU, in microseconds) against the period."""
+    figure, ax = plt.subplots(figsize=(9, 4))
+    t = np.arange(timing.tet.size) * timing.step
+    for i, name in enumerate(timing.names):
+        ax.plot(t, timing.fmu_tet[:, i] * US, lw=0.5, alpha=0.7, label=name)
+    ax.plot(t, timing.tet * US, "k", lw=0.6, label="TET (step)")
+    ax.axhline(timing.period * US, color="r", ls="--", lw=1, label="period")
+    late = timing.tet + timing.lateness > timing.period
+    if late.any():
+        ax.plot(t[late], (timing.tet + timing.lateness)[late] * US, "rx", ms=4,
+                label=f"overrun ({timing.overruns})")
+    ax.set(xlabel="time [s]", ylabel="[us]", yscale="log",
+           title="task execution time per step")
+    ax.grid(True, alpha=0.3, which="both")
+    ax.legend(loc="upper right", fontsize="small", ncol=2)
     return save_figure(figure, path)
 
 

@@ -16,6 +16,7 @@ import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -30,6 +31,7 @@ class Recording:
     time: np.ndarray
     signals: Mapping[str, np.ndarray]
     wall_s: float = 0.0  # seconds the stepping loop took (0 for a reloaded recording)
+    timing: Any = None  # cosim.timing.StepTiming of the run (None for a reloaded recording)
 
     def __post_init__(self) -> None:
         if "time" in self.signals:

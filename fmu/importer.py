@@ -9,8 +9,8 @@ are FmuError messages that name the file, never tracebacks.
 Types: FMI 2.0 has Real, Integer, Boolean, String and Enumeration; FMI 3.0 Float32/64, (U)Int8 to
 (U)Int64, Boolean, String, Binary, Enumeration and Clock. `TYPE_KINDS` maps each to the kind
 of value it carries, so that an FMI 2.0 Real and an FMI 3.0 Float64 agree (both "float64").
-The hot path of a run, float64 values, goes through `FastCalls`: the bare C functions with
-ctypes arguments built once.
+The hot path of a run, float64 values, is called from compiled code (cosim/c/engine.c) with
+the instance's own function pointers.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import os
 import shutil
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
-from ctypes import CFUNCTYPE, byref, c_bool, c_double, c_int, c_size_t, c_uint, c_void_p, cast
+from ctypes import byref, c_void_p
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -234,25 +234,6 @@ def _message(status: int, message: bytes | None) -> str:
     return f"[{label}] {(message or b'').decode('utf-8', 'replace')}"
 
 
-@dataclass(frozen=True)
-class FastCalls:
-    """Float64 set, get and step of one instance as bare C calls with prebuilt arguments.
-
-    `set_args(vr, n, values)` and `get_args(...)` give the argument tuple of fmi2SetReal /
-    fmi3SetFloat64 (FMI 3.0 adds the number of values); `step_args` is the argument tuple
-    of fmi2DoStep / fmi3DoStep with `time` (a c_double to update before each call) and the
-    fixed step size. Each call returns the status as an int.
-    """
-
-    set_float64: Callable[..., int]
-    get_float64: Callable[..., int]
-    do_step: Callable[..., int]
-    set_args: Callable[[Any, int, Any], tuple]
-    get_args: Callable[[Any, int, Any], tuple]
-    time: c_double
-    step_args: Callable[[float], tuple]
-
-
 class FmuInstance:
     """One instantiated co-simulation FMU (FMI 2.0 or 3.0) with its own message log."""
 
@@ -367,30 +348,6 @@ class FmuInstance:
                   lambda: self.fmu.doStep(currentCommunicationPoint=time,
                                           communicationStepSize=step))
 
-    def fast_calls(self) -> FastCalls:
-        """The bare float64 and step calls of this instance (see FastCalls)."""
-        prototype = CFUNCTYPE(c_int)
-        dll, c = self.fmu.dll, self.component
-
-        def pointer(name: str) -> Callable[..., int]:
-            return prototype(cast(getattr(dll, name), c_void_p).value)
-
-        time = c_double(0.0)
-        if self.info.fmi_version == "2.0":
-            return FastCalls(
-                pointer("fmi2SetReal"), pointer("fmi2GetReal"), pointer("fmi2DoStep"),
-                lambda vr, n, values: (c, vr, c_size_t(n), values),
-                lambda vr, n, values: (c, vr, c_size_t(n), values),
-                time, lambda h: (c, time, c_double(h), c_int(1)))
-        flags = [c_bool(False) for _ in range(3)]
-        last = c_double(0.0)
-        return FastCalls(
-            pointer("fmi3SetFloat64"), pointer("fmi3GetFloat64"), pointer("fmi3DoStep"),
-            lambda vr, n, values: (c, vr, c_size_t(n), values, c_size_t(n)),
-            lambda vr, n, values: (c, vr, c_size_t(n), values, c_size_t(n)),
-            time, lambda h: (c, time, c_double(h), c_bool(True), *map(byref, flags),
-                             byref(last)))
-
     def close(self) -> None:
         """Terminate (if initialized), free the instance, delete the extracted files."""
         try:
@@ -413,8 +370,3 @@ class FmuInstance:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-def uint_array(values: Sequence[int]):
-    """A ctypes array of value references."""
-    return (c_uint * len(values))(*values)

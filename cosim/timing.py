@@ -1,0 +1,99 @@
+"""Step timing of a run, as Simulink Real-Time reports it: the task execution time (TET) of
+every step, each FMU's share of it, and, when the run is paced to the wall clock, how late each
+step started and which steps overran their period.
+
+TET of step k: from the first FMI call of communication point k to the end of the step to
+t_{k+1} (cosim/c/engine.c). Lateness: the step's start after its due time on the absolute
+schedule start + k * period (period = step / real-time factor). An overrun: a step whose TET
+plus lateness passes its period, so that it ends after the next step was due.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+US = 1e6
+PERCENTILES = {"p50": 50.0, "p99": 99.0, "p99.9": 99.9}
+
+
+@dataclass(frozen=True)
+class Pacing:
+    """How a run is paced: `rt_factor` simulated seconds per wall-clock second; stop after
+    `max_overruns` overruns (0: never) that come after the first `grace` seconds."""
+
+    rt_factor: float = 1.0
+    max_overruns: int = 0
+    grace: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.rt_factor > 0:
+            raise ValueError(f"the real-time factor must be positive, got {self.rt_factor}")
+        if self.max_overruns < 0 or self.grace < 0:
+            raise ValueError("max_overruns and grace must not be negative")
+
+
+@dataclass(frozen=True, eq=False)
+class StepTiming:
+    """What the engine measured, one value per step made."""
+
+    step: float
+    names: tuple[str, ...]  # the FMUs, in stepping order
+    tet: np.ndarray  # [s]
+    fmu_tet: np.ndarray  # steps x FMUs [s]
+    lateness: np.ndarray  # [s], zero when not paced
+    pacing: Pacing | None
+    overruns: int
+    first_overruns: tuple[int, ...]  # step indices of the first overruns
+    stopped_at: int | None  # the step at which max_overruns stopped the run
+
+    @property
+    def period(self) -> float:
+        """Wall-clock seconds per step."""
+        return self.step / (self.pacing.rt_factor if self.pacing else 1.0)
+
+    def table(self, wall_s: float) -> dict:
+        """The `realtime` table of metrics.json (times in microseconds)."""
+        simulated = self.tet.size * self.step
+        table = {
+            "period_us": self.period * US,
+            "target_real_time_factor": self.pacing.rt_factor if self.pacing else None,
+            "achieved_real_time_factor": simulated / wall_s if wall_s > 0 else None,
+            "steps": int(self.tet.size),
+            "tet_us": _stats(self.tet),
+            "tet_us_per_fmu": {n: _stats(self.fmu_tet[:, i]) for i, n in enumerate(self.names)},
+            "tet_over_period_p99": float(np.percentile(self.tet, 99) / self.period)
+            if self.tet.size else None,
+        }
+        if self.pacing is not None:
+            table.update({
+                "lateness_us": {"p99": _percentile(self.lateness, 99.0),
+                                "max": float(self.lateness.max() * US)
+                                if self.lateness.size else 0.0},
+                "overruns": self.overruns,
+                "first_overruns_s": [k * self.step for k in self.first_overruns],
+                "max_overruns": self.pacing.max_overruns, "grace_s": self.pacing.grace,
+                "stopped_at_s": None if self.stopped_at is None
+                else self.stopped_at * self.step})
+        return table
+
+    def stop_message(self) -> str:
+        """Why max_overruns stopped the run: when, and how late its last step ended."""
+        k = self.stopped_at
+        over = (self.tet[k] + self.lateness[k] - self.period) * US
+        return (f"stopped after {self.overruns} overruns (--max-overruns "
+                f"{self.pacing.max_overruns}): the step from t = {k * self.step:.6g} s took "
+                f"{self.tet[k] * US:.1f} us and started {self.lateness[k] * US:.1f} us late, "
+                f"{over:.1f} us past its {self.period * US:.1f} us period")
+
+
+def _percentile(values: np.ndarray, q: float) -> float:
+    return float(np.percentile(values, q) * US) if values.size else 0.0
+
+
+def _stats(values: np.ndarray) -> dict[str, float]:
+    """p50, p99, p99.9 and max in microseconds."""
+    out = {name: _percentile(values, q) for name, q in PERCENTILES.items()}
+    out["max"] = float(values.max() * US) if values.size else 0.0
+    return out

@@ -1,0 +1,86 @@
+"""Paced runs on the compiled engine: the schedule holds the wall clock, every overrun is
+counted, --max-overruns stops the run and keeps its record, and the timing table says so.
+
+The FMUs are the Modelica Reference-FMUs (VanDerPol, FMI 2.0 and 3.0), which cost about a
+microsecond a step, so the pacing (not the FMUs) sets the wall time.
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.master import Master, SlaveSpec
+from cosim.realtime import realtime_process
+from cosim.timing import Pacing
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "fmus"
+
+
+def van_der_pol(version: int = 2) -> list[SlaveSpec]:
+    path = SHARED / f"fmi{version}" / "VanDerPol.fmu"
+    assert path.is_file(), f"the Reference-FMUs are missing: expected {path}"
+    return [SlaveSpec("vdp", path)]
+
+
+def run(step: float, steps: int, pacing: Pacing | None, version: int = 2):
+    with Master(van_der_pol(version), [], step) as master:
+        return master.run({}, steps, pacing=pacing)
+
+
+@pytest.mark.parametrize("factor, wall", [(1.0, 2.0), (4.0, 0.5)])
+def test_pacing_holds_the_wall_clock(factor, wall):
+    """2 s of simulated time at 1 ms: 2 s of wall time at F = 1, 0.5 s at F = 4 (within 1 %),
+    on an absolute schedule: no step starts before it is due."""
+    recording = run(1e-3, 2000, Pacing(rt_factor=factor))
+    assert recording.wall_s == pytest.approx(wall, rel=0.01)
+    timing = recording.timing
+    assert timing.period == pytest.approx(1e-3 / factor)
+    assert np.all(timing.lateness >= 0) and timing.tet.size == 2000
+    table = timing.table(recording.wall_s)
+    assert table["achieved_real_time_factor"] == pytest.approx(factor, rel=0.01)
+    assert table["tet_us"]["p50"] <= table["tet_us"]["p99"] <= table["tet_us"]["max"]
+    assert set(table["tet_us_per_fmu"]) == {"vdp"}
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_paced_equals_unpaced(version):
+    """Pacing changes when the steps run, never what they compute."""
+    fast = run(1e-3, 300, None, version)
+    paced = run(1e-3, 300, Pacing(rt_factor=10.0), version)
+    for name in ("vdp.x0", "vdp.x1"):
+        assert np.array_equal(fast[name], paced[name])
+
+
+def test_every_overrun_is_counted():
+    """A 0.1 us period is shorter than any step: every step overruns, and the count is
+    exactly the steps whose TET plus lateness passed the period."""
+    timing = run(1e-7, 500, Pacing()).timing
+    late = timing.tet + timing.lateness > timing.period
+    assert timing.overruns == int(late.sum()) == 500
+    assert timing.first_overruns == tuple(range(16))
+
+
+def test_max_overruns_stops_the_run_and_keeps_the_record():
+    recording = run(1e-7, 500, Pacing(max_overruns=5))
+    timing = recording.timing
+    assert timing.stopped_at == 4 and timing.overruns == 5
+    assert recording.time.size == 5 and recording["vdp.x0"].size == 5  # points 0 .. 4
+    assert "stopped after 5 overruns" in timing.stop_message()
+    assert timing.table(recording.wall_s)["stopped_at_s"] == pytest.approx(4e-7)
+
+
+def test_grace_keeps_early_overruns_from_stopping_the_run():
+    """Overruns in the first S seconds are counted, but --max-overruns counts only later ones."""
+    recording = run(1e-7, 500, Pacing(max_overruns=5, grace=100e-7))
+    assert recording.timing.stopped_at == 104 and recording.timing.overruns == 105
+
+
+def test_the_process_setup_reports_what_it_did():
+    with realtime_process(cpu=0) as report:
+        assert report.cpu == 0
+        assert report.sched_fifo or any("SCHED_FIFO" in w for w in report.warnings)
+        assert report.memory_locked or any("memory" in w for w in report.warnings)
+    with pytest.raises(ValueError, match="--cpu 4096"):
+        with realtime_process(cpu=4096):
+            pass
