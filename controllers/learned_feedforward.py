@@ -10,6 +10,10 @@ the nominal model) is added in generated C at every step.
 Two modes with equal results: step by step (the graph's recurrent state carried in the FMU
 state) and precomputed (the whole reference given at build time, run through the graph in
 one call at initialization, as the seed's offline feedforward).
+
+The network part is the one of any ONNX graph as an FMU (fmu.onnx_graph, `flexff fmu build
+onnx`), the graph's first dimension being time; only the features and the prior are this
+module's.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ import onnx
 from controllers.features import feature_names, motion_function
 from controllers.feedforward import (FORCE_OUTPUTS, REFERENCE_INPUTS, feedforward_system,
                                      rigid_body_force)
-from fmu.network import read_network
+from fmu.onnx_graph import graph_network, read_graph
 from fmu.system import System
 
 FORMAT = "flexff-feedforward"  # metadata "format" written by learning.export
@@ -75,8 +79,9 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     if prior not in PRIORS:
         raise ValueError(f"{model}: unknown prior {prior!r} (known: {', '.join(PRIORS)})")
     x, p = ca.SX.sym("x", 0), ca.SX.sym("p", 0)
-    network = read_network(model, ca.Function("network_input", [x, u, p], [inputs]), period,
-                           None if reference is None else _table(reference, step))
+    network = graph_network(read_graph(model, time_axis=True),
+                            ca.Function("network_input", [x, u, p], [inputs]), period,
+                            None if reference is None else _table(reference, step))
     if network.n_outputs != len(FORCE_OUTPUTS):
         raise ValueError(f"{model}: the graph returns {network.n_outputs} values per step, the "
                          f"feedforward needs {len(FORCE_OUTPUTS)} (Fx_ff, Fy_ff)")

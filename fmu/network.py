@@ -7,7 +7,8 @@ NAME_out of the same shape (where the graph leaves a dimension symbolic, the run
 start). The FMU runs it every `period` communication steps on `input_function(x, u, p)` and
 hands the result to the System's output function (see System); `table` switches it to the
 precomputed mode. The FMU bundles the graph (resources/) and the libonnxruntime of the
-installed onnxruntime wheel (binaries/<platform>/).
+installed onnxruntime wheel (binaries/<platform>/). fmu.onnx_graph brings any graph of
+fixed-size float tensors to this convention.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 import onnx
 
 MAX_RANK = 4  # of a state tensor (NET_MAX_RANK in onnx_network.h)
+MAX_TENSORS = 16  # inputs, or outputs, of one graph (MAX_TENSORS in onnx_network.c)
 ELEMENT_TYPES = {onnx.TensorProto.FLOAT: "float32", onnx.TensorProto.DOUBLE: "float64"}
 
 
@@ -68,12 +70,7 @@ def read_network(model: str | Path, input_function: ca.Function, period: int = 1
     """The Network of the ONNX file `model`; ValueError (what is wrong) if the graph does not
     follow the convention of this module or does not fit `input_function`."""
     path = Path(model)
-    if not path.is_file():
-        raise ValueError(f"ONNX model {path} does not exist")
-    try:
-        graph = onnx.load(str(path)).graph
-    except Exception as exc:  # onnx raises DecodeError and others for a broken file
-        raise ValueError(f"{path} is not a readable ONNX model: {exc}") from exc
+    graph = load_model(path).graph
     inputs = {v.name: _tensor(v, path) for v in graph.input}
     outputs = {v.name: _tensor(v, path) for v in graph.output}
     sequence_in = [n for n, (kind, _) in inputs.items() if kind == "float64"]
@@ -95,6 +92,9 @@ def read_network(model: str | Path, input_function: ca.Function, period: int = 1
             raise ValueError(f"{path}: state input {name!r} {list(shape)} needs an output "
                              f"{state.output!r} of the same type and shape")
         states.append(state)
+    if 1 + len(states) > MAX_TENSORS:
+        raise ValueError(f"{path}: {len(states)} state tensors; the FMU runs graphs with at most "
+                         f"{MAX_TENSORS - 1}")
     if len(outputs) != 1 + len(states):
         raise ValueError(f"{path}: outputs {_describe(outputs)} are not the float64 output and "
                          f"one NAME_out per state input")
@@ -103,6 +103,22 @@ def read_network(model: str | Path, input_function: ca.Function, period: int = 1
                          f"input function gives {input_function.numel_out(0)}")
     return Network(path, sequence_in[0], sequence_out[0], n_in, n_out, tuple(states),
                    input_function, period, table)
+
+
+def load_model(model: str | Path) -> onnx.ModelProto:
+    """The ONNX model in the file `model`; ValueError naming the file if it is missing or is not
+    an ONNX model."""
+    path = Path(model)
+    if not path.is_file():
+        raise ValueError(f"ONNX model {path} does not exist")
+    try:
+        loaded = onnx.load(str(path))
+    except Exception as exc:  # onnx raises DecodeError and others for a broken file
+        raise ValueError(f"{path} is not a readable ONNX model: {exc}") from exc
+    if loaded.ir_version < 1 or not loaded.graph.output:  # protobuf reads some junk as empty
+        raise ValueError(f"{path} is not a readable ONNX model: it has no IR version or no "
+                         f"graph outputs")
+    return loaded
 
 
 def runtime_library() -> Path:
