@@ -11,23 +11,31 @@ encoder noise above the new Nyquist frequency folds into the band).
 
 Every file is written to a temporary name and renamed, so a folder never holds half a file.
 Running again into the same folder resumes: a trajectory whose file loads and holds exactly its
-reference is skipped, a missing or unreadable one is run, and leftover temporary files of an
-interrupted run are deleted (so one collection per folder at a time). A folder of another set,
-another dataset format or version, or with files of other trajectories is refused before
-anything runs. A failed trajectory does not stop the others; the manifest is only written once
-every trajectory has its file. Runs go to local processes, or to a Dask scheduler whose workers
-see the same file system as this process.
+reference (and, where the folder's manifest lists it, has the sha256 listed there) is skipped,
+a missing, unreadable or changed one is run, and leftover temporary files of an interrupted run
+are deleted (so one collection per folder at a time). A folder of another set, another dataset
+format or version, or with files of other trajectories is refused before anything runs. A failed
+trajectory does not stop the others, but an error that would fail every one alike (a full disk,
+a read-only or inaccessible folder, a broken process pool) cancels the trajectories not yet
+started; the manifest is only written once every trajectory has its file. Runs go to local
+processes, which end with the collecting process even when it is killed (Linux), or to a Dask
+scheduler whose workers see the same file system as this process.
 """
 
 from __future__ import annotations
 
+import ctypes
+import errno
+import hashlib
 import json
 import os
+import signal
+import sys
 import tempfile
 import time
-import traceback
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,12 +43,12 @@ import numpy as np
 from tqdm import tqdm
 
 from cosim.config import parse_config
-from cosim.recording import Recording, atomic_write
+from cosim.recording import Recording
 from cosim.run import simulate_config
 from cosim.scenario import reference_signals, resolve
-from cosim.schema import ConfigError, RunConfig
-from learning.dataset import (ENCODER_SIGNALS, FORMAT, MANIFEST, POSITION_SIGNALS,
-                              REFERENCE_SIGNALS, SIGNALS, VERSION)
+from cosim.schema import RunConfig
+from learning.dataset import (COLLECTED, ENCODER_SIGNALS, FORMAT, MANIFEST, POSITION_SIGNALS,
+                              REFERENCE_SIGNALS, SIGNALS, VERSION, save_signals, write_manifest)
 from learning.trajectories import TrajectorySet, TrajectorySpec, trajectory_set
 from plant.model import VARIANTS
 from plant.system import plant_system
@@ -49,6 +57,8 @@ CURRENTS = ("i1", "i2", "i3")
 FORCES = ("Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
 RECORDED = REFERENCE_SIGNALS + ENCODER_SIGNALS + POSITION_SIGNALS + FORCES + CURRENTS
 START_VALUES = ("x_start", "y_start")  # per trajectory: where its reference starts
+STOPPING = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES)  # fail every trajectory
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
 class DataFolderError(ValueError):
@@ -59,22 +69,25 @@ class CollectionError(RuntimeError):
     """Some trajectories failed (the others were written); `report` says which and why."""
 
     def __init__(self, report: CollectionReport) -> None:
-        lines = [f"{o.name}: {o.error}" for o in report.failed]
+        cancelled = f", {len(report.cancelled)} not run" if report.cancelled else ""
         super().__init__(f"{len(report.failed)} of {report.total} trajectories of set "
-                         f"{report.set_name!r} failed (run again into {report.path} to retry "
-                         f"them):\n" + "\n".join(lines))
+                         f"{report.set_name!r} failed{cancelled} (run again into {report.path} "
+                         f"to retry them):\n" + "\n".join(report.problems()))
         self.report = report
 
 
 @dataclass(frozen=True)
 class Outcome:
-    """One trajectory run: wall seconds and the largest commanded current, or its error."""
+    """One trajectory run: wall seconds and the largest commanded current, or its error (one
+    line), or that it was cancelled before it started."""
 
     name: str
     seconds: float = 0.0
     max_current: float = 0.0  # A, over the three motors and the whole 1 kHz run
     saturated: float = 0.0  # fraction of the 1 kHz samples with a commanded |i| >= i_max
     error: str | None = None
+    stops_all: bool = False  # the error would fail every trajectory alike (a full disk)
+    cancelled: bool = False
 
 
 @dataclass(frozen=True)
@@ -87,14 +100,28 @@ class CollectionReport:
     skipped: tuple[str, ...]
     failed: tuple[Outcome, ...]
     seconds: float
+    cancelled: tuple[str, ...] = ()  # not run: an error that fails every one stopped them
 
     @property
     def total(self) -> int:
-        return len(self.ran) + len(self.skipped) + len(self.failed)
+        return len(self.ran) + len(self.skipped) + len(self.failed) + len(self.cancelled)
 
     @property
     def ok(self) -> bool:
-        return not self.failed
+        return not self.failed and not self.cancelled
+
+    def problems(self) -> list[str]:
+        """One line per failed trajectory, and one in all for those failed by the error that
+        stopped the collection (a full disk), with the number cancelled."""
+        lines = [f"{o.name}: FAILED: {o.error}" for o in self.failed if not o.stops_all]
+        stopping = [o.name for o in self.failed if o.stops_all]
+        if stopping:
+            first = next(o for o in self.failed if o.stops_all)
+            names = ", ".join(stopping[:5]) + (", ..." if len(stopping) > 5 else "")
+            lines.append(f"stopped: {first.error} ({len(stopping)} failed with it: {names}; "
+                         f"{len(self.cancelled)} not run): fix the cause (a full disk, an "
+                         f"unwritable folder) and run the same command again to resume")
+        return lines
 
 
 @dataclass(frozen=True)
@@ -127,24 +154,29 @@ def run_collection(set_name: str, out: str | Path, workers: int | None = None,
     trajectories = trajectory_set(set_name)
     if limit is not None and limit < 1:
         raise ValueError(f"limit must be at least 1, got {limit}")
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers} (leave it out for one "
+                         f"process per CPU)")
     specs = trajectories.trajectories[:limit]
     out = Path(out)
-    _check_folder(out, trajectories)
+    listed = _check_folder(out, trajectories)
     jobs, skipped = [], []
     for spec in specs:
         job = _Job(run_config(spec, trajectories), out / f"{spec.name}.npz",
                    trajectories.decimation)
-        (skipped if _present(job) else jobs).append(job)
+        (skipped if _present(job, listed.get(job.path.name)) else jobs).append(job)
     out.mkdir(parents=True, exist_ok=True)
     for stale in out.glob(".*.tmp"):  # left by an interrupted run (atomic_write's names)
         stale.unlink()
     outcomes = list(_execute(jobs, workers, scheduler, progress, len(specs), set_name))
     failed = tuple(o for o in outcomes if o.error is not None)
-    if not failed:
+    cancelled = tuple(o.name for o in outcomes if o.cancelled)
+    if not failed and not cancelled:
         _write_manifest(out, trajectories, specs)
-    return CollectionReport(out, set_name, tuple(o for o in outcomes if o.error is None),
+    return CollectionReport(out, set_name,
+                            tuple(o for o in outcomes if o.error is None and not o.cancelled),
                             tuple(j.config.name for j in skipped), failed,
-                            time.perf_counter() - start)
+                            time.perf_counter() - start, cancelled)
 
 
 def run_config(spec: TrajectorySpec, trajectories: TrajectorySet) -> RunConfig:
@@ -168,11 +200,13 @@ def dataset_signals(recording: Recording, decimation: int = 1) -> dict[str, np.n
 
 
 # -- folder -----------------------------------------------------------------------------------
-def _check_folder(out: Path, trajectories: TrajectorySet) -> None:
-    """Refuse a folder that holds another set, format or version, or foreign trajectories."""
+def _check_folder(out: Path, trajectories: TrajectorySet) -> dict[str, str]:
+    """Refuse a folder that holds another set, format or version, or foreign trajectories;
+    return the sha256 its manifest lists for each file (none without a manifest)."""
     if out.exists() and not out.is_dir():
         raise DataFolderError(f"{out} exists and is not a folder")
     manifest = out / MANIFEST
+    listed = {}
     if manifest.is_file():
         try:
             found = json.loads(manifest.read_text())
@@ -186,6 +220,9 @@ def _check_folder(out: Path, trajectories: TrajectorySet) -> None:
                 f"{out} holds set {found.get('set')!r} in dataset version "
                 f"{found.get('version')!r}; this collects set {trajectories.name!r} in version "
                 f"{VERSION}: collect into another folder (or delete this one)")
+        entries = found.get("trajectories")
+        listed = {e.get("file"): e.get("sha256") for e in entries if isinstance(e, dict)} \
+            if isinstance(entries, list) else {}
     names = {s.name for s in trajectories.trajectories}
     foreign = sorted(p.name for p in out.glob("*.npz") if p.stem not in names)
     if foreign:
@@ -193,18 +230,22 @@ def _check_folder(out: Path, trajectories: TrajectorySet) -> None:
                               f"{trajectories.name!r} ({', '.join(foreign[:5])}"
                               f"{', ...' if len(foreign) > 5 else ''}): collect into another "
                               f"folder (or delete this one)")
+    return listed
 
 
-def _present(job: _Job) -> bool:
+def _present(job: _Job, listed: str | None) -> bool:
     """Whether job's file is already there, complete and of exactly its trajectory.
 
-    A file that does not load (or lacks signals) is run again; one that loads but holds
-    another reference or time grid is refused: the folder is from other trajectory definitions.
+    A file that does not load (or lacks signals), or differs from the sha256 `listed` for it
+    in the folder's manifest, is run again; one that loads but holds another reference or time
+    grid is refused: the folder is from other trajectory definitions.
     """
     try:
         with np.load(job.path) as data:
             signals = {n: data[n] for n in SIGNALS}
     except Exception:  # noqa: BLE001  (missing, truncated, not a zip, lacks a signal: run it)
+        return False
+    if listed is not None and hashlib.sha256(job.path.read_bytes()).hexdigest() != listed:
         return False
     c = job.config
     expected = {n: v[::job.decimation] for n, v in reference_signals(c).items()}
@@ -220,39 +261,32 @@ def _write_manifest(out: Path, trajectories: TrajectorySet,
                     specs: Iterable[TrajectorySpec]) -> None:
     parameters = {p.name: p.start for p in plant_system(trajectories.variant).parameters
                   if p.name not in START_VALUES}
-    manifest = {
-        "format": FORMAT, "version": VERSION, "set": trajectories.name,
-        "sample_rate_hz": trajectories.sample_rate_hz,
-        "plant": {"variant": trajectories.variant, "parameters": parameters},
-        "trajectories": [{"name": s.name, "split": s.split, "file": f"{s.name}.npz",
-                          "reference": s.reference, "seed": s.seed} for s in specs],
-    }
-    text = json.dumps(manifest, indent=2) + "\n"
-    atomic_write(out / MANIFEST, lambda tmp: tmp.write_text(text))
+    write_manifest(out, trajectories.name, trajectories.sample_rate_hz,
+                   {"variant": trajectories.variant, "parameters": parameters},
+                   [{"name": s.name, "split": s.split, "file": f"{s.name}.npz",
+                     "reference": s.reference, "seed": s.seed} for s in specs], COLLECTED)
 
 
 # -- running ----------------------------------------------------------------------------------
 def _collect_one(job: _Job) -> Outcome:
-    """Run one trajectory and write its file; every error is returned, never raised."""
+    """Run one trajectory and write its file; every error is returned (one line), never
+    raised."""
     name = job.config.name
     try:
         recording = simulate_config(job.config, progress=False)
-        signals = dataset_signals(recording, job.decimation)
-
-        def write(tmp: Path) -> None:
-            with open(tmp, "wb") as handle:  # a file object keeps numpy from adding ".npz"
-                np.savez(handle, **signals)
-
-        atomic_write(job.path, write)
+        save_signals(job.path, dataset_signals(recording, job.decimation))
         currents = np.abs(np.vstack([recording[n] for n in CURRENTS])).max(axis=0)
         variant = job.config.builtin("plant").options["variant"]
         limit = float(VARIANTS[variant].parameters.i_max)
         return Outcome(name, recording.wall_s, float(currents.max()),
                        float(np.mean(currents >= limit)))
     except Exception as error:  # noqa: BLE001  (reported; the other trajectories go on)
-        detail = "" if isinstance(error, ConfigError) else \
-            "\n" + "".join(traceback.format_exception(error)[-3:])
-        return Outcome(name, error=f"{type(error).__name__}: {error}{detail}")
+        return Outcome(name, error=_one_line(error),
+                       stops_all=isinstance(error, OSError) and error.errno in STOPPING)
+
+
+def _one_line(error: BaseException) -> str:
+    return f"{type(error).__name__}: {' '.join(str(error).split())}"
 
 
 def _execute(jobs: list[_Job], workers: int | None, scheduler: str | None, progress: bool,
@@ -276,10 +310,21 @@ def _on_processes(jobs: list[_Job], workers: int | None) -> Iterator[Outcome]:
     with tempfile.TemporaryDirectory(prefix="flexff-warm-") as folder:
         resolve(jobs[0].config, folder)  # fills the FMU cache once, not in every worker
     workers = min(workers or os.cpu_count() or 1, len(jobs))
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    with ProcessPoolExecutor(max_workers=workers, initializer=_die_with_parent,
+                             initargs=(os.getpid(),)) as pool:
         futures = {pool.submit(_collect_one, job): job for job in jobs}
-        for future in as_completed(futures):
-            yield _result(future, futures[future])
+        yield from _settle(futures, as_completed(futures),
+                           lambda: [f.cancel() for f in futures])
+
+
+def _die_with_parent(parent: int) -> None:
+    """Pool initializer: have the kernel kill this worker when the collecting process dies
+    (Linux), even by SIGKILL, instead of leaving it blocked on a queue nobody serves. (The
+    signal follows the thread that started the worker: the pool's user, which outlives it.)"""
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:  # it died before that took effect
+        os._exit(1)
 
 
 def _on_dask(jobs: list[_Job], scheduler: str) -> Iterator[Outcome]:
@@ -293,14 +338,25 @@ def _on_dask(jobs: list[_Job], scheduler: str) -> Iterator[Outcome]:
                            "pip install 'dask[distributed]'") from None
     with Client(scheduler) as client:
         futures = client.map(_collect_one, jobs, pure=False)
-        by_future = dict(zip(futures, jobs))
-        for future in dask_completed(futures):
-            yield _result(future, by_future[future])
+        yield from _settle(dict(zip(futures, jobs)), dask_completed(futures),
+                           lambda: client.cancel([f for f in futures if not f.done()]))
 
 
-def _result(future, job: _Job) -> Outcome:
-    """The future's outcome, or its error (a worker that died) as a failed outcome."""
-    try:
-        return future.result()
-    except Exception as error:  # noqa: BLE001
-        return Outcome(job.config.name, error=f"{type(error).__name__}: {error}")
+def _settle(futures: dict, finished: Iterable, cancel: Callable[[], object]) -> Iterator[Outcome]:
+    """The outcomes of `futures` (future -> job) in the order `finished` yields them; after
+    the first error that would fail every trajectory, `cancel` the ones not started."""
+    stopped = False
+    for future in finished:
+        name = futures[future].config.name
+        if future.cancelled():
+            yield Outcome(name, cancelled=True)
+            continue
+        try:
+            outcome = future.result()
+        except Exception as error:  # noqa: BLE001  (a worker that died)
+            outcome = Outcome(name, error=_one_line(error),
+                              stops_all=isinstance(error, BrokenProcessPool))
+        yield outcome
+        if outcome.stops_all and not stopped:
+            stopped = True
+            cancel()

@@ -3,11 +3,19 @@
 The format is the contract between data collection (co-simulation or hardware logs) and
 training. Reading checks everything a training run relies on, so that a bad folder fails at
 once with a message naming the file and the signal, and saying what to do about it.
+
+Version 2 guards the data against silent change: every trajectory entry holds the sha256 of
+its file, and the manifest holds a sha256 of itself (all but the trajectories' splits, which
+may be edited by hand), so a truncated or swapped file, or an edited `set` or `plant`, is
+refused instead of trained on.
 """
 
 from __future__ import annotations
 
+import hashlib
+import io
 import json
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -15,10 +23,13 @@ from typing import Any, Mapping
 import numpy as np
 
 from controllers.features import REFERENCE_SIGNALS
+from cosim.recording import atomic_write
 
 FORMAT = "flexff-dataset"
-VERSION = 1
+VERSION = 2
 MANIFEST = "manifest.json"
+COLLECTED = "flexff data collect"  # the manifest's `source` for a collected set
+WRITTEN = "learning.dataset.write_dataset"
 SETS = ("sim", "hardware")
 SPLITS = ("train", "test")
 ENCODER_SIGNALS = ("theta_s1", "theta_s2", "theta_s3")
@@ -55,6 +66,7 @@ class Dataset:
     sample_rate_hz: float
     plant: Mapping[str, Any]
     trajectories: tuple[Trajectory, ...]
+    digest: str  # sha256 of the whole manifest, splits included: what a run trained on
 
     def split(self, name: str) -> list[Trajectory]:
         """The trajectories of split `name` ('train' or 'test'), in manifest order."""
@@ -69,39 +81,83 @@ def load_dataset(path: str | Path) -> Dataset:
         raise DatasetError(f"{path} is not a flexff dataset: {MANIFEST} is missing ({RECOLLECT})")
     try:
         manifest = json.loads(manifest_path.read_text())
-    except json.JSONDecodeError as err:
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise DatasetError(f"{manifest_path} is not valid JSON ({err}); {RECOLLECT}") from None
     _check_manifest(manifest, manifest_path)
+    collected = manifest.get("source") == COLLECTED
+    if manifest["sha256"] != _digest(manifest, splits=False):
+        redo = (f"run flexff data collect into {path} again with the set it was collected with"
+                if collected else "write the dataset again")
+        raise DatasetError(f"{manifest_path} was edited: its set, sample rate, plant or "
+                           f"trajectory list no longer match its sha256 (only a trajectory's "
+                           f"'split' may be changed by hand): undo the edit, or {redo}")
+    fix = (f"run flexff data collect --set {manifest['set']} -o {path} again to re-run it"
+           if collected else f"write the dataset again, or {RECOLLECT}")
     rate = float(manifest["sample_rate_hz"])
-    trajectories = tuple(_load_trajectory(path, entry, rate) for entry in manifest["trajectories"])
+    trajectories = tuple(_load_trajectory(path, entry, rate, fix)
+                         for entry in manifest["trajectories"])
     return Dataset(path=path, set=manifest["set"], sample_rate_hz=rate,
-                   plant=manifest.get("plant", {}), trajectories=trajectories)
+                   plant=manifest.get("plant", {}), trajectories=trajectories,
+                   digest=_digest(manifest, splits=True))
 
 
 def write_dataset(path: str | Path, set_name: str, sample_rate_hz: float, plant: Mapping[str, Any],
                   trajectories: list[Trajectory]) -> Path:
-    """Write trajectories as a dataset folder (manifest plus one .npz each); returns the folder.
+    """Write trajectories as a dataset folder (one .npz each, then the manifest); return it.
 
-    The one writer of the format: data collection and the synthetic generator both use it, so
-    what they write is what `load_dataset` accepts.
+    Data collection writes its files itself (in parallel workers) and its manifest with
+    `write_manifest`, as this does, so what either writes is what `load_dataset` accepts.
     """
     path = Path(path)
-    path.mkdir(parents=True, exist_ok=True)
     entries = []
     for traj in trajectories:
         missing = [s for s in SIGNALS if s not in traj.signals]
         if missing:
             raise DatasetError(f"trajectory {traj.name!r} lacks signals {missing}")
         filename = f"{traj.name}.npz"
-        np.savez(path / filename, **{s: np.asarray(traj.signals[s], dtype=np.float64)
-                                     for s in SIGNALS})
+        save_signals(path / filename, traj.signals)
         entries.append({"name": traj.name, "split": traj.split, "file": filename,
                         "reference": dict(traj.reference), "seed": int(traj.seed)})
-    manifest = {"format": FORMAT, "version": VERSION, "set": set_name,
-                "sample_rate_hz": sample_rate_hz, "plant": dict(plant), "trajectories": entries}
-    _check_manifest(manifest, path / MANIFEST)
-    (path / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+    write_manifest(path, set_name, sample_rate_hz, plant, entries, WRITTEN)
     return path
+
+
+def save_signals(path: Path, signals: Mapping[str, np.ndarray]) -> None:
+    """Write one trajectory's SIGNALS as float64 arrays to the .npz `path`, atomically."""
+    arrays = {s: np.asarray(signals[s], dtype=np.float64) for s in SIGNALS}
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as handle:  # a file object keeps numpy from adding ".npz"
+            np.savez(handle, **arrays)
+
+    atomic_write(path, write)
+
+
+def write_manifest(path: Path, set_name: str, sample_rate_hz: float, plant: Mapping[str, Any],
+                   entries: list[dict[str, Any]], source: str) -> None:
+    """Write the manifest of the trajectory files in `path` (entries: name, split, file,
+    reference, seed), adding each file's sha256 and the manifest's own."""
+    entries = [{**e, "sha256": file_sha256(path / e["file"])} for e in entries]
+    manifest = {"format": FORMAT, "version": VERSION, "set": set_name, "source": source,
+                "sample_rate_hz": sample_rate_hz, "plant": dict(plant), "trajectories": entries}
+    manifest["sha256"] = _digest(manifest, splits=False)
+    _check_manifest(manifest, path / MANIFEST)
+    text = json.dumps(manifest, indent=2) + "\n"
+    atomic_write(path / MANIFEST, lambda tmp: tmp.write_text(text))
+
+
+def file_sha256(path: Path) -> str:
+    """The sha256 of a file's bytes, as hex."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _digest(manifest: Mapping[str, Any], splits: bool) -> str:
+    """sha256 of the manifest but its own hash (and, unless `splits`, the trajectories' splits)."""
+    content = {k: v for k, v in manifest.items() if k != "sha256"}
+    content["trajectories"] = [{k: v for k, v in e.items() if splits or k != "split"}
+                               for e in manifest["trajectories"]]
+    text = json.dumps(content, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _check_manifest(manifest: Any, where: Path) -> None:
@@ -111,6 +167,8 @@ def _check_manifest(manifest: Any, where: Path) -> None:
     if manifest.get("version") != VERSION:
         raise DatasetError(f"{where}: dataset version {manifest.get('version')!r}, this flexff "
                            f"reads version {VERSION}; {RECOLLECT}")
+    if not _is_sha256(manifest.get("sha256")):
+        raise DatasetError(f"{where}: 'sha256' is missing or not a sha256; {RECOLLECT}")
     if manifest.get("set") not in SETS:
         raise DatasetError(f"{where}: 'set' is {manifest.get('set')!r}, expected one of {SETS}")
     rate = manifest.get("sample_rate_hz")
@@ -121,8 +179,14 @@ def _check_manifest(manifest: Any, where: Path) -> None:
         raise DatasetError(f"{where}: no trajectories listed; {RECOLLECT}")
     names = set()
     for k, entry in enumerate(entries):
-        if not isinstance(entry, dict) or not {"name", "split", "file"} <= set(entry):
-            raise DatasetError(f"{where}: trajectory entry {k} needs 'name', 'split' and 'file'")
+        if not isinstance(entry, dict) or not {"name", "split", "file", "sha256"} <= set(entry):
+            raise DatasetError(f"{where}: trajectory entry {k} needs 'name', 'split', 'file' and "
+                               f"'sha256'; {RECOLLECT}")
+        if not isinstance(entry["name"], str) or not isinstance(entry["file"], str):
+            raise DatasetError(f"{where}: trajectory entry {k}: 'name' and 'file' must be text")
+        if not _is_sha256(entry["sha256"]):
+            raise DatasetError(f"{where}: trajectory {entry['name']!r} has no valid 'sha256'; "
+                               f"{RECOLLECT}")
         if entry["split"] not in SPLITS:
             raise DatasetError(f"{where}: trajectory {entry['name']!r} has split "
                                f"{entry['split']!r}, expected one of {SPLITS}")
@@ -131,27 +195,41 @@ def _check_manifest(manifest: Any, where: Path) -> None:
         names.add(entry["name"])
 
 
-def _load_trajectory(folder: Path, entry: Mapping[str, Any], rate: float) -> Trajectory:
+def _is_sha256(value: Any) -> bool:
+    return isinstance(value, str) and len(value) == 64 and all(c in "0123456789abcdef"
+                                                               for c in value)
+
+
+def _load_trajectory(folder: Path, entry: Mapping[str, Any], rate: float,
+                     fix: str) -> Trajectory:
     file = folder / entry["file"]
     if not file.is_file():
-        raise DatasetError(f"{file} is listed in {MANIFEST} but missing; {RECOLLECT}")
-    with np.load(file) as npz:
-        missing = [s for s in SIGNALS if s not in npz.files]
-        if missing:
-            raise DatasetError(f"{file} lacks signals {missing}; {RECOLLECT}")
-        signals = {s: np.asarray(npz[s], dtype=np.float64) for s in SIGNALS}
+        raise DatasetError(f"{file} is listed in {MANIFEST} but missing; {fix}")
+    content = file.read_bytes()
+    try:
+        with np.load(io.BytesIO(content)) as npz:
+            missing = [s for s in SIGNALS if s not in npz.files]
+            signals = {s: np.asarray(npz[s], dtype=np.float64) for s in SIGNALS if s in npz.files}
+    except (zipfile.BadZipFile, EOFError, ValueError, OSError):
+        raise DatasetError(f"{file} is truncated or not a .npz file; {fix}") from None
+    if hashlib.sha256(content).hexdigest() != entry["sha256"]:
+        raise DatasetError(f"{file} is not the file {MANIFEST} lists for trajectory "
+                           f"{entry['name']!r} (its sha256 differs: changed, or swapped with "
+                           f"another trajectory's); {fix}")
+    if missing:
+        raise DatasetError(f"{file} lacks signals {missing}; {fix}")
     lengths = {s: a.shape for s, a in signals.items()}
     if any(a.ndim != 1 for a in signals.values()) or len(set(lengths.values())) != 1:
         raise DatasetError(f"{file}: signals must be 1-D arrays of equal length, got {lengths}; "
-                           f"{RECOLLECT}")
+                           f"{fix}")
     for s, a in signals.items():
         bad = np.flatnonzero(~np.isfinite(a))
         if bad.size:
             raise DatasetError(f"{file}: signal {s!r} has {bad.size} NaN/Inf value(s), first at "
-                               f"sample {bad[0]}; fix or drop this trajectory, or {RECOLLECT}")
+                               f"sample {bad[0]}; fix or drop this trajectory, or {fix}")
     steps = np.diff(signals["time"])
     if steps.size == 0 or not np.allclose(steps, 1.0 / rate, rtol=1e-6, atol=1e-9):
         raise DatasetError(f"{file}: 'time' must be sampled at the manifest's {rate:g} Hz "
-                           f"(steps of {1.0 / rate:g} s); {RECOLLECT}")
+                           f"(steps of {1.0 / rate:g} s); {fix}")
     return Trajectory(name=entry["name"], split=entry["split"], signals=signals,
                       reference=entry.get("reference", {}), seed=int(entry.get("seed", 0)))

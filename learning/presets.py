@@ -96,6 +96,9 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     },
 }
 _PRESET_FEATURES = {"thesis": FeatureConfig(), "fast": FeatureConfig(model_rate_hz=100.0)}
+# epochs between training checkpoints (learning.train): about a minute of work on the machine
+# each preset is meant for; not a TrainConfig field, as it does not change the result
+CHECKPOINT_EVERY = {"thesis": 10, "fast": 5}
 
 
 def make_config(model: str, preset: str, **overrides: Any) -> TrainConfig:

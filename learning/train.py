@@ -5,6 +5,11 @@ residual F - F_rigid divided by the same label span, which gives the same MSE), 
 backpropagation through time for the recurrent networks, random windows for the convolutional
 ones (`learning.batches`), the epoch with the lowest validation loss kept. Seeded: the same
 configuration, data, device and thread count give the same weights.
+
+Every few epochs a checkpoint (weights, optimizer, random generators, history and the best
+weights so far) is written into the run folder, and the best weights whenever they improve
+(`learning.run_folder`); a run interrupted (kill -9 included) resumes from its last checkpoint
+to the same weights as one never interrupted.
 """
 
 from __future__ import annotations
@@ -27,9 +32,10 @@ from learning.batches import TRAIN, VALIDATION, SequenceSet, WindowSampler, wind
 from learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
 from learning.features import decimation, prepare_trajectory
 from learning.models import RECURRENT, SequenceNetwork, build_network, parameter_count, uses_prior
-from learning.presets import TrainConfig, make_config
+from learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
 from learning.rigid import rigid_forces
-from learning.run_folder import save_run
+from learning.run_folder import (CHECKPOINT_FILE, RunFolderError, save_best, save_checkpoint,
+                                 save_run, start_run)
 from learning.scaling import MinMaxScaler
 from learning.threads import torch_threads
 
@@ -37,19 +43,31 @@ MSE_UNITS = "MSE of min-max scaled labels Fx, Fy (the seed's normalized units)"
 
 
 def train(model: str, preset: str, data: str | Path, out: str | Path, progress: bool = True,
+          resume: bool | None = None, force: bool = True, checkpoint_every: int | None = None,
           **overrides: Any) -> dict[str, Any]:
     """Train `model` ('lstm', 'cnn-lstm', 'tcn', 'pgnn') with `preset` ('thesis', 'fast') on the
     dataset folder `data`; write the run folder `out`; return the metrics.
 
     `overrides` replace preset settings by name (see `learning.presets.make_config`), e.g.
-    `epochs=5`, `feature_set="compact"`, `model_rate_hz=200`, `hidden=50`.
+    `epochs=5`, `feature_set="compact"`, `model_rate_hz=200`, `hidden=50`. `resume` and
+    `force` say what to do with what `out` holds (`learning.run_folder.start_run`): by default
+    a checkpoint of the same settings and data is resumed and anything else replaced, a
+    finished run's files only once the new ones are complete (`flexff train` refuses instead
+    unless told). `checkpoint_every`: epochs between checkpoints (default: the preset's).
     """
     config = make_config(model, preset, **overrides)
-    return fit(config, load_dataset(data), Path(out), progress)
+    return fit(config, load_dataset(data), Path(out), progress, resume, force, checkpoint_every)
 
 
-def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True) -> dict[str, Any]:
+def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
+        resume: bool | None = None, force: bool = True,
+        checkpoint_every: int | None = None) -> dict[str, Any]:
     """Train with a ready configuration on a loaded dataset; see `train`."""
+    every = CHECKPOINT_EVERY[config.preset] if checkpoint_every is None else checkpoint_every
+    if every < 1:
+        raise ValueError(f"checkpoint_every must be at least 1 epoch, got {every}")
+    settings = _settings(config, dataset)
+    checkpoint = start_run(out, settings, resume, force)
     train_set, test_set = _splits(dataset)
     rate = dataset.sample_rate_hz
     model_rate = rate / decimation(rate, config.features.model_rate_hz)
@@ -75,7 +93,8 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True)
         test_data = SequenceSet.build([feature_scaler.transform(x) for x in test_x],
                                       targets(test_x, test_f),
                                       [np.full(len(x), TRAIN) for x in test_x], device)
-        history = _fit_loop(network, config, train_data, rng, progress)
+        saver = _Saver(out, settings, every)
+        history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint)
         metrics = {
             "model": config.model, "preset": config.preset, "units": MSE_UNITS,
             "train_mse": evaluate(network, train_data, TRAIN),
@@ -96,12 +115,21 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True)
     save_run(out, config, network, feature_scaler, label_scaler,
              feature_names(config.features.feature_set), model_rate,
              {"data": {"path": str(Path(dataset.path).resolve()), "set": dataset.set,
-                       "sample_rate_hz": rate, "plant": dict(dataset.plant),
-                       "train": [t.name for t in train_set], "test": [t.name for t in test_set]},
-              "parameters": metrics["parameters"]})
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-    plot_losses(history, out / "loss.png", f"{config.model} ({config.preset})")
+                       "sha256": dataset.digest, "sample_rate_hz": rate,
+                       "plant": dict(dataset.plant), "train": [t.name for t in train_set],
+                       "test": [t.name for t in test_set]},
+              "parameters": metrics["parameters"]},
+             {"metrics.json": lambda path: path.write_text(json.dumps(metrics, indent=2) + "\n"),
+              "loss.png": lambda path: plot_losses(history, path,
+                                                   f"{config.model} ({config.preset})")})
     return {**metrics, "run": str(out)}
+
+
+def _settings(config: TrainConfig, dataset: Dataset) -> dict[str, Any]:
+    """What a checkpoint must share to be resumed: the configuration (where it runs aside)
+    and the data."""
+    settings = {k: v for k, v in config.to_dict().items() if k not in ("device", "threads")}
+    return json.loads(json.dumps({"config": settings, "data": dataset.digest}))
 
 
 def _splits(dataset: Dataset) -> tuple[list[Trajectory], list[Trajectory]]:
@@ -127,14 +155,64 @@ def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,
     return float(np.mean(np.concatenate(errors) ** 2))
 
 
+class _Saver:
+    """Writes the checkpoints of one training run (see `learning.run_folder`)."""
+
+    def __init__(self, out: Path, settings: dict[str, Any], every: int) -> None:
+        self.out, self.settings, self.every = out, settings, every
+
+    def best(self, state: dict[str, torch.Tensor], epoch: int, val: float) -> None:
+        save_best(self.out, state, epoch, val)
+
+    def epoch_done(self, epochs: int, network: SequenceNetwork, optimizer: torch.optim.Optimizer,
+                   rng: np.random.Generator, history: dict[str, Any], best: float,
+                   best_state: dict[str, torch.Tensor] | None) -> None:
+        """Write a checkpoint every `every` epochs and after the last (so that a failed final
+        write resumes with nothing to repeat)."""
+        done = len(history["train"])
+        if done % self.every and done != epochs:
+            return
+        save_checkpoint(self.out, {
+            "settings": json.dumps(self.settings), "epoch": done, "epochs": epochs,
+            "network": network.state_dict(), "optimizer": optimizer.state_dict(),
+            "best": best, "best_state": best_state or {},
+            "rng": json.dumps(rng.bit_generator.state), "torch_rng": torch.get_rng_state(),
+            "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else [],
+            "history": json.dumps(history)})
+
+
+def _restore(checkpoint: dict[str, Any], network: SequenceNetwork,
+             optimizer: torch.optim.Optimizer, rng: np.random.Generator, out: Path) -> tuple[
+                 dict[str, Any], float, dict[str, torch.Tensor] | None]:
+    """Put the training state of `checkpoint` (from run folder `out`) back; return its history,
+    best loss and best weights."""
+    try:
+        network.load_state_dict(checkpoint["network"])
+        optimizer.load_state_dict(checkpoint["optimizer"])
+        rng.bit_generator.state = json.loads(checkpoint["rng"])
+        torch.set_rng_state(checkpoint["torch_rng"])
+        if checkpoint["cuda_rng"] and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all(checkpoint["cuda_rng"])
+        history = json.loads(checkpoint["history"])
+    except Exception:  # noqa: BLE001  (torch reports a mismatch in many lines)
+        raise RunFolderError(f"{out / CHECKPOINT_FILE} does not fit the network of its settings "
+                             f"(damaged): start again with --force") from None
+    return history, float(checkpoint["best"]), dict(checkpoint["best_state"]) or None
+
+
 def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
-              rng: np.random.Generator, progress: bool) -> dict[str, Any]:
+              rng: np.random.Generator, progress: bool, saver: _Saver,
+              checkpoint: dict[str, Any] | None) -> dict[str, Any]:
     optimizer = torch.optim.Adam(network.parameters(), lr=config.learning_rate)
     recurrent = config.model in RECURRENT
     sampler = None if recurrent else WindowSampler(data, config.window, network.history)
     history: dict[str, Any] = {"train": [], "val": [], "seconds": []}
     best, best_state = math.inf, None
-    bar = tqdm(range(config.epochs), desc=f"{config.model}", disable=not progress, unit="epoch")
+    if checkpoint is not None:
+        history, best, best_state = _restore(checkpoint, network, optimizer, rng, saver.out)
+    first = len(history["train"])
+    bar = tqdm(range(first, config.epochs), initial=first, total=config.epochs,
+               desc=f"{config.model}", disable=not progress, unit="epoch")
     for epoch in bar:
         start = time.perf_counter()
         network.train()
@@ -149,10 +227,12 @@ def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
         if val < best:
             best, best_state = val, copy.deepcopy(network.state_dict())
             history["best_epoch"] = epoch + 1
+            saver.best(best_state, epoch + 1, val)
+        saver.epoch_done(config.epochs, network, optimizer, rng, history, best, best_state)
         bar.set_postfix(train=f"{loss:.3g}", val=f"{val:.3g}", best=history.get("best_epoch"))
     if best_state is None:
-        raise RuntimeError(f"training diverged (validation loss {val}): lower learning_rate "
-                           f"(now {config.learning_rate:g}) or grad_clip")
+        raise RuntimeError(f"training diverged (validation loss {history['val'][-1]}): lower "
+                           f"learning_rate (now {config.learning_rate:g}) or grad_clip")
     network.load_state_dict(best_state)
     return history
 

@@ -1,8 +1,11 @@
 """Data collection on the first few trajectories of a set: the files and the manifest the
 dataset loader reads, resuming an interrupted collection, atomic files, refusing foreign
-folders, failures, a Dask scheduler, the hardware set's 100 Hz files and `flexff data collect`.
+folders, failures (a full disk stops it with one message), workers that end with a killed
+collection, a Dask scheduler, the hardware set's 100 Hz files and `flexff data collect`.
 The whole sim set runs in a slow test."""
 
+import errno
+import hashlib
 import json
 import os
 import re
@@ -14,12 +17,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+import psutil
 import pytest
 
 from cosim.run import simulate_config
 from learning.collect import (CollectionError, CollectionReport, DataFolderError, Outcome,
                               collect, dataset_signals, run_collection, run_config)
-from learning.dataset import MANIFEST, SIGNALS, load_dataset
+from learning.dataset import MANIFEST, SIGNALS, DatasetError, load_dataset
 from learning.trajectories import trajectory_set
 
 FIRST = 3  # trajectories of the small collections
@@ -63,10 +67,11 @@ def test_files_reload_bit_for_bit(collected):
 
 def test_manifest(collected):
     manifest = json.loads((collected / MANIFEST).read_text())
-    assert list(manifest) == ["format", "version", "set", "sample_rate_hz", "plant",
-                              "trajectories"]
-    assert (manifest["format"], manifest["version"], manifest["set"],
-            manifest["sample_rate_hz"]) == ("flexff-dataset", 1, "sim", 1000)
+    assert list(manifest) == ["format", "version", "set", "source", "sample_rate_hz", "plant",
+                              "trajectories", "sha256"]
+    assert (manifest["format"], manifest["version"], manifest["set"], manifest["source"],
+            manifest["sample_rate_hz"]) == ("flexff-dataset", 2, "sim", "flexff data collect",
+                                            1000)
     plant = manifest["plant"]
     assert plant["variant"] == "nominal"
     assert plant["parameters"]["i_max"] == 10.0 and plant["parameters"]["encoder_quantization"] == 0
@@ -74,7 +79,9 @@ def test_manifest(collected):
     specs = trajectory_set("sim").trajectories[:FIRST]
     assert manifest["trajectories"] == [
         {"name": s.name, "split": s.split, "file": f"{s.name}.npz", "reference": s.reference,
-         "seed": s.seed} for s in specs]
+         "seed": s.seed,
+         "sha256": hashlib.sha256((collected / f"{s.name}.npz").read_bytes()).hexdigest()}
+        for s in specs]
     dataset = load_dataset(collected)  # the loader of the training side accepts it
     assert dataset.sample_rate_hz == 1000 and [t.name for t in dataset.trajectories] == names()
 
@@ -135,7 +142,7 @@ def test_a_killed_collection_resumes(collected, tmp_path):
 
 
 @pytest.mark.parametrize("case, message", [
-    ("other set", "holds set 'sim' in dataset version 1; this collects set 'hardware'"),
+    ("other set", "holds set 'sim' in dataset version 2; this collects set 'hardware'"),
     ("other version", "holds set 'hardware' in dataset version 7"),
     ("not a dataset", "not a 'flexff-dataset' manifest"),
     ("foreign file", "no trajectories of set 'hardware' (notes.npz)"),
@@ -172,7 +179,8 @@ def test_a_failed_trajectory_is_reported_and_the_others_finish(collected, tmp_pa
     blocker.mkdir(parents=True)  # a folder where the file should go: its run cannot be saved
     report = run_collection("sim", out, progress=False, limit=FIRST)
     assert [o.name for o in report.failed] == [names()[1]] and not report.ok
-    assert "IsADirectoryError" in report.failed[0].error
+    assert "IsADirectoryError" in report.failed[0].error and "\n" not in report.failed[0].error
+    assert not report.failed[0].stops_all and not report.cancelled  # the others went on
     assert sorted(o.name for o in report.ran) == [names()[0], names()[2]]
     assert not (out / MANIFEST).exists()  # incomplete: no manifest
     with pytest.raises(CollectionError, match=f"1 of 3 trajectories.*\n{names()[1]}: "):
@@ -182,6 +190,96 @@ def test_a_failed_trajectory_is_reported_and_the_others_finish(collected, tmp_pa
     assert [o.name for o in retried.ran] == [names()[1]] and len(retried.skipped) == 2
     same_files(out, collected, names())
     assert (out / MANIFEST).is_file()
+
+
+def test_swapped_or_damaged_files_are_refused_and_collected_again(collected, tmp_path):
+    """Files of a collected set swapped or truncated: training refuses them, naming the file and
+    the command that repairs the folder; that command runs those trajectories again."""
+    out = tmp_path / "sim"
+    shutil.copytree(collected, out)
+    first, second, third = (out / f"{n}.npz" for n in names())
+    content = first.read_bytes()
+    first.write_bytes(second.read_bytes())
+    second.write_bytes(content)
+    with pytest.raises(DatasetError, match=rf"{first} is not the file manifest.json lists.*run "
+                                           rf"flexff data collect --set sim -o {out} again"):
+        load_dataset(out)
+    third.write_bytes(third.read_bytes()[:1000])
+    report = run_collection("sim", out, progress=False, limit=FIRST)
+    assert sorted(o.name for o in report.ran) == names() and report.ok
+    same_files(out, collected, names())
+    load_dataset(out)
+
+
+def test_workers_must_be_at_least_one(tmp_path, capsys):
+    from flexff.cli import main
+
+    with pytest.raises(ValueError, match="workers must be at least 1, got 0"):
+        run_collection("sim", tmp_path / "sim", workers=0, progress=False, limit=1)
+    assert main(["data", "collect", "--set", "sim", "-o", str(tmp_path / "sim"),
+                 "--workers", "0"]) == 2
+    assert "workers must be at least 1" in capsys.readouterr().err
+    assert not (tmp_path / "sim").exists()
+
+
+def _full_disk(path, signals):
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+
+@pytest.mark.parametrize("scheduler", [False, True], ids=["processes", "dask"])
+def test_a_full_disk_stops_the_collection_with_one_message(tmp_path, monkeypatch, capsys,
+                                                           scheduler):
+    """Every file write fails with ENOSPC: the trajectories not yet started are cancelled, and
+    `flexff data collect` says so in one line, without stack frames."""
+    from flexff.cli import main
+
+    monkeypatch.setattr("learning.collect.save_signals", _full_disk)  # forked workers inherit it
+    args = ["data", "collect", "--set", "sim", "-o", str(tmp_path / "sim"), "--workers", "1"]
+    if scheduler:
+        from dask.distributed import LocalCluster
+
+        cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                               dashboard_address=None)
+        args = args[:-2] + ["--scheduler", cluster.scheduler_address]
+    try:
+        assert main(args) == 1
+    finally:
+        if scheduler:
+            cluster.close()
+    out, err = capsys.readouterr()
+    full = [line for line in err.splitlines() if "No space left on device" in line]
+    assert len(full) == 1 and full[0].startswith("stopped: OSError: [Errno 28]")
+    failed, cancelled = (int(n) for n in re.search(r"\((\d+) failed with it.*; (\d+) not run\)",
+                                                    full[0]).groups())
+    assert failed >= 1 and cancelled >= 40 and failed + cancelled == 48
+    assert "Traceback" not in err and 'File "' not in err and "FAILED" not in err
+    assert f"{failed} failed, {cancelled} not run" in out
+    assert not (tmp_path / "sim" / MANIFEST).exists()
+
+
+def test_workers_end_with_a_killed_collection(tmp_path):
+    """SIGKILL of `data collect` (the parent alone): its pool workers end within seconds
+    instead of waiting forever for work."""
+    code = ("from learning.collect import run_collection; "
+            f"run_collection('sim', {str(tmp_path / 'sim')!r}, workers=2, progress=False, "
+            f"limit=6)")
+    process = subprocess.Popen([sys.executable, "-c", code], start_new_session=True)
+    parent = psutil.Process(process.pid)
+    workers = []
+    try:
+        deadline = time.monotonic() + 60
+        while len(workers) < 2:
+            assert process.poll() is None and time.monotonic() < deadline
+            workers = parent.children()
+            time.sleep(0.05)
+        process.kill()
+        process.wait()
+        _, alive = psutil.wait_procs(workers, timeout=5)
+        assert not alive
+    finally:
+        for worker in workers:  # the test's own processes, should the check fail
+            if worker.is_running():
+                worker.kill()
 
 
 def test_on_a_dask_scheduler(collected, tmp_path):

@@ -1,11 +1,13 @@
-"""The dataset format: what is written is read back; every kind of bad folder is refused."""
+"""The dataset format: what is written is read back; every kind of bad folder is refused, a
+damaged, swapped or edited one (sha256 of every file and of the manifest) included."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
 
-from learning.dataset import SIGNALS, DatasetError, load_dataset
+from learning.dataset import COLLECTED, SIGNALS, DatasetError, load_dataset, write_manifest
 from learning.synthetic import synthetic_dataset
 
 
@@ -20,12 +22,21 @@ def _edit_manifest(folder, **changes):
     (folder / "manifest.json").write_text(json.dumps(manifest))
 
 
+def _rewrite_manifest(folder, source=None):
+    """The manifest written anew for the files as they are (as a writer of bad data would)."""
+    manifest = json.loads((folder / "manifest.json").read_text())
+    entries = [{k: v for k, v in e.items() if k != "sha256"} for e in manifest["trajectories"]]
+    write_manifest(folder, manifest["set"], manifest["sample_rate_hz"], manifest["plant"],
+                   entries, source or manifest["source"])
+
+
 def _edit_signals(folder, name, **signals):
     path = folder / f"{name}.npz"
     with np.load(path) as npz:
         arrays = {k: npz[k] for k in npz.files}
     arrays.update(signals)
     np.savez(path, **arrays)
+    _rewrite_manifest(folder)
 
 
 def test_round_trip(folder):
@@ -41,7 +52,7 @@ def test_round_trip(folder):
 
 @pytest.mark.parametrize("changes,message", [
     ({"format": "something-else"}, "format is 'something-else'.*flexff data collect"),
-    ({"version": 2}, "version 2.*reads version 1.*collect the data again"),
+    ({"version": 1}, "version 1.*reads version 2.*collect the data again"),
     ({"set": "lab"}, "'set' is 'lab'"),
     ({"sample_rate_hz": -5}, "sample_rate_hz"),
     ({"trajectories": []}, "no trajectories"),
@@ -85,5 +96,50 @@ def test_missing_signal_is_named(folder):
     with np.load(path) as npz:
         arrays = {k: npz[k] for k in npz.files if k != "theta_s3"}
     np.savez(path, **arrays)
+    _rewrite_manifest(folder)
     with pytest.raises(DatasetError, match="lacks signals \\['theta_s3'\\]"):
         load_dataset(folder)
+
+
+@pytest.mark.parametrize("content", [b"", b"PK\x03\x04 truncated"], ids=["empty", "truncated"])
+def test_a_damaged_file_is_named(folder, content):
+    (folder / "train_001.npz").write_bytes(content)
+    with pytest.raises(DatasetError, match=r"train_001\.npz is truncated or not a \.npz file"):
+        load_dataset(folder)
+
+
+def test_a_damaged_file_of_a_collected_set_says_to_collect_again(folder):
+    _rewrite_manifest(folder, source=COLLECTED)
+    half = (folder / "test_002.npz").read_bytes()
+    (folder / "test_002.npz").write_bytes(half[:len(half) // 2])
+    with pytest.raises(DatasetError, match=r"test_002\.npz is truncated.*run flexff data collect "
+                                           rf"--set sim -o {folder} again"):
+        load_dataset(folder)
+
+
+def test_swapped_files_are_refused(folder, tmp_path):
+    shutil.move(folder / "train_000.npz", tmp_path / "swap.npz")
+    shutil.move(folder / "train_001.npz", folder / "train_000.npz")
+    shutil.move(tmp_path / "swap.npz", folder / "train_001.npz")
+    with pytest.raises(DatasetError, match=r"train_000\.npz is not the file manifest.json lists "
+                                           r"for trajectory 'train_000' \(its sha256 differs"):
+        load_dataset(folder)
+
+
+@pytest.mark.parametrize("key, value", [("set", "hardware"), ("plant", {"variant": "hardware"}),
+                                        ("sample_rate_hz", 200.0)])
+def test_an_edited_manifest_is_refused(folder, key, value):
+    _edit_manifest(folder, **{key: value})
+    with pytest.raises(DatasetError, match="manifest.json was edited.*only a trajectory's "
+                                           "'split' may be changed"):
+        load_dataset(folder)
+
+
+def test_splits_may_be_edited_and_change_the_digest(folder):
+    before = load_dataset(folder).digest
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["trajectories"][0]["split"] = "test"
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    after = load_dataset(folder)
+    assert [t.name for t in after.split("test")] == ["train_000", "test_002"]
+    assert after.digest != before

@@ -2,6 +2,7 @@
 model kind; the metadata tells a runner what it needs; the graph is in SI units."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -133,5 +134,71 @@ def test_scaling_lives_inside_the_graph(runs):
 
 
 def test_export_of_a_missing_run_says_what_to_do(tmp_path):
-    with pytest.raises(FileNotFoundError, match="train one"):
+    with pytest.raises(ValueError, match="not a finished training run.*train one"):
         export(tmp_path / "nothing", tmp_path / "x.onnx")
+
+
+def _truncate(path):
+    path.write_bytes(path.read_bytes()[:path.stat().st_size // 2])
+
+
+def _unlisted_truncated(run):
+    """A run written before run.json held the weights' sha256, its model.pt then truncated."""
+    info = json.loads((run / "run.json").read_text())
+    del info["weights_sha256"]
+    (run / "run.json").write_text(json.dumps(info))
+    _truncate(run / "model.pt")
+
+
+def _other_weights(run):
+    shutil.copy(run.parent / "tcn" / "model.pt", run / "model.pt")
+
+
+def _unlisted_other_weights(run):
+    _other_weights(run)
+    info = json.loads((run / "run.json").read_text())
+    del info["weights_sha256"]
+    (run / "run.json").write_text(json.dumps(info))
+
+
+def _no_scalers(run):
+    info = json.loads((run / "run.json").read_text())
+    del info["scalers"]
+    (run / "run.json").write_text(json.dumps(info))
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda run: _truncate(run / "model.pt"), "model.pt is not the file run.json was written with"),
+    (_unlisted_truncated, "model.pt is damaged or does not hold the weights"),
+    (_other_weights, "model.pt is not the file run.json was written with"),
+    (_unlisted_other_weights, "model.pt is damaged or does not hold the weights"),
+    (lambda run: (run / "run.json").write_bytes(b"\x00\xff garbage"),
+     "run.json is not valid JSON"),
+    (lambda run: (run / "run.json").write_text("[1, 2]"), "run.json: format and version None"),
+    (_no_scalers, "run.json is damaged \\(KeyError: 'scalers'\\)"),
+    (lambda run: (run / "model.pt").unlink(), "not a finished training run \\(model.pt is missing"),
+    (lambda run: (run / "run.json").unlink(), "not a finished training run \\(run.json is missing"),
+], ids=["truncated", "truncated-unlisted", "swapped", "swapped-unlisted", "garbage-json",
+        "not-a-run", "no-scalers", "no-weights", "no-run-json"])
+def test_export_of_a_damaged_run_names_the_file(runs, tmp_path, damage, message):
+    """One line naming the file and what to do, from `flexff export` too (no torch traceback)."""
+    run = tmp_path / "runs" / "lstm"
+    shutil.copytree(runs / "lstm", run)
+    shutil.copytree(runs / "tcn", tmp_path / "runs" / "tcn")
+    damage(run)
+    with pytest.raises(ValueError, match=message) as info:
+        export(run, tmp_path / "x.onnx")
+    assert "\n" not in str(info.value) and str(run) in str(info.value)
+    assert "flexff train" in str(info.value)
+    assert not (tmp_path / "x.onnx").exists()
+
+
+def test_flexff_export_of_a_damaged_run_prints_one_line(runs, tmp_path, capsys):
+    from flexff.cli import main
+
+    run = tmp_path / "lstm"
+    shutil.copytree(runs / "lstm", run)
+    _truncate(run / "model.pt")
+    assert main(["export", str(run), "-o", str(tmp_path / "x.onnx")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{run / 'model.pt'} is not the file" in err

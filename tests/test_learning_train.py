@@ -145,7 +145,7 @@ def test_empty_split_and_bad_data_are_refused(data, tmp_path):
 
 
 def test_run_folder_must_exist(tmp_path):
-    with pytest.raises(FileNotFoundError, match="not a training run folder"):
+    with pytest.raises(ValueError, match="not a finished training run.*run.json is missing"):
         load_run(tmp_path)
 
 
