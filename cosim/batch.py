@@ -1,13 +1,17 @@
 """Several runs in parallel: local processes by default, or a Dask cluster.
 
 Each run writes into <output_dir>/<config name>/. A run that fails (a bad configuration
-included) is reported with its error; the others carry on. With a Dask scheduler the workers
-must see the same file system as this process (configuration files and output folder).
+included) is reported with its error in one line (and its traceback where FLEXFF_DEBUG=1,
+which `flexff --debug` sets); the others carry on. With a Dask scheduler the workers must see
+the same file system as this process (configuration files and output folder).
 """
 
 from __future__ import annotations
 
 import copy
+import os
+import re
+import signal
 import tomllib
 import traceback
 from collections.abc import Sequence
@@ -18,7 +22,9 @@ from typing import Any
 
 from cosim.config import parse_config
 from cosim.run import run_config
-from cosim.schema import ConfigError, RunConfig
+from cosim.schema import RunConfig
+
+SCHEDULER_TIMEOUT = "10s"  # how long to try to reach a Dask scheduler
 
 
 @dataclass(frozen=True)
@@ -39,16 +45,44 @@ def _name(config: RunConfig | str | Path) -> str:
     return config.name if isinstance(config, RunConfig) else Path(config).stem
 
 
-def _run_one(config: RunConfig | str | Path, output_dir: Path) -> BatchResult:
-    """Run one configuration, catching every error (it is returned, never raised)."""
+def _run_one(config: RunConfig | str | Path, output_dir: Path, debug: bool = False
+             ) -> BatchResult:
+    """Run one configuration, catching every error (it is returned, never raised); with
+    `debug` the error carries its traceback."""
     name = _name(config)
     try:
         return BatchResult(name, output_dir, metrics=run_config(config, output_dir,
                                                                 progress=False))
     except Exception as error:  # noqa: BLE001  (reported to the caller, the batch goes on)
-        detail = "" if isinstance(error, (ConfigError, NotImplementedError)) else \
-            "\n" + "".join(traceback.format_exception(error)[-3:])
+        detail = "\n" + "".join(traceback.format_exception(error)) if debug else ""
         return BatchResult(name, output_dir, error=f"{type(error).__name__}: {error}{detail}")
+
+
+_worker = {"running": False, "interrupted": False}  # a pool process's state, for Ctrl-C
+
+
+def _on_interrupt(signum: int, frame: object) -> None:
+    """Ctrl-C in a pool process: it starts no further run, and stops the one in progress
+    (an idle one stays quiet: a KeyboardInterrupt there would print a traceback)."""
+    _worker["interrupted"] = True
+    if _worker["running"]:
+        raise KeyboardInterrupt
+
+
+def _init_worker() -> None:
+    signal.signal(signal.SIGINT, _on_interrupt)
+
+
+def _run_in_worker(config: RunConfig | str | Path, output_dir: Path, debug: bool
+                   ) -> BatchResult:
+    """_run_one in a pool process, unless Ctrl-C was pressed (the pool queues ahead)."""
+    if _worker["interrupted"]:
+        raise KeyboardInterrupt
+    _worker["running"] = True
+    try:
+        return _run_one(config, output_dir, debug)
+    finally:
+        _worker["running"] = False
 
 
 def run_batch(configs: Sequence[RunConfig | str | Path], output_dir: str | Path,
@@ -68,33 +102,47 @@ def run_batch(configs: Sequence[RunConfig | str | Path], output_dir: str | Path,
         raise ValueError(f"configurations share the name(s) {twice}: each run needs its own "
                          f"output folder")
     folders = [Path(output_dir) / n if subfolders else Path(output_dir) for n in names]
+    debug = [os.environ.get("FLEXFF_DEBUG") == "1"] * len(folders)
     if scheduler is not None:
-        return _run_dask(list(configs), folders, scheduler)
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(_run_one, configs, folders))
+        return _run_dask(list(configs), folders, debug, scheduler)
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker)
+    try:
+        return list(pool.map(_run_in_worker, configs, folders, debug))
+    finally:  # on Ctrl-C: the runs not started are dropped, those in progress stop
+        pool.shutdown(cancel_futures=True)
 
 
-def _run_dask(configs: list, folders: list[Path], scheduler: str) -> list[BatchResult]:
+def _run_dask(configs: list, folders: list[Path], debug: list[bool], scheduler: str
+              ) -> list[BatchResult]:
     try:
         from dask.distributed import Client
     except ImportError:
         raise RuntimeError("running on a Dask cluster needs dask.distributed: "
                            "pip install 'dask[distributed]'") from None
-    with Client(scheduler) as client:
-        futures = client.map(_run_one, configs, folders, pure=False)
+    try:
+        client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
+    except OSError as error:  # refused, timed out, unknown host
+        raise ConnectionError(f"cannot reach the Dask scheduler at {scheduler}: {error}") \
+            from None
+    with client:
+        futures = client.map(_run_one, configs, folders, debug, pure=False)
         return client.gather(futures)
 
 
 def sweep(path: str | Path, key: str, values: Sequence[Any]) -> list[RunConfig]:
     """Copies of the configuration file at `path` with the key `key` (dotted: `plant.m_up1`,
     `fmu.vdp.parameters.mu`) set to each value, named <stem>-<key>=<value>; each copy is
-    checked like any configuration."""
+    checked like any configuration. Names are safe folder names (see _folder_name), made
+    unique by a suffix; a value given twice is an error."""
     path = Path(path)
     *tables, name = key.split(".")
     if not tables or not all(tables) or not name:
         raise ValueError(f"a sweep key is table.key (e.g. plant.m_up1), got {key!r}")
+    twice = next((v for k, v in enumerate(values) if v in values[:k]), None)
+    if twice is not None:
+        raise ValueError(f"--sweep {key}: the sweep lists the same value twice: {twice!r}")
     base = tomllib.loads(path.read_text())
-    configs = []
+    configs, names = [], []
     for value in values:
         data = copy.deepcopy(base)
         table = data
@@ -103,6 +151,22 @@ def sweep(path: str | Path, key: str, values: Sequence[Any]) -> list[RunConfig]:
             if not isinstance(table, dict):
                 raise ValueError(f"--sweep {key}: {part!r} is not a table in {path}")
         table[name] = value
-        configs.append(parse_config(data, name=f"{path.stem}-{key}={value}",
-                                    base=path.resolve().parent, source=str(path)))
+        names.append(_unique(_folder_name(f"{path.stem}-{key}={value}"), names))
+        configs.append(parse_config(data, name=names[-1], base=path.resolve().parent,
+                                    source=str(path)))
     return configs
+
+
+def _folder_name(text: str) -> str:
+    """`text` as one safe folder name: path separators and anything outside
+    [A-Za-z0-9._=+-] become "_", and no ".." is left."""
+    return re.sub(r"\.{2,}", "_", re.sub(r"[^A-Za-z0-9._=+-]", "_", text))
+
+
+def _unique(name: str, taken: Sequence[str]) -> str:
+    """`name`, or with the first suffix -2, -3, ... that is not taken yet."""
+    k, unique = 1, name
+    while unique in taken:
+        k += 1
+        unique = f"{name}-{k}"
+    return unique

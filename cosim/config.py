@@ -60,7 +60,7 @@ import tomli_w
 from controllers.allocation import ENCODER_CHOICES
 from controllers.feedforward import FORCE_OUTPUTS
 from controllers.learned_feedforward import model_metadata
-from cosim.references import REFERENCE_KINDS, SegmentError, build_reference
+from cosim.references import REFERENCE_KINDS, MemoryNeeded, SegmentError, build_reference
 from cosim.schema import (ALGORITHMS, BUILTIN_OPTIONS, SOURCE_KINDS, UNCONNECTED, ConfigError,
                           ConnectionConfig, FmuConfig, RecordConfig, ReferenceConfig,
                           RunConfig, SourceConfig)
@@ -209,6 +209,9 @@ class _Parser:
             return build_reference(reference.kind, reference.options, step)
         except SegmentError as error:
             raise self.error(f"reference.segments[{error.index}]", str(error)) from None
+        except MemoryNeeded as error:
+            raise self.error("run.step", f"{error}: a larger run.step or a shorter "
+                                         f"reference") from None
         except (ValueError, OSError) as error:
             given = [f"reference.{k}" for k in table if k != "kind"]
             raise self.error(", ".join(given) or "reference.kind", str(error)) from None

@@ -7,13 +7,15 @@ must be continuous) and `sample` evaluates a path on the communication grid. Tab
 files are resampled onto the grid, with missing derivatives from a Savitzky-Golay filter.
 
 Every segment checks its arguments and that it stays inside the nominal workspace, and raises
-ValueError naming the offending point otherwise.
+ValueError naming the offending point otherwise. Sampling checks first that the samples fit
+into the available memory (MemoryNeeded, a ValueError, says how much they need).
 """
 
 from __future__ import annotations
 
 import csv
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from collections.abc import Mapping, Sequence
@@ -38,6 +40,7 @@ THESIS_HW_LINE_TIME, THESIS_HW_REST, THESIS_HW_CIRCLE_TIME, THESIS_HW_END = 21.0
 THESIS_HW_TURNS = 9.0
 
 JOIN_TOLERANCE = 1e-9  # m: largest position jump accepted between chained segments
+SAMPLED_ARRAYS = 7  # float64 arrays a sampled reference holds: t, x, y, vx, vy, ax, ay
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,7 +243,10 @@ class Chain(Segment):
 def sample(path: Segment, step: float = 1e-3) -> Reference:
     """`path` on the grid 0, step, 2 step, ... up to its duration."""
     _positive("step", step, "s")
-    t = np.arange(int(math.floor(path.duration / step + 1e-9)) + 1) * step
+    n = int(math.floor(path.duration / step + 1e-9)) + 1
+    check_memory(SAMPLED_ARRAYS * n, f"sampling the {path.duration:g} s reference every "
+                                     f"{step:g} s")
+    t = np.arange(n) * step
     return Reference(t, *path.evaluate(t))
 
 
@@ -300,7 +306,10 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
         raise ValueError(f"{path}: time column t is not strictly increasing at data row {k + 1} "
                          f"(t = {t[k - 1]:.9g} then {t[k]:.9g})")
     check_workspace(NOMINAL, columns["x_ref"], columns["y_ref"], f"{path}: point")
-    grid = t[0] + np.arange(int(math.floor((t[-1] - t[0]) / step + 1e-9)) + 1) * step
+    n = int(math.floor((t[-1] - t[0]) / step + 1e-9)) + 1
+    check_memory(SAMPLED_ARRAYS * n, f"{path}: resampling the {t[-1] - t[0]:g} s table every "
+                                     f"{step:g} s")
+    grid = t[0] + np.arange(n) * step
     window = 2 * int(round(smoothing_window / step / 2)) + 1
     if grid.size < max(window, 4):
         raise ValueError(f"{path}: the table spans {t[-1] - t[0]:.6g} s, too short for the "
@@ -319,16 +328,24 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
 
 
 def _read_columns(path: Path) -> dict[str, np.ndarray]:
-    """The known columns of a CSV table, checked to be present, numeric and finite."""
-    with open(path, newline="") as handle:
-        rows = list(csv.reader(handle))
+    """The known columns of a CSV table, checked to be present, numeric and finite. Errors
+    name the problem, never the file's content (which may be anything)."""
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as handle:  # a byte-order mark too
+            rows = list(csv.reader(handle))
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not a CSV text file (no UTF-8 text at byte {error.start})") \
+            from None
+    except csv.Error as error:
+        raise ValueError(f"{path}: not a CSV table ({error})") from None
     if not rows:
         raise ValueError(f"{path}: empty file")
     header = [name.strip() for name in rows[0]]
     missing = [name for name in ("t", "x_ref", "y_ref") if name not in header]
     if missing:
-        raise ValueError(f"{path}: missing column(s) {', '.join(missing)} (found: "
-                         f"{', '.join(header)})")
+        raise ValueError(f"{path}: missing column(s) {', '.join(missing)}: the first line must "
+                         f"name the columns t, x_ref, y_ref (and optionally vx_ref, vy_ref, "
+                         f"ax_ref, ay_ref), separated by commas")
     body = [row for row in rows[1:] if any(cell.strip() for cell in row)]  # blank lines
     if len(body) < 2:
         raise ValueError(f"{path}: needs at least two data rows, found {len(body)}")
@@ -348,6 +365,29 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
             values.append(value)
         columns[name] = np.array(values)
     return columns
+
+
+class MemoryNeeded(ValueError):
+    """Values that would not fit into the available memory, found before allocating them."""
+
+
+def available_memory() -> int:
+    """Bytes of memory a new allocation can take without swapping (psutil's estimate, which
+    counts reclaimable caches; else the free pages)."""
+    try:
+        import psutil
+    except ImportError:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    return int(psutil.virtual_memory().available)
+
+
+def check_memory(values: int, what: str) -> None:
+    """Raise MemoryNeeded when `values` float64 numbers do not fit into the available memory;
+    `what` names them in the message."""
+    need, have = 8 * values, available_memory()
+    if need > have:
+        raise MemoryNeeded(f"{what} needs {need / 1e6:,.0f} MB, more than the "
+                           f"{have / 1e6:,.0f} MB of memory available")
 
 
 def _skew_sine(t: np.ndarray, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

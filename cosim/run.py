@@ -7,11 +7,15 @@ tracking errors where the run has a reference and a true position; with a learne
 also `feedforward_range`, where the reference leaves the model's training range); the plots
 (cosim.plots); and run.json, the checked configuration in the general form. The built-in FMUs
 are built into the fmu/ cache and loaded from a temporary copy.
+
+Before anything runs, the output folder must take a file and the recording must fit into the
+available memory, so that neither shows only after the simulation.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import tempfile
 from pathlib import Path
@@ -23,7 +27,7 @@ from cosim.config import expanded, load_config
 from cosim.metrics import run_metrics
 from cosim.plots import PLOT_SIGNALS, write_plots
 from cosim.recording import Recording, atomic_write, save_recording
-from cosim.references import Reference
+from cosim.references import MemoryNeeded, Reference, check_memory
 from cosim.scenario import Scenario, resolve
 from cosim.schema import ConfigError, RunConfig
 from plant.model import PlantModel
@@ -41,6 +45,42 @@ def load_run(path: str | Path) -> RunConfig:
     return load_config(path)
 
 
+def output_folder(path: str | Path) -> Path:
+    """Create the folder `path` (and its parents) and check that a file can be written in it:
+    an existing file, a read-only file system or a missing permission is an OSError naming
+    the path, raised before any work."""
+    path = Path(path)
+    existing = next((p for p in (path, *path.parents) if p.exists()), None)
+    if existing is not None and not existing.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "is a file, not a folder", str(existing))
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as error:  # named after the folder, not the probe's temporary file
+        raise OSError(error.errno, error.strerror, str(path)) from None
+    return path
+
+
+def check_recording_memory(config: RunConfig, signals: int) -> None:
+    """Refuse a run whose (steps + 1) x `signals` float64 values do not fit into the
+    available memory, before anything allocates them (ConfigError naming run.stop and
+    run.step)."""
+    try:
+        check_memory((config.steps + 1) * signals, f"recording {signals} signals at "
+                                                   f"{config.steps + 1} points")
+    except MemoryNeeded as error:
+        raise ConfigError(config.source, "run.stop, run.step",
+                          f"{error}: record fewer signals ([record] signals), shorten "
+                          f"run.stop or enlarge run.step") from None
+
+
+def _least_signals(config: RunConfig) -> int:
+    """The columns any run of `config` holds: time, the reference, the recorded signals."""
+    return (1 + len(Reference.SIGNALS) * (config.reference is not None)
+            + len(config.record.signals or ()))
+
+
 def simulate(scenario: Scenario, progress: bool | None = None) -> Recording:
     """Run a resolved scenario; the recording holds its [record] signals (all by default)
     plus those the metrics and plots need."""
@@ -55,6 +95,9 @@ def simulate(scenario: Scenario, progress: bool | None = None) -> Recording:
                                       str(error)) from None
             extra = [n for n in PLOT_SIGNALS if n not in wanted and _known(master, n)]
             wanted = list(wanted) + extra
+        recorded = len(master.signals) + len(master.typed_signals) if wanted is None else \
+            len(wanted)
+        check_recording_memory(scenario.config, 1 + len(master.sources) + recorded)
         return master.run(scenario.sources, scenario.steps, wanted, progress)
 
 
@@ -68,6 +111,7 @@ def _known(master, name: str) -> bool:
 
 def simulate_config(config: RunConfig, progress: bool | None = None) -> Recording:
     """Resolve a configuration (built-ins into a temporary folder) and run it."""
+    check_recording_memory(config, _least_signals(config))
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
         return simulate(resolve(config, folder), progress)
 
@@ -117,8 +161,8 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
     the metrics written to metrics.json."""
     if not isinstance(config, RunConfig):
         config = load_run(config)
-    out = Path(output_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    check_recording_memory(config, _least_signals(config))
+    out = output_folder(output_dir)
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
         scenario = resolve(config, folder)
         recording = simulate(scenario, progress)

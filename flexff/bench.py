@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import platform
 import tempfile
 from pathlib import Path
@@ -13,11 +14,14 @@ from cosim.config import parse_config
 from cosim.floor import run_c_loop
 from cosim.libcosim import run_libcosim, time_libcosim_engine
 from cosim.scenario import Scenario, resolve
+from cosim.realtime import realtime_process
+from cosim.timing import Pacing
 from fmu.bench import bench_fmu
 from fmu.build import build_fmu
 from plant.system import plant_system
 
 CLOSED_LOOP_REFERENCE = "thesis-eval"  # the thesis's evaluation reference, 15 s at 1 ms
+REALTIME_MODELS = ("tcn", "lstm")  # the thesis ran these on Simulink Real-Time
 
 
 def closed_loop_scenario(folder: Path, feedforward: dict[str, str] | None = None) -> Scenario:
@@ -113,11 +117,42 @@ def learned_feedforward_benchmark(folder: Path, models: dict[str, Path],
     return results
 
 
+def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | None = None,
+                       kinds: tuple[str, ...] = REALTIME_MODELS) -> dict[str, Any]:
+    """The closed loop of the hardware evaluation (hardware plant, PID with notch, thesis
+    hardware reference: 100 s, or its first `seconds`) with the TCN and the LSTM feedforward
+    in step mode, paced at 1 kHz: TET p50 / p99 / max, each FMU's share, overruns."""
+    results: dict[str, Any] = {"reference": "thesis-hardware-eval"}
+    for kind in kinds:
+        config = parse_config({
+            "run": {"stop": seconds} if seconds else {},
+            "reference": {"kind": "thesis-hardware-eval"},
+            "plant": {"variant": "hardware", "seed": 1},
+            "feedforward": {"kind": "onnx", "model": str(models[kind]), "mode": "step"}},
+            name=f"realtime-{kind}")
+        scenario = resolve(config, folder)
+        with scenario.master() as master, realtime_process() as process:
+            recording = master.run(scenario.sources, scenario.steps, ["x"], progress=False,
+                                   pacing=Pacing(rt_factor=1.0))
+        table = recording.timing.table(recording.wall_s)
+        results[kind] = {key: table[key] for key in (
+            "period_us", "achieved_real_time_factor", "tet_us", "tet_us_per_fmu",
+            "tet_over_period_p99", "lateness_us", "overruns")}
+        results[kind]["process"] = dataclasses.asdict(process)
+    return results
+
+
 def run_benchmarks(steps: int = 20000, repeats: int = 5,
-                   models: dict[str, Path] | None = None) -> dict[str, Any]:
+                   models: dict[str, Path] | None = None,
+                   realtime_seconds: float | None = None) -> dict[str, Any]:
     """Cost of a 1 ms plant step through fmpy's low-level API and in plain C, per variant, of
-    the closed loop through our master, libcosim and C, and of the closed loop with each
-    learned feedforward FMU (`models`: kind -> .onnx; default: untrained exports)."""
+    the closed loop through our master, libcosim and C, of the closed loop with each learned
+    feedforward FMU (`models`: kind -> .onnx; default: untrained exports), and the paced
+    hardware evaluation loop with the TCN and LSTM feedforward (`realtime_seconds` of its
+    100 s; default all)."""
+    for name, value in (("steps", steps), ("repeats", repeats)):
+        if not isinstance(value, int) or value < 1:
+            raise ValueError(f"bench {name} must be a whole number of at least 1, got {value!r}")
     results: dict[str, Any] = {"machine": platform.processor() or platform.machine(),
                                "python": platform.python_version(), "plant_step": {}}
     with tempfile.TemporaryDirectory() as tmp:
@@ -127,6 +162,7 @@ def run_benchmarks(steps: int = 20000, repeats: int = 5,
             figures["real_time_factor_fmpy"] = 1e3 / figures["python_us_per_step"]
             results["plant_step"][variant] = figures
         results["closed_loop"] = closed_loop_benchmark(Path(tmp))
-        results["learned_feedforward"] = learned_feedforward_benchmark(
-            Path(tmp), models or untrained_models(Path(tmp)))
+        models = models or untrained_models(Path(tmp))
+        results["learned_feedforward"] = learned_feedforward_benchmark(Path(tmp), models)
+        results["realtime"] = realtime_benchmark(Path(tmp), models, realtime_seconds)
     return results

@@ -1,10 +1,19 @@
-"""The `flexff` command line: parses arguments and calls package functions, nothing more."""
+"""The `flexff` command line: parses arguments and calls package functions, nothing more.
+
+main() is the one place that turns a failure into one line on stderr and an exit code: 0 ok,
+1 a run that failed (an FMU error, a full disk, an unreachable Dask scheduler, memory), 2 bad
+input (a configuration, a path, an option, an unwritable output folder), 130 interrupted
+(3 is kept for real-time overruns). A Python traceback only with `flexff --debug`.
+"""
 
 from __future__ import annotations
 
 import argparse
+import errno
 import json
+import os
 import sys
+import traceback
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -13,6 +22,13 @@ from plant.model import VARIANTS
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to keep torch unloaded
 PRESETS = ("fast", "thesis")
+INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
+                PermissionError)  # OSErrors about paths the user gave: exit code 2, as are
+INPUT_ERRNOS = (errno.EROFS, errno.ENAMETOOLONG, errno.ELOOP)  # these (others: 1)
+KEPT = {  # what an interrupted command keeps, by command
+    "run": "the runs that finished keep their folders; no file is left half-written",
+    "data": "the trajectories collected so far are kept: run the same command again to resume",
+}
 
 
 def _plant_info(args: argparse.Namespace) -> int:
@@ -31,10 +47,27 @@ def _plant_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _output_file(path: str) -> None:
+    """Check, before any work, that the file `path` can be written: its folder is made."""
+    from cosim.run import output_folder
+
+    output_folder(Path(path).parent)
+
+
 def _fmu_build(args: argparse.Namespace) -> int:
     from fmu.build import build_fmu
 
-    if args.kind == "feedforward":
+    if args.kind != "onnx" and (args.graph is not None or args.every is not None):
+        raise ValueError("only fmu build onnx takes a graph file and --every (a learned "
+                         "feedforward takes --model M.onnx and runs at the model's rate)")
+    if args.kind == "onnx":
+        from fmu.onnx_fmu import onnx_system
+
+        if args.graph is None:
+            raise ValueError("fmu build onnx needs the graph: flexff fmu build onnx MODEL.onnx "
+                             "-o M.fmu")
+        system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every)
+    elif args.kind == "feedforward":
         from controllers.learned_feedforward import learned_feedforward_system
 
         if args.model is None:
@@ -44,6 +77,7 @@ def _fmu_build(args: argparse.Namespace) -> int:
         from plant.system import plant_system
 
         system = plant_system(args.variant)
+    _output_file(args.output)
     print(f"wrote {build_fmu(system, args.output)}")
     return 0
 
@@ -69,6 +103,8 @@ def _bench(args: argparse.Namespace) -> int:
         models = {p.stem: p for p in sorted(Path(args.models).glob("*.onnx"))}
         if not models:
             raise ValueError(f"no .onnx files in {args.models}")
+    if args.output:
+        _output_file(args.output)
     text = json.dumps(run_benchmarks(steps=args.steps, models=models), indent=2)
     print(text)
     if args.output:
@@ -79,8 +115,9 @@ def _bench(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from cosim.batch import run_batch, sweep
-    from cosim.run import run_config
+    from cosim.run import output_folder, run_config
 
+    output_folder(args.output)
     configs = args.configs
     if args.sweep:
         if len(configs) != 1:
@@ -88,11 +125,7 @@ def _run(args: argparse.Namespace) -> int:
         key, values = _sweep_values(args.sweep)
         configs = sweep(configs[0], key, values)
     elif len(configs) == 1 and args.scheduler is None:
-        try:
-            metrics = run_config(configs[0], args.output)
-        except (NotImplementedError, RuntimeError) as error:
-            print(f"flexff: error: {configs[0]}: {error}", file=sys.stderr)
-            return 1
+        metrics = run_config(configs[0], args.output)
         _print_result(configs[0], metrics, args.output)
         return 0
     status = 0
@@ -159,6 +192,7 @@ def _ssp_export(args: argparse.Namespace) -> int:
     from cosim.run import load_run
     from cosim.ssp import export_ssp
 
+    _output_file(args.output)
     print(f"wrote {export_ssp(load_run(args.config), args.output)}")
     return 0
 
@@ -167,11 +201,12 @@ def _data_collect(args: argparse.Namespace) -> int:
     from learning.collect import run_collection
 
     report = run_collection(args.set, args.output, args.workers, args.scheduler)
-    for outcome in report.failed:
-        print(f"{outcome.name}: FAILED: {outcome.error}", file=sys.stderr)
+    for line in report.problems():
+        print(line, file=sys.stderr)
+    cancelled = f", {len(report.cancelled)} not run" if report.cancelled else ""
     print(f"{report.set_name}: {report.total} trajectories -> {report.path}: {len(report.ran)} "
-          f"run, {len(report.skipped)} skipped (already there), {len(report.failed)} failed, "
-          f"{report.seconds:.1f} s")
+          f"run, {len(report.skipped)} skipped (already there), {len(report.failed)} failed"
+          f"{cancelled}, {report.seconds:.1f} s")
     if report.ran:
         top = max(report.ran, key=lambda o: o.max_current)
         print(f"largest commanded motor current: {top.max_current:.2f} A ({top.name})")
@@ -185,7 +220,8 @@ def _train(args: argparse.Namespace) -> int:
     from learning.train import train
 
     overrides = {"epochs": args.epochs} if args.epochs is not None else {}
-    metrics = train(args.model, args.preset, args.data, args.output, **overrides)
+    metrics = train(args.model, args.preset, args.data, args.output, resume=args.resume,
+                    force=args.force, checkpoint_every=args.checkpoint_every, **overrides)
     print(json.dumps(metrics, indent=2, default=str))
     return 0
 
@@ -193,13 +229,16 @@ def _train(args: argparse.Namespace) -> int:
 def _export(args: argparse.Namespace) -> int:
     from learning.export import export
 
+    _output_file(args.output)
     print(f"wrote {export(args.run, args.output, inputs=args.inputs)}")
     return 0
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    from cosim.run import output_folder
     from learning.evaluate import evaluate
 
+    output_folder(args.output)
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
@@ -208,8 +247,10 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
+    from cosim.run import output_folder
     from flexff.demo import run_demo
 
+    output_folder(args.output)
     return run_demo(args.output)
 
 
@@ -217,6 +258,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="flexff", description="Learned feedforward for a flexure manipulator, as FMI "
                                    "co-simulation.")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the Python traceback of an error (sets FLEXFF_DEBUG=1)")
     commands = parser.add_subparsers(dest="command", required=True)
 
     plant = commands.add_parser("plant", help="the manipulator plant model")
@@ -229,13 +272,18 @@ def build_parser() -> argparse.ArgumentParser:
     fmu = commands.add_parser("fmu", help="build and validate FMUs")
     fmu_commands = fmu.add_subparsers(dest="fmu_command", required=True)
     build = fmu_commands.add_parser("build", help="build an FMU")
-    build.add_argument("kind", choices=["plant", "feedforward"],
-                       help="the plant, or a learned feedforward from an exported ONNX model")
+    build.add_argument("kind", choices=["plant", "feedforward", "onnx"],
+                       help="the plant, a learned feedforward from an exported ONNX model, or "
+                            "any ONNX graph of fixed-size float tensors")
+    build.add_argument("graph", nargs="?", help="onnx: the .onnx file")
     build.add_argument("--variant", choices=sorted(VARIANTS), default="nominal",
                        help="plant variant")
     build.add_argument("--model", help="feedforward: the .onnx file (flexff export)")
     build.add_argument("--step", type=float, default=1e-3,
-                       help="feedforward: communication step [s] (default 0.001)")
+                       help="feedforward, onnx: communication step [s] (default 0.001)")
+    build.add_argument("--every", type=int,
+                       help="onnx: communication steps between calls of the graph, its results "
+                            "extrapolated linearly in between (default 1)")
     build.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     build.set_defaults(handler=_fmu_build)
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")
@@ -281,7 +329,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(resumes an interrupted collection)")
     collect.add_argument("--set", required=True, choices=SETS, help="the trajectory set")
     collect.add_argument("-o", "--output", required=True, help="the dataset folder")
-    collect.add_argument("--workers", type=int, help="parallel local processes (default: CPUs)")
+    collect.add_argument("--workers", type=int,
+                         help="parallel local processes, at least 1 (default: CPUs)")
     collect.add_argument("--scheduler", help="address of a Dask scheduler to run on instead")
     collect.set_defaults(handler=_data_collect)
 
@@ -292,6 +341,15 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--data", required=True, help="a dataset folder (flexff data collect)")
     train.add_argument("-o", "--output", required=True, help="the run folder to write")
     train.add_argument("--epochs", type=int, help="override the preset's number of epochs")
+    existing = train.add_mutually_exclusive_group()
+    existing.add_argument("--resume", action="store_true",
+                          help="continue the unfinished run in the run folder from its last "
+                               "checkpoint (same settings and data)")
+    existing.add_argument("--force", action="store_true",
+                          help="train into a run folder that is not empty, starting afresh "
+                               "(a finished run's files stay until the new ones are complete)")
+    train.add_argument("--checkpoint-every", type=int, metavar="N",
+                       help="epochs between checkpoints (default: the preset's)")
     train.set_defaults(handler=_train)
 
     export = commands.add_parser("export", help="export a training run to ONNX")
@@ -327,14 +385,41 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _failure(error: BaseException, command: str) -> tuple[int, str]:
+    """The exit code and the line on stderr for an error that stopped `command`."""
+    if isinstance(error, KeyboardInterrupt):
+        kept = KEPT.get(command)
+        return 130, "flexff: interrupted" + (f"; {kept}" if kept else "")
+    if isinstance(error, MemoryError):
+        return 1, f"flexff: error: out of memory{f' ({error})' if str(error) else ''}"
+    if isinstance(error, OSError):
+        code = 2 if isinstance(error, INPUT_ERRORS) or error.errno in INPUT_ERRNOS else 1
+        message = error.strerror or str(error)
+        if error.filename is not None:
+            message = f"{error.filename}: {message}"
+        return code, f"flexff: error: {message}"
+    if isinstance(error, (ValueError, RuntimeError)):
+        return (2 if isinstance(error, ValueError) else 1), f"flexff: error: {error}"
+    return 1, f"flexff: error: {type(error).__name__}: {error} (flexff --debug shows where)"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run the command of `argv` (default: sys.argv); return its exit code, never raise."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as done:  # --help, or a usage error argparse has printed
+        return int(done.code or 0)
+    if args.debug:
+        os.environ["FLEXFF_DEBUG"] = "1"  # worker processes inherit it (cosim.batch)
     handler: Callable[[argparse.Namespace], int] = args.handler
     try:
         return handler(args)
-    except (ValueError, FileNotFoundError) as error:
-        print(f"flexff: error: {error}", file=sys.stderr)
-        return 2
+    except (Exception, KeyboardInterrupt) as error:
+        if os.environ.get("FLEXFF_DEBUG") == "1":
+            traceback.print_exc()
+        code, line = _failure(error, args.command)
+        print(line, file=sys.stderr)
+        return code
 
 
 if __name__ == "__main__":

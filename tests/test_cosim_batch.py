@@ -2,6 +2,7 @@
 `flexff config example` commands."""
 
 import json
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -60,6 +61,38 @@ def test_sweep(tmp_path):
     assert [c.builtin("controller").options["crossover_hz"] for c in configs] == [2.0, 3.0]
     with pytest.raises(ValueError, match="controller.crossover_hz: expected a number"):
         sweep(path, "controller.crossover_hz", ["fast"])
+
+
+def test_sweep_folder_names_are_safe_and_unique(tmp_path):
+    """Values with separators and `..` stay inside the output folder, values that clean up to
+    the same name get a suffix, and a value given twice is refused."""
+    from cosim.references import Line, sample
+
+    for name in ("ref.csv", "a b.csv", "a_b.csv"):
+        sample(Line((0.0, 0.0), (0.005, 0.0), 0.5), 0.01).to_csv(tmp_path / name)
+    (tmp_path / "sub").mkdir()
+    path = tmp_path / "sub" / "base.toml"
+    path.write_text('[reference]\nkind = "csv"\npath = "../ref.csv"\n')
+    values = ["../ref.csv", "../sub/../ref.csv", "../a b.csv", "../a_b.csv"]
+    names = [c.name for c in sweep(path, "reference.path", values)]
+    assert names == ["base-reference.path=__ref.csv", "base-reference.path=__sub___ref.csv",
+                     "base-reference.path=__a_b.csv", "base-reference.path=__a_b.csv-2"]
+    for name in names:
+        assert re.fullmatch(r"[A-Za-z0-9._=+-]+", name) and ".." not in name
+    with pytest.raises(ValueError, match="the sweep lists the same value twice: '../ref.csv'"):
+        sweep(path, "reference.path", ["../ref.csv", "../a b.csv", "../ref.csv"])
+
+
+def test_a_failed_run_carries_its_traceback_only_when_debugging(tmp_path):
+    from cosim.batch import _run_one
+
+    config = tmp_path / "one.toml"
+    config.write_text(SHORT)
+    (tmp_path / "file").write_text("")
+    plain = _run_one(config, tmp_path / "file" / "one")
+    assert plain.error == (f"NotADirectoryError: [Errno 20] is a file, not a folder: "
+                           f"'{tmp_path / 'file'}'")
+    assert "Traceback" in _run_one(config, tmp_path / "file" / "one", debug=True).error
 
 
 def test_names_must_differ(tmp_path):

@@ -6,8 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from cosim.references import (Chain, Circle, Hold, Line, Reference, Spline, read_csv, sample,
-                              thesis_evaluation, thesis_evaluation_path)
+from cosim.references import (Chain, Circle, Hold, Line, MemoryNeeded, Reference, Spline,
+                              available_memory, read_csv, sample, thesis_evaluation,
+                              thesis_evaluation_path)
 
 STEP = 1e-3
 
@@ -177,6 +178,36 @@ def test_csv_errors(tmp_path, text, message):
     (tmp_path / "bad.csv").write_text(text)
     with pytest.raises(ValueError, match=message):
         read_csv(tmp_path / "bad.csv", STEP)
+
+
+def test_csv_with_a_byte_order_mark(tmp_path):
+    ref = sample(Line((0.0, 0.0), (0.005, 0.0), 0.5), 0.01)
+    ref.to_csv(tmp_path / "plain.csv")
+    (tmp_path / "bom.csv").write_bytes(b"\xef\xbb\xbf" + (tmp_path / "plain.csv").read_bytes())
+    assert np.array_equal(read_csv(tmp_path / "bom.csv", STEP).x,
+                          read_csv(tmp_path / "plain.csv", STEP).x)
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"\x89PNG\r\n\x1a\n\x00\x00secret,t,x_ref", "not a CSV text file"),
+    (b"t,x_ref,y_ref\n" + b"secret" * 40000, "not a CSV table"),
+    (b"t,x_ref,y_ref\n0,0,0\n1,\x00secret,0\n", "column x_ref has a missing, non-numeric"),
+    (b"secret,x_ref,y_ref\n0,0,0\n1,0,0\n", "missing column.* t: the first line must name"),
+])
+def test_csv_errors_name_the_problem_not_the_content(tmp_path, content, message):
+    (tmp_path / "bad.csv").write_bytes(content)
+    with pytest.raises(ValueError, match=message) as error:
+        read_csv(tmp_path / "bad.csv", STEP)
+    assert "secret" not in str(error.value) and "PNG" not in str(error.value)
+
+
+def test_sampling_beyond_the_available_memory_is_refused_before_allocating(monkeypatch):
+    assert available_memory() > 0
+    monkeypatch.setattr("cosim.references.available_memory", lambda: 500 * 10**6)
+    with pytest.raises(MemoryNeeded, match=r"sampling the 15 s reference every 1e-06 s needs "
+                                           r"840 MB, more than the 500 MB of memory available"):
+        sample(thesis_evaluation_path(), 1e-6)
+    assert issubclass(MemoryNeeded, ValueError)
 
 
 def test_reference_arrays_must_agree():
