@@ -265,10 +265,10 @@ class Master:
         gc_was_enabled = gc.isenabled()
         gc.disable()  # no collection pauses inside the loop
         try:
-            if pacing is not None:
-                start_schedule(run)
-            start = time.perf_counter()
             with tqdm(total=steps, unit="step", disable=not progress, leave=False) as bar:
+                if pacing is not None:
+                    start_schedule(run)
+                start = time.perf_counter()
                 for k0 in range(0, steps + 1, PROGRESS_CHUNK):
                     k1 = min(k0 + PROGRESS_CHUNK, steps + 1)
                     status = engine.engine_run(byref(run), k0, k1)

@@ -38,9 +38,13 @@ def tracking_metrics(recording: Recording) -> dict[str, dict[str, float]]:
 
 def run_metrics(recording: Recording) -> dict:
     """The content of metrics.json: tracking metrics (where the run records a reference and a
-    true position), wall time of the loop and its real-time factor (simulated seconds per
-    wall-clock second)."""
+    true position), wall time of the loop, its real-time factor (simulated seconds per
+    wall-clock second) and the step timing (cosim.timing: the `realtime` table)."""
     duration = float(recording.time[-1] - recording.time[0])
     tracked = all(n in recording for axis in AXES for n in (axis, f"{axis}_ref"))
-    return {**(tracking_metrics(recording) if tracked else {}), "wall_s": recording.wall_s,
-            "real_time_factor": duration / recording.wall_s if recording.wall_s > 0 else None}
+    metrics = {**(tracking_metrics(recording) if tracked else {}), "wall_s": recording.wall_s,
+               "real_time_factor": duration / recording.wall_s if recording.wall_s > 0
+               else None}
+    if recording.timing is not None:
+        metrics["realtime"] = recording.timing.table(recording.wall_s)
+    return metrics

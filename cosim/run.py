@@ -25,11 +25,13 @@ from controllers.feedforward import FORCE_OUTPUTS
 from controllers.training_range import MARGIN, training_range_excess
 from cosim.config import expanded, load_config
 from cosim.metrics import run_metrics
-from cosim.plots import PLOT_SIGNALS, write_plots
+from cosim.plots import PLOT_SIGNALS, plot_tet, write_plots
+from cosim.realtime import realtime_process
 from cosim.recording import Recording, atomic_write, save_recording
 from cosim.references import MemoryNeeded, Reference, check_memory
 from cosim.scenario import Scenario, resolve
 from cosim.schema import ConfigError, RunConfig
+from cosim.timing import OverrunError, Pacing
 from plant.model import PlantModel
 
 # DESIGN.md's signals of the manipulator, kept under their short names in recordings
@@ -81,9 +83,12 @@ def _least_signals(config: RunConfig) -> int:
             + len(config.record.signals or ()))
 
 
-def simulate(scenario: Scenario, progress: bool | None = None) -> Recording:
+def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | None = None,
+             cpu: int | None = None) -> Recording:
     """Run a resolved scenario; the recording holds its [record] signals (all by default)
-    plus those the metrics and plots need."""
+    plus those the metrics and plots need. With `pacing` the steps follow the wall clock, in a
+    process set up for real time (cosim.realtime: pinned to `cpu`, SCHED_FIFO, locked memory
+    where permitted); the recording's timing then carries that setup's report."""
     wanted = scenario.config.record.signals
     with scenario.master() as master:
         if wanted is not None:
@@ -98,7 +103,12 @@ def simulate(scenario: Scenario, progress: bool | None = None) -> Recording:
         recorded = len(master.signals) + len(master.typed_signals) if wanted is None else \
             len(wanted)
         check_recording_memory(scenario.config, 1 + len(master.sources) + recorded)
-        return master.run(scenario.sources, scenario.steps, wanted, progress)
+        if pacing is None:
+            return master.run(scenario.sources, scenario.steps, wanted, progress)
+        with realtime_process(cpu) as process:
+            recording = master.run(scenario.sources, scenario.steps, wanted, progress, pacing)
+        return dataclasses.replace(recording, timing=dataclasses.replace(
+            recording.timing, process=process))
 
 
 def _known(master, name: str) -> bool:
@@ -156,21 +166,28 @@ def _kept(recording: Recording, config: RunConfig) -> Recording:
 
 
 def run_config(config: RunConfig | str | Path, output_dir: str | Path,
-               progress: bool | None = None) -> dict:
+               progress: bool | None = None, pacing: Pacing | None = None,
+               cpu: int | None = None) -> dict:
     """Run one configuration (or the TOML / SSP file at that path) into `output_dir`; return
-    the metrics written to metrics.json."""
+    the metrics written to metrics.json. A paced run (`pacing`) also writes tet.png, and one
+    that its overruns stopped raises OverrunError after writing what it recorded."""
     if not isinstance(config, RunConfig):
         config = load_run(config)
     check_recording_memory(config, _least_signals(config))
     out = output_folder(output_dir)
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
         scenario = resolve(config, folder)
-        recording = simulate(scenario, progress)
+        recording = simulate(scenario, progress, pacing, cpu)
         metrics = run_metrics(recording)
         if config.learned_feedforward is not None:
             metrics["feedforward_range"] = feedforward_range(scenario)
     save_recording(_kept(recording, config), out, csv=config.record.csv)
     write_plots(recording, out)
+    if pacing is not None:
+        plot_tet(recording.timing, out / "tet.png")
     _write_json(out / "run.json", expanded(config))
     _write_json(out / "metrics.json", metrics)
+    if recording.timing.stopped_at is not None:
+        raise OverrunError(f"{recording.timing.stop_message()}; the record up to there is in "
+                           f"{out}")
     return metrics

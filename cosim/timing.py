@@ -10,12 +10,18 @@ plus lateness passes its period, so that it ends after the next step was due.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 US = 1e6
 PERCENTILES = {"p50": 50.0, "p99": 99.0, "p99.9": 99.9}
+
+
+class OverrunError(RuntimeError):
+    """A paced run stopped by --max-overruns (its results up to there were written)."""
 
 
 @dataclass(frozen=True)
@@ -47,6 +53,7 @@ class StepTiming:
     overruns: int
     first_overruns: tuple[int, ...]  # step indices of the first overruns
     stopped_at: int | None  # the step at which max_overruns stopped the run
+    process: Any = None  # cosim.realtime.ProcessReport of a paced run
 
     @property
     def period(self) -> float:
@@ -75,7 +82,8 @@ class StepTiming:
                 "first_overruns_s": [k * self.step for k in self.first_overruns],
                 "max_overruns": self.pacing.max_overruns, "grace_s": self.pacing.grace,
                 "stopped_at_s": None if self.stopped_at is None
-                else self.stopped_at * self.step})
+                else self.stopped_at * self.step,
+                "process": dataclasses.asdict(self.process) if self.process else None})
         return table
 
     def stop_message(self) -> str:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import platform
 import tempfile
 from pathlib import Path
@@ -13,8 +12,8 @@ import numpy as np
 from cosim.config import parse_config
 from cosim.floor import run_c_loop
 from cosim.libcosim import run_libcosim, time_libcosim_engine
+from cosim.run import simulate
 from cosim.scenario import Scenario, resolve
-from cosim.realtime import realtime_process
 from cosim.timing import Pacing
 from fmu.bench import bench_fmu
 from fmu.build import build_fmu
@@ -131,14 +130,11 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
             "feedforward": {"kind": "onnx", "model": str(models[kind]), "mode": "step"}},
             name=f"realtime-{kind}")
         scenario = resolve(config, folder)
-        with scenario.master() as master, realtime_process() as process:
-            recording = master.run(scenario.sources, scenario.steps, ["x"], progress=False,
-                                   pacing=Pacing(rt_factor=1.0))
+        recording = simulate(scenario, progress=False, pacing=Pacing(rt_factor=1.0))
         table = recording.timing.table(recording.wall_s)
         results[kind] = {key: table[key] for key in (
             "period_us", "achieved_real_time_factor", "tet_us", "tet_us_per_fmu",
-            "tet_over_period_p99", "lateness_us", "overruns")}
-        results[kind]["process"] = dataclasses.asdict(process)
+            "tet_over_period_p99", "lateness_us", "overruns", "process")}
     return results
 
 

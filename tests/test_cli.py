@@ -51,7 +51,8 @@ def test_fmu_validate_reports_bad_files(tmp_path):
 
 
 def test_bench_prints_json(tmp_path):
-    result = flexff("bench", "--steps", "200", "-o", str(tmp_path / "bench.json"))
+    result = flexff("bench", "--steps", "200", "--realtime-seconds", "0.5", "-o",
+                    str(tmp_path / "bench.json"))
     assert result.returncode == 0, result.stderr
     figures = json.loads((tmp_path / "bench.json").read_text())
     for variant in ("nominal", "hardware"):
@@ -66,6 +67,10 @@ def test_bench_prints_json(tmp_path):
     for kind in ("lstm", "cnn-lstm", "tcn", "pgnn"):
         for mode in ("step", "precomputed"):
             assert learned[f"{kind}_{mode}"]["ratio_over_without_feedforward"] > 0
+    for kind in ("tcn", "lstm"):  # the paced hardware loop: 0.5 s at 1 kHz
+        paced = figures["realtime"][kind]
+        assert paced["period_us"] == 1000.0 and paced["overruns"] >= 0
+        assert set(paced["tet_us_per_fmu"]) == {"feedforward", "controller", "plant"}
 
 
 @pytest.mark.slow

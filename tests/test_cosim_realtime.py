@@ -5,6 +5,7 @@ The FMUs are the Modelica Reference-FMUs (VanDerPol, FMI 2.0 and 3.0), which cos
 microsecond a step, so the pacing (not the FMUs) sets the wall time.
 """
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,9 @@ import pytest
 
 from cosim.master import Master, SlaveSpec
 from cosim.realtime import realtime_process
+from cosim.recording import load_recording
 from cosim.timing import Pacing
+from flexff.cli import main
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "fmus"
 
@@ -84,3 +87,34 @@ def test_the_process_setup_reports_what_it_did():
     with pytest.raises(ValueError, match="--cpu 4096"):
         with realtime_process(cpu=4096):
             pass
+
+
+def write_config(folder: Path, step: float, stop: float) -> Path:
+    path = folder / "vdp.toml"
+    path.write_text(f'[run]\nstep = {step}\nstop = {stop}\n[fmu.vdp]\n'
+                    f'path = "{SHARED / "fmi2" / "VanDerPol.fmu"}"\n')
+    return path
+
+
+def test_cli_stops_after_max_overruns_with_exit_code_3(tmp_path, capsys):
+    config = write_config(tmp_path, 1e-7, 1e-4)
+    code = main(["run", str(config), "-o", str(tmp_path / "out"), "--realtime",
+                 "--max-overruns", "5"])
+    err = capsys.readouterr().err
+    assert code == 3 and err.count("\n") == 1 and "stopped after 5 overruns" in err
+    assert load_recording(tmp_path / "out").time.size == 5  # the record up to there is kept
+    realtime = json.loads((tmp_path / "out" / "metrics.json").read_text())["realtime"]
+    assert realtime["overruns"] == 5 and realtime["stopped_at_s"] == pytest.approx(4e-7)
+    assert (tmp_path / "out" / "tet.png").is_file()
+
+
+def test_cli_paced_run_reports_its_timing(tmp_path, capsys):
+    config = write_config(tmp_path, 1e-3, 0.2)
+    assert main(["run", str(config), "-o", str(tmp_path / "out"), "--realtime",
+                 "--rt-factor", "2"]) == 0
+    assert "paced at 2x real time" in capsys.readouterr().out
+    realtime = json.loads((tmp_path / "out" / "metrics.json").read_text())["realtime"]
+    assert realtime["target_real_time_factor"] == 2.0 and realtime["steps"] == 200
+    assert set(realtime["tet_us"]) == {"p50", "p99", "p99.9", "max"}
+    assert main(["run", str(config), "-o", str(tmp_path / "x"), "--max-overruns", "3"]) == 2
+    assert "add --realtime" in capsys.readouterr().err
