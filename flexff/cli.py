@@ -17,6 +17,7 @@ import traceback
 from pathlib import Path
 from typing import Callable, Sequence
 
+from cosim.timing import OverrunError
 from learning.dataset import SETS
 from plant.model import VARIANTS
 
@@ -25,9 +26,11 @@ PRESETS = ("fast", "thesis")
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
                 PermissionError)  # OSErrors about paths the user gave: exit code 2, as are
 INPUT_ERRNOS = (errno.EROFS, errno.ENAMETOOLONG, errno.ELOOP)  # these (others: 1)
-KEPT = {  # what an interrupted command keeps, by command
+KEPT = {  # what an interrupted command keeps, by command (and subcommand)
     "run": "the runs that finished keep their folders; no file is left half-written",
-    "data": "the trajectories collected so far are kept: run the same command again to resume",
+    "data collect": "the trajectories collected so far are kept: run the same command again "
+                    "to resume",
+    "data import": "the dataset folder was left as it was",
 }
 
 
@@ -105,7 +108,8 @@ def _bench(args: argparse.Namespace) -> int:
             raise ValueError(f"no .onnx files in {args.models}")
     if args.output:
         _output_file(args.output)
-    text = json.dumps(run_benchmarks(steps=args.steps, models=models), indent=2)
+    text = json.dumps(run_benchmarks(steps=args.steps, models=models,
+                                     realtime_seconds=args.realtime_seconds), indent=2)
     print(text)
     if args.output:
         with open(args.output, "w") as f:
@@ -125,9 +129,11 @@ def _run(args: argparse.Namespace) -> int:
         key, values = _sweep_values(args.sweep)
         configs = sweep(configs[0], key, values)
     elif len(configs) == 1 and args.scheduler is None:
-        metrics = run_config(configs[0], args.output)
+        metrics = run_config(configs[0], args.output, pacing=_pacing(args), cpu=args.cpu)
         _print_result(configs[0], metrics, args.output)
         return 0
+    if args.realtime:
+        raise ValueError("--realtime runs one configuration, in this process")
     status = 0
     for result in run_batch(configs, args.output, args.workers, args.scheduler,
                             subfolders=len(configs) > 1 or bool(args.sweep)):
@@ -137,6 +143,21 @@ def _run(args: argparse.Namespace) -> int:
             print(f"{result.name}: FAILED: {result.error}", file=sys.stderr)
             status = 1
     return status
+
+
+def _pacing(args: argparse.Namespace):
+    """The run's Pacing from --realtime and its options (None: as fast as it goes)."""
+    from cosim.timing import Pacing
+
+    options = {"--rt-factor": args.rt_factor, "--max-overruns": args.max_overruns,
+               "--grace": args.grace, "--cpu": args.cpu}
+    if not args.realtime:
+        given = [name for name, value in options.items() if value is not None]
+        if given:
+            raise ValueError(f"{', '.join(given)} apply to paced runs: add --realtime")
+        return None
+    return Pacing(rt_factor=1.0 if args.rt_factor is None else args.rt_factor,
+                  max_overruns=args.max_overruns or 0, grace=args.grace or 0.0)
 
 
 def _sweep_values(text: str) -> tuple[str, list]:
@@ -163,6 +184,15 @@ def _print_result(name: object, metrics: dict, output: object) -> None:
         tracking = (f"e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), einf = ({x['einf']:.4g}, "
                     f"{y['einf']:.4g}) m, ")
     print(f"{name}: {tracking}real-time factor {metrics['real_time_factor']:.0f} -> {output}")
+    timing = metrics.get("realtime", {})
+    if timing.get("target_real_time_factor"):
+        tet = timing["tet_us"]
+        print(f"  {name}: paced at {timing['target_real_time_factor']:g}x real time "
+              f"(achieved {timing['achieved_real_time_factor']:.4g}x): TET p50 {tet['p50']:.1f}"
+              f" us, p99 {tet['p99']:.1f} us, max {tet['max']:.1f} us of a "
+              f"{timing['period_us']:.0f} us period, {timing['overruns']} overruns")
+        for warning in (timing.get("process") or {}).get("warnings", []):
+            print(f"  {name}: warning: {warning}")
     if warning := range_warning(metrics):
         print(f"  {name}: {warning}")
 
@@ -200,7 +230,12 @@ def _ssp_export(args: argparse.Namespace) -> int:
 def _data_collect(args: argparse.Namespace) -> int:
     from learning.collect import run_collection
 
-    report = run_collection(args.set, args.output, args.workers, args.scheduler)
+    config = None
+    if args.config is not None:
+        from cosim.run import load_run
+
+        config = load_run(args.config)
+    report = run_collection(args.set, args.output, args.workers, args.scheduler, config=config)
     for line in report.problems():
         print(line, file=sys.stderr)
     cancelled = f", {len(report.cancelled)} not run" if report.cancelled else ""
@@ -214,6 +249,19 @@ def _data_collect(args: argparse.Namespace) -> int:
         print("manifest.json not written: run the same command again to retry the failed "
               "trajectories", file=sys.stderr)
     return 0 if report.ok else 1
+
+
+def _data_import(args: argparse.Namespace) -> int:
+    from learning.logs import import_logs
+
+    test = None if args.test is None else [n.strip() for n in args.test.split(",") if n.strip()]
+    dataset = import_logs(args.files, args.output, args.rate, test)
+    for t in dataset.trajectories:
+        print(f"{t.name} ({t.split}): {len(t)} samples; derived, not measured: "
+              f"{', '.join(t.derived) or 'nothing'}")
+    print(f"{len(dataset.trajectories)} logs -> {dataset.path} at {dataset.sample_rate_hz:g} Hz"
+          f" (test split: {', '.join(t.name for t in dataset.split('test'))})")
+    return 0
 
 
 def _train(args: argparse.Namespace) -> int:
@@ -235,11 +283,12 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from cosim.run import output_folder
+    from cosim.run import load_run, output_folder
     from learning.evaluate import evaluate
 
+    loop = None if args.config is None else load_run(args.config)
     output_folder(args.output)
-    evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs)
+    evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
           f"forces.png, the .onnx models)")
@@ -300,6 +349,17 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--scheduler", help="address of a Dask scheduler to run on instead")
     run.add_argument("--sweep", metavar="TABLE.KEY=V1,V2,...",
                      help="run one configuration once per value of a key")
+    run.add_argument("--realtime", action="store_true",
+                     help="pace the steps to the wall clock and report task execution times "
+                          "(TET) and overruns, as Simulink Real-Time does (tet.png, "
+                          "metrics.json 'realtime')")
+    run.add_argument("--rt-factor", type=float, metavar="F",
+                     help="real-time factor of a paced run: 2 runs twice as fast (default 1)")
+    run.add_argument("--max-overruns", type=int, metavar="N",
+                     help="stop a paced run after N overruns (exit code 3, record kept)")
+    run.add_argument("--grace", type=float, metavar="S",
+                     help="overruns in the first S seconds do not count for --max-overruns")
+    run.add_argument("--cpu", type=int, metavar="K", help="pin a paced run to CPU K")
     run.set_defaults(handler=_run)
 
     config = commands.add_parser("config", help="run configurations")
@@ -328,11 +388,27 @@ def build_parser() -> argparse.ArgumentParser:
         "collect", help="co-simulate a trajectory set under PID into a dataset folder "
                         "(resumes an interrupted collection)")
     collect.add_argument("--set", required=True, choices=SETS, help="the trajectory set")
+    collect.add_argument("--config", metavar="CONFIG.toml|SYSTEM.ssp",
+                         help="the loop to collect on (flexff's controller and any plant); "
+                              "default: the set's built-in plant under PID")
     collect.add_argument("-o", "--output", required=True, help="the dataset folder")
     collect.add_argument("--workers", type=int,
                          help="parallel local processes, at least 1 (default: CPUs)")
     collect.add_argument("--scheduler", help="address of a Dask scheduler to run on instead")
     collect.set_defaults(handler=_data_collect)
+    imports = data_commands.add_parser(
+        "import", help="turn logs of a real machine (CSV or MATLAB .mat) into a dataset folder")
+    imports.add_argument("files", nargs="+", metavar="FILE",
+                         help="logs with columns time, theta_s1..3, Fx, Fy (optionally x_ref .. "
+                              "ay_ref), one trajectory each")
+    imports.add_argument("-o", "--output", required=True, help="the dataset folder (new)")
+    imports.add_argument("--rate", type=float, metavar="HZ",
+                         help="the dataset's sample rate: the logs are resampled to it "
+                              "(default: the logs' own)")
+    imports.add_argument("--test", metavar="NAME,...",
+                         help="the logs (file names without suffix) of the test split "
+                              "(default: the last file)")
+    imports.set_defaults(handler=_data_import)
 
     train = commands.add_parser("train", help="train a feedforward model on a dataset folder")
     train.add_argument("--model", required=True, choices=MODELS, help="the network")
@@ -363,6 +439,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON")
     bench.add_argument("--steps", type=int, default=20000, help="steps per timed loop")
     bench.add_argument("-o", "--output", help="also write the JSON to this file")
+    bench.add_argument("--realtime-seconds", type=float, metavar="S",
+                       help="pace only the first S seconds of the 100 s hardware evaluation "
+                            "in the real-time figures (default: all of it)")
     bench.add_argument("--models", help="a folder of exported .onnx models (e.g. flexff "
                                         "evaluate's) for the feedforward figures; default: "
                                         "untrained exports of each model kind")
@@ -372,6 +451,9 @@ def build_parser() -> argparse.ArgumentParser:
         "evaluate", help="the thesis's Table 5.2 (sim) or 6.2 (hardware) for flexff: collect, "
                          "train, export, co-simulate with each feedforward, report")
     evaluation.add_argument("--env", default="sim", choices=("sim", "hardware"))
+    evaluation.add_argument("--config", metavar="CONFIG.toml|SYSTEM.ssp",
+                            help="collect and evaluate on this loop (flexff's controller and "
+                                 "any plant) instead of the environment's plant")
     evaluation.add_argument("-o", "--output", required=True, help="the output folder")
     evaluation.add_argument("--preset", default="fast", choices=PRESETS)
     evaluation.add_argument("--models", nargs="+", default=list(MODELS), choices=MODELS)
@@ -390,6 +472,8 @@ def _failure(error: BaseException, command: str) -> tuple[int, str]:
     if isinstance(error, KeyboardInterrupt):
         kept = KEPT.get(command)
         return 130, "flexff: interrupted" + (f"; {kept}" if kept else "")
+    if isinstance(error, OverrunError):
+        return 3, f"flexff: error: {error}"
     if isinstance(error, MemoryError):
         return 1, f"flexff: error: out of memory{f' ({error})' if str(error) else ''}"
     if isinstance(error, OSError):
@@ -417,7 +501,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (Exception, KeyboardInterrupt) as error:
         if os.environ.get("FLEXFF_DEBUG") == "1":
             traceback.print_exc()
-        code, line = _failure(error, args.command)
+        command = " ".join(filter(None, (args.command, getattr(args, "data_command", None))))
+        code, line = _failure(error, command)
         print(line, file=sys.stderr)
         return code
 

@@ -1,25 +1,35 @@
 """Data collection: every trajectory of a set as a PID-only closed-loop co-simulation, written
 in the dataset format of learning.dataset.
 
+The loop is flexff's own (the set's built-in plant under PID) or any run configuration with
+flexff's controller (learning.loop): the built-in plant with other parameters, or a plant FMU
+by path wired by name or by [[connection]] tables. Each trajectory replaces the loop's
+reference, run.stop, start values and plant seed; the dataset's signals are read where the
+loop's controller sees them (learning.loop.dataset_taps), and a loop that lacks one is refused
+before anything runs.
+
 The folder gets one NAME.npz per trajectory (float64 arrays of equal length: `time`, the six
 reference signals, the encoders `theta_s1..3`, the true position `x, y`, and the force the
 controller applied to the wrist, Fx = Fx_fb + Fx_ff, likewise Fy) and, last, `manifest.json`
-(set, sample rate, plant variant and parameters, every trajectory's reference table and seed).
-A set saved at a lower rate than the 1 kHz run (hardware: 100 Hz) keeps every n-th sample of
-the run: plain decimation, no anti-alias filter (the preprocessing low-pass filters at 1.8 Hz;
-encoder noise above the new Nyquist frequency folds into the band).
+(set, sample rate, plant variant and parameters, the loop: its configuration in the general
+form and the sha256 of every FMU, every trajectory's reference table and seed). A set saved at
+a lower rate than the run (hardware: 100 Hz) keeps every n-th sample of the run: plain
+decimation, no anti-alias filter (the preprocessing low-pass filters at 1.8 Hz; encoder noise
+above the new Nyquist frequency folds into the band).
 
 Every file is written to a temporary name and renamed, so a folder never holds half a file.
 Running again into the same folder resumes: a trajectory whose file loads and holds exactly its
 reference (and, where the folder's manifest lists it, has the sha256 listed there) is skipped,
 a missing, unreadable or changed one is run, and leftover temporary files of an interrupted run
 are deleted (so one collection per folder at a time). A folder of another set, another dataset
-format or version, or with files of other trajectories is refused before anything runs. A failed
-trajectory does not stop the others, but an error that would fail every one alike (a full disk,
-a read-only or inaccessible folder, a broken process pool) cancels the trajectories not yet
-started; the manifest is only written once every trajectory has its file. Runs go to local
-processes, which end with the collecting process even when it is killed (Linux), or to a Dask
-scheduler whose workers see the same file system as this process.
+format or version, another loop (`collection.json`, written before the first trajectory runs
+and removed with the manifest's writing, or the manifest's `loop`; a folder that records none
+was collected on the set's own loop), or with files of other trajectories is refused before
+anything runs. A failed trajectory does not stop the others, but an error that would fail every
+one alike (a full disk, a read-only or inaccessible folder, a broken process pool) cancels the
+trajectories not yet started; the manifest is only written once every trajectory has its file.
+Runs go to local processes, which end with the collecting process even when it is killed
+(Linux), or to a Dask scheduler whose workers see the same file system as this process.
 """
 
 from __future__ import annotations
@@ -36,33 +46,30 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
 from tqdm import tqdm
 
-from cosim.config import parse_config
-from cosim.recording import Recording
+from cosim.recording import Recording, atomic_write
 from cosim.run import simulate_config
-from cosim.scenario import reference_signals, resolve
-from cosim.schema import RunConfig
+from cosim.scenario import Scenario, reference_signals, resolve
+from cosim.schema import ConfigError, RecordConfig, RunConfig
 from learning.dataset import (COLLECTED, ENCODER_SIGNALS, FORMAT, MANIFEST, POSITION_SIGNALS,
                               REFERENCE_SIGNALS, SIGNALS, VERSION, save_signals, write_manifest)
+from learning.loop import (CURRENTS, OWN_TAPS, Tap, current_limit, dataset_taps, default_loop,
+                           loop_differences, loop_record, on_reference, plant_record)
 from learning.trajectories import TrajectorySet, TrajectorySpec, trajectory_set
-from plant.model import VARIANTS
-from plant.system import plant_system
 
-CURRENTS = ("i1", "i2", "i3")
-FORCES = ("Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
-RECORDED = REFERENCE_SIGNALS + ENCODER_SIGNALS + POSITION_SIGNALS + FORCES + CURRENTS
-START_VALUES = ("x_start", "y_start")  # per trajectory: where its reference starts
+PROGRESS = "collection.json"  # the loop of a collection under way (see the module docstring)
 STOPPING = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES)  # fail every trajectory
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
 class DataFolderError(ValueError):
-    """The output folder belongs to another set, format or trajectory definition."""
+    """The output folder belongs to another set, format, loop or trajectory definition."""
 
 
 class CollectionError(RuntimeError):
@@ -84,7 +91,8 @@ class Outcome:
     name: str
     seconds: float = 0.0
     max_current: float = 0.0  # A, over the three motors and the whole 1 kHz run
-    saturated: float = 0.0  # fraction of the 1 kHz samples with a commanded |i| >= i_max
+    saturated: float = 0.0  # share of the run's samples with a commanded |i| >= i_max (NaN:
+    # a plant FMU by path, whose limit is not known)
     error: str | None = None
     stops_all: bool = False  # the error would fail every trajectory alike (a full disk)
     cancelled: bool = False
@@ -129,18 +137,30 @@ class _Job:
     config: RunConfig
     path: Path
     decimation: int
+    taps: Mapping[str, Tap]
+    current_limit: float | None  # A: the plant's i_max (None: not known)
+
+
+@dataclass(frozen=True)
+class _Folder:
+    """What a dataset folder holds already: the sha256 its manifest lists per file, and the
+    loop it records (None: collected by an earlier flexff, on the set's own loop)."""
+
+    listed: Mapping[str, str]
+    loop: Mapping[str, Any] | None
 
 
 def collect(set_name: str, out: str | Path, workers: int | None = None,
             scheduler: str | None = None, progress: bool = True,
-            limit: int | None = None) -> Path:
+            limit: int | None = None, config: RunConfig | None = None) -> Path:
     """Collect trajectory set `set_name` into folder `out` (resuming what is there); return it.
 
+    `config`: the loop to run (learning.loop; default: the set's built-in plant under PID).
     Raises CollectionError after the other trajectories finished if any failed, and
-    DataFolderError if `out` holds another set. `limit` collects the first `limit` trajectories
-    only (the manifest then lists just those).
+    DataFolderError if `out` holds another set or loop. `limit` collects the first `limit`
+    trajectories only (the manifest then lists just those).
     """
-    report = run_collection(set_name, out, workers, scheduler, progress, limit)
+    report = run_collection(set_name, out, workers, scheduler, progress, limit, config)
     if not report.ok:
         raise CollectionError(report)
     return report.path
@@ -148,7 +168,8 @@ def collect(set_name: str, out: str | Path, workers: int | None = None,
 
 def run_collection(set_name: str, out: str | Path, workers: int | None = None,
                    scheduler: str | None = None, progress: bool = True,
-                   limit: int | None = None) -> CollectionReport:
+                   limit: int | None = None, config: RunConfig | None = None
+                   ) -> CollectionReport:
     """`collect`, returning the report instead of raising for failed trajectories."""
     start = time.perf_counter()
     trajectories = trajectory_set(set_name)
@@ -159,54 +180,76 @@ def run_collection(set_name: str, out: str | Path, workers: int | None = None,
                          f"process per CPU)")
     specs = trajectories.trajectories[:limit]
     out = Path(out)
-    listed = _check_folder(out, trajectories)
+    folder = _check_folder(out, trajectories)
+    loop = config or default_loop(trajectories.variant)
+    decimation = _decimation(loop, trajectories)
+    configs = [run_config(spec, trajectories, loop) for spec in specs]
+    with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as fmus:
+        scenario = resolve(configs[0], fmus)  # checks the wiring, fills the FMU cache
+        taps, record = dataset_taps(scenario), loop_record(scenario)
+    _check_loop(out, folder.loop, record, config is None)
+    recorded = RecordConfig(tuple(dict.fromkeys(t.signal for t in taps.values())), csv=False)
     jobs, skipped = [], []
-    for spec in specs:
-        job = _Job(run_config(spec, trajectories), out / f"{spec.name}.npz",
-                   trajectories.decimation)
-        (skipped if _present(job, listed.get(job.path.name)) else jobs).append(job)
+    for c in configs:
+        job = _Job(replace(c, record=recorded), out / f"{c.name}.npz", decimation, taps,
+                   current_limit(loop))
+        (skipped if _present(job, folder.listed.get(job.path.name)) else jobs).append(job)
     out.mkdir(parents=True, exist_ok=True)
     for stale in out.glob(".*.tmp"):  # left by an interrupted run (atomic_write's names)
         stale.unlink()
+    if not (out / MANIFEST).is_file():
+        text = json.dumps(record, indent=2) + "\n"
+        atomic_write(out / PROGRESS, lambda tmp: tmp.write_text(text))
     outcomes = list(_execute(jobs, workers, scheduler, progress, len(specs), set_name))
     failed = tuple(o for o in outcomes if o.error is not None)
     cancelled = tuple(o.name for o in outcomes if o.cancelled)
     if not failed and not cancelled:
-        _write_manifest(out, trajectories, specs)
+        _write_manifest(out, trajectories, specs, scenario, taps, record)
+        (out / PROGRESS).unlink(missing_ok=True)
     return CollectionReport(out, set_name,
                             tuple(o for o in outcomes if o.error is None and not o.cancelled),
                             tuple(j.config.name for j in skipped), failed,
                             time.perf_counter() - start, cancelled)
 
 
-def run_config(spec: TrajectorySpec, trajectories: TrajectorySet) -> RunConfig:
-    """The checked PID-only run configuration of one trajectory."""
-    return parse_config({
-        "run": {"step": trajectories.step, "stop": trajectories.duration},
-        "reference": dict(spec.reference),
-        "plant": {"variant": spec.variant, "seed": spec.seed},
-        "feedforward": {"kind": "none"},
-        "record": {"signals": list(RECORDED), "csv": False},
-    }, name=spec.name, source=f"{trajectories.name} trajectory {spec.name}")
+def run_config(spec: TrajectorySpec, trajectories: TrajectorySet,
+               loop: RunConfig | None = None) -> RunConfig:
+    """The checked run configuration of one trajectory on `loop` (default: the set's built-in
+    plant under PID), recording every signal."""
+    loop = loop or default_loop(trajectories.variant)
+    return replace(on_reference(loop, spec.reference, spec.name, trajectories.duration,
+                                spec.seed), record=RecordConfig(None, csv=False))
 
 
-def dataset_signals(recording: Recording, decimation: int = 1) -> dict[str, np.ndarray]:
-    """A recording as the dataset's signals (every `decimation`-th sample), in SIGNALS order."""
-    values = {"time": recording.time, **{n: recording[n] for n in
+def dataset_signals(recording: Recording, decimation: int = 1,
+                    taps: Mapping[str, Tap] = OWN_TAPS) -> dict[str, np.ndarray]:
+    """A recording as the dataset's signals (every `decimation`-th sample), in SIGNALS order,
+    each read at its tap (learning.loop.dataset_taps; default: flexff's own loop)."""
+    values = {"time": recording.time, **{n: taps[n].read(recording) for n in
                                          REFERENCE_SIGNALS + ENCODER_SIGNALS + POSITION_SIGNALS},
-              "Fx": recording["Fx_fb"] + recording["Fx_ff"],
-              "Fy": recording["Fy_fb"] + recording["Fy_ff"]}
+              "Fx": taps["Fx_fb"].read(recording) + taps["Fx_ff"].read(recording),
+              "Fy": taps["Fy_fb"].read(recording) + taps["Fy_ff"].read(recording)}
     return {n: np.ascontiguousarray(values[n][::decimation], dtype=np.float64) for n in SIGNALS}
 
 
+def _decimation(loop: RunConfig, trajectories: TrajectorySet) -> int:
+    """Run steps per saved sample: the loop's step must divide the set's sample period."""
+    period = 1.0 / trajectories.sample_rate_hz
+    ratio = period / loop.step
+    if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+        raise ConfigError(loop.source, "run.step", f"{loop.step:g} s does not divide the "
+                          f"{trajectories.name} set's sample period of {period:g} s")
+    return round(ratio)
+
+
 # -- folder -----------------------------------------------------------------------------------
-def _check_folder(out: Path, trajectories: TrajectorySet) -> dict[str, str]:
+def _check_folder(out: Path, trajectories: TrajectorySet) -> _Folder:
     """Refuse a folder that holds another set, format or version, or foreign trajectories;
-    return the sha256 its manifest lists for each file (none without a manifest)."""
+    return what it holds."""
     if out.exists() and not out.is_dir():
         raise DataFolderError(f"{out} exists and is not a folder")
     manifest = out / MANIFEST
-    listed = {}
+    listed, loop = {}, None
     if manifest.is_file():
         try:
             found = json.loads(manifest.read_text())
@@ -223,6 +266,13 @@ def _check_folder(out: Path, trajectories: TrajectorySet) -> dict[str, str]:
         entries = found.get("trajectories")
         listed = {e.get("file"): e.get("sha256") for e in entries if isinstance(e, dict)} \
             if isinstance(entries, list) else {}
+        loop = found.get("loop")
+    elif (out / PROGRESS).is_file():
+        try:
+            loop = json.loads((out / PROGRESS).read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            raise DataFolderError(f"{out / PROGRESS} is damaged: collect into another folder "
+                                  f"(or delete this one)") from None
     names = {s.name for s in trajectories.trajectories}
     foreign = sorted(p.name for p in out.glob("*.npz") if p.stem not in names)
     if foreign:
@@ -230,7 +280,24 @@ def _check_folder(out: Path, trajectories: TrajectorySet) -> dict[str, str]:
                               f"{trajectories.name!r} ({', '.join(foreign[:5])}"
                               f"{', ...' if len(foreign) > 5 else ''}): collect into another "
                               f"folder (or delete this one)")
-    return listed
+    return _Folder(listed, loop)
+
+
+def _check_loop(out: Path, found: Mapping[str, Any] | None, wanted: Mapping[str, Any],
+                own: bool) -> None:
+    """Refuse a folder collected on another loop than `wanted` (loop_record's form); one that
+    records none is of an earlier flexff, which ran the set's `own` loop alone."""
+    if found is None:
+        if not own and any(p.is_file() for p in out.glob("*.npz")):
+            raise DataFolderError(f"{out} holds trajectories collected on the set's own loop "
+                                  f"(by an earlier flexff): collect into another folder (or "
+                                  f"delete this one)")
+        return
+    differences = loop_differences(found, wanted)
+    if differences:
+        shown = "; ".join(differences[:3]) + ("; ..." if len(differences) > 3 else "")
+        raise DataFolderError(f"{out} was collected on another loop ({shown}): collect into "
+                              f"another folder (or delete this one)")
 
 
 def _present(job: _Job, listed: str | None) -> bool:
@@ -257,14 +324,14 @@ def _present(job: _Job, listed: str | None) -> bool:
     return True
 
 
-def _write_manifest(out: Path, trajectories: TrajectorySet,
-                    specs: Iterable[TrajectorySpec]) -> None:
-    parameters = {p.name: p.start for p in plant_system(trajectories.variant).parameters
-                  if p.name not in START_VALUES}
+def _write_manifest(out: Path, trajectories: TrajectorySet, specs: Iterable[TrajectorySpec],
+                    scenario: Scenario, taps: Mapping[str, Tap],
+                    record: Mapping[str, Any]) -> None:
     write_manifest(out, trajectories.name, trajectories.sample_rate_hz,
-                   {"variant": trajectories.variant, "parameters": parameters},
+                   plant_record(scenario, taps, record),
                    [{"name": s.name, "split": s.split, "file": f"{s.name}.npz",
-                     "reference": s.reference, "seed": s.seed} for s in specs], COLLECTED)
+                     "reference": s.reference, "seed": s.seed} for s in specs], COLLECTED,
+                   {"loop": record})
 
 
 # -- running ----------------------------------------------------------------------------------
@@ -274,12 +341,11 @@ def _collect_one(job: _Job) -> Outcome:
     name = job.config.name
     try:
         recording = simulate_config(job.config, progress=False)
-        save_signals(job.path, dataset_signals(recording, job.decimation))
-        currents = np.abs(np.vstack([recording[n] for n in CURRENTS])).max(axis=0)
-        variant = job.config.builtin("plant").options["variant"]
-        limit = float(VARIANTS[variant].parameters.i_max)
-        return Outcome(name, recording.wall_s, float(currents.max()),
-                       float(np.mean(currents >= limit)))
+        save_signals(job.path, dataset_signals(recording, job.decimation, job.taps))
+        currents = np.abs(np.vstack([job.taps[n].read(recording) for n in CURRENTS])).max(axis=0)
+        saturated = (float("nan") if job.current_limit is None else
+                     float(np.mean(currents >= job.current_limit)))
+        return Outcome(name, recording.wall_s, float(currents.max()), saturated)
     except Exception as error:  # noqa: BLE001  (reported; the other trajectories go on)
         return Outcome(name, error=_one_line(error),
                        stops_all=isinstance(error, OSError) and error.errno in STOPPING)
@@ -307,8 +373,6 @@ def _execute(jobs: list[_Job], workers: int | None, scheduler: str | None, progr
 def _on_processes(jobs: list[_Job], workers: int | None) -> Iterator[Outcome]:
     if not jobs:
         return
-    with tempfile.TemporaryDirectory(prefix="flexff-warm-") as folder:
-        resolve(jobs[0].config, folder)  # fills the FMU cache once, not in every worker
     workers = min(workers or os.cpu_count() or 1, len(jobs))
     with ProcessPoolExecutor(max_workers=workers, initializer=_die_with_parent,
                              initargs=(os.getpid(),)) as pool:

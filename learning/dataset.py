@@ -8,6 +8,11 @@ Version 2 guards the data against silent change: every trajectory entry holds th
 its file, and the manifest holds a sha256 of itself (all but the trajectories' splits, which
 may be edited by hand), so a truncated or swapped file, or an edited `set` or `plant`, is
 refused instead of trained on.
+
+A trajectory entry's optional `derived` maps a signal to how it was computed, where its source
+did not hold it (imported logs: the true position from the encoders). Training reads the
+encoders and the forces (TRAINED), which must be measured: an entry marking one of them derived
+is refused.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ FORMAT = "flexff-dataset"
 VERSION = 2
 MANIFEST = "manifest.json"
 COLLECTED = "flexff data collect"  # the manifest's `source` for a collected set
+IMPORTED = "flexff data import"  # ... and for imported logs
 WRITTEN = "learning.dataset.write_dataset"
 SETS = ("sim", "hardware")
 SPLITS = ("train", "test")
@@ -36,6 +42,7 @@ ENCODER_SIGNALS = ("theta_s1", "theta_s2", "theta_s3")
 POSITION_SIGNALS = ("x", "y")
 LABEL_SIGNALS = ("Fx", "Fy")
 SIGNALS = ("time",) + REFERENCE_SIGNALS + ENCODER_SIGNALS + POSITION_SIGNALS + LABEL_SIGNALS
+TRAINED = ("time",) + ENCODER_SIGNALS + LABEL_SIGNALS  # what training reads (learning.features)
 RECOLLECT = "collect the data again with this flexff version: flexff data collect ..."
 
 
@@ -52,6 +59,7 @@ class Trajectory:
     signals: Mapping[str, np.ndarray]
     reference: Mapping[str, Any] = field(default_factory=dict)
     seed: int = 0
+    derived: Mapping[str, str] = field(default_factory=dict)  # signal -> how it was computed
 
     def __len__(self) -> int:
         return len(self.signals["time"])
@@ -84,15 +92,18 @@ def load_dataset(path: str | Path) -> Dataset:
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise DatasetError(f"{manifest_path} is not valid JSON ({err}); {RECOLLECT}") from None
     _check_manifest(manifest, manifest_path)
-    collected = manifest.get("source") == COLLECTED
+    source = manifest.get("source")
     if manifest["sha256"] != _digest(manifest, splits=False):
-        redo = (f"run flexff data collect into {path} again with the set it was collected with"
-                if collected else "write the dataset again")
+        redo = {COLLECTED: f"run flexff data collect into {path} again with the set it was "
+                           f"collected with",
+                IMPORTED: "import the logs again"}.get(source, "write the dataset again")
         raise DatasetError(f"{manifest_path} was edited: its set, sample rate, plant or "
                            f"trajectory list no longer match its sha256 (only a trajectory's "
                            f"'split' may be changed by hand): undo the edit, or {redo}")
-    fix = (f"run flexff data collect --set {manifest['set']} -o {path} again to re-run it"
-           if collected else f"write the dataset again, or {RECOLLECT}")
+    fix = {COLLECTED: f"run flexff data collect --set {manifest['set']} -o {path} again to "
+                      f"re-run it",
+           IMPORTED: "import the logs again (flexff data import)"}.get(
+        source, f"write the dataset again, or {RECOLLECT}")
     rate = float(manifest["sample_rate_hz"])
     trajectories = tuple(_load_trajectory(path, entry, rate, fix)
                          for entry in manifest["trajectories"])
@@ -134,12 +145,15 @@ def save_signals(path: Path, signals: Mapping[str, np.ndarray]) -> None:
 
 
 def write_manifest(path: Path, set_name: str, sample_rate_hz: float, plant: Mapping[str, Any],
-                   entries: list[dict[str, Any]], source: str) -> None:
+                   entries: list[dict[str, Any]], source: str,
+                   extra: Mapping[str, Any] | None = None) -> None:
     """Write the manifest of the trajectory files in `path` (entries: name, split, file,
-    reference, seed), adding each file's sha256 and the manifest's own."""
+    reference, seed, optionally derived), adding each file's sha256 and the manifest's own;
+    `extra` adds top-level entries (a collection's `loop`)."""
     entries = [{**e, "sha256": file_sha256(path / e["file"])} for e in entries]
     manifest = {"format": FORMAT, "version": VERSION, "set": set_name, "source": source,
-                "sample_rate_hz": sample_rate_hz, "plant": dict(plant), "trajectories": entries}
+                "sample_rate_hz": sample_rate_hz, "plant": dict(plant), **(extra or {}),
+                "trajectories": entries}
     manifest["sha256"] = _digest(manifest, splits=False)
     _check_manifest(manifest, path / MANIFEST)
     text = json.dumps(manifest, indent=2) + "\n"
@@ -193,6 +207,20 @@ def _check_manifest(manifest: Any, where: Path) -> None:
         if entry["name"] in names:
             raise DatasetError(f"{where}: trajectory name {entry['name']!r} appears twice")
         names.add(entry["name"])
+        _check_derived(entry, where)
+
+
+def _check_derived(entry: Mapping[str, Any], where: Path) -> None:
+    derived = entry.get("derived", {})
+    if not isinstance(derived, dict) or not all(isinstance(k, str) and isinstance(v, str)
+                                                for k, v in derived.items()):
+        raise DatasetError(f"{where}: trajectory {entry['name']!r}: 'derived' must map signal "
+                           f"names to text")
+    trained = [s for s in TRAINED if s in derived]
+    if trained:
+        raise DatasetError(f"{where}: trajectory {entry['name']!r}: {', '.join(trained)} "
+                           f"marked derived, but training reads them as measured: they must "
+                           f"come from the logs")
 
 
 def _is_sha256(value: Any) -> bool:
@@ -232,4 +260,5 @@ def _load_trajectory(folder: Path, entry: Mapping[str, Any], rate: float,
         raise DatasetError(f"{file}: 'time' must be sampled at the manifest's {rate:g} Hz "
                            f"(steps of {1.0 / rate:g} s); {fix}")
     return Trajectory(name=entry["name"], split=entry["split"], signals=signals,
-                      reference=entry.get("reference", {}), seed=int(entry.get("seed", 0)))
+                      reference=entry.get("reference", {}), seed=int(entry.get("seed", 0)),
+                      derived=entry.get("derived", {}))

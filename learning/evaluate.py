@@ -9,6 +9,11 @@
    circles) on the hardware plant;
 4. write the report (cosim.report): summary.json, table.md and the figures.
 
+Given a run configuration (`loop`, learning.loop), steps 1 and 3 run on that loop instead of
+the environment's plant: the set is collected on it under PID alone, and every scenario is that loop on the
+environment's evaluation reference with its feedforward replaced (PID alone, rigid-body, or
+the learned one stepped right before the controller).
+
 Preprocessing beyond the seed (Environment.features): the seed low-passes the measured motion
 and forces at 1.8 Hz and re-quantizes its ideal simulated encoders. The sim evaluation
 reference's circle runs at up to 1.8 Hz, where that filter halves the signals and the training
@@ -22,17 +27,17 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from cosim.config import parse_config
 from cosim.recording import Recording, load_recording
 from cosim.report import write_report
 from cosim.run import range_warning, run_config
-from cosim.schema import RunConfig
+from cosim.schema import RecordConfig, RunConfig
 from learning.collect import collect
 from learning.export import export
+from learning.loop import default_loop, on_reference, with_feedforward
 from learning.models import NETWORKS, check_kind
 from learning.presets import TrainConfig, make_config
 from learning.train import train
@@ -56,28 +61,31 @@ ENVIRONMENTS = {
 MODELS = tuple(NETWORKS)
 
 
-def scenario_config(env: str, name: str, model: Path | None = None,
-                    mode: str = "step") -> RunConfig:
-    """The environment's evaluation reference on its plant, with the feedforward of scenario
-    `name`: "pid" (none), "rigid-body", or a learned model (the ONNX file `model`)."""
-    feedforward: dict[str, str] = {"kind": "none"}
+def scenario_config(env: str, name: str, model: Path | None = None, mode: str = "step",
+                    loop: RunConfig | None = None) -> RunConfig:
+    """The environment's evaluation reference on `loop` (default: its plant under PID), with
+    the feedforward of scenario `name`: "pid" (none), "rigid-body", or a learned model (the
+    ONNX file `model`); every signal recorded."""
+    builtin, options = None, {}
     if name == "rigid-body":
-        feedforward = {"kind": "model"}
+        builtin = "rigid-body-feedforward"
     elif name != "pid":
         if model is None:
             raise ValueError(f"scenario {name!r} needs an ONNX model")
-        feedforward = {"kind": "onnx", "model": str(model), "mode": mode}
+        builtin, options = "learned-feedforward", {"model": Path(model).resolve(), "mode": mode}
     environment = ENVIRONMENTS[env]
-    return parse_config({"reference": {"kind": environment.reference},
-                         "plant": {"variant": environment.plant, "seed": 1},
-                         "feedforward": feedforward}, name=f"{env}-{name}")
+    config = on_reference(with_feedforward(loop or default_loop(environment.plant), builtin,
+                                           options),
+                          {"kind": environment.reference}, f"{env}-{name}", seed=1)
+    return replace(config, record=RecordConfig())
 
 
 def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[str] = MODELS,
              data: str | Path | None = None, epochs: int | None = None,
-             say: Callable[[str], None] = print) -> dict:
+             say: Callable[[str], None] = print, loop: RunConfig | None = None) -> dict:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
-    summary (see cosim.report.write_report). `data` reuses a collected dataset folder."""
+    summary (see cosim.report.write_report). `data` reuses a collected dataset folder; `loop`
+    collects and evaluates on that run configuration instead of the environment's plant."""
     if env not in ENVIRONMENTS:
         raise ValueError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
     for kind in models:
@@ -86,8 +94,10 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     environment = ENVIRONMENTS[env]
     set_name = environment.trajectory_set
     if data is None:
-        say(f"collecting the {set_name} set (PID only) into {out / f'data-{set_name}'}")
-        data = collect(set_name, out / f"data-{set_name}")
+        on = f" on {loop.source}" if loop is not None else ""
+        say(f"collecting the {set_name} set (PID only){on} into {out / f'data-{set_name}'}")
+        data = collect(set_name, out / f"data-{set_name}",
+                       config=None if loop is None else with_feedforward(loop))
     onnx_files = {}
     for kind in models:
         run = out / "runs" / kind
@@ -100,7 +110,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     recordings: dict[str, Recording] = {}
     for name in ["pid", "rigid-body", *models]:
         folder = out / "cosim" / name
-        metrics = run_config(scenario_config(env, name, onnx_files.get(name)), folder)
+        metrics = run_config(scenario_config(env, name, onnx_files.get(name), loop=loop), folder)
         recordings[name] = load_recording(folder)
         say(f"{name}: e2 = ({metrics['x']['e2']:.3g}, {metrics['y']['e2']:.3g}) m/sqrt(s), "
             f"real-time factor {metrics['real_time_factor']:.0f}")

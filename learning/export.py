@@ -21,6 +21,10 @@ The physics-guided model is exported as its residual: the graph's forces plus th
 feedforward of the nominal model (eq. 2.4, controllers.feedforward) on the same reference are
 the model's forces; the metadata says so (`prior` = "rigid-body", else "none").
 
+The graph is written to a temporary file beside `out` and renamed only once onnx's checker and
+the comparison with PyTorch pass, so a failed export leaves no file, and an existing one as it
+was.
+
 The metadata (onnx metadata_props, strings; lists and objects as JSON) names everything a
 runner needs: input and output signal names and units, the state tensors and their shapes,
 the sample rate, the prior, the model kind and feature set, the range of every feature in the
@@ -38,6 +42,7 @@ import onnx
 import onnxruntime as ort
 import torch
 
+from cosim.recording import atomic_write
 from learning.deploy import SIModel
 from learning.run_folder import Run, flexff_version, load_run
 from learning.threads import torch_threads
@@ -63,18 +68,27 @@ def export(run: str | Path, out: str | Path, inputs: str = "features") -> Path:
 
 def _export(loaded: Run, out: Path, inputs: str) -> Path:
     model = SIModel(loaded, inputs, prior=False).eval()
-    out.parent.mkdir(parents=True, exist_ok=True)
+
+    def write(tmp: Path) -> None:
+        _write_graph(loaded, model, inputs, tmp)
+        check_export(model, tmp, _probe(loaded, inputs, 60), name=out)
+
+    return atomic_write(out, write)
+
+
+def _write_graph(loaded: Run, model: SIModel, inputs: str, path: Path) -> None:
+    """The checked graph with its metadata, to `path`."""
     state = model.initial_state()
     state_names = loaded.network.state_names()
     example = torch.as_tensor(_probe(loaded, inputs, 8), dtype=torch.float64)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         torch.onnx.export(
-            model, (example, *state), str(out), dynamo=False, opset_version=OPSET,
+            model, (example, *state), str(path), dynamo=False, opset_version=OPSET,
             input_names=["inputs", *state_names],
             output_names=["forces", *[f"{n}_out" for n in state_names]],
             dynamic_axes={"inputs": {0: "time"}, "forces": {0: "time"}})
-    graph = onnx.load(str(out))
+    graph = onnx.load(str(path))
     metadata = {
         "format": FORMAT, "format_version": str(VERSION), "flexff_version": flexff_version(),
         "model_kind": loaded.config.model, "preset": loaded.config.preset,
@@ -100,9 +114,7 @@ def _export(loaded: Run, out: Path, inputs: str) -> Path:
     }
     onnx.helper.set_model_props(graph, metadata)
     onnx.checker.check_model(graph)
-    onnx.save(graph, str(out))
-    check_export(model, out, _probe(loaded, inputs, 60))
-    return out
+    onnx.save(graph, str(path))
 
 
 def read_metadata(path: str | Path) -> dict[str, str]:
@@ -137,9 +149,10 @@ def run_steps(session: ort.InferenceSession, inputs: np.ndarray) -> np.ndarray:
     return np.array(forces)
 
 
-def check_export(model: SIModel, path: Path, inputs: np.ndarray) -> float:
+def check_export(model: SIModel, path: Path, inputs: np.ndarray,
+                 name: Path | None = None) -> float:
     """Largest relative deviation of onnxruntime (both forms) from PyTorch on `inputs`;
-    RuntimeError if above TOLERANCE."""
+    RuntimeError (naming the graph `name`, default `path`) if above TOLERANCE."""
     with torch.no_grad():
         expected = model(torch.as_tensor(inputs, dtype=torch.float64),
                          *model.initial_state())[0].numpy()
@@ -148,8 +161,8 @@ def check_export(model: SIModel, path: Path, inputs: np.ndarray) -> float:
     worst = max(float(np.abs(run(runtime, inputs) - expected).max()) / scale
                 for run in (run_sequence, run_steps))
     if not worst <= TOLERANCE:
-        raise RuntimeError(f"{path}: onnxruntime deviates from PyTorch by {worst:.3g} (relative), "
-                           f"more than {TOLERANCE:g}; the export is not usable")
+        raise RuntimeError(f"{name or path}: onnxruntime deviates from PyTorch by {worst:.3g} "
+                           f"(relative), more than {TOLERANCE:g}; the export is not usable")
     return worst
 
 

@@ -68,7 +68,17 @@ def test_files_reload_bit_for_bit(collected):
 def test_manifest(collected):
     manifest = json.loads((collected / MANIFEST).read_text())
     assert list(manifest) == ["format", "version", "set", "source", "sample_rate_hz", "plant",
-                              "trajectories", "sha256"]
+                              "loop", "trajectories", "sha256"]
+    loop = manifest["loop"]  # the set's own loop: PID on the nominal plant, FMUs by their hash
+    assert loop["configuration"]["fmu"] == {
+        "controller": {"builtin": "controller", "variant": "nominal", "encoders": 2},
+        "plant": {"builtin": "plant", "variant": "nominal"}}
+    assert loop["configuration"]["source"] == [{"kind": "constant",
+                                                "values": {"Fx_ff": 0.0, "Fy_ff": 0.0}}]
+    assert "reference" not in loop["configuration"] and "stop" not in loop["configuration"]["run"]
+    assert {n: f["builtin"] for n, f in loop["fmus"].items()} == {"controller": "controller",
+                                                                  "plant": "plant"}
+    assert all(re.fullmatch("[0-9a-f]{64}", f["sha256"]) for f in loop["fmus"].values())
     assert (manifest["format"], manifest["version"], manifest["set"], manifest["source"],
             manifest["sample_rate_hz"]) == ("flexff-dataset", 2, "sim", "flexff data collect",
                                             1000)
@@ -316,8 +326,8 @@ def test_hardware_files_keep_every_tenth_sample(tmp_path):
 def test_cli_prints_a_summary_and_the_status(monkeypatch, tmp_path, capsys):
     from flexff.cli import main
 
-    def fake(set_name, out, workers, scheduler):
-        assert (set_name, workers, scheduler) == ("hardware", 3, "tcp://h:8786")
+    def fake(set_name, out, workers, scheduler, config):
+        assert (set_name, workers, scheduler, config) == ("hardware", 3, "tcp://h:8786", None)
         return CollectionReport(Path(out), set_name, (Outcome("circle-01", 1.0, 7.25),),
                                 ("circle-00",), (Outcome("circle-02", error="boom"),), 4.0)
 

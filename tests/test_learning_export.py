@@ -5,6 +5,7 @@ import json
 import shutil
 
 import numpy as np
+import onnx
 import pytest
 import torch
 
@@ -202,3 +203,25 @@ def test_flexff_export_of_a_damaged_run_prints_one_line(runs, tmp_path, capsys):
     assert main(["export", str(run), "-o", str(tmp_path / "x.onnx")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{run / 'model.pt'} is not the file" in err
+
+
+@pytest.mark.parametrize("failure", ["accuracy", "onnx checker"])
+def test_a_failed_export_leaves_the_file_as_it_was(runs, tmp_path, monkeypatch, failure):
+    """The graph goes to a temporary file that is renamed once every check passed: a failed
+    check leaves no file, and keeps an existing one as it was."""
+    out = tmp_path / "pgnn.onnx"
+    good = export(runs / "pgnn", out).read_bytes()
+    if failure == "accuracy":
+        monkeypatch.setattr("learning.export.TOLERANCE", -1.0)
+        expected, match = RuntimeError, f"^{out}: onnxruntime deviates from PyTorch"
+    else:
+        def broken(graph):
+            raise onnx.checker.ValidationError("bad graph")
+
+        monkeypatch.setattr("onnx.checker.check_model", broken)
+        expected, match = onnx.checker.ValidationError, "bad graph"
+    for target in (out, tmp_path / "new.onnx"):
+        with pytest.raises(expected, match=match.replace(str(out), str(target))):
+            export(runs / "pgnn", target)
+    assert out.read_bytes() == good and sorted(p.name for p in tmp_path.iterdir()) == [
+        "pgnn.onnx"]
