@@ -60,7 +60,8 @@ import tomli_w
 from controllers.allocation import ENCODER_CHOICES
 from controllers.feedforward import FORCE_OUTPUTS
 from controllers.learned_feedforward import model_metadata
-from cosim.references import REFERENCE_KINDS, MemoryNeeded, SegmentError, build_reference
+from cosim.memory import MemoryNeeded
+from cosim.references import REFERENCE_KINDS, SegmentError, build_reference
 from cosim.schema import (ALGORITHMS, BUILTIN_OPTIONS, SOURCE_KINDS, UNCONNECTED, ConfigError,
                           ConnectionConfig, FmuConfig, RecordConfig, ReferenceConfig,
                           RunConfig, SourceConfig)

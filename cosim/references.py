@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from collections.abc import Mapping, Sequence
@@ -25,6 +24,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_filter
 
+from cosim.memory import check_memory
 from plant.kinematics import check_workspace
 from plant.parameters import NOMINAL
 
@@ -365,29 +365,6 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
             values.append(value)
         columns[name] = np.array(values)
     return columns
-
-
-class MemoryNeeded(ValueError):
-    """Values that would not fit into the available memory, found before allocating them."""
-
-
-def available_memory() -> int:
-    """Bytes of memory a new allocation can take without swapping (psutil's estimate, which
-    counts reclaimable caches; else the free pages)."""
-    try:
-        import psutil
-    except ImportError:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    return int(psutil.virtual_memory().available)
-
-
-def check_memory(values: int, what: str) -> None:
-    """Raise MemoryNeeded when `values` float64 numbers do not fit into the available memory;
-    `what` names them in the message."""
-    need, have = 8 * values, available_memory()
-    if need > have:
-        raise MemoryNeeded(f"{what} needs {need / 1e6:,.0f} MB, more than the "
-                           f"{have / 1e6:,.0f} MB of memory available")
 
 
 def _skew_sine(t: np.ndarray, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -28,7 +28,8 @@ from cosim.metrics import run_metrics
 from cosim.plots import PLOT_SIGNALS, plot_tet, write_plots
 from cosim.realtime import realtime_process
 from cosim.recording import Recording, atomic_write, save_recording
-from cosim.references import MemoryNeeded, Reference, check_memory
+from cosim.memory import MemoryNeeded, check_memory
+from cosim.references import Reference
 from cosim.scenario import Scenario, resolve
 from cosim.schema import ConfigError, RunConfig
 from cosim.timing import OverrunError, Pacing

@@ -115,7 +115,7 @@ def test_an_output_on_a_read_only_file_system(capsys, tmp_path, config, read_onl
      "the sweep lists the same value twice: 2"),
 ], ids=["bench-steps-0", "stop-1e7", "step-1e-9", "sweep-twice"])
 def test_bad_input(capsys, monkeypatch, tmp_path, config, args, text, message):
-    monkeypatch.setattr("cosim.references.available_memory", lambda: 16 * 10**9)
+    monkeypatch.setattr("cosim.memory.available_memory", lambda: 16 * 10**9)
     if text is not None:
         config.write_text(text)
     code, line = fails(capsys, args, config=config, tmp=tmp_path)
