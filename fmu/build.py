@@ -5,7 +5,8 @@ code, config.h and the FMI headers, listed in the XML's SourceFiles) so it can b
 elsewhere with `cc -shared -fPIC -Isources sources/*.c -lm -ldl`. A System with an embedded
 network also gets its graph (and precomputation table) in resources/ and onnxruntime's library
 beside its own in binaries/<platform>/. Builds are cached by a hash of all their inputs; the
-GUID is derived from the same hash, so equal inputs give a bit-equal FMU.
+GUID is derived from the same hash, so equal inputs give a bit-equal FMU. `$FLEXFF_SANITIZE`
+builds the binaries with sanitizers (fmu.compile.sanitizer_flags), under their own key.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import fmpy
 
 from fmu import cache
 from fmu.codegen import NET_MODEL_FILE, NET_TABLE_FILE, generate_config_h, generate_model_c
-from fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler
+from fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler, sanitizer_flags
 from fmu.layout import make_layout, model_identifier
 from fmu.model_description import model_description_xml
 from fmu.network import Network, runtime_library
@@ -76,7 +77,7 @@ def _network_files(net: Network, input_names: list[str]) -> dict[str, bytes]:
 def _key(files: dict[str, str | bytes]) -> str:
     parts = {name: (f"{len(data)} bytes" if name.startswith("binaries/") else data)
              for name, data in files.items()}  # the runtime library is named by its version
-    parts["cflags"] = " ".join(CFLAGS)
+    parts["cflags"] = " ".join(CFLAGS + sanitizer_flags())
     parts["compiler"] = compiler_version()
     return cache.digest(parts)
 
@@ -104,7 +105,7 @@ def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: st
                 (src / name.removeprefix("sources/")).write_text(text)
         library = Path(tmp) / f"{identifier}{fmpy.sharedLibraryExtension}"
         run_compiler([src / name for name in sources], library, [src],
-                     libraries=("-lm", "-ldl"))
+                     extra_flags=("-shared", *sanitizer_flags()), libraries=("-lm", "-ldl"))
         files = {**files, f"binaries/{fmpy.platform}/{library.name}": library.read_bytes()}
         with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as zf:
             for name in sorted(files):

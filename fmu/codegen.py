@@ -139,6 +139,7 @@ def generate_config_h(system: System, layout: Layout, identifier: str, guid: str
         _c_array("char *const", "REAL_NAMES", [_c_string(v.name) for v in reals]),
         _c_array("double", "P_START", [repr(v.start) for v in params]),
         _c_array("int", "P_POSITIVE", [str(int(v.positive)) for v in params]),
+        _c_array("int", "P_FIXED", [str(int(v.variability == "fixed")) for v in params]),
         _c_array("double", "U_START", [repr(v.start) for v in inputs]),
         *(_network_config(system.network) if system.network else []),
         "",

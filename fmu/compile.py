@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 import subprocess
 import tempfile
 from pathlib import Path
@@ -19,6 +20,25 @@ from fmu import cache
 
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = ("-O2", "-std=c99", "-fPIC", "-fvisibility=hidden", "-ffp-contract=off")
+
+
+SANITIZE_ENV = "FLEXFF_SANITIZE"
+
+
+def sanitizer_flags() -> tuple[str, ...]:
+    """Flags of a sanitizer build of the FMU binaries: `$FLEXFF_SANITIZE=address,undefined`
+    (any list of gcc's -fsanitize= names) adds `-fsanitize=address,undefined
+    -fno-omit-frame-pointer -g`; unset or empty, none. They are part of the build's cache key,
+    so sanitized and plain builds never replace each other. A host that loads a sanitized FMU
+    must preload the runtime: `LD_PRELOAD="$(gcc -print-file-name=libasan.so)
+    $(gcc -print-file-name=libubsan.so)"` (and `ASAN_OPTIONS=detect_leaks=0` for Python)."""
+    value = os.environ.get(SANITIZE_ENV, "").strip()
+    if not value:
+        return ()
+    if not re.fullmatch(r"[a-z0-9_-]+(,[a-z0-9_-]+)*", value):
+        raise ValueError(f"${SANITIZE_ENV} = {value!r}: expected a comma-separated list of "
+                         f"sanitizers such as 'address,undefined'")
+    return (f"-fsanitize={value}", "-fno-omit-frame-pointer", "-g")
 
 
 def compiler() -> str:

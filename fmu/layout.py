@@ -94,6 +94,8 @@ def make_layout(system: System) -> Layout:
                 description="largest RK4 sub-step inside one communication step",
                 start=float(system.max_substep), positive=True))
             continue
+        if role == "parameter" and var.fixed:
+            variability = "fixed"
         has_start = role in ("parameter", "input")
         if has_start and not math.isfinite(var.start):
             raise ValueError(f"start value of {var.name!r} must be finite")

@@ -27,9 +27,12 @@ class Variable:
 
 @dataclass(frozen=True)
 class Parameter(Variable):
-    """A tunable real parameter; `positive` parameters are rejected at initialization if <= 0."""
+    """A real parameter; `positive` parameters are rejected at initialization if <= 0. Tunable
+    (settable while stepping) unless `fixed`: a parameter that only enters the initial state
+    (an initial condition) can only be set until initialization ends."""
 
     positive: bool = False
+    fixed: bool = False
 
 
 @dataclass(frozen=True)

@@ -49,8 +49,10 @@ def plant_system(variant: Variant | str = "nominal") -> System:
     rows = [row for row in rows if row[0] in used]
     p = ca.vertcat(kept, start)
     parameters = tuple(Parameter(n, u, d, float(v), positive) for n, v, u, d, positive in rows)
-    parameters += (Parameter("x_start", "m", "initial end-effector x position (at rest)"),
-                   Parameter("y_start", "m", "initial end-effector y position (at rest)"))
+    parameters += (Parameter("x_start", "m", "initial end-effector x position (at rest)",
+                             fixed=True),
+                   Parameter("y_start", "m", "initial end-effector y position (at rest)",
+                             fixed=True))
     return System(
         name=f"plant_{model.variant.name}",
         description=f"flexure manipulator plant, {model.variant.name} variant: Lagrangian "

@@ -4,11 +4,13 @@ the rigid-body force (numpy, CasADi) added for the physics-guided model. Both mo
 restore, libcosim, validation, closed loop, and the errors for models that do not fit."""
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
+from fmpy.fmi2 import fmi2Error
 
-from controllers.features import reference_features
+from controllers.features import feature_names, reference_features
 from controllers.learned_feedforward import learned_feedforward_system, model_metadata
 from controllers.training_range import MARGIN, RangeExcess
 from cosim.config import config_examples, parse_config
@@ -23,7 +25,7 @@ from learning.rigid import rigid_forces
 from learning.synthetic import synthetic_dataset
 from learning.threads import torch_threads
 from learning.train import train
-from tests.fmu_toys import LoggedSlave
+from tests.fmu_toys import LoggedSlave, status_of
 from tests.test_fmu_network import running_sum_graph
 
 STEPS = 600  # 0.6 s of the thesis evaluation reference at 1 kHz
@@ -165,3 +167,36 @@ def test_models_that_do_not_fit_are_refused(models, tmp_path):
         learned_feedforward_system(models / "lstm.onnx", step=3e-3)
     with pytest.raises(ValueError, match="does not exist"):
         learned_feedforward_system(tmp_path / "none.onnx")
+
+
+def _named_feature(message: str, model) -> str:
+    """The feature a non-finite-input message names, checked against the model's features."""
+    found = re.search(r"The network's input '(\w+)' \((\d+) of (\d+)\) is -?nan at t = ",
+                      message)
+    assert found, message
+    names = feature_names(model_metadata(model)["feature_set"])
+    assert (found[1], int(found[3])) == (names[int(found[2]) - 1], len(names))
+    return found[1]
+
+
+def test_a_reference_outside_the_workspace_is_named(models, fmus, reference, tmp_path):
+    """Inverse kinematics of an unreachable reference: the feature that is not finite and the
+    inputs are named (it was "the network returned -nan"), in both modes."""
+    s = LoggedSlave(fmus["lstm", "step"])
+    s.initialize()
+    s.set(x_ref=0.5, y_ref=0.01)
+    assert status_of(lambda: s.get("Fx_ff")) == fmi2Error
+    _named_feature(s.log(), models / "lstm.onnx")
+    assert "for the inputs x_ref = 0.5, y_ref = 0.01, vx_ref = 0" in s.log()
+    assert "returned" not in s.log()
+    s.free()
+    away = {n: np.append(reference[n][:STEPS], reference[n][STEPS - 1]) for n in reference}
+    away["x_ref"][20:] = 0.5
+    fmu = build_fmu(learned_feedforward_system(models / "lstm.onnx", 1e-3, away),
+                    tmp_path / "away.fmu")
+    s = LoggedSlave(fmu)
+    with pytest.raises(Exception):
+        s.initialize()  # the precomputation runs over the whole table
+    _named_feature(s.log(), models / "lstm.onnx")
+    assert "at t = 0.02: it is not defined for the inputs x_ref = 0.5" in s.log()
+    s.free()

@@ -16,6 +16,7 @@ from fmpy import read_model_description
 import fmu
 from fmu import build_fmu, fmu_key
 from fmu.codegen import generate_model_c
+from fmu.compile import SANITIZE_ENV, sanitizer_flags
 from fmu.layout import make_layout
 from fmu.runner import run_fmu
 from fmu.system import System, Variable
@@ -154,6 +155,20 @@ def test_changes_change_the_key():
                                  duffing(name="other"), discrete_pi(),
                                  discrete_pi(sample_time=2e-3)]}
     assert len(keys) == 6
+
+
+def test_a_sanitizer_build_has_its_own_key(monkeypatch):
+    """$FLEXFF_SANITIZE adds the sanitizer's flags (tests/test_fmu_fuzz.py builds with it);
+    such a build never replaces the plain one in the cache."""
+    plain = fmu_key(duffing())
+    monkeypatch.setenv(SANITIZE_ENV, "address,undefined")
+    assert sanitizer_flags() == ("-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-g")
+    assert fmu_key(duffing()) != plain
+    monkeypatch.setenv(SANITIZE_ENV, "address; rm -rf /")
+    with pytest.raises(ValueError, match="FLEXFF_SANITIZE"):
+        sanitizer_flags()
+    monkeypatch.setenv(SANITIZE_ENV, "")
+    assert sanitizer_flags() == () and fmu_key(duffing()) == plain
 
 
 def test_guid_follows_the_key(tmp_path, monkeypatch):

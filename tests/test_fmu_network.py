@@ -4,14 +4,16 @@ results extrapolated linearly in between; precomputed and step-by-step modes agr
 restore exactly; libcosim agrees; bad graphs, a missing library and NaN give clear errors."""
 
 import shutil
+import struct
 import zipfile
+from ctypes import byref, c_char
 
 import casadi as ca
 import numpy as np
 import onnx
 import pytest
 from fmpy import read_model_description
-from fmpy.fmi2 import FMU2Slave, fmi2Error
+from fmpy.fmi2 import FMU2Slave, fmi2Error, fmi2FMUstate, fmi2OK
 from onnx import TensorProto
 from onnx import helper as oh
 
@@ -242,9 +244,139 @@ def test_a_non_finite_result_stops_the_step(tmp_path_factory):
     s.free()
 
 
+def test_a_failed_network_call_leaves_no_result_behind(tmp_path_factory):
+    """After a call that returned NaN, going back to the inputs of the call before must run
+    the graph again: the failed call had overwritten the kept result (NaN read with fmi2OK)."""
+    fmu = build_toy(network_system(sqrt_graph(tmp_path_factory.mktemp("g") / "sqrt.onnx"),
+                                   name="toy_sqrt_again"), tmp_path_factory)
+    s = LoggedSlave(fmu)
+    s.initialize()
+    s.set(u1=4.0, u2=1.0)
+    good = s.get("y1", "y2")
+    s.set(u1=-1.0)
+    assert status_of(lambda: s.get("y1")) == fmi2Error
+    s.set(u1=4.0)
+    assert s.get("y1", "y2") == good
+    s.free()
+
+
 def test_a_copy_of_the_fmu_runs_from_elsewhere(step_fmu, tmp_path):
     """The library is found next to the FMU's own binary, wherever it was unpacked."""
     moved = tmp_path / "a folder with spaces" / "copy.fmu"
     moved.parent.mkdir()
     shutil.copy(step_fmu, moved)
     assert np.array_equal(_run(moved), _run(step_fmu))
+
+
+# --- precomputed mode: restored states, corrupt states, the end of the table ----------------
+
+def _steps(s, ks):
+    """Set the inputs of step k, read the outputs, step; for each k."""
+    out = []
+    for k in ks:
+        s.set(u1=INPUTS[k, 0], u2=INPUTS[k, 1])
+        out.append(s.get("y1", "y2"))
+        s.slave.doStep(k * H, H)
+    return out
+
+
+@pytest.mark.parametrize("split", [PERIOD * 4, PERIOD * 4 + 1])
+@pytest.mark.parametrize("how", ["set", "deserialize"])
+def test_a_state_restored_into_an_uninitialized_instance_continues(precomputed_fmu, split, how):
+    """Checkpoint and restart: the state of an initialized instance, restored into one that
+    was never initialized, continues exactly (it crashed: the table was only computed in
+    fmi2ExitInitializationMode)."""
+    s = LoggedSlave(precomputed_fmu, instance_name="first")
+    s.initialize()
+    _steps(s, range(split))
+    saved = s.slave.getFMUstate()
+    blob = s.slave.serializeFMUstate(saved)
+    straight = _steps(s, range(split, STEPS))
+    fresh = LoggedSlave(precomputed_fmu, instance_name="restarted")
+    fresh.slave.setFMUstate(saved if how == "set" else fresh.slave.deSerializeFMUstate(blob))
+    assert _steps(fresh, range(split, STEPS)) == straight
+    fresh.free()
+    s.slave.freeFMUstate(saved)
+    s.free()
+
+
+def _word_offsets(before: bytes, after: bytes, fmt: str, change) -> list[int]:
+    """Offsets of the aligned words of a serialized state that changed by `change` in a step
+    (the header is 24 bytes; the fields follow, 8-byte aligned)."""
+    return [k for k in range(24, len(before) - 7, 8)
+            if abs(struct.unpack_from(fmt, after, k)[0] - struct.unpack_from(fmt, before, k)[0]
+                   - change) <= 1e-15]
+
+
+def _deserialize_status(s, blob: bytes) -> int:
+    buffer = (c_char * len(blob)).from_buffer_copy(blob)
+    return status_of(s.slave.fmi2DeSerializeFMUstate, s.slave.component, buffer, len(blob),
+                     byref(fmi2FMUstate()))
+
+
+def test_a_corrupt_serialized_state_is_refused(precomputed_fmu):
+    """Every field that indexes memory is checked: a step counter outside the table (it was
+    accepted and read out of bounds) or not matching the state's time, a non-finite time."""
+    s = LoggedSlave(precomputed_fmu)
+    s.initialize()
+    _steps(s, range(5))
+    before = s.slave.serializeFMUstate(s.slave.getFMUstate())
+    _steps(s, [5])
+    blob = s.slave.serializeFMUstate(s.slave.getFMUstate())
+    [counter] = _word_offsets(before, blob, "<q", 1)  # the network's step counter
+    [clock] = _word_offsets(before, blob, "<d", H)  # the time
+    assert _deserialize_status(s, blob) == fmi2OK
+
+    def changed(offset: int, fmt: str, value) -> bytes:
+        return blob[:offset] + struct.pack(fmt, value) + blob[offset + 8:]
+
+    rows = STEPS + 1
+    for value in (-1, -PERIOD, rows, rows + PERIOD - 1, 2**62, -2**63):
+        assert _deserialize_status(s, changed(counter, "<q", value)) == fmi2Error
+        assert "corrupt state: network step counter" in s.messages[-1][2]
+    assert _deserialize_status(s, changed(counter, "<q", PERIOD)) == fmi2Error
+    assert "is not the time" in s.messages[-1][2]  # in the table, but not where the time is
+    assert _deserialize_status(s, changed(clock, "<d", float("nan"))) == fmi2Error
+    assert "corrupt state: time = nan" in s.messages[-1][2]
+    s.free()
+
+
+def test_a_corrupt_step_counter_is_refused_step_by_step(step_fmu):
+    """Without a table the counter only needs to be one a run can reach (one near LONG_MAX
+    overflowed in the next step, a negative one gave a negative phase)."""
+    s = LoggedSlave(step_fmu)
+    s.initialize()
+    _steps(s, range(4))
+    before = s.slave.serializeFMUstate(s.slave.getFMUstate())
+    _steps(s, [4])
+    blob = s.slave.serializeFMUstate(s.slave.getFMUstate())
+    [counter] = _word_offsets(before, blob, "<q", 1)
+    for value in (-1, 2**63 - 1, 2**53 + 1):
+        changed = blob[:counter] + struct.pack("<q", value) + blob[counter + 8:]
+        assert _deserialize_status(s, changed) == fmi2Error
+        assert "corrupt state: network step counter" in s.messages[-1][2]
+    s.free()
+
+
+@pytest.fixture(scope="module")
+def short_table_fmu(graph, tmp_path_factory):
+    """Precomputed over 4 model periods: the last row of the table is a call point."""
+    rows = 4 * PERIOD
+    table = np.column_stack([np.arange(rows) * H, INPUTS[:rows]])
+    return build_toy(network_system(graph, table, "toy_network_short"), tmp_path_factory)
+
+
+def test_no_step_past_the_end_of_the_table(short_table_fmu, step_fmu):
+    """A step from the table's last row is refused (the next read was past the table), and
+    the last row itself reads as step by step."""
+    rows = 4 * PERIOD
+    s, reference = LoggedSlave(short_table_fmu), LoggedSlave(step_fmu)
+    for slave in (s, reference):
+        slave.initialize()
+        _steps(slave, range(rows - 1))
+        slave.set(u1=INPUTS[rows - 1, 0], u2=INPUTS[rows - 1, 1])
+    assert status_of(s.slave.doStep, (rows - 1) * H, H) == fmi2Error
+    assert f"the precomputation table ({rows} rows) ends at t = 0.011" in s.log()
+    assert s.get("y1", "y2") == reference.get("y1", "y2")  # still at the last row
+    s.free()
+    reference.free()

@@ -4,7 +4,10 @@ Every misuse must return the documented status, log a message naming the culprit
 the process (and, where documented, the instance) in a usable state.
 """
 
-from ctypes import byref, c_char, c_double, c_uint
+import struct
+import time
+from ctypes import (addressof, byref, c_char, c_double, c_size_t, c_uint, c_void_p,
+                    create_string_buffer)
 
 import numpy as np
 import pytest
@@ -86,6 +89,45 @@ def test_null_pointers_are_errors(slave):
     assert status_of(f.fmi2SetDebugLogging, c, 1, 2, None) == fmi2Error
 
 
+def test_freed_and_garbage_component_pointers_are_errors(duffing_fmu):
+    """Live instances are registered: a second fmi2FreeInstance, a call after it and a pointer
+    to anything else are refused without reading the memory behind them (they read freed
+    memory before, or crashed)."""
+    s = LoggedSlave(duffing_fmu)
+    f, freed = s.slave, s.slave.component
+    s.initialize()
+    f.fmi2FreeInstance(freed)
+    f.fmi2FreeInstance(freed)  # the second free is a no-op
+    garbage = create_string_buffer(b"FLXF" * 64)  # even with the magic number in it
+    for comp in (freed, c_void_p(addressof(garbage)), c_void_p(0x10)):
+        assert status_of(f.fmi2DoStep, comp, 0.0, H, 1) == fmi2Error
+        assert status_of(f.fmi2Reset, comp) == fmi2Error
+        assert status_of(f.fmi2GetFMUstate, comp, byref(fmi2FMUstate())) == fmi2Error
+        f.fmi2FreeInstance(comp)
+    other = LoggedSlave(duffing_fmu, unzipdir=s.unzipdir)  # the library still works
+    other.initialize()
+    assert np.isfinite(run(other, 2)).all()
+    other.slave.freeInstance()
+    s.free()  # frees the freed instance a third time, then unloads the library
+
+
+def test_instances_beyond_the_registry_are_refused(duffing_fmu):
+    s = LoggedSlave(duffing_fmu)
+    f, cb = s.slave, byref(s.callbacks)
+    made = []
+    while len(made) < 5000:
+        comp = f.fmi2Instantiate(b"many", fmi2CoSimulation, s.guid.encode(), b"", cb, 0, 0)
+        if comp is None:
+            break
+        made.append(comp)
+    assert len(made) == 4096 - 1  # with `s`, the most instances one library holds
+    assert "4096 instances of this FMU are alive in this process" in s.log()
+    for comp in made:
+        f.fmi2FreeInstance(comp)
+    assert f.fmi2Instantiate(b"again", fmi2CoSimulation, s.guid.encode(), b"", cb, 0, 0)
+    s.free()
+
+
 def test_instantiate_checks_its_arguments(slave):
     f = slave.slave
     cb = byref(slave.callbacks)
@@ -105,6 +147,20 @@ def test_wrong_communication_point_and_step(slave):
     assert status_of(f.fmi2DoStep, c, 0.0, -H, 1) == fmi2Error
     assert status_of(f.fmi2DoStep, c, 0.0, float("nan"), 1) == fmi2Error
     assert run(slave, 2).shape == (2, 4)  # the instance is still usable
+
+
+def test_a_step_of_too_many_sub_steps_is_refused_at_once(slave):
+    """A huge step with a tiny max_substep is refused before it starts (it could run for
+    10^9 sub-steps), naming both; the instance stays usable."""
+    slave.initialize()
+    slave.set(max_substep=1e-9)
+    start = time.perf_counter()
+    assert status_of(slave.slave.fmi2DoStep, slave.slave.component, 0.0, 10.0, 1) == fmi2Error
+    assert time.perf_counter() - start < 0.5
+    assert ("communicationStepSize = 10 s needs 1e+10 RK4 sub-steps of max_substep = 1e-09 s, "
+            "more than the 1000000 allowed per step") in slave.log()
+    slave.set(max_substep=2.5e-4)
+    assert np.isfinite(run(slave, 2)).all()
 
 
 def test_stop_time_is_enforced(slave):
@@ -266,6 +322,63 @@ def test_deserialize_validates_the_blob(slave, pi_fmu):
     pi.initialize()
     assert status(pi.slave.serializeFMUstate(pi.slave.getFMUstate())) == fmi2Error
     pi.free()
+
+
+def test_a_state_of_another_model_is_refused(slave, pi_fmu):
+    """An FMU state of another flexff FMU in the process holds another model's data, of
+    another size: restoring or serializing it read past its end."""
+    slave.initialize()
+    pi = LoggedSlave(pi_fmu)
+    pi.initialize()
+    foreign = pi.slave.getFMUstate()
+    f, c = slave.slave, slave.slave.component
+    assert status_of(f.fmi2SetFMUstate, c, foreign) == fmi2Error
+    assert "the FMU state belongs to another model" in slave.log()
+    assert status_of(f.fmi2SerializedFMUstateSize, c, foreign, byref(c_size_t())) == fmi2Error
+    assert status_of(f.fmi2FreeFMUstate, c, byref(foreign)) == fmi2Error
+    assert status_of(f.fmi2GetFMUstate, c, byref(foreign)) == fmi2Error  # not overwritten
+    pi.slave.setFMUstate(foreign)  # still the other model's, intact
+    pi.slave.freeFMUstate(foreign)
+    pi.free()
+
+
+def _offset(blob: bytes, value: float) -> int:
+    """Where the double `value` is stored in a serialized state (after the 24-byte header)."""
+    [offset] = [k for k in range(24, len(blob) - 7, 8) if struct.unpack_from("<d", blob, k)[0]
+                == value]
+    return offset
+
+
+def test_deserialize_checks_every_field(slave):
+    """A serialized state comes from outside: each field is checked against what the FMU can
+    produce itself, and a corrupt one is refused, naming it."""
+    slave.initialize(k=123.456)
+    slave.set(F=0.777)
+    run(slave, 3)
+    slave.set(F=0.777)
+    f = slave.slave
+    blob = f.serializeFMUstate(f.getFMUstate())
+    [q] = slave.get("q")
+
+    def status(offset: int, fmt: str, value) -> int:
+        data = blob[:offset] + struct.pack(fmt, value) + blob[offset + struct.calcsize(fmt):]
+        buffer = (c_char * len(data)).from_buffer_copy(data)
+        return status_of(f.fmi2DeSerializeFMUstate, f.component, buffer, len(data),
+                         byref(fmi2FMUstate()))
+
+    nan, inf = float("nan"), float("inf")
+    for offset, fmt, value, message in [
+            (24, "<i", 3, "machine state 3 is none of the FMU's"),
+            (_offset(blob, 3 * H), "<d", nan, "time = nan"),
+            (_offset(blob, 123.456), "<d", -1.0, "parameter 'k' = -1 must be > 0"),
+            (_offset(blob, 0.777), "<d", inf, "input 'F' = inf"),
+            (_offset(blob, q), "<d", nan, "state 'q' = nan")]:
+        assert status(offset, fmt, value) == fmi2Error
+        assert slave.messages[-1][2] == f"fmi2DeSerializeFMUstate(): corrupt state: {message}."
+    restored = f.deSerializeFMUstate(blob)  # the intact blob restores
+    f.setFMUstate(restored)
+    assert slave.get("q") == [q]
+    f.freeFMUstate(restored)
 
 
 def test_two_instances_are_independent(duffing_fmu):

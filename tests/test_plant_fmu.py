@@ -3,13 +3,15 @@
 import fmpy.validation
 import numpy as np
 import pytest
+from fmpy import read_model_description
+from fmpy.fmi2 import fmi2Error
 from scipy.integrate import solve_ivp
 
 from fmu.runner import Slave, run_fmu, run_fmu_libcosim
 from fmu.validation import validate_fmu
 from plant.model import PlantModel
 from plant.system import plant_system
-from tests.fmu_toys import LoggedSlave, rk4_reference
+from tests.fmu_toys import LoggedSlave, rk4_reference, status_of
 
 STEPS = 1500
 H = 1e-3
@@ -131,4 +133,39 @@ def test_bad_physical_parameter_is_rejected_by_name(plant_fmus, name):
     with pytest.raises(Exception):
         slave.initialize(**{name: 0.0})
     assert name in slave.log()
+    slave.free()
+
+
+@pytest.mark.parametrize("variant", ["nominal", "hardware"])
+def test_a_start_out_of_reach_is_refused_naming_it(plant_fmus, variant):
+    """A start position the arms cannot reach has no encoder angles: initialization is refused,
+    naming the output and x_start / y_start (it initialized and read NaN with fmi2OK); a
+    reachable start then initializes."""
+    slave = LoggedSlave(str(plant_fmus[variant]))
+    f = slave.slave
+    f.setupExperiment(startTime=0.0)
+    f.enterInitializationMode()
+    slave.set(x_start=0.5, y_start=0.01)
+    assert status_of(f.exitInitializationMode) == fmi2Error
+    assert "Initial output 'theta_s1' = -nan is not finite" in slave.log()
+    assert "for the parameters set (x_start = 0.5, y_start = 0.01)" in slave.log()
+    slave.set(**START)  # still in initialization mode
+    f.exitInitializationMode()
+    assert np.isfinite(slave.get("theta_s1", "theta_s2", "theta_s3")).all()
+    slave.free()
+
+
+def test_the_start_position_is_fixed(plant_fmus):
+    """x_start and y_start are initial conditions: fixed parameters, refused after
+    initialization (they were declared tunable and ignored)."""
+    md = read_model_description(str(plant_fmus["nominal"]))
+    variability = {v.name: v.variability for v in md.modelVariables}
+    assert variability["x_start"] == variability["y_start"] == "fixed"
+    assert variability["k_e1"] == "tunable"
+    slave = LoggedSlave(str(plant_fmus["nominal"]))
+    slave.initialize(**START)
+    assert status_of(lambda: slave.set(x_start=0.0)) == fmi2Error
+    assert "parameter 'x_start' is fixed (an initial condition)" in slave.log()
+    assert slave.get("x_start") == [START["x_start"]]
+    slave.set(k_e1=slave.get("k_e1")[0] * 1.01)  # the physical parameters stay tunable
     slave.free()

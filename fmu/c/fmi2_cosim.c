@@ -57,7 +57,13 @@ typedef char assert_sz_arg[SZ_ARG >= 5 ? 1 : -1];
 #define SERIAL_MAGIC "FLXFSTA"     /* 7 characters + NUL = 8 bytes */
 #define SERIAL_VERSION 1u
 #define TIME_TOL 1e-9              /* relative tolerance on communication times */
-#define MAX_SUBSTEPS 1000000000.0  /* refuse steps that would need more RK4 sub-steps */
+#define MAX_SUBSTEPS 1000000.0     /* RK4 sub-steps per fmi2DoStep: more is refused, not run
+                                    * (10^6 already take seconds; a typo in max_substep or in
+                                    * the step must not block the caller for hours) */
+#define REGISTRY_SIZE 4096         /* live instances of one FMU in one process (a power of 2) */
+#define NET_STEP_MAX (1L << 53)    /* communication points of a run (285,000 years at 1 kHz): a
+                                    * serialized step counter beyond is corrupt, and counting on
+                                    * from near LONG_MAX would overflow */
 
 typedef int (*CasadiFn)(const casadi_real **arg, casadi_real **res, casadi_int *iw,
                         casadi_real *w, int mem);
@@ -176,6 +182,7 @@ typedef struct {
 
 typedef struct {
     uint32_t magic;
+    uint64_t model; /* model_hash(): a state of another flexff FMU in the process is refused */
     Data d;
 } State;
 
@@ -198,9 +205,12 @@ typedef struct {
 #if HAS_NETWORK
     Network *net;
     fmi2Real features[NET_N_IN];
+    fmi2Real x0[DIM(N_X)]; /* the initial state a table is precomputed with */
     double *table;       /* NET_PRECOMPUTED: rows of time and the N_U inputs */
     long table_rows;
-    double *precomputed; /* NET_PRECOMPUTED: the result of every call point of the table */
+    double *precomputed; /* NET_PRECOMPUTED: the result of every call point of the table, or
+                          * NULL until needed (ExitInitializationMode, or the first call point
+                          * after a state was restored into an instance never initialized) */
 #endif
 } Instance;
 
@@ -248,10 +258,55 @@ static fmi2Status fail(Instance *c, const char *fmt, ...) {
     return fmi2Error;
 }
 
-/* The instance behind `comp` if it is valid and `fname` is allowed in its mode, else NULL. */
+/* ---------------------------------------------------------------------------------------- */
+/* Live instances                                                                            */
+
+/* Every instance of this library that fmi2Instantiate returned and fmi2FreeInstance has not
+ * freed yet, by address. A component pointer is looked up here before it is dereferenced, so
+ * a freed, foreign or garbage pointer (a second fmi2FreeInstance, a call after it) is refused
+ * without reading the memory it points to: a magic number alone would be read from freed
+ * memory. Slots are claimed and released with atomic operations (no lock: instances may live
+ * in different threads); an instance sits at, or soon after, the slot its address hashes to. */
+static void *registry[REGISTRY_SIZE];
+
+static unsigned registry_home(const void *p) {
+    return (unsigned)((((uint64_t)(uintptr_t)p >> 4) * 0x9e3779b97f4a7c15ull) >> 40) &
+           (REGISTRY_SIZE - 1);
+}
+
+/* The slot of `p`, or -1 if it is not a live instance (a full scan: only misuse pays it). */
+static int registry_find(const void *p) {
+    const unsigned home = registry_home(p);
+    if (p == NULL) return -1;
+    for (unsigned k = 0; k < REGISTRY_SIZE; k++) {
+        const unsigned i = (home + k) & (REGISTRY_SIZE - 1);
+        if (__atomic_load_n(&registry[i], __ATOMIC_ACQUIRE) == p) return (int)i;
+    }
+    return -1;
+}
+
+/* Claim a free slot for `p`: 0, or -1 when REGISTRY_SIZE instances are alive. */
+static int registry_add(void *p) {
+    const unsigned home = registry_home(p);
+    for (unsigned k = 0; k < REGISTRY_SIZE; k++) {
+        void *expected = NULL;
+        if (__atomic_compare_exchange_n(&registry[(home + k) & (REGISTRY_SIZE - 1)], &expected, p,
+                                        0, __ATOMIC_ACQ_REL, __ATOMIC_ACQUIRE))
+            return 0;
+    }
+    return -1;
+}
+
+static void registry_remove(const void *p) {
+    const int slot = registry_find(p);
+    if (slot >= 0) __atomic_store_n(&registry[slot], NULL, __ATOMIC_RELEASE);
+}
+
+/* The instance behind `comp` if it is a live instance and `fname` is allowed in its mode,
+ * else NULL (with no instance to log to, a bad pointer gets fmi2Error without a message). */
 static Instance *enter(fmi2Component comp, const char *fname, int allowed) {
     Instance *c = (Instance *)comp;
-    if (c == NULL || c->magic != INSTANCE_MAGIC) return NULL;
+    if (registry_find(comp) < 0 || c->magic != INSTANCE_MAGIC) return NULL;
     if (!(c->d.mode & allowed)) {
         fail(c, "%s() is not allowed in state '%s'.", fname, mode_name(c->d.mode));
         return NULL;
@@ -305,6 +360,15 @@ static int first_nonfinite(const fmi2Real *v, int n) {
     return -1;
 }
 
+/* "x_ref = 0.5, y_ref = 0.2, ...": the inputs u, for messages ("" without inputs). */
+static void describe_inputs(const fmi2Real *u, char *text, size_t size) {
+    size_t used = 0;
+    text[0] = '\0';
+    for (int i = 0; i < N_U && used < size; i++)
+        used += (size_t)snprintf(text + used, size - used, "%s%s = %.9g", i ? ", " : "",
+                                 REAL_NAMES[VR_U + i], u[i]);
+}
+
 /* One RK4 step of length dt from c->xn, in place, inputs held constant. */
 static int rk4_step(Instance *c, fmi2Real dt) {
     fmi2Real *x = c->xn;
@@ -328,8 +392,9 @@ static const NetSpec NET_SPEC = {NET_INPUT, NET_OUTPUT, NET_N_IN, N_R, NET_N_STA
                                  NET_STATE_INPUTS, NET_STATE_OUTPUTS, NET_STATE_RANK,
                                  NET_STATE_DIMS, NET_STATE_OFFSET};
 
-static int eval_network_input(Instance *c, const fmi2Real *u, fmi2Real *features) {
-    return eval(c, MODEL_FN(network_input), c->mem[3], c->d.x, u, c->d.p, NULL, NULL, features);
+static int eval_network_input(Instance *c, const fmi2Real *x, const fmi2Real *u,
+                              fmi2Real *features) {
+    return eval(c, MODEL_FN(network_input), c->mem[3], x, u, c->d.p, NULL, NULL, features);
 }
 
 /* The local path of file `name` in the resources folder given as a file URI. */
@@ -448,15 +513,41 @@ static fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t
     return fmi2OK;
 }
 
-/* Run the network once over the table's call points (every NET_PERIOD-th row), from the zero
- * state: the precomputed results. */
-static fmi2Status net_precompute(Instance *c) {
-    const long calls = (c->table_rows + NET_PERIOD - 1) / NET_PERIOD;
-    char error[1024];
+/* The network's inputs computed from the FMU's inputs u must be finite: a non-finite one
+ * (inverse kinematics of a reference outside the workspace, say) would only come back as
+ * "the network returned nan", which names neither the cause nor the culprit. */
+static fmi2Status check_network_inputs(Instance *c, const fmi2Real *features, const fmi2Real *u,
+                                       fmi2Real t) {
+    const int bad = first_nonfinite(features, NET_N_IN);
+    char inputs[1024];
+    if (bad < 0) return fmi2OK;
+    const char *name = net_input_name(c->net, bad);
+    describe_inputs(u, inputs, sizeof inputs);
+    return fail(c, "The network's input %s%s%s(%d of %d) is %g at t = %.17g: it is not defined "
+                   "for the inputs %s (for a feedforward: is the reference inside the workspace?).",
+                name ? "'" : "", name ? name : "", name ? "' " : "", bad + 1, NET_N_IN,
+                features[bad], t, inputs);
+}
+
+/* The table must start at the start time and advance by the sample time: row k is then the
+ * communication point k. */
+static fmi2Status check_table_start(Instance *c) {
     if (fabs(c->table[0] - c->d.time) > TIME_TOL * fmax(1.0, fabs(c->d.time)) ||
         (c->table_rows > 1 && fabs(c->table[1 + N_U] - c->table[0] - SAMPLE_TIME) > TIME_TOL))
         return fail(c, "The precomputation table must start at the start time %g and advance by "
                        "the sample time %g per row.", c->d.time, SAMPLE_TIME);
+    return fmi2OK;
+}
+
+static long table_calls(const Instance *c) { return (c->table_rows + NET_PERIOD - 1) / NET_PERIOD; }
+
+static double table_time(const Instance *c, long row) { return c->table[row * (1 + N_U)]; }
+
+/* Run the network once over the table's call points (every NET_PERIOD-th row), from the zero
+ * state, its inputs evaluated at the initial state x0: the precomputed results. */
+static fmi2Status net_precompute(Instance *c, const fmi2Real *x0) {
+    const long calls = table_calls(c);
+    char error[1024];
     double *features = (double *)malloc(sizeof(double) * (size_t)(calls * NET_N_IN));
     float *state = (float *)calloc(2 * DIM(NET_STATE_SIZE), sizeof(float));
     free(c->precomputed);
@@ -465,28 +556,49 @@ static fmi2Status net_precompute(Instance *c) {
     if (features == NULL || state == NULL || c->precomputed == NULL) {
         status = fail(c, "Out of memory precomputing %ld network calls.", calls);
     } else {
-        for (long k = 0; k < calls && status == fmi2OK; k++)
-            if (eval_network_input(c, c->table + k * NET_PERIOD * (1 + N_U) + 1,
-                                   features + k * NET_N_IN) != 0)
+        for (long k = 0; k < calls && status == fmi2OK; k++) {
+            const double *row = c->table + k * NET_PERIOD * (1 + N_U);
+            if (eval_network_input(c, x0, row + 1, features + k * NET_N_IN) != 0)
                 status = fail(c, "Evaluating the network's inputs failed.");
+            else
+                status = check_network_inputs(c, features + k * NET_N_IN, row + 1, row[0]);
+        }
         if (status == fmi2OK && net_run(c->net, features, calls, state, c->precomputed,
                                         state + DIM(NET_STATE_SIZE), error, sizeof error) != 0)
             status = fail(c, "%s", error);
         for (long k = 0; k < calls && status == fmi2OK; k++)
             status = check_finite_result(c, c->precomputed + k * N_R,
-                                         c->table[k * NET_PERIOD * (1 + N_U)]);
+                                         table_time(c, k * NET_PERIOD));
     }
     free(features);
     free(state);
+    if (status != fmi2OK) {
+        free(c->precomputed); /* never leave a partial table to be read */
+        c->precomputed = NULL;
+    }
     return status;
 }
 
-/* Precomputed: the inputs a step starts from must be the table's (outputs may be read with
- * the inputs of the previous point, as a Jacobi master does). */
+/* The precomputed results, computed now if this instance has none: a state restored into an
+ * instance that was never initialized (a checkpoint continued in another process) reaches a
+ * call point without fmi2ExitInitializationMode. The network's inputs do not depend on the
+ * state in the precomputed mode's use (the learned feedforward's come from the reference
+ * alone); for any other model they are evaluated at the initial state of the current
+ * parameters, as fmi2ExitInitializationMode does. */
+static fmi2Status net_ensure_precomputed(Instance *c) {
+    if (c->precomputed != NULL) return fmi2OK;
+    if (eval_initial_state(c, c->x0) != 0) return fail(c, "Evaluating the initial state failed.");
+    return net_precompute(c, c->x0);
+}
+
+/* Precomputed: a step goes from one row of the table to the next, so it must start before the
+ * last row (there are no inputs past it to check, nor a result to give), with the inputs of
+ * its row (outputs may be read with the inputs of the previous point, as a Jacobi master does). */
 static fmi2Status check_table_inputs(Instance *c) {
-    if (c->d.net_step >= c->table_rows)
-        return fail(c, "The precomputation table ends at t = %.17g; the run went past it.",
-                    c->table[(c->table_rows - 1) * (1 + N_U)]);
+    if (c->d.net_step < 0 || c->d.net_step + 1 >= c->table_rows)
+        return fail(c, "fmi2DoStep(): the precomputation table (%ld rows) ends at t = %.9g: "
+                       "this FMU was built for a reference that ends there and cannot step past "
+                       "it.", c->table_rows, table_time(c, c->table_rows - 1));
     const double *row = c->table + c->d.net_step * (1 + N_U) + 1;
     for (int i = 0; i < N_U; i++)
         if (fabs(c->d.u[i] - row[i]) > 1e-9 * (1.0 + fabs(row[i])))
@@ -496,15 +608,27 @@ static fmi2Status check_table_inputs(Instance *c) {
     return fmi2OK;
 }
 
+/* The precomputed result of call point `call` into net_new; the bound is checked here too, so
+ * no sequence of calls can read past the table. */
+static fmi2Status net_lookup(Instance *c, long call) {
+    if (net_ensure_precomputed(c) != fmi2OK) return fmi2Error;
+    if (call < 0 || call >= table_calls(c))
+        return fail(c, "Communication point %ld is outside the precomputation table (%ld rows).",
+                    c->d.net_step, c->table_rows);
+    memcpy(c->d.net_new, c->precomputed + call * N_R, sizeof c->d.net_new);
+    return fmi2OK;
+}
+
 /* The network's result for the call point at the current time, into net_new. */
 static fmi2Status net_call(Instance *c) {
     const long call = c->d.net_step / NET_PERIOD;
     char error[1024];
     if (NET_PRECOMPUTED && c->d.mode != MODE_INIT) {
-        memcpy(c->d.net_new, c->precomputed + call * N_R, sizeof c->d.net_new);
+        if (net_lookup(c, call) != fmi2OK) return fmi2Error;
     } else {
-        if (eval_network_input(c, c->d.u, c->features) != 0)
+        if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
             return fail(c, "Evaluating the network's inputs failed.");
+        if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
         if (net_run(c->net, c->features, 1, c->d.net_state, c->d.net_new, c->d.net_state_new,
                     error, sizeof error) != 0)
             return fail(c, "%s", error);
@@ -518,6 +642,7 @@ static fmi2Status net_prepare(Instance *c) {
     const long phase = c->d.net_step % NET_PERIOD;
     if (phase == 0) {
         if (!c->d.net_pending || memcmp(c->d.net_u, c->d.u, sizeof c->d.u) != 0) {
+            c->d.net_pending = 0; /* a failed call leaves no result to reuse for any inputs */
             if (net_call(c) != fmi2OK) return fmi2Error;
             memcpy(c->d.net_u, c->d.u, sizeof c->d.u);
             c->d.net_pending = 1;
@@ -687,6 +812,13 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     }
     memset(c, 0, sizeof *c);
     memcpy(name, instanceName, len);
+    if (registry_add(c) != 0) {
+        functions->freeMemory(name);
+        functions->freeMemory(c);
+        log_early(functions, instanceName, "fmi2Instantiate(): %d instances of this FMU are "
+                  "alive in this process, the most it can hold.", REGISTRY_SIZE);
+        return NULL;
+    }
     c->magic = INSTANCE_MAGIC;
     c->cb = *functions;
     c->name = name;
@@ -730,7 +862,8 @@ void fmi2FreeInstance(fmi2Component comp) {
     MODEL_FN(dynamics_decref)();
     MODEL_FN(output_decref)();
     MODEL_FN(network_input_decref)();
-    c->magic = 0; /* make use after free detectable */
+    registry_remove(c); /* from now on the pointer is refused without being read */
+    c->magic = 0;
     c->cb.freeMemory(c->name);
     c->cb.freeMemory(c);
 }
@@ -761,20 +894,53 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
     return fmi2OK;
 }
 
+/* "x_start = 0.5, y_start = 0.4": the parameters set away from their start values, the usual
+ * cause of an initial point the model cannot have; "" if there are none. */
+static void describe_changed_parameters(const Instance *c, char *text, size_t size) {
+    size_t used = 0;
+    text[0] = '\0';
+    for (int i = 0; i < N_P && used < size; i++)
+        if (!(c->d.p[i] == P_START[i]))
+            used += (size_t)snprintf(text + used, size - used, "%s%s = %.9g", used ? ", " : "",
+                                     REAL_NAMES[VR_P + i], c->d.p[i]);
+}
+
+/* The initial values v[0..n) (of the block starting at value reference vr) must be finite; the
+ * message names the first that is not, the parameters that were changed and, for outputs,
+ * the inputs. */
+static fmi2Status check_initial(Instance *c, const char *what, const fmi2Real *v, int n,
+                                fmi2ValueReference vr) {
+    const int bad = first_nonfinite(v, n);
+    char changed[512], inputs[512] = "";
+    if (bad < 0) return fmi2OK;
+    describe_changed_parameters(c, changed, sizeof changed);
+    if (vr == VR_Y) describe_inputs(c->d.u, inputs, sizeof inputs);
+    return fail(c, "Initial %s '%s' = %g is not finite: the model has no valid initial point for "
+                   "%s%s%s%s%s.", what, REAL_NAMES[vr + bad], v[bad],
+                changed[0] ? "the parameters set (" : "the parameters at their start values",
+                changed, changed[0] ? ")" : "", inputs[0] ? " and the inputs " : "", inputs);
+}
+
 /* Validates the parameters (staying in initialization mode if one is bad), then computes the
- * initial state and seeds the noise. */
+ * initial state and seeds the noise. The initial state and outputs must be finite: a start
+ * point the model cannot have (a plant's x_start out of the arms' reach) would otherwise
+ * initialize and give NaN outputs with fmi2OK. */
 fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     Instance *c = enter(comp, "fmi2ExitInitializationMode", MODE_INIT);
     if (!c) return fmi2Error;
     if (check_parameters(c) != fmi2OK) return fmi2Error;
     if (compute_initial(c) != 0) return fail(c, "Evaluating the initial state failed.");
-    int bad = first_nonfinite(c->d.x, N_X);
-    if (bad >= 0) return fail(c, "Initial state '%s' is not finite.", REAL_NAMES[VR_X + bad]);
+    if (check_initial(c, "state", c->d.x, N_X, VR_X) != fmi2OK) return fmi2Error;
 #if HAS_NETWORK
     net_restart(c);
-    if (NET_PRECOMPUTED && net_precompute(c) != fmi2OK) return fmi2Error;
+    if (NET_PRECOMPUTED && (check_table_start(c) != fmi2OK || net_precompute(c, c->d.x) != fmi2OK))
+        return fmi2Error;
 #endif
-    c->d.mode = MODE_STEPPING;
+    c->d.mode = MODE_STEPPING; /* the outputs as the first fmi2GetReal will see them */
+    if (compute_outputs(c) != fmi2OK || check_initial(c, "output", c->y, N_Y, VR_Y) != fmi2OK) {
+        c->d.mode = MODE_INIT;
+        return fmi2Error;
+    }
     return fmi2OK;
 }
 
@@ -834,6 +1000,9 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
                         is_output(r) ? "output" : "internal state");
         if (is_input(r) && !isfinite(value[i]))
             return fail(c, "fmi2SetReal(): input '%s' = %g is not finite.", REAL_NAMES[r], value[i]);
+        if (is_parameter(r) && P_FIXED[r - VR_P] && c->d.mode == MODE_STEPPING)
+            return fail(c, "fmi2SetReal(): parameter '%s' is fixed (an initial condition): it can "
+                           "only be set before fmi2ExitInitializationMode.", REAL_NAMES[r]);
         if (!is_input(r) && c->d.mode == MODE_STEPPING) {
             const char *why = parameter_problem(r, value[i]);
             if (why) return fail(c, "fmi2SetReal(): parameter '%s' = %g %s.", REAL_NAMES[r], value[i], why);
@@ -907,10 +1076,70 @@ fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size
 /* ---------------------------------------------------------------------------------------- */
 /* FMU states                                                                                */
 
+/* Why a deserialized Data cannot be a state of this FMU (into `why`), or 0 if it can be one.
+ * Serialized bytes come from outside (a file, another process): every field that indexes
+ * memory or that the FMU relies on is checked against what the FMU itself can produce, so
+ * that a corrupt state is refused here instead of being run. */
+static int data_problem(const Instance *c, const Data *d, char *why, size_t size) {
+    const int initialized = d->mode & (MODE_STEPPING | MODE_TERMINATED | MODE_ERROR);
+    int bad;
+    (void)c; /* used with a network only */
+#define PROBLEM(...) do { snprintf(why, size, __VA_ARGS__); return 1; } while (0)
+    if (!(d->mode & ANY_MODE) || (d->mode & (d->mode - 1)) != 0)
+        PROBLEM("machine state %d is none of the FMU's", d->mode);
+    if (!isfinite(d->time)) PROBLEM("time = %g", d->time);
+    /* a stop time of +inf is no stop, as fmi2SetupExperiment allows */
+    if ((d->stop_time_defined != 0 && d->stop_time_defined != 1) ||
+        (d->stop_time_defined && isnan(d->stop_time)))
+        PROBLEM("stop time %g (defined: %d)", d->stop_time, d->stop_time_defined);
+    if ((bad = first_nonfinite(d->u, N_U)) >= 0)
+        PROBLEM("input '%s' = %g", REAL_NAMES[VR_U + bad], d->u[bad]);
+    if (first_nonfinite(d->w, N_W) >= 0 || (d->rng.has_spare != 0 && d->rng.has_spare != 1) ||
+        !isfinite(d->rng.spare))
+        PROBLEM("noise generator");
+    /* Parameters may be anything until fmi2ExitInitializationMode checks them; from then on
+     * they and the state are what the checks let through. */
+    for (int i = 0; initialized && i < N_P + N_MS; i++) {
+        const fmi2ValueReference vr = (fmi2ValueReference)(VR_P + i);
+        const fmi2Real value = is_parameter(vr) ? d->p[i] : d->max_substep;
+        const char *problem = parameter_problem(vr, value);
+        if (problem) PROBLEM("parameter '%s' = %g %s", REAL_NAMES[vr], value, problem);
+    }
+    if (initialized && (bad = first_nonfinite(d->x, N_X)) >= 0)
+        PROBLEM("state '%s' = %g", REAL_NAMES[VR_X + bad], d->x[bad]);
+#if HAS_NETWORK
+    if (d->net_step < 0 || d->net_step > NET_STEP_MAX)
+        PROBLEM("network step counter %ld", d->net_step);
+    if (!initialized && d->net_step != 0)
+        PROBLEM("network step counter %ld before initialization", d->net_step);
+    if (d->net_pending != 0 && d->net_pending != 1) PROBLEM("network flag %d", d->net_pending);
+    if (d->net_pending && (first_nonfinite(d->net_new, N_R) >= 0 ||
+                           first_nonfinite(d->net_u, N_U) >= 0))
+        PROBLEM("network result at this point");
+    if (first_nonfinite(d->net_last, N_R) >= 0 || first_nonfinite(d->net_before, N_R) >= 0)
+        PROBLEM("last network results");
+    if (NET_PRECOMPUTED && initialized) {
+        /* Row net_step of the table is the current communication point. */
+        if (d->net_step >= c->table_rows)
+            PROBLEM("network step counter %ld past the precomputation table (%ld rows)",
+                    d->net_step, c->table_rows);
+        if (!(fabs(d->time - table_time(c, d->net_step)) <= 0.5 * SAMPLE_TIME))
+            PROBLEM("time %.17g is not the time %.17g of row %ld of the precomputation table",
+                    d->time, table_time(c, d->net_step), d->net_step);
+    }
+#endif
+#undef PROBLEM
+    return 0;
+}
+
 static State *as_state(Instance *c, fmi2FMUstate s, const char *fname) {
     State *st = (State *)s;
     if (st == NULL || st->magic != STATE_MAGIC) {
         fail(c, "%s(): invalid FMU state.", fname);
+        return NULL;
+    }
+    if (st->model != model_hash()) { /* its Data has another size and layout */
+        fail(c, "%s(): the FMU state belongs to another model.", fname);
         return NULL;
     }
     return st;
@@ -929,6 +1158,7 @@ static State *state_for_writing(Instance *c, fmi2FMUstate *FMUstate, const char 
         return NULL;
     }
     st->magic = STATE_MAGIC;
+    st->model = model_hash();
     *FMUstate = st;
     return st;
 }
@@ -1006,8 +1236,9 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serialized
         return fail(c, "fmi2DeSerializeFMUstate(): not a serialized state of this FMU version.");
     if (h.model_hash != model_hash())
         return fail(c, "fmi2DeSerializeFMUstate(): the state belongs to another model (GUID mismatch).");
-    if (!(d.mode & ANY_MODE) || (d.mode & (d.mode - 1)) != 0)
-        return fail(c, "fmi2DeSerializeFMUstate(): corrupt machine state %d.", d.mode);
+    char why[512];
+    if (data_problem(c, &d, why, sizeof why))
+        return fail(c, "fmi2DeSerializeFMUstate(): corrupt state: %s.", why);
     State *st = state_for_writing(c, FMUstate, "fmi2DeSerializeFMUstate");
     if (!st) return fmi2Error;
     st->d = d;
@@ -1074,8 +1305,10 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h,
     } else {
         const double ratio = h / c->d.max_substep - 1e-12;
         if (!(ratio < MAX_SUBSTEPS))
-            return fail(c, "fmi2DoStep(): step %g needs too many sub-steps of max_substep = %g.", h,
-                        c->d.max_substep);
+            return fail(c, "fmi2DoStep(): communicationStepSize = %g s needs %.3g RK4 sub-steps of "
+                           "max_substep = %g s, more than the %.0f allowed per step: raise "
+                           "max_substep or take shorter steps.", h, ceil(ratio), c->d.max_substep,
+                        MAX_SUBSTEPS);
         const long n = ratio < 1.0 ? 1 : (long)ceil(ratio);
         const fmi2Real dt = h / (fmi2Real)n;
         err = 0;

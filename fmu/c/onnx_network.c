@@ -28,6 +28,7 @@ typedef struct OrtTypeInfo OrtTypeInfo;
 typedef struct OrtTensorTypeAndShapeInfo OrtTensorTypeAndShapeInfo;
 typedef struct OrtAllocator OrtAllocator;
 typedef struct OrtRunOptions OrtRunOptions;
+typedef struct OrtModelMetadata OrtModelMetadata;
 
 enum { ORT_LOGGING_LEVEL_ERROR = 3 };
 enum { ELEMENT_FLOAT = 1, ELEMENT_DOUBLE = 11 };
@@ -67,7 +68,10 @@ enum {
     SLOT_ReleaseSession = 95,
     SLOT_ReleaseValue = 96,
     SLOT_ReleaseTypeInfo = 98,
-    SLOT_ReleaseSessionOptions = 100
+    SLOT_ReleaseSessionOptions = 100,
+    SLOT_SessionGetModelMetadata = 111, /* API version 2 */
+    SLOT_ModelMetadataLookupCustomMetadataMap = 116,
+    SLOT_ReleaseModelMetadata = 118
 };
 
 typedef const char *(*GetErrorMessageFn)(const OrtStatus *);
@@ -103,6 +107,10 @@ typedef void (*ReleaseSessionFn)(OrtSession *);
 typedef void (*ReleaseValueFn)(OrtValue *);
 typedef void (*ReleaseTypeInfoFn)(OrtTypeInfo *);
 typedef void (*ReleaseSessionOptionsFn)(OrtSessionOptions *);
+typedef OrtStatus *(*SessionGetModelMetadataFn)(const OrtSession *, OrtModelMetadata **);
+typedef OrtStatus *(*ModelMetadataLookupCustomMetadataMapFn)(const OrtModelMetadata *,
+                                                             OrtAllocator *, const char *, char **);
+typedef void (*ReleaseModelMetadataFn)(OrtModelMetadata *);
 
 typedef void (*AnyFn)(void);
 
@@ -118,6 +126,8 @@ struct Network {
     OrtEnv *env;
     OrtSession *session;
     OrtMemoryInfo *memory;
+    char *input_names;           /* the names of the input columns, one after the other ... */
+    const char **input_name;     /* ... and where each starts; NULL if the graph has none */
 };
 
 static void set_error(char *error, size_t size, const char *fmt, ...) {
@@ -236,6 +246,63 @@ static int check_signature(Network *net, int is_input, char *error, size_t size)
     return 0;
 }
 
+static const char *skip_spaces(const char *s) {
+    while (*s == ' ') s++;
+    return s;
+}
+
+/* Parse `text`, a JSON list of exactly n plain strings (no escapes: signal names), into one
+ * buffer of NUL-terminated names and n pointers into it; 0, or -1 if it is anything else. */
+static int parse_names(const char *text, int n, char **buffer, const char ***names) {
+    const char *s = skip_spaces(text);
+    char *base = (char *)malloc(strlen(text) + 1), *out = base;
+    const char **starts = (const char **)malloc(sizeof(char *) * (size_t)(n > 0 ? n : 1));
+    int count = 0;
+    if (base == NULL || starts == NULL || *s++ != '[') goto refuse;
+    for (;;) { /* each pass: one "name", then ',' or the closing ']' */
+        s = skip_spaces(s);
+        if (*s++ != '"' || count == n) goto refuse;
+        starts[count++] = out;
+        while (*s != '\0' && *s != '"' && *s != '\\') *out++ = *s++;
+        if (*s++ != '"') goto refuse;
+        *out++ = '\0';
+        s = skip_spaces(s);
+        if (*s == ']') break;
+        if (*s++ != ',') goto refuse;
+    }
+    if (count != n) goto refuse;
+    *buffer = base;
+    *names = starts;
+    return 0;
+refuse:
+    free(base);
+    free((void *)starts);
+    return -1;
+}
+
+/* The input names from the graph's metadata, if it has them (their absence is no error). */
+static void read_input_names(Network *net) {
+    OrtModelMetadata *metadata = NULL;
+    OrtAllocator *allocator = NULL;
+    char *value = NULL;
+    OrtStatus *status = ORT(net, GetAllocatorWithDefaultOptions)(&allocator);
+    if (status == NULL) status = ORT(net, SessionGetModelMetadata)(net->session, &metadata);
+    if (status == NULL)
+        status = ORT(net, ModelMetadataLookupCustomMetadataMap)(metadata, allocator,
+                                                                "input_signals", &value);
+    if (status == NULL && value != NULL &&
+        parse_names(value, net->spec->n_in, &net->input_names, &net->input_name) != 0)
+        net->input_name = NULL;
+    if (status != NULL) ORT(net, ReleaseStatus)(status);
+    if (value != NULL) ORT(net, AllocatorFree)(allocator, value);
+    if (metadata != NULL) ORT(net, ReleaseModelMetadata)(metadata);
+}
+
+const char *net_input_name(const Network *net, int i) {
+    if (net == NULL || net->input_name == NULL || i < 0 || i >= net->spec->n_in) return NULL;
+    return net->input_name[i];
+}
+
 Network *net_open(const char *library_path, const char *model_path, const NetSpec *spec,
                   char *error, size_t size) {
     Network *net = (Network *)calloc(1, sizeof *net);
@@ -277,6 +344,7 @@ Network *net_open(const char *library_path, const char *model_path, const NetSpe
         return NULL;
     }
     ORT(net, ReleaseSessionOptions)(options);
+    read_input_names(net);
     return net;
 }
 
@@ -341,5 +409,7 @@ void net_close(Network *net) {
     }
     /* The library stays loaded: onnxruntime keeps process-wide state (threads, the
      * environment's singletons) that does not survive being unloaded and loaded again. */
+    free(net->input_names);
+    free((void *)net->input_name);
     free(net);
 }

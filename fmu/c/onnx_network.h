@@ -44,6 +44,11 @@ Network *net_open(const char *library_path, const char *model_path, const NetSpe
 int net_run(Network *net, const double *inputs, int64_t steps, float *state_in,
             double *outputs, float *state_out, char *error, size_t error_size);
 
+/* The name of the graph's input column `i` (0-based), or NULL if the graph does not name it.
+ * Names come from the graph's metadata entry "input_signals", a JSON list of n_in strings
+ * (flexff's export writes it); they are only used in messages. */
+const char *net_input_name(const Network *net, int i);
+
 void net_close(Network *net);
 
 #endif
