@@ -295,7 +295,9 @@ class Master:
         timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
                             self._slave_tet[:made], self._lateness[:made], pacing, run.overruns,
                             tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
-                            run.failed_k if status == OVERRUN else None)
+                            run.failed_k if status == OVERRUN else None,
+                            network_calls={p.name: times for p in self._plans
+                                           if (times := p.instance.network_times())})
         return Recording(np.arange(end) * self.step, signals, wall, timing)
 
     def _engine_run(self, table: np.ndarray, out: np.ndarray, columns: np.ndarray | None,

@@ -54,6 +54,8 @@ class StepTiming:
     first_overruns: tuple[int, ...]  # step indices of the first overruns
     stopped_at: int | None  # the step at which max_overruns stopped the run
     process: Any = None  # cosim.realtime.ProcessReport of a paced run
+    network_calls: dict = dataclasses.field(default_factory=dict)  # FMU -> its network's
+    # call times (calls; p50, p99, max in us), for FMUs that embed one
 
     @property
     def period(self) -> float:
@@ -72,6 +74,7 @@ class StepTiming:
             "tet_us_per_fmu": {n: _stats(self.fmu_tet[:, i]) for i, n in enumerate(self.names)},
             "tet_over_period_p99": float(np.percentile(self.tet, 99) / self.period)
             if self.tet.size else None,
+            "network_call_us": self.network_calls,
         }
         if self.pacing is not None:
             table.update({

@@ -19,7 +19,7 @@ import os
 import shutil
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
-from ctypes import byref, c_void_p
+from ctypes import byref, c_double, c_void_p
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -347,6 +347,16 @@ class FmuInstance:
         self.call(f"fmi{self.info.fmi_version[0]}DoStep from t = {time:.9g} s",
                   lambda: self.fmu.doStep(currentCommunicationPoint=time,
                                           communicationStepSize=step))
+
+    def network_times(self) -> dict[str, float] | None:
+        """The call times of a flexff FMU's embedded network so far (calls; p50, p99, max in
+        microseconds), or None for an FMU without one."""
+        function = getattr(self.fmu.dll, "flexff_network_times", None)
+        times = (c_double * 4)()
+        if function is None or function(self.component, times) != 0:
+            return None
+        return {"calls": int(times[0]), "p50": times[1] * 1e6, "p99": times[2] * 1e6,
+                "max": times[3] * 1e6}
 
     def close(self) -> None:
         """Terminate (if initialized), free the instance, delete the extracted files."""

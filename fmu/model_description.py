@@ -18,6 +18,8 @@ LOG_CATEGORIES = {
     "logStatusError": "errors (on unless switched off with fmi2SetDebugLogging)",
     "logStatusWarning": "warnings and unavailable status requests",
     "logAll": "every FMI call",
+    "logNetworkTimes": "an embedded network's call times, at fmi2Terminate (on unless "
+                       "switched off)",
 }
 
 

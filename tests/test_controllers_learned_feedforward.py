@@ -152,6 +152,23 @@ def test_closed_loop_with_the_learned_feedforward(models, tmp_path):
     # the synthetic set's random motion covers the reference: nothing to warn of
     assert metrics["feedforward_range"] == {"margin": MARGIN, "outside": []}
     assert range_warning(metrics) is None
+    # every call of the network was timed: at points 0, 10, ..., 4000 (one per 10 ms model
+    # period), plus the one at initialization
+    calls = metrics["realtime"]["network_call_us"]["feedforward"]
+    assert calls["calls"] == (4000 // 10 + 1) + 1
+    assert 0 < calls["p50"] <= calls["p99"] <= calls["max"]
+
+
+def test_the_network_logs_its_call_times_at_terminate(fmus, reference):
+    s = LoggedSlave(fmus["lstm", "step"])
+    s.initialize()
+    for k in range(100):
+        s.set(**{n: float(reference[n][k]) for n in REFERENCE_SIGNALS})
+        s.slave.doStep(k * 1e-3, 1e-3)
+    s.slave.terminate()
+    line = next(line for line in s.log().splitlines() if "network calls" in line)
+    assert re.search(r"network calls: \d+, p50 [\d.]+ us, p99 [\d.]+ us, max [\d.]+ us", line)
+    s.free()
 
 
 def test_a_run_outside_the_training_range_is_warned_of():

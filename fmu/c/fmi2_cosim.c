@@ -94,9 +94,9 @@ static const char *mode_name(int mode) {
 }
 
 /* Log categories, as declared in modelDescription.xml. */
-enum { LOG_ERROR, LOG_WARNING, LOG_ALL, N_CATEGORIES };
+enum { LOG_ERROR, LOG_WARNING, LOG_ALL, LOG_NETWORK, N_CATEGORIES };
 static const char *const CATEGORY_NAMES[N_CATEGORIES] = {"logStatusError", "logStatusWarning",
-                                                         "logAll"};
+                                                         "logAll", "logNetworkTimes"};
 
 /* ---------------------------------------------------------------------------------------- */
 /* Random numbers: xoshiro256** seeded by splitmix64, normals by Box-Muller (cached pair).    */
@@ -823,6 +823,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     c->cb = *functions;
     c->name = name;
     c->log_on[LOG_ERROR] = 1; /* errors are reported unless switched off explicitly */
+    c->log_on[LOG_NETWORK] = 1; /* as are the network's call times, once, at fmi2Terminate */
     c->log_on[LOG_WARNING] = loggingOn != fmi2False;
     c->log_on[LOG_ALL] = loggingOn != fmi2False;
     MODEL_FN(initial_state_incref)();
@@ -948,8 +949,29 @@ fmi2Status fmi2Terminate(fmi2Component comp) {
     Instance *c = enter(comp, "fmi2Terminate", MODE_STEPPING);
     if (!c) return fmi2Error;
     c->d.mode = MODE_TERMINATED;
+#if HAS_NETWORK
+    if (c->net != NULL) {
+        double t[4];
+        net_call_times(c->net, t);
+        log_msg(c, fmi2OK, LOG_NETWORK, "network calls: %.0f, p50 %.1f us, p99 %.1f us, "
+                "max %.1f us", t[0], 1e6 * t[1], 1e6 * t[2], 1e6 * t[3]);
+    }
+#endif
     return fmi2OK;
 }
+
+#if HAS_NETWORK
+/* flexff's own entry, not part of FMI: the network's call times so far (calls, p50, p99 and
+ * max in seconds), which flexff's master puts in its real-time report. 0, or -1 for a
+ * component that is not a live instance with a network. */
+__attribute__((visibility("default"))) int flexff_network_times(fmi2Component comp,
+                                                                double times[4]) {
+    Instance *c = (Instance *)comp;
+    if (registry_find(comp) < 0 || c->magic != INSTANCE_MAGIC || c->net == NULL) return -1;
+    net_call_times(c->net, times);
+    return 0;
+}
+#endif
 
 fmi2Status fmi2Reset(fmi2Component comp) {
     Instance *c = enter(comp, "fmi2Reset", ANY_MODE);
