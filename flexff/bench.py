@@ -134,7 +134,7 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
         table = recording.timing.table(recording.wall_s)
         results[kind] = {key: table[key] for key in (
             "period_us", "achieved_real_time_factor", "tet_us", "tet_us_per_fmu",
-            "tet_over_period_p99", "lateness_us", "overruns", "process")}
+            "tet_over_period_p99", "lateness_us", "overruns", "network_call_us", "process")}
     return results
 
 
