@@ -24,6 +24,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_filter
 
+from cosim.csv_text import read_rows
 from cosim.memory import check_memory
 from plant.kinematics import check_workspace
 from plant.parameters import NOMINAL
@@ -330,16 +331,7 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
 def _read_columns(path: Path) -> dict[str, np.ndarray]:
     """The known columns of a CSV table, checked to be present, numeric and finite. Errors
     name the problem, never the file's content (which may be anything)."""
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as handle:  # a byte-order mark too
-            rows = list(csv.reader(handle))
-    except UnicodeDecodeError as error:
-        raise ValueError(f"{path}: not a CSV text file (no UTF-8 text at byte {error.start})") \
-            from None
-    except csv.Error as error:
-        raise ValueError(f"{path}: not a CSV table ({error})") from None
-    if not rows:
-        raise ValueError(f"{path}: empty file")
+    rows = [row for _, row in read_rows(path)]
     header = [name.strip() for name in rows[0]]
     missing = [name for name in ("t", "x_ref", "y_ref") if name not in header]
     if missing:

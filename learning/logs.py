@@ -33,7 +33,6 @@ leaves `out` as it was.
 
 from __future__ import annotations
 
-import csv
 import os
 import shutil
 import tempfile
@@ -46,6 +45,7 @@ from scipy.io import loadmat
 from scipy.io.matlab import matfile_version
 from scipy.signal import savgol_filter
 
+from cosim.csv_text import read_rows
 from learning.dataset import (ENCODER_SIGNALS, IMPORTED, LABEL_SIGNALS, POSITION_SIGNALS,
                               REFERENCE_SIGNALS, Dataset, file_sha256, load_dataset,
                               save_signals, write_manifest)
@@ -145,17 +145,7 @@ def _read(path: Path) -> _Log:
 
 
 def _read_csv(path: Path) -> _Log:
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as handle:
-            reader = csv.reader(handle)
-            rows = [(reader.line_num, row) for row in reader]
-    except UnicodeDecodeError as error:
-        raise LogError(f"{path}: not a CSV text file (no UTF-8 text at byte {error.start})") \
-            from None
-    except csv.Error as error:
-        raise LogError(f"{path}: not a CSV table ({error})") from None
-    if not rows:
-        raise LogError(f"{path}: empty file")
+    rows = read_rows(path, LogError)
     header = [name.strip() for name in rows[0][1]]
     body = [(line, row) for line, row in rows[1:] if any(cell.strip() for cell in row)]
     lines = [line for line, _ in body]
