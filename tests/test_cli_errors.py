@@ -14,17 +14,8 @@ import pytest
 
 from cosim.master import CosimError
 from flexff.cli import main
+from tests.test_cosim_batch import SHORT  # a 1 s run of the manipulator
 
-SHORT = """
-[run]
-stop = 1.0
-
-[reference]
-kind = "line-circle"
-line_duration = 0.5
-radius = 0.005
-circle_duration = 0.5
-"""
 
 # commands that write: {out} is the output folder (or the folder of the output file)
 WRITERS = {
