@@ -142,26 +142,28 @@ def test_libcosim_gives_the_same_outputs(step_fmu, precomputed_fmu):
         assert np.array_equal(_run(fmu, run_fmu_libcosim), ours)
 
 
+def _steps(s, ks):
+    """Set the inputs of step k, read the outputs, step; for each k."""
+    out = []
+    for k in ks:
+        s.set(u1=INPUTS[k, 0], u2=INPUTS[k, 1])
+        out.append(s.get("y1", "y2"))
+        s.slave.doStep(k * H, H)
+    return out
+
+
 @pytest.mark.parametrize("split", [PERIOD * 4, PERIOD * 4 + 1, PERIOD * 4 + 2])
 def test_restored_state_continues_exactly(step_fmu, split):
-    def steps(s, ks):
-        out = []
-        for k in ks:
-            s.set(u1=INPUTS[k, 0], u2=INPUTS[k, 1])
-            out.append(s.get("y1", "y2"))
-            s.slave.doStep(k * H, H)
-        return out
-
     s = LoggedSlave(step_fmu)
     s.initialize()
-    steps(s, range(split))
+    _steps(s, range(split))
     saved = s.slave.getFMUstate()
     blob = s.slave.serializeFMUstate(saved)
-    straight = steps(s, range(split, STEPS))
+    straight = _steps(s, range(split, STEPS))
     s.slave.setFMUstate(saved)
-    assert steps(s, range(split, STEPS)) == straight
+    assert _steps(s, range(split, STEPS)) == straight
     s.slave.setFMUstate(s.slave.deSerializeFMUstate(blob))
-    assert steps(s, range(split, STEPS)) == straight
+    assert _steps(s, range(split, STEPS)) == straight
     s.slave.freeFMUstate(saved)
     s.free()
 
@@ -269,16 +271,6 @@ def test_a_copy_of_the_fmu_runs_from_elsewhere(step_fmu, tmp_path):
 
 
 # --- precomputed mode: restored states, corrupt states, the end of the table ----------------
-
-def _steps(s, ks):
-    """Set the inputs of step k, read the outputs, step; for each k."""
-    out = []
-    for k in ks:
-        s.set(u1=INPUTS[k, 0], u2=INPUTS[k, 1])
-        out.append(s.get("y1", "y2"))
-        s.slave.doStep(k * H, H)
-    return out
-
 
 @pytest.mark.parametrize("split", [PERIOD * 4, PERIOD * 4 + 1])
 @pytest.mark.parametrize("how", ["set", "deserialize"])
