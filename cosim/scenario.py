@@ -20,6 +20,7 @@ import numpy as np
 from controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
 from controllers.feedforward import rigid_body_feedforward_system
 from controllers.learned_feedforward import learned_feedforward_system
+from cosim.csv_text import read_rows
 from cosim.master import Master, SlaveSpec
 from cosim.references import Reference, build_reference
 from cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
@@ -118,12 +119,16 @@ def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, 
     def fail(message: str) -> ConfigError:
         return ConfigError(config.source, key, f"{source.path}: {message}")
 
-    with open(source.path, encoding="utf-8-sig") as handle:
-        header = [h.strip() for h in handle.readline().strip().split(",")]
-        try:
-            data = np.loadtxt(handle, delimiter=",", ndmin=2)
-        except ValueError as error:
-            raise fail(f"not a table of numbers under its header: {error}") from None
+    try:
+        rows = read_rows(source.path)
+    except ValueError as error:
+        raise ConfigError(config.source, key, str(error)) from None
+    header = [h.strip() for h in rows[0][1]]
+    try:
+        data = np.array([[float(cell) for cell in row] for _, row in rows[1:]
+                         if any(cell.strip() for cell in row)], ndmin=2)
+    except ValueError:
+        raise fail("not a table of numbers under its header") from None
     if not header or header[0] != "time" or len(header) < 2:
         raise fail("the header must be `time,<signal>,...`")
     if data.shape[1] != len(header) or data.shape[0] < 2:
