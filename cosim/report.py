@@ -23,6 +23,7 @@ import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -265,9 +266,27 @@ def plot_force_split(recordings: Mapping[str, Recording], path: Path) -> Path:
     return save_figure(figure, path)
 
 
-def write_report(recordings: dict[str, Recording], env: str, out: str | Path) -> dict:
+def training_table(training: Mapping[str, Mapping[str, Any]]) -> str:
+    """The cost and fit of each trained model as Markdown: wall time of its training, epochs
+    run and the one kept (lowest validation loss), parameters and test MSE."""
+    lines = ["| model | training [s] | epochs (kept) | parameters | test MSE |",
+             "|---|---:|---:|---:|---:|"]
+    for name, m in training.items():
+        lines.append(f"| {SCENARIO_LABELS.get(name, name)} | {m['seconds']:.0f} | "
+                     f"{m['epochs']} ({m['best_epoch']}) | {m['parameters']} | "
+                     f"{m['test_mse']:.3g} |")
+    return "\n".join(lines) + "\n"
+
+
+TRAINING_KEYS = ("seconds", "epochs", "best_epoch", "parameters", "test_mse", "val_mse",
+                 "rigid_body_test_mse", "model_rate_hz", "threads")
+
+
+def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
+                 training: Mapping[str, Mapping[str, Any]] | None = None) -> dict:
     """Write summary.json, table.md, paths.png, errors.png and forces.png into `out`; return
-    the summary.json content.
+    the summary.json content. `training` (model -> learning.train metrics) adds what each
+    model's training cost and reached, in both files.
 
     `recordings` maps a scenario name ("pid" required; see SCENARIO_LABELS) to the Recording
     of its run on the thesis's evaluation reference, in display order: x_ref, y_ref, x, y for
@@ -281,11 +300,16 @@ def write_report(recordings: dict[str, Recording], env: str, out: str | Path) ->
     summary = summarize({name: tracking_metrics(rec) for name, rec in ordered.items()})
     content = {"env": env, "scenarios": summary, "thesis": copy.deepcopy(THESIS_TABLES[env]),
                "units": dict(UNITS)}
+    table = markdown_table(summary, env)
+    if training:
+        content["training"] = {name: {key: m.get(key) for key in TRAINING_KEYS}
+                               for name, m in training.items()}
+        table += "\nTraining (test MSE in scaled label units):\n\n" + training_table(training)
     out = Path(out)
     atomic_write(out / "summary.json",
                  lambda tmp: tmp.write_text(json.dumps(content, indent=2) + "\n", "utf-8"))
     atomic_write(out / "table.md",
-                 lambda tmp: tmp.write_text(markdown_table(summary, env), "utf-8"))
+                 lambda tmp: tmp.write_text(table, "utf-8"))
     plot_paths(ordered, out / "paths.png")
     plot_errors(ordered, out / "errors.png")
     feedforward = {name: rec for name, rec in ordered.items() if name != "pid"}

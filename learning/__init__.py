@@ -14,6 +14,7 @@ synthetic (data without co-simulation), features (signal processing; the 63 / 6 
 themselves are controllers.features),
 scaling (min-max), casadi_torch and rigid (plant expressions in torch; the pgnn's rigid-body
 prior), models (LSTM, CNN-LSTM, TCN), presets (thesis / fast), batches (validation windows,
-TBPTT chunks, random windows), threads (CPU thread policy), train, run_folder, deploy (the
+TBPTT chunks, random windows), threads (CPU thread policy), train, workers (models trained
+side by side, one process per core), run_folder, deploy (the
 model in SI units), export (ONNX), evaluate (collect, train, export, co-simulate, report).
 """

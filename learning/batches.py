@@ -25,19 +25,33 @@ PAD, TRAIN, VALIDATION = 0, 1, 2
 
 
 def window_roles(lengths: list[int], window: int, val_fraction: float,
-                 rng: np.random.Generator) -> list[np.ndarray]:
-    """Per trajectory, the role of each sample (TRAIN or VALIDATION), by whole windows."""
-    blocks = [(i, start) for i, n in enumerate(lengths) for start in range(0, n, window)]
+                 rng: np.random.Generator, edge: int = 0) -> list[np.ndarray]:
+    """Per trajectory, the role of each sample (TRAIN or VALIDATION), by whole windows; the
+    first and last `edge` samples PAD (see `without_edges`), and only windows with samples
+    between them drawn for validation."""
+    roles = [without_edges(np.full(n, TRAIN, dtype=np.int64), edge) for n in lengths]
+    blocks = [(i, start) for i, r in enumerate(roles) for start in range(0, len(r), window)
+              if (r[start:start + window] == TRAIN).any()]
     n_val = int(round(val_fraction * len(blocks)))
     if n_val < 1 or n_val >= len(blocks):
         raise ValueError(
             f"the training trajectories give {len(blocks)} window(s) of {window} samples, too few "
             f"to hold out {val_fraction:.1%} for validation: collect more or longer training "
             f"trajectories, or lower `window`")
-    roles = [np.full(n, TRAIN, dtype=np.int64) for n in lengths]
     for k in rng.permutation(len(blocks))[:n_val]:
         i, start = blocks[k]
-        roles[i][start:start + window] = VALIDATION
+        block = roles[i][start:start + window]
+        block[block == TRAIN] = VALIDATION
+    return roles
+
+
+def without_edges(roles: np.ndarray, edge: int) -> np.ndarray:
+    """`roles` with the first and last `edge` samples PAD: the network still runs over them
+    (its state and history warm up there), but they enter no loss. There the zero-phase
+    filter's start and end transients make motion and force disagree (learning.features)."""
+    roles = roles.copy()
+    roles[:edge] = PAD
+    roles[max(len(roles) - edge, 0):] = PAD
     return roles
 
 

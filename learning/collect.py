@@ -34,13 +34,10 @@ Runs go to local processes, which end with the collecting process even when it i
 
 from __future__ import annotations
 
-import ctypes
 import errno
 import hashlib
 import json
 import os
-import signal
-import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -62,10 +59,10 @@ from learning.dataset import (COLLECTED, ENCODER_SIGNALS, FORMAT, MANIFEST, POSI
 from learning.loop import (CURRENTS, OWN_TAPS, Tap, current_limit, dataset_taps, default_loop,
                            loop_differences, loop_record, on_reference, plant_record)
 from learning.trajectories import TrajectorySet, TrajectorySpec, trajectory_set
+from learning.workers import die_with_parent
 
 PROGRESS = "collection.json"  # the loop of a collection under way (see the module docstring)
 STOPPING = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES)  # fail every trajectory
-PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
 class DataFolderError(ValueError):
@@ -374,21 +371,11 @@ def _on_processes(jobs: list[_Job], workers: int | None) -> Iterator[Outcome]:
     if not jobs:
         return
     workers = min(workers or os.cpu_count() or 1, len(jobs))
-    with ProcessPoolExecutor(max_workers=workers, initializer=_die_with_parent,
+    with ProcessPoolExecutor(max_workers=workers, initializer=die_with_parent,
                              initargs=(os.getpid(),)) as pool:
         futures = {pool.submit(_collect_one, job): job for job in jobs}
         yield from _settle(futures, as_completed(futures),
                            lambda: [f.cancel() for f in futures])
-
-
-def _die_with_parent(parent: int) -> None:
-    """Pool initializer: have the kernel kill this worker when the collecting process dies
-    (Linux), even by SIGKILL, instead of leaving it blocked on a queue nobody serves. (The
-    signal follows the thread that started the worker: the pool's user, which outlives it.)"""
-    if sys.platform.startswith("linux"):
-        ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    if os.getppid() != parent:  # it died before that took effect
-        os._exit(1)
 
 
 def _on_dask(jobs: list[_Job], scheduler: str) -> Iterator[Outcome]:

@@ -189,6 +189,51 @@ class CNNLSTM(SequenceNetwork):
         return y, (buffer, h, c)
 
 
+class LinearSkip(SequenceNetwork):
+    """Any sequence network plus a linear map from the current input to the output.
+
+    The inverse dynamics of the full feature set is close to linear in it (a least-squares fit
+    alone reaches a test MSE of 5e-5, below the rigid-body model's 6.7e-5, on the sim set), so
+    the skip, fitted by least squares before training (`fit_linear_skip`), starts the network
+    where a linear model ends, and the network, its head zeroed, learns only what is not
+    linear. The state is the inner network's.
+    """
+
+    def __init__(self, network: SequenceNetwork, n_features: int) -> None:
+        super().__init__()
+        self.network = network
+        self.history = network.history
+        # float64: the least-squares weights of nearly collinear features are large and
+        # cancel; in float32 the sum lost 4e-5 of the force
+        self.linear = nn.Linear(n_features, N_OUTPUTS, dtype=torch.float64)
+
+    def state_shapes(self, batch: int) -> list[tuple[int, ...]]:
+        return self.network.state_shapes(batch)
+
+    def state_names(self) -> list[str]:
+        return self.network.state_names()
+
+    def forward(self, x: torch.Tensor, state: State | None = None) -> tuple[torch.Tensor, State]:
+        y, state = self.network(x, state)
+        return y + self.linear(x.double()).to(y.dtype), state
+
+
+def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor) -> None:
+    """Set the skip of a LinearSkip network to the least-squares fit y ~ x W + b over the
+    samples (n, n_features), (n, 2), and zero the inner network's head, so that training
+    starts from the linear fit."""
+    if not isinstance(network, LinearSkip):
+        return
+    design = torch.cat([x.double(), torch.ones(len(x), 1, dtype=torch.float64)], dim=1)
+    solution = torch.linalg.lstsq(design, y.double(), driver="gelsd").solution
+    with torch.no_grad():
+        network.linear.weight.copy_(solution[:-1].T)
+        network.linear.bias.copy_(solution[-1])
+        inner = network.network.lstm if isinstance(network.network, CNNLSTM) else network.network
+        nn.init.zeros_(inner.head.weight)
+        nn.init.zeros_(inner.head.bias)
+
+
 # kind -> (class, whether its target is the residual over the rigid-body prior)
 NETWORKS: dict[str, tuple[type[SequenceNetwork], bool]] = {
     "lstm": (LSTMNet, False),
@@ -205,14 +250,16 @@ def check_kind(kind: str) -> None:
         raise ValueError(f"unknown model {kind!r}: choose one of {', '.join(NETWORKS)}")
 
 
-def build_network(kind: str, n_features: int, **architecture) -> SequenceNetwork:
-    """A fresh network of `kind` ('lstm', 'cnn-lstm', 'tcn', 'pgnn') for n_features inputs."""
+def build_network(kind: str, n_features: int, linear_skip: bool = False,
+                  **architecture) -> SequenceNetwork:
+    """A fresh network of `kind` ('lstm', 'cnn-lstm', 'tcn', 'pgnn') for n_features inputs,
+    wrapped in a LinearSkip when `linear_skip`."""
     check_kind(kind)
     cls, prior = NETWORKS[kind]
     network = cls(n_features, **architecture)
     if prior:  # a zero head: training starts from the rigid-body model itself
         nn.init.zeros_(network.head.weight)
-    return network
+    return LinearSkip(network, n_features) if linear_skip else network
 
 
 def uses_prior(kind: str) -> bool:

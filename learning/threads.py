@@ -16,12 +16,15 @@ from typing import Iterator
 import torch
 
 
+def granted_cores() -> int:
+    """The cores this process may run on (its CPU affinity), at least one."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, cores or 1)
+
+
 def cpu_threads(requested: int = 0) -> int:
     """`requested`, or by default half the cores granted to this process (at least one)."""
-    if requested:
-        return requested
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, (cores or 1) // 2)
+    return requested or max(1, granted_cores() // 2)
 
 
 @contextmanager

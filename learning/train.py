@@ -20,7 +20,7 @@ import math
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 import torch
@@ -28,10 +28,12 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from controllers.features import feature_names
-from learning.batches import TRAIN, VALIDATION, SequenceSet, WindowSampler, window_roles
+from learning.batches import (TRAIN, VALIDATION, SequenceSet, WindowSampler, window_roles,
+                              without_edges)
 from learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
 from learning.features import decimation, prepare_trajectory
-from learning.models import RECURRENT, SequenceNetwork, build_network, parameter_count, uses_prior
+from learning.models import (RECURRENT, SequenceNetwork, build_network, fit_linear_skip,
+                             parameter_count, uses_prior)
 from learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
 from learning.rigid import rigid_forces
 from learning.run_folder import (CHECKPOINT_FILE, RunFolderError, save_best, save_checkpoint,
@@ -39,12 +41,13 @@ from learning.run_folder import (CHECKPOINT_FILE, RunFolderError, save_best, sav
 from learning.scaling import MinMaxScaler
 from learning.threads import torch_threads
 
+EpochReport = Callable[[dict[str, Any]], None]
 MSE_UNITS = "MSE of min-max scaled labels Fx, Fy (the seed's normalized units)"
 
 
 def train(model: str, preset: str, data: str | Path, out: str | Path, progress: bool = True,
           resume: bool | None = None, force: bool = True, checkpoint_every: int | None = None,
-          **overrides: Any) -> dict[str, Any]:
+          on_epoch: EpochReport | None = None, **overrides: Any) -> dict[str, Any]:
     """Train `model` ('lstm', 'cnn-lstm', 'tcn', 'pgnn') with `preset` ('thesis', 'fast') on the
     dataset folder `data`; write the run folder `out`; return the metrics.
 
@@ -54,15 +57,19 @@ def train(model: str, preset: str, data: str | Path, out: str | Path, progress: 
     a checkpoint of the same settings and data is resumed and anything else replaced, a
     finished run's files only once the new ones are complete (`flexff train` refuses instead
     unless told). `checkpoint_every`: epochs between checkpoints (default: the preset's).
+    `on_epoch` is called after every epoch with {"epoch", "epochs", "train", "val",
+    "best_epoch"} (learning.workers draws bars from it).
     """
     config = make_config(model, preset, **overrides)
-    return fit(config, load_dataset(data), Path(out), progress, resume, force, checkpoint_every)
+    return fit(config, load_dataset(data), Path(out), progress, resume, force, checkpoint_every,
+               on_epoch)
 
 
 def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
-        resume: bool | None = None, force: bool = True,
-        checkpoint_every: int | None = None) -> dict[str, Any]:
+        resume: bool | None = None, force: bool = True, checkpoint_every: int | None = None,
+        on_epoch: EpochReport | None = None) -> dict[str, Any]:
     """Train with a ready configuration on a loaded dataset; see `train`."""
+    start = time.perf_counter()
     every = CHECKPOINT_EVERY[config.preset] if checkpoint_every is None else checkpoint_every
     if every < 1:
         raise ValueError(f"checkpoint_every must be at least 1 epoch, got {every}")
@@ -83,7 +90,8 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
                     for x, f in zip(xs, fs)]
         return [label_scaler.transform(f) for f in fs]
 
-    roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng)
+    edge = config.features.edge_samples(model_rate)
+    roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge)
     device = pick_device(config.device)
     with reproducible(config.seed, config.threads):
         network = build_network(config.model, train_x[0].shape[1], **config.architecture)
@@ -92,9 +100,13 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
                                        targets(train_x, train_f), roles, device)
         test_data = SequenceSet.build([feature_scaler.transform(x) for x in test_x],
                                       targets(test_x, test_f),
-                                      [np.full(len(x), TRAIN) for x in test_x], device)
+                                      [without_edges(np.full(len(x), TRAIN), edge)
+                                       for x in test_x], device)
+        fitted = train_data.role == TRAIN
+        fit_linear_skip(network, train_data.x[fitted], train_data.y[fitted])
         saver = _Saver(out, settings, every)
-        history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint)
+        history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint,
+                            on_epoch)
         metrics = {
             "model": config.model, "preset": config.preset, "units": MSE_UNITS,
             "train_mse": evaluate(network, train_data, TRAIN),
@@ -103,9 +115,10 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
             "test_mse_per_trajectory": {
                 t.name: evaluate(network, test_data, TRAIN, only=[i])
                 for i, t in enumerate(test_set)},
-            "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, config),
+            "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, config, edge),
             "parameters": parameter_count(network),
             "seconds_per_epoch": float(np.mean(history["seconds"])),
+            "seconds": time.perf_counter() - start,  # this call's wall time, data preparation in
             "epochs": config.epochs, "best_epoch": history["best_epoch"],
             "model_rate_hz": model_rate, "device": str(device),
             "threads": torch.get_num_threads() if device.type == "cpu" else None,
@@ -148,10 +161,11 @@ def _prepare(trajectories: list[Trajectory], rate: float, config: TrainConfig,
 
 
 def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,
-               config: TrainConfig) -> float:
-    """The nominal rigid-body model's test MSE in the same units: the baseline to beat."""
-    errors = [(f - rigid_forces(x, config.features.feature_set)) / scaler.span
-              for x, f in zip(xs, fs)]
+               config: TrainConfig, edge: int) -> float:
+    """The nominal rigid-body model's test MSE in the same units and on the same samples (the
+    `edge` samples at each end left out): the baseline to beat."""
+    errors = [((f - rigid_forces(x, config.features.feature_set)) / scaler.span)[
+        without_edges(np.full(len(x), TRAIN), edge) == TRAIN] for x, f in zip(xs, fs)]
     return float(np.mean(np.concatenate(errors) ** 2))
 
 
@@ -202,7 +216,7 @@ def _restore(checkpoint: dict[str, Any], network: SequenceNetwork,
 
 def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
               rng: np.random.Generator, progress: bool, saver: _Saver,
-              checkpoint: dict[str, Any] | None) -> dict[str, Any]:
+              checkpoint: dict[str, Any] | None, on_epoch: EpochReport | None) -> dict[str, Any]:
     optimizer = torch.optim.Adam(network.parameters(), lr=config.learning_rate)
     recurrent = config.model in RECURRENT
     sampler = None if recurrent else WindowSampler(data, config.window, network.history)
@@ -230,6 +244,9 @@ def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
             saver.best(best_state, epoch + 1, val)
         saver.epoch_done(config.epochs, network, optimizer, rng, history, best, best_state)
         bar.set_postfix(train=f"{loss:.3g}", val=f"{val:.3g}", best=history.get("best_epoch"))
+        if on_epoch is not None:
+            on_epoch({"epoch": epoch + 1, "epochs": config.epochs, "train": loss, "val": val,
+                      "best_epoch": history.get("best_epoch")})
     if best_state is None:
         raise RuntimeError(f"training diverged (validation loss {history['val'][-1]}): lower "
                            f"learning_rate (now {config.learning_rate:g}) or grad_clip")

@@ -75,18 +75,20 @@ def test_bench_prints_json(tmp_path):
 
 @pytest.mark.slow
 def test_demo_runs(tmp_path):
-    """The whole demo (about ten minutes on 2 cores): FMUs, data, training of the four models,
-    export, the evaluation with every feedforward."""
+    """The whole demo (about four minutes on 2 cores): FMUs, data, training of the four models
+    side by side, export, the evaluation with every feedforward; each black-box network must
+    reach the targets of issue 16 (LSTM and TCN 100x in e2, CNN-LSTM 40x, all 40x in einf)
+    and the training table must say what each model cost."""
     result = flexff("demo", "-o", str(tmp_path))
     assert result.returncode == 0, result.stderr
-    assert "physics-guided FF" in result.stdout
+    assert "physics-guided FF" in result.stdout and "training [s]" in result.stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert list(summary["scenarios"]) == ["pid", "rigid-body", "lstm", "cnn-lstm", "tcn", "pgnn"]
-    best = max(("lstm", "cnn-lstm", "tcn", "pgnn"),
-               key=lambda m: min(summary["scenarios"][m][a]["e2_ratio"] for a in "xy"))
-    for axis in ("x", "y"):
-        assert summary["scenarios"][best][axis]["e2_ratio"] >= 100
-        assert summary["scenarios"][best][axis]["einf_ratio"] >= 40
+    for model, e2 in (("lstm", 100), ("tcn", 100), ("cnn-lstm", 40), ("pgnn", 100)):
+        for axis in ("x", "y"):
+            assert summary["scenarios"][model][axis]["e2_ratio"] >= e2, (model, axis)
+            assert summary["scenarios"][model][axis]["einf_ratio"] >= 40, (model, axis)
+    assert set(summary["training"]) == {"lstm", "cnn-lstm", "tcn", "pgnn"}
     assert all((tmp_path / f"{m}.onnx").is_file() for m in ("lstm", "cnn-lstm", "tcn", "pgnn"))
 
 

@@ -30,6 +30,9 @@ def test_every_scenario_is_reported(evaluation):
         assert (out / name).is_file()
     assert (out / "cosim" / "pgnn" / "signals.npz").is_file()
     assert any(line.startswith("pgnn: test MSE") for line in lines)
+    training = summary["training"]["pgnn"]
+    assert training["epochs"] == 1 and training["seconds"] > 0 and training["test_mse"] > 0
+    assert "| physics-guided FF | " in (out / "table.md").read_text().split("Training")[1]
 
 
 def test_rigid_body_feedforward_is_exact_on_the_nominal_plant(evaluation):

@@ -114,7 +114,7 @@ def test_metadata_names_everything_a_runner_needs(runs, tmp_path):
     assert meta["flexff_version"] and "extrapolate" in meta["usage"]
     state = json.loads(meta["state"])
     assert [s["input"] for s in state] == ["input_buffer", "h", "c"]
-    assert state[0]["shape"] == [1, 63, 13] and state[1]["shape"] == [2, 1, 12]
+    assert state[0]["shape"] == [1, 63, 13] and state[1]["shape"] == [1, 1, 12]  # 1 layer
     runtime = session(path)
     inputs = {i.name: i.shape for i in runtime.get_inputs()}
     assert inputs["inputs"][1] == 63 and isinstance(inputs["inputs"][0], str)  # dynamic time

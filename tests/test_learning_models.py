@@ -1,10 +1,11 @@
 """Networks: shapes, causality, receptive field, streaming state, sizes, initialization."""
 
+import numpy as np
 import pytest
 import torch
 
-from learning.models import (TemporalConvNet, build_network, parameter_count, receptive_field,
-                             uses_prior)
+from learning.models import (TemporalConvNet, build_network, fit_linear_skip, parameter_count,
+                             receptive_field, uses_prior)
 from learning.threads import torch_threads
 
 SMALL = {
@@ -122,3 +123,21 @@ def test_unknown_model_and_bad_sizes_are_refused():
         build_network("gru", 6)
     with pytest.raises(ValueError, match="levels"):
         build_network("tcn", 6, levels=0)
+
+
+@pytest.mark.parametrize("kind", ["lstm", "cnn-lstm", "tcn"])
+def test_a_fitted_linear_skip_starts_as_the_least_squares_fit(kind):
+    """After fit_linear_skip the network's output is numpy's least-squares solution of the
+    same samples (its head zeroed), and the state is the inner network's."""
+    torch.manual_seed(0)
+    net = build_network(kind, 5, linear_skip=True, **SMALL[kind]).double().eval()
+    x = torch.randn(2, 40, 5, dtype=torch.float64)
+    y = x @ torch.randn(5, 2, dtype=torch.float64) + 0.1 * torch.randn(2, 40, 2,
+                                                                         dtype=torch.float64)
+    fit_linear_skip(net, x.reshape(-1, 5), y.reshape(-1, 2))
+    design = np.column_stack([x.reshape(-1, 5).numpy(), np.ones(80)])
+    expected = design @ np.linalg.lstsq(design, y.reshape(-1, 2).numpy(), rcond=None)[0]
+    out, state = net(x)
+    np.testing.assert_allclose(out.reshape(-1, 2).detach().numpy(), expected, atol=1e-10)
+    assert net.state_names() == net.network.state_names()
+    assert [tuple(s.shape) for s in state] == net.state_shapes(2)

@@ -9,17 +9,17 @@ import pytest
 import torch
 
 import learning.train as training
-from learning.batches import TRAIN, VALIDATION, window_roles
+from learning.batches import PAD, TRAIN, VALIDATION, window_roles
 from learning.dataset import DatasetError, load_dataset
 from learning.deploy import predict
-from learning.features import prepare_trajectory
+from learning.features import FeatureConfig, prepare_trajectory
 from learning.presets import make_config
 from learning.run_folder import load_run
 from learning.synthetic import synthetic_dataset
 from learning.threads import cpu_threads, torch_threads
 from learning.train import learning_rate, train
 
-TINY = {"lstm": {"hidden": 16}, "pgnn": {"channels": 8, "levels": 3}, "tcn": {"channels": 8}}
+TINY = {"lstm": {"hidden": 16, "layers": 2, "linear_skip": False}, "pgnn": {"channels": 8, "levels": 3}, "tcn": {"channels": 8}}
 
 
 @pytest.fixture(scope="module")
@@ -74,14 +74,17 @@ def test_training_is_reproducible(data, tmp_path):
 
 @pytest.mark.parametrize("kind", ["lstm", "pgnn"])
 def test_reported_test_mse_is_that_of_the_si_model(data, tmp_path, kind):
-    """The metric's units, end to end: min-max-scaled labels, from the deployed forces."""
+    """The metric's units, end to end: min-max-scaled labels, from the deployed forces, the
+    filter's edges left out."""
     metrics = train(kind, "fast", data, tmp_path / "run", progress=False, epochs=2, **TINY[kind])
     run = load_run(tmp_path / "run")
     dataset = load_dataset(data)
     features, forces = prepare_trajectory(dataset.split("test")[0], dataset.sample_rate_hz,
                                           run.config.features)
     predicted = predict(run, features)
-    scaled = (predicted - forces) / run.label_scaler.span
+    edge = run.config.features.edge_samples(run.model_rate_hz)
+    assert edge > 0
+    scaled = ((predicted - forces) / run.label_scaler.span)[edge:-edge]
     assert np.mean(scaled**2) == pytest.approx(metrics["test_mse"], rel=1e-4)
 
 
@@ -94,6 +97,17 @@ def test_validation_windows_are_a_seeded_shuffle():
     assert all(np.array_equal(a, b) for a, b in zip(roles, again))
     with pytest.raises(ValueError, match="too few"):
         window_roles([100], 100, 0.125, np.random.default_rng(0))
+
+
+def test_the_filter_edges_enter_no_loss():
+    """The first and last `edge` samples are PAD; the windows between keep their roles."""
+    plain = window_roles([250, 300], 100, 0.25, np.random.default_rng(0))
+    edged = window_roles([250, 300], 100, 0.25, np.random.default_rng(0), edge=20)
+    for a, b in zip(plain, edged):
+        assert np.all(b[:20] == PAD) and np.all(b[-20:] == PAD)
+        assert np.array_equal(a[20:-20], b[20:-20])
+    assert FeatureConfig(cutoff_hz=5.0, edge_periods=2.0).edge_samples(100.0) == 40
+    assert FeatureConfig().edge_samples(100.0) == 0  # the thesis's preprocessing keeps them
 
 
 def test_learning_rate_schedules():
