@@ -105,11 +105,11 @@ def _drain(epochs: Any, bars: dict[str, tqdm]) -> None:
         except queue.Empty:
             return
         bar = bars[model]
-        bar.total = report["epochs"]
-        bar.n = report["epoch"]
+        if bar.total is None:  # its first epoch: the rate counts from now, not from the queue
+            bar.reset(total=report["epochs"])
         bar.set_postfix(train=f"{report['train']:.3g}", val=f"{report['val']:.3g}",
                         best=report["best_epoch"], refresh=False)
-        bar.refresh()
+        bar.update(report["epoch"] - bar.n)
 
 
 def _train_one(job: TrainJob, threads: int, epochs: Any) -> dict[str, Any]:
