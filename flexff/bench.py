@@ -85,7 +85,7 @@ def untrained_models(folder: Path) -> dict[str, Path]:
     from learning.synthetic import synthetic_dataset
     from learning.train import train
 
-    data = synthetic_dataset(folder / "data", n_train=3, n_test=1, duration=3.0, rate_hz=100.0,
+    data = synthetic_dataset(folder / "data", n_train=3, n_test=1, duration=6.0, rate_hz=100.0,
                              seed=1)
     models = {}
     for kind in MODELS:
