@@ -106,7 +106,7 @@ def test_feedforward_fmu_build_needs_a_flexff_model(tmp_path):
 def test_train_and_export_from_the_command_line(tmp_path):
     from learning.synthetic import synthetic_dataset
 
-    data = synthetic_dataset(tmp_path / "data", n_train=3, n_test=1, duration=3.0, rate_hz=200.0,
+    data = synthetic_dataset(tmp_path / "data", n_train=3, n_test=1, duration=6.0, rate_hz=200.0,
                              seed=4)
     run = tmp_path / "run"
     result = flexff("train", "--model", "tcn", "--data", str(data), "-o", str(run),

@@ -15,7 +15,7 @@ TINY = {"pgnn": {"channels": 8, "levels": 3, "epochs": 2},
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     return synthetic_dataset(tmp_path_factory.mktemp("tiny") / "data", n_train=4, n_test=1,
-                             duration=3.0, rate_hz=100.0, seed=5)
+                             duration=6.0, rate_hz=100.0, seed=5)
 
 
 def test_parallel_training_equals_training_one_after_the_other(data, tmp_path):
