@@ -27,9 +27,9 @@ PAD, TRAIN, VALIDATION = 0, 1, 2
 def window_roles(lengths: list[int], window: int, val_fraction: float,
                  rng: np.random.Generator, edge: int = 0) -> list[np.ndarray]:
     """Per trajectory, the role of each sample (TRAIN or VALIDATION), by whole windows; the
-    first and last `edge` samples PAD (see `without_edges`), and only windows with samples
+    first and last `edge` samples PAD (see `interior`), and only windows with samples
     between them drawn for validation."""
-    roles = [without_edges(np.full(n, TRAIN, dtype=np.int64), edge) for n in lengths]
+    roles = [interior(n, edge) for n in lengths]
     blocks = [(i, start) for i, r in enumerate(roles) for start in range(0, len(r), window)
               if (r[start:start + window] == TRAIN).any()]
     n_val = int(round(val_fraction * len(blocks)))
@@ -45,13 +45,14 @@ def window_roles(lengths: list[int], window: int, val_fraction: float,
     return roles
 
 
-def without_edges(roles: np.ndarray, edge: int) -> np.ndarray:
-    """`roles` with the first and last `edge` samples PAD: the network still runs over them
-    (its state and history warm up there), but they enter no loss. There the zero-phase
-    filter's start and end transients make motion and force disagree (learning.features)."""
-    roles = roles.copy()
+def interior(length: int, edge: int) -> np.ndarray:
+    """The roles of a trajectory of `length` samples: TRAIN, but its first and last `edge`
+    samples PAD. The network still runs over those (its state and history warm up there), but
+    they enter no loss: there the zero-phase filter's start and end transients make motion
+    and force disagree (learning.features)."""
+    roles = np.full(length, TRAIN, dtype=np.int64)
     roles[:edge] = PAD
-    roles[max(len(roles) - edge, 0):] = PAD
+    roles[max(length - edge, 0):] = PAD
     return roles
 
 

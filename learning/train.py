@@ -28,8 +28,8 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from controllers.features import feature_names
-from learning.batches import (TRAIN, VALIDATION, SequenceSet, WindowSampler, window_roles,
-                              without_edges)
+from learning.batches import (TRAIN, VALIDATION, SequenceSet, WindowSampler, interior,
+                              window_roles)
 from learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
 from learning.features import decimation, prepare_trajectory
 from learning.models import (RECURRENT, SequenceNetwork, build_network, fit_linear_skip,
@@ -100,8 +100,7 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
                                        targets(train_x, train_f), roles, device)
         test_data = SequenceSet.build([feature_scaler.transform(x) for x in test_x],
                                       targets(test_x, test_f),
-                                      [without_edges(np.full(len(x), TRAIN), edge)
-                                       for x in test_x], device)
+                                      [interior(len(x), edge) for x in test_x], device)
         fitted = train_data.role == TRAIN
         fit_linear_skip(network, train_data.x[fitted], train_data.y[fitted])
         saver = _Saver(out, settings, every)
@@ -165,7 +164,7 @@ def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,
     """The nominal rigid-body model's test MSE in the same units and on the same samples (the
     `edge` samples at each end left out): the baseline to beat."""
     errors = [((f - rigid_forces(x, config.features.feature_set)) / scaler.span)[
-        without_edges(np.full(len(x), TRAIN), edge) == TRAIN] for x, f in zip(xs, fs)]
+        interior(len(x), edge) == TRAIN] for x, f in zip(xs, fs)]
     return float(np.mean(np.concatenate(errors) ** 2))
 
 
