@@ -320,7 +320,7 @@ def test_the_sim_evaluation_on_a_plant_of_other_parameters(tmp_path):
     """Table 5.2 on the nominal plant with OWN_PLANT's parameters (about a minute): the
     rigid-body feedforward of the nominal model loses most of its gain; the physics-guided one
     trained on this loop's data keeps it. Measured (fast preset): rigid-body 3.1x / 3.2x in
-    e2, pgnn 51x / 142x (e2) and 38x / 117x (einf); TCN 52x / 81x."""
+    e2, pgnn 63x / 118x (e2) and 52x / 74x (einf); TCN 165x / 247x."""
     loop = parse_config({"reference": {"kind": "thesis-eval"}, "plant": OWN_PLANT},
                         name="own-plant")
     summary = evaluate("sim", tmp_path, models=["pgnn"], say=lambda _: None, loop=loop)
