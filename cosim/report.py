@@ -266,6 +266,10 @@ def plot_force_split(recordings: Mapping[str, Recording], path: Path) -> Path:
     return save_figure(figure, path)
 
 
+TRAINING_KEYS = ("seconds", "epochs", "best_epoch", "parameters", "test_mse", "val_mse",
+                 "rigid_body_test_mse", "model_rate_hz", "threads")
+
+
 def training_table(training: Mapping[str, Mapping[str, Any]]) -> str:
     """The cost and fit of each trained model as Markdown: wall time of its training, epochs
     run and the one kept (lowest validation loss), parameters and test MSE."""
@@ -276,10 +280,6 @@ def training_table(training: Mapping[str, Mapping[str, Any]]) -> str:
                      f"{m['epochs']} ({m['best_epoch']}) | {m['parameters']} | "
                      f"{m['test_mse']:.3g} |")
     return "\n".join(lines) + "\n"
-
-
-TRAINING_KEYS = ("seconds", "epochs", "best_epoch", "parameters", "test_mse", "val_mse",
-                 "rigid_body_test_mse", "model_rate_hz", "threads")
 
 
 def write_report(recordings: dict[str, Recording], env: str, out: str | Path,

@@ -60,7 +60,8 @@ def train_parallel(jobs: Sequence[TrainJob], workers: int | None = None,
                    progress: bool = True) -> dict[str, dict[str, Any]]:
     """Train every job, `workers` at a time (default: one per core granted, at most one per
     job), each on cores // workers threads; return the metrics per model kind. The first
-    failure is raised once the runs under way have stopped (their checkpoints kept)."""
+    failure is raised once the runs under way have finished (an evaluation run again reuses
+    them); the jobs not started are cancelled."""
     if not jobs:
         return {}
     workers = max(1, min(workers or granted_cores(), len(jobs)))
