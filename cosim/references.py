@@ -199,7 +199,7 @@ class Spline(Segment):
         if np.any(chords == 0):
             k = int(np.argmin(chords))
             raise ValueError(f"consecutive spline points {k} and {(k + 1) % len(pts)} coincide "
-                             f"at {tuple(pts[k])}")
+                             f"at ({pts[k][0]:g}, {pts[k][1]:g}) m")
         _positive("duration", self.duration, "s")
         knots = np.concatenate([[0.0], np.cumsum(chords)]) / chords.sum() * self.duration
         object.__setattr__(self, "_spline", CubicSpline(knots, closed, bc_type="periodic"))

@@ -106,7 +106,7 @@ def test_leaving_the_workspace_raises_naming_the_point(make, point):
     (lambda: Circle((0, 0), 0.0, 0.0, 1.0, 1.0), "radius must be a positive"),
     (lambda: Circle((0, 0), 0.01, 0.0, 0.0, 1.0), "turns"),
     (lambda: Hold((0, 0), math.inf), "duration must be a positive"),
-    (lambda: Spline(((0, 0), (0, 0), (0.01, 0)), 1.0), "coincide"),
+    (lambda: Spline(((0, 0), (0, 0), (0.01, 0)), 1.0), r"0 and 1 coincide at \(0, 0\) m"),
     (lambda: Spline(((0, 0),), 1.0), "at least two"),
     (lambda: Chain(()), "at least one"),
     (lambda: Chain((Line((0, 0), (0.01, 0), 1.0), Hold((0.02, 0), 1.0))), "jump"),
