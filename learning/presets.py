@@ -8,8 +8,8 @@ GPU.
 `fast` trains the same kinds of network on a 2-core CPU in one to two minutes each, the four
 models of an evaluation side by side (learning.workers). Each choice, and what it was measured
 to do (closed-loop e2 ratio PID alone / feedforward, x / y, on the sim evaluation reference,
-with a 0.03 m circle and a spline beside it as references nobody trained for;
-`tests/test_learning_slow.py` checks the outcome):
+with a 0.03 m circle and a spline beside it as references nobody trained for; the slow demo
+test, tests/test_cli.py, checks the outcome):
 
 - 100 Hz model rate (sim; the hardware environment's slow data 25 Hz, learning.evaluate):
   the filtered data hold nothing above 5 Hz, and the feedforward FMU extrapolates linearly
@@ -22,11 +22,11 @@ with a 0.03 m circle and a spline beside it as references nobody trained for;
   dynamics is nearly linear, but their covariance spans 16 decades, and gradient descent does
   not reach in minutes what least squares solves at once. The skip starts from the
   least-squares fit and the network learns the rest. On the nominal sim plant the rest is
-  small: the least-squares fit alone reaches a test MSE of 1.95e-8 and each network 2.0e-8
-  to 2.0e-8, and the closed-loop figures of the LSTM and CNN-LSTM agree to three digits. On
+  small: the least-squares fit alone reaches a test MSE of 1.95e-8 and each network 1.96e-8
+  to 2.01e-8, and the closed-loop figures of the LSTM and CNN-LSTM agree to three digits. On
   the hardware stand-in (friction, a tool mode, noisy encoders) the network part matters: the
-  linear fit alone gives e2 11 / 11 there, the TCN with it 30 / 33, the LSTM 16 / 17 (10 / 12
-  without the skip).
+  linear fit alone gives e2 11 / 11 there, the TCN with it 31 / 38, the LSTM 27 / 31 (10 / 12
+  without the skip, after 60 epochs; learning.evaluate).
 - Smaller recurrent networks (one LSTM layer of 64 instead of two of 100): 0.8 s per epoch
   against 2.3 s, and e2 68 / 91 against 48 / 56 after the same 120 epochs without skip.
 - TCN of 4 levels of 64 channels, batches of 16 windows: 0.9 s per epoch (128 channels:
