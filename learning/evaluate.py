@@ -1,13 +1,15 @@
 """`flexff evaluate`: the seed's Table 5.2 (sim) or 6.2 (hardware) for flexff, end to end.
 
 1. collect the environment's trajectory set under PID (resumes what is there);
-2. train each model (reuses a finished run with the same settings) and export it to ONNX;
+2. train the models side by side, one process per core (learning.workers; a finished run with
+   the same settings is reused), and export each to ONNX;
 3. co-simulate the environment's evaluation reference on its plant: PID alone, with the
    rigid-body feedforward, and with each learned model as an ONNX feedforward FMU. As in the
    seed, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
    100 s reference of sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz
    circles) on the hardware plant;
-4. write the report (cosim.report): summary.json, table.md and the figures.
+4. write the report (cosim.report): summary.json, table.md (with what each model's training
+   cost) and the figures.
 
 Given a run configuration (`loop`, learning.loop), steps 1 and 3 run on that loop instead of
 the environment's plant: the set is collected on it under PID alone, and every scenario is that loop on the
