@@ -46,13 +46,13 @@ from scipy.io.matlab import matfile_version
 from scipy.signal import savgol_filter
 
 from cosim.csv_text import read_rows
-from learning.dataset import (ENCODER_SIGNALS, IMPORTED, LABEL_SIGNALS, POSITION_SIGNALS,
-                              REFERENCE_SIGNALS, Dataset, file_sha256, load_dataset,
-                              save_signals, write_manifest)
+from learning.dataset import (ENCODER_SIGNALS, IMPORTED, POSITION_SIGNALS, REFERENCE_SIGNALS,
+                              TRAINED, Dataset, file_sha256, load_dataset, save_signals,
+                              write_manifest)
 from learning.features import decimation, encoder_positions
 from learning.presets import PRESETS, make_config
 
-REQUIRED = ("time", *ENCODER_SIGNALS, *LABEL_SIGNALS)
+REQUIRED = TRAINED  # a log must hold what training reads
 COLUMNS = (*REQUIRED, *REFERENCE_SIGNALS)
 RATE_TOLERANCE = 0.01  # largest relative deviation of a sample interval from the median
 UNIFORM = 1e-6  # relative: a grid this close to the rate is kept as it is (learning.dataset)
