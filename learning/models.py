@@ -176,6 +176,11 @@ class CNNLSTM(SequenceNetwork):
         self.lstm = LSTMNet(conv_channels[-1], hidden, layers, dropout)
         glorot_init(self)
 
+    @property
+    def head(self) -> nn.Linear:
+        """The output layer: the LSTM's."""
+        return self.lstm.head
+
     def state_shapes(self, batch: int) -> list[tuple[int, ...]]:
         return [(batch, self.n_features, self.history)] + self.lstm.state_shapes(batch)
 
@@ -230,9 +235,8 @@ def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor) 
     with torch.no_grad():
         network.linear.weight.copy_(solution[:-1].T)
         network.linear.bias.copy_(solution[-1])
-        inner = network.network.lstm if isinstance(network.network, CNNLSTM) else network.network
-        nn.init.zeros_(inner.head.weight)
-        nn.init.zeros_(inner.head.bias)
+        nn.init.zeros_(network.network.head.weight)
+        nn.init.zeros_(network.network.head.bias)
 
 
 # kind -> (class, whether its target is the residual over the rigid-body prior)
