@@ -300,6 +300,19 @@ def _word_offsets(before: bytes, after: bytes, fmt: str, change) -> list[int]:
                    - change) <= 1e-15]
 
 
+def _states_around_step(s, k: int) -> tuple[bytes, bytes]:
+    """The serialized states of slave `s` after steps 0 .. k - 1, and after step k."""
+    _steps(s, range(k))
+    before = s.slave.serializeFMUstate(s.slave.getFMUstate())
+    _steps(s, [k])
+    return before, s.slave.serializeFMUstate(s.slave.getFMUstate())
+
+
+def _patched(blob: bytes, offset: int, fmt: str, value) -> bytes:
+    """`blob` with the 8-byte word at `offset` replaced by `value` packed as `fmt`."""
+    return blob[:offset] + struct.pack(fmt, value) + blob[offset + 8:]
+
+
 def _deserialize_status(s, blob: bytes) -> int:
     buffer = (c_char * len(blob)).from_buffer_copy(blob)
     return status_of(s.slave.fmi2DeSerializeFMUstate, s.slave.component, buffer, len(blob),
@@ -311,24 +324,17 @@ def test_a_corrupt_serialized_state_is_refused(precomputed_fmu):
     accepted and read out of bounds) or not matching the state's time, a non-finite time."""
     s = LoggedSlave(precomputed_fmu)
     s.initialize()
-    _steps(s, range(5))
-    before = s.slave.serializeFMUstate(s.slave.getFMUstate())
-    _steps(s, [5])
-    blob = s.slave.serializeFMUstate(s.slave.getFMUstate())
+    before, blob = _states_around_step(s, 5)
     [counter] = _word_offsets(before, blob, "<q", 1)  # the network's step counter
     [clock] = _word_offsets(before, blob, "<d", H)  # the time
     assert _deserialize_status(s, blob) == fmi2OK
-
-    def changed(offset: int, fmt: str, value) -> bytes:
-        return blob[:offset] + struct.pack(fmt, value) + blob[offset + 8:]
-
     rows = STEPS + 1
     for value in (-1, -PERIOD, rows, rows + PERIOD - 1, 2**62, -2**63):
-        assert _deserialize_status(s, changed(counter, "<q", value)) == fmi2Error
+        assert _deserialize_status(s, _patched(blob, counter, "<q", value)) == fmi2Error
         assert "corrupt state: network step counter" in s.messages[-1][2]
-    assert _deserialize_status(s, changed(counter, "<q", PERIOD)) == fmi2Error
+    assert _deserialize_status(s, _patched(blob, counter, "<q", PERIOD)) == fmi2Error
     assert "is not the time" in s.messages[-1][2]  # in the table, but not where the time is
-    assert _deserialize_status(s, changed(clock, "<d", float("nan"))) == fmi2Error
+    assert _deserialize_status(s, _patched(blob, clock, "<d", float("nan"))) == fmi2Error
     assert "corrupt state: time = nan" in s.messages[-1][2]
     s.free()
 
@@ -338,14 +344,10 @@ def test_a_corrupt_step_counter_is_refused_step_by_step(step_fmu):
     overflowed in the next step, a negative one gave a negative phase)."""
     s = LoggedSlave(step_fmu)
     s.initialize()
-    _steps(s, range(4))
-    before = s.slave.serializeFMUstate(s.slave.getFMUstate())
-    _steps(s, [4])
-    blob = s.slave.serializeFMUstate(s.slave.getFMUstate())
+    before, blob = _states_around_step(s, 4)
     [counter] = _word_offsets(before, blob, "<q", 1)
     for value in (-1, 2**63 - 1, 2**53 + 1):
-        changed = blob[:counter] + struct.pack("<q", value) + blob[counter + 8:]
-        assert _deserialize_status(s, changed) == fmi2Error
+        assert _deserialize_status(s, _patched(blob, counter, "<q", value)) == fmi2Error
         assert "corrupt state: network step counter" in s.messages[-1][2]
     s.free()
 
