@@ -8,9 +8,12 @@ tensors float32):
 - single-step form: T = 1 per call, each call fed the state outputs of the previous one
   (zeros at the first call).
 
-State tensors (batch size 1): LSTM `h`, `c` (layers, 1, hidden); TCN and pgnn
-`input_buffer` (1, n_features, receptive field - 1) holding the last scaled inputs; CNN-LSTM
-both. Each state input `NAME` has the output `NAME_out`.
+State tensors (batch size 1): LSTM `h`, `c` (layers, 1, hidden); TCN and pgnn one buffer
+per level, `level0_buffer` ... (1, channels in, (kernel - 1) * dilation), holding that level's
+last inputs (learning.models.StreamingTCN: a call costs one output per level, not the whole
+receptive field); CNN-LSTM `input_buffer` (1, n_features, history) holding the last scaled
+inputs, then `h`, `c`. Each state input `NAME` has the output `NAME_out`. The graph is checked
+against the network as trained, sequence and steps.
 
 The model runs at its own sample rate (metadata `sample_rate_hz`, e.g. 100 Hz when trained
 down-sampled): a runner at a higher rate, such as the feedforward FMU at 1 kHz, calls it once
@@ -35,6 +38,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -68,9 +72,10 @@ def export(run: str | Path, out: str | Path, inputs: str = "features") -> Path:
 
 def _export(loaded: Run, out: Path, inputs: str) -> Path:
     model = SIModel(loaded, inputs, prior=False).eval()
+    stepped = replace(loaded, network=loaded.network.step_form())
 
     def write(tmp: Path) -> None:
-        _write_graph(loaded, model, inputs, tmp)
+        _write_graph(stepped, SIModel(stepped, inputs, prior=False).eval(), inputs, tmp)
         check_export(model, tmp, _probe(loaded, inputs, 60), name=out)
 
     return atomic_write(out, write)

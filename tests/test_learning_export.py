@@ -77,7 +77,11 @@ def test_onnxruntime_matches_pytorch_in_both_forms(data, runs, tmp_path, kind):
     run = load_run(runs / kind)
     features, _ = _test_inputs(data, run)
     expected = _graph_forces(run, features)
-    assert read_metadata(path)["prior"] == ("rigid-body" if kind == "pgnn" else "none")
+    metadata = read_metadata(path)
+    assert metadata["prior"] == ("rigid-body" if kind == "pgnn" else "none")
+    if kind in ("tcn", "pgnn"):  # one buffer per level (learning.models.StreamingTCN)
+        assert [s["input"] for s in json.loads(metadata["state"])] == [
+            f"level{i}_buffer" for i in range(TINY[kind]["levels"])]
     runtime = session(path)
     whole = run_sequence(runtime, features)
     steps = run_steps(runtime, features)

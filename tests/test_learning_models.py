@@ -67,6 +67,33 @@ def test_chunks_with_carried_state_equal_the_whole_sequence(kind):
     torch.testing.assert_close(torch.cat(parts, dim=1), whole, rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("kind,skip", [("tcn", False), ("tcn", True), ("pgnn", False)])
+def test_the_streaming_tcn_gives_the_tcns_outputs_from_the_start(kind, skip):
+    torch.manual_seed(1)
+    net = build_network(kind, 5, linear_skip=skip, **SMALL[kind]).double().eval()
+    for parameter in net.parameters():  # nonzero biases: zero input is not at rest at zero
+        torch.nn.init.normal_(parameter, std=0.5)
+    stepped = net.step_form()
+    assert type(stepped).__name__ == ("LinearSkip" if skip else "StreamingTCN")
+    assert stepped.state_names()[0] == "level0_buffer" and len(stepped.state_names()) == \
+        SMALL[kind]["levels"]
+    x = torch.randn(2, 50, 5, dtype=torch.float64)
+    whole, _ = net(x)
+    state, steps = None, []
+    for t in range(50):
+        y, state = stepped(x[:, t:t + 1], state)
+        steps.append(y)
+    torch.testing.assert_close(stepped(x)[0], whole, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(torch.cat(steps, dim=1), whole, rtol=1e-12, atol=1e-12)
+    assert [tuple(s.shape) for s in state] == stepped.state_shapes(2)
+
+
+def test_a_network_without_a_cheaper_step_form_is_its_own():
+    for skip in (False, True):
+        net = build_network("lstm", 5, linear_skip=skip, **SMALL["lstm"])
+        assert net.step_form() is net
+
+
 @pytest.mark.parametrize("levels,kernel", [(6, 3), (4, 2), (3, 5)])
 def test_tcn_receptive_field_equals_the_formula(levels, kernel):
     net = TemporalConvNet(3, channels=6, levels=levels, kernel=kernel, dropout=0.0).double().eval()
