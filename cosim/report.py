@@ -267,16 +267,20 @@ def plot_force_split(recordings: Mapping[str, Recording], path: Path) -> Path:
 
 
 TRAINING_KEYS = ("seconds", "epochs", "best_epoch", "parameters", "test_mse", "val_mse",
-                 "rigid_body_test_mse", "model_rate_hz", "threads")
+                 "rigid_body_test_mse", "model_rate_hz", "threads", "members")
 
 
 def training_table(training: Mapping[str, Mapping[str, Any]]) -> str:
     """The cost and fit of each trained model as Markdown: wall time of its training, epochs
-    run and the one kept (lowest validation loss), parameters and test MSE."""
+    run and the one kept (lowest validation loss), parameters and test MSE (an ensemble's:
+    its members' summed time and parameters, mean test MSE)."""
     lines = ["| model | training [s] | epochs (kept) | parameters | test MSE |",
              "|---|---:|---:|---:|---:|"]
     for name, m in training.items():
-        lines.append(f"| {SCENARIO_LABELS.get(name, name)} | {m['seconds']:.0f} | "
+        label = SCENARIO_LABELS.get(name, name)
+        if m.get("members"):
+            label += f" ({m['members']} seeds)"
+        lines.append(f"| {label} | {m['seconds']:.0f} | "
                      f"{m['epochs']} ({m['best_epoch']}) | {m['parameters']} | "
                      f"{m['test_mse']:.3g} |")
     return "\n".join(lines) + "\n"

@@ -428,8 +428,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="epochs between checkpoints (default: the preset's)")
     train.set_defaults(handler=_train)
 
-    export = commands.add_parser("export", help="export a training run to ONNX")
-    export.add_argument("run", help="the run folder (flexff train)")
+    export = commands.add_parser("export", help="export a training run (or an ensemble of "
+                                                "runs) to ONNX")
+    export.add_argument("run", nargs="+", help="the run folder (flexff train); several runs "
+                                               "of one model kind give one graph of their mean")
     export.add_argument("-o", "--output", required=True, help="the .onnx file to write")
     export.add_argument("--inputs", default="features", choices=("features", "reference"),
                         help="graph inputs: the SI features, or the reference signals "

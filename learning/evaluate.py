@@ -33,6 +33,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from controllers.features import feature_names
 from cosim.recording import Recording, load_recording
 from cosim.report import write_report
@@ -56,10 +58,16 @@ class Environment:
     reference: str
     features: dict[str, Any] = field(default_factory=dict)
     fast: dict[str, dict[str, Any]] = field(default_factory=dict)  # model kind -> settings
+    ensembles: dict[str, int] = field(default_factory=dict)  # model kind -> members (fast)
 
     def overrides(self, preset: str, model: str) -> dict[str, Any]:
         """The training settings this environment sets for `model` trained with `preset`."""
         return {**self.features, **(self.fast.get(model, {}) if preset == "fast" else {})}
+
+    def members(self, preset: str, model: str) -> int:
+        """How many networks of `model`, trained with seeds 0, 1, ..., its feedforward
+        averages (learning.deploy.EnsembleSIModel): 1 unless the fast preset says more."""
+        return self.ensembles.get(model, 1) if preset == "fast" else 1
 
 
 ENVIRONMENTS = {
@@ -122,19 +130,18 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         data = collect(set_name, out / f"data-{set_name}",
                        config=None if loop is None else with_feedforward(loop))
     extra = {"epochs": epochs} if epochs else {}
-    overrides = {kind: {**environment.overrides(preset, kind), **extra} for kind in models}
-    runs = {kind: out / "runs" / kind for kind in models}
-    wanted = {kind: make_config(kind, preset, **overrides[kind]) for kind in models}
-    training = {kind: m for kind in models if (m := _finished(runs[kind], wanted[kind]))}
-    if todo := [kind for kind in models if kind not in training]:
+    jobs = {job.name: job for kind in models
+            for job in _member_jobs(kind, preset, {**environment.overrides(preset, kind), **extra},
+                                    environment.members(preset, kind), Path(data), out / "runs")}
+    training = {name: m for name, job in jobs.items() if (m := _finished(job))}
+    if todo := [name for name in jobs if name not in training]:
         say(f"training {', '.join(todo)} ({preset} preset), one process per core")
-    training.update(train_parallel([
-        TrainJob(kind, preset, Path(data), runs[kind], overrides[kind], _cost(wanted[kind]))
-        for kind in todo], progress=progress))
-    onnx_files = {}
+    training.update(train_parallel([jobs[name] for name in todo], progress=progress))
+    onnx_files, model_training = {}, {}
     for kind in models:
-        metrics = training[kind]
-        onnx_files[kind] = export(runs[kind], out / f"{kind}.onnx")
+        names = [name for name, job in jobs.items() if job.model == kind]
+        metrics = model_training[kind] = _ensemble_metrics([training[n] for n in names])
+        onnx_files[kind] = export([jobs[n].run for n in names], out / f"{kind}.onnx")
         say(f"{kind}: test MSE {metrics['test_mse']:.3g} ({metrics['parameters']} parameters, "
             f"{metrics['epochs']} epochs in {metrics['seconds']:.0f} s) -> {onnx_files[kind]}")
     recordings: dict[str, Recording] = {}
@@ -146,7 +153,32 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
             f"real-time factor {metrics['real_time_factor']:.0f}")
         if warning := range_warning(metrics):
             say(f"{name}: {warning}")
-    return write_report(recordings, env, out, {kind: training[kind] for kind in models})
+    return write_report(recordings, env, out, model_training)
+
+
+def _member_jobs(kind: str, preset: str, overrides: dict[str, Any], members: int, data: Path,
+                 runs: Path) -> list[TrainJob]:
+    """The training runs of model `kind`: one in runs/KIND, or an ensemble's members, seeds
+    0, 1, ..., in runs/KIND/seedN."""
+    if members == 1:
+        return [TrainJob(kind, preset, data, runs / kind, overrides,
+                         _cost(make_config(kind, preset, **overrides)))]
+    return [TrainJob(kind, preset, data, runs / kind / f"seed{seed}", {**overrides, "seed": seed},
+                     _cost(make_config(kind, preset, **overrides)), f"{kind}-seed{seed}")
+            for seed in range(members)]
+
+
+def _ensemble_metrics(members: list[dict]) -> dict:
+    """One model's training metrics; for an ensemble, its members' summed time and
+    parameters, mean test and validation MSE and latest kept epoch."""
+    if len(members) == 1:
+        return members[0]
+    return {**members[0], "members": len(members),
+            "seconds": sum(m["seconds"] for m in members),
+            "parameters": sum(m["parameters"] for m in members),
+            "test_mse": float(np.mean([m["test_mse"] for m in members])),
+            "val_mse": float(np.mean([m["val_mse"] for m in members])),
+            "best_epoch": max(m["best_epoch"] for m in members)}
 
 
 def _cost(config: TrainConfig) -> float:
@@ -158,14 +190,15 @@ def _cost(config: TrainConfig) -> float:
     return config.epochs * parameter_count(network) * (config.features.model_rate_hz or 1.0)
 
 
-def _finished(run: Path, wanted: TrainConfig) -> dict | None:
-    """The metrics of a finished training run in `run` with the settings of `wanted` (where it
-    ran, on which device and threads, aside), or None."""
+def _finished(job: TrainJob) -> dict | None:
+    """The metrics of a finished training run in the job's folder with the job's settings
+    (where it ran, on which device and threads, aside), or None."""
     try:
-        config = json.loads((run / "run.json").read_text())["config"]
-        metrics = json.loads((run / "metrics.json").read_text())
+        config = json.loads((job.run / "run.json").read_text())["config"]
+        metrics = json.loads((job.run / "metrics.json").read_text())
     except (OSError, ValueError, KeyError):
         return None
+    wanted = make_config(job.model, job.preset, **job.overrides)
     settings = json.loads(json.dumps(wanted.to_dict()))
     same = all(config.get(key) == value for key, value in settings.items()
                if key not in ("device", "threads"))

@@ -40,6 +40,7 @@ import json
 import warnings
 from dataclasses import replace
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 import onnx
@@ -47,7 +48,7 @@ import onnxruntime as ort
 import torch
 
 from cosim.recording import atomic_write
-from learning.deploy import SIModel
+from learning.deploy import EnsembleSIModel, SIModel
 from learning.run_folder import Run, flexff_version, load_run
 from learning.threads import torch_threads
 
@@ -58,33 +59,57 @@ OUTPUT_SIGNALS = ["Fx_ff", "Fy_ff"]
 TOLERANCE = 1e-5  # largest |onnxruntime - torch| relative to the largest |force|
 
 
-def export(run: str | Path, out: str | Path, inputs: str = "features") -> Path:
+def export(run: str | Path | Sequence[str | Path], out: str | Path,
+           inputs: str = "features") -> Path:
     """Write the ONNX graph of the run folder `run` to the file `out`; return its path.
 
-    `inputs="features"` (default): the graph takes the run's features in SI units (63 or 6);
-    `inputs="reference"`: it takes x_ref, y_ref, vx_ref, vy_ref, ax_ref, ay_ref and computes
-    the features itself. The export is checked: onnxruntime must reproduce PyTorch in both
-    forms to within 1e-5 (relative to the largest force), or a RuntimeError is raised.
+    Several run folders of one model kind (trained with other seeds) give one graph of their
+    mean force (learning.deploy.EnsembleSIModel). `inputs="features"` (default): the graph
+    takes the run's features in SI units (63 or 6); `inputs="reference"`: it takes x_ref,
+    y_ref, vx_ref, vy_ref, ax_ref, ay_ref and computes the features itself. The export is
+    checked: onnxruntime must reproduce PyTorch in both forms to within 1e-5 (relative to the
+    largest force), or a RuntimeError is raised.
     """
+    folders = [run] if isinstance(run, (str, Path)) else list(run)
+    if not folders:
+        raise ValueError("export needs at least one training run folder")
     with torch_threads():
-        return _export(load_run(run), Path(out), inputs)
+        return _export([load_run(folder) for folder in folders], Path(out), inputs)
 
 
-def _export(loaded: Run, out: Path, inputs: str) -> Path:
-    model = SIModel(loaded, inputs, prior=False).eval()
-    stepped = replace(loaded, network=loaded.network.step_form())
+def _export(runs: list[Run], out: Path, inputs: str) -> Path:
+    _check_members(runs)
+    model = _si_model(runs, inputs)
+    stepped = _si_model([replace(r, network=r.network.step_form()) for r in runs], inputs)
 
     def write(tmp: Path) -> None:
-        _write_graph(stepped, SIModel(stepped, inputs, prior=False).eval(), inputs, tmp)
-        check_export(model, tmp, _probe(loaded, inputs, 60), name=out)
+        _write_graph(runs, stepped, inputs, tmp)
+        check_export(model, tmp, _probe(runs[0], inputs, 60), name=out)
 
     return atomic_write(out, write)
 
 
-def _write_graph(loaded: Run, model: SIModel, inputs: str, path: Path) -> None:
+def _si_model(runs: list[Run], inputs: str) -> SIModel | EnsembleSIModel:
+    members = [SIModel(r, inputs, prior=False) for r in runs]
+    return (members[0] if len(members) == 1 else EnsembleSIModel(members)).eval()
+
+
+def _check_members(runs: list[Run]) -> None:
+    """Ensemble members must run alike: same model kind, features and rate."""
+    def key(r: Run) -> tuple:
+        return r.config.model, r.config.features.feature_set, r.model_rate_hz
+
+    if len({key(r) for r in runs}) > 1:
+        raise ValueError("the runs of one export must share model kind, feature set and model "
+                         "rate: " + ", ".join(f"{r.path} {key(r)}" for r in runs))
+
+
+def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
+                 path: Path) -> None:
     """The checked graph with its metadata, to `path`."""
+    loaded = runs[0]
     state = model.initial_state()
-    state_names = loaded.network.state_names()
+    state_names = model.state_names()
     example = torch.as_tensor(_probe(loaded, inputs, 8), dtype=torch.float64)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -94,21 +119,23 @@ def _write_graph(loaded: Run, model: SIModel, inputs: str, path: Path) -> None:
             output_names=["forces", *[f"{n}_out" for n in state_names]],
             dynamic_axes={"inputs": {0: "time"}, "forces": {0: "time"}})
     graph = onnx.load(str(path))
+    low = np.min([r.feature_scaler.low for r in runs], axis=0)
+    high = np.max([r.feature_scaler.high for r in runs], axis=0)
     metadata = {
         "format": FORMAT, "format_version": str(VERSION), "flexff_version": flexff_version(),
         "model_kind": loaded.config.model, "preset": loaded.config.preset,
+        "ensemble_members": str(len(runs)),
         "feature_set": loaded.config.features.feature_set, "input_kind": inputs,
         "prior": "rigid-body" if model.residual else "none",
         "input_signals": json.dumps(model.input_names),
         "input_units": json.dumps(model.input_units),
         "feature_range": json.dumps({"signals": loaded.feature_names,
-                                     "low": loaded.feature_scaler.low.tolist(),
-                                     "high": loaded.feature_scaler.high.tolist()}),
+                                     "low": low.tolist(), "high": high.tolist()}),
         "output_signals": json.dumps(OUTPUT_SIGNALS), "output_units": json.dumps(["N", "N"]),
         "sample_rate_hz": repr(float(loaded.model_rate_hz)),
         "state": json.dumps([{"input": n, "output": f"{n}_out", "shape": list(s.shape),
                               "initial": "zeros"} for n, s in zip(state_names, state)]),
-        "history_samples": str(loaded.network.history),
+        "history_samples": str(max(r.network.history for r in runs)),
         "usage": ("inputs (T, n_inputs) float64 in SI units -> forces (T, 2) float64 [N] "
                   "(plus the rigid-body feedforward when prior = rigid-body); "
                   "state tensors float32. "
@@ -154,7 +181,7 @@ def run_steps(session: ort.InferenceSession, inputs: np.ndarray) -> np.ndarray:
     return np.array(forces)
 
 
-def check_export(model: SIModel, path: Path, inputs: np.ndarray,
+def check_export(model: SIModel | EnsembleSIModel, path: Path, inputs: np.ndarray,
                  name: Path | None = None) -> float:
     """Largest relative deviation of onnxruntime (both forms) from PyTorch on `inputs`;
     RuntimeError (naming the graph `name`, default `path`) if above TOLERANCE."""

@@ -4,7 +4,7 @@ The networks' operations are small, so one model gains little from a second thre
 much when that thread waits for a busy core, learning.threads); the models of an evaluation
 are independent, so they train in parallel processes instead, one thread each, the most
 expensive first so that the cores finish together. Measured on the 2-core machine: the demo's
-four models took ... s one after the other on two threads and ... s side by side.
+four models took 265 s one after the other on two threads and about 130 s side by side.
 
 A worker reports each epoch through a queue; this process draws the bars. Workers die with
 this process (even by SIGKILL), and what they finished is kept: every run folder resumes from
@@ -36,7 +36,8 @@ POLL_S = 0.2  # how often the bars are redrawn while the workers run
 @dataclass(frozen=True)
 class TrainJob:
     """One training run of learning.train.train: model kind, preset, data and run folders,
-    setting overrides, and its expected cost (any unit; the largest starts first)."""
+    setting overrides, its expected cost (any unit; the largest starts first) and the name
+    its bar and result go by (default: the model kind)."""
 
     model: str
     preset: str
@@ -44,6 +45,11 @@ class TrainJob:
     run: Path
     overrides: Mapping[str, Any] = field(default_factory=dict)
     cost: float = 1.0
+    label: str = ""
+
+    @property
+    def name(self) -> str:
+        return self.label or self.model
 
 
 def die_with_parent(parent: int) -> None:
@@ -59,7 +65,7 @@ def die_with_parent(parent: int) -> None:
 def train_parallel(jobs: Sequence[TrainJob], workers: int | None = None,
                    progress: bool = True) -> dict[str, dict[str, Any]]:
     """Train every job, `workers` at a time (default: one per core granted, at most one per
-    job), each on cores // workers threads; return the metrics per model kind. The first
+    job), each on cores // workers threads; return the metrics per job name. The first
     failure is raised once the runs under way have finished (an evaluation run again reuses
     them); the jobs not started are cancelled."""
     if not jobs:
@@ -73,7 +79,7 @@ def train_parallel(jobs: Sequence[TrainJob], workers: int | None = None,
             initargs=(os.getpid(),)) as pool:
         epochs = manager.Queue()
         futures = {pool.submit(_train_one, job, threads, epochs): job for job in ordered}
-        bars = {job.model: tqdm(desc=job.model, position=k, unit="epoch", leave=True,
+        bars = {job.name: tqdm(desc=job.name, position=k, unit="epoch", leave=True,
                                 disable=not progress, dynamic_ncols=True)
                 for k, job in enumerate(ordered)}
         try:
@@ -81,7 +87,7 @@ def train_parallel(jobs: Sequence[TrainJob], workers: int | None = None,
         finally:
             for bar in bars.values():
                 bar.close()
-        return {futures[f].model: f.result() for f in futures}
+        return {futures[f].name: f.result() for f in futures}
 
 
 def _follow(futures: dict[Future, TrainJob], epochs: Any, bars: dict[str, tqdm]) -> None:
@@ -118,5 +124,5 @@ def _train_one(job: TrainJob, threads: int, epochs: Any) -> dict[str, Any]:
     from learning.train import train
 
     return train(job.model, job.preset, job.data, job.run, progress=False,
-                 on_epoch=lambda report: epochs.put((job.model, report)),
+                 on_epoch=lambda report: epochs.put((job.name, report)),
                  **{**job.overrides, "threads": threads})

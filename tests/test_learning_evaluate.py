@@ -3,12 +3,14 @@ report written, and the rigid-body feedforward as good as the exact model makes 
 
 import json
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from cosim.references import build_reference
-from learning.evaluate import evaluate, scenario_config
+from learning.evaluate import ENVIRONMENTS, evaluate, scenario_config
+from learning.export import read_metadata
 from learning.synthetic import synthetic_dataset
 
 
@@ -58,6 +60,25 @@ def test_a_run_with_other_settings_is_trained_again(evaluation, tmp_path):
     evaluate("sim", copy, models=["pgnn"], data=out / "data", epochs=2, say=lambda _: None)
     assert (copy / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns != stamp
     assert json.loads((copy / "runs" / "pgnn" / "run.json").read_text())["config"]["epochs"] == 2
+
+
+def test_an_ensemble_trains_its_members_and_runs_their_mean(evaluation, tmp_path, monkeypatch):
+    out, _, _ = evaluation
+    environment = replace(ENVIRONMENTS["sim"], ensembles={"pgnn": 2})
+    assert environment.members("fast", "pgnn") == 2 and environment.members("thesis", "pgnn") == 1
+    monkeypatch.setitem(ENVIRONMENTS, "sim", environment)
+    summary = evaluate("sim", tmp_path, models=["pgnn"], data=out / "data", epochs=1,
+                       say=lambda _: None, progress=False)
+    members = [json.loads((tmp_path / "runs" / "pgnn" / f"seed{k}" / "metrics.json").read_text())
+               for k in range(2)]
+    assert [json.loads((tmp_path / "runs" / "pgnn" / f"seed{k}" / "run.json").read_text())
+            ["config"]["seed"] for k in range(2)] == [0, 1]
+    assert read_metadata(tmp_path / "pgnn.onnx")["ensemble_members"] == "2"
+    training = summary["training"]["pgnn"]
+    assert training["members"] == 2
+    assert training["parameters"] == sum(m["parameters"] for m in members)
+    assert training["test_mse"] == pytest.approx(np.mean([m["test_mse"] for m in members]))
+    assert "| physics-guided FF (2 seeds) | " in (tmp_path / "table.md").read_text()
 
 
 def test_bad_requests_are_refused(tmp_path):

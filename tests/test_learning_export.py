@@ -229,3 +229,25 @@ def test_a_failed_export_leaves_the_file_as_it_was(runs, tmp_path, monkeypatch, 
             export(runs / "pgnn", target)
     assert out.read_bytes() == good and sorted(p.name for p in tmp_path.iterdir()) == [
         "pgnn.onnx"]
+
+
+def test_an_ensemble_graph_gives_its_members_mean_force(data, runs, tmp_path):
+    second = tmp_path / "pgnn-seed1"
+    train("pgnn", "fast", data, second, progress=False, epochs=1, val_fraction=0.2, seed=1,
+          **TINY["pgnn"])
+    members = [load_run(runs / "pgnn"), load_run(second)]
+    features, _ = _test_inputs(data, members[0])
+    alone = [_graph_forces(run, features) for run in members]
+    assert _relative(alone[0], alone[1]) > 1e-3  # the seeds do make other networks
+    path = export([runs / "pgnn", second], tmp_path / "ensemble.onnx")
+    runtime = session(path)
+    mean = (alone[0] + alone[1]) / 2
+    assert _relative(run_sequence(runtime, features), mean) < TOLERANCE
+    assert _relative(run_steps(runtime, features), mean) < TOLERANCE
+    metadata = read_metadata(path)
+    assert metadata["ensemble_members"] == "2"
+    assert [s["input"] for s in json.loads(metadata["state"])] == [
+        f"member{m}_level{i}_buffer" for m in range(2) for i in range(TINY["pgnn"]["levels"])]
+    with pytest.raises(ValueError, match="share model kind"):
+        export([runs / "pgnn", runs / "tcn"], tmp_path / "mixed.onnx")
+    assert not (tmp_path / "mixed.onnx").exists()
