@@ -22,7 +22,7 @@ import numpy as np
 import onnx
 
 MAX_RANK = 4  # of a state tensor (NET_MAX_RANK in onnx_network.h)
-MAX_TENSORS = 16  # inputs, or outputs, of one graph (MAX_TENSORS in onnx_network.c)
+MAX_TENSORS = 64  # inputs, or outputs, of one graph (MAX_TENSORS in onnx_network.c)
 ELEMENT_TYPES = {onnx.TensorProto.FLOAT: "float32", onnx.TensorProto.DOUBLE: "float64"}
 
 

@@ -123,7 +123,7 @@ typedef void (*AnyFn)(void);
 /* The function in slot SLOT_<name> of the table, with its type. */
 #define ORT(net, name) ((name##Fn)((net)->api[SLOT_##name]))
 
-#define MAX_TENSORS 16 /* inputs or outputs of one graph */
+#define MAX_TENSORS 64 /* inputs or outputs of one graph */
 
 struct Network {
     void *library;
