@@ -2,7 +2,8 @@
 
 1. collect the environment's trajectory set under PID (resumes what is there);
 2. train the models side by side, one process per core (learning.workers; a finished run with
-   the same settings is reused), and export each to ONNX;
+   the same settings is reused), and export each to ONNX (an ensemble's members, where the
+   environment asks for one, as one graph of their mean);
 3. co-simulate the environment's evaluation reference on its plant: PID alone, with the
    rigid-body feedforward, and with each learned model as an ONNX feedforward FMU. As in the
    seed, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
@@ -164,12 +165,11 @@ def _member_jobs(kind: str, preset: str, overrides: dict[str, Any], members: int
                  runs: Path) -> list[TrainJob]:
     """The training runs of model `kind`: one in runs/KIND, or an ensemble's members, seeds
     0, 1, ..., in runs/KIND/seedN."""
+    cost = _cost(make_config(kind, preset, **overrides))
     if members == 1:
-        return [TrainJob(kind, preset, data, runs / kind, overrides,
-                         _cost(make_config(kind, preset, **overrides)))]
+        return [TrainJob(kind, preset, data, runs / kind, overrides, cost)]
     return [TrainJob(kind, preset, data, runs / kind / f"seed{seed}", {**overrides, "seed": seed},
-                     _cost(make_config(kind, preset, **overrides)), f"{kind}-seed{seed}")
-            for seed in range(members)]
+                     cost, f"{kind}-seed{seed}") for seed in range(members)]
 
 
 def _ensemble_metrics(members: list[dict]) -> dict:
