@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.timing import Pacing, StepTiming
 from fmu import cache
 from fmu.compile import CFLAGS, compiler_version, run_compiler
 
@@ -96,3 +97,21 @@ def start_schedule(run: EngineRun, lead: float = 1e-3) -> None:
     """Point 0 is due `lead` seconds from now, on CLOCK_MONOTONIC (the engine's clock)."""
     ns = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + int(lead * 1e9)
     run.start.tv_sec, run.start.tv_nsec = divmod(ns, 1_000_000_000)
+
+
+def idle_timing(seconds: float, period: float = 1e-3) -> StepTiming:
+    """The engine's paced loop with no FMU in it for `seconds` at `period`: what the machine
+    alone does to the schedule (the lateness an empty loop sees, as cyclictest measures), the
+    floor beneath every paced run's lateness and overruns."""
+    steps = max(1, round(seconds / period))
+    tet, lateness = np.zeros(steps + 1), np.zeros(steps + 1)
+    scratch = np.zeros(1)
+    run = EngineRun(step=period, steps=steps, bus=pointer(scratch), sources=pointer(scratch),
+                    record=pointer(np.zeros(steps + 1)), typed=TYPED_HOOK(),
+                    tet=pointer(tet), slave_tet=pointer(scratch), lateness=pointer(lateness),
+                    paced=1, period=period)
+    start_schedule(run)
+    library().engine_run(ctypes.byref(run), 0, steps + 1)
+    listed = tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)])
+    return StepTiming(period, (), tet[:steps], np.zeros((steps, 0)), lateness[:steps],
+                      Pacing(), run.overruns, listed, None)

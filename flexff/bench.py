@@ -8,15 +8,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import onnx
 
 from cosim.config import parse_config
+from cosim.engine import idle_timing
 from cosim.floor import run_c_loop
 from cosim.libcosim import run_libcosim, time_libcosim_engine
+from cosim.master import Master, SlaveSpec
 from cosim.run import simulate
 from cosim.scenario import Scenario, resolve
 from cosim.timing import Pacing
 from fmu.bench import bench_fmu
 from fmu.build import build_fmu
+from fmu.onnx_fmu import onnx_system
 from plant.system import plant_system
 
 CLOSED_LOOP_REFERENCE = "thesis-eval"  # the thesis's evaluation reference, 15 s at 1 ms
@@ -120,8 +124,11 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
                        kinds: tuple[str, ...] = REALTIME_MODELS) -> dict[str, Any]:
     """The closed loop of the hardware evaluation (hardware plant, PID with notch, thesis
     hardware reference: 100 s, or its first `seconds`) with the TCN and the LSTM feedforward
-    in step mode, paced at 1 kHz: TET p50 / p99 / max, each FMU's share, overruns."""
+    in step mode, paced at 1 kHz: TET p50 / p99 / max, each FMU's share, overruns; and, as
+    their floor, the same paced loop with no FMU for as long (`idle`: the lateness and
+    overruns the machine alone causes)."""
     results: dict[str, Any] = {"reference": "thesis-hardware-eval"}
+    paced_s = 0.0
     for kind in kinds:
         config = parse_config({
             "run": {"stop": seconds} if seconds else {},
@@ -135,7 +142,34 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
         results[kind] = {key: table[key] for key in (
             "period_us", "achieved_real_time_factor", "tet_us", "tet_us_per_fmu",
             "tet_over_period_p99", "lateness_us", "overruns", "network_call_us", "process")}
+        paced_s = recording.timing.tet.size * recording.timing.period
+    idle = idle_timing(paced_s)
+    table = idle.table(idle.tet.size * idle.period)
+    results["idle"] = {key: table[key] for key in ("period_us", "steps", "tet_us", "lateness_us",
+                                                   "overruns")}
+    results["one_node_graph"] = one_node_graph_benchmark(folder, paced_s)
     return results
+
+
+def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40) -> dict[str, Any]:
+    """The floor of an onnxruntime call in a paced loop: a graph of one Add node as an FMU,
+    called every `every` 1 ms steps (the hardware models' 25 Hz), paced alone for `seconds`.
+    Its call time is what a network call costs on this machine before any arithmetic."""
+    graph = onnx.helper.make_graph(
+        [onnx.helper.make_node("Add", ["u", "u"], ["y"])], "one_node",
+        [onnx.helper.make_tensor_value_info("u", onnx.TensorProto.DOUBLE, [1, 2])],
+        [onnx.helper.make_tensor_value_info("y", onnx.TensorProto.DOUBLE, [1, 2])])
+    model = onnx.helper.make_model(graph, opset_imports=[onnx.helper.make_opsetid("", 17)],
+                                   ir_version=9)  # onnx's default is newer than onnxruntime reads
+    onnx.save(model, folder / "one_node.onnx")
+    fmu = build_fmu(onnx_system(folder / "one_node.onnx", every=every), folder / "one_node.fmu")
+    steps = max(1, round(seconds / 1e-3))
+    inputs = {"u[0]": 1.0, "u[1]": 2.0}
+    with Master([SlaveSpec("graph", fmu)], list(inputs), 1e-3) as master:
+        recording = master.run(inputs, steps, pacing=Pacing(rt_factor=1.0))
+    table = recording.timing.table(recording.wall_s)
+    return {"every_steps": every, "tet_us": table["tet_us"],
+            "network_call_us": table["network_call_us"]["graph"]}
 
 
 def run_benchmarks(steps: int = 20000, repeats: int = 5,

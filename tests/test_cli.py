@@ -71,6 +71,8 @@ def test_bench_prints_json(tmp_path):
         paced = figures["realtime"][kind]
         assert paced["period_us"] == 1000.0 and paced["overruns"] >= 0
         assert set(paced["tet_us_per_fmu"]) == {"feedforward", "controller", "plant"}
+    idle = figures["realtime"]["idle"]  # the machine's floor, as long as one paced run
+    assert idle["steps"] == 500 and idle["overruns"] >= 0 and idle["lateness_us"]["max"] > 0
 
 
 @pytest.mark.slow

@@ -6,11 +6,13 @@ microsecond a step, so the pacing (not the FMUs) sets the wall time.
 """
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cosim.engine import idle_timing
 from cosim.master import Master, SlaveSpec
 from cosim.realtime import realtime_process
 from cosim.recording import load_recording
@@ -44,6 +46,19 @@ def test_pacing_holds_the_wall_clock(factor, wall):
     assert table["achieved_real_time_factor"] == pytest.approx(factor, rel=0.01)
     assert table["tet_us"]["p50"] <= table["tet_us"]["p99"] <= table["tet_us"]["max"]
     assert set(table["tet_us_per_fmu"]) == {"vdp"}
+
+
+def test_the_idle_loop_measures_the_machine_alone():
+    """The engine's paced loop with no FMU: 0.5 s at 1 kHz, on the same schedule and clock."""
+    start = time.perf_counter()
+    timing = idle_timing(0.5)
+    wall = time.perf_counter() - start
+    assert wall == pytest.approx(0.5, rel=0.02, abs=0.005)
+    assert timing.tet.size == timing.lateness.size == 500 and timing.names == ()
+    assert np.all(timing.lateness >= 0) and np.all(timing.tet < timing.period)
+    assert timing.overruns == int(np.sum(timing.tet + timing.lateness > timing.period))
+    table = timing.table(wall)
+    assert table["tet_us_per_fmu"] == {} and table["lateness_us"]["max"] > 0
 
 
 @pytest.mark.parametrize("version", [2, 3])
