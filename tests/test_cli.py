@@ -73,6 +73,8 @@ def test_bench_prints_json(tmp_path):
         assert set(paced["tet_us_per_fmu"]) == {"feedforward", "controller", "plant"}
     idle = figures["realtime"]["idle"]  # the machine's floor, as long as one paced run
     assert idle["steps"] == 500 and idle["overruns"] >= 0 and idle["lateness_us"]["max"] > 0
+    floor = figures["realtime"]["one_node_graph"]  # at initialization, then every 40th step
+    assert floor["network_call_us"]["calls"] == 1 + 13 and floor["network_call_us"]["p50"] > 0
 
 
 @pytest.mark.slow
