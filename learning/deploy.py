@@ -87,11 +87,7 @@ class EnsembleSIModel(nn.Module):
 
     def __init__(self, members: list[SIModel]) -> None:
         super().__init__()
-        first = members[0]
-        for member in members[1:]:
-            if (member.input_names, member.residual) != (first.input_names, first.residual):
-                raise ValueError("the members of an ensemble must take the same inputs and "
-                                 "be of one kind (all physics-guided or none)")
+        first = members[0]  # the members are of one kind on one feature set (learning.export)
         self.members = nn.ModuleList(members)
         self.input_names, self.input_units = first.input_names, first.input_units
         self.residual = first.residual
