@@ -125,8 +125,8 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
     """The closed loop of the hardware evaluation (hardware plant, PID with notch, thesis
     hardware reference: 100 s, or its first `seconds`) with the TCN and the LSTM feedforward
     in step mode, paced at 1 kHz: TET p50 / p99 / max, each FMU's share, overruns; and, as
-    their floor, the same paced loop with no FMU for as long (`idle`: the lateness and
-    overruns the machine alone causes)."""
+    their floors, the same paced loop with no FMU for as long (`idle`: the lateness and
+    overruns the machine alone causes) and with a one-node graph FMU (`one_node_graph`)."""
     results: dict[str, Any] = {"reference": "thesis-hardware-eval"}
     paced_s = 0.0
     for kind in kinds:
@@ -179,7 +179,7 @@ def run_benchmarks(steps: int = 20000, repeats: int = 5,
     the closed loop through our master, libcosim and C, of the closed loop with each learned
     feedforward FMU (`models`: kind -> .onnx; default: untrained exports), and the paced
     hardware evaluation loop with the TCN and LSTM feedforward (`realtime_seconds` of its
-    100 s; default all)."""
+    100 s; default all) with its two floors."""
     for name, value in (("steps", steps), ("repeats", repeats)):
         if not isinstance(value, int) or value < 1:
             raise ValueError(f"bench {name} must be a whole number of at least 1, got {value!r}")
