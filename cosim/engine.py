@@ -105,9 +105,9 @@ def idle_timing(seconds: float, period: float = 1e-3) -> StepTiming:
     floor beneath every paced run's lateness and overruns."""
     steps = max(1, round(seconds / period))
     tet, lateness = np.zeros(steps + 1), np.zeros(steps + 1)
-    scratch = np.zeros(1)
+    scratch = np.zeros(1)  # bus, sources and record: no column, so nothing is written there
     run = EngineRun(step=period, steps=steps, bus=pointer(scratch), sources=pointer(scratch),
-                    record=pointer(np.zeros(steps + 1)), typed=TYPED_HOOK(),
+                    record=pointer(scratch), typed=TYPED_HOOK(),
                     tet=pointer(tet), slave_tet=pointer(scratch), lateness=pointer(lateness),
                     paced=1, period=period)
     start_schedule(run)
