@@ -151,10 +151,12 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
     return results
 
 
-def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40) -> dict[str, Any]:
+def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
+                             step: float = 1e-3) -> dict[str, Any]:
     """The floor of an onnxruntime call in a paced loop: a graph of one Add node as an FMU,
-    called every `every` 1 ms steps (the hardware models' 25 Hz), paced alone for `seconds`.
-    Its call time is what a network call costs on this machine before any arithmetic."""
+    called every `every` steps of `step` seconds (the hardware models' 25 Hz at 1 kHz), paced
+    alone for `seconds`. Its call time is what a network call costs on this machine before
+    any arithmetic."""
     graph = onnx.helper.make_graph(
         [onnx.helper.make_node("Add", ["u", "u"], ["y"])], "one_node",
         [onnx.helper.make_tensor_value_info("u", onnx.TensorProto.DOUBLE, [1, 2])],
@@ -162,10 +164,10 @@ def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40) -> d
     model = onnx.helper.make_model(graph, opset_imports=[onnx.helper.make_opsetid("", 17)],
                                    ir_version=9)  # onnx's default is newer than onnxruntime reads
     onnx.save(model, folder / "one_node.onnx")
-    fmu = build_fmu(onnx_system(folder / "one_node.onnx", every=every), folder / "one_node.fmu")
-    steps = max(1, round(seconds / 1e-3))
+    fmu = build_fmu(onnx_system(folder / "one_node.onnx", step, every), folder / "one_node.fmu")
+    steps = max(1, round(seconds / step))
     inputs = {"u[0]": 1.0, "u[1]": 2.0}
-    with Master([SlaveSpec("graph", fmu)], list(inputs), 1e-3) as master:
+    with Master([SlaveSpec("graph", fmu)], list(inputs), step) as master:
         recording = master.run(inputs, steps, pacing=Pacing(rt_factor=1.0))
     table = recording.timing.table(recording.wall_s)
     return {"every_steps": every, "tet_us": table["tet_us"],
