@@ -24,7 +24,7 @@ from scipy.interpolate import CubicSpline
 from learning.dataset import ENCODER_SIGNALS, REFERENCE_SIGNALS, Trajectory, write_dataset
 from controllers.features import nominal_model
 from plant.kinematics import SHOULDER_INDEX
-from plant.parameters import HARDWARE
+from plant.parameters import HARDWARE, MOTOR_FRICTION
 
 WORKSPACE = 0.05  # m
 MAX_ACCELERATION = 4.0  # m/s^2: keeps the currents well inside the amplifier limit
@@ -77,20 +77,14 @@ def random_motion(rng: np.random.Generator, t: np.ndarray,
 
 @functools.lru_cache(maxsize=None)
 def _label_function(friction: bool) -> ca.Function:
-    """(pos, vel, acc) -> (force, shoulder angles): nominal inverse dynamics plus motor friction
-    through A^T, and theta_s1..3."""
+    """(pos, vel, acc) -> (force, shoulder angles): the nominal inverse dynamics, with the
+    hardware variant's motor friction when `friction`, and theta_s1..3."""
     model = nominal_model()
-    p = model.parameter_values()
+    p = model.parameter_values(**(HARDWARE.flat_values(*MOTOR_FRICTION) if friction else {}))
     pos, vel, acc = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2), ca.SX.sym("acc", 2)
-    force = model.inverse_dynamics(pos, vel, acc, p)
-    if friction:
-        jacobian = model.terms(pos, vel, p)[4]  # A = d theta_s / d pos
-        speed = jacobian @ vel
-        torque = ca.vertcat(*[HARDWARE.tau_coulomb[i] * ca.tanh(speed[i] / HARDWARE.w_stribeck)
-                              + HARDWARE.b_viscous[i] * speed[i] for i in range(3)])
-        force += jacobian.T @ torque
     shoulders = ca.vertcat(*[model.coordinates(pos, p)[k] for k in SHOULDER_INDEX])
-    return ca.Function("labels", [pos, vel, acc], [force, shoulders])
+    return ca.Function("labels", [pos, vel, acc], [model.inverse_dynamics(pos, vel, acc, p),
+                                                  shoulders])
 
 
 def motion_trajectory(name: str, split: str, seed: int, t: np.ndarray, motion: np.ndarray,

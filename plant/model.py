@@ -139,10 +139,13 @@ class PlantModel:
 
     @cached_property
     def inverse_dynamics(self) -> ca.Function:
-        """Eq. (2.4): end-effector force [N] for position, velocity, acceleration (rigid model)."""
-        dyn, acc = self.rigid, ca.SX.sym("acc", 2)
+        """Eq. (2.4) plus motor friction: the end-effector force [N] the motors must give for
+        position, velocity, acceleration (rigid model). The motors' own friction torque is
+        mapped through A^T, as in `forward_dynamics`; the nominal parameters have none."""
+        pp, dyn, acc = self.params, self.rigid, ca.SX.sym("acc", 2)
+        force = dyn.inverse(acc) - dyn.A.T @ friction_torque(pp, dyn.A @ dyn.vel)
         return ca.Function("inverse_dynamics", [dyn.pos, dyn.vel, acc, self.p],
-                           [dyn.inverse(acc)], ["pos", "vel", "acc", "p"], ["F"])
+                           [force], ["pos", "vel", "acc", "p"], ["F"])
 
     @cached_property
     def terms(self) -> ca.Function:

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any, Iterator
 
 CHAINS = (1, 2, 3)
+MOTOR_FRICTION = ("tau_coulomb", "b_viscous", "w_stribeck")  # fields of plant.actuator's model
 
 
 def _param(unit: str, description: str, positive: bool = True) -> Any:
@@ -123,6 +124,15 @@ class PlantParameters:
         result = self.from_vector([flat[n] for n in self.names()])
         result.validate()
         return result
+
+    def flat_values(self, *fields_: str) -> dict[str, float]:
+        """The flat parameters of the named fields: `flat_values("k_t")` gives k_t1, k_t2,
+        k_t3; the names and order of `names()`, ready for `with_values`."""
+        unknown = sorted(set(fields_) - {f.name for f in fields(self)})
+        if unknown:
+            raise ValueError(f"unknown plant parameter field(s) {unknown}")
+        return {name: getattr(self, attr) if j is None else getattr(self, attr)[j]
+                for name, attr, _, j in self._flat_fields() if attr in fields_}
 
     def validate(self) -> None:
         """Raise ValueError naming every parameter that is not finite or not positive."""

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from plant.analysis import FRICTION_FREE, modes
-from plant.parameters import NOMINAL
+from plant.parameters import HARDWARE, MOTOR_FRICTION, NOMINAL
 from tests.helpers import simulate, workspace_points
 
 NO_DAMPING = {f"{d}{i}": 0.0 for d in ("d_s", "d_e", "d_w") for i in (1, 2, 3)} | {"d_tool": 0.0}
@@ -71,8 +71,9 @@ def test_stiffness_and_dynamics_jacobians_match_finite_differences(nominal, hard
             assert np.allclose(ju, fd_u, rtol=1e-5, atol=1e-6)
 
 
-def test_inverse_dynamics_inverts_forward_dynamics(nominal, rng):
-    p = nominal.parameter_values()
+@pytest.mark.parametrize("friction", [{}, HARDWARE.flat_values(*MOTOR_FRICTION)], ids=["frictionless", "friction"])
+def test_inverse_dynamics_inverts_forward_dynamics(nominal, rng, friction):
+    p = nominal.parameter_values(**friction)
     for x0 in random_states(nominal, rng, 10, p):
         current = rng.uniform(-3, 3, 3)
         acc = np.array(nominal.forward_dynamics(x0, current, p)).ravel()[2:4]
