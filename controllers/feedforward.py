@@ -7,6 +7,7 @@ mismatch, friction or the parasitic mode of the real machine.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import casadi as ca
@@ -28,11 +29,14 @@ FORCE_OUTPUTS = (
 )
 
 
-def rigid_body_force(reference: ca.SX) -> ca.SX:
-    """F = M a + C v + Q + D of the nominal model along the reference (x, y, vx, vy, ax, ay)."""
+def rigid_body_force(reference: ca.SX, parameters: Mapping[str, float] | None = None) -> ca.SX:
+    """F = M a + C v + Q + D of the nominal model along the reference (x, y, vx, vy, ax, ay).
+
+    `parameters` (flat plant parameter names, SI values) replace nominal values: a
+    physics-guided model's identified motor friction adds its A^T tau_friction."""
     model = nominal_model()
     return model.inverse_dynamics(reference[0:2], reference[2:4], reference[4:6],
-                                  model.parameter_values())
+                                  model.parameter_values(**(parameters or {})))
 
 
 def feedforward_system(name: str, description: str, reference: ca.SX, force: ca.SX,

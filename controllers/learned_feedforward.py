@@ -5,7 +5,8 @@ inputs from them in generated C (the 63 features of eq. 2.1 and their derivative
 nominal inverse kinematics, or the reference itself), runs the ONNX graph with onnxruntime at
 the model's own rate (metadata `sample_rate_hz`) and extrapolates its forces linearly in
 between. A physics-guided model's graph is a residual: the rigid-body feedforward (eq. 2.4 on
-the nominal model) is added in generated C at every step.
+the nominal model, with the motor friction identified in training) is added in generated C at
+every step, so friction's steps at each reversal come at 1 kHz, not extrapolated.
 
 Two modes with equal results: step by step (the graph's recurrent state carried in the FMU
 state) and precomputed (the whole reference given at build time, run through the graph in
@@ -26,7 +27,7 @@ import casadi as ca
 import numpy as np
 import onnx
 
-from controllers.features import feature_names, motion_function
+from controllers.features import feature_names, motion_function, nominal_model
 from controllers.feedforward import (FORCE_OUTPUTS, REFERENCE_INPUTS, feedforward_system,
                                      rigid_body_force)
 from fmu.onnx_graph import graph_network, read_graph
@@ -78,6 +79,7 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     prior = meta.get("prior", "none")
     if prior not in PRIORS:
         raise ValueError(f"{model}: unknown prior {prior!r} (known: {', '.join(PRIORS)})")
+    parameters = prior_parameters(meta, model)
     x, p = ca.SX.sym("x", 0), ca.SX.sym("p", 0)
     network = graph_network(read_graph(model, time_axis=True),
                             ca.Function("network_input", [x, u, p], [inputs]), period,
@@ -86,20 +88,38 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
         raise ValueError(f"{model}: the graph returns {network.n_outputs} values per step, the "
                          f"feedforward needs {len(FORCE_OUTPUTS)} (Fx_ff, Fy_ff)")
     r = ca.SX.sym("r", network.n_outputs)
-    force = r + rigid_body_force(u) if prior == "rigid-body" else r
+    force = r + rigid_body_force(u, parameters) if prior == "rigid-body" else r
     mode = "step" if reference is None else "precomputed"
+    added = ""
+    if prior == "rigid-body":
+        added = " plus the rigid-body feedforward" + (
+            f" with identified {', '.join(parameters)}" if parameters else "")
     return feedforward_system(
         "learned_feedforward",
         (f"learned feedforward: {meta.get('model_kind', 'ONNX')} model at "
-         f"{float(meta['sample_rate_hz']):g} Hz in onnxruntime"
-         f"{' plus the rigid-body feedforward' if prior == 'rigid-body' else ''}, {mode} mode"),
+         f"{float(meta['sample_rate_hz']):g} Hz in onnxruntime{added}, {mode} mode"),
         u, force, step, r,
         extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": prior,
+               "flexff.feedforward.prior_parameters": json.dumps(parameters),
                **{f"flexff.model.{k}": meta[k] for k in ("model_kind", "preset", "feature_set",
                                                            "input_kind", "sample_rate_hz")
                   if k in meta}},
         network=network,
     )
+
+
+def prior_parameters(meta: Mapping[str, str], model: str | Path) -> dict[str, float]:
+    """The nominal-model parameters a model's prior replaces (metadata `prior_parameters`,
+    JSON; none when absent); ValueError naming the model if they are not valid ones."""
+    text = meta.get("prior_parameters", "{}")
+    try:
+        parameters = json.loads(text)
+        nominal_model().variant.parameters.with_values(**parameters)  # names and values
+    except (json.JSONDecodeError, TypeError, ValueError) as error:
+        raise ValueError(f"{model}: metadata prior_parameters {text!r} are not nominal-model "
+                         f"parameters ({error}); export the model again with `flexff export`"
+                         ) from None
+    return parameters
 
 
 def model_period(meta: Mapping[str, str], step: float, model: str | Path) -> int:

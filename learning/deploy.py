@@ -1,9 +1,9 @@
 """A trained run as a model in SI units: what the exported ONNX graph computes.
 
 Scaling and unscaling live inside the module, so it takes features in SI units and returns
-forces in newtons; for the pgnn it adds the network's residual to the rigid-body force (or,
-with `prior=False`, returns the residual alone: the feedforward FMU adds the rigid-body force
-from generated C). With
+forces in newtons; for the pgnn it adds the network's residual to its prior, the rigid-body
+force with the identified motor friction (or, with `prior=False`, returns the residual alone:
+the feedforward FMU adds the prior from generated C). With
 `inputs="reference"` it also computes the features from the six reference signals
 x_ref ... ay_ref in the graph (the nominal kinematics replayed in torch), so a runner only
 needs the reference.
@@ -48,7 +48,9 @@ class SIModel(nn.Module):
         self.reference = (TorchFunction(motion_function(feature_set))
                           if inputs == "reference" else None)
         self.residual = uses_prior(run.config.model)
-        self.prior = RigidBodyForce(feature_set) if self.residual and prior else None
+        self.prior_parameters = run.prior_parameters
+        self.prior = (RigidBodyForce(feature_set, self.prior_parameters)
+                      if self.residual and prior else None)
         for name, value in (("feature_low", run.feature_scaler.low),
                             ("feature_span", run.feature_scaler.span),
                             ("label_low", run.label_scaler.low),
@@ -90,7 +92,7 @@ class EnsembleSIModel(nn.Module):
         first = members[0]  # the members are of one kind on one feature set (learning.export)
         self.members = nn.ModuleList(members)
         self.input_names, self.input_units = first.input_names, first.input_units
-        self.residual = first.residual
+        self.residual, self.prior_parameters = first.residual, first.prior_parameters
         self.counts = [len(member.initial_state()) for member in members]
 
     def forward(self, inputs: torch.Tensor, *state: torch.Tensor) -> tuple[torch.Tensor, ...]:

@@ -21,8 +21,10 @@ every 1/sample_rate_hz seconds with the current inputs and extrapolates the forc
 from the last two calls in between (holding them instead would lag by half a model period).
 
 The physics-guided model is exported as its residual: the graph's forces plus the rigid-body
-feedforward of the nominal model (eq. 2.4, controllers.feedforward) on the same reference are
-the model's forces; the metadata says so (`prior` = "rigid-body", else "none").
+feedforward of the nominal model (eq. 2.4, controllers.feedforward) on the same reference,
+with the motor friction identified in training, are the model's forces; the metadata says so
+(`prior` = "rigid-body", else "none"; `prior_parameters`: the nominal-model parameters
+replaced, as flat plant parameter names and SI values).
 
 The graph is written to a temporary file beside `out` and renamed only once onnx's checker and
 the comparison with PyTorch pass, so a failed export leaves no file, and an existing one as it
@@ -95,13 +97,15 @@ def _si_model(runs: list[Run], inputs: str) -> SIModel | EnsembleSIModel:
 
 
 def _check_members(runs: list[Run]) -> None:
-    """Ensemble members must run alike: same model kind, features and rate."""
+    """Ensemble members must run alike: same model kind, features, rate and prior."""
     def key(r: Run) -> tuple:
-        return r.config.model, r.config.features.feature_set, r.model_rate_hz
+        return (r.config.model, r.config.features.feature_set, r.model_rate_hz,
+                json.dumps(r.prior_parameters, sort_keys=True))
 
     if len({key(r) for r in runs}) > 1:
-        raise ValueError("the runs of one export must share model kind, feature set and model "
-                         "rate: " + ", ".join(f"{r.path} {key(r)}" for r in runs))
+        raise ValueError("the runs of one export must share model kind, feature set, model "
+                         "rate and prior (the same training data): "
+                         + ", ".join(f"{r.path} {key(r)}" for r in runs))
 
 
 def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
@@ -127,6 +131,7 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
         "ensemble_members": str(len(runs)),
         "feature_set": loaded.config.features.feature_set, "input_kind": inputs,
         "prior": "rigid-body" if model.residual else "none",
+        "prior_parameters": json.dumps(model.prior_parameters),
         "input_signals": json.dumps(model.input_names),
         "input_units": json.dumps(model.input_units),
         "feature_range": json.dumps({"signals": loaded.feature_names,
@@ -137,7 +142,8 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
                               "initial": "zeros"} for n, s in zip(state_names, state)]),
         "history_samples": str(max(r.network.history for r in runs)),
         "usage": ("inputs (T, n_inputs) float64 in SI units -> forces (T, 2) float64 [N] "
-                  "(plus the rigid-body feedforward when prior = rigid-body); "
+                  "(plus the nominal inverse dynamics, prior_parameters in place, when "
+                  "prior = rigid-body); "
                   "state tensors float32. "
                   "Whole sequence: T samples, state inputs zero. Step by step: T = 1 every "
                   "1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "

@@ -1,48 +1,58 @@
-"""The rigid-body prior of the physics-guided model: eq. (2.4) on the nominal plant.
+"""The prior of the physics-guided model: eq. (2.4) on the nominal plant, with motor friction.
 
-F_rigid = M a + C v + Q + D from the wrist position, velocity and acceleration held in the
-features. It is fixed (nothing in it is trained): the network beside it learns only the
-remainder F - F_rigid, the epsilon of eq. (2.5). Evaluated in numpy (CasADi, float64) when
-preparing training data and as a torch module (the same CasADi expression replayed op by op)
-inside the exported model.
+F_prior = M a + C v + Q + D - A^T tau_friction from the wrist position, velocity and
+acceleration held in the features, the nominal model's inverse dynamics with some of its
+parameters replaced (`parameters`: flat plant parameter names, the motor friction identified
+from the training data by learning.friction; none: the nominal model, which has no friction).
+Nothing in it is trained by gradient descent: the network beside it learns only the remainder
+F - F_prior, the epsilon of eq. (2.5). Evaluated in numpy (CasADi, float64) when preparing
+training data and as a torch module (the same CasADi expression replayed op by op) inside
+the exported model.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
 
 import casadi as ca
 import numpy as np
 import torch
 from torch import nn
 
-from controllers.features import motion_columns, nominal_model
+from controllers.features import evaluate_samples, motion_columns, nominal_model
 from learning.casadi_torch import TorchFunction, frozen
+
+Parameters = Mapping[str, float]  # flat nominal-model parameters replaced in the prior
+
+
+def rigid_function(parameters: Parameters | None = None) -> ca.Function:
+    """CasADi Function (pos, vel, acc) -> F [N] of the nominal model, its parameters (with
+    `parameters` in place) built in."""
+    return _frozen_inverse_dynamics(tuple(sorted((parameters or {}).items())))
 
 
 @functools.lru_cache(maxsize=None)
-def rigid_function() -> ca.Function:
-    """CasADi Function (pos, vel, acc) -> F [N] of the nominal model, parameters built in."""
+def _frozen_inverse_dynamics(parameters: tuple[tuple[str, float], ...]) -> ca.Function:
     model = nominal_model()
-    return frozen(model.inverse_dynamics, [3], [model.parameter_values()])
+    return frozen(model.inverse_dynamics, [3], [model.parameter_values(**dict(parameters))])
 
 
-def rigid_forces(features: np.ndarray, feature_set: str) -> np.ndarray:
-    """F_rigid (n, 2) [N] for features (n, n_features) in SI units."""
+def rigid_forces(features: np.ndarray, feature_set: str,
+                 parameters: Parameters | None = None) -> np.ndarray:
+    """F_prior (n, 2) [N] for features (n, n_features) in SI units."""
     pos, vel, acc = motion_columns(feature_set)
-    function = rigid_function()
-    n = features.shape[0]
-    out = function.map(n, "thread", 2)(features[:, pos].T, features[:, vel].T, features[:, acc].T)
-    return np.asarray(out, dtype=float).T.reshape(n, 2)
+    return evaluate_samples(rigid_function(parameters), features[:, pos], features[:, vel],
+                            features[:, acc])
 
 
 class RigidBodyForce(nn.Module):
-    """Torch module: SI features (..., n_features) -> F_rigid (..., 2) [N]."""
+    """Torch module: SI features (..., n_features) -> F_prior (..., 2) [N]."""
 
-    def __init__(self, feature_set: str) -> None:
+    def __init__(self, feature_set: str, parameters: Parameters | None = None) -> None:
         super().__init__()
         self.columns = motion_columns(feature_set)
-        self.function = TorchFunction(rigid_function())
+        self.function = TorchFunction(rigid_function(parameters))
 
     def forward(self, features: torch.Tensor) -> torch.Tensor:
         pos, vel, acc = (features[..., cols] for cols in self.columns)

@@ -71,6 +71,12 @@ class Run:
     model_rate_hz: float
     info: dict[str, Any]
 
+    @property
+    def prior_parameters(self) -> dict[str, float]:
+        """The nominal-model parameters a physics-guided model's prior replaces (its identified
+        motor friction, learning.friction); empty for other models and runs from before."""
+        return dict(self.info.get("prior_parameters", {}))
+
 
 def save_run(out: Path, config: TrainConfig, network: SequenceNetwork,
              feature_scaler: MinMaxScaler, label_scaler: MinMaxScaler, feature_names: list[str],

@@ -32,6 +32,7 @@ from learning.batches import (TRAIN, VALIDATION, SequenceSet, WindowSampler, int
                               window_roles)
 from learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
 from learning.features import decimation, prepare_trajectory
+from learning.friction import identify_friction
 from learning.models import (RECURRENT, SequenceNetwork, build_network, fit_linear_skip,
                              parameter_count, uses_prior)
 from learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
@@ -82,15 +83,16 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
     train_x, train_f = _prepare(train_set, rate, config, rng)
     test_x, test_f = _prepare(test_set, rate, config, None)
     feature_scaler, label_scaler = MinMaxScaler.fit(train_x), MinMaxScaler.fit(train_f)
-    prior = uses_prior(config.model)
+    feature_set = config.features.feature_set
+    edge = config.features.edge_samples(model_rate)
+    prior = _prior_parameters(config, train_set, rate, edge)
 
     def targets(xs: list[np.ndarray], fs: list[np.ndarray]) -> list[np.ndarray]:
-        if prior:  # the residual over the rigid-body model, in label spans
-            return [(f - rigid_forces(x, config.features.feature_set)) / label_scaler.span
+        if prior is not None:  # the residual over the prior, in label spans
+            return [(f - rigid_forces(x, feature_set, prior)) / label_scaler.span
                     for x, f in zip(xs, fs)]
         return [label_scaler.transform(f) for f in fs]
 
-    edge = config.features.edge_samples(model_rate)
     roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge)
     device = pick_device(config.device)
     with reproducible(config.seed, config.threads):
@@ -114,7 +116,11 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
             "test_mse_per_trajectory": {
                 t.name: evaluate(network, test_data, TRAIN, only=[i])
                 for i, t in enumerate(test_set)},
-            "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, config, edge),
+            "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge),
+            **({} if prior is None else {
+                "prior_parameters": prior,
+                "prior_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge,
+                                             prior)}),
             "parameters": parameter_count(network),
             "seconds_per_epoch": float(np.mean(history["seconds"])),
             "seconds": time.perf_counter() - start,  # this call's wall time, data preparation in
@@ -125,12 +131,13 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
         }
     network.cpu()
     save_run(out, config, network, feature_scaler, label_scaler,
-             feature_names(config.features.feature_set), model_rate,
+             feature_names(feature_set), model_rate,
              {"data": {"path": str(Path(dataset.path).resolve()), "set": dataset.set,
                        "sha256": dataset.digest, "sample_rate_hz": rate,
                        "plant": dict(dataset.plant), "train": [t.name for t in train_set],
                        "test": [t.name for t in test_set]},
-              "parameters": metrics["parameters"]},
+              "parameters": metrics["parameters"],
+              **({} if prior is None else {"prior_parameters": prior})},
              {"metrics.json": lambda path: path.write_text(json.dumps(metrics, indent=2) + "\n"),
               "loss.png": lambda path: plot_losses(history, path,
                                                    f"{config.model} ({config.preset})")})
@@ -159,11 +166,23 @@ def _prepare(trajectories: list[Trajectory], rate: float, config: TrainConfig,
     return [x for x, _ in pairs], [f for _, f in pairs]
 
 
+def _prior_parameters(config: TrainConfig, trajectories: list[Trajectory], rate: float,
+                      edge: int) -> dict[str, float] | None:
+    """The physics-guided model's prior: the motor friction identified from the training
+    trajectories, without the added training noise, so that runs of other seeds share it
+    (learning.friction); None for a model without a prior."""
+    if not uses_prior(config.model):
+        return None
+    return identify_friction(*_prepare(trajectories, rate, config, None),
+                             config.features.feature_set, edge)
+
+
 def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,
-               config: TrainConfig, edge: int) -> float:
-    """The nominal rigid-body model's test MSE in the same units and on the same samples (the
-    `edge` samples at each end left out): the baseline to beat."""
-    errors = [((f - rigid_forces(x, config.features.feature_set)) / scaler.span)[
+               feature_set: str, edge: int, parameters: dict[str, float] | None = None) -> float:
+    """The test MSE of the nominal rigid-body model (with `parameters` in place: the prior) in
+    the same units and on the same samples (the `edge` samples at each end left out): the
+    baseline to beat."""
+    errors = [((f - rigid_forces(x, feature_set, parameters)) / scaler.span)[
         interior(len(x), edge) == TRAIN] for x, f in zip(xs, fs)]
     return float(np.mean(np.concatenate(errors) ** 2))
 

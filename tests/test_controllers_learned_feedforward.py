@@ -4,9 +4,11 @@ the rigid-body force (numpy, CasADi) added for the physics-guided model. Both mo
 restore, libcosim, validation, closed loop, and the errors for models that do not fit."""
 
 import dataclasses
+import json
 import re
 
 import numpy as np
+import onnx
 import pytest
 from fmpy.fmi2 import fmi2Error
 
@@ -71,7 +73,8 @@ def independent_forces(model, reference) -> np.ndarray:
         j, phase = divmod(k, period)
         forces[k] = calls[j] + phase / period * (calls[j] - calls[max(j - 1, 0)])
     if meta["prior"] == "rigid-body":
-        forces += rigid_forces(features, meta["feature_set"])
+        forces += rigid_forces(features, meta["feature_set"],
+                               json.loads(meta["prior_parameters"]))
     return forces
 
 
@@ -184,6 +187,13 @@ def test_models_that_do_not_fit_are_refused(models, tmp_path):
         learned_feedforward_system(models / "lstm.onnx", step=3e-3)
     with pytest.raises(ValueError, match="does not exist"):
         learned_feedforward_system(tmp_path / "none.onnx")
+    graph = onnx.load(str(models / "pgnn.onnx"))
+    for bad in ('{"tau_coulomb9": 0.01}', '{"tau_coulomb1": -0.01}', '[0.01]', 'friction'):
+        onnx.helper.set_model_props(graph, {**model_metadata(models / "pgnn.onnx"),
+                                            "prior_parameters": bad})
+        onnx.save(graph, str(tmp_path / "bad.onnx"))
+        with pytest.raises(ValueError, match="prior_parameters .* are not nominal-model param"):
+            learned_feedforward_system(tmp_path / "bad.onnx")
 
 
 def _named_feature(message: str, model) -> str:

@@ -67,7 +67,8 @@ def _graph_forces(run, features):
     (its graph is the residual; the feedforward FMU adds the prior)."""
     forces = predict(run, features)
     if run.config.model == "pgnn":
-        forces = forces - rigid_forces(features, run.config.features.feature_set)
+        forces = forces - rigid_forces(features, run.config.features.feature_set,
+                                       run.prior_parameters)
     return forces
 
 
@@ -79,6 +80,8 @@ def test_onnxruntime_matches_pytorch_in_both_forms(data, runs, tmp_path, kind):
     expected = _graph_forces(run, features)
     metadata = read_metadata(path)
     assert metadata["prior"] == ("rigid-body" if kind == "pgnn" else "none")
+    assert json.loads(metadata["prior_parameters"]) == run.prior_parameters
+    assert bool(run.prior_parameters) == (kind == "pgnn")
     if kind in ("tcn", "pgnn"):  # one buffer per level (learning.models.StreamingTCN)
         assert [s["input"] for s in json.loads(metadata["state"])] == [
             f"level{i}_buffer" for i in range(TINY[kind]["levels"])]
