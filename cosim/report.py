@@ -4,7 +4,7 @@ Every scenario (PID alone, then PID with each feedforward) runs the thesis's eva
 reference; this module compares their tracking errors with each other and with the thesis's
 published numbers. Into the output folder go
 
-  summary.json  e2, einf, rms and the improvement ratios (PID alone / scenario) per scenario
+  summary.json  rms, e2, einf and the improvement ratios (PID alone / scenario) per scenario
                 and axis, with the thesis's table for the same environment, in SI units
   table.md      the same as a Markdown table, in the thesis's scale (1e-4 or 1e-3)
   paths.png     reference and each scenario's x-y path, with a zoom on where the feedforwards err
@@ -48,17 +48,22 @@ SCENARIO_LABELS: dict[str, str] = {
 
 
 def _thesis(exponent: int, rows: Mapping[str, tuple[float, float, float, float]]) -> dict:
-    """A thesis table in SI units from its printed rows (e2 x, e2 y, einf x, einf y), which
-    are in units of 10**exponent; read as decimal literals so 42.930 x 1e-4 is 0.004293."""
+    """A thesis table in SI units from its printed rows (‖E_x‖₂, ‖E_y‖₂, ‖E_x‖∞, ‖E_y‖∞), which
+    are in units of 10**exponent; read as decimal literals so 42.930 x 1e-4 is 0.004293.
+
+    The thesis's ‖E‖₂ is stored as "rms": its values are the rms error, not DESIGN.md's e2 =
+    rms / sqrt(T). Read as e2, its PID alone in simulation (42.93e-4 over 15 s) would be an rms
+    of 16.6 mm, above its own largest error of 14.2 mm; read as the rms it is 4.29 mm, next to
+    flexff's 3.85 mm on the same reference."""
     def si(value: float) -> float:
         return float(f"{value!r}e{exponent}")
 
-    return {name: {"x": {"e2": si(e2x), "einf": si(einfx)},
-                   "y": {"e2": si(e2y), "einf": si(einfy)}}
-            for name, (e2x, e2y, einfx, einfy) in rows.items()}
+    return {name: {"x": {"rms": si(rms_x), "einf": si(einf_x)},
+                   "y": {"rms": si(rms_y), "einf": si(einf_y)}}
+            for name, (rms_x, rms_y, einf_x, einf_y) in rows.items()}
 
 
-# e2 in m/sqrt(s), einf in m, as printed (x 1e-4 in Table 5.2, x 1e-3 in Table 6.2)
+# ‖E‖₂ (the rms) and ‖E‖∞ in m, as printed (x 1e-4 in Table 5.2, x 1e-3 in Table 6.2)
 THESIS_TABLES: dict[str, dict] = {
     "sim": _thesis(-4, {"pid": (42.930, 42.940, 142.23, 140.00),
                         "lstm": (0.457, 1.102, 3.467, 4.032),
@@ -72,10 +77,12 @@ THESIS_TABLES: dict[str, dict] = {
 # env -> (the thesis table's scale as a power of ten, which table and what it measured)
 _ENVS = {"sim": (-4, "thesis Table 5.2 (nominal simulation)"),
          "hardware": (-3, "thesis Table 6.2 (the real machine)")}
-_ROWS = (("e2", "x", "‖E_x‖₂"), ("e2", "y", "‖E_y‖₂"),
+NORMS = ("rms", "e2", "einf")
+_ROWS = (("rms", "x", "‖E_x‖₂ (rms, as the thesis)"), ("rms", "y", "‖E_y‖₂ (rms, as the thesis)"),
+         ("e2", "x", "e2 x (rms/√T)"), ("e2", "y", "e2 y (rms/√T)"),
          ("einf", "x", "‖E_x‖∞"), ("einf", "y", "‖E_y‖∞"))
-UNITS = {"e2": "m/sqrt(s)", "einf": "m", "rms": "m",
-         "e2_ratio": "PID alone / scenario", "einf_ratio": "PID alone / scenario"}
+UNITS = {"rms": "m", "e2": "m/sqrt(s)", "einf": "m",
+         **{f"{norm}_ratio": "PID alone / scenario" for norm in NORMS}}
 TRACKING = ("x_ref", "y_ref", "x", "y")
 FORCES = ("Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
 
@@ -94,10 +101,10 @@ def _check_pid(names: Mapping[str, object], what: str) -> None:
 
 
 def _ratios(norms: Mapping[str, float], pid: Mapping[str, float]) -> dict[str, float | None]:
-    """e2_ratio and einf_ratio of one axis: PID alone / scenario, None where the scenario's
-    error is exactly zero (no finite ratio)."""
+    """The ratio of each norm of one axis (rms_ratio, e2_ratio, einf_ratio, those it has): PID
+    alone / scenario, None where the scenario's error is exactly zero (no finite ratio)."""
     return {f"{key}_ratio": pid[key] / norms[key] if norms[key] > 0 else None
-            for key in ("e2", "einf")}
+            for key in NORMS if key in norms}
 
 
 def _pid_first(names: Mapping[str, object]) -> list[str]:
@@ -105,8 +112,9 @@ def _pid_first(names: Mapping[str, object]) -> list[str]:
 
 
 def summarize(metrics: dict[str, dict]) -> dict[str, dict]:
-    """Per scenario and axis: e2, einf, rms and the improvement ratios e2_ratio, einf_ratio
-    (PID alone / scenario, so the PID's are 1.0 and higher is better), PID alone first.
+    """Per scenario and axis: rms, e2, einf and their improvement ratios rms_ratio (equal to
+    e2_ratio on one reference), e2_ratio, einf_ratio (PID alone / scenario, so the PID's are
+    1.0 and higher is better), PID alone first.
 
     `metrics` maps a scenario name to a cosim.metrics.tracking_metrics dict
     {"x": {"e2", "einf", "rms"}, "y": {...}}; it must hold "pid", the base of every ratio.
@@ -116,7 +124,7 @@ def summarize(metrics: dict[str, dict]) -> dict[str, dict]:
     for name in _pid_first(metrics):
         summary[name] = {}
         for axis in AXES:
-            norms = {key: float(metrics[name][axis][key]) for key in ("e2", "einf", "rms")}
+            norms = {key: float(metrics[name][axis][key]) for key in NORMS}
             summary[name][axis] = {**norms, **_ratios(norms, metrics["pid"][axis])}
     return summary
 
@@ -129,7 +137,10 @@ def _number(value: float) -> str:
 
 
 def _cell(norms: Mapping[str, float | None], norm: str, scale: float, with_ratio: bool) -> str:
-    """One table entry: the value in the table's scale, with its improvement ratio."""
+    """One table entry: the value in the table's scale, with its improvement ratio ("–" for
+    a norm the column does not have: the thesis gives no e2)."""
+    if norm not in norms:
+        return "–"
     text = _number(norms[norm] / scale)
     if not with_ratio:
         return text
@@ -140,10 +151,11 @@ def _cell(norms: Mapping[str, float | None], norm: str, scale: float, with_ratio
 
 
 def markdown_table(summary: dict[str, dict], env: str) -> str:
-    """The thesis's table for `env` ("sim" or "hardware") as Markdown: rows ‖E_x‖₂, ‖E_y‖₂,
-    ‖E_x‖∞, ‖E_y‖∞; a column per flexff scenario of `summary` (from `summarize`), then the
-    thesis's columns for the same environment, values in the thesis's scale and each
-    feedforward's improvement ratio in parentheses, so both can be read side by side."""
+    """The thesis's table for `env` ("sim" or "hardware") as Markdown: rows ‖E_x‖₂, ‖E_y‖₂
+    (the rms, as the thesis's), e2 x, e2 y (DESIGN.md's rms/√T), ‖E_x‖∞, ‖E_y‖∞; a column
+    per flexff scenario of `summary` (from `summarize`), then the thesis's columns for the
+    same environment, values in the thesis's scale and each feedforward's improvement ratio
+    in parentheses, so both can be read side by side."""
     _check_env(env)
     exponent, source = _ENVS[env]
     scale = 10.0**exponent
@@ -155,7 +167,7 @@ def markdown_table(summary: dict[str, dict], env: str) -> str:
                   for axis in AXES}, name != "pid")
                 for name, table in thesis.items()]
     lines = [f"Tracking error on the evaluation reference, flexff env {env!r} next to {source}: "
-             f"values x 1e{exponent}, ‖E‖₂ in m/√s, ‖E‖∞ in m.",
+             f"values x 1e{exponent}, ‖E‖₂ and ‖E‖∞ in m, e2 in m/√s.",
              "",
              f"| error (x 1e{exponent}) | " + " | ".join(label for label, _, _ in columns) + " |",
              "|---" + "|---:" * len(columns) + "|"]

@@ -60,11 +60,11 @@ def test_summarize_against_closed_forms():
     for name, scale in (("pid", 1.0), ("lstm", 1 / 50), ("tcn", 1 / 8)):
         for axis, a in (("x", PID_X), ("y", PID_Y)):
             got = summary[name][axis]
-            assert set(got) == {"e2", "einf", "rms", "e2_ratio", "einf_ratio"}
+            assert set(got) == {"rms", "e2", "einf", "rms_ratio", "e2_ratio", "einf_ratio"}
             for key, value in sine_norms(scale * a).items():
                 assert got[key] == pytest.approx(value, rel=1e-9), (name, axis, key)
-            assert got["e2_ratio"] == pytest.approx(1 / scale, rel=1e-9)
-            assert got["einf_ratio"] == pytest.approx(1 / scale, rel=1e-9)
+            for key in ("rms_ratio", "e2_ratio", "einf_ratio"):
+                assert got[key] == pytest.approx(1 / scale, rel=1e-9), (name, axis, key)
     assert summary["pid"]["x"]["e2_ratio"] == summary["pid"]["y"]["einf_ratio"] == 1.0
     rigid_e2 = RIGID_C * math.sqrt((N + 1) * STEP) / T
     for axis, a in (("x", PID_X), ("y", PID_Y)):
@@ -91,10 +91,13 @@ def test_thesis_tables_in_si_units():
     sim, hardware = THESIS_TABLES["sim"], THESIS_TABLES["hardware"]
     assert list(sim) == ["pid", "lstm", "cnn-lstm", "tcn"] and list(hardware) == ["pid", "lstm",
                                                                                   "tcn"]
-    assert sim["pid"]["x"] == {"e2": 0.004293, "einf": 0.014223}
-    assert sim["cnn-lstm"]["y"] == {"e2": 0.0016648, "einf": 0.007234}
-    assert hardware["tcn"]["y"] == {"e2": 0.003446, "einf": 0.009361}
-    assert hardware["pid"]["x"] == {"e2": 0.003585, "einf": 0.00782}
+    # the thesis's ‖E‖₂ is an rms: as e2 = rms / sqrt(15 s) its PID alone would have an rms
+    # above its own largest error
+    assert sim["pid"]["x"]["rms"] * math.sqrt(15.0) > sim["pid"]["x"]["einf"]
+    assert sim["pid"]["x"] == {"rms": 0.004293, "einf": 0.014223}
+    assert sim["cnn-lstm"]["y"] == {"rms": 0.0016648, "einf": 0.007234}
+    assert hardware["tcn"]["y"] == {"rms": 0.003446, "einf": 0.009361}
+    assert hardware["pid"]["x"] == {"rms": 0.003585, "einf": 0.00782}
     assert set(SCENARIO_LABELS) >= set(sim) | {"rigid-body", "pgnn"}
 
 
@@ -102,19 +105,23 @@ def test_markdown_table_sim_and_hardware():
     summary = summarize({name: tracking_metrics(rec) for name, rec in scenarios().items()})
     sim = markdown_table(summary, "sim")
     lines = sim.splitlines()
-    assert "x 1e-4" in lines[0] and "m/√s" in lines[0]
+    assert "x 1e-4" in lines[0] and "e2 in m/√s" in lines[0]
     header = [cell.strip() for cell in lines[2].strip("|").split("|")]
     assert header == ["error (x 1e-4)", "PID alone", "LSTM FF", "TCN FF", "rigid-body FF",
                       "thesis: PID alone", "thesis: LSTM FF", "thesis: CNN-LSTM FF",
                       "thesis: TCN FF"]
     rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|").split("|")[1:]]
-            for line in lines[4:8]}
-    assert list(rows) == ["‖E_x‖₂", "‖E_y‖₂", "‖E_x‖∞", "‖E_y‖∞"]
-    # PID alone: e2 x = 2 mm / 2 = 10e-4, einf x = 20e-4; LSTM 1/50 of it
-    assert rows["‖E_x‖₂"][:2] == ["10.000", "0.200 (50x)"]
+            for line in lines[4:10]}
+    rms_x, rms_y = "‖E_x‖₂ (rms, as the thesis)", "‖E_y‖₂ (rms, as the thesis)"
+    assert list(rows) == [rms_x, rms_y, "e2 x (rms/√T)", "e2 y (rms/√T)", "‖E_x‖∞", "‖E_y‖∞"]
+    # PID alone: rms x = 2 mm sqrt(N / (2 (N + 1))) = 14.139e-4, e2 x = 2 mm / 2 = 10e-4,
+    # einf x = 20e-4; LSTM 1/50 of it
+    assert rows[rms_x][:2] == ["14.139", "0.283 (50x)"]
+    assert rows["e2 x (rms/√T)"][:2] == ["10.000", "0.200 (50x)"]
     assert rows["‖E_x‖∞"][:3] == ["20.000", "0.400 (50x)", "2.500 (8x)"]
-    assert rows["‖E_y‖₂"][:2] == ["5.000", "0.100 (50x)"]
-    assert rows["‖E_x‖₂"][4:] == ["42.930", "0.457 (94x)", "10.550 (4.1x)", "1.257 (34x)"]
+    assert rows["e2 y (rms/√T)"][:2] == ["5.000", "0.100 (50x)"]
+    assert rows[rms_x][4:] == ["42.930", "0.457 (94x)", "10.550 (4.1x)", "1.257 (34x)"]
+    assert rows["e2 x (rms/√T)"][4:] == ["–"] * 4  # the thesis gives no e2
     assert rows["‖E_y‖∞"][4:] == ["140.000", "4.032 (35x)", "72.340 (1.9x)", "6.372 (22x)"]
     assert "PID alone / scenario" in lines[-1]
 
@@ -124,7 +131,7 @@ def test_markdown_table_sim_and_hardware():
                    "4.736", "8.240", "6.952", "9.361"):
         assert number in hardware
     # PID alone's e2 x on the 1e-3 scale; three significant digits below 0.1
-    assert "| ‖E_x‖₂ | 1.000 | 0.0200 (50x) |" in hardware
+    assert "| e2 x (rms/√T) | 1.000 | 0.0200 (50x) |" in hardware
 
 
 def test_write_report_files(tmp_path):
