@@ -180,7 +180,7 @@ def run_collection(set_name: str, out: str | Path, workers: int | None = None,
     folder = _check_folder(out, trajectories)
     loop = config or default_loop(trajectories.variant)
     decimation = _decimation(loop, trajectories)
-    configs = [run_config(spec, trajectories, loop) for spec in specs]
+    configs = [trajectory_config(spec, trajectories, loop) for spec in specs]
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as fmus:
         scenario = resolve(configs[0], fmus)  # checks the wiring, fills the FMU cache
         taps, record = dataset_taps(scenario), loop_record(scenario)
@@ -209,8 +209,8 @@ def run_collection(set_name: str, out: str | Path, workers: int | None = None,
                             time.perf_counter() - start, cancelled)
 
 
-def run_config(spec: TrajectorySpec, trajectories: TrajectorySet,
-               loop: RunConfig | None = None) -> RunConfig:
+def trajectory_config(spec: TrajectorySpec, trajectories: TrajectorySet,
+                      loop: RunConfig | None = None) -> RunConfig:
     """The checked run configuration of one trajectory on `loop` (default: the set's built-in
     plant under PID), recording every signal."""
     loop = loop or default_loop(trajectories.variant)

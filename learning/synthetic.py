@@ -128,13 +128,13 @@ def synthetic_collection_set(path: str | Path, set_name: str = "sim", friction: 
     # imported here: the run configurations pull in the co-simulation (fmpy), which the
     # random datasets above do not need
     from cosim.scenario import reference_signals
-    from learning.collect import run_config
+    from learning.collect import trajectory_config
     from learning.trajectories import trajectory_set
 
     trajectories = trajectory_set(set_name)
     written = []
     for spec in trajectories.trajectories:
-        config = run_config(spec, trajectories)
+        config = trajectory_config(spec, trajectories)
         signals = reference_signals(config)
         motion = np.vstack([signals[s] for s in REFERENCE_SIGNALS])[:, ::trajectories.decimation]
         t = np.arange(motion.shape[1]) / trajectories.sample_rate_hz

@@ -110,11 +110,11 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
                             on_epoch)
         metrics = {
             "model": config.model, "preset": config.preset, "units": MSE_UNITS,
-            "train_mse": evaluate(network, train_data, TRAIN),
-            "val_mse": evaluate(network, train_data, VALIDATION),
-            "test_mse": evaluate(network, test_data, TRAIN),
+            "train_mse": role_mse(network, train_data, TRAIN),
+            "val_mse": role_mse(network, train_data, VALIDATION),
+            "test_mse": role_mse(network, test_data, TRAIN),
             "test_mse_per_trajectory": {
-                t.name: evaluate(network, test_data, TRAIN, only=[i])
+                t.name: role_mse(network, test_data, TRAIN, only=[i])
                 for i, t in enumerate(test_set)},
             "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge),
             **({} if prior is None else {
@@ -252,7 +252,7 @@ def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
             loss = _recurrent_epoch(network, config, data, optimizer, rng, epoch)
         else:
             loss = _window_epoch(network, config, sampler, optimizer, rng, epoch)
-        val = evaluate(network, data, VALIDATION)
+        val = role_mse(network, data, VALIDATION)
         history["seconds"].append(time.perf_counter() - start)
         history["train"].append(loss)
         history["val"].append(val)
@@ -352,7 +352,7 @@ def learning_rate(config: TrainConfig, fraction: float) -> float:
 
 
 @torch.no_grad()
-def evaluate(network: SequenceNetwork, data: SequenceSet, role: int,
+def role_mse(network: SequenceNetwork, data: SequenceSet, role: int,
              only: list[int] | None = None, batch: int = 8) -> float:
     """MSE over the samples of `role`, each trajectory run whole from the zero state."""
     network.eval()

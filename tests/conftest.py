@@ -46,3 +46,13 @@ def pi_fmu(tmp_path_factory):
     from tests.fmu_toys import build_toy, discrete_pi
 
     return build_toy(discrete_pi(), tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def few_threads():
+    """Small tensors: spare threads only wait for busy cores (see learning.threads). A module
+    asks for it with `pytestmark = pytest.mark.usefixtures("few_threads")`."""
+    from learning.threads import torch_threads  # torch only for the modules that use it
+
+    with torch_threads():
+        yield

@@ -22,7 +22,7 @@ import pytest
 
 from cosim.run import simulate_config
 from learning.collect import (CollectionError, CollectionReport, DataFolderError, Outcome,
-                              collect, dataset_signals, run_collection, run_config)
+                              collect, dataset_signals, run_collection, trajectory_config)
 from learning.dataset import MANIFEST, SIGNALS, DatasetError, load_dataset
 from learning.trajectories import trajectory_set
 
@@ -53,7 +53,7 @@ def names(k: int = FIRST) -> list[str]:
 def test_files_reload_bit_for_bit(collected):
     trajectories = trajectory_set("sim")
     for spec in trajectories.trajectories[:FIRST]:
-        recorded = dataset_signals(simulate_config(run_config(spec, trajectories)))
+        recorded = dataset_signals(simulate_config(trajectory_config(spec, trajectories)))
         saved = arrays(collected / f"{spec.name}.npz")
         assert list(saved) == list(SIGNALS)
         for name in SIGNALS:
@@ -308,7 +308,7 @@ def test_hardware_files_keep_every_tenth_sample(tmp_path):
     spec = trajectories.trajectories[0]
     out = collect("hardware", tmp_path / "hw", progress=False, limit=1)
     saved = arrays(out / f"{spec.name}.npz")
-    full = dataset_signals(simulate_config(run_config(spec, trajectories)))
+    full = dataset_signals(simulate_config(trajectory_config(spec, trajectories)))
     assert saved["time"].shape == (10001,) and saved["time"][-1] == pytest.approx(100.0)
     np.testing.assert_allclose(np.diff(saved["time"]), 0.01, rtol=1e-9)
     for name in SIGNALS:

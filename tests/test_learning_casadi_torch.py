@@ -8,14 +8,9 @@ import torch
 from controllers.features import motion_features, motion_function
 from learning.casadi_torch import TorchFunction, atan2, frozen
 from learning.rigid import RigidBodyForce, rigid_forces
-from learning.threads import torch_threads
 
 
-@pytest.fixture(autouse=True, scope="module")
-def few_threads():
-    """Small tensors: spare threads only wait for busy cores (see learning.threads)."""
-    with torch_threads():
-        yield
+pytestmark = pytest.mark.usefixtures("few_threads")
 
 
 def _samples(n=200, seed=0):

@@ -18,7 +18,6 @@ from learning.features import prepare_trajectory
 from learning.rigid import rigid_forces
 from learning.run_folder import load_run
 from learning.synthetic import synthetic_dataset
-from learning.threads import torch_threads
 from learning.train import train
 
 TINY = {
@@ -29,11 +28,7 @@ TINY = {
 }
 
 
-@pytest.fixture(autouse=True, scope="module")
-def few_threads():
-    """Small tensors: spare threads only wait for busy cores (see learning.threads)."""
-    with torch_threads():
-        yield
+pytestmark = pytest.mark.usefixtures("few_threads")
 
 
 @pytest.fixture(scope="module")

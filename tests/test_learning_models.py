@@ -6,7 +6,6 @@ import torch
 
 from learning.models import (TemporalConvNet, build_network, fit_linear_skip, parameter_count,
                              receptive_field, uses_prior)
-from learning.threads import torch_threads
 
 SMALL = {
     "lstm": {"hidden": 12, "layers": 2, "dropout": 0.05},
@@ -18,11 +17,7 @@ SMALL = {
 KINDS = list(SMALL)
 
 
-@pytest.fixture(autouse=True, scope="module")
-def few_threads():
-    """Small tensors: spare threads only wait for busy cores (see learning.threads)."""
-    with torch_threads():
-        yield
+pytestmark = pytest.mark.usefixtures("few_threads")
 
 
 def _net(kind: str, n_features: int = 5) -> torch.nn.Module:
