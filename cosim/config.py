@@ -32,7 +32,7 @@ short form:
                  x_start, y_start default to the reference's first point
   [controller]   crossover_hz, notch (true / false / Hz), encoders (2 or 3); defaults follow
                  the plant variant (controllers.feedback.DEFAULTS)
-  [feedforward]  kind = "none" | "model" (rigid-body) | "onnx" (with model = "file.onnx", an
+  [feedforward]  kind = "none" | "rigid-body" | "onnx" (with model = "file.onnx", an
                  exported learned model, and mode = "step" (default) | "precomputed")
 
 A configuration without [fmu.*] tables is the manipulator's loop: the short form, with the
@@ -49,6 +49,7 @@ when the FMUs are resolved, before anything runs.
 from __future__ import annotations
 
 import math
+import warnings
 import tomllib
 from collections.abc import Mapping, Sequence
 from importlib import resources
@@ -74,8 +75,9 @@ from plant.system import plant_system
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
                 "circle": ("kind", "centre", "turns", "duration"),
                 "spline": ("kind", "points", "duration")}
-FEEDFORWARD_KINDS = ("none", "model", "onnx")
-FEEDFORWARD_BUILTINS = {"model": "rigid-body-feedforward", "onnx": "learned-feedforward"}
+FEEDFORWARD_KINDS = ("none", "rigid-body", "onnx")
+FEEDFORWARD_BUILTINS = {"rigid-body": "rigid-body-feedforward", "onnx": "learned-feedforward"}
+RENAMED_KINDS = {"model": "rigid-body"}  # old [feedforward] kind -> its name now
 FEEDFORWARD_MODES = ("step", "precomputed")
 SHORT_FORM = ("plant", "controller", "feedforward")
 TABLES = ("run", "reference", "source", "fmu", "connection", "record", *SHORT_FORM)
@@ -248,6 +250,12 @@ class _Parser:
         variant = self.choice(plant, "plant", "variant", tuple(VARIANTS), "nominal")
         fmus, sources = [], []
         ff = self.table(data, "feedforward")
+        if ff.get("kind") in RENAMED_KINDS:
+            new = RENAMED_KINDS[ff["kind"]]
+            warnings.warn(f"{self.source}: [feedforward] kind = {ff['kind']!r} is deprecated, "
+                          f"write kind = {new!r} (the same rigid-body feedforward)",
+                          FutureWarning, stacklevel=2)
+            ff = {**ff, "kind": new}
         kind = self.choice(ff, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
         self.keys(ff, "feedforward", ("kind", "model", "mode") if kind == "onnx" else ("kind",))
         if kind == "none":
@@ -375,7 +383,7 @@ class _Parser:
 
     def feedforward_options(self, t: Mapping[str, Any], where: str) -> dict[str, Any]:
         """A learned feedforward's model and mode (nothing for the rigid-body one)."""
-        if "model" not in t and t.get("builtin", t.get("kind")) in ("model",
+        if "model" not in t and t.get("builtin", t.get("kind")) in ("rigid-body",
                                                                       "rigid-body-feedforward"):
             return {}
         model = self.path(t, where, "model")

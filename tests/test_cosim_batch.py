@@ -30,7 +30,7 @@ def flexff(*args):
 
 def test_a_broken_run_is_reported_and_the_others_finish(tmp_path):
     good = tmp_path / "good.toml"
-    good.write_text(SHORT + '[feedforward]\nkind = "model"\n')
+    good.write_text(SHORT + '[feedforward]\nkind = "rigid-body"\n')
     broken = tmp_path / "broken.toml"
     broken.write_text(SHORT + "[plant]\nk_t1 = -1.0\n")
     results = run_batch([broken, good], tmp_path / "out", workers=2)
@@ -121,8 +121,8 @@ def test_batch_on_a_dask_cluster(tmp_path):
 def test_cli_config_examples(tmp_path):
     listed = flexff("config", "example")
     assert listed.returncode == 0 and listed.stdout.split() == list(config_examples())
-    shown = flexff("config", "example", "thesis-eval-model-ff")
-    assert shown.returncode == 0 and shown.stdout == config_examples()["thesis-eval-model-ff"]
+    shown = flexff("config", "example", "thesis-eval-rigid-body-ff")
+    assert shown.returncode == 0 and shown.stdout == config_examples()["thesis-eval-rigid-body-ff"]
     missing = flexff("config", "example", "nope")
     assert missing.returncode == 2 and "no example 'nope'" in missing.stderr
 

@@ -73,7 +73,7 @@ def test_csv_paths_are_relative_to_the_configuration(tmp_path):
     ({"plant": "k_t1 = -0.03"}, "plant.k_t1", "must be positive"),
     ({"plant": "x_start = 0.2"}, "plant.x_start", "outside the workspace"),
     ({"feedforward": 'kind = "lstm"'}, "feedforward.kind", "unknown kind 'lstm'"),
-    ({"feedforward": 'kind = "model"\nmodel = "a.onnx"'}, "feedforward.model", "unknown key"),
+    ({"feedforward": 'kind = "rigid-body"\nmodel = "a.onnx"'}, "feedforward.model", "unknown key"),
     ({"record": "signals = 3"}, "record.signals", "expected a list"),
 ])
 def test_mistakes_name_the_key(tmp_path, change, key, message):
@@ -106,6 +106,13 @@ def test_a_reference_outside_the_workspace_in_a_csv_file(tmp_path):
     (tmp_path / "far.csv").write_text("t,x_ref,y_ref\n0,0,0\n1,0.03,0.03\n2,0.06,0\n")
     with pytest.raises(ConfigError, match=r"reference.path.*outside the workspace"):
         load_config(write(tmp_path, '[reference]\nkind = "csv"\npath = "far.csv"\n'))
+
+
+def test_the_old_name_of_the_rigid_body_feedforward_still_reads(tmp_path):
+    new = load_config(write(tmp_path, GOOD + '[feedforward]\nkind = "rigid-body"\n'))
+    with pytest.warns(FutureWarning, match="kind = 'model' is deprecated, write kind = 'rig"):
+        old = load_config(write(tmp_path, GOOD + '[feedforward]\nkind = "model"\n'))
+    assert old.fmus == new.fmus
 
 
 def test_onnx_feedforward_model_is_checked(tmp_path):

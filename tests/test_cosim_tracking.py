@@ -59,7 +59,7 @@ def test_pid_alone_tracks_a_slow_circle():
 
 @pytest.fixture(scope="module")
 def thesis_runs():
-    return {"pid": metrics("thesis-eval-pid"), "model-ff": metrics("thesis-eval-model-ff")}
+    return {"pid": metrics("thesis-eval-pid"), "rigid-body-ff": metrics("thesis-eval-rigid-body-ff")}
 
 
 def test_pid_alone_on_the_thesis_reference_has_a_large_error(thesis_runs):
@@ -77,9 +77,9 @@ def test_rigid_body_feedforward_removes_most_of_the_error(thesis_runs):
     """The nominal plant's encoders are ideal, as in the thesis's simulation model: the
     feedforward cuts e2 far more than 50 times. Counting whole 2048-count encoder steps in the
     loop (the hardware's sensor) leaves the quantization fed back through the PID: about 30-45."""
-    pid, ff = thesis_runs["pid"], thesis_runs["model-ff"]
+    pid, ff = thesis_runs["pid"], thesis_runs["rigid-body-ff"]
     counted = "encoder_quantization = 1.0\n"
-    pid_q, ff_q = metrics("thesis-eval-pid", counted), metrics("thesis-eval-model-ff", counted)
+    pid_q, ff_q = metrics("thesis-eval-pid", counted), metrics("thesis-eval-rigid-body-ff", counted)
     print(f"\nrigid-body feedforward, nominal plant (x, y):\n"
           f"  e2 = {e2(ff) * 1e4} 1e-4 m/sqrt(s), einf = {einf(ff) * 1e4} 1e-4 m, "
           f"e2 ratio PID / FF = {e2(pid) / e2(ff)}\n"
