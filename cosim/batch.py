@@ -118,7 +118,7 @@ def _run_dask(configs: list, folders: list[Path], debug: list[bool], scheduler: 
         from dask.distributed import Client
     except ImportError:
         raise RuntimeError("running on a Dask cluster needs dask.distributed: "
-                           "pip install 'dask[distributed]'") from None
+                           "pip install 'flexff[cluster]'") from None
     try:
         client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
     except OSError as error:  # refused, timed out, unknown host

@@ -22,6 +22,16 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+try:
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimManipulator import CosimManipulator
+    from libcosimpy.CosimObserver import CosimObserver
+    from libcosimpy.CosimSlave import CosimLocalSlave
+except ImportError:  # an optional dependency: the extra "libcosim"
+    raise ImportError("runs under libcosim need libcosimpy: pip install 'flexff[libcosim]'"
+                      ) from None
+
 from cosim.master import SlaveSpec
 from cosim.recording import Recording
 from cosim.wiring import SOURCE, Link, Port, wire
@@ -35,10 +45,6 @@ class _Execution:
 
     def __init__(self, slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
                  step: float, links: Sequence[Link] | None = None) -> None:
-        from libcosimpy.CosimExecution import CosimExecution
-        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
-        from libcosimpy.CosimSlave import CosimLocalSlave
-
         log_output_level(CosimLogLevel.WARNING)  # libcosim traces every FMI call otherwise
         infos = {s.name: read_fmu(s.fmu) for s in slaves}
         self.variables = {name: info.variables for name, info in infos.items()}
@@ -89,9 +95,6 @@ def run_libcosim(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray |
     Its wall time includes libcosimpy's per-step calls (manipulator and observer), which
     build their ctypes prototypes on every call: see `time_libcosim_engine` for the rest.
     """
-    from libcosimpy.CosimManipulator import CosimManipulator
-    from libcosimpy.CosimObserver import CosimObserver
-
     ex = _Execution(slaves, sources, step, links)
     manipulator, observer = CosimManipulator.create_override(), CosimObserver.create_last_value()
     ex.execution.add_manipulator(manipulator)

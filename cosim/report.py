@@ -78,7 +78,8 @@ THESIS_TABLES: dict[str, dict] = {
 _ENVS = {"sim": (-4, "thesis Table 5.2 (nominal simulation)"),
          "hardware": (-3, "thesis Table 6.2 (the real machine)")}
 NORMS = ("rms", "e2", "einf")
-_ROWS = (("rms", "x", "‖E_x‖₂ (rms, as the thesis)"), ("rms", "y", "‖E_y‖₂ (rms, as the thesis)"),
+_ROWS = (("rms", "x", "‖E_x‖₂ (rms, as the thesis)"),
+         ("rms", "y", "‖E_y‖₂ (rms, as the thesis)"),
          ("e2", "x", "e2 x (rms/√T)"), ("e2", "y", "e2 y (rms/√T)"),
          ("einf", "x", "‖E_x‖∞"), ("einf", "y", "‖E_y‖∞"))
 UNITS = {"rms": "m", "e2": "m/sqrt(s)", "einf": "m",

@@ -386,7 +386,7 @@ def _on_dask(jobs: list[_Job], scheduler: str) -> Iterator[Outcome]:
         from dask.distributed import as_completed as dask_completed
     except ImportError:
         raise RuntimeError("running on a Dask cluster needs dask.distributed: "
-                           "pip install 'dask[distributed]'") from None
+                           "pip install 'flexff[cluster]'") from None
     with Client(scheduler) as client:
         futures = client.map(_collect_one, jobs, pure=False)
         yield from _settle(dict(zip(futures, jobs)), dask_completed(futures),
