@@ -10,7 +10,7 @@ every step, so friction's steps at each reversal come at 1 kHz, not extrapolated
 
 Two modes with equal results: step by step (the graph's recurrent state carried in the FMU
 state) and precomputed (the whole reference given at build time, run through the graph in
-one call at initialization, as the seed's offline feedforward).
+one call at initialization, as the thesis's offline feedforward).
 
 The network part is the one of any ONNX graph as an FMU (fmu.onnx_graph, `flexff fmu build
 onnx`), the graph's first dimension being time; only the features and the prior are this

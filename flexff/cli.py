@@ -413,7 +413,8 @@ def build_parser() -> argparse.ArgumentParser:
     train = commands.add_parser("train", help="train a feedforward model on a dataset folder")
     train.add_argument("--model", required=True, choices=MODELS, help="the network")
     train.add_argument("--preset", default="fast", choices=PRESETS,
-                       help="fast: minutes on a laptop CPU; thesis: the seed's sizes (GPU)")
+                       help="fast: minutes on a laptop CPU; "
+                            "thesis: the thesis's network sizes (GPU)")
     train.add_argument("--data", required=True, help="a dataset folder (flexff data collect)")
     train.add_argument("-o", "--output", required=True, help="the run folder to write")
     train.add_argument("--epochs", type=int, help="override the preset's number of epochs")

@@ -1,7 +1,7 @@
 """Windows, the validation split and mini-batches over prepared trajectories.
 
 Training trajectories are cut into consecutive windows of `window` samples; a seeded shuffle
-of all windows picks the validation share (the seed holds out 12.5 % of its training data).
+of all windows picks the validation share (the thesis holds out 12.5 % of its training data).
 Every sample carries a role: train, validation or padding. The networks always run over
 whole trajectories or consecutive chunks of them, so the recurrent state and the
 convolutions' history are those of deployment; a sample's role only decides which loss it

@@ -1,4 +1,4 @@
-"""`flexff evaluate`: the seed's Table 5.2 (sim) or 6.2 (hardware) for flexff, end to end.
+"""`flexff evaluate`: the thesis's Table 5.2 (sim) or 6.2 (hardware) for flexff, end to end.
 
 1. collect the environment's trajectory set under PID (resumes what is there);
 2. train the models side by side, one process per core (learning.workers; a finished run with
@@ -6,7 +6,7 @@
    environment asks for one, as one graph of their mean);
 3. co-simulate the environment's evaluation reference on its plant: PID alone, with the
    rigid-body feedforward, and with each learned model as an ONNX feedforward FMU. As in the
-   seed, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
+   thesis, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
    100 s reference of sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz
    circles) on the hardware plant;
 4. write the report (cosim.report): summary.json, table.md (with what each model's training
@@ -17,12 +17,12 @@ the environment's plant: the set is collected on it under PID alone, and every s
 environment's evaluation reference with its feedforward replaced (PID alone, rigid-body, or
 the learned one stepped right before the controller).
 
-Preprocessing beyond the seed (Environment.features): the seed low-passes the measured motion
+Preprocessing beyond the thesis (Environment.features): the thesis low-passes the measured motion
 and forces at 1.8 Hz and re-quantizes its ideal simulated encoders. The sim evaluation
 reference's circle runs at up to 1.8 Hz, where that filter halves the signals and the training
 forces differ from the inverse dynamics of the filtered motion by about 1 %; with a 5 Hz corner
 and the simulated encoders left ideal, the residual of the nominal model falls to 0.2 % and the
-feedforward error with it. The hardware environment keeps the seed's preprocessing: its
+feedforward error with it. The hardware environment keeps the thesis's preprocessing: its
 reference is slow and its encoders noisy.
 """
 

@@ -1,7 +1,7 @@
 """Preprocessing: from recorded signals (or a reference) to network features and labels.
 
 As the seed: the encoder angles counted in whole counts of the 2048 counts/rev encoders about
-their home angles (the seed quantizes its ideal simulated angles so; angles already counted,
+their home angles (the thesis quantizes its ideal simulated angles so; angles already counted,
 as the hardware's, stay as they are), the wrist position from them by forward kinematics (two
 encoders as the thesis; three as an option), optional white noise on positions and forces
 (training data only), a 4th-order Butterworth low-pass at 1.8 Hz run forwards and backwards
@@ -40,12 +40,12 @@ class FeatureConfig:
     quantize_encoders: bool = True  # count the angles in whole encoder counts first (seed)
     cutoff_hz: float = 1.8  # low-pass corner, slightly above the 1.7 Hz first mode (seed)
     filter_order: int = 4
-    filter_forces: bool = True  # the seed filters the force labels with the same filter
+    filter_forces: bool = True  # the thesis filters the force labels with the same filter
     position_noise_m: float = 1e-4  # white noise std added to training positions [m]
     force_noise_n: float = 1e-2  # white noise std added to training forces [N]
     model_rate_hz: float | None = None  # down-sample to this rate; None keeps the data rate
     edge_periods: float = 0.0  # filter corner periods at each end of a trajectory left out
-    # of every loss (`edge_samples`); 0 as the seed
+    # of every loss (`edge_samples`); 0 as in the thesis
 
     def edge_samples(self, rate_hz: float) -> int:
         """Samples at `rate_hz` at each end of a trajectory where the zero-phase filter's

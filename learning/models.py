@@ -1,4 +1,4 @@
-"""The networks: LSTM, CNN-LSTM and TCN as in the seed, and the residual net of the pgnn.
+"""The networks: LSTM, CNN-LSTM and TCN as in the thesis, and the residual net of the pgnn.
 
 Every network maps scaled features (batch, time, n_features) to scaled outputs
 (batch, time, 2) and is causal. Each one takes and returns an explicit state, a tuple of
@@ -17,10 +17,10 @@ an output never sees a later input and nothing needs chomping.
 TCN receptive field (samples of input one output depends on, the current one included), for
 kernel size k and one dilated convolution per level with dilations d_i = 1, 2, 4, ...:
     R = 1 + (k - 1) * sum_i d_i = 1 + (k - 1) * (2^L - 1)
-The thesis preset (k = 3, L = 6, dilations 1 ... 32) gives R = 127. The seed's eq. (3.4),
+The thesis preset (k = 3, L = 6, dilations 1 ... 32) gives R = 127. The thesis's eq. (3.4),
 R = 2^L (k - 1) = 128, counts one sample more than the network can see.
 
-Initialization as Keras (the seed's framework) does by default: Glorot-uniform input weights
+Initialization as Keras (the thesis's framework) does by default: Glorot-uniform input weights
 (convolutions, dense layers, LSTM input kernels), orthogonal recurrent kernels, zero biases
 and a unit forget-gate bias.
 """
@@ -177,7 +177,7 @@ class StreamingTCN(SequenceNetwork):
 
 
 class LSTMNet(SequenceNetwork):
-    """Stacked LSTM, dropout, linear head (the seed's 2 x 100 network)."""
+    """Stacked LSTM, dropout, linear head (the thesis's 2 x 100 network)."""
 
     def __init__(self, n_features: int, hidden: int = 100, layers: int = 2,
                  dropout: float = 0.05) -> None:

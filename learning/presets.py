@@ -1,8 +1,8 @@
-"""Training configurations: the seed's settings (`thesis`) and a CPU-friendly one (`fast`).
+"""Training configurations: the thesis's settings (`thesis`) and a CPU-friendly one (`fast`).
 
-`thesis` takes the seed's sizes, learning rates and epoch counts (sections 5.3-5.5): data at
+`thesis` takes the thesis's sizes, learning rates and epoch counts (sections 5.3-5.5): data at
 its own rate, Adam at a constant 2e-5 for 1000 epochs (LSTM, CNN-LSTM) or 2e-4 for 1500 epochs
-(TCN); the seed does not give batch sizes, so Keras's default of 32 is used. It is meant for a
+(TCN); the thesis does not give batch sizes, so Keras's default of 32 is used. It is meant for a
 GPU.
 
 `fast` trains the same kinds of network on a 2-core CPU in one to two minutes each, the four
@@ -37,7 +37,7 @@ test, tests/test_cli.py, checks the outcome):
   accuracy (all 44 trajectories per batch: 1.4 s per epoch and a validation loss 15 times
   higher after 100 epochs).
 
-The pgnn is not in the seed: a small TCN learning the residual over the rigid-body model.
+The pgnn is not in the thesis: a small TCN learning the residual over the rigid-body model.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
-"""Min-max scaling to [0, 1] (eq. 4.3 of the seed), fitted on training data only.
+"""Min-max scaling to [0, 1] (eq. 4.3 of the thesis), fitted on training data only.
 
-The seed normalizes features and labels separately, with coefficients from the training set
+The thesis normalizes features and labels separately, with coefficients from the training set
 applied unchanged to validation and test data; the test MSE it reports is in these units.
 """
 

@@ -2,14 +2,14 @@
 
 For tests, and to exercise training before co-simulated data exist. Each trajectory is a
 smooth motion of the wrist, followed exactly (x = x_ref: there is no controller here): either
-random (a skew-sine circle, eq. 4.1 of the seed, at rest at both ends, or a periodic cubic
+random (a skew-sine circle, eq. 4.1 of the thesis, at rest at both ends, or a periodic cubic
 spline through random workspace points) or the reference of a trajectory of the collection's
 sets (`learning.trajectories`). The force labels are the exact rigid-body inverse dynamics of
 the nominal model (eq. 2.4) along the motion plus what the motors' Coulomb and viscous
 friction (the hardware variant's values) take, mapped to the wrist by A^T, and white noise
 standing in for the feedback's reaction to the encoders. The encoder angles are the exact
 shoulder coordinates of eq. (2.1), as the nominal plant reports them (preprocessing counts
-them in encoder steps, as the seed does).
+them in encoder steps, as the thesis does).
 """
 
 from __future__ import annotations

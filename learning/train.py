@@ -1,6 +1,6 @@
 """Training: a dataset folder in, a run folder out (weights, run.json, metrics.json, loss.png).
 
-Adam on the MSE of min-max-scaled labels (the seed's normalized units; for the pgnn the
+Adam on the MSE of min-max-scaled labels (the thesis's normalized units; for the pgnn the
 residual F - F_rigid divided by the same label span, which gives the same MSE), truncated
 backpropagation through time for the recurrent networks, random windows for the convolutional
 ones (`learning.batches`), the epoch with the lowest validation loss kept. Seeded: the same
@@ -43,7 +43,7 @@ from learning.scaling import MinMaxScaler
 from learning.threads import torch_threads
 
 EpochReport = Callable[[dict[str, Any]], None]
-MSE_UNITS = "MSE of min-max scaled labels Fx, Fy (the seed's normalized units)"
+MSE_UNITS = "MSE of min-max scaled labels Fx, Fy (the thesis's normalized units)"
 
 
 def train(model: str, preset: str, data: str | Path, out: str | Path, progress: bool = True,

@@ -1,4 +1,4 @@
-"""The trajectory sets that data collection runs (seed, sec. 4.3), as plain data.
+"""The trajectory sets that data collection runs (thesis, sec. 4.3), as plain data.
 
 Each trajectory is a name, a split, a [reference] table that cosim.config.parse_config accepts
 (JSON-ready: numbers and lists only), the plant variant and the seed of its encoder noise.
@@ -7,18 +7,18 @@ The sets are drawn from seeded numpy Generators, so they are the same on every m
 `sim` (nominal plant, 15 s each, recorded at 1 kHz):
   - 30 training circles (eq. 4.1, about the centre): 20 start at rest on the circle, 10 start at
     the centre and reach it by a skew-sine line (2.5 s), rest 0.5 s, then circle for 12 s, as
-    the seed's figure 4.3c. Mean frequency (turns / circle time) and radius are stratified over
+    the thesis's figure 4.3c. Mean frequency (turns / circle time) and radius are stratified over
     [1/15, 1] Hz and [R_MIN, R_MAX] (each stratum used once), start angles are multiples of
     pi/4, half run clockwise;
   - 14 training splines: closed periodic cubic splines through 4-6 random points, 1-3 laps;
     the plant starts at rest on the first point, the reference moves off at once;
-  - 4 test trajectories of the seed's sec. 4.3.2: circles of 0.01 m at 0.93 Hz, 0.043 m at
-    0.367 Hz and 0.02761 m at 0.632 Hz (start angles and directions are ours: the seed gives
+  - 4 test trajectories of the thesis's sec. 4.3.2: circles of 0.01 m at 0.93 Hz, 0.043 m at
+    0.367 Hz and 0.02761 m at 0.632 Hz (start angles and directions are ours: the thesis gives
     none), and one spline.
-`hardware` (hardware plant, 100 s each, recorded at 1 kHz and saved at 100 Hz): the seed's
+`hardware` (hardware plant, 100 s each, recorded at 1 kHz and saved at 100 Hz): the thesis's
 sec. 4.3.3 protocol, every run from the centre: a 21 s line to the start point, 1 s at rest, 75 s
 of circle (1-22 turns) or of spline laps (1-10), 3 s at rest. 60 training trajectories (39
-circles, 21 splines) and the 10 test ones the seed lists: circles at 0.066, 0.08, 0.09, 0.106,
+circles, 21 splines) and the 10 test ones the thesis lists: circles at 0.066, 0.08, 0.09, 0.106,
 0.265 and 0.28 Hz (radii inside the training range, start angles between the training ones)
 and 4 splines.
 
@@ -49,9 +49,9 @@ R_MAX = 0.045  # m: largest radius any training trajectory reaches (see the modu
 SPLINE_POINT_RADIUS = 0.04  # m: spline points are drawn inside this disc
 MIN_CHORD = 0.006  # m: consecutive spline points (and the last and first) at least this apart
 ANGLES = 8  # training start angles: multiples of 2 pi / ANGLES
-SEEDS = {"sim": 431, "hardware": 433}  # one root seed per set (after the seed's sections)
+SEEDS = {"sim": 431, "hardware": 433}  # one root seed per set (after the thesis's sections)
 
-# sim: the seed's sec. 4.3.1 and fig. 4.3c
+# sim: the thesis's sec. 4.3.1 and fig. 4.3c
 SIM_DURATION = 15.0
 SIM_LINE, SIM_REST, SIM_CIRCLE = 2.5, 0.5, 12.0
 SIM_CIRCLES, SIM_LINE_CIRCLES, SIM_SPLINES = 20, 10, 14
@@ -59,7 +59,7 @@ SIM_FREQUENCY = (1.0 / 15.0, 1.0)  # Hz: 1 to 15 turns in 15 s
 SIM_TEST_CIRCLES = ((0.01, 0.93, math.pi / 8, 1), (0.043, 0.367, 0.0, 1),
                     (0.02761, 0.632, 5 * math.pi / 8, 1))  # radius, Hz, start angle, direction
 
-# hardware: the seed's sec. 4.3.3
+# hardware: the thesis's sec. 4.3.3
 HW_DURATION = 100.0
 HW_LINE, HW_REST, HW_MOTION, HW_END = 21.0, 1.0, 75.0, 3.0
 HW_CIRCLES, HW_SPLINES, HW_TEST_SPLINES = 39, 21, 4

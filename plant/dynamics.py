@@ -2,7 +2,7 @@
 
 Kinetic energy of the seven rigid bodies plus the flexures' potential energy, written in the 21
 coordinates of eq. (2.1) and reduced through the inverse kinematics q = phi(x_ee, y_ee) (the
-minimal-coordinate formulation the seed adopts). Euler-Lagrange then gives eqs. (2.2)-(2.4):
+minimal-coordinate formulation the thesis adopts). Euler-Lagrange then gives eqs. (2.2)-(2.4):
 
     M(q) qdd + C(q, qd) qd + Q(q) + D(q, qd) = A(q)^T tau
 

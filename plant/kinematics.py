@@ -3,7 +3,7 @@
 Chain i: a motor at M_i on a circle of radius r_mount (90, -30 and 210 degrees) turns the
 upper arm to absolute angle theta_si; the elbow hinge E_i = M_i + l_up u(theta_si) carries the
 lower arm at absolute angle theta_si + theta_ei (theta_ei is the elbow's relative angle, as in
-the seed's appendix C); the three lower arms meet at the wrist hinge (x_ee, y_ee), whose
+the thesis's appendix C); the three lower arms meet at the wrist hinge (x_ee, y_ee), whose
 rotation theta_ee is the mean of the three lower-arm angles. The elbows bend the same way in
 every chain (the branch that holds at the centre: each upper arm turned clockwise from the
 line motor -> end effector).

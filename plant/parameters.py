@@ -1,6 +1,6 @@
 """Physical parameters of the redundantly actuated flexure manipulator, with units.
 
-Berendsen's identified values are not public. The seed gives the arm lengths (0.3086 m, the
+Berendsen's identified values are not public. The thesis gives the arm lengths (0.3086 m, the
 table's "mm" is a typo: the workspace radius is 0.05 m), the motor (torque constant
 36.9 mNm/A, nominal torque 0.128 Nm: a Maxon EC 45 flat 70 W), the 2048 counts/rev encoders,
 the Escon 50/5 amplifiers and the lowest natural frequency at the centre, about 1.7 Hz. The
@@ -185,7 +185,7 @@ def _three(value: float) -> tuple[float, float, float]:
 #    flexure stiffness, and so the current that holds the wrist off-centre, within the motors'
 #    reach: 8.1 A at the 0.05 m workspace edge in the worst direction.
 #  - rotor inertia 181 g*cm^2: EC 45 flat class rotor (the 36.9 mNm/A, 0.128 Nm motor).
-#  - current limit 10 A: below the 15 A peak of the Escon 50/5 amplifier the seed names, and
+#  - current limit 10 A: below the 15 A peak of the Escon 50/5 amplifier the thesis names, and
 #    above the 8.1 A that holds the wrist at the workspace edge.
 #  - all nine flexures share one stiffness, solved for a 1.70 Hz lowest mode at the centre;
 #    damping is stiffness-proportional for about 1 % modal damping at that mode ("light").
@@ -218,7 +218,7 @@ NOMINAL = PlantParameters(
 # bolts), flexures 4-9 % off (thickness tolerance), torque constants 2-4 % low. Coulomb
 # friction of about 7 mNm per motor (an EC 45 flat draws ~0.2 A without load), some viscous
 # friction, a 50 g tool on a compliant wrist mount whose mode lies near 40 Hz (well above the
-# 2 Hz crossover; the seed's notch filter targets such a parasitic mode; its static deflection
+# 2 Hz crossover; the thesis's notch filter targets such a parasitic mode; its static deflection
 # under the reference's accelerations stays below 0.1 mm) and encoder noise of a third of a
 # count before quantization.
 HARDWARE_MISMATCH = dict(

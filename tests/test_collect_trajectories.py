@@ -1,4 +1,4 @@
-"""The trajectory sets of data collection: the seed's counts and test trajectories, references
+"""The trajectory sets of data collection: the thesis's counts and test trajectories, references
 the run configurations accept, inside the part of the workspace the motors can hold, and the
 same on every call."""
 

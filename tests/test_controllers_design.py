@@ -49,7 +49,7 @@ def test_axis_plant_is_the_centre_linearization(nominal):
     d_plus = np.array(nominal.terms([0, 0], [0, h], p)[3]).ravel()
     assert q_plus / h == pytest.approx([plant.stiffness, 0], abs=1e-5 * plant.stiffness)
     assert d_plus / h == pytest.approx([0, plant.damping], abs=1e-5 * plant.damping)
-    # the seed's 1.7 Hz lowest natural frequency
+    # the thesis's 1.7 Hz lowest natural frequency
     assert math.sqrt(plant.stiffness / plant.mass) / (2 * math.pi) == pytest.approx(1.70, abs=1e-3)
 
 

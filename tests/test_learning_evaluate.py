@@ -109,7 +109,7 @@ def test_each_environment_runs_the_seeds_own_evaluation_reference(env, variant, 
 def test_hardware_physics_guided_feedforward_beats_the_rigid_body_one(tmp_path):
     """Table 6.2 for flexff (about 7 minutes): on the hardware plant, where the nominal model
     is wrong (mismatch, friction, the tool mode), the physics-guided model trained on the
-    hardware set (the mean of three seeds) tracks the seed's hardware evaluation reference far
+    hardware set (the mean of three seeds) tracks the thesis's hardware evaluation reference far
     better than the rigid-body feedforward of the nominal model. Measured: pgnn 54x / 49x in
     e2, rigid-body 7.0x / 7.9x; the thesis's LSTM reached 1.8x / 1.3x."""
     summary = evaluate("hardware", tmp_path, models=["pgnn"], say=lambda _: None)

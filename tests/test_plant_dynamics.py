@@ -206,4 +206,4 @@ def test_linearized_frequency_matches_free_vibration(variant, nominal, hardware)
     period = np.diff(exact).mean()
     assert 1 / period == pytest.approx(frequency, rel=1e-4)
     if variant == "nominal":
-        assert frequency == pytest.approx(1.70, rel=1e-3)  # the seed's lowest mode
+        assert frequency == pytest.approx(1.70, rel=1e-3)  # the thesis's lowest mode

@@ -1,4 +1,4 @@
-"""Kinematics against independent references: geometry, the seed's appendix C, least squares."""
+"""Kinematics against independent references: geometry, the thesis's appendix C, least squares."""
 
 import casadi as ca
 import numpy as np
@@ -28,7 +28,7 @@ def test_inverse_kinematics_satisfies_the_geometry(nominal, rng):
             assert np.allclose(up, m + L / 2 * unit(th_s), atol=1e-13)
             assert np.allclose(low, elbow + L / 2 * unit(th_s + th_e), atol=1e-13)
             assert np.allclose(elbow + L * unit(th_s + th_e), pos, atol=1e-13)
-            # the seed's eq. (C.3): elbow angle from the motor-to-wrist distance
+            # the thesis's eq. (C.3): elbow angle from the motor-to-wrist distance
             reach = np.linalg.norm(pos - m)
             assert th_e == pytest.approx(np.arccos((reach**2 - 2 * L**2) / (2 * L**2)), abs=1e-12)
             lower_angles.append(th_s + th_e)

@@ -1,4 +1,4 @@
-"""Reference trajectories against independent checks: finite differences, the seed's eqs. (4.1)
+"""Reference trajectories against independent checks: finite differences, the thesis's eqs. (4.1)
 and (4.2) written out, the thesis's evaluation landmarks, workspace and argument errors, CSV."""
 
 import math
@@ -127,7 +127,7 @@ def test_chain_is_continuous_and_switches_segments_at_the_joins():
 
 
 def test_spline_passes_through_its_points_and_closes():
-    # the seed's random trajectory 2 scaled by 0.8: its (0.038, 0.034) lies outside the disc
+    # the thesis's random trajectory 2 scaled by 0.8: its (0.038, 0.034) lies outside the disc
     seed = ((-0.01275, 0.04292), (-0.035, -0.009), (0.038, 0.034), (0.0065, -0.0317),
             (-0.025, -0.0335))
     points = tuple((0.8 * x, 0.8 * y) for x, y in seed)
