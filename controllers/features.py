@@ -18,10 +18,10 @@ import numpy as np
 
 from plant.kinematics import COORDINATE_NAMES, EE_INDEX
 from plant.model import PlantModel
+from plant.signals import REFERENCE, names, reference_motion, units
 
 FEATURE_SETS = ("full", "compact")
-REFERENCE_SIGNALS = ("x_ref", "y_ref", "vx_ref", "vy_ref", "ax_ref", "ay_ref")
-COMPACT_NAMES = ("x", "y", "vx", "vy", "ax", "ay")
+COMPACT_NAMES = ("x", "y", "vx", "vy", "ax", "ay")  # the wrist's motion, in REFERENCE's units
 
 
 def feature_names(feature_set: str) -> list[str]:
@@ -38,7 +38,7 @@ def feature_names(feature_set: str) -> list[str]:
 def feature_units(feature_set: str) -> list[str]:
     """SI units of the features, in column order."""
     if feature_set == "compact":
-        return ["m", "m", "m/s", "m/s", "m/s2", "m/s2"]
+        return list(units(REFERENCE))
     base = ["rad" if n.startswith("theta") else "m" for n in COORDINATE_NAMES]
     return base + [f"{u}/s" for u in base] + [f"{u}/s2" for u in base]
 
@@ -75,6 +75,16 @@ def motion_function(feature_set: str) -> ca.Function:
                        ["pos", "vel", "acc"], ["features"])
 
 
+@functools.lru_cache(maxsize=None)
+def reference_feature_function(feature_set: str) -> ca.Function:
+    """CasADi Function (the REFERENCE signals x_ref ... ay_ref, one sample) -> features: what
+    a learned feedforward computes from its inputs."""
+    reference = ca.SX.sym("reference", len(REFERENCE))
+    features = motion_function(feature_set)(*reference_motion(reference))
+    return ca.Function(f"reference_features_{feature_set}", [reference], [features],
+                       ["reference"], ["features"])
+
+
 def motion_features(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,
                     feature_set: str) -> np.ndarray:
     """Features (n, n_features) of n samples of wrist position, velocity, acceleration (n, 2)."""
@@ -83,9 +93,9 @@ def motion_features(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,
 
 def reference_features(signals: dict[str, np.ndarray], feature_set: str) -> np.ndarray:
     """Features computed from the reference x_ref ... ay_ref: what the feedforward sees."""
-    ref = np.column_stack([np.asarray(signals[s], dtype=float).ravel()
-                           for s in REFERENCE_SIGNALS])
-    return motion_features(ref[:, 0:2], ref[:, 2:4], ref[:, 4:6], feature_set)
+    reference = np.column_stack([np.asarray(signals[s], dtype=float).ravel()
+                                 for s in names(REFERENCE)])
+    return evaluate_samples(reference_feature_function(feature_set), reference)
 
 
 def evaluate_samples(function: ca.Function, *columns: np.ndarray) -> np.ndarray:

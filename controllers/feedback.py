@@ -12,18 +12,19 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
 
 from controllers.allocation import measured_position, motor_currents
-from controllers.feedforward import FORCE_OUTPUTS, REFERENCE_INPUTS
 from controllers.loop_shaping import PIDDesign, StateSpace, design_pid
 from fmu.system import Parameter, System, Variable
 from plant.analysis import plant_info
 from plant.kinematics import shoulder_angles
 from plant.parameters import NOMINAL
+from plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES,
+                           POSITION_REFERENCE, pick)
 
 AXES = ("x", "y")
 
@@ -44,19 +45,9 @@ DEFAULTS = {
 
 # encoder inputs start at the angles of the centre pose, where the controller is at rest
 HOME_ANGLES = tuple(float(a) for a in shoulder_angles(NOMINAL, 0.0, 0.0))
-INPUTS = (
-    *REFERENCE_INPUTS[:2],  # x_ref, y_ref
-    *(Variable(f"theta_s{k + 1}", "rad", f"encoder angle, motor {k + 1}", start=HOME_ANGLES[k])
-      for k in range(3)),
-    *FORCE_OUTPUTS,  # the feedforward's Fx_ff, Fy_ff
-)
-OUTPUTS = (
-    Variable("i1", "A", "commanded current, motor 1"),
-    Variable("i2", "A", "commanded current, motor 2"),
-    Variable("i3", "A", "commanded current, motor 3"),
-    Variable("Fx_fb", "N", "feedback end-effector force, x"),
-    Variable("Fy_fb", "N", "feedback end-effector force, y"),
-)
+ENCODER_INPUTS = tuple(replace(v, start=a) for v, a in zip(ENCODERS, HOME_ANGLES))
+INPUTS = (*POSITION_REFERENCE, *ENCODER_INPUTS, *FEEDFORWARD_FORCES)
+OUTPUTS = (*CURRENTS, *FEEDBACK_FORCES)
 
 
 def parasitic_mode_hz() -> float:
@@ -91,9 +82,9 @@ def controller_system(variant: str = "nominal", crossover_hz: float | None = Non
     n = ss.A.shape[0]
     x, u = ca.SX.sym("x", 2 * n), ca.SX.sym("u", len(INPUTS))
     p, w = ca.SX.sym("p", len(AXES)), ca.SX.sym("w", 0)
-    theta, force_ff = u[2:5], u[5:7]
+    theta, force_ff = pick(u, INPUTS, ENCODERS), pick(u, INPUTS, FEEDFORWARD_FORCES)
     pos = measured_position(theta, encoders)
-    error = u[0:2] - pos
+    error = pick(u, INPUTS, POSITION_REFERENCE) - pos
     states = [x[k * n:(k + 1) * n] for k in range(len(AXES))]
     force_fb = ca.vertcat(*[p[k] / design.kp * _output(ss, states[k], error[k])
                             for k in range(len(AXES))])

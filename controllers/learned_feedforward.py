@@ -27,15 +27,15 @@ import casadi as ca
 import numpy as np
 import onnx
 
-from controllers.features import feature_names, motion_function, nominal_model
-from controllers.feedforward import (FORCE_OUTPUTS, REFERENCE_INPUTS, feedforward_system,
-                                     rigid_body_force)
+from controllers.features import feature_names, nominal_model, reference_feature_function
+from controllers.feedforward import feedforward_system, rigid_body_force
 from fmu.onnx_graph import graph_network, read_graph
 from fmu.system import System
+from plant.signals import FEEDFORWARD_FORCES, REFERENCE, names
 
 FORMAT = "flexff-feedforward"  # metadata "format" written by learning.export
 PRIORS = ("none", "rigid-body")
-REFERENCE_NAMES = [v.name for v in REFERENCE_INPUTS]
+REFERENCE_NAMES = list(names(REFERENCE))
 
 
 def model_metadata(model: str | Path) -> dict[str, str]:
@@ -72,7 +72,7 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
         expected, inputs = REFERENCE_NAMES, u
     else:
         expected = feature_names(meta["feature_set"])
-        inputs = motion_function(meta["feature_set"])(u[0:2], u[2:4], u[4:6])
+        inputs = reference_feature_function(meta["feature_set"])(u)
     if json.loads(meta["input_signals"]) != expected:
         raise ValueError(f"{model}: its input signals {json.loads(meta['input_signals'])} are not "
                          f"the {meta['input_kind']} signals {expected} the FMU computes")
@@ -84,9 +84,10 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     network = graph_network(read_graph(model, time_axis=True),
                             ca.Function("network_input", [x, u, p], [inputs]), period,
                             None if reference is None else _table(reference, step))
-    if network.n_outputs != len(FORCE_OUTPUTS):
+    if network.n_outputs != len(FEEDFORWARD_FORCES):
         raise ValueError(f"{model}: the graph returns {network.n_outputs} values per step, the "
-                         f"feedforward needs {len(FORCE_OUTPUTS)} (Fx_ff, Fy_ff)")
+                         f"feedforward needs {len(FEEDFORWARD_FORCES)} "
+                         f"({', '.join(names(FEEDFORWARD_FORCES))})")
     r = ca.SX.sym("r", network.n_outputs)
     force = r + rigid_body_force(u, parameters) if prior == "rigid-body" else r
     mode = "step" if reference is None else "precomputed"

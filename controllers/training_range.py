@@ -18,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.features import REFERENCE_SIGNALS, feature_units, reference_features
+from controllers.features import feature_units, reference_features
 from controllers.learned_feedforward import model_metadata, model_period
+from plant.signals import REFERENCE, names
 
 MARGIN = 0.1  # of a feature's training span: how far beyond it counts as extrapolating
 
@@ -52,7 +53,7 @@ def training_range_excess(model: str | Path, reference: Mapping[str, np.ndarray]
     if "feature_range" not in meta:
         return None
     every = model_period(meta, step, model)  # the FMU runs the network on every n-th sample
-    seen = {n: np.asarray(reference[n], dtype=float).ravel()[::every] for n in REFERENCE_SIGNALS}
+    seen = {n: np.asarray(reference[n], dtype=float).ravel()[::every] for n in names(REFERENCE)}
     trained = json.loads(meta["feature_range"])
     low, high = np.asarray(trained["low"]), np.asarray(trained["high"])
     span = np.where(high > low, high - low, 1.0)

@@ -59,7 +59,6 @@ from typing import Any
 import tomli_w
 
 from controllers.allocation import ENCODER_CHOICES
-from controllers.feedforward import FORCE_OUTPUTS
 from controllers.learned_feedforward import model_metadata
 from cosim.memory import MemoryNeeded
 from cosim.references import REFERENCE_KINDS, SegmentError, build_reference
@@ -70,6 +69,7 @@ from fmu.importer import FmuError, read_fmu, typed_value
 from plant.kinematics import check_workspace
 from plant.model import VARIANTS
 from plant.parameters import NOMINAL
+from plant.signals import FEEDFORWARD_FORCES, names
 from plant.system import plant_system
 
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
@@ -259,7 +259,7 @@ class _Parser:
         kind = self.choice(ff, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
         self.keys(ff, "feedforward", ("kind", "model", "mode") if kind == "onnx" else ("kind",))
         if kind == "none":
-            sources.append(SourceConfig("constant", {v.name: 0.0 for v in FORCE_OUTPUTS}))
+            sources.append(SourceConfig("constant", {n: 0.0 for n in names(FEEDFORWARD_FORCES)}))
         else:
             fmus.append(FmuConfig("feedforward", builtin=FEEDFORWARD_BUILTINS[kind],
                                   options=self.feedforward_options(ff, "feedforward")))

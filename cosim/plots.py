@@ -22,8 +22,10 @@ import numpy as np  # noqa: E402
 
 from cosim.recording import Recording, atomic_write  # noqa: E402
 from cosim.timing import US, StepTiming  # noqa: E402
+from plant.signals import (FEEDBACK_FORCES, FEEDFORWARD_FORCES, POSITION_REFERENCE,  # noqa: E402
+                           TRUE_POSITION, names)
 
-PLOT_SIGNALS = ("x_ref", "y_ref", "x", "y", "Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
+PLOT_SIGNALS = names(POSITION_REFERENCE, TRUE_POSITION, FEEDBACK_FORCES, FEEDFORWARD_FORCES)
 MAX_PANELS = 8
 MM = 1e3
 

@@ -28,6 +28,7 @@ from cosim.csv_text import read_rows
 from cosim.memory import check_memory
 from plant.kinematics import check_workspace
 from plant.parameters import NOMINAL
+from plant.signals import REFERENCE, names
 
 # evaluation reference of the thesis (section 5.7)
 THESIS_LINE_END = (0.0098, -0.0098)
@@ -56,8 +57,7 @@ class Reference:
     ax: np.ndarray
     ay: np.ndarray
 
-    SIGNALS: ClassVar[tuple[str, ...]] = ("x_ref", "y_ref", "vx_ref", "vy_ref", "ax_ref",
-                                          "ay_ref")
+    SIGNALS: ClassVar[tuple[str, ...]] = names(REFERENCE)
 
     def __post_init__(self) -> None:
         arrays = self._arrays()

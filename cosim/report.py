@@ -36,6 +36,8 @@ from matplotlib.patches import Rectangle  # noqa: E402
 from cosim.metrics import AXES, tracking_metrics  # noqa: E402
 from cosim.plots import MM, save_figure  # noqa: E402
 from cosim.recording import Recording, atomic_write  # noqa: E402
+from plant.signals import (FEEDBACK_FORCES, FEEDFORWARD_FORCES, POSITION_REFERENCE,  # noqa: E402
+                           TRUE_POSITION, names)
 
 SCENARIO_LABELS: dict[str, str] = {
     "pid": "PID alone",
@@ -84,8 +86,8 @@ _ROWS = (("rms", "x", "‖E_x‖₂ (rms, as the thesis)"),
          ("einf", "x", "‖E_x‖∞"), ("einf", "y", "‖E_y‖∞"))
 UNITS = {"rms": "m", "e2": "m/sqrt(s)", "einf": "m",
          **{f"{norm}_ratio": "PID alone / scenario" for norm in NORMS}}
-TRACKING = ("x_ref", "y_ref", "x", "y")
-FORCES = ("Fx_fb", "Fy_fb", "Fx_ff", "Fy_ff")
+TRACKING = names(POSITION_REFERENCE, TRUE_POSITION)
+FORCES = names(FEEDBACK_FORCES, FEEDFORWARD_FORCES)
 
 
 def _check_env(env: str) -> None:

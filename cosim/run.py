@@ -20,8 +20,6 @@ import json
 import tempfile
 from pathlib import Path
 
-from controllers.feedback import OUTPUTS as CONTROLLER_OUTPUTS
-from controllers.feedforward import FORCE_OUTPUTS
 from controllers.training_range import MARGIN, training_range_excess
 from cosim.config import expanded, load_config
 from cosim.metrics import run_metrics
@@ -33,11 +31,12 @@ from cosim.references import Reference
 from cosim.scenario import Scenario, resolve
 from cosim.schema import ConfigError, RunConfig
 from cosim.timing import OverrunError, Pacing
-from plant.model import PlantModel
+from plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, REFERENCE,
+                           TORQUES, TRUE_POSITION, TRUE_VELOCITY, names)
 
 # DESIGN.md's signals of the manipulator, kept under their short names in recordings
-MANIPULATOR_SIGNALS = (*Reference.SIGNALS, *(v.name for v in FORCE_OUTPUTS),
-                       *(v.name for v in CONTROLLER_OUTPUTS), *PlantModel.output_names)
+MANIPULATOR_SIGNALS = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, ENCODERS,
+                            TRUE_POSITION, TRUE_VELOCITY, TORQUES)
 
 
 def load_run(path: str | Path) -> RunConfig:

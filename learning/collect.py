@@ -54,12 +54,14 @@ from cosim.recording import Recording, atomic_write
 from cosim.run import simulate_config
 from cosim.scenario import Scenario, reference_signals, resolve
 from cosim.schema import ConfigError, RecordConfig, RunConfig
-from learning.dataset import (COLLECTED, ENCODER_SIGNALS, FORMAT, MANIFEST, POSITION_SIGNALS,
-                              REFERENCE_SIGNALS, SIGNALS, VERSION, save_signals, write_manifest)
-from learning.loop import (CURRENTS, OWN_TAPS, Tap, current_limit, dataset_taps, default_loop,
+from learning.dataset import (COLLECTED, ENCODER_SIGNALS, FORMAT, LABEL_SIGNALS, MANIFEST,
+                              POSITION_SIGNALS, REFERENCE_SIGNALS, SIGNALS, VERSION, save_signals,
+                              write_manifest)
+from learning.loop import (OWN_TAPS, Tap, current_limit, dataset_taps, default_loop,
                            loop_differences, loop_record, on_reference, plant_record)
 from learning.trajectories import TrajectorySet, TrajectorySpec, trajectory_set
 from learning.workers import die_with_parent
+from plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
 
 PROGRESS = "collection.json"  # the loop of a collection under way (see the module docstring)
 STOPPING = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES)  # fail every trajectory
@@ -224,8 +226,9 @@ def dataset_signals(recording: Recording, decimation: int = 1,
     each read at its tap (learning.loop.dataset_taps; default: flexff's own loop)."""
     values = {"time": recording.time, **{n: taps[n].read(recording) for n in
                                          REFERENCE_SIGNALS + ENCODER_SIGNALS + POSITION_SIGNALS},
-              "Fx": taps["Fx_fb"].read(recording) + taps["Fx_ff"].read(recording),
-              "Fy": taps["Fy_fb"].read(recording) + taps["Fy_ff"].read(recording)}
+              **{label: taps[fb].read(recording) + taps[ff].read(recording)  # feedback + ff
+                 for label, fb, ff in zip(LABEL_SIGNALS, names(FEEDBACK_FORCES),
+                                          names(FEEDFORWARD_FORCES))}}
     return {n: np.ascontiguousarray(values[n][::decimation], dtype=np.float64) for n in SIGNALS}
 
 
@@ -339,7 +342,7 @@ def _collect_one(job: _Job) -> Outcome:
     try:
         recording = simulate_config(job.config, progress=False)
         save_signals(job.path, dataset_signals(recording, job.decimation, job.taps))
-        currents = np.abs(np.vstack([job.taps[n].read(recording) for n in CURRENTS])).max(axis=0)
+        currents = np.abs(np.vstack([job.taps[n].read(recording) for n in names(CURRENTS)])).max(axis=0)
         saturated = (float("nan") if job.current_limit is None else
                      float(np.mean(currents >= job.current_limit)))
         return Outcome(name, recording.wall_s, float(currents.max()), saturated)

@@ -27,8 +27,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from controllers.features import REFERENCE_SIGNALS
 from cosim.recording import atomic_write
+from plant.signals import ENCODERS, FORCES, REFERENCE, TRUE_POSITION, names
 
 FORMAT = "flexff-dataset"
 VERSION = 2
@@ -38,9 +38,11 @@ IMPORTED = "flexff data import"  # ... and for imported logs
 WRITTEN = "learning.dataset.write_dataset"
 SETS = ("sim", "hardware")
 SPLITS = ("train", "test")
-ENCODER_SIGNALS = ("theta_s1", "theta_s2", "theta_s3")
-POSITION_SIGNALS = ("x", "y")
-LABEL_SIGNALS = ("Fx", "Fy")
+# a trajectory's columns (plant.signals): reference, encoders, true position, force labels
+REFERENCE_SIGNALS = names(REFERENCE)
+ENCODER_SIGNALS = names(ENCODERS)
+POSITION_SIGNALS = names(TRUE_POSITION)
+LABEL_SIGNALS = names(FORCES)
 SIGNALS = ("time",) + REFERENCE_SIGNALS + ENCODER_SIGNALS + POSITION_SIGNALS + LABEL_SIGNALS
 TRAINED = ("time",) + ENCODER_SIGNALS + LABEL_SIGNALS  # what training reads (learning.features)
 RECOLLECT = "collect the data again with this flexff version: flexff data collect ..."

@@ -15,16 +15,15 @@ import numpy as np
 import torch
 from torch import nn
 
-from controllers.features import feature_units, motion_function
+from controllers.features import feature_units, reference_feature_function
 from learning.casadi_torch import TorchFunction
-from learning.dataset import REFERENCE_SIGNALS
 from learning.models import uses_prior
 from learning.rigid import RigidBodyForce
 from learning.run_folder import Run
 from learning.threads import torch_threads
+from plant.signals import REFERENCE, names, units
 
 INPUT_KINDS = ("features", "reference")
-REFERENCE_UNITS = ["m", "m", "m/s", "m/s", "m/s2", "m/s2"]
 
 
 class SIModel(nn.Module):
@@ -43,10 +42,11 @@ class SIModel(nn.Module):
         feature_set = run.config.features.feature_set
         self.network = run.network.eval()
         self.inputs = inputs
-        self.input_names = list(REFERENCE_SIGNALS) if inputs == "reference" else run.feature_names
-        self.input_units = REFERENCE_UNITS if inputs == "reference" else feature_units(feature_set)
-        self.reference = (TorchFunction(motion_function(feature_set))
-                          if inputs == "reference" else None)
+        by_reference = inputs == "reference"
+        self.input_names = list(names(REFERENCE)) if by_reference else run.feature_names
+        self.input_units = list(units(REFERENCE)) if by_reference else feature_units(feature_set)
+        self.reference = (TorchFunction(reference_feature_function(feature_set))
+                          if by_reference else None)
         self.residual = uses_prior(run.config.model)
         self.prior_parameters = run.prior_parameters
         self.prior = (RigidBodyForce(feature_set, self.prior_parameters)
@@ -60,7 +60,7 @@ class SIModel(nn.Module):
     def forward(self, inputs: torch.Tensor, *state: torch.Tensor) -> tuple[torch.Tensor, ...]:
         inputs = inputs.double()
         if self.reference is not None:
-            features = self.reference(inputs[:, 0:2], inputs[:, 2:4], inputs[:, 4:6])[0]
+            features = self.reference(inputs)[0]
         else:
             features = inputs
         scaled = ((features - self.feature_low) / self.feature_span).float().unsqueeze(0)

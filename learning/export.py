@@ -53,11 +53,11 @@ from cosim.recording import atomic_write
 from learning.deploy import EnsembleSIModel, SIModel
 from learning.run_folder import Run, flexff_version, load_run
 from learning.threads import torch_threads
+from plant.signals import FEEDFORWARD_FORCES, names, units
 
 FORMAT = "flexff-feedforward"
 VERSION = 1
 OPSET = 17
-OUTPUT_SIGNALS = ["Fx_ff", "Fy_ff"]
 TOLERANCE = 1e-5  # largest |onnxruntime - torch| relative to the largest |force|
 
 
@@ -136,7 +136,8 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
         "input_units": json.dumps(model.input_units),
         "feature_range": json.dumps({"signals": loaded.feature_names,
                                      "low": low.tolist(), "high": high.tolist()}),
-        "output_signals": json.dumps(OUTPUT_SIGNALS), "output_units": json.dumps(["N", "N"]),
+        "output_signals": json.dumps(names(FEEDFORWARD_FORCES)),
+        "output_units": json.dumps(units(FEEDFORWARD_FORCES)),
         "sample_rate_hz": repr(float(loaded.model_rate_hz)),
         "state": json.dumps([{"input": n, "output": f"{n}_out", "shape": list(s.shape),
                               "initial": "zeros"} for n, s in zip(state_names, state)]),

@@ -20,7 +20,6 @@ from typing import Any
 
 import numpy as np
 
-from controllers.feedforward import FORCE_OUTPUTS
 from cosim.config import expanded, parse_config
 from cosim.recording import Recording
 from cosim.scenario import Scenario
@@ -28,12 +27,10 @@ from cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
 from fmu.importer import read_fmu, typed_value
 from learning.dataset import ENCODER_SIGNALS, POSITION_SIGNALS, REFERENCE_SIGNALS, file_sha256
 from plant.model import VARIANTS
+from plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
 from plant.system import plant_system
 
 START_VALUES = ("x_start", "y_start")
-FEEDFORWARD_FORCES = tuple(v.name for v in FORCE_OUTPUTS)  # Fx_ff, Fy_ff
-FEEDBACK_FORCES = ("Fx_fb", "Fy_fb")
-CURRENTS = ("i1", "i2", "i3")
 FEEDFORWARDS = ("rigid-body-feedforward", "learned-feedforward")
 SETTABLE = ("parameter", "input")
 
@@ -54,7 +51,7 @@ class Tap:
 
 # flexff's own loop: every signal by its short name
 OWN_TAPS = {n: Tap(n) for n in (*REFERENCE_SIGNALS, *ENCODER_SIGNALS, *POSITION_SIGNALS,
-                                *FEEDBACK_FORCES, *FEEDFORWARD_FORCES, *CURRENTS)}
+                                *names(FEEDBACK_FORCES, FEEDFORWARD_FORCES, CURRENTS))}
 
 
 def default_loop(variant: str) -> RunConfig:
@@ -97,17 +94,17 @@ def with_feedforward(loop: RunConfig, builtin: str | None = None,
     Fx_ff, Fy_ff and the connections to the controller's Fx_ff, Fy_ff go."""
     controller = _controller(loop)
     gone = {f.name for f in loop.fmus if f.builtin in FEEDFORWARDS}
-    targets = {f"{controller.name}.{n}" for n in FEEDFORWARD_FORCES}
+    targets = {f"{controller.name}.{n}" for n in names(FEEDFORWARD_FORCES)}
     connections = tuple(c for c in loop.connections if c.target not in targets and not
                         {c.source.partition(".")[0], c.target.partition(".")[0]} & gone)
     sources = []
     for s in loop.sources:
-        values = {k: v for k, v in s.values.items() if k not in FEEDFORWARD_FORCES}
+        values = {k: v for k, v in s.values.items() if k not in names(FEEDFORWARD_FORCES)}
         if s.kind != "constant" or values:
             sources.append(replace(s, values=values))
     fmus = [f for f in loop.fmus if f.name not in gone]
     if builtin is None:
-        sources.insert(0, SourceConfig("constant", {n: 0.0 for n in FEEDFORWARD_FORCES}))
+        sources.insert(0, SourceConfig("constant", {n: 0.0 for n in names(FEEDFORWARD_FORCES)}))
     else:
         name = "feedforward"
         while any(f.name == name for f in fmus):
@@ -133,7 +130,7 @@ def dataset_taps(scenario: Scenario) -> dict[str, Tap]:
     controller = _controller(config).name
     into = {(k.target, k.input): k for k in scenario.links}
     taps = {n: Tap(n) for n in REFERENCE_SIGNALS}  # the [reference]: source signals
-    for name in (*ENCODER_SIGNALS, *FEEDFORWARD_FORCES):
+    for name in (*ENCODER_SIGNALS, *names(FEEDFORWARD_FORCES)):
         link = into.get((controller, name))
         if link is None:
             raise ConfigError(config.source, f"fmu.{controller}", (
@@ -141,7 +138,7 @@ def dataset_taps(scenario: Scenario) -> dict[str, Tap]:
                 f"receives, and it receives no signal: connect it ([[connection]] from = "
                 f"\"PLANT.OUTPUT\", to = \"{controller}.{name}\")"))
         taps[name] = Tap(link.producer, link.gain, link.offset)
-    taps.update({n: Tap(f"{controller}.{n}") for n in (*FEEDBACK_FORCES, *CURRENTS)})
+    taps.update({n: Tap(f"{controller}.{n}") for n in names(FEEDBACK_FORCES, CURRENTS)})
     outputs = [(s.name, read_fmu(s.fmu).outputs) for s in scenario.slaves]
     for name in POSITION_SIGNALS:
         found = [f"{fmu}.{name}" for fmu, names in outputs if name in names]

@@ -20,6 +20,7 @@ from plant.dynamics import reduced_dynamics
 from plant.kinematics import flexure_deflections, forward_kinematics_2, forward_kinematics_3
 from plant.kinematics import generalized_coordinates, shoulder_angles
 from plant.parameters import HARDWARE, NOMINAL, PlantParameters
+from plant.signals import CURRENTS, ENCODERS, TORQUES, TRUE_POSITION, TRUE_VELOCITY
 
 
 @dataclass(frozen=True)
@@ -71,9 +72,8 @@ class PlantModel:
             names += ["tool_dx", "tool_dy", "tool_vx", "tool_vy"]
         return names
 
-    input_names = ["i1", "i2", "i3"]
-    output_names = ["theta_s1", "theta_s2", "theta_s3", "x", "y", "vx", "vy",
-                    "tau1", "tau2", "tau3"]
+    inputs = CURRENTS
+    outputs = (*ENCODERS, *TRUE_POSITION, *TRUE_VELOCITY, *TORQUES)  # in the order of `output`
 
     @property
     def n_states(self) -> int:

@@ -14,21 +14,10 @@ _STATE_INFO = {
     "tool_dy": ("m", "tool deflection from the wrist, y"),
     "tool_vx": ("m/s", "tool deflection rate, x"), "tool_vy": ("m/s", "tool deflection rate, y"),
 }
-_OUTPUT_INFO = {
-    "theta_s": ("rad", "encoder angle (quantized) of motor"),
-    "x": ("m", "true end-effector x position (evaluation only)"),
-    "y": ("m", "true end-effector y position (evaluation only)"),
-    "vx": ("m/s", "true end-effector x velocity (evaluation only)"),
-    "vy": ("m/s", "true end-effector y velocity (evaluation only)"),
-    "tau": ("N*m", "motor torque after current saturation, motor"),
-}
 
 
-def _variable(name: str, info: dict[str, tuple[str, str]]) -> Variable:
-    stem = name.rstrip("123")
-    unit, description = info[stem]
-    if stem != name:
-        description += f" {name[len(stem):]}"
+def _state(name: str) -> Variable:
+    unit, description = _STATE_INFO[name]
     return Variable(name, unit, description)
 
 
@@ -58,10 +47,9 @@ def plant_system(variant: Variant | str = "nominal") -> System:
         description=f"flexure manipulator plant, {model.variant.name} variant: Lagrangian "
                     "dynamics in minimal coordinates, current saturation, encoders",
         kind="continuous",
-        states=tuple(_variable(n, _STATE_INFO) for n in model.state_names),
-        inputs=tuple(Variable(n, "A", f"commanded current of motor {n[1]}")
-                     for n in model.input_names),
-        outputs=tuple(_variable(n, _OUTPUT_INFO) for n in model.output_names),
+        states=tuple(_state(n) for n in model.state_names),
+        inputs=model.inputs,
+        outputs=model.outputs,
         parameters=parameters,
         initial_state=ca.Function("initial_state", [p], [model.initial_state(start, full)]),
         dynamics=ca.Function("dynamics", [x, i, p], [model.forward_dynamics(x, i, full)]),

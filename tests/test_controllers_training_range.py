@@ -9,7 +9,8 @@ import numpy as np
 import onnx
 import pytest
 
-from controllers.features import REFERENCE_SIGNALS, feature_names, reference_features
+from controllers.features import feature_names, reference_features
+from plant.signals import REFERENCE, names
 from controllers.training_range import MARGIN, training_range_excess
 
 RADIUS, RATE = 0.01, 2 * np.pi * 0.5  # m, rad/s
@@ -21,7 +22,7 @@ def circle(rate: float, radius: float = RADIUS) -> dict[str, np.ndarray]:
     c, s = np.cos(angle), np.sin(angle)
     values = (radius * c, radius * s, -radius * rate * s, radius * rate * c,
               -radius * rate**2 * c, -radius * rate**2 * s)
-    return dict(zip(REFERENCE_SIGNALS, values))
+    return dict(zip(names(REFERENCE), values))
 
 
 def model_file(path, feature_set: str, trained_on: dict | None, rate_hz: float = 1000.0) -> str:

@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from controllers.features import (REFERENCE_SIGNALS, feature_names, feature_units,
-                                  motion_columns, motion_features, reference_features)
+from controllers.features import (feature_names, feature_units, motion_columns, motion_features,
+                                  reference_features)
+from learning.dataset import REFERENCE_SIGNALS
 from learning.features import (FeatureConfig, decimation, differentiate, encoder_positions,
                                lowpass, prepare_trajectory, quantize_encoders)
 from learning.scaling import MinMaxScaler
