@@ -25,61 +25,32 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
-import onnx
 
-from controllers.features import feature_names, nominal_model, reference_feature_function
+from controllers.features import feature_names, reference_feature_function
 from controllers.feedforward import feedforward_system, rigid_body_force
+from controllers.model_card import ModelCard, read_card
 from fmu.onnx_graph import graph_network, read_graph
 from fmu.system import System
 from plant.signals import FEEDFORWARD_FORCES, REFERENCE, names
 
-FORMAT = "flexff-feedforward"  # metadata "format" written by learning.export
-PRIORS = ("none", "rigid-body")
 REFERENCE_NAMES = list(names(REFERENCE))
-
-
-def model_metadata(model: str | Path) -> dict[str, str]:
-    """The flexff metadata of an exported feedforward model; ValueError (what to do) if the
-    file is not one."""
-    path = Path(model)
-    if not path.is_file():
-        raise ValueError(f"ONNX model {path} does not exist")
-    try:
-        props = {p.key: p.value for p in onnx.load(str(path), load_external_data=False)
-                 .metadata_props}
-    except Exception as exc:  # onnx raises DecodeError and others for a broken file
-        raise ValueError(f"{path} is not a readable ONNX model: {exc}") from exc
-    if props.get("format") != FORMAT:
-        raise ValueError(f"{path} is not a flexff feedforward model (metadata format "
-                         f"{props.get('format')!r}, expected {FORMAT!r}): export a trained run "
-                         f"with `flexff export RUN -o MODEL.onnx`")
-    missing = [k for k in ("input_kind", "feature_set", "input_signals", "sample_rate_hz")
-               if k not in props]
-    if missing:
-        raise ValueError(f"{path}: metadata lacks {', '.join(missing)}; export it again with "
-                         f"`flexff export`")
-    return props
 
 
 def learned_feedforward_system(model: str | Path, step: float = 1e-3,
                                reference: Mapping[str, np.ndarray] | None = None) -> System:
     """The System of the feedforward FMU running `model`; with `reference` (x_ref ... ay_ref
     at every step from t = 0) it is built in the precomputed mode for that reference."""
-    meta = model_metadata(model)
-    period = model_period(meta, step, model)
+    card = read_card(model)
+    period = model_period(card, step, model)
     u = ca.SX.sym("u", len(REFERENCE_NAMES))
-    if meta["input_kind"] == "reference":
+    if card.input_kind == "reference":
         expected, inputs = REFERENCE_NAMES, u
     else:
-        expected = feature_names(meta["feature_set"])
-        inputs = reference_feature_function(meta["feature_set"])(u)
-    if json.loads(meta["input_signals"]) != expected:
-        raise ValueError(f"{model}: its input signals {json.loads(meta['input_signals'])} are not "
-                         f"the {meta['input_kind']} signals {expected} the FMU computes")
-    prior = meta.get("prior", "none")
-    if prior not in PRIORS:
-        raise ValueError(f"{model}: unknown prior {prior!r} (known: {', '.join(PRIORS)})")
-    parameters = prior_parameters(meta, model)
+        expected = feature_names(card.feature_set)
+        inputs = reference_feature_function(card.feature_set)(u)
+    if card.input_signals != expected:
+        raise ValueError(f"{model}: its input signals {card.input_signals} are not the "
+                         f"{card.input_kind} signals {expected} the FMU computes")
     x, p = ca.SX.sym("x", 0), ca.SX.sym("p", 0)
     network = graph_network(read_graph(model, time_axis=True),
                             ca.Function("network_input", [x, u, p], [inputs]), period,
@@ -89,43 +60,31 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
                          f"feedforward needs {len(FEEDFORWARD_FORCES)} "
                          f"({', '.join(names(FEEDFORWARD_FORCES))})")
     r = ca.SX.sym("r", network.n_outputs)
-    force = r + rigid_body_force(u, parameters) if prior == "rigid-body" else r
+    with_prior = card.prior == "rigid-body"
+    force = r + rigid_body_force(u, card.prior_parameters) if with_prior else r
     mode = "step" if reference is None else "precomputed"
     added = ""
-    if prior == "rigid-body":
+    if with_prior:
         added = " plus the rigid-body feedforward" + (
-            f" with identified {', '.join(parameters)}" if parameters else "")
+            f" with identified {', '.join(card.prior_parameters)}"
+            if card.prior_parameters else "")
     return feedforward_system(
         "learned_feedforward",
-        (f"learned feedforward: {meta.get('model_kind', 'ONNX')} model at "
-         f"{float(meta['sample_rate_hz']):g} Hz in onnxruntime{added}, {mode} mode"),
+        (f"learned feedforward: {card.model_kind} model at {card.sample_rate_hz:g} Hz in "
+         f"onnxruntime{added}, {mode} mode"),
         u, force, step, r,
-        extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": prior,
-               "flexff.feedforward.prior_parameters": json.dumps(parameters),
-               **{f"flexff.model.{k}": meta[k] for k in ("model_kind", "preset", "feature_set",
-                                                           "input_kind", "sample_rate_hz")
-                  if k in meta}},
+        extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": card.prior,
+               "flexff.feedforward.prior_parameters": json.dumps(card.prior_parameters),
+               **{f"flexff.model.{k}": str(getattr(card, k))
+                  for k in ("model_kind", "preset", "feature_set", "input_kind",
+                            "sample_rate_hz")}},
         network=network,
     )
 
 
-def prior_parameters(meta: Mapping[str, str], model: str | Path) -> dict[str, float]:
-    """The nominal-model parameters a model's prior replaces (metadata `prior_parameters`,
-    JSON; none when absent); ValueError naming the model if they are not valid ones."""
-    text = meta.get("prior_parameters", "{}")
-    try:
-        parameters = json.loads(text)
-        nominal_model().variant.parameters.with_values(**parameters)  # names and values
-    except (json.JSONDecodeError, TypeError, ValueError) as error:
-        raise ValueError(f"{model}: metadata prior_parameters {text!r} are not nominal-model "
-                         f"parameters ({error}); export the model again with `flexff export`"
-                         ) from None
-    return parameters
-
-
-def model_period(meta: Mapping[str, str], step: float, model: str | Path) -> int:
+def model_period(card: ModelCard, step: float, model: str | Path) -> int:
     """Communication steps per model call: the step must divide the model's sample period."""
-    rate = float(meta["sample_rate_hz"])
+    rate = card.sample_rate_hz
     if not (step > 0 and rate > 0):
         raise ValueError(f"step ({step}) and the model's sample rate ({rate}) must be positive")
     ratio = 1.0 / (rate * step)

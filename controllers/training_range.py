@@ -11,7 +11,6 @@ by more than MARGIN of its span.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from controllers.features import feature_units, reference_features
-from controllers.learned_feedforward import model_metadata, model_period
+from controllers.learned_feedforward import model_period
+from controllers.model_card import read_card
 from plant.signals import REFERENCE, names
 
 MARGIN = 0.1  # of a feature's training span: how far beyond it counts as extrapolating
@@ -49,19 +49,19 @@ def training_range_excess(model: str | Path, reference: Mapping[str, np.ndarray]
     """The features of `model` that `reference` (sampled every `step` s from t = 0) drives more
     than MARGIN spans outside the training range, farthest first; None for a model exported
     without its range."""
-    meta = model_metadata(model)
-    if "feature_range" not in meta:
+    card = read_card(model)
+    if card.feature_range is None:
         return None
-    every = model_period(meta, step, model)  # the FMU runs the network on every n-th sample
+    every = model_period(card, step, model)  # the FMU runs the network on every n-th sample
     seen = {n: np.asarray(reference[n], dtype=float).ravel()[::every] for n in names(REFERENCE)}
-    trained = json.loads(meta["feature_range"])
+    trained = card.feature_range
     low, high = np.asarray(trained["low"]), np.asarray(trained["high"])
     span = np.where(high > low, high - low, 1.0)
-    features = reference_features(seen, meta["feature_set"])
+    features = reference_features(seen, card.feature_set)
     below, above = features.min(axis=0), features.max(axis=0)
     spans = np.maximum(low - below, above - high) / span
     outside = ((features < low) | (features > high)).mean(axis=0)
-    units = feature_units(meta["feature_set"])
+    units = feature_units(card.feature_set)
     found = [RangeExcess(trained["signals"][k], units[k], float(low[k]), float(high[k]),
                          float(below[k]), float(above[k]), float(spans[k]), float(outside[k]))
              for k in np.flatnonzero(spans > MARGIN)]

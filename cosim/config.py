@@ -59,7 +59,7 @@ from typing import Any
 import tomli_w
 
 from controllers.allocation import ENCODER_CHOICES
-from controllers.learned_feedforward import model_metadata
+from controllers.model_card import read_card
 from cosim.memory import MemoryNeeded
 from cosim.references import REFERENCE_KINDS, SegmentError, build_reference
 from cosim.schema import (ALGORITHMS, BUILTIN_OPTIONS, SOURCE_KINDS, UNCONNECTED, ConfigError,
@@ -390,7 +390,7 @@ class _Parser:
         if model.suffix.lower() != ".onnx":
             raise self.error(f"{where}.model", f"{model} is not an .onnx file")
         try:
-            model_metadata(model)
+            read_card(model)
         except ValueError as exc:
             raise self.error(f"{where}.model", str(exc)) from None
         return {"model": model,

@@ -30,10 +30,8 @@ The graph is written to a temporary file beside `out` and renamed only once onnx
 the comparison with PyTorch pass, so a failed export leaves no file, and an existing one as it
 was.
 
-The metadata (onnx metadata_props, strings; lists and objects as JSON) names everything a
-runner needs: input and output signal names and units, the state tensors and their shapes,
-the sample rate, the prior, the model kind and feature set, the range of every feature in the
-training data (`feature_range`, for controllers.training_range), the flexff version.
+The metadata is the model's card (controllers.model_card.ModelCard): everything a runner needs,
+from the signals and the state tensors to the range of every feature in the training data.
 """
 
 from __future__ import annotations
@@ -49,14 +47,11 @@ import onnx
 import onnxruntime as ort
 import torch
 
+from controllers.model_card import ModelCard
 from cosim.recording import atomic_write
 from learning.deploy import EnsembleSIModel, SIModel
 from learning.run_folder import Run, flexff_version, load_run
 from learning.threads import torch_threads
-from plant.signals import FEEDFORWARD_FORCES, names, units
-
-FORMAT = "flexff-feedforward"
-VERSION = 1
 OPSET = 17
 TOLERANCE = 1e-5  # largest |onnxruntime - torch| relative to the largest |force|
 
@@ -125,40 +120,21 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
     graph = onnx.load(str(path))
     low = np.min([r.feature_scaler.low for r in runs], axis=0)
     high = np.max([r.feature_scaler.high for r in runs], axis=0)
-    metadata = {
-        "format": FORMAT, "format_version": str(VERSION), "flexff_version": flexff_version(),
-        "model_kind": loaded.config.model, "preset": loaded.config.preset,
-        "ensemble_members": str(len(runs)),
-        "feature_set": loaded.config.features.feature_set, "input_kind": inputs,
-        "prior": "rigid-body" if model.residual else "none",
-        "prior_parameters": json.dumps(model.prior_parameters),
-        "input_signals": json.dumps(model.input_names),
-        "input_units": json.dumps(model.input_units),
-        "feature_range": json.dumps({"signals": loaded.feature_names,
-                                     "low": low.tolist(), "high": high.tolist()}),
-        "output_signals": json.dumps(names(FEEDFORWARD_FORCES)),
-        "output_units": json.dumps(units(FEEDFORWARD_FORCES)),
-        "sample_rate_hz": repr(float(loaded.model_rate_hz)),
-        "state": json.dumps([{"input": n, "output": f"{n}_out", "shape": list(s.shape),
-                              "initial": "zeros"} for n, s in zip(state_names, state)]),
-        "history_samples": str(max(r.network.history for r in runs)),
-        "usage": ("inputs (T, n_inputs) float64 in SI units -> forces (T, 2) float64 [N] "
-                  "(plus the nominal inverse dynamics, prior_parameters in place, when "
-                  "prior = rigid-body); "
-                  "state tensors float32. "
-                  "Whole sequence: T samples, state inputs zero. Step by step: T = 1 every "
-                  "1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
-                  "extrapolate the forces from the last two calls when the host runs "
-                  "faster."),
-    }
-    onnx.helper.set_model_props(graph, metadata)
+    card = ModelCard(
+        model_kind=loaded.config.model, preset=loaded.config.preset,
+        ensemble_members=len(runs), feature_set=loaded.config.features.feature_set,
+        input_kind=inputs, prior="rigid-body" if model.residual else "none",
+        prior_parameters=model.prior_parameters, input_signals=model.input_names,
+        input_units=model.input_units,
+        feature_range={"signals": loaded.feature_names, "low": low.tolist(),
+                       "high": high.tolist()},
+        sample_rate_hz=float(loaded.model_rate_hz),
+        state=[{"input": n, "output": f"{n}_out", "shape": list(s.shape), "initial": "zeros"}
+               for n, s in zip(state_names, state)],
+        history_samples=max(r.network.history for r in runs), flexff_version=flexff_version())
+    onnx.helper.set_model_props(graph, card.metadata())
     onnx.checker.check_model(graph)
     onnx.save(graph, str(path))
-
-
-def read_metadata(path: str | Path) -> dict[str, str]:
-    """The metadata_props of an exported graph as a dict of strings."""
-    return {p.key: p.value for p in onnx.load(str(path)).metadata_props}
 
 
 def session(path: str | Path) -> ort.InferenceSession:

@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from controllers.model_card import read_card
 from cosim.references import build_reference
 from learning.evaluate import ENVIRONMENTS, evaluate, scenario_config
-from learning.export import read_metadata
 from learning.synthetic import synthetic_dataset
 
 
@@ -73,7 +73,7 @@ def test_an_ensemble_trains_its_members_and_runs_their_mean(evaluation, tmp_path
                for k in range(2)]
     assert [json.loads((tmp_path / "runs" / "pgnn" / f"seed{k}" / "run.json").read_text())
             ["config"]["seed"] for k in range(2)] == [0, 1]
-    assert read_metadata(tmp_path / "pgnn.onnx")["ensemble_members"] == "2"
+    assert read_card(tmp_path / "pgnn.onnx").ensemble_members == 2
     training = summary["training"]["pgnn"]
     assert training["members"] == 2
     assert training["parameters"] == sum(m["parameters"] for m in members)

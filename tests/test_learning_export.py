@@ -10,10 +10,10 @@ import pytest
 import torch
 
 from controllers.features import reference_features
+from controllers.model_card import ModelCard, read_card
 from learning.dataset import REFERENCE_SIGNALS, load_dataset
 from learning.deploy import SIModel, predict
-from learning.export import (TOLERANCE, export, read_metadata, run_sequence, run_steps,
-                             session)
+from learning.export import TOLERANCE, export, run_sequence, run_steps, session
 from learning.features import prepare_trajectory
 from learning.rigid import rigid_forces
 from learning.run_folder import load_run
@@ -73,12 +73,12 @@ def test_onnxruntime_matches_pytorch_in_both_forms(data, runs, tmp_path, kind):
     run = load_run(runs / kind)
     features, _ = _test_inputs(data, run)
     expected = _graph_forces(run, features)
-    metadata = read_metadata(path)
-    assert metadata["prior"] == ("rigid-body" if kind == "pgnn" else "none")
-    assert json.loads(metadata["prior_parameters"]) == run.prior_parameters
+    card = read_card(path)
+    assert card.prior == ("rigid-body" if kind == "pgnn" else "none")
+    assert card.prior_parameters == run.prior_parameters
     assert bool(run.prior_parameters) == (kind == "pgnn")
     if kind in ("tcn", "pgnn"):  # one buffer per level (learning.models.StreamingTCN)
-        assert [s["input"] for s in json.loads(metadata["state"])] == [
+        assert [s["input"] for s in card.state] == [
             f"level{i}_buffer" for i in range(TINY[kind]["levels"])]
     runtime = session(path)
     whole = run_sequence(runtime, features)
@@ -98,12 +98,13 @@ def test_reference_inputs_compute_the_features_in_the_graph(data, runs, tmp_path
     expected = _graph_forces(run, reference_features(traj.signals,
                                                      run.config.features.feature_set))
     assert _relative(run_sequence(session(path), reference), expected) < TOLERANCE
-    assert read_metadata(path)["input_signals"] == json.dumps(list(REFERENCE_SIGNALS))
+    assert read_card(path).input_signals == list(REFERENCE_SIGNALS)
 
 
 def test_metadata_names_everything_a_runner_needs(runs, tmp_path):
     path = export(runs / "cnn-lstm", tmp_path / "model.onnx")
-    meta = read_metadata(path)
+    meta = {p.key: p.value for p in onnx.load(str(path)).metadata_props}  # as any reader sees it
+    assert read_card(path) == ModelCard.from_metadata(meta, path)
     run = load_run(runs / "cnn-lstm")
     assert meta["format"] == "flexff-feedforward" and meta["model_kind"] == "cnn-lstm"
     assert json.loads(meta["input_signals"]) == run.feature_names
@@ -242,9 +243,9 @@ def test_an_ensemble_graph_gives_its_members_mean_force(data, runs, tmp_path):
     mean = (alone[0] + alone[1]) / 2
     assert _relative(run_sequence(runtime, features), mean) < TOLERANCE
     assert _relative(run_steps(runtime, features), mean) < TOLERANCE
-    metadata = read_metadata(path)
-    assert metadata["ensemble_members"] == "2"
-    assert [s["input"] for s in json.loads(metadata["state"])] == [
+    card = read_card(path)
+    assert card.ensemble_members == 2
+    assert [s["input"] for s in card.state] == [
         f"member{m}_level{i}_buffer" for m in range(2) for i in range(TINY["pgnn"]["levels"])]
     with pytest.raises(ValueError, match="share model kind"):
         export([runs / "pgnn", runs / "tcn"], tmp_path / "mixed.onnx")

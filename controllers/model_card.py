@@ -1,0 +1,130 @@
+"""The card of an exported feedforward model: its ONNX metadata as one checked dataclass.
+
+learning.export writes it (`ModelCard.metadata`), the feedforward FMU builder
+(controllers.learned_feedforward), the training-range check and the run configurations read
+it (`read_card`): the contract between them is written here once. In the graph it is a set of
+string properties (onnx metadata_props; lists and objects as JSON), so any ONNX reader can see
+what the model needs and gives: input and output signals with units, the state tensors, the
+sample rate, the prior, the model kind and feature set, the range of every feature in the
+training data.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import onnx
+
+from plant.parameters import NOMINAL
+from plant.signals import FEEDFORWARD_FORCES, names, units
+
+FORMAT = "flexff-feedforward"
+VERSION = 1
+INPUT_KINDS = ("features", "reference")
+PRIORS = ("none", "rigid-body")
+REQUIRED = ("input_kind", "feature_set", "input_signals", "sample_rate_hz")
+USAGE = ("inputs (T, n_inputs) float64 in SI units -> forces (T, 2) float64 [N] (plus the "
+         "nominal inverse dynamics, prior_parameters in place, when prior = rigid-body); state "
+         "tensors float32. Whole sequence: T samples, state inputs zero. Step by step: T = 1 "
+         "every 1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
+         "extrapolate the forces from the last two calls when the host runs faster.")
+_JSON = ("input_signals", "input_units", "output_signals", "output_units", "state",
+         "prior_parameters", "feature_range")
+_NUMBERS = {"sample_rate_hz": float, "history_samples": int, "ensemble_members": int}
+
+
+@dataclass(frozen=True)
+class ModelCard:
+    """What an exported feedforward model is and how to run it.
+
+    `state`: one {"input", "output", "shape", "initial"} per state tensor (fmu.onnx_graph reads
+    the pairs); `prior_parameters`: the nominal-model parameters the prior replaces (flat plant
+    parameter names, SI values); `feature_range`: {"signals", "low", "high"} of the training
+    data, None for a model exported without it.
+    """
+
+    feature_set: str
+    input_kind: str
+    input_signals: list[str]
+    sample_rate_hz: float
+    model_kind: str = "ONNX"
+    preset: str = ""
+    input_units: list[str] = field(default_factory=list)
+    output_signals: list[str] = field(default_factory=lambda: list(names(FEEDFORWARD_FORCES)))
+    output_units: list[str] = field(default_factory=lambda: list(units(FEEDFORWARD_FORCES)))
+    state: list[dict[str, Any]] = field(default_factory=list)
+    history_samples: int = 0
+    prior: str = "none"
+    prior_parameters: dict[str, float] = field(default_factory=dict)
+    feature_range: dict[str, Any] | None = None
+    ensemble_members: int = 1
+    flexff_version: str = "unknown"
+
+    def metadata(self) -> dict[str, str]:
+        """The card as onnx metadata_props (strings; lists and objects as JSON)."""
+        props = {"format": FORMAT, "format_version": str(VERSION), "usage": USAGE}
+        for key, value in self.__dict__.items():
+            if value is None:
+                continue
+            props[key] = json.dumps(value) if key in _JSON else (
+                repr(float(value)) if key == "sample_rate_hz" else str(value))
+        return props
+
+    @classmethod
+    def from_metadata(cls, props: Mapping[str, str], where: str | Path) -> "ModelCard":
+        """The card of the metadata `props` of the graph `where`; ValueError (what is wrong,
+        what to do) if they are not those of a flexff feedforward model."""
+        if props.get("format") != FORMAT:
+            raise ValueError(f"{where} is not a flexff feedforward model (metadata format "
+                             f"{props.get('format')!r}, expected {FORMAT!r}): export a trained "
+                             f"run with `flexff export RUN -o MODEL.onnx`")
+        missing = [k for k in REQUIRED if k not in props]
+        if missing:
+            raise ValueError(f"{where}: metadata lacks {', '.join(missing)}; export it again "
+                             f"with `flexff export`")
+        known = cls.__dataclass_fields__
+        values: dict[str, Any] = {}
+        for key, text in props.items():
+            if key not in known:
+                continue
+            try:
+                values[key] = (json.loads(text) if key in _JSON
+                               else _NUMBERS[key](text) if key in _NUMBERS else text)
+            except (ValueError, TypeError) as error:
+                raise ValueError(f"{where}: metadata {key} = {text!r} is not valid ({error}); "
+                                 f"export the model again with `flexff export`") from None
+        card = cls(**values)
+        card._check(where)
+        return card
+
+    def _check(self, where: str | Path) -> None:
+        if self.input_kind not in INPUT_KINDS:
+            raise ValueError(f"{where}: unknown input kind {self.input_kind!r} (known: "
+                             f"{', '.join(INPUT_KINDS)})")
+        if self.prior not in PRIORS:
+            raise ValueError(f"{where}: unknown prior {self.prior!r} (known: {', '.join(PRIORS)})")
+        try:
+            NOMINAL.with_values(**self.prior_parameters)  # names and values
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"{where}: metadata prior_parameters "
+                             f"{json.dumps(self.prior_parameters)} are not nominal-model "
+                             f"parameters ({error}); export the model again with "
+                             f"`flexff export`") from None
+
+
+def read_card(model: str | Path) -> ModelCard:
+    """The card of an exported feedforward model; ValueError (what to do) if the file is not
+    one."""
+    path = Path(model)
+    if not path.is_file():
+        raise ValueError(f"ONNX model {path} does not exist")
+    try:
+        props = {p.key: p.value for p in onnx.load(str(path), load_external_data=False)
+                 .metadata_props}
+    except Exception as exc:  # onnx raises DecodeError and others for a broken file
+        raise ValueError(f"{path} is not a readable ONNX model: {exc}") from exc
+    return ModelCard.from_metadata(props, path)
