@@ -342,7 +342,8 @@ def _collect_one(job: _Job) -> Outcome:
     try:
         recording = simulate_config(job.config, progress=False)
         save_signals(job.path, dataset_signals(recording, job.decimation, job.taps))
-        currents = np.abs(np.vstack([job.taps[n].read(recording) for n in names(CURRENTS)])).max(axis=0)
+        currents = np.abs(np.vstack([job.taps[n].read(recording)
+                                     for n in names(CURRENTS)])).max(axis=0)
         saturated = (float("nan") if job.current_limit is None else
                      float(np.mean(currents >= job.current_limit)))
         return Outcome(name, recording.wall_s, float(currents.max()), saturated)

@@ -216,7 +216,8 @@ def _read_hdf5(path: Path) -> dict[str, np.ndarray]:
     try:
         import h5py
     except ImportError:
-        raise LogError(f"{path}: this is a MATLAB v7.3 file: install h5py (pip install 'flexff[matlab]'), "
+        raise LogError(f"{path}: this is a MATLAB v7.3 file: install h5py "
+                       f"(pip install 'flexff[matlab]'), "
                        f"or save it as v7 (save -v7) or CSV") from None
     try:
         with h5py.File(path, "r") as handle:

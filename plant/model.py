@@ -3,8 +3,9 @@
 `nominal` is the ideal model the controllers are designed on: rotors rigid on the arms, no
 friction, no noise. `hardware` stands in for the real machine: mismatched parameters, motor
 friction, a compliant rotor-to-arm coupling (a parasitic resonance; three rotor angles and
-speeds join the state) and encoder noise. Friction acts at the shoulder joints. Each effect is a parameter: zero friction or noise
-switches it off; the coupling is structural (`parasitic_mode`).
+speeds join the state) and encoder noise. Friction acts at the shoulder joints. Each effect
+is a parameter: zero friction or noise switches it off; the coupling is structural
+(`parasitic_mode`).
 """
 
 from __future__ import annotations

@@ -59,7 +59,8 @@ def test_pid_alone_tracks_a_slow_circle():
 
 @pytest.fixture(scope="module")
 def thesis_runs():
-    return {"pid": metrics("thesis-eval-pid"), "rigid-body-ff": metrics("thesis-eval-rigid-body-ff")}
+    return {"pid": metrics("thesis-eval-pid"),
+            "rigid-body-ff": metrics("thesis-eval-rigid-body-ff")}
 
 
 def test_pid_alone_on_the_thesis_reference_has_a_large_error(thesis_runs):
