@@ -77,17 +77,16 @@ ENVIRONMENTS = {
     # the hardware set (60 trajectories of 100 s) holds 9 times the sim set's samples at the
     # same rate, but its motion is slow (circles up to 0.29 Hz) and filtered at 1.8 Hz: the
     # fast preset's black-box networks sample it at 25 Hz, a quarter of the work of 100 Hz
-    # (LSTM e2 16 / 17 at 25 Hz, 13 / 17 at 50 Hz). The physics-guided one stays at 100 Hz:
-    # its residual holds the friction's steps, which the feedforward FMU extrapolates between
-    # calls (e2 50 / 42 at 100 Hz, 42 / 35 at 50 Hz, 40 / 35 at 25 Hz). Its noisier labels
+    # (LSTM e2 16 / 17 at 25 Hz, 13 / 17 at 50 Hz). The physics-guided one stays at 100 Hz
+    # (seed 0: e2 134 / 79 at 100 Hz, 107 / 63 at 50 Hz, 101 / 64 at 25 Hz). Its noisier labels
     # need more epochs: the LSTM still improved at its 60th (e2 16 / 17 after 60, 27 / 31
     # after 150), and the CNN-LSTM at 3e-3 made its linear fit worse after the 5th (e2 9.6 /
     # 8.5; at 1e-3 it improved up to its 58th: 12 / 14, up to its 199th of 200: 31 / 21). The
-    # physics-guided model gains nothing from more (e2 52 / 41 after 60, 52 / 38 after 120),
-    # nor from 64 channels (51 / 40), but its seeds differ: seeds 0 to 4 gave e2 50 / 42,
-    # 54 / 44, 50 / 49, 57 / 39 and 52 / 37, and the mean of seeds 0-2 53 / 50 (of 0-3:
-    # 55 / 48, of 0-4: 55 / 47), with the circle and spline references nobody trained for
-    # improving alike (e2 47 / 52 and 186 / 191 against 44 / 51 and 177 / 132 for seed 0).
+    # physics-guided model gained nothing from more (before its prior held the motor friction:
+    # e2 52 / 41 after 60, 52 / 38 after 120), nor from 64 channels (51 / 40), but its seeds
+    # differ: seeds 0 to 2 gave e2 134 / 79, 79 / 74 and 74 / 88, their mean 105 / 88, with
+    # the circle and spline references nobody trained for improving alike (e2 114 / 94 and
+    # 293 / 303 against 74 / 93 and 326 / 278 for seed 0).
     "hardware": Environment("hardware", "hardware", "thesis-hardware-eval", fast={
         "lstm": {"model_rate_hz": 25.0, "epochs": 150},
         "cnn-lstm": {"model_rate_hz": 25.0, "epochs": 200, "learning_rate": 1e-3},

@@ -71,7 +71,8 @@ def test_stiffness_and_dynamics_jacobians_match_finite_differences(nominal, hard
             assert np.allclose(ju, fd_u, rtol=1e-5, atol=1e-6)
 
 
-@pytest.mark.parametrize("friction", [{}, HARDWARE.flat_values(*MOTOR_FRICTION)], ids=["frictionless", "friction"])
+@pytest.mark.parametrize("friction", [{}, HARDWARE.flat_values(*MOTOR_FRICTION)],
+                         ids=["frictionless", "friction"])
 def test_inverse_dynamics_inverts_forward_dynamics(nominal, rng, friction):
     p = nominal.parameter_values(**friction)
     for x0 in random_states(nominal, rng, 10, p):
