@@ -109,11 +109,13 @@ def test_each_environment_runs_the_seeds_own_evaluation_reference(env, variant, 
 def test_hardware_physics_guided_feedforward_beats_the_rigid_body_one(tmp_path):
     """Table 6.2 for flexff (about 7 minutes): on the hardware plant, where the nominal model
     is wrong (mismatch, friction, the tool mode), the physics-guided model trained on the
-    hardware set (the mean of three seeds) tracks the thesis's hardware evaluation reference far
-    better than the rigid-body feedforward of the nominal model. Measured: pgnn 54x / 49x in
-    e2, rigid-body 7.0x / 7.9x; the thesis's LSTM reached 1.8x / 1.3x."""
+    hardware set (the mean of three seeds, its prior with the identified motor friction)
+    tracks the thesis's hardware evaluation reference far better than the rigid-body
+    feedforward of the nominal model, and reaches issue 16's 50x. Measured: pgnn 105x / 88x
+    in e2 and 40x / 40x in einf, rigid-body 7.0x / 7.9x and 5.8x / 7.6x; the thesis's LSTM
+    reached 1.8x / 1.3x."""
     summary = evaluate("hardware", tmp_path, models=["pgnn"], say=lambda _: None)
     pgnn, rigid = summary["scenarios"]["pgnn"], summary["scenarios"]["rigid-body"]
     for axis in ("x", "y"):
-        assert pgnn[axis]["e2_ratio"] > max(20.0, 3 * rigid[axis]["e2_ratio"])
-        assert pgnn[axis]["einf_ratio"] > rigid[axis]["einf_ratio"]
+        assert pgnn[axis]["e2_ratio"] > max(50.0, 5 * rigid[axis]["e2_ratio"])
+        assert pgnn[axis]["einf_ratio"] > 3 * rigid[axis]["einf_ratio"]
