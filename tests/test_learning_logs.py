@@ -253,7 +253,7 @@ def _case(case: str, base: dict, folder: Path, monkeypatch) -> tuple[list, str]:
             _matlab_header(first)
             monkeypatch.setitem(sys.modules, "h5py", None)  # as if it were not installed
             return [first, write_log(second, b)], (f"{first}: this is a MATLAB v7.3 file: install "
-                                                   f"h5py (pip install h5py)")
+                                                   f"h5py (pip install 'flexff[matlab]')")
         else:
             first.write_bytes(b"MATLAB? no: just text\n" * 10)
             return [first, write_log(second, b)], f"{first}: not a MATLAB .mat file"

@@ -46,15 +46,15 @@ def test_tiny_training_reduces_the_loss_and_writes_the_run_folder(data, tmp_path
 
 def test_the_epoch_with_the_lowest_validation_loss_is_kept(data, tmp_path, monkeypatch):
     scripted, snapshots = [5.0, 3.0, 1.0, 2.0, 4.0], []
-    real = training.evaluate
+    real = training.role_mse
 
-    def scripted_evaluate(network, data_set, role, **kwargs):
+    def scripted_role_mse(network, data_set, role, **kwargs):
         if role == VALIDATION and scripted and not kwargs:
             snapshots.append(copy.deepcopy(network.state_dict()))
             return scripted.pop(0)
         return real(network, data_set, role, **kwargs)
 
-    monkeypatch.setattr(training, "evaluate", scripted_evaluate)
+    monkeypatch.setattr(training, "role_mse", scripted_role_mse)
     metrics = train("tcn", "fast", data, tmp_path / "run", progress=False, epochs=5,
                     **TINY["tcn"])
     assert metrics["best_epoch"] == 3 and metrics["history"]["val"] == [5.0, 3.0, 1.0, 2.0, 4.0]
