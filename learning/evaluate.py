@@ -9,7 +9,7 @@
    thesis, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
    100 s reference of sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz
    circles) on the hardware plant;
-4. write the report (cosim.report): summary.json, table.md (with what each model's training
+4. write the report (learning.report): summary.json, table.md (with what each model's training
    cost) and the figures.
 
 Given a run configuration (`loop`, learning.loop), steps 1 and 3 run on that loop instead of
@@ -38,7 +38,6 @@ import numpy as np
 
 from controllers.features import feature_names
 from cosim.recording import Recording, load_recording
-from cosim.report import write_report
 from cosim.run import range_warning, run_config
 from cosim.schema import RecordConfig, RunConfig
 from learning.collect import collect
@@ -46,7 +45,9 @@ from learning.export import export
 from learning.loop import default_loop, on_reference, with_feedforward
 from learning.models import NETWORKS, build_network, check_kind, parameter_count
 from learning.presets import TrainConfig, make_config
+from learning.report import write_report
 from learning.workers import TrainJob, train_parallel
+
 
 @dataclass(frozen=True)
 class Environment:
@@ -119,7 +120,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
              progress: bool = True) -> dict:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
-    summary (see cosim.report.write_report). `data` reuses a collected dataset folder; `loop`
+    summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
     collects and evaluates on that run configuration instead of the environment's plant."""
     if env not in ENVIRONMENTS:
         raise ValueError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")

@@ -16,8 +16,8 @@ import pytest
 
 from cosim.metrics import tracking_metrics
 from cosim.recording import Recording
-from cosim.report import SCENARIO_LABELS, THESIS_TABLES, markdown_table, summarize
-from cosim.report import write_report
+from learning.report import SCENARIO_LABELS, THESIS_TABLES, markdown_table, summarize
+from learning.report import write_report
 
 STEP, N = 1e-3, 2000
 T = N * STEP
