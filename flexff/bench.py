@@ -18,7 +18,7 @@ from cosim.master import Master, SlaveSpec
 from cosim.run import simulate
 from cosim.scenario import Scenario, resolve
 from cosim.timing import Pacing
-from fmu.bench import bench_fmu
+from flexff.fmu_bench import bench_fmu
 from fmu.build import build_fmu
 from fmu.onnx_fmu import onnx_system
 from plant.system import plant_system

@@ -1,16 +1,15 @@
 """Generic FMU builder: a System (CasADi functions + named signals) -> FMI 2.0 co-simulation FMU.
 
-Public API: `build_fmu`, `fmu_key` (build), `validate_fmu`, `run_fmu` / `Slave` (a minimal
-single-FMU runner on fmpy), `bench_fmu`, the description classes `System`, `Variable`,
+Public API: `build_fmu`, `fmu_key` (build), `validate_fmu`, `Slave` (one FMU on fmpy, by
+variable names), the description classes `System`, `Variable`,
 `Parameter`, and `read_network` / `Network` for an ONNX graph embedded in a System's FMU.
 """
 
-from fmu.bench import bench_fmu
 from fmu.build import build_fmu, fmu_key
 from fmu.network import Network, read_network
-from fmu.runner import Slave, run_fmu
+from fmu.slave import Slave
 from fmu.system import Parameter, System, Variable
 from fmu.validation import validate_fmu
 
-__all__ = ["Network", "Parameter", "Slave", "System", "Variable", "bench_fmu", "build_fmu",
-           "fmu_key", "read_network", "run_fmu", "validate_fmu"]
+__all__ = ["Network", "Parameter", "Slave", "System", "Variable", "build_fmu", "fmu_key",
+           "read_network", "validate_fmu"]

@@ -19,7 +19,6 @@ from cosim.config import config_examples, parse_config
 from cosim.references import thesis_evaluation
 from cosim.run import range_warning, run_config
 from fmu.build import build_fmu
-from fmu.runner import run_fmu, run_fmu_libcosim
 from fmu.validation import validate_fmu
 from learning.dataset import REFERENCE_SIGNALS
 from learning.export import export, session
@@ -28,6 +27,7 @@ from learning.synthetic import synthetic_dataset
 from learning.threads import torch_threads
 from learning.train import train
 from tests.fmu_toys import LoggedSlave, status_of
+from tests.runners import run_fmu, run_fmu_libcosim
 from tests.test_fmu_network import running_sum_graph
 
 STEPS = 600  # 0.6 s of the thesis evaluation reference at 1 kHz

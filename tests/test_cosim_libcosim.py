@@ -21,7 +21,7 @@ from cosim.scenario import reference_samples
 from cosim.wiring import SOURCE, Port, wire
 from fmu.importer import read_fmu
 from fmu.build import build_fmu
-from fmu.runner import Slave
+from fmu.slave import Slave
 from plant.system import plant_system
 
 STEP, STEPS = 1e-3, 15000

@@ -13,17 +13,15 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-import fmu
+from flexff.fmu_bench import BENCH_SOURCE
 from fmu import build_fmu, fmu_key
 from fmu.codegen import generate_model_c
 from fmu.compile import SANITIZE_ENV, sanitizer_flags
 from fmu.layout import make_layout
-from fmu.runner import run_fmu
 from fmu.system import System, Variable
 from fmu.validation import FMI2_CS_FUNCTIONS, validate_fmu
 from tests.fmu_toys import build_toy, discrete_pi, duffing
-
-BENCH_SOURCE = Path(fmu.__file__).parent / "c" / "bench_loop.c"
+from tests.runners import run_fmu
 
 TOYS = {"duffing": duffing, "discrete_pi": discrete_pi}
 

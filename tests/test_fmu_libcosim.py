@@ -8,8 +8,8 @@ the FMU does not depend on fmpy's particular call sequence.
 import numpy as np
 import pytest
 
-from fmu.runner import run_fmu_libcosim
 from tests.fmu_toys import LoggedSlave, build_toy, discrete_pi, duffing
+from tests.runners import run_fmu_libcosim
 
 STEPS = 300
 H = 1e-3

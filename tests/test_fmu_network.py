@@ -18,10 +18,10 @@ from onnx import TensorProto
 from onnx import helper as oh
 
 from fmu.network import read_network
-from fmu.runner import run_fmu, run_fmu_libcosim
 from fmu.system import System, Variable
 from fmu.validation import validate_fmu
 from tests.fmu_toys import LoggedSlave, build_toy, logging_callbacks, status_of
+from tests.runners import run_fmu, run_fmu_libcosim
 
 PERIOD = 3
 STEPS = 40

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from fmu.runner import run_fmu
 from tests.fmu_toys import (
     DUFFING_PARAMS,
     LoggedSlave,
@@ -18,6 +17,7 @@ from tests.fmu_toys import (
     normals,
     rk4_reference,
 )
+from tests.runners import run_fmu
 
 H = 1e-3
 STEPS = 1000

@@ -21,8 +21,9 @@ from flexff.cli import main
 from fmu.build import build_fmu
 from fmu.onnx_fmu import onnx_system
 from fmu.onnx_graph import graph_network, read_graph
-from fmu.runner import Slave, run_fmu, run_fmu_libcosim
+from fmu.slave import Slave
 from fmu.validation import validate_fmu
+from tests.runners import run_fmu, run_fmu_libcosim
 
 STEPS = 40
 H = 1e-3

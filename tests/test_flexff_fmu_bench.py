@@ -2,7 +2,7 @@
 
 import pytest
 
-from fmu.bench import bench_fmu
+from flexff.fmu_bench import bench_fmu
 from tests.fmu_toys import build_toy, discrete_pi, duffing
 
 

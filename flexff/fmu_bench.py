@@ -17,14 +17,14 @@ from pathlib import Path
 import numpy as np
 
 from fmu.compile import cached_program
-from fmu.runner import Slave, bare_calls
+from fmu.slave import Slave, bare_calls
 
 BENCH_SOURCE = Path(__file__).parent / "c" / "bench_loop.c"
 
 
 def _python_loop(s: Slave, steps: int, step: float, repeats: int) -> dict[str, float]:
     """Best seconds per step cycle through fmpy's FMU2Slave calls and through the bare C
-    pointers the co-simulation master uses (fmu.runner.bare_calls), per bare fmi2DoStep
+    pointers the co-simulation master uses (fmu.slave.bare_calls), per bare fmi2DoStep
     through fmpy, and the checksum of the outputs the first cycle recorded (summed afterwards,
     in the C loop's order)."""
     inputs, outputs = s.names("input"), s.names("output")

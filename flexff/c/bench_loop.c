@@ -1,5 +1,5 @@
 /*
- * bench_loop.c -- times the co-simulation step loop of one FMU in plain C (used by fmu/bench.py).
+ * bench_loop.c -- times the co-simulation step loop of one FMU in plain C (used by flexff/fmu_bench.py).
  *
  * usage: bench_loop LIBRARY GUID STEPS STEP REPEATS N_IN VR_IN... VALUE_IN... N_OUT VR_OUT...
  *
