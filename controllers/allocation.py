@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import casadi as ca
 
-from plant.kinematics import forward_kinematics_2, forward_kinematics_3, shoulder_angles
-from plant.parameters import NOMINAL, PlantParameters
+from flexff.plant.kinematics import forward_kinematics_2, forward_kinematics_3, shoulder_angles
+from flexff.plant.parameters import NOMINAL, PlantParameters
 
 ENCODER_CHOICES = (2, 3)
 

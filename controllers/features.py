@@ -16,9 +16,9 @@ import functools
 import casadi as ca
 import numpy as np
 
-from plant.kinematics import COORDINATE_NAMES, EE_INDEX
-from plant.model import PlantModel
-from plant.signals import REFERENCE, names, reference_motion, units
+from flexff.plant.kinematics import COORDINATE_NAMES, EE_INDEX
+from flexff.plant.model import PlantModel
+from flexff.plant.signals import REFERENCE, names, reference_motion, units
 
 FEATURE_SETS = ("full", "compact")
 COMPACT_NAMES = ("x", "y", "vx", "vy", "ax", "ay")  # the wrist's motion, in REFERENCE's units

@@ -17,14 +17,14 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
-from controllers.allocation import measured_position, motor_currents
-from controllers.loop_shaping import PIDDesign, StateSpace, design_pid
-from fmu.system import Parameter, System, Variable
-from plant.analysis import plant_info
-from plant.kinematics import shoulder_angles
-from plant.parameters import NOMINAL
-from plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES,
-                           POSITION_REFERENCE, pick)
+from flexff.controllers.allocation import measured_position, motor_currents
+from flexff.controllers.loop_shaping import PIDDesign, StateSpace, design_pid
+from flexff.fmu.system import Parameter, System, Variable
+from flexff.plant.analysis import plant_info
+from flexff.plant.kinematics import shoulder_angles
+from flexff.plant.parameters import NOMINAL
+from flexff.plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES,
+                                  POSITION_REFERENCE, pick)
 
 AXES = ("x", "y")
 

@@ -12,9 +12,9 @@ from typing import Any
 
 import casadi as ca
 
-from controllers.features import nominal_model
-from fmu.system import System
-from plant.signals import FEEDFORWARD_FORCES, REFERENCE, reference_motion
+from flexff.controllers.features import nominal_model
+from flexff.fmu.system import System
+from flexff.plant.signals import FEEDFORWARD_FORCES, REFERENCE, reference_motion
 
 
 def rigid_body_force(reference: ca.SX, parameters: Mapping[str, float] | None = None) -> ca.SX:

@@ -26,12 +26,12 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from controllers.features import feature_names, reference_feature_function
-from controllers.feedforward import feedforward_system, rigid_body_force
-from controllers.model_card import ModelCard, read_card
-from fmu.onnx_graph import graph_network, read_graph
-from fmu.system import System
-from plant.signals import FEEDFORWARD_FORCES, REFERENCE, names
+from flexff.controllers.features import feature_names, reference_feature_function
+from flexff.controllers.feedforward import feedforward_system, rigid_body_force
+from flexff.controllers.model_card import ModelCard, read_card
+from flexff.fmu.onnx_graph import graph_network, read_graph
+from flexff.fmu.system import System
+from flexff.plant.signals import FEEDFORWARD_FORCES, REFERENCE, names
 
 REFERENCE_NAMES = list(names(REFERENCE))
 

@@ -23,8 +23,8 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.signal import cont2discrete, tf2ss
 
-from plant.analysis import linearization
-from plant.model import PlantModel
+from flexff.plant.analysis import linearization
+from flexff.plant.model import PlantModel
 
 # notch damping ratios (numerator, denominator): -28 dB deep, a few Hz wide at 40 Hz
 NOTCH_ZETA = (0.02, 0.5)

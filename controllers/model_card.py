@@ -19,8 +19,8 @@ from typing import Any
 
 import onnx
 
-from plant.parameters import NOMINAL
-from plant.signals import FEEDFORWARD_FORCES, names, units
+from flexff.plant.parameters import NOMINAL
+from flexff.plant.signals import FEEDFORWARD_FORCES, names, units
 
 FORMAT = "flexff-feedforward"
 VERSION = 1

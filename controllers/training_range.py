@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.features import feature_units, reference_features
-from controllers.learned_feedforward import model_period
-from controllers.model_card import read_card
-from plant.signals import REFERENCE, names
+from flexff.controllers.features import feature_units, reference_features
+from flexff.controllers.learned_feedforward import model_period
+from flexff.controllers.model_card import read_card
+from flexff.plant.signals import REFERENCE, names
 
 MARGIN = 0.1  # of a feature's training span: how far beyond it counts as extrapolating
 

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cosim.config import parse_config
-from cosim.run import run_config
-from cosim.schema import RunConfig
+from flexff.cosim.config import parse_config
+from flexff.cosim.run import run_config
+from flexff.cosim.schema import RunConfig
 
 SCHEDULER_TIMEOUT = "10s"  # how long to try to reach a Dask scheduler
 

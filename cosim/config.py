@@ -58,19 +58,19 @@ from typing import Any
 
 import tomli_w
 
-from controllers.allocation import ENCODER_CHOICES
-from controllers.model_card import read_card
-from cosim.memory import MemoryNeeded
-from cosim.references import REFERENCE_KINDS, SegmentError, build_reference
-from cosim.schema import (ALGORITHMS, BUILTIN_OPTIONS, SOURCE_KINDS, UNCONNECTED, ConfigError,
-                          ConnectionConfig, FmuConfig, RecordConfig, ReferenceConfig,
-                          RunConfig, SourceConfig)
-from fmu.importer import FmuError, read_fmu, typed_value
-from plant.kinematics import check_workspace
-from plant.model import VARIANTS
-from plant.parameters import NOMINAL
-from plant.signals import FEEDFORWARD_FORCES, names
-from plant.system import plant_system
+from flexff.controllers.allocation import ENCODER_CHOICES
+from flexff.controllers.model_card import read_card
+from flexff.cosim.memory import MemoryNeeded
+from flexff.cosim.references import REFERENCE_KINDS, SegmentError, build_reference
+from flexff.cosim.schema import (ALGORITHMS, BUILTIN_OPTIONS, SOURCE_KINDS, UNCONNECTED,
+                                 ConfigError, ConnectionConfig, FmuConfig, RecordConfig,
+                                 ReferenceConfig, RunConfig, SourceConfig)
+from flexff.fmu.importer import FmuError, read_fmu, typed_value
+from flexff.plant.kinematics import check_workspace
+from flexff.plant.model import VARIANTS
+from flexff.plant.parameters import NOMINAL
+from flexff.plant.signals import FEEDFORWARD_FORCES, names
+from flexff.plant.system import plant_system
 
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
                 "circle": ("kind", "centre", "turns", "duration"),
@@ -112,7 +112,7 @@ def parse_config(data: Mapping[str, Any] | str, name: str = "config",
 
 def config_examples() -> dict[str, str]:
     """Example configurations (TOML text) by name, shipped in cosim/examples/."""
-    folder = resources.files("cosim") / "examples"
+    folder = resources.files("flexff.cosim") / "examples"
     return {Path(f.name).stem: f.read_text() for f in sorted(folder.iterdir(),
                                                               key=lambda f: f.name)
             if f.name.endswith(".toml")}

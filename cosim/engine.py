@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.timing import Pacing, StepTiming
-from fmu import cache
-from fmu.compile import CFLAGS, compiler_version, run_compiler
+from flexff.cosim.timing import Pacing, StepTiming
+from flexff.fmu import cache
+from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
 
 SOURCE = Path(__file__).parent / "c" / "engine.c"
 TYPED_HOOK = CFUNCTYPE(c_int, c_long, c_int, c_long)  # (slave, phase, k) -> 0 if ok

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.master import Master
-from fmu.compile import cached_program
+from flexff.cosim.master import Master
+from flexff.fmu.compile import cached_program
 
 SOURCE = Path(__file__).parent / "c" / "cosim_loop.c"
 

@@ -32,10 +32,10 @@ except ImportError:  # an optional dependency: the extra "libcosim"
     raise ImportError("runs under libcosim need libcosimpy: pip install 'flexff[libcosim]'"
                       ) from None
 
-from cosim.master import SlaveSpec
-from cosim.recording import Recording
-from cosim.wiring import SOURCE, Link, Port, wire
-from fmu.importer import read_fmu
+from flexff.cosim.master import SlaveSpec
+from flexff.cosim.recording import Recording
+from flexff.cosim.wiring import SOURCE, Link, Port, wire
+from flexff.fmu.importer import read_fmu
 
 
 class _Execution:

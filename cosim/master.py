@@ -48,13 +48,14 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from cosim.engine import (CALLS, FAILED, MAX_LISTED_OVERRUNS, OK, OVERRUN, TYPED_HOOK, EngineRun,
-                          EngineSlave, function_address, library, pointer, start_schedule)
-from cosim.recording import Recording
-from cosim.timing import Pacing, StepTiming
-from cosim.schema import ALGORITHMS
-from cosim.wiring import SOURCE, Link, Port, wire
-from fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
+from flexff.cosim.engine import (CALLS, FAILED, MAX_LISTED_OVERRUNS, OK, OVERRUN, TYPED_HOOK,
+                                 EngineRun, EngineSlave, function_address, library, pointer,
+                                 start_schedule)
+from flexff.cosim.recording import Recording
+from flexff.cosim.timing import Pacing, StepTiming
+from flexff.cosim.schema import ALGORITHMS
+from flexff.cosim.wiring import SOURCE, Link, Port, wire
+from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 
 PROGRESS_MIN_STEPS = 100_000  # runs this long show a progress bar (on a terminal)
 PROGRESS_CHUNK = 1000  # steps between progress bar updates

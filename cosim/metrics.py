@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from cosim.recording import Recording
+from flexff.cosim.recording import Recording
 
 AXES = ("x", "y")
 

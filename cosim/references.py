@@ -24,11 +24,11 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_filter
 
-from cosim.csv_text import read_rows
-from cosim.memory import check_memory
-from plant.kinematics import check_workspace
-from plant.parameters import NOMINAL
-from plant.signals import REFERENCE, names
+from flexff.cosim.csv_text import read_rows
+from flexff.cosim.memory import check_memory
+from flexff.plant.kinematics import check_workspace
+from flexff.plant.parameters import NOMINAL
+from flexff.plant.signals import REFERENCE, names
 
 # evaluation reference of the thesis (section 5.7)
 THESIS_LINE_END = (0.0098, -0.0098)

@@ -20,19 +20,19 @@ import json
 import tempfile
 from pathlib import Path
 
-from controllers.training_range import MARGIN, training_range_excess
-from cosim.config import expanded, load_config
-from cosim.metrics import run_metrics
-from cosim.plots import PLOT_SIGNALS, plot_tet, write_plots
-from cosim.realtime import realtime_process
-from cosim.recording import Recording, atomic_write, save_recording
-from cosim.memory import MemoryNeeded, check_memory
-from cosim.references import Reference
-from cosim.scenario import Scenario, resolve
-from cosim.schema import ConfigError, RunConfig
-from cosim.timing import OverrunError, Pacing
-from plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, REFERENCE,
-                           TORQUES, TRUE_POSITION, TRUE_VELOCITY, names)
+from flexff.controllers.training_range import MARGIN, training_range_excess
+from flexff.cosim.config import expanded, load_config
+from flexff.cosim.metrics import run_metrics
+from flexff.cosim.plots import PLOT_SIGNALS, plot_tet, write_plots
+from flexff.cosim.realtime import realtime_process
+from flexff.cosim.recording import Recording, atomic_write, save_recording
+from flexff.cosim.memory import MemoryNeeded, check_memory
+from flexff.cosim.references import Reference
+from flexff.cosim.scenario import Scenario, resolve
+from flexff.cosim.schema import ConfigError, RunConfig
+from flexff.cosim.timing import OverrunError, Pacing
+from flexff.plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES,
+                                  REFERENCE, TORQUES, TRUE_POSITION, TRUE_VELOCITY, names)
 
 # DESIGN.md's signals of the manipulator, kept under their short names in recordings
 MANIPULATOR_SIGNALS = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, ENCODERS,
@@ -42,7 +42,7 @@ MANIPULATOR_SIGNALS = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FO
 def load_run(path: str | Path) -> RunConfig:
     """A run configuration from a TOML file or an SSP file (by its suffix)."""
     if Path(path).suffix.lower() == ".ssp":
-        from cosim.ssp import load_ssp
+        from flexff.cosim.ssp import load_ssp
         return load_ssp(path)
     return load_config(path)
 

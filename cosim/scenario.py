@@ -17,18 +17,18 @@ from typing import Any
 
 import numpy as np
 
-from controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
-from controllers.feedforward import rigid_body_feedforward_system
-from controllers.learned_feedforward import learned_feedforward_system
-from cosim.csv_text import read_rows
-from cosim.master import Master, SlaveSpec
-from cosim.references import Reference, build_reference
-from cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
-from cosim.wiring import Link, Port, WiringError, wire
-from fmu.build import build_fmu
-from fmu.importer import FmuError, read_fmu
-from fmu.system import System
-from plant.system import plant_system
+from flexff.controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
+from flexff.controllers.feedforward import rigid_body_feedforward_system
+from flexff.controllers.learned_feedforward import learned_feedforward_system
+from flexff.cosim.csv_text import read_rows
+from flexff.cosim.master import Master, SlaveSpec
+from flexff.cosim.references import Reference, build_reference
+from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
+from flexff.cosim.wiring import Link, Port, WiringError, wire
+from flexff.fmu.build import build_fmu
+from flexff.fmu.importer import FmuError, read_fmu
+from flexff.fmu.system import System
+from flexff.plant.system import plant_system
 
 
 @dataclass(frozen=True, eq=False)

@@ -49,13 +49,13 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
-from cosim.config import STEP_TOLERANCE
-from cosim.recording import atomic_write
-from cosim.scenario import Scenario, resolve
-from cosim.schema import ALGORITHMS, ConfigError, ConnectionConfig, FmuConfig, RunConfig
-from cosim.wiring import SOURCE
-from fmu.cache import cache_dir
-from fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
+from flexff.cosim.config import STEP_TOLERANCE
+from flexff.cosim.recording import atomic_write
+from flexff.cosim.scenario import Scenario, resolve
+from flexff.cosim.schema import ALGORITHMS, ConfigError, ConnectionConfig, FmuConfig, RunConfig
+from flexff.cosim.wiring import SOURCE
+from flexff.fmu.cache import cache_dir
+from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
 
 NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
       "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",

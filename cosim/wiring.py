@@ -20,8 +20,8 @@ from __future__ import annotations
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 
-from cosim.schema import ConnectionConfig
-from fmu.importer import FmuInfo
+from flexff.cosim.schema import ConnectionConfig
+from flexff.fmu.importer import FmuInfo
 
 SOURCE = "sources"  # producer name of the external signals
 FLOAT_KINDS = ("float64", "float32")

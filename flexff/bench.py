@@ -10,18 +10,18 @@ from typing import Any
 import numpy as np
 import onnx
 
-from cosim.config import parse_config
-from cosim.engine import idle_timing
-from cosim.floor import run_c_loop
-from cosim.libcosim import run_libcosim, time_libcosim_engine
-from cosim.master import Master, SlaveSpec
-from cosim.run import simulate
-from cosim.scenario import Scenario, resolve
-from cosim.timing import Pacing
+from flexff.cosim.config import parse_config
+from flexff.cosim.engine import idle_timing
+from flexff.cosim.floor import run_c_loop
+from flexff.cosim.libcosim import run_libcosim, time_libcosim_engine
+from flexff.cosim.master import Master, SlaveSpec
+from flexff.cosim.run import simulate
+from flexff.cosim.scenario import Scenario, resolve
+from flexff.cosim.timing import Pacing
 from flexff.fmu_bench import bench_fmu
-from fmu.build import build_fmu
-from fmu.onnx_fmu import onnx_system
-from plant.system import plant_system
+from flexff.fmu.build import build_fmu
+from flexff.fmu.onnx_fmu import onnx_system
+from flexff.plant.system import plant_system
 
 CLOSED_LOOP_REFERENCE = "thesis-eval"  # the thesis's evaluation reference, 15 s at 1 ms
 REALTIME_MODELS = ("tcn", "lstm")  # the thesis ran these on Simulink Real-Time
@@ -84,10 +84,10 @@ def closed_loop_benchmark(folder: Path, repeats: int = 3) -> dict[str, Any]:
 def untrained_models(folder: Path) -> dict[str, Path]:
     """ONNX exports of every model kind at the fast preset's sizes, trained for one epoch on a
     small synthetic dataset: what a step costs does not depend on the weights."""
-    from learning.evaluate import MODELS
-    from learning.export import export
-    from learning.synthetic import synthetic_dataset
-    from learning.train import train
+    from flexff.learning.evaluate import MODELS
+    from flexff.learning.export import export
+    from flexff.learning.synthetic import synthetic_dataset
+    from flexff.learning.train import train
 
     data = synthetic_dataset(folder / "data", n_train=3, n_test=1, duration=6.0, rate_hz=100.0,
                              seed=1)

@@ -17,9 +17,9 @@ import traceback
 from pathlib import Path
 from typing import Callable, Sequence
 
-from cosim.timing import OverrunError
-from learning.dataset import SETS
-from plant.model import VARIANTS
+from flexff.cosim.timing import OverrunError
+from flexff.learning.dataset import SETS
+from flexff.plant.model import VARIANTS
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to keep torch unloaded
 PRESETS = ("fast", "thesis")
@@ -35,7 +35,7 @@ KEPT = {  # what an interrupted command keeps, by command (and subcommand)
 
 
 def _plant_info(args: argparse.Namespace) -> int:
-    from plant.analysis import plant_info
+    from flexff.plant.analysis import plant_info
 
     info = plant_info(args.variant)
     if args.json:
@@ -52,32 +52,32 @@ def _plant_info(args: argparse.Namespace) -> int:
 
 def _output_file(path: str) -> None:
     """Check, before any work, that the file `path` can be written: its folder is made."""
-    from cosim.run import output_folder
+    from flexff.cosim.run import output_folder
 
     output_folder(Path(path).parent)
 
 
 def _fmu_build(args: argparse.Namespace) -> int:
-    from fmu.build import build_fmu
+    from flexff.fmu.build import build_fmu
 
     if args.kind != "onnx" and (args.graph is not None or args.every is not None):
         raise ValueError("only fmu build onnx takes a graph file and --every (a learned "
                          "feedforward takes --model M.onnx and runs at the model's rate)")
     if args.kind == "onnx":
-        from fmu.onnx_fmu import onnx_system
+        from flexff.fmu.onnx_fmu import onnx_system
 
         if args.graph is None:
             raise ValueError("fmu build onnx needs the graph: flexff fmu build onnx MODEL.onnx "
                              "-o M.fmu")
         system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every)
     elif args.kind == "feedforward":
-        from controllers.learned_feedforward import learned_feedforward_system
+        from flexff.controllers.learned_feedforward import learned_feedforward_system
 
         if args.model is None:
             raise ValueError("fmu build feedforward needs --model M.onnx (flexff export)")
         system = learned_feedforward_system(args.model, args.step)
     else:
-        from plant.system import plant_system
+        from flexff.plant.system import plant_system
 
         system = plant_system(args.variant)
     _output_file(args.output)
@@ -86,7 +86,7 @@ def _fmu_build(args: argparse.Namespace) -> int:
 
 
 def _fmu_validate(args: argparse.Namespace) -> int:
-    from fmu.validation import validate_fmu
+    from flexff.fmu.validation import validate_fmu
 
     status = 0
     for path in args.files:
@@ -118,8 +118,8 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from cosim.batch import run_batch, sweep
-    from cosim.run import output_folder, run_config
+    from flexff.cosim.batch import run_batch, sweep
+    from flexff.cosim.run import output_folder, run_config
 
     output_folder(args.output)
     configs = args.configs
@@ -147,7 +147,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _pacing(args: argparse.Namespace):
     """The run's Pacing from --realtime and its options (None: as fast as it goes)."""
-    from cosim.timing import Pacing
+    from flexff.cosim.timing import Pacing
 
     options = {"--rt-factor": args.rt_factor, "--max-overruns": args.max_overruns,
                "--grace": args.grace, "--cpu": args.cpu}
@@ -176,7 +176,7 @@ def _sweep_values(text: str) -> tuple[str, list]:
 
 def _print_result(name: object, metrics: dict, output: object) -> None:
     """One line per run, and a second where its learned feedforward extrapolates."""
-    from cosim.run import range_warning
+    from flexff.cosim.run import range_warning
 
     tracking = ""
     if "x" in metrics:
@@ -198,7 +198,7 @@ def _print_result(name: object, metrics: dict, output: object) -> None:
 
 
 def _config_example(args: argparse.Namespace) -> int:
-    from cosim.config import config_examples
+    from flexff.cosim.config import config_examples
 
     examples = config_examples()
     if args.name is None:
@@ -211,16 +211,16 @@ def _config_example(args: argparse.Namespace) -> int:
 
 
 def _config_expand(args: argparse.Namespace) -> int:
-    from cosim.config import expanded_text
-    from cosim.run import load_run
+    from flexff.cosim.config import expanded_text
+    from flexff.cosim.run import load_run
 
     print(expanded_text(load_run(args.config)), end="")
     return 0
 
 
 def _ssp_export(args: argparse.Namespace) -> int:
-    from cosim.run import load_run
-    from cosim.ssp import export_ssp
+    from flexff.cosim.run import load_run
+    from flexff.cosim.ssp import export_ssp
 
     _output_file(args.output)
     print(f"wrote {export_ssp(load_run(args.config), args.output)}")
@@ -228,11 +228,11 @@ def _ssp_export(args: argparse.Namespace) -> int:
 
 
 def _data_collect(args: argparse.Namespace) -> int:
-    from learning.collect import run_collection
+    from flexff.learning.collect import run_collection
 
     config = None
     if args.config is not None:
-        from cosim.run import load_run
+        from flexff.cosim.run import load_run
 
         config = load_run(args.config)
     report = run_collection(args.set, args.output, args.workers, args.scheduler, config=config)
@@ -252,7 +252,7 @@ def _data_collect(args: argparse.Namespace) -> int:
 
 
 def _data_import(args: argparse.Namespace) -> int:
-    from learning.logs import import_logs
+    from flexff.learning.logs import import_logs
 
     test = None if args.test is None else [n.strip() for n in args.test.split(",") if n.strip()]
     dataset = import_logs(args.files, args.output, args.rate, test)
@@ -265,7 +265,7 @@ def _data_import(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from learning.train import train
+    from flexff.learning.train import train
 
     overrides = {"epochs": args.epochs} if args.epochs is not None else {}
     metrics = train(args.model, args.preset, args.data, args.output, resume=args.resume,
@@ -275,7 +275,7 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from learning.export import export
+    from flexff.learning.export import export
 
     _output_file(args.output)
     print(f"wrote {export(args.run, args.output, inputs=args.inputs)}")
@@ -283,8 +283,8 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from cosim.run import load_run, output_folder
-    from learning.evaluate import evaluate
+    from flexff.cosim.run import load_run, output_folder
+    from flexff.learning.evaluate import evaluate
 
     loop = None if args.config is None else load_run(args.config)
     output_folder(args.output)
@@ -296,7 +296,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from cosim.run import output_folder
+    from flexff.cosim.run import output_folder
     from flexff.demo import run_demo
 
     output_folder(args.output)

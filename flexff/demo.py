@@ -15,9 +15,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from fmu.build import build_fmu
-from fmu.validation import validate_fmu
-from plant.system import plant_system
+from flexff.fmu.build import build_fmu
+from flexff.fmu.validation import validate_fmu
+from flexff.plant.system import plant_system
 
 
 def _stage(title: str) -> float:
@@ -41,7 +41,7 @@ def _build_plants(out: Path) -> bool:
 
 def run_demo(output: str | Path) -> int:
     """Run the demo into folder `output`; print what it finds; 0 on success."""
-    from learning.evaluate import evaluate
+    from flexff.learning.evaluate import evaluate
 
     out = Path(output)
     out.mkdir(parents=True, exist_ok=True)

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu.compile import cached_program
-from fmu.slave import Slave, bare_calls
+from flexff.fmu.compile import cached_program
+from flexff.fmu.slave import Slave, bare_calls
 
 BENCH_SOURCE = Path(__file__).parent / "c" / "bench_loop.c"
 

@@ -5,11 +5,11 @@ variable names), the description classes `System`, `Variable`,
 `Parameter`, and `read_network` / `Network` for an ONNX graph embedded in a System's FMU.
 """
 
-from fmu.build import build_fmu, fmu_key
-from fmu.network import Network, read_network
-from fmu.slave import Slave
-from fmu.system import Parameter, System, Variable
-from fmu.validation import validate_fmu
+from flexff.fmu.build import build_fmu, fmu_key
+from flexff.fmu.network import Network, read_network
+from flexff.fmu.slave import Slave
+from flexff.fmu.system import Parameter, System, Variable
+from flexff.fmu.validation import validate_fmu
 
 __all__ = ["Network", "Parameter", "Slave", "System", "Variable", "build_fmu", "fmu_key",
            "read_network", "validate_fmu"]

@@ -19,13 +19,13 @@ from pathlib import Path
 
 import fmpy
 
-from fmu import cache
-from fmu.codegen import NET_MODEL_FILE, NET_TABLE_FILE, generate_config_h, generate_model_c
-from fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler, sanitizer_flags
-from fmu.layout import make_layout, model_identifier
-from fmu.model_description import model_description_xml
-from fmu.network import Network, runtime_library
-from fmu.system import System
+from flexff.fmu import cache
+from flexff.fmu.codegen import NET_MODEL_FILE, NET_TABLE_FILE, generate_config_h, generate_model_c
+from flexff.fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler, sanitizer_flags
+from flexff.fmu.layout import make_layout, model_identifier
+from flexff.fmu.model_description import model_description_xml
+from flexff.fmu.network import Network, runtime_library
+from flexff.fmu.system import System
 
 C_DIR = Path(__file__).parent / "c"
 NETWORK_SOURCES = ("onnx_network.c", "onnx_network.h")

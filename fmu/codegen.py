@@ -14,9 +14,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from fmu.layout import Layout
-from fmu.network import MAX_RANK, Network, runtime_library
-from fmu.system import System
+from flexff.fmu.layout import Layout
+from flexff.fmu.network import MAX_RANK, Network, runtime_library
+from flexff.fmu.system import System
 
 
 def _check_vector(shape: tuple[int, int], n: int, what: str) -> None:

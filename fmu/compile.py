@@ -16,7 +16,7 @@ from pathlib import Path
 
 import fmpy
 
-from fmu import cache
+from flexff.fmu import cache
 
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = ("-O2", "-std=c99", "-fPIC", "-fvisibility=hidden", "-ffp-contract=off")

@@ -14,7 +14,7 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
-from fmu.system import System
+from flexff.fmu.system import System
 
 Role = Literal["parameter", "max_substep", "input", "output", "state", "seed"]
 ROLES: tuple[Role, ...] = ("parameter", "max_substep", "input", "output", "state", "seed")

@@ -11,8 +11,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from fmu.layout import Layout
-from fmu.system import System
+from flexff.fmu.layout import Layout
+from flexff.fmu.system import System
 
 LOG_CATEGORIES = {
     "logStatusError": "errors (on unless switched off with fmi2SetDebugLogging)",

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import casadi as ca
 
-from fmu.onnx_graph import Port, graph_network, read_graph
-from fmu.system import System, Variable
+from flexff.fmu.onnx_graph import Port, graph_network, read_graph
+from flexff.fmu.system import System, Variable
 
 
 def onnx_system(model: str | Path, step: float = 1e-3, every: int = 1) -> System:

@@ -33,8 +33,8 @@ import onnxruntime as ort
 from onnx import TensorProto
 from onnx import helper as oh
 
-from fmu import cache
-from fmu.network import Network, load_model, read_network
+from flexff.fmu import cache
+from flexff.fmu.network import Network, load_model, read_network
 
 FLOATS = {TensorProto.FLOAT: "float32", TensorProto.DOUBLE: "float64"}
 RESERVED = "flexff/"  # names of the adapter: FMU_INPUTS, FMU_OUTPUTS, the graph's under GRAPH

@@ -12,7 +12,7 @@ from typing import Literal
 
 import casadi as ca
 
-from fmu.network import Network
+from flexff.fmu.network import Network
 
 
 @dataclass(frozen=True)

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import fmpy.validation
 
-from fmu.codegen import NET_TABLE_FILE
-from fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
+from flexff.fmu.codegen import NET_TABLE_FILE
+from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 
 FMI2_CS_FUNCTIONS = (
     "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",

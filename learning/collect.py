@@ -50,18 +50,18 @@ from typing import Any, Mapping
 import numpy as np
 from tqdm import tqdm
 
-from cosim.recording import Recording, atomic_write
-from cosim.run import simulate_config
-from cosim.scenario import Scenario, reference_signals, resolve
-from cosim.schema import ConfigError, RecordConfig, RunConfig
-from learning.dataset import (COLLECTED, ENCODER_SIGNALS, FORMAT, LABEL_SIGNALS, MANIFEST,
-                              POSITION_SIGNALS, REFERENCE_SIGNALS, SIGNALS, VERSION, save_signals,
-                              write_manifest)
-from learning.loop import (OWN_TAPS, Tap, current_limit, dataset_taps, default_loop,
-                           loop_differences, loop_record, on_reference, plant_record)
-from learning.trajectories import TrajectorySet, TrajectorySpec, trajectory_set
-from learning.workers import die_with_parent
-from plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
+from flexff.cosim.recording import Recording, atomic_write
+from flexff.cosim.run import simulate_config
+from flexff.cosim.scenario import Scenario, reference_signals, resolve
+from flexff.cosim.schema import ConfigError, RecordConfig, RunConfig
+from flexff.learning.dataset import (COLLECTED, ENCODER_SIGNALS, FORMAT, LABEL_SIGNALS, MANIFEST,
+                                     POSITION_SIGNALS, REFERENCE_SIGNALS, SIGNALS, VERSION,
+                                     save_signals, write_manifest)
+from flexff.learning.loop import (OWN_TAPS, Tap, current_limit, dataset_taps, default_loop,
+                                  loop_differences, loop_record, on_reference, plant_record)
+from flexff.learning.trajectories import TrajectorySet, TrajectorySpec, trajectory_set
+from flexff.learning.workers import die_with_parent
+from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
 
 PROGRESS = "collection.json"  # the loop of a collection under way (see the module docstring)
 STOPPING = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES)  # fail every trajectory

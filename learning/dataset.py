@@ -27,8 +27,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from cosim.recording import atomic_write
-from plant.signals import ENCODERS, FORCES, REFERENCE, TRUE_POSITION, names
+from flexff.cosim.recording import atomic_write
+from flexff.plant.signals import ENCODERS, FORCES, REFERENCE, TRUE_POSITION, names
 
 FORMAT = "flexff-dataset"
 VERSION = 2

@@ -15,13 +15,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from controllers.features import feature_units, reference_feature_function
-from learning.casadi_torch import TorchFunction
-from learning.models import uses_prior
-from learning.rigid import RigidBodyForce
-from learning.run_folder import Run
-from learning.threads import torch_threads
-from plant.signals import REFERENCE, names, units
+from flexff.controllers.features import feature_units, reference_feature_function
+from flexff.learning.casadi_torch import TorchFunction
+from flexff.learning.models import uses_prior
+from flexff.learning.rigid import RigidBodyForce
+from flexff.learning.run_folder import Run
+from flexff.learning.threads import torch_threads
+from flexff.plant.signals import REFERENCE, names, units
 
 INPUT_KINDS = ("features", "reference")
 

@@ -36,17 +36,17 @@ from typing import Any
 
 import numpy as np
 
-from controllers.features import feature_names
-from cosim.recording import Recording, load_recording
-from cosim.run import range_warning, run_config
-from cosim.schema import RecordConfig, RunConfig
-from learning.collect import collect
-from learning.export import export
-from learning.loop import default_loop, on_reference, with_feedforward
-from learning.models import NETWORKS, build_network, check_kind, parameter_count
-from learning.presets import TrainConfig, make_config
-from learning.report import write_report
-from learning.workers import TrainJob, train_parallel
+from flexff.controllers.features import feature_names
+from flexff.cosim.recording import Recording, load_recording
+from flexff.cosim.run import range_warning, run_config
+from flexff.cosim.schema import RecordConfig, RunConfig
+from flexff.learning.collect import collect
+from flexff.learning.export import export
+from flexff.learning.loop import default_loop, on_reference, with_feedforward
+from flexff.learning.models import NETWORKS, build_network, check_kind, parameter_count
+from flexff.learning.presets import TrainConfig, make_config
+from flexff.learning.report import write_report
+from flexff.learning.workers import TrainJob, train_parallel
 
 
 @dataclass(frozen=True)

@@ -47,11 +47,11 @@ import onnx
 import onnxruntime as ort
 import torch
 
-from controllers.model_card import ModelCard
-from cosim.recording import atomic_write
-from learning.deploy import EnsembleSIModel, SIModel
-from learning.run_folder import Run, flexff_version, load_run
-from learning.threads import torch_threads
+from flexff.controllers.model_card import ModelCard
+from flexff.cosim.recording import atomic_write
+from flexff.learning.deploy import EnsembleSIModel, SIModel
+from flexff.learning.run_folder import Run, flexff_version, load_run
+from flexff.learning.threads import torch_threads
 OPSET = 17
 TOLERANCE = 1e-5  # largest |onnxruntime - torch| relative to the largest |force|
 

@@ -25,9 +25,10 @@ import casadi as ca
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from controllers.features import FEATURE_SETS, evaluate_samples, motion_features, nominal_model
-from learning.dataset import ENCODER_SIGNALS, LABEL_SIGNALS, Trajectory
-from plant.kinematics import SHOULDER_INDEX
+from flexff.controllers.features import (FEATURE_SETS, evaluate_samples, motion_features,
+                                         nominal_model)
+from flexff.learning.dataset import ENCODER_SIGNALS, LABEL_SIGNALS, Trajectory
+from flexff.plant.kinematics import SHOULDER_INDEX
 
 
 

@@ -30,11 +30,11 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import nnls
 
-from controllers.features import evaluate_samples, motion_columns, nominal_model
-from learning.batches import TRAIN, interior
-from learning.casadi_torch import frozen
-from learning.rigid import rigid_forces
-from plant.parameters import NOMINAL
+from flexff.controllers.features import evaluate_samples, motion_columns, nominal_model
+from flexff.learning.batches import TRAIN, interior
+from flexff.learning.casadi_torch import frozen
+from flexff.learning.rigid import rigid_forces
+from flexff.plant.parameters import NOMINAL
 
 LINEAR = tuple(NOMINAL.flat_values("tau_coulomb", "b_viscous"))  # tau_coulomb1 ... b_viscous3
 WIDTHS = (1e-3, 3e-3, 1e-2, 3e-2, 1e-1)  # candidate tanh widths w_stribeck [rad/s]

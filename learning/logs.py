@@ -45,12 +45,12 @@ from scipy.io import loadmat
 from scipy.io.matlab import matfile_version
 from scipy.signal import savgol_filter
 
-from cosim.csv_text import read_rows
-from learning.dataset import (ENCODER_SIGNALS, IMPORTED, POSITION_SIGNALS, REFERENCE_SIGNALS,
-                              TRAINED, Dataset, file_sha256, load_dataset, save_signals,
-                              write_manifest)
-from learning.features import decimation, encoder_positions
-from learning.presets import PRESETS, make_config
+from flexff.cosim.csv_text import read_rows
+from flexff.learning.dataset import (ENCODER_SIGNALS, IMPORTED, POSITION_SIGNALS, REFERENCE_SIGNALS,
+                                     TRAINED, Dataset, file_sha256, load_dataset, save_signals,
+                                     write_manifest)
+from flexff.learning.features import decimation, encoder_positions
+from flexff.learning.presets import PRESETS, make_config
 
 REQUIRED = TRAINED  # a log must hold what training reads
 COLUMNS = (*REQUIRED, *REFERENCE_SIGNALS)

@@ -20,15 +20,16 @@ from typing import Any
 
 import numpy as np
 
-from cosim.config import expanded, parse_config
-from cosim.recording import Recording
-from cosim.scenario import Scenario
-from cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
-from fmu.importer import read_fmu, typed_value
-from learning.dataset import ENCODER_SIGNALS, POSITION_SIGNALS, REFERENCE_SIGNALS, file_sha256
-from plant.model import VARIANTS
-from plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
-from plant.system import plant_system
+from flexff.cosim.config import expanded, parse_config
+from flexff.cosim.recording import Recording
+from flexff.cosim.scenario import Scenario
+from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
+from flexff.fmu.importer import read_fmu, typed_value
+from flexff.learning.dataset import (ENCODER_SIGNALS, POSITION_SIGNALS, REFERENCE_SIGNALS,
+                                     file_sha256)
+from flexff.plant.model import VARIANTS
+from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
+from flexff.plant.system import plant_system
 
 START_VALUES = ("x_start", "y_start")
 FEEDFORWARDS = ("rigid-body-feedforward", "learned-feedforward")

@@ -46,8 +46,8 @@ import dataclasses
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from learning.features import FeatureConfig
-from learning.models import check_kind
+from flexff.learning.features import FeatureConfig
+from flexff.learning.models import check_kind
 
 SCHEDULES = ("constant", "onecycle", "cosine")
 

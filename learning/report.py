@@ -33,11 +33,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after selecting the backend)
 from matplotlib.patches import Rectangle  # noqa: E402
 
-from cosim.metrics import AXES, tracking_metrics  # noqa: E402
-from cosim.plots import MM, save_figure  # noqa: E402
-from cosim.recording import Recording, atomic_write  # noqa: E402
-from plant.signals import (FEEDBACK_FORCES, FEEDFORWARD_FORCES, POSITION_REFERENCE,  # noqa: E402
-                           TRUE_POSITION, names)
+from flexff.cosim.metrics import AXES, tracking_metrics  # noqa: E402
+from flexff.cosim.plots import MM, save_figure  # noqa: E402
+from flexff.cosim.recording import Recording, atomic_write  # noqa: E402
+from flexff.plant.signals import (  # noqa: E402
+    FEEDBACK_FORCES, FEEDFORWARD_FORCES, POSITION_REFERENCE, TRUE_POSITION, names)
 
 SCENARIO_LABELS: dict[str, str] = {
     "pid": "PID alone",

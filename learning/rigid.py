@@ -20,8 +20,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from controllers.features import evaluate_samples, motion_columns, nominal_model
-from learning.casadi_torch import TorchFunction, frozen
+from flexff.controllers.features import evaluate_samples, motion_columns, nominal_model
+from flexff.learning.casadi_torch import TorchFunction, frozen
 
 Parameters = Mapping[str, float]  # flat nominal-model parameters replaced in the prior
 

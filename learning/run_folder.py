@@ -28,11 +28,11 @@ from typing import Any
 
 import torch
 
-from cosim.recording import atomic_write
-from learning.dataset import file_sha256
-from learning.models import SequenceNetwork, build_network
-from learning.presets import TrainConfig
-from learning.scaling import MinMaxScaler
+from flexff.cosim.recording import atomic_write
+from flexff.learning.dataset import file_sha256
+from flexff.learning.models import SequenceNetwork, build_network
+from flexff.learning.presets import TrainConfig
+from flexff.learning.scaling import MinMaxScaler
 
 FORMAT = "flexff-run"
 VERSION = 1

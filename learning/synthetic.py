@@ -21,10 +21,10 @@ import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from learning.dataset import ENCODER_SIGNALS, REFERENCE_SIGNALS, Trajectory, write_dataset
-from controllers.features import nominal_model
-from plant.kinematics import SHOULDER_INDEX
-from plant.parameters import HARDWARE, MOTOR_FRICTION
+from flexff.learning.dataset import ENCODER_SIGNALS, REFERENCE_SIGNALS, Trajectory, write_dataset
+from flexff.controllers.features import nominal_model
+from flexff.plant.kinematics import SHOULDER_INDEX
+from flexff.plant.parameters import HARDWARE, MOTOR_FRICTION
 
 WORKSPACE = 0.05  # m
 MAX_ACCELERATION = 4.0  # m/s^2: keeps the currents well inside the amplifier limit
@@ -127,9 +127,9 @@ def synthetic_collection_set(path: str | Path, set_name: str = "sim", friction: 
     splits and rate that `flexff data collect` runs), followed exactly, with synthetic labels."""
     # imported here: the run configurations pull in the co-simulation (fmpy), which the
     # random datasets above do not need
-    from cosim.scenario import reference_signals
-    from learning.collect import trajectory_config
-    from learning.trajectories import trajectory_set
+    from flexff.cosim.scenario import reference_signals
+    from flexff.learning.collect import trajectory_config
+    from flexff.learning.trajectories import trajectory_set
 
     trajectories = trajectory_set(set_name)
     written = []

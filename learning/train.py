@@ -27,20 +27,20 @@ import torch
 from matplotlib.figure import Figure
 from tqdm import tqdm
 
-from controllers.features import feature_names
-from learning.batches import (TRAIN, VALIDATION, SequenceSet, WindowSampler, interior,
-                              window_roles)
-from learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
-from learning.features import decimation, prepare_trajectory
-from learning.friction import identify_friction
-from learning.models import (RECURRENT, SequenceNetwork, build_network, fit_linear_skip,
-                             parameter_count, uses_prior)
-from learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
-from learning.rigid import rigid_forces
-from learning.run_folder import (CHECKPOINT_FILE, RunFolderError, save_best, save_checkpoint,
-                                 save_run, start_run)
-from learning.scaling import MinMaxScaler
-from learning.threads import torch_threads
+from flexff.controllers.features import feature_names
+from flexff.learning.batches import (TRAIN, VALIDATION, SequenceSet, WindowSampler, interior,
+                                     window_roles)
+from flexff.learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
+from flexff.learning.features import decimation, prepare_trajectory
+from flexff.learning.friction import identify_friction
+from flexff.learning.models import (RECURRENT, SequenceNetwork, build_network, fit_linear_skip,
+                                    parameter_count, uses_prior)
+from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
+from flexff.learning.rigid import rigid_forces
+from flexff.learning.run_folder import (CHECKPOINT_FILE, RunFolderError, save_best, save_checkpoint,
+                                        save_run, start_run)
+from flexff.learning.scaling import MinMaxScaler
+from flexff.learning.threads import torch_threads
 
 EpochReport = Callable[[dict[str, Any]], None]
 MSE_UNITS = "MSE of min-max scaled labels Fx, Fy (the thesis's normalized units)"

@@ -40,8 +40,8 @@ from typing import Any
 
 import numpy as np
 
-from cosim.references import Spline
-from learning.dataset import SETS
+from flexff.cosim.references import Spline
+from flexff.learning.dataset import SETS
 
 STEP = 1e-3  # s: the co-simulation step of every run
 R_MIN = 0.007  # m: smallest circle radius (seed)

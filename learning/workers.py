@@ -27,7 +27,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from learning.threads import granted_cores
+from flexff.learning.threads import granted_cores
 
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 POLL_S = 0.2  # how often the bars are redrawn while the workers run
@@ -121,7 +121,7 @@ def _drain(epochs: Any, bars: dict[str, tqdm]) -> None:
 
 def _train_one(job: TrainJob, threads: int, epochs: Any) -> dict[str, Any]:
     """Worker: one training run, each epoch reported on the queue `epochs`."""
-    from learning.train import train
+    from flexff.learning.train import train
 
     return train(job.model, job.preset, job.data, job.run, progress=False,
                  on_epoch=lambda report: epochs.put((job.name, report)),

@@ -7,7 +7,7 @@ from typing import Any
 
 import casadi as ca
 
-from plant.parameters import PlantParameters
+from flexff.plant.parameters import PlantParameters
 
 
 def saturated_current(p: PlantParameters, current: Any) -> Any:

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from plant.kinematics import ELBOW_INDEX, EE_INDEX, N_COORDINATES, SHOULDER_INDEX
-from plant.kinematics import flexure_deflections, generalized_coordinates
-from plant.parameters import PlantParameters
+from flexff.plant.kinematics import ELBOW_INDEX, EE_INDEX, N_COORDINATES, SHOULDER_INDEX
+from flexff.plant.kinematics import flexure_deflections, generalized_coordinates
+from flexff.plant.parameters import PlantParameters
 
 
 def body_mass_matrix(p: PlantParameters) -> ca.SX:

@@ -22,7 +22,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from plant.parameters import PlantParameters
+from flexff.plant.parameters import PlantParameters
 
 MOUNT_ANGLES_DEG = (90.0, -30.0, 210.0)
 COORDINATE_NAMES = tuple(
@@ -125,7 +125,7 @@ def _branch_sign() -> float:
     Evaluated once on the design geometry: the two intersections only swap where the two
     elbows coincide, far outside any reachable configuration.
     """
-    from plant.parameters import NOMINAL
+    from flexff.plant.parameters import NOMINAL
 
     t1, t2, _ = (float(a) for a in shoulder_angles(NOMINAL, 0.0, 0.0))
     guess = _intersection(NOMINAL, t1, t2, 1.0)

@@ -16,12 +16,12 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
-from plant.actuator import encoder_reading, friction_torque, motor_torque
-from plant.dynamics import reduced_dynamics
-from plant.kinematics import flexure_deflections, forward_kinematics_2, forward_kinematics_3
-from plant.kinematics import generalized_coordinates, shoulder_angles
-from plant.parameters import HARDWARE, NOMINAL, PlantParameters
-from plant.signals import CURRENTS, ENCODERS, TORQUES, TRUE_POSITION, TRUE_VELOCITY
+from flexff.plant.actuator import encoder_reading, friction_torque, motor_torque
+from flexff.plant.dynamics import reduced_dynamics
+from flexff.plant.kinematics import flexure_deflections, forward_kinematics_2, forward_kinematics_3
+from flexff.plant.kinematics import generalized_coordinates, shoulder_angles
+from flexff.plant.parameters import HARDWARE, NOMINAL, PlantParameters
+from flexff.plant.signals import CURRENTS, ENCODERS, TORQUES, TRUE_POSITION, TRUE_VELOCITY
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import casadi as ca
 
-from fmu.system import Variable
+from flexff.fmu.system import Variable
 
 Signals = tuple[Variable, ...]
 

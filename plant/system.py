@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import casadi as ca
 
-from fmu.system import Parameter, System, Variable
-from plant.model import PlantModel, Variant
+from flexff.fmu.system import Parameter, System, Variable
+from flexff.plant.model import PlantModel, Variant
 
 _STATE_INFO = {
     "q_x": ("m", "end-effector x position"), "q_y": ("m", "end-effector y position"),

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from plant.model import PlantModel
+from flexff.plant.model import PlantModel
 
 
 @pytest.fixture(scope="session")
@@ -24,8 +24,8 @@ def rng() -> np.random.Generator:
 @pytest.fixture(scope="session")
 def plant_fmus(tmp_path_factory) -> dict:
     """The plant FMU of each variant, built once per test session."""
-    from fmu.build import build_fmu
-    from plant.system import plant_system
+    from flexff.fmu.build import build_fmu
+    from flexff.plant.system import plant_system
 
     folder = tmp_path_factory.mktemp("plant_fmus")
     return {v: build_fmu(plant_system(v), folder / f"plant_{v}.fmu")
@@ -52,7 +52,7 @@ def pi_fmu(tmp_path_factory):
 def few_threads():
     """Small tensors: spare threads only wait for busy cores (see learning.threads). A module
     asks for it with `pytestmark = pytest.mark.usefixtures("few_threads")`."""
-    from learning.threads import torch_threads  # torch only for the modules that use it
+    from flexff.learning.threads import torch_threads  # torch only for the modules that use it
 
     with torch_threads():
         yield

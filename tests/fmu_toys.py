@@ -27,8 +27,8 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 
-from fmu import build_fmu
-from fmu.system import Parameter, System, Variable
+from flexff.fmu import build_fmu
+from flexff.fmu.system import Parameter, System, Variable
 
 DUFFING_PARAMS = {"m": 0.5, "k": 200.0, "c": 0.4, "alpha": 5e4, "q0": 0.05, "v0": 0.0,
                   "sigma": 1e-3}

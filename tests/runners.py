@@ -19,7 +19,7 @@ from libcosimpy.CosimManipulator import CosimManipulator
 from libcosimpy.CosimObserver import CosimObserver
 from libcosimpy.CosimSlave import CosimLocalSlave
 
-from fmu.slave import Slave
+from flexff.fmu.slave import Slave
 
 
 def run_fmu(path: str | Path, steps: int, step: float = 1e-3,

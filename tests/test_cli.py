@@ -108,7 +108,7 @@ def test_feedforward_fmu_build_needs_a_flexff_model(tmp_path):
 
 
 def test_train_and_export_from_the_command_line(tmp_path):
-    from learning.synthetic import synthetic_dataset
+    from flexff.learning.synthetic import synthetic_dataset
 
     data = synthetic_dataset(tmp_path / "data", n_train=3, n_test=1, duration=6.0, rate_hz=200.0,
                              seed=4)
@@ -129,9 +129,9 @@ def test_train_refuses_a_folder_that_is_not_a_dataset(tmp_path):
 
 
 def test_cli_model_names_are_the_library_s():
-    from learning.models import check_kind
+    from flexff.learning.models import check_kind
     from flexff.cli import MODELS, PRESETS
-    from learning.presets import PRESETS as LIBRARY_PRESETS
+    from flexff.learning.presets import PRESETS as LIBRARY_PRESETS
 
     for name in MODELS:
         check_kind(name)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.master import CosimError
+from flexff.cosim.master import CosimError
 from flexff.cli import main
 from tests.test_cosim_batch import SHORT  # a 1 s run of the manipulator
 
@@ -106,7 +106,7 @@ def test_an_output_on_a_read_only_file_system(capsys, tmp_path, config, read_onl
      "the sweep lists the same value twice: 2"),
 ], ids=["bench-steps-0", "stop-1e7", "step-1e-9", "sweep-twice"])
 def test_bad_input(capsys, monkeypatch, tmp_path, config, args, text, message):
-    monkeypatch.setattr("cosim.memory.available_memory", lambda: 16 * 10**9)
+    monkeypatch.setattr("flexff.cosim.memory.available_memory", lambda: 16 * 10**9)
     if text is not None:
         config.write_text(text)
     code, line = fails(capsys, args, config=config, tmp=tmp_path)
@@ -126,13 +126,13 @@ def test_a_run_that_failed(capsys, monkeypatch, tmp_path, config, error, message
     def run_config(*args, **kwargs):
         raise error
 
-    monkeypatch.setattr("cosim.run.run_config", run_config)
+    monkeypatch.setattr("flexff.cosim.run.run_config", run_config)
     code, line = fails(capsys, WRITERS["run"], config=config, out=tmp_path / "out")
     assert (code, line) == (1, f"flexff: error: {message}")
 
 
 def test_an_unreachable_scheduler(capsys, monkeypatch, tmp_path, config):
-    monkeypatch.setattr("cosim.batch.SCHEDULER_TIMEOUT", "1s")
+    monkeypatch.setattr("flexff.cosim.batch.SCHEDULER_TIMEOUT", "1s")
     code, line = fails(capsys, WRITERS["run"] + ["--scheduler", "tcp://127.0.0.1:9"],
                        config=config, out=tmp_path / "out")
     assert code == 1
@@ -144,7 +144,7 @@ def test_an_interrupted_run(capsys, monkeypatch, tmp_path, config):
     def run_config(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("cosim.run.run_config", run_config)
+    monkeypatch.setattr("flexff.cosim.run.run_config", run_config)
     assert main(["run", str(config), "-o", str(tmp_path / "out")]) == 130
     assert capsys.readouterr().err == ("flexff: interrupted; the runs that finished keep their "
                                        "folders; no file is left half-written\n")
@@ -156,7 +156,7 @@ def test_a_traceback_only_with_debug(capsys, monkeypatch, tmp_path, config, debu
     def run_config(*args, **kwargs):
         raise KeyError("x_ref")
 
-    monkeypatch.setattr("cosim.run.run_config", run_config)
+    monkeypatch.setattr("flexff.cosim.run.run_config", run_config)
     monkeypatch.setenv("FLEXFF_DEBUG", "0")  # restored after the test: --debug sets it
     args = ["--debug"] * debug + ["run", str(config), "-o", str(tmp_path / "out")]
     assert main(args) == 1

@@ -20,11 +20,11 @@ import numpy as np
 import psutil
 import pytest
 
-from cosim.run import simulate_config
-from learning.collect import (CollectionError, CollectionReport, DataFolderError, Outcome,
-                              collect, dataset_signals, run_collection, trajectory_config)
-from learning.dataset import MANIFEST, SIGNALS, DatasetError, load_dataset
-from learning.trajectories import trajectory_set
+from flexff.cosim.run import simulate_config
+from flexff.learning.collect import (CollectionError, CollectionReport, DataFolderError, Outcome,
+                                     collect, dataset_signals, run_collection, trajectory_config)
+from flexff.learning.dataset import MANIFEST, SIGNALS, DatasetError, load_dataset
+from flexff.learning.trajectories import trajectory_set
 
 FIRST = 3  # trajectories of the small collections
 
@@ -130,7 +130,7 @@ def test_a_killed_collection_resumes(collected, tmp_path):
     """Kill a collection (and its worker) once its first file is there: what it left loads or
     is a hidden temporary file, there is no manifest, and running again completes it."""
     out = tmp_path / "sim"
-    code = ("from learning.collect import run_collection; "
+    code = ("from flexff.learning.collect import run_collection; "
             f"run_collection('sim', {str(out)!r}, workers=1, progress=False, limit={FIRST})")
     process = subprocess.Popen([sys.executable, "-c", code], start_new_session=True)
     try:
@@ -243,7 +243,7 @@ def test_a_full_disk_stops_the_collection_with_one_message(tmp_path, monkeypatch
     `flexff data collect` says so in one line, without stack frames."""
     from flexff.cli import main
 
-    monkeypatch.setattr("learning.collect.save_signals", _full_disk)  # forked workers inherit it
+    monkeypatch.setattr("flexff.learning.collect.save_signals", _full_disk)  # forked workers inherit it
     args = ["data", "collect", "--set", "sim", "-o", str(tmp_path / "sim"), "--workers", "1"]
     if scheduler:
         from dask.distributed import LocalCluster
@@ -270,7 +270,7 @@ def test_a_full_disk_stops_the_collection_with_one_message(tmp_path, monkeypatch
 def test_workers_end_with_a_killed_collection(tmp_path):
     """SIGKILL of `data collect` (the parent alone): its pool workers end within seconds
     instead of waiting forever for work."""
-    code = ("from learning.collect import run_collection; "
+    code = ("from flexff.learning.collect import run_collection; "
             f"run_collection('sim', {str(tmp_path / 'sim')!r}, workers=2, progress=False, "
             f"limit=6)")
     process = subprocess.Popen([sys.executable, "-c", code], start_new_session=True)
@@ -331,7 +331,7 @@ def test_cli_prints_a_summary_and_the_status(monkeypatch, tmp_path, capsys):
         return CollectionReport(Path(out), set_name, (Outcome("circle-01", 1.0, 7.25),),
                                 ("circle-00",), (Outcome("circle-02", error="boom"),), 4.0)
 
-    monkeypatch.setattr("learning.collect.run_collection", fake)
+    monkeypatch.setattr("flexff.learning.collect.run_collection", fake)
     status = main(["data", "collect", "--set", "hardware", "-o", str(tmp_path), "--workers", "3",
                    "--scheduler", "tcp://h:8786"])
     out, err = capsys.readouterr()

@@ -11,14 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.config import parse_config
-from cosim.schema import ConfigError
-from fmu.build import build_fmu
-from learning.collect import DataFolderError, PROGRESS, collect, run_collection
-from learning.dataset import MANIFEST, REFERENCE_SIGNALS, SIGNALS, file_sha256, load_dataset
-from learning.evaluate import evaluate, scenario_config
-from learning.synthetic import synthetic_dataset
-from plant.system import plant_system
+from flexff.cosim.config import parse_config
+from flexff.cosim.schema import ConfigError
+from flexff.fmu.build import build_fmu
+from flexff.learning.collect import DataFolderError, PROGRESS, collect, run_collection
+from flexff.learning.dataset import MANIFEST, REFERENCE_SIGNALS, SIGNALS, file_sha256, load_dataset
+from flexff.learning.evaluate import evaluate, scenario_config
+from flexff.learning.synthetic import synthetic_dataset
+from flexff.plant.system import plant_system
 
 FIRST = 2  # trajectories of the small collections
 HEAVY = {"m_up1": 0.13, "k_t1": 0.0332}  # nominal: 0.1 kg, 0.0369 Nm/A
@@ -211,7 +211,7 @@ values = {{ i1 = 0.0, i2 = 0.0, i3 = 0.0 }}
 
 def test_cli_passes_the_configuration(monkeypatch, tmp_path, capsys):
     from flexff.cli import main
-    from learning.collect import CollectionReport
+    from flexff.learning.collect import CollectionReport
 
     seen = {}
 
@@ -219,7 +219,7 @@ def test_cli_passes_the_configuration(monkeypatch, tmp_path, capsys):
         seen["config"] = config
         return CollectionReport(Path(out), set_name, (), (), (), 0.0)
 
-    monkeypatch.setattr("learning.collect.run_collection", fake)
+    monkeypatch.setattr("flexff.learning.collect.run_collection", fake)
     config = tmp_path / "heavy.toml"
     config.write_text('[reference]\nkind = "thesis-eval"\n[plant]\nm_up1 = 0.13\n')
     assert main(["data", "collect", "--set", "sim", "--config", str(config), "-o",
@@ -237,7 +237,7 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
         seen.update(env=env, loop=loop)
         (Path(out) / "table.md").write_text("| table |\n")
 
-    monkeypatch.setattr("learning.evaluate.evaluate", fake)
+    monkeypatch.setattr("flexff.learning.evaluate.evaluate", fake)
     config = tmp_path / "heavy.toml"
     config.write_text('[reference]\nkind = "thesis-eval"\n[plant]\nm_up1 = 0.13\n')
     assert main(["evaluate", "--config", str(config), "--env", "hardware", "-o",
@@ -302,7 +302,7 @@ def test_evaluate_on_a_loop(heavy_loop, tmp_path, monkeypatch):
     def stop(set_name, out, config):
         raise SystemExit((set_name, config))
 
-    monkeypatch.setattr("learning.evaluate.collect", stop)
+    monkeypatch.setattr("flexff.learning.evaluate.collect", stop)
     with pytest.raises(SystemExit) as info:
         evaluate("sim", tmp_path / "eval", models=["pgnn"], loop=scenario_config(
             "sim", "rigid-body", loop=heavy_loop))

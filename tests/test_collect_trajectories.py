@@ -10,12 +10,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from controllers.allocation import motor_currents
-from cosim.config import parse_config
-from cosim.references import build_reference
-from learning import trajectories as T
-from learning.trajectories import R_MAX, R_MIN, trajectory_set
-from plant.model import PlantModel
+from flexff.controllers.allocation import motor_currents
+from flexff.cosim.config import parse_config
+from flexff.cosim.references import build_reference
+from flexff.learning import trajectories as T
+from flexff.learning.trajectories import R_MAX, R_MIN, trajectory_set
+from flexff.plant.model import PlantModel
 
 COUNTS = {"sim": {("train", "circle"): 20, ("train", "line-circle"): 10,
                   ("train", "spline"): 14, ("test", "test-circle"): 3,

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from controllers.allocation import (actuation_jacobian, allocate_torques, measured_position,
-                                    motor_currents)
-from controllers.feedback import HOME_ANGLES, controller_design, controller_system
-from controllers.feedforward import rigid_body_feedforward_system
-from plant.kinematics import shoulder_angles
-from plant.parameters import NOMINAL
+from flexff.controllers.allocation import (actuation_jacobian, allocate_torques, measured_position,
+                                           motor_currents)
+from flexff.controllers.feedback import HOME_ANGLES, controller_design, controller_system
+from flexff.controllers.feedforward import rigid_body_feedforward_system
+from flexff.plant.kinematics import shoulder_angles
+from flexff.plant.parameters import NOMINAL
 from tests.helpers import workspace_points
 
 POS, FORCE = ca.SX.sym("pos", 2), ca.SX.sym("force", 2)

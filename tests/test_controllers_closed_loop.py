@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from controllers.feedback import controller_design, controller_system
-from controllers.feedforward import rigid_body_feedforward_system
-from cosim.references import Chain, Circle, Line, sample, thesis_evaluation
+from flexff.controllers.feedback import controller_design, controller_system
+from flexff.controllers.feedforward import rigid_body_feedforward_system
+from flexff.cosim.references import Chain, Circle, Line, sample, thesis_evaluation
 
 STEP, SUBSTEPS = 1e-3, 4
 COUNT = 2 * math.pi / 2048 * 0.3086  # an upper arm's travel per encoder count: 0.95 mm

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from controllers.feedback import controller_design, controller_system, parasitic_mode_hz
-from controllers.loop_shaping import axis_plant, design_pid, loop_margins
-from plant.analysis import FRICTION_FREE, linearization
-from plant.model import PlantModel
+from flexff.controllers.feedback import controller_design, controller_system, parasitic_mode_hz
+from flexff.controllers.loop_shaping import axis_plant, design_pid, loop_margins
+from flexff.plant.analysis import FRICTION_FREE, linearization
+from flexff.plant.model import PlantModel
 
 STEP = 1e-3
 

@@ -12,20 +12,20 @@ import onnx
 import pytest
 from fmpy.fmi2 import fmi2Error
 
-from controllers.features import feature_names, reference_features
-from controllers.learned_feedforward import learned_feedforward_system
-from controllers.training_range import MARGIN, RangeExcess
-from cosim.config import config_examples, parse_config
-from cosim.references import thesis_evaluation
-from cosim.run import range_warning, run_config
-from fmu.build import build_fmu
-from fmu.validation import validate_fmu
-from learning.dataset import REFERENCE_SIGNALS
-from learning.export import export, session
-from learning.rigid import rigid_forces
-from learning.synthetic import synthetic_dataset
-from learning.threads import torch_threads
-from learning.train import train
+from flexff.controllers.features import feature_names, reference_features
+from flexff.controllers.learned_feedforward import learned_feedforward_system
+from flexff.controllers.training_range import MARGIN, RangeExcess
+from flexff.cosim.config import config_examples, parse_config
+from flexff.cosim.references import thesis_evaluation
+from flexff.cosim.run import range_warning, run_config
+from flexff.fmu.build import build_fmu
+from flexff.fmu.validation import validate_fmu
+from flexff.learning.dataset import REFERENCE_SIGNALS
+from flexff.learning.export import export, session
+from flexff.learning.rigid import rigid_forces
+from flexff.learning.synthetic import synthetic_dataset
+from flexff.learning.threads import torch_threads
+from flexff.learning.train import train
 from tests.fmu_toys import LoggedSlave, status_of
 from tests.runners import run_fmu, run_fmu_libcosim
 from tests.test_fmu_network import running_sum_graph

@@ -9,9 +9,9 @@ import numpy as np
 import onnx
 import pytest
 
-from controllers.features import feature_names, reference_features
-from plant.signals import REFERENCE, names
-from controllers.training_range import MARGIN, training_range_excess
+from flexff.controllers.features import feature_names, reference_features
+from flexff.plant.signals import REFERENCE, names
+from flexff.controllers.training_range import MARGIN, training_range_excess
 
 RADIUS, RATE = 0.01, 2 * np.pi * 0.5  # m, rad/s
 

@@ -9,8 +9,8 @@ from dataclasses import replace
 
 import pytest
 
-from cosim.batch import run_batch, sweep
-from cosim.config import config_examples, parse_config
+from flexff.cosim.batch import run_batch, sweep
+from flexff.cosim.config import config_examples, parse_config
 
 SHORT = """
 [run]
@@ -66,7 +66,7 @@ def test_sweep(tmp_path):
 def test_sweep_folder_names_are_safe_and_unique(tmp_path):
     """Values with separators and `..` stay inside the output folder, values that clean up to
     the same name get a suffix, and a value given twice is refused."""
-    from cosim.references import Line, sample
+    from flexff.cosim.references import Line, sample
 
     for name in ("ref.csv", "a b.csv", "a_b.csv"):
         sample(Line((0.0, 0.0), (0.005, 0.0), 0.5), 0.01).to_csv(tmp_path / name)
@@ -84,7 +84,7 @@ def test_sweep_folder_names_are_safe_and_unique(tmp_path):
 
 
 def test_a_failed_run_carries_its_traceback_only_when_debugging(tmp_path):
-    from cosim.batch import _run_one
+    from flexff.cosim.batch import _run_one
 
     config = tmp_path / "one.toml"
     config.write_text(SHORT)

@@ -5,11 +5,11 @@ import json
 
 import pytest
 
-from controllers.feedback import parasitic_mode_hz
-from cosim.config import ConfigError, config_examples, load_config, parse_config
-from cosim.references import thesis_evaluation
-from cosim.run import run_config
-from cosim.scenario import controller_for
+from flexff.controllers.feedback import parasitic_mode_hz
+from flexff.cosim.config import ConfigError, config_examples, load_config, parse_config
+from flexff.cosim.references import thesis_evaluation
+from flexff.cosim.run import run_config
+from flexff.cosim.scenario import controller_for
 
 GOOD = """
 [run]

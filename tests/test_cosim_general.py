@@ -30,11 +30,11 @@ import numpy as np
 import pytest
 import tomli_w
 
-from cosim.config import config_examples, expanded, expanded_text, load_config, parse_config
-from cosim.recording import NPZ_NAME, load_recording
-from cosim.run import run_config, simulate_config
-from cosim.scenario import resolve
-from cosim.schema import ConfigError
+from flexff.cosim.config import config_examples, expanded, expanded_text, load_config, parse_config
+from flexff.cosim.recording import NPZ_NAME, load_recording
+from flexff.cosim.run import run_config, simulate_config
+from flexff.cosim.scenario import resolve
+from flexff.cosim.schema import ConfigError
 from flexff.cli import main
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "fmus"
@@ -284,7 +284,7 @@ def test_units_must_agree(tmp_path, capsys):
 
 def test_reference_fmus_declare_no_units(ref_fmu):
     """Why test_units_must_agree uses the built-ins (if this fails, use a Reference-FMU)."""
-    from fmu.importer import read_fmu
+    from flexff.fmu.importer import read_fmu
 
     for model in ("VanDerPol", "Feedthrough", "Dahlquist"):
         for version in (2, 3):

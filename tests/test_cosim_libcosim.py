@@ -11,18 +11,18 @@ libcosim's integer-nanosecond clock), and its gap to cosim.master is measured.
 import numpy as np
 import pytest
 
-from controllers.feedback import controller_system
-from controllers.feedforward import rigid_body_feedforward_system
-from cosim.libcosim import run_libcosim
-from cosim.master import Master, SlaveSpec
-from cosim.metrics import error_norms
-from cosim.references import thesis_evaluation
-from cosim.scenario import reference_samples
-from cosim.wiring import SOURCE, Port, wire
-from fmu.importer import read_fmu
-from fmu.build import build_fmu
-from fmu.slave import Slave
-from plant.system import plant_system
+from flexff.controllers.feedback import controller_system
+from flexff.controllers.feedforward import rigid_body_feedforward_system
+from flexff.cosim.libcosim import run_libcosim
+from flexff.cosim.master import Master, SlaveSpec
+from flexff.cosim.metrics import error_norms
+from flexff.cosim.references import thesis_evaluation
+from flexff.cosim.scenario import reference_samples
+from flexff.cosim.wiring import SOURCE, Port, wire
+from flexff.fmu.importer import read_fmu
+from flexff.fmu.build import build_fmu
+from flexff.fmu.slave import Slave
+from flexff.plant.system import plant_system
 
 STEP, STEPS = 1e-3, 15000
 NANOSECONDS = 1_000_000

@@ -11,16 +11,16 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from controllers.feedback import controller_system
-from controllers.feedforward import rigid_body_feedforward_system
-from cosim.floor import run_c_loop
-from cosim.master import CosimError, Master, SlaveSpec
-from cosim.references import thesis_evaluation
-from cosim.scenario import reference_samples
-from cosim.wiring import SOURCE, Port, wire
-from fmu.importer import read_fmu
-from fmu.build import build_fmu
-from plant.system import plant_system
+from flexff.controllers.feedback import controller_system
+from flexff.controllers.feedforward import rigid_body_feedforward_system
+from flexff.cosim.floor import run_c_loop
+from flexff.cosim.master import CosimError, Master, SlaveSpec
+from flexff.cosim.references import thesis_evaluation
+from flexff.cosim.scenario import reference_samples
+from flexff.cosim.wiring import SOURCE, Port, wire
+from flexff.fmu.importer import read_fmu
+from flexff.fmu.build import build_fmu
+from flexff.plant.system import plant_system
 
 STEP, STOP = 1e-3, 15.0
 STEPS = int(round(STOP / STEP))

@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.engine import idle_timing
-from cosim.master import Master, SlaveSpec
-from cosim.realtime import realtime_process
-from cosim.recording import load_recording
-from cosim.timing import Pacing
+from flexff.cosim.engine import idle_timing
+from flexff.cosim.master import Master, SlaveSpec
+from flexff.cosim.realtime import realtime_process
+from flexff.cosim.recording import load_recording
+from flexff.cosim.timing import Pacing
 from flexff.cli import main
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "fmus"

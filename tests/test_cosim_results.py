@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from cosim.metrics import error_norms, run_metrics, tracking_metrics
-from cosim.plots import write_plots
-from cosim.recording import CSV_NAME, NPZ_NAME, Recording, atomic_write, load_recording
-from cosim.recording import save_recording
+from flexff.cosim.metrics import error_norms, run_metrics, tracking_metrics
+from flexff.cosim.plots import write_plots
+from flexff.cosim.recording import CSV_NAME, NPZ_NAME, Recording, atomic_write, load_recording
+from flexff.cosim.recording import save_recording
 
 
 def synthetic():

@@ -14,11 +14,11 @@ import pytest
 import tomli_w
 from lxml import etree
 
-from cosim.config import load_config
-from cosim.run import run_config, simulate_config
-from cosim.schema import ConfigError
-from cosim.ssp import NS, SSD, export_ssp, load_ssp
-from fmu.importer import read_fmu
+from flexff.cosim.config import load_config
+from flexff.cosim.run import run_config, simulate_config
+from flexff.cosim.schema import ConfigError
+from flexff.cosim.ssp import NS, SSD, export_ssp, load_ssp
+from flexff.fmu.importer import read_fmu
 
 FMUS = Path(__file__).resolve().parents[2] / "shared" / "fmus"
 STEPS = 200

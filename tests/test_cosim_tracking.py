@@ -9,9 +9,9 @@ compared; the numbers are printed (pytest -s) for the report.
 import numpy as np
 import pytest
 
-from cosim.config import config_examples, parse_config
-from cosim.metrics import error_norms, run_metrics
-from cosim.run import simulate_config
+from flexff.cosim.config import config_examples, parse_config
+from flexff.cosim.metrics import error_norms, run_metrics
+from flexff.cosim.run import simulate_config
 
 THESIS_E2 = (42.93e-4, 42.94e-4)
 THESIS_EINF = (142.23e-4, 140.00e-4)

@@ -14,12 +14,12 @@ import pytest
 from fmpy import read_model_description
 
 from flexff.fmu_bench import BENCH_SOURCE
-from fmu import build_fmu, fmu_key
-from fmu.codegen import generate_model_c
-from fmu.compile import SANITIZE_ENV, sanitizer_flags
-from fmu.layout import make_layout
-from fmu.system import System, Variable
-from fmu.validation import FMI2_CS_FUNCTIONS, validate_fmu
+from flexff.fmu import build_fmu, fmu_key
+from flexff.fmu.codegen import generate_model_c
+from flexff.fmu.compile import SANITIZE_ENV, sanitizer_flags
+from flexff.fmu.layout import make_layout
+from flexff.fmu.system import System, Variable
+from flexff.fmu.validation import FMI2_CS_FUNCTIONS, validate_fmu
 from tests.fmu_toys import build_toy, discrete_pi, duffing
 from tests.runners import run_fmu
 
@@ -122,8 +122,8 @@ def test_c_sources_compile_without_warnings(toy_fmu, tmp_path):
 
 def test_codegen_and_key_are_deterministic():
     """Two fresh processes generate the same C and the same cache key."""
-    script = ("from tests.fmu_toys import duffing; from fmu import fmu_key; "
-              "from fmu.codegen import generate_model_c; import hashlib; "
+    script = ("from tests.fmu_toys import duffing; from flexff.fmu import fmu_key; "
+              "from flexff.fmu.codegen import generate_model_c; import hashlib; "
               "print(fmu_key(duffing()), hashlib.sha256(str(generate_model_c(duffing(), 'd'))"
               ".encode()).hexdigest())")
     root = Path(__file__).parent.parent

@@ -25,12 +25,12 @@ from fmpy import extract, read_model_description
 from onnx import TensorProto
 from onnx import helper as oh
 
-from controllers.features import feature_names
-from controllers.feedback import controller_system
-from controllers.learned_feedforward import learned_feedforward_system
-from fmu.build import build_fmu
-from fmu.compile import SANITIZE_ENV, compiler
-from plant.system import plant_system
+from flexff.controllers.features import feature_names
+from flexff.controllers.feedback import controller_system
+from flexff.controllers.learned_feedforward import learned_feedforward_system
+from flexff.fmu.build import build_fmu
+from flexff.fmu.compile import SANITIZE_ENV, compiler
+from flexff.plant.system import plant_system
 
 DRIVER = Path(__file__).with_name("fmu_fuzz_driver.py")
 KINDS = ("plant", "controller", "feedforward-step", "feedforward-precomputed")

@@ -17,9 +17,9 @@ from fmpy.fmi2 import FMU2Slave, fmi2Error, fmi2FMUstate, fmi2OK
 from onnx import TensorProto
 from onnx import helper as oh
 
-from fmu.network import read_network
-from fmu.system import System, Variable
-from fmu.validation import validate_fmu
+from flexff.fmu.network import read_network
+from flexff.fmu.system import System, Variable
+from flexff.fmu.validation import validate_fmu
 from tests.fmu_toys import LoggedSlave, build_toy, logging_callbacks, status_of
 from tests.runners import run_fmu, run_fmu_libcosim
 

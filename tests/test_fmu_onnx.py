@@ -18,11 +18,11 @@ from onnx import TensorProto
 from onnx import helper as oh
 
 from flexff.cli import main
-from fmu.build import build_fmu
-from fmu.onnx_fmu import onnx_system
-from fmu.onnx_graph import graph_network, read_graph
-from fmu.slave import Slave
-from fmu.validation import validate_fmu
+from flexff.fmu.build import build_fmu
+from flexff.fmu.onnx_fmu import onnx_system
+from flexff.fmu.onnx_graph import graph_network, read_graph
+from flexff.fmu.slave import Slave
+from flexff.fmu.validation import validate_fmu
 from tests.runners import run_fmu, run_fmu_libcosim
 
 STEPS = 40

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 import torch
 
-from controllers.features import motion_features, motion_function
-from learning.casadi_torch import TorchFunction, atan2, frozen
-from learning.rigid import RigidBodyForce, rigid_forces
+from flexff.controllers.features import motion_features, motion_function
+from flexff.learning.casadi_torch import TorchFunction, atan2, frozen
+from flexff.learning.rigid import RigidBodyForce, rigid_forces
 
 
 pytestmark = pytest.mark.usefixtures("few_threads")

@@ -13,12 +13,12 @@ import time
 import pytest
 import torch
 
-import learning.train as training
+import flexff.learning.train as training
 from flexff.cli import main
-from learning.export import export
-from learning.run_folder import RunFolderError, load_run
-from learning.synthetic import synthetic_dataset
-from learning.train import train
+from flexff.learning.export import export
+from flexff.learning.run_folder import RunFolderError, load_run
+from flexff.learning.synthetic import synthetic_dataset
+from flexff.learning.train import train
 
 FILES = ("run.json", "model.pt", "metrics.json", "loss.png")
 

@@ -7,8 +7,8 @@ import shutil
 import numpy as np
 import pytest
 
-from learning.dataset import COLLECTED, SIGNALS, DatasetError, load_dataset, write_manifest
-from learning.synthetic import synthetic_dataset
+from flexff.learning.dataset import COLLECTED, SIGNALS, DatasetError, load_dataset, write_manifest
+from flexff.learning.synthetic import synthetic_dataset
 
 
 @pytest.fixture

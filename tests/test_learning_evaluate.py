@@ -8,10 +8,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from controllers.model_card import read_card
-from cosim.references import build_reference
-from learning.evaluate import ENVIRONMENTS, evaluate, scenario_config
-from learning.synthetic import synthetic_dataset
+from flexff.controllers.model_card import read_card
+from flexff.cosim.references import build_reference
+from flexff.learning.evaluate import ENVIRONMENTS, evaluate, scenario_config
+from flexff.learning.synthetic import synthetic_dataset
 
 
 @pytest.fixture(scope="module")

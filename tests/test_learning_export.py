@@ -9,16 +9,16 @@ import onnx
 import pytest
 import torch
 
-from controllers.features import reference_features
-from controllers.model_card import ModelCard, read_card
-from learning.dataset import REFERENCE_SIGNALS, load_dataset
-from learning.deploy import SIModel, predict
-from learning.export import TOLERANCE, export, run_sequence, run_steps, session
-from learning.features import prepare_trajectory
-from learning.rigid import rigid_forces
-from learning.run_folder import load_run
-from learning.synthetic import synthetic_dataset
-from learning.train import train
+from flexff.controllers.features import reference_features
+from flexff.controllers.model_card import ModelCard, read_card
+from flexff.learning.dataset import REFERENCE_SIGNALS, load_dataset
+from flexff.learning.deploy import SIModel, predict
+from flexff.learning.export import TOLERANCE, export, run_sequence, run_steps, session
+from flexff.learning.features import prepare_trajectory
+from flexff.learning.rigid import rigid_forces
+from flexff.learning.run_folder import load_run
+from flexff.learning.synthetic import synthetic_dataset
+from flexff.learning.train import train
 
 TINY = {
     "lstm": {"hidden": 12},
@@ -215,7 +215,7 @@ def test_a_failed_export_leaves_the_file_as_it_was(runs, tmp_path, monkeypatch, 
     out = tmp_path / "pgnn.onnx"
     good = export(runs / "pgnn", out).read_bytes()
     if failure == "accuracy":
-        monkeypatch.setattr("learning.export.TOLERANCE", -1.0)
+        monkeypatch.setattr("flexff.learning.export.TOLERANCE", -1.0)
         expected, match = RuntimeError, f"^{out}: onnxruntime deviates from PyTorch"
     else:
         def broken(graph):

@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
-from controllers.features import (feature_names, feature_units, motion_columns, motion_features,
-                                  reference_features)
-from learning.dataset import REFERENCE_SIGNALS
-from learning.features import (FeatureConfig, decimation, differentiate, encoder_positions,
-                               lowpass, prepare_trajectory, quantize_encoders)
-from learning.scaling import MinMaxScaler
-from learning.synthetic import skew_sine_circle, synthetic_trajectory
-from plant.kinematics import COORDINATE_NAMES, SHOULDER_INDEX
+from flexff.controllers.features import (feature_names, feature_units, motion_columns,
+                                         motion_features, reference_features)
+from flexff.learning.dataset import REFERENCE_SIGNALS
+from flexff.learning.features import (FeatureConfig, decimation, differentiate, encoder_positions,
+                                      lowpass, prepare_trajectory, quantize_encoders)
+from flexff.learning.scaling import MinMaxScaler
+from flexff.learning.synthetic import skew_sine_circle, synthetic_trajectory
+from flexff.plant.kinematics import COORDINATE_NAMES, SHOULDER_INDEX
 
 
 def test_chain_rule_velocities_match_finite_differences_of_the_coordinates(nominal):

@@ -2,12 +2,12 @@
 
 import pytest
 
-from learning.dataset import load_dataset
-from learning.features import decimation, prepare_trajectory
-from learning.friction import LINEAR, identify_friction
-from learning.presets import make_config
-from learning.synthetic import synthetic_dataset
-from plant.parameters import HARDWARE, MOTOR_FRICTION
+from flexff.learning.dataset import load_dataset
+from flexff.learning.features import decimation, prepare_trajectory
+from flexff.learning.friction import LINEAR, identify_friction
+from flexff.learning.presets import make_config
+from flexff.learning.synthetic import synthetic_dataset
+from flexff.plant.parameters import HARDWARE, MOTOR_FRICTION
 
 
 def _identify(path, friction):

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 from scipy.io import savemat
 
-from learning.collect import collect
-from learning.dataset import (ENCODER_SIGNALS, LABEL_SIGNALS, POSITION_SIGNALS,
-                              REFERENCE_SIGNALS, DatasetError, Trajectory, load_dataset,
-                              write_manifest)
-from learning.features import prepare_trajectory
-from learning.logs import FK, import_logs
-from learning.presets import make_config
-from learning.train import train
+from flexff.learning.collect import collect
+from flexff.learning.dataset import (ENCODER_SIGNALS, LABEL_SIGNALS, POSITION_SIGNALS,
+                                     REFERENCE_SIGNALS, DatasetError, Trajectory, load_dataset,
+                                     write_manifest)
+from flexff.learning.features import prepare_trajectory
+from flexff.learning.logs import FK, import_logs
+from flexff.learning.presets import make_config
+from flexff.learning.train import train
 
 MEASURED = ("time", *ENCODER_SIGNALS, *LABEL_SIGNALS)
 FIRST = 3  # collected trajectories

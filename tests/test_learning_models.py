@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from learning.models import (TemporalConvNet, build_network, fit_linear_skip, parameter_count,
-                             receptive_field, uses_prior)
+from flexff.learning.models import (TemporalConvNet, build_network, fit_linear_skip,
+                                    parameter_count, receptive_field, uses_prior)
 
 SMALL = {
     "lstm": {"hidden": 12, "layers": 2, "dropout": 0.05},

@@ -14,10 +14,10 @@ import math
 import numpy as np
 import pytest
 
-from cosim.metrics import tracking_metrics
-from cosim.recording import Recording
-from learning.report import SCENARIO_LABELS, THESIS_TABLES, markdown_table, summarize
-from learning.report import write_report
+from flexff.cosim.metrics import tracking_metrics
+from flexff.cosim.recording import Recording
+from flexff.learning.report import SCENARIO_LABELS, THESIS_TABLES, markdown_table, summarize
+from flexff.learning.report import write_report
 
 STEP, N = 1e-3, 2000
 T = N * STEP

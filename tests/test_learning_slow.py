@@ -10,9 +10,9 @@ import json
 
 import pytest
 
-from learning.export import export
-from learning.synthetic import synthetic_collection_set
-from learning.train import train
+from flexff.learning.export import export
+from flexff.learning.synthetic import synthetic_collection_set
+from flexff.learning.train import train
 
 
 @pytest.fixture(scope="module")

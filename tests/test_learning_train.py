@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 import torch
 
-import learning.train as training
-from learning.batches import PAD, TRAIN, VALIDATION, window_roles
-from learning.dataset import DatasetError, load_dataset
-from learning.deploy import predict
-from learning.features import FeatureConfig, prepare_trajectory
-from learning.presets import make_config
-from learning.run_folder import load_run
-from learning.synthetic import synthetic_dataset
-from learning.threads import cpu_threads, torch_threads
-from learning.train import learning_rate, train
+import flexff.learning.train as training
+from flexff.learning.batches import PAD, TRAIN, VALIDATION, window_roles
+from flexff.learning.dataset import DatasetError, load_dataset
+from flexff.learning.deploy import predict
+from flexff.learning.features import FeatureConfig, prepare_trajectory
+from flexff.learning.presets import make_config
+from flexff.learning.run_folder import load_run
+from flexff.learning.synthetic import synthetic_dataset
+from flexff.learning.threads import cpu_threads, torch_threads
+from flexff.learning.train import learning_rate, train
 
 TINY = {"lstm": {"hidden": 16, "layers": 2, "linear_skip": False}, "pgnn": {"channels": 8, "levels": 3}, "tcn": {"channels": 8}}
 

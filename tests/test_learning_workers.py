@@ -4,9 +4,9 @@ and a failed one is reported, not lost."""
 import pytest
 import torch
 
-from learning.synthetic import synthetic_dataset
-from learning.train import train
-from learning.workers import TrainJob, train_parallel
+from flexff.learning.synthetic import synthetic_dataset
+from flexff.learning.train import train
+from flexff.learning.workers import TrainJob, train_parallel
 
 TINY = {"pgnn": {"channels": 8, "levels": 3, "epochs": 2},
         "tcn": {"channels": 8, "levels": 3, "epochs": 2}}

@@ -5,8 +5,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from plant.analysis import FRICTION_FREE, modes
-from plant.parameters import HARDWARE, MOTOR_FRICTION, NOMINAL
+from flexff.plant.analysis import FRICTION_FREE, modes
+from flexff.plant.parameters import HARDWARE, MOTOR_FRICTION, NOMINAL
 from tests.helpers import simulate, workspace_points
 
 NO_DAMPING = {f"{d}{i}": 0.0 for d in ("d_s", "d_e", "d_w") for i in (1, 2, 3)} | {"d_tool": 0.0}

@@ -7,10 +7,10 @@ from fmpy import read_model_description
 from fmpy.fmi2 import fmi2Error
 from scipy.integrate import solve_ivp
 
-from fmu.slave import Slave
-from fmu.validation import validate_fmu
-from plant.model import PlantModel
-from plant.system import plant_system
+from flexff.fmu.slave import Slave
+from flexff.fmu.validation import validate_fmu
+from flexff.plant.model import PlantModel
+from flexff.plant.system import plant_system
 from tests.fmu_toys import LoggedSlave, rk4_reference, status_of
 from tests.runners import run_fmu, run_fmu_libcosim
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from plant.kinematics import check_workspace
-from plant.parameters import NOMINAL
+from flexff.plant.kinematics import check_workspace
+from flexff.plant.parameters import NOMINAL
 from tests.helpers import workspace_points
 
 L, R = NOMINAL.l_up, NOMINAL.r_mount

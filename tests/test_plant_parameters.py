@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from plant.analysis import modes, plant_info
-from plant.model import PlantModel, get_variant
-from plant.parameters import HARDWARE, NOMINAL, PlantParameters
+from flexff.plant.analysis import modes, plant_info
+from flexff.plant.model import PlantModel, get_variant
+from flexff.plant.parameters import HARDWARE, NOMINAL, PlantParameters
 
 
 def test_seed_figures_are_kept():

@@ -3,11 +3,12 @@
 import casadi as ca
 import pytest
 
-from controllers.feedback import INPUTS, OUTPUTS
-from controllers.feedforward import rigid_body_feedforward_system
-from plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, REFERENCE,
-                           TRUE_POSITION, TRUE_VELOCITY, names, pick, reference_motion, units)
-from plant.system import plant_system
+from flexff.controllers.feedback import INPUTS, OUTPUTS
+from flexff.controllers.feedforward import rigid_body_feedforward_system
+from flexff.plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES,
+                                  REFERENCE, TRUE_POSITION, TRUE_VELOCITY, names, pick,
+                                  reference_motion, units)
+from flexff.plant.system import plant_system
 
 
 def test_the_names_and_units_of_design_md():

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from cosim.memory import MemoryNeeded, available_memory
-from cosim.references import (Chain, Circle, Hold, Line, Reference, Spline, read_csv, sample,
-                              thesis_evaluation, thesis_evaluation_path)
+from flexff.cosim.memory import MemoryNeeded, available_memory
+from flexff.cosim.references import (Chain, Circle, Hold, Line, Reference, Spline, read_csv, sample,
+                                     thesis_evaluation, thesis_evaluation_path)
 
 STEP = 1e-3
 
@@ -203,7 +203,7 @@ def test_csv_errors_name_the_problem_not_the_content(tmp_path, content, message)
 
 def test_sampling_beyond_the_available_memory_is_refused_before_allocating(monkeypatch):
     assert available_memory() > 0
-    monkeypatch.setattr("cosim.memory.available_memory", lambda: 500 * 10**6)
+    monkeypatch.setattr("flexff.cosim.memory.available_memory", lambda: 500 * 10**6)
     with pytest.raises(MemoryNeeded, match=r"sampling the 15 s reference every 1e-06 s needs "
                                            r"840 MB, more than the 500 MB of memory available"):
         sample(thesis_evaluation_path(), 1e-6)
