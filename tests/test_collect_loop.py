@@ -253,7 +253,7 @@ def test_the_default_scenarios_are_the_short_forms(env, name):
     variant, kind = {"sim": ("nominal", "thesis-eval"),
                      "hardware": ("hardware", "thesis-hardware-eval")}[env]
     short = parse_config({"reference": {"kind": kind}, "plant": {"variant": variant, "seed": 1},
-                          "feedforward": {"kind": "none" if name == "pid" else "model"}})
+                          "feedforward": {"kind": "none" if name == "pid" else "rigid-body"}})
     ours = scenario_config(env, name)
     for field in ("step", "stop", "fmus", "reference", "sources", "connections", "algorithm",
                   "record"):
