@@ -16,7 +16,7 @@ from fmpy import read_model_description
 from flexff.fmu_bench import BENCH_SOURCE
 from flexff.fmu import build_fmu, fmu_key
 from flexff.fmu.codegen import generate_model_c
-from flexff.fmu.compile import SANITIZE_ENV, sanitizer_flags
+from flexff.fmu.compile import HOST_HEADER, SANITIZE_ENV, sanitizer_flags
 from flexff.fmu.layout import make_layout
 from flexff.fmu.system import System, Variable
 from flexff.fmu.validation import FMI2_CS_FUNCTIONS, validate_fmu
@@ -116,7 +116,8 @@ def test_c_sources_compile_without_warnings(toy_fmu, tmp_path):
     for source in (tmp_path / "sources" / "fmi2_cosim.c", BENCH_SOURCE):
         result = subprocess.run(["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-pedantic",
                                  "-Werror", "-fsyntax-only", f"-I{tmp_path / 'sources'}",
-                                 str(source)], capture_output=True, text=True)
+                                 f"-I{HOST_HEADER.parent}", str(source)],
+                                capture_output=True, text=True)
         assert result.returncode == 0, result.stderr
 
 
