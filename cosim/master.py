@@ -52,8 +52,8 @@ from flexff.cosim.engine import (CALLS, FAILED, MAX_LISTED_OVERRUNS, OK, OVERRUN
                                  EngineRun, EngineSlave, function_address, library, pointer,
                                  start_schedule)
 from flexff.cosim.recording import Recording
-from flexff.cosim.timing import Pacing, StepTiming
 from flexff.cosim.schema import ALGORITHMS
+from flexff.cosim.timing import Pacing, StepTiming
 from flexff.cosim.wiring import SOURCE, Link, Port, wire
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 

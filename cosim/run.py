@@ -22,11 +22,11 @@ from pathlib import Path
 
 from flexff.controllers.training_range import MARGIN, training_range_excess
 from flexff.cosim.config import expanded, load_config
+from flexff.cosim.memory import MemoryNeeded, check_memory
 from flexff.cosim.metrics import run_metrics
 from flexff.cosim.plots import PLOT_SIGNALS, plot_tet, write_plots
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import Recording, atomic_write, save_recording
-from flexff.cosim.memory import MemoryNeeded, check_memory
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ConfigError, RunConfig

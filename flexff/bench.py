@@ -18,9 +18,9 @@ from flexff.cosim.master import Master, SlaveSpec
 from flexff.cosim.run import simulate
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.timing import Pacing
-from flexff.fmu_bench import bench_fmu
 from flexff.fmu.build import build_fmu
 from flexff.fmu.onnx_fmu import onnx_system
+from flexff.fmu_bench import bench_fmu
 from flexff.plant.system import plant_system
 
 CLOSED_LOOP_REFERENCE = "thesis-eval"  # the thesis's evaluation reference, 15 s at 1 ms

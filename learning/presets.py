@@ -9,7 +9,7 @@ GPU.
 models of an evaluation side by side (learning.workers). Each choice, and what it was measured
 to do (closed-loop e2 ratio PID alone / feedforward, x / y, on the sim evaluation reference,
 with a 0.03 m circle and a spline beside it as references nobody trained for; the slow demo
-test, tests/test_cli.py, checks the outcome):
+test, tests/flexff/test_cli.py, checks the outcome):
 
 - 100 Hz model rate (sim; the hardware environment's slow data 25 Hz, learning.evaluate):
   the filtered data hold nothing above 5 Hz, and the feedforward FMU extrapolates linearly

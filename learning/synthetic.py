@@ -21,8 +21,8 @@ import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from flexff.learning.dataset import ENCODER_SIGNALS, REFERENCE_SIGNALS, Trajectory, write_dataset
 from flexff.controllers.features import nominal_model
+from flexff.learning.dataset import ENCODER_SIGNALS, REFERENCE_SIGNALS, Trajectory, write_dataset
 from flexff.plant.kinematics import SHOULDER_INDEX
 from flexff.plant.parameters import HARDWARE, MOTOR_FRICTION
 

@@ -1,6 +1,6 @@
 """FMI 2.0 call-sequence fuzzer: seeded random call sequences against one co-simulation FMU.
 
-tests/test_fmu_fuzz.py runs it in a subprocess, so that a crash, a hang or a sanitizer report
+tests/fmu/test_fuzz.py runs it in a subprocess, so that a crash, a hang or a sanitizer report
 of the FMU fails the test instead of the test run:
 
     python tests/fmu_fuzz_driver.py SPEC.json --seed S --count N --trace FILE

@@ -1,6 +1,11 @@
 """Helpers shared by the tests."""
 
+from pathlib import Path
+
 import numpy as np
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+SHARED_FMUS = REPOSITORY.parent / "shared" / "fmus"  # the Modelica Reference-FMUs
 
 
 def workspace_points(rng: np.random.Generator, n: int, radius: float = 0.05) -> np.ndarray:

@@ -10,8 +10,8 @@ import onnx
 import pytest
 
 from flexff.controllers.features import feature_names, reference_features
-from flexff.plant.signals import REFERENCE, names
 from flexff.controllers.training_range import MARGIN, training_range_excess
+from flexff.plant.signals import REFERENCE, names
 
 RADIUS, RATE = 0.01, 2 * np.pi * 0.5  # m, rad/s
 

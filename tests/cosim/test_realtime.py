@@ -12,18 +12,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from flexff.cli import main
 from flexff.cosim.engine import idle_timing
 from flexff.cosim.master import Master, SlaveSpec
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import load_recording
 from flexff.cosim.timing import Pacing
-from flexff.cli import main
+from tests.helpers import SHARED_FMUS
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "fmus"
 
 
 def van_der_pol(version: int = 2) -> list[SlaveSpec]:
-    path = SHARED / f"fmi{version}" / "VanDerPol.fmu"
+    path = SHARED_FMUS / f"fmi{version}" / "VanDerPol.fmu"
     assert path.is_file(), f"the Reference-FMUs are missing: expected {path}"
     return [SlaveSpec("vdp", path)]
 
@@ -107,7 +107,7 @@ def test_the_process_setup_reports_what_it_did():
 def write_config(folder: Path, step: float, stop: float) -> Path:
     path = folder / "vdp.toml"
     path.write_text(f'[run]\nstep = {step}\nstop = {stop}\n[fmu.vdp]\n'
-                    f'path = "{SHARED / "fmi2" / "VanDerPol.fmu"}"\n')
+                    f'path = "{SHARED_FMUS / "fmi2" / "VanDerPol.fmu"}"\n')
     return path
 
 

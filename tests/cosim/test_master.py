@@ -18,8 +18,8 @@ from flexff.cosim.master import CosimError, Master, SlaveSpec
 from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.scenario import reference_samples
 from flexff.cosim.wiring import SOURCE, Port, wire
-from flexff.fmu.importer import read_fmu
 from flexff.fmu.build import build_fmu
+from flexff.fmu.importer import read_fmu
 from flexff.plant.system import plant_system
 
 STEP, STOP = 1e-3, 15.0

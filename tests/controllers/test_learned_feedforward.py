@@ -26,9 +26,9 @@ from flexff.learning.rigid import rigid_forces
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.threads import torch_threads
 from flexff.learning.train import train
+from tests.fmu.test_network import running_sum_graph
 from tests.fmu_toys import LoggedSlave, status_of
 from tests.runners import run_fmu, run_fmu_libcosim
-from tests.test_fmu_network import running_sum_graph
 
 STEPS = 600  # 0.6 s of the thesis evaluation reference at 1 kHz
 TINY = {"lstm": {"hidden": 12}, "pgnn": {"channels": 8, "levels": 3}}

@@ -30,14 +30,14 @@ import numpy as np
 import pytest
 import tomli_w
 
+from flexff.cli import main
 from flexff.cosim.config import config_examples, expanded, expanded_text, load_config, parse_config
 from flexff.cosim.recording import NPZ_NAME, load_recording
 from flexff.cosim.run import run_config, simulate_config
 from flexff.cosim.scenario import resolve
 from flexff.cosim.schema import ConfigError
-from flexff.cli import main
+from tests.helpers import SHARED_FMUS
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "fmus"
 VDP_REFERENCE_CSV = "extra/org.fmi-standard.fmi-ls-ref/VanDerPol_out.csv"
 FT_IN, FT_OUT = "ft.Float64_continuous_input", "ft.Float64_continuous_output"
 GAIN, OFFSET = 2.0, 0.5
@@ -48,10 +48,10 @@ DROP = object()  # in `merged`: remove this key
 @pytest.fixture(scope="module")
 def ref_fmu():
     """`ref_fmu("VanDerPol", 3)`: the path of a Reference-FMU; fails (never skips) without one."""
-    assert SHARED.is_dir(), f"the Reference-FMUs are missing: expected them in {SHARED}"
+    assert SHARED_FMUS.is_dir(), f"the Reference-FMUs are missing: expected them in {SHARED_FMUS}"
 
     def path(model: str, version: int = 2) -> Path:
-        fmu = SHARED / f"fmi{version}" / f"{model}.fmu"
+        fmu = SHARED_FMUS / f"fmi{version}" / f"{model}.fmu"
         assert fmu.is_file(), f"Reference-FMU missing: {fmu}"
         return fmu
 

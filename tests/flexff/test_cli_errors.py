@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from flexff.cosim.master import CosimError
 from flexff.cli import main
-from tests.test_cosim_batch import SHORT  # a 1 s run of the manipulator
+from flexff.cosim.master import CosimError
+from tests.cosim.test_batch import SHORT  # a 1 s run of the manipulator
 
 
 # commands that write: {out} is the output folder (or the folder of the output file)

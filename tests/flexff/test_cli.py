@@ -97,7 +97,7 @@ def test_demo_runs(tmp_path):
 
 
 def test_feedforward_fmu_build_needs_a_flexff_model(tmp_path):
-    from tests.test_fmu_network import running_sum_graph
+    from tests.fmu.test_network import running_sum_graph
 
     result = flexff("fmu", "build", "feedforward", "-o", str(tmp_path / "ff.fmu"))
     assert result.returncode == 2 and "needs --model" in result.stderr

@@ -32,7 +32,7 @@ from flexff.fmu.build import build_fmu
 from flexff.fmu.compile import SANITIZE_ENV, compiler
 from flexff.plant.system import plant_system
 
-DRIVER = Path(__file__).with_name("fmu_fuzz_driver.py")
+DRIVER = Path(__file__).parents[1] / "fmu_fuzz_driver.py"
 KINDS = ("plant", "controller", "feedforward-step", "feedforward-precomputed")
 FOREIGN = {"plant": "controller", "controller": "plant",
            "feedforward-step": "feedforward-precomputed", "feedforward-precomputed": "plant"}

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from flexff.cosim.references import build_reference
 from flexff.cosim.config import ConfigError, config_examples, parse_config
+from flexff.cosim.references import build_reference
 
 STEP = 1e-3
 SEGMENTS = [

@@ -19,8 +19,8 @@ from flexff.cosim.metrics import error_norms
 from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.scenario import reference_samples
 from flexff.cosim.wiring import SOURCE, Port, wire
-from flexff.fmu.importer import read_fmu
 from flexff.fmu.build import build_fmu
+from flexff.fmu.importer import read_fmu
 from flexff.fmu.slave import Slave
 from flexff.plant.system import plant_system
 

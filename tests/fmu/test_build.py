@@ -13,14 +13,15 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from flexff.fmu_bench import BENCH_SOURCE
 from flexff.fmu import build_fmu, fmu_key
 from flexff.fmu.codegen import generate_model_c
 from flexff.fmu.compile import HOST_HEADER, SANITIZE_ENV, sanitizer_flags
 from flexff.fmu.layout import make_layout
 from flexff.fmu.system import System, Variable
 from flexff.fmu.validation import FMI2_CS_FUNCTIONS, validate_fmu
+from flexff.fmu_bench import BENCH_SOURCE
 from tests.fmu_toys import build_toy, discrete_pi, duffing
+from tests.helpers import REPOSITORY
 from tests.runners import run_fmu
 
 TOYS = {"duffing": duffing, "discrete_pi": discrete_pi}
@@ -127,9 +128,8 @@ def test_codegen_and_key_are_deterministic():
               "from flexff.fmu.codegen import generate_model_c; import hashlib; "
               "print(fmu_key(duffing()), hashlib.sha256(str(generate_model_c(duffing(), 'd'))"
               ".encode()).hexdigest())")
-    root = Path(__file__).parent.parent
     outputs = {subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                              check=True, cwd=root).stdout for _ in range(2)}
+                              check=True, cwd=REPOSITORY).stdout for _ in range(2)}
     assert len(outputs) == 1
     key, _ = outputs.pop().split()
     assert key == fmu_key(duffing())
@@ -157,7 +157,7 @@ def test_changes_change_the_key():
 
 
 def test_a_sanitizer_build_has_its_own_key(monkeypatch):
-    """$FLEXFF_SANITIZE adds the sanitizer's flags (tests/test_fmu_fuzz.py builds with it);
+    """$FLEXFF_SANITIZE adds the sanitizer's flags (tests/fmu/test_fuzz.py builds with it);
     such a build never replaces the plain one in the cache."""
     plain = fmu_key(duffing())
     monkeypatch.setenv(SANITIZE_ENV, "address,undefined")

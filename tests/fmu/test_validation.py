@@ -13,8 +13,8 @@ from fmpy.fmi3 import FMU3Slave
 from flexff.cli import main
 from flexff.fmu.importer import FmuInstance
 from flexff.fmu.validation import FMI3_CS_FUNCTIONS, validate_fmu
+from tests.helpers import SHARED_FMUS
 
-SHARED_FMUS = Path(__file__).resolve().parents[2] / "shared" / "fmus"
 REFERENCE_FMUS = [f"fmi{v}/{m}.fmu" for v in (2, 3) for m in ("Dahlquist", "Feedthrough",
                                                                "VanDerPol")]
 
