@@ -28,7 +28,11 @@ from flexff.fmu.network import Network, runtime_library
 from flexff.fmu.system import System
 
 C_DIR = Path(__file__).parent / "c"
-NETWORK_SOURCES = ("onnx_network.c", "onnx_network.h")
+# the generic slave (see c/slave.h), compiled with the generated model.c of each FMU
+SLAVE_SOURCES = ("fmi2Functions.c", "slave.c", "rng.c")
+SLAVE_HEADERS = ("slave.h", "rng.h")
+NETWORK_SOURCES = ("network_slave.c", "onnx_network.c")
+NETWORK_HEADERS = ("onnx_network.h",)
 GUID_PLACEHOLDER = "{00000000-0000-0000-0000-000000000000}"
 GUID_FILES = ("modelDescription.xml", "sources/config.h")
 ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps keep the archive reproducible
@@ -36,20 +40,20 @@ ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps keep the archive reproducib
 
 def _source_files(system: System) -> list[str]:
     """The C files compiled into the FMU's library."""
-    return ["fmi2_cosim.c", "model.c", *(["onnx_network.c"] if system.network else [])]
+    return [*SLAVE_SOURCES, "model.c", *(NETWORK_SOURCES if system.network else ())]
 
 
 def _files(system: System, guid: str) -> dict[str, str | bytes]:
     """Every file of the FMU but its compiled library, by archive path."""
     identifier = model_identifier(system)
     layout = make_layout(system)
+    generic = (*SLAVE_SOURCES, *SLAVE_HEADERS,
+               *((*NETWORK_SOURCES, *NETWORK_HEADERS) if system.network else ()))
     sources = {
-        "fmi2_cosim.c": (C_DIR / "fmi2_cosim.c").read_text(),
+        **{name: (C_DIR / name).read_text() for name in generic},
         "config.h": generate_config_h(system, layout, identifier, guid),
         **generate_model_c(system, identifier),
         **fmi_headers(),
-        **({name: (C_DIR / name).read_text() for name in NETWORK_SOURCES}
-           if system.network else {}),
     }
     files: dict[str, str | bytes] = {f"sources/{name}": text for name, text in sources.items()}
     files["modelDescription.xml"] = model_description_xml(system, layout, identifier, guid,

@@ -14,6 +14,7 @@ import pytest
 from fmpy import read_model_description
 
 from flexff.fmu import build_fmu, fmu_key
+from flexff.fmu.build import SLAVE_SOURCES
 from flexff.fmu.codegen import generate_model_c
 from flexff.fmu.compile import HOST_HEADER, SANITIZE_ENV, sanitizer_flags
 from flexff.fmu.layout import make_layout
@@ -55,12 +56,15 @@ def test_archive_layout(toy_fmu):
     ident = md.coSimulation.modelIdentifier
     with zipfile.ZipFile(toy_fmu) as zf:
         names = set(zf.namelist())
+    # the Reference-FMUs' layout: the FMI API, the slave core and the noise generator beside
+    # the model's generated code and config.h (no network code without a network)
     assert names == {"modelDescription.xml", f"binaries/{fmpy.platform}/{ident}.so",
-                     "sources/fmi2_cosim.c", "sources/model.c", "sources/model.h",
+                     "sources/fmi2Functions.c", "sources/slave.c", "sources/slave.h",
+                     "sources/rng.c", "sources/rng.h", "sources/model.c", "sources/model.h",
                      "sources/config.h", "sources/fmi2Functions.h",
                      "sources/fmi2FunctionTypes.h", "sources/fmi2TypesPlatform.h"}
     source_files = md.buildConfigurations[0].sourceFileSets[0].sourceFiles
-    assert source_files == ["fmi2_cosim.c", "model.c"]
+    assert source_files == ["fmi2Functions.c", "slave.c", "rng.c", "model.c"]
     cs = md.coSimulation
     assert cs.canGetAndSetFMUstate and cs.canSerializeFMUstate
     assert cs.canHandleVariableCommunicationStepSize == (ident == "duffing")
@@ -114,7 +118,8 @@ def test_rebuild_from_sources(toy_fmu, tmp_path):
 def test_c_sources_compile_without_warnings(toy_fmu, tmp_path):
     with zipfile.ZipFile(toy_fmu) as zf:
         zf.extractall(tmp_path)
-    for source in (tmp_path / "sources" / "fmi2_cosim.c", BENCH_SOURCE):
+    ours = [tmp_path / "sources" / name for name in SLAVE_SOURCES]  # model.c is CasADi's
+    for source in (*ours, BENCH_SOURCE):
         result = subprocess.run(["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-pedantic",
                                  "-Werror", "-fsyntax-only", f"-I{tmp_path / 'sources'}",
                                  f"-I{HOST_HEADER.parent}", str(source)],

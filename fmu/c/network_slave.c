@@ -1,0 +1,298 @@
+/*
+ * network_slave.c -- the embedded network of a slave (HAS_NETWORK): an ONNX graph run by
+ * onnxruntime (onnx_network.c) every NET_PERIOD communication steps on network_input(x, u, p);
+ * its result r enters output(), extrapolated linearly from the last two results between
+ * calls. With NET_PRECOMPUTED the graph runs once at initialization over a table of the inputs
+ * in resources/ (each step's inputs are checked against it), with equal results.
+ */
+
+#include "slave.h"
+
+#if HAS_NETWORK
+static const NetSpec NET_SPEC = {NET_INPUT, NET_OUTPUT, NET_N_IN, N_R, NET_N_STATES,
+                                 NET_STATE_INPUTS, NET_STATE_OUTPUTS, NET_STATE_RANK,
+                                 NET_STATE_DIMS, NET_STATE_OFFSET};
+
+static int eval_network_input(Instance *c, const fmi2Real *x, const fmi2Real *u,
+                              fmi2Real *features) {
+    return eval(c, MODEL_FN(network_input), c->mem[3], x, u, c->d.p, NULL, NULL, features);
+}
+
+/* The local path of file `name` in the resources folder given as a file URI. */
+static int resource_path(const char *uri, const char *name, char *path, size_t size) {
+    const char *s = uri;
+    size_t j = 0;
+    if (s == NULL || strncmp(s, "file:", 5) != 0) return -1;
+    s += 5;
+    if (strncmp(s, "///", 3) == 0) s += 2;
+    else if (strncmp(s, "//localhost/", 12) == 0) s += 11;
+    for (; *s && j + 1 < size; s++) { /* percent-decode */
+        unsigned int byte;
+        if (s[0] == '%' && s[1] && s[2] && sscanf(s + 1, "%2x", &byte) == 1) {
+            path[j++] = (char)byte;
+            s += 2;
+        } else {
+            path[j++] = *s;
+        }
+    }
+    if (j > 0 && path[j - 1] == '/') j--;
+    path[j] = '\0';
+    return snprintf(path + j, size - j, "/%s", name) < (int)(size - j) ? 0 : -1;
+}
+
+/* resources/NET_TABLE_FILE: a header "time,<inputs>" and one row per communication point. */
+static int load_table(Instance *c, const char *path, char *error, size_t size) {
+    FILE *f = fopen(path, "r");
+    char line[4096] = "", header[4096] = "time";
+    long capacity = 1024;
+    if (f == NULL) {
+        snprintf(error, size, "cannot open the precomputation table %s", path);
+        return -1;
+    }
+    for (int i = 0; i < N_U; i++) {
+        strncat(header, ",", sizeof header - strlen(header) - 1);
+        strncat(header, REAL_NAMES[VR_U + i], sizeof header - strlen(header) - 1);
+    }
+    if (fgets(line, sizeof line, f) != NULL) line[strcspn(line, "\r\n")] = '\0';
+    if (strcmp(line, header) != 0) {
+        snprintf(error, size, "%s must start with the header line '%s'", path, header);
+        fclose(f);
+        return -1;
+    }
+    c->table = (double *)malloc(sizeof(double) * (size_t)capacity * (1 + N_U));
+    c->table_rows = 0;
+    while (c->table != NULL && fgets(line, sizeof line, f) != NULL) {
+        char *s = line, *end;
+        if (c->table_rows == capacity) {
+            double *grown = (double *)realloc(c->table, sizeof(double) * (size_t)(2 * capacity) * (1 + N_U));
+            if (grown == NULL) break;
+            c->table = grown;
+            capacity *= 2;
+        }
+        double *row = c->table + c->table_rows * (1 + N_U);
+        for (int k = 0; k < 1 + N_U; k++) {
+            row[k] = strtod(s, &end);
+            if (end == s || !isfinite(row[k]) || (k < N_U && *end != ',')) {
+                snprintf(error, size, "%s, line %ld: expected %d finite numbers separated by commas",
+                         path, c->table_rows + 2, 1 + N_U);
+                fclose(f);
+                return -1;
+            }
+            s = end + 1;
+        }
+        c->table_rows++;
+    }
+    fclose(f);
+    if (c->table == NULL || c->table_rows < 1) {
+        snprintf(error, size, c->table ? "%s has no rows" : "out of memory reading %s", path);
+        return -1;
+    }
+    return 0;
+}
+
+/* Open the network (and the table) from the FMU's binaries and resources; NULL error text on
+ * success. */
+int net_load(Instance *c, fmi2String resources, char *error, size_t size) {
+    char library[4096], model[4096];
+    Dl_info self;
+    if (!dladdr(&NET_SPEC, &self) || self.dli_fname == NULL) { /* an address in this library */
+        snprintf(error, size, "cannot locate the FMU's own shared library");
+        return -1;
+    }
+    const char *slash = strrchr(self.dli_fname, '/');
+    const int dir_len = slash ? (int)(slash - self.dli_fname) : 1;
+    snprintf(library, sizeof library, "%.*s/%s", dir_len, slash ? self.dli_fname : ".",
+             NET_RUNTIME_FILE);
+    if (resource_path(resources, NET_MODEL_FILE, model, sizeof model) != 0) {
+        snprintf(error, size, "fmuResourceLocation '%s' is not a file URI",
+                 resources ? resources : "(null)");
+        return -1;
+    }
+    c->net = net_open(library, model, &NET_SPEC, error, size);
+    if (c->net == NULL) return -1;
+    if (NET_PRECOMPUTED) {
+        char table[4096];
+        resource_path(resources, NET_TABLE_FILE, table, sizeof table);
+        return load_table(c, table, error, size);
+    }
+    return 0;
+}
+
+void net_unload(Instance *c) {
+    net_close(c->net);
+    free(c->table);
+    free(c->precomputed);
+    c->net = NULL;
+    c->table = c->precomputed = NULL;
+}
+
+static fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t) {
+    int bad = first_nonfinite(r, N_R);
+    if (bad >= 0)
+        return fail(c, "The network returned %g (result %d of %d) at t = %.17g: not finite.",
+                    r[bad], bad + 1, N_R, t);
+    return fmi2OK;
+}
+
+/* The network's inputs computed from the FMU's inputs u must be finite: a non-finite one
+ * (inverse kinematics of a reference outside the workspace, say) would only come back as
+ * "the network returned nan", which names neither the cause nor the culprit. */
+static fmi2Status check_network_inputs(Instance *c, const fmi2Real *features, const fmi2Real *u,
+                                       fmi2Real t) {
+    const int bad = first_nonfinite(features, NET_N_IN);
+    char inputs[1024];
+    if (bad < 0) return fmi2OK;
+    const char *name = net_input_name(c->net, bad);
+    describe_inputs(u, inputs, sizeof inputs);
+    return fail(c, "The network's input %s%s%s(%d of %d) is %g at t = %.17g: it is not defined "
+                   "for the inputs %s (for a feedforward: is the reference inside the workspace?).",
+                name ? "'" : "", name ? name : "", name ? "' " : "", bad + 1, NET_N_IN,
+                features[bad], t, inputs);
+}
+
+/* The table must start at the start time and advance by the sample time: row k is then the
+ * communication point k. */
+fmi2Status check_table_start(Instance *c) {
+    if (fabs(c->table[0] - c->d.time) > TIME_TOL * fmax(1.0, fabs(c->d.time)) ||
+        (c->table_rows > 1 && fabs(c->table[1 + N_U] - c->table[0] - SAMPLE_TIME) > TIME_TOL))
+        return fail(c, "The precomputation table must start at the start time %g and advance by "
+                       "the sample time %g per row.", c->d.time, SAMPLE_TIME);
+    return fmi2OK;
+}
+
+static long table_calls(const Instance *c) { return (c->table_rows + NET_PERIOD - 1) / NET_PERIOD; }
+
+double table_time(const Instance *c, long row) { return c->table[row * (1 + N_U)]; }
+
+/* Run the network once over the table's call points (every NET_PERIOD-th row), from the zero
+ * state, its inputs evaluated at the initial state x0: the precomputed results. */
+fmi2Status net_precompute(Instance *c, const fmi2Real *x0) {
+    const long calls = table_calls(c);
+    char error[1024];
+    double *features = (double *)malloc(sizeof(double) * (size_t)(calls * NET_N_IN));
+    float *state = (float *)calloc(2 * DIM(NET_STATE_SIZE), sizeof(float));
+    free(c->precomputed);
+    c->precomputed = (double *)malloc(sizeof(double) * (size_t)(calls * N_R));
+    fmi2Status status = fmi2OK;
+    if (features == NULL || state == NULL || c->precomputed == NULL) {
+        status = fail(c, "Out of memory precomputing %ld network calls.", calls);
+    } else {
+        for (long k = 0; k < calls && status == fmi2OK; k++) {
+            const double *row = c->table + k * NET_PERIOD * (1 + N_U);
+            if (eval_network_input(c, x0, row + 1, features + k * NET_N_IN) != 0)
+                status = fail(c, "Evaluating the network's inputs failed.");
+            else
+                status = check_network_inputs(c, features + k * NET_N_IN, row + 1, row[0]);
+        }
+        if (status == fmi2OK && net_run(c->net, features, calls, state, c->precomputed,
+                                        state + DIM(NET_STATE_SIZE), error, sizeof error) != 0)
+            status = fail(c, "%s", error);
+        for (long k = 0; k < calls && status == fmi2OK; k++)
+            status = check_finite_result(c, c->precomputed + k * N_R,
+                                         table_time(c, k * NET_PERIOD));
+    }
+    free(features);
+    free(state);
+    if (status != fmi2OK) {
+        free(c->precomputed); /* never leave a partial table to be read */
+        c->precomputed = NULL;
+    }
+    return status;
+}
+
+/* The precomputed results, computed now if this instance has none: a state restored into an
+ * instance that was never initialized (a checkpoint continued in another process) reaches a
+ * call point without fmi2ExitInitializationMode. The network's inputs do not depend on the
+ * state in the precomputed mode's use (the learned feedforward's come from the reference
+ * alone); for any other model they are evaluated at the initial state of the current
+ * parameters, as fmi2ExitInitializationMode does. */
+static fmi2Status net_ensure_precomputed(Instance *c) {
+    if (c->precomputed != NULL) return fmi2OK;
+    if (eval_initial_state(c, c->x0) != 0) return fail(c, "Evaluating the initial state failed.");
+    return net_precompute(c, c->x0);
+}
+
+/* Precomputed: a step goes from one row of the table to the next, so it must start before the
+ * last row (there are no inputs past it to check, nor a result to give), with the inputs of
+ * its row (outputs may be read with the inputs of the previous point, as a Jacobi master does). */
+fmi2Status check_table_inputs(Instance *c) {
+    if (c->d.net_step < 0 || c->d.net_step + 1 >= c->table_rows)
+        return fail(c, "fmi2DoStep(): the precomputation table (%ld rows) ends at t = %.9g: "
+                       "this FMU was built for a reference that ends there and cannot step past "
+                       "it.", c->table_rows, table_time(c, c->table_rows - 1));
+    const double *row = c->table + c->d.net_step * (1 + N_U) + 1;
+    for (int i = 0; i < N_U; i++)
+        if (fabs(c->d.u[i] - row[i]) > 1e-9 * (1.0 + fabs(row[i])))
+            return fail(c, "Input '%s' = %.17g at t = %.17g differs from the precomputation "
+                           "table (%.17g): this FMU was built for another reference.",
+                        REAL_NAMES[VR_U + i], c->d.u[i], c->d.time, row[i]);
+    return fmi2OK;
+}
+
+/* The precomputed result of call point `call` into net_new; the bound is checked here too, so
+ * no sequence of calls can read past the table. */
+static fmi2Status net_lookup(Instance *c, long call) {
+    if (net_ensure_precomputed(c) != fmi2OK) return fmi2Error;
+    if (call < 0 || call >= table_calls(c))
+        return fail(c, "Communication point %ld is outside the precomputation table (%ld rows).",
+                    c->d.net_step, c->table_rows);
+    memcpy(c->d.net_new, c->precomputed + call * N_R, sizeof c->d.net_new);
+    return fmi2OK;
+}
+
+/* The network's result for the call point at the current time, into net_new. */
+static fmi2Status net_call(Instance *c) {
+    const long call = c->d.net_step / NET_PERIOD;
+    char error[1024];
+    if (NET_PRECOMPUTED && c->d.mode != MODE_INIT) {
+        if (net_lookup(c, call) != fmi2OK) return fmi2Error;
+    } else {
+        if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
+            return fail(c, "Evaluating the network's inputs failed.");
+        if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
+        if (net_run(c->net, c->features, 1, c->d.net_state, c->d.net_new, c->d.net_state_new,
+                    error, sizeof error) != 0)
+            return fail(c, "%s", error);
+    }
+    return check_finite_result(c, c->d.net_new, c->d.time);
+}
+
+/* c->r at the current point: at a call point the network runs on the current inputs (again
+ * only if they changed since), in between its last two results are extrapolated. */
+fmi2Status net_prepare(Instance *c) {
+    const long phase = c->d.net_step % NET_PERIOD;
+    if (phase == 0) {
+        if (!c->d.net_pending || memcmp(c->d.net_u, c->d.u, sizeof c->d.u) != 0) {
+            c->d.net_pending = 0; /* a failed call leaves no result to reuse for any inputs */
+            if (net_call(c) != fmi2OK) return fmi2Error;
+            memcpy(c->d.net_u, c->d.u, sizeof c->d.u);
+            c->d.net_pending = 1;
+        }
+        memcpy(c->r, c->d.net_new, sizeof c->r);
+    } else {
+        const double s = (double)phase / NET_PERIOD;
+        for (int i = 0; i < N_R; i++)
+            c->r[i] = c->d.net_last[i] + s * (c->d.net_last[i] - c->d.net_before[i]);
+    }
+    return fmi2OK;
+}
+
+/* A successful step: a call point's result and state become the committed ones. */
+void net_commit(Instance *c) {
+    if (c->d.net_step % NET_PERIOD == 0) {
+        memcpy(c->d.net_before, c->d.net_step == 0 ? c->d.net_new : c->d.net_last,
+               sizeof c->d.net_before);
+        memcpy(c->d.net_last, c->d.net_new, sizeof c->d.net_last);
+        memcpy(c->d.net_state, c->d.net_state_new, sizeof c->d.net_state);
+        c->d.net_pending = 0;
+    }
+    c->d.net_step++;
+}
+
+/* Back to the first call point with the zero state (the other fields are zero already). */
+void net_restart(Instance *c) {
+    c->d.net_step = 0;
+    c->d.net_pending = 0;
+    memset(c->d.net_state, 0, sizeof c->d.net_state);
+}
+#endif
