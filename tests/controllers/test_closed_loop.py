@@ -1,61 +1,32 @@
-"""Closed loop in plain Python, no FMU: the nominal plant (RK4, 1 ms steps of four 0.25 ms
-sub-steps, quantized encoders from PlantModel.output) with the controller and feedforward
-Systems, stepped in the co-simulation's order (feedforward, controller, plant)."""
+"""The closed loop without FMUs (tests/loops.py: the nominal plant's System under RK4, 1 ms
+steps of four 0.25 ms sub-steps, quantized encoders, with the controller and feedforward
+Systems, stepped in the co-simulation's order) against the linear design and the thesis."""
 
 import math
 
-import casadi as ca
 import numpy as np
 import pytest
 from scipy import signal
 
-from flexff.controllers.feedback import controller_design, controller_system
-from flexff.controllers.feedforward import rigid_body_feedforward_system
+from flexff.controllers.feedback import controller_design
 from flexff.cosim.references import Chain, Circle, Line, sample, thesis_evaluation
+from tests.loops import STEP, loop_systems, monolithic
 
-STEP, SUBSTEPS = 1e-3, 4
+SUBSTEPS = 4
 COUNT = 2 * math.pi / 2048 * 0.3086  # an upper arm's travel per encoder count: 0.95 mm
 
 
-def closed_loop_step(model, controller, feedforward):
-    """CasADi Function (state, reference, use_ff) -> (next state, [true pos, currents, F_fb]).
-
-    The state stacks the plant's and the controller's; the currents are held over the step.
-    """
-    p = model.parameter_values()
-    kp = [v.start for v in controller.parameters]
-    xp, xc = ca.SX.sym("xp", model.n_states), ca.SX.sym("xc", len(controller.states))
-    ref, use_ff = ca.SX.sym("ref", 6), ca.SX.sym("use_ff")
-    empty = ca.SX(0, 1)
-    theta = model.output(xp, ca.DM.zeros(3), p, ca.DM.zeros(3))[:3]
-    force_ff = use_ff * feedforward.output(empty, ref, empty, empty)
-    u = ca.vertcat(ref[:2], theta, force_ff)
-    y = controller.output(xc, u, kp, empty)
-    h, x = STEP / SUBSTEPS, xp
-    for _ in range(SUBSTEPS):
-        k1 = model.forward_dynamics(x, y[:3], p)
-        k2 = model.forward_dynamics(x + h / 2 * k1, y[:3], p)
-        k3 = model.forward_dynamics(x + h / 2 * k2, y[:3], p)
-        k4 = model.forward_dynamics(x + h * k3, y[:3], p)
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    state = ca.vertcat(xp, xc)
-    return ca.Function("closed_loop_step", [state, ref, use_ff],
-                       [ca.vertcat(x, controller.dynamics(xc, u, kp)), ca.vertcat(xp[:2], y)])
-
-
 @pytest.fixture(scope="module")
-def simulate(nominal):
-    step = closed_loop_step(nominal, controller_system("nominal"), rigid_body_feedforward_system())
+def simulate():
+    systems = loop_systems("nominal")
 
     def run(reference, use_ff):
         """Tracking error e = ref - true position (2 x n) and the currents (3 x n)."""
-        signals = np.vstack(list(reference.signals().values()))
-        x0 = np.r_[np.array(nominal.initial_state([reference.x[0], reference.y[0]],
-                                                  nominal.parameter_values())).ravel(),
-                   np.zeros(4)]
-        _, logged = step.mapaccum(signals.shape[1])(x0, signals, float(use_ff))
-        logged = np.array(logged)
-        return signals[:2] - logged[:2], logged[2:5]
+        signals = reference.signals()
+        out = monolithic(systems, signals, STEP / SUBSTEPS, use_ff,
+                         {"x_start": reference.x[0], "y_start": reference.y[0]})
+        error = np.vstack([signals["x_ref"] - out["x"], signals["y_ref"] - out["y"]])
+        return error, np.vstack([out[n] for n in ("i1", "i2", "i3")])
 
     return run
 

@@ -11,18 +11,14 @@ libcosim's integer-nanosecond clock), and its gap to cosim.master is measured.
 import numpy as np
 import pytest
 
-from flexff.controllers.feedback import controller_system
-from flexff.controllers.feedforward import rigid_body_feedforward_system
 from flexff.cosim.libcosim import run_libcosim
 from flexff.cosim.master import Master, SlaveSpec
 from flexff.cosim.metrics import error_norms
 from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.scenario import reference_samples
 from flexff.cosim.wiring import SOURCE, Port, wire
-from flexff.fmu.build import build_fmu
 from flexff.fmu.importer import read_fmu
 from flexff.fmu.slave import Slave
-from flexff.plant.system import plant_system
 
 STEP, STEPS = 1e-3, 15000
 NANOSECONDS = 1_000_000
@@ -84,12 +80,8 @@ def jacobi(slaves, sources, steps, libcosim_clock=True):
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("libcosim_fmus")
-    return {"feedforward": build_fmu(rigid_body_feedforward_system(STEP),
-                                     folder / "feedforward.fmu"),
-            "controller": build_fmu(controller_system("nominal"), folder / "controller.fmu"),
-            "plant": build_fmu(plant_system("hardware"), folder / "plant.fmu")}
+def fmus(loop_fmus):
+    return loop_fmus("hardware")
 
 
 def test_plant_alone_equals_the_master(fmus):

@@ -1,82 +1,35 @@
-"""The master against a monolithic closed loop, the C loop, and its load-time and run-time errors.
+"""The master against the monolithic closed loop (tests/loops.py), the C loop, and its
+load-time and run-time errors."""
 
-The monolithic loop is plain Python on the same CasADi functions: the feedforward's output,
-the controller's output and update, the plant's output (encoders) and its dynamics under the
-FMU's RK4 sub-steps, stepped in the master's order at every communication point.
-"""
-
-import math
-
-import casadi as ca
 import numpy as np
 import pytest
 
-from flexff.controllers.feedback import controller_system
-from flexff.controllers.feedforward import rigid_body_feedforward_system
 from flexff.cosim.floor import run_c_loop
 from flexff.cosim.master import CosimError, Master, SlaveSpec
 from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.scenario import reference_samples
 from flexff.cosim.wiring import SOURCE, Port, wire
-from flexff.fmu.build import build_fmu
 from flexff.fmu.importer import read_fmu
-from flexff.plant.system import plant_system
+from tests.loops import STEP, loop_systems, monolithic
 
-STEP, STOP = 1e-3, 15.0
+STOP = 15.0
 STEPS = int(round(STOP / STEP))
 MAX_SUBSTEP = 2.5e-4  # four RK4 sub-steps per communication step
 
 
 @pytest.fixture(scope="module")
 def systems():
-    return {"feedforward": rigid_body_feedforward_system(STEP),
-            "controller": controller_system("nominal", step=STEP),
-            "plant": plant_system("nominal")}
+    return loop_systems("nominal")
 
 
 @pytest.fixture(scope="module")
-def fmus(systems, tmp_path_factory):
-    folder = tmp_path_factory.mktemp("cosim_fmus")
-    return {name: build_fmu(system, folder / f"{name}.fmu") for name, system in systems.items()}
+def fmus(loop_fmus):
+    return loop_fmus("nominal")
 
 
 @pytest.fixture(scope="module")
 def reference():
     return reference_samples(thesis_evaluation(STEP), STEPS)
-
-
-def monolithic(systems, reference, steps, max_substep):
-    """x, y, currents and feedback forces of the closed loop, every point 0 .. steps.
-
-    One CasADi Function per communication point, composed of the Systems' own functions,
-    accumulated over the run (mapaccum) so that the test stays fast.
-    """
-    ff, ctrl, plant = systems["feedforward"], systems["controller"], systems["plant"]
-    p_plant = ca.DM([p.start for p in plant.parameters])
-    p_ctrl = ca.DM([p.start for p in ctrl.parameters])
-    empty = ca.SX(0, 1)
-    xp, xc = ca.SX.sym("xp", len(plant.states)), ca.SX.sym("xc", len(ctrl.states))
-    ref = ca.SX.sym("ref", 6)
-    force_ff = ff.output(empty, ref, empty, empty)
-    encoders = plant.output(xp, ca.DM.zeros(3), p_plant, ca.DM.zeros(3))[:3]
-    u = ca.vertcat(ref[:2], encoders, force_ff)
-    y = ctrl.output(xc, u, p_ctrl, empty)
-    n = max(1, math.ceil(STEP / max_substep - 1e-12))
-    dt, x = STEP / n, xp
-    for _ in range(n):  # the wrapper's RK4, operation for operation
-        k1 = plant.dynamics(x, y[:3], p_plant)
-        k2 = plant.dynamics(x + 0.5 * dt * k1, y[:3], p_plant)
-        k3 = plant.dynamics(x + 0.5 * dt * k2, y[:3], p_plant)
-        k4 = plant.dynamics(x + dt * k3, y[:3], p_plant)
-        x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-    state = ca.vertcat(xp, xc)
-    step = ca.Function("step", [state, ref], [ca.vertcat(x, ctrl.dynamics(xc, u, p_ctrl)),
-                                              ca.vertcat(xp[:2], y)])
-    x0 = ca.vertcat(plant.initial_state(p_plant), ctrl.initial_state(p_ctrl))
-    refs = np.vstack([reference[n][:steps + 1] for n in ("x_ref", "y_ref", "vx_ref", "vy_ref",
-                                                          "ax_ref", "ay_ref")])
-    _, out = step.mapaccum(steps + 1)(x0, refs)
-    return dict(zip(("x", "y", "i1", "i2", "i3", "Fx_fb", "Fy_fb"), np.array(out)))
 
 
 def slaves(fmus, plant_parameters=None):
@@ -86,7 +39,8 @@ def slaves(fmus, plant_parameters=None):
 
 
 def test_closed_loop_equals_the_monolithic_simulation(systems, fmus, reference):
-    expected = monolithic(systems, reference, STEPS, MAX_SUBSTEP)
+    points = {n: v[:STEPS + 1] for n, v in reference.items()}
+    expected = monolithic(systems, points, MAX_SUBSTEP)
     with Master(slaves(fmus, {"max_substep": MAX_SUBSTEP}), list(reference), STEP) as master:
         rec = master.run(reference, STEPS)
     for name, values in expected.items():
