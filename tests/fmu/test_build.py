@@ -4,7 +4,6 @@ import subprocess
 import sys
 import time
 import zipfile
-from pathlib import Path
 
 import casadi as ca
 import fmpy
