@@ -16,14 +16,13 @@ import torch
 from torch import nn
 
 from flexff.controllers.features import feature_units, reference_feature_function
+from flexff.controllers.model_card import INPUT_KINDS
 from flexff.learning.casadi_torch import TorchFunction
 from flexff.learning.models import uses_prior
 from flexff.learning.rigid import RigidBodyForce
 from flexff.learning.run_folder import Run
 from flexff.learning.threads import torch_threads
 from flexff.plant.signals import REFERENCE, names, units
-
-INPUT_KINDS = ("features", "reference")
 
 
 class SIModel(nn.Module):
