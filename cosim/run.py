@@ -39,7 +39,7 @@ MANIPULATOR_SIGNALS = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FO
                             TRUE_POSITION, TRUE_VELOCITY, TORQUES)
 
 
-def load_run(path: str | Path) -> RunConfig:
+def load_run_config(path: str | Path) -> RunConfig:
     """A run configuration from a TOML file or an SSP file (by its suffix)."""
     if Path(path).suffix.lower() == ".ssp":
         from flexff.cosim.ssp import load_ssp
@@ -172,7 +172,7 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
     the metrics written to metrics.json. A paced run (`pacing`) also writes tet.png, and one
     that its overruns stopped raises OverrunError after writing what it recorded."""
     if not isinstance(config, RunConfig):
-        config = load_run(config)
+        config = load_run_config(config)
     check_recording_memory(config, _least_signals(config))
     out = output_folder(output_dir)
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:

@@ -212,18 +212,18 @@ def _config_example(args: argparse.Namespace) -> int:
 
 def _config_expand(args: argparse.Namespace) -> int:
     from flexff.cosim.config import expanded_text
-    from flexff.cosim.run import load_run
+    from flexff.cosim.run import load_run_config
 
-    print(expanded_text(load_run(args.config)), end="")
+    print(expanded_text(load_run_config(args.config)), end="")
     return 0
 
 
 def _ssp_export(args: argparse.Namespace) -> int:
-    from flexff.cosim.run import load_run
+    from flexff.cosim.run import load_run_config
     from flexff.cosim.ssp import export_ssp
 
     _output_file(args.output)
-    print(f"wrote {export_ssp(load_run(args.config), args.output)}")
+    print(f"wrote {export_ssp(load_run_config(args.config), args.output)}")
     return 0
 
 
@@ -232,9 +232,9 @@ def _data_collect(args: argparse.Namespace) -> int:
 
     config = None
     if args.config is not None:
-        from flexff.cosim.run import load_run
+        from flexff.cosim.run import load_run_config
 
-        config = load_run(args.config)
+        config = load_run_config(args.config)
     report = run_collection(args.set, args.output, args.workers, args.scheduler, config=config)
     for line in report.problems():
         print(line, file=sys.stderr)
@@ -283,10 +283,10 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from flexff.cosim.run import load_run, output_folder
+    from flexff.cosim.run import load_run_config, output_folder
     from flexff.learning.evaluate import evaluate
 
-    loop = None if args.config is None else load_run(args.config)
+    loop = None if args.config is None else load_run_config(args.config)
     output_folder(args.output)
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop)
     print((Path(args.output) / "table.md").read_text())
