@@ -94,19 +94,24 @@ def rk4_reference(system: System, params: dict[str, float], forces: np.ndarray,
     `params` overrides the parameter start values; force k is held over step k.
     """
     p = ca.DM([params.get(v.name, v.start) for v in system.parameters])
-    f = lambda x, u: np.array(system.dynamics(x, u, p)).ravel()  # noqa: E731
     x = np.array(system.initial_state(p)).ravel()
     out = [x]
     for u, (h, n) in zip(forces, steps, strict=True):
-        dt = h / n
-        for _ in range(n):
-            k1 = f(x, u)
-            k2 = f(x + 0.5 * dt * k1, u)
-            k3 = f(x + 0.5 * dt * k2, u)
-            k4 = f(x + dt * k3, u)
-            x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        x = rk4(lambda state: np.array(system.dynamics(state, u, p)).ravel(), x, h / n, n)
         out.append(x)
     return np.array(out)
+
+
+def rk4(f, x, dt: float, substeps: int):
+    """`substeps` RK4 steps of length dt from x under dx/dt = f(x), in the FMU wrapper's order
+    of operations (fmu/c/slave.c: rk4_step), on numbers or on CasADi symbols alike."""
+    for _ in range(substeps):
+        k1 = f(x)
+        k2 = f(x + 0.5 * dt * k1)
+        k3 = f(x + 0.5 * dt * k2)
+        k4 = f(x + dt * k3)
+        x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return x
 
 
 MASK = (1 << 64) - 1

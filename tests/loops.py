@@ -18,6 +18,7 @@ from flexff.controllers.feedforward import rigid_body_feedforward_system
 from flexff.fmu.system import System
 from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, REFERENCE, TRUE_POSITION, names
 from flexff.plant.system import plant_system
+from tests.fmu_toys import rk4
 
 STEP = 1e-3
 
@@ -49,13 +50,7 @@ def monolithic(systems: Mapping[str, System], reference: Mapping[str, np.ndarray
     y = ctrl.output(xc, u, p_ctrl, empty)
     currents = y[:len(CURRENTS)]
     substeps = max(1, math.ceil(step / max_substep - 1e-12))
-    dt, x = step / substeps, xp
-    for _ in range(substeps):  # the wrapper's RK4, operation for operation
-        k1 = plant.dynamics(x, currents, p_plant)
-        k2 = plant.dynamics(x + 0.5 * dt * k1, currents, p_plant)
-        k3 = plant.dynamics(x + 0.5 * dt * k2, currents, p_plant)
-        k4 = plant.dynamics(x + dt * k3, currents, p_plant)
-        x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    x = rk4(lambda state: plant.dynamics(state, currents, p_plant), xp, step / substeps, substeps)
     state = ca.vertcat(xp, xc)
     advance = ca.Function("step", [state, ref], [ca.vertcat(x, ctrl.dynamics(xc, u, p_ctrl)),
                                                  ca.vertcat(xp[:2], y)])
