@@ -70,8 +70,7 @@ class ModelCard:
         for key, value in self.__dict__.items():
             if value is None:
                 continue
-            props[key] = json.dumps(value) if key in _JSON else (
-                repr(float(value)) if key == "sample_rate_hz" else str(value))
+            props[key] = json.dumps(value) if key in _JSON else str(value)
         return props
 
     @classmethod
