@@ -52,13 +52,13 @@ def motion_columns(feature_set: str) -> tuple[list[int], list[int], list[int]]:
     return pos, [n + k for k in pos], [2 * n + k for k in pos]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def nominal_model() -> PlantModel:
     """The nominal plant model (built once: its symbolic construction takes a moment)."""
     return PlantModel("nominal")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def motion_function(feature_set: str) -> ca.Function:
     """CasADi Function (pos, vel, acc) -> features of one sample, nominal kinematics built in."""
     model = nominal_model()
@@ -75,7 +75,7 @@ def motion_function(feature_set: str) -> ca.Function:
                        ["pos", "vel", "acc"], ["features"])
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def reference_feature_function(feature_set: str) -> ca.Function:
     """CasADi Function (the REFERENCE signals x_ref ... ay_ref, one sample) -> features: what
     a learned feedforward computes from its inputs."""

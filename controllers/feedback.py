@@ -23,8 +23,14 @@ from flexff.fmu.system import Parameter, System, Variable
 from flexff.plant.analysis import plant_info
 from flexff.plant.kinematics import shoulder_angles
 from flexff.plant.parameters import NOMINAL
-from flexff.plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES,
-                                  POSITION_REFERENCE, pick)
+from flexff.plant.signals import (
+    CURRENTS,
+    ENCODERS,
+    FEEDBACK_FORCES,
+    FEEDFORWARD_FORCES,
+    POSITION_REFERENCE,
+    pick,
+)
 
 AXES = ("x", "y")
 

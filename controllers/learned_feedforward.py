@@ -91,7 +91,7 @@ def model_period(card: ModelCard, step: float, model: str | Path) -> int:
     if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
         raise ValueError(f"{model}: the model runs at {rate:g} Hz; the step {step:g} s must "
                          f"divide its period {1 / rate:g} s by a whole number")
-    return int(round(ratio))
+    return round(ratio)
 
 
 def _table(reference: Mapping[str, np.ndarray], step: float) -> np.ndarray:

@@ -74,7 +74,7 @@ class ModelCard:
         return props
 
     @classmethod
-    def from_metadata(cls, props: Mapping[str, str], where: str | Path) -> "ModelCard":
+    def from_metadata(cls, props: Mapping[str, str], where: str | Path) -> ModelCard:
         """The card of the metadata `props` of the graph `where`; ValueError (what is wrong,
         what to do) if they are not those of a flexff feedforward model."""
         if props.get("format") != FORMAT:

@@ -53,7 +53,7 @@ def _run_one(config: RunConfig | str | Path, output_dir: Path, debug: bool = Fal
     try:
         return BatchResult(name, output_dir, metrics=run_config(config, output_dir,
                                                                 progress=False))
-    except Exception as error:  # noqa: BLE001  (reported to the caller, the batch goes on)
+    except Exception as error:
         detail = "\n" + "".join(traceback.format_exception(error)) if debug else ""
         return BatchResult(name, output_dir, error=f"{type(error).__name__}: {error}{detail}")
 

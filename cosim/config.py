@@ -49,8 +49,9 @@ when the FMUs are resolved, before anything runs.
 from __future__ import annotations
 
 import math
-import warnings
+import re
 import tomllib
+import warnings
 from collections.abc import Mapping, Sequence
 from importlib import resources
 from pathlib import Path
@@ -62,9 +63,19 @@ from flexff.controllers.allocation import ENCODER_CHOICES
 from flexff.controllers.model_card import read_card
 from flexff.cosim.memory import MemoryNeeded
 from flexff.cosim.references import REFERENCE_KINDS, SegmentError, build_reference
-from flexff.cosim.schema import (ALGORITHMS, BUILTIN_OPTIONS, SOURCE_KINDS, UNCONNECTED,
-                                 ConfigError, ConnectionConfig, FmuConfig, RecordConfig,
-                                 ReferenceConfig, RunConfig, SourceConfig)
+from flexff.cosim.schema import (
+    ALGORITHMS,
+    BUILTIN_OPTIONS,
+    SOURCE_KINDS,
+    UNCONNECTED,
+    ConfigError,
+    ConnectionConfig,
+    FmuConfig,
+    RecordConfig,
+    ReferenceConfig,
+    RunConfig,
+    SourceConfig,
+)
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
 from flexff.plant.kinematics import check_workspace
 from flexff.plant.model import VARIANTS
@@ -110,12 +121,19 @@ def parse_config(data: Mapping[str, Any] | str, name: str = "config",
     return _Parser(source, Path(base)).parse(data, name)
 
 
+EXAMPLE_PATH = re.compile(r'^(\s*path\s*=\s*)"([^"/][^"]*)"', re.MULTILINE)  # a relative path
+
+
 def config_examples() -> dict[str, str]:
-    """Example configurations (TOML text) by name, shipped in cosim/examples/."""
-    folder = resources.files("flexff.cosim") / "examples"
-    return {Path(f.name).stem: f.read_text() for f in sorted(folder.iterdir(),
-                                                              key=lambda f: f.name)
-            if f.name.endswith(".toml")}
+    """Example configurations (TOML text) by name, shipped in cosim/examples/.
+
+    The files they name (third-party FMUs, CSV tables) ship beside them; their relative paths
+    are made absolute, so an example saved anywhere runs from there.
+    """
+    folder = Path(str(resources.files("flexff.cosim") / "examples"))
+    return {path.stem: EXAMPLE_PATH.sub(lambda m: f'{m[1]}"{(folder / m[2]).as_posix()}"',
+                                        path.read_text())
+            for path in sorted(folder.glob("*.toml"))}
 
 
 def expanded(config: RunConfig) -> dict[str, Any]:
@@ -259,7 +277,7 @@ class _Parser:
         kind = self.choice(ff, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
         self.keys(ff, "feedforward", ("kind", "model", "mode") if kind == "onnx" else ("kind",))
         if kind == "none":
-            sources.append(SourceConfig("constant", {n: 0.0 for n in names(FEEDFORWARD_FORCES)}))
+            sources.append(SourceConfig("constant", dict.fromkeys(names(FEEDFORWARD_FORCES), 0.0)))
         else:
             fmus.append(FmuConfig("feedforward", builtin=FEEDFORWARD_BUILTINS[kind],
                                   options=self.feedforward_options(ff, "feedforward")))

@@ -12,8 +12,7 @@ import ctypes
 import functools
 import tempfile
 import time
-from ctypes import (CFUNCTYPE, POINTER, Structure, c_double, c_int, c_long, c_uint, c_void_p,
-                    cast)
+from ctypes import CFUNCTYPE, POINTER, Structure, c_double, c_int, c_long, c_uint, c_void_p, cast
 from pathlib import Path
 
 import numpy as np

@@ -51,7 +51,7 @@ class _Execution:
         self.ports = [Port(s.name, infos[s.name]) for s in slaves]
         if links is None:
             links = wire(self.ports, list(sources), algorithm="jacobi")
-        self.execution = execution = CosimExecution.from_step_size(int(round(step * 1e9)))
+        self.execution = execution = CosimExecution.from_step_size(round(step * 1e9))
         self.index = {s.name: execution.add_local_slave(
             CosimLocalSlave(fmu_path=str(s.fmu), instance_name=s.name)) for s in slaves}
         for s in slaves:

@@ -35,12 +35,12 @@ the steps may be paced to the wall clock (cosim.timing.Pacing).
 
 from __future__ import annotations
 
-import sys
-import time
 import gc
 import math
-from ctypes import byref, c_long, c_uint
+import sys
+import time
 from collections.abc import Mapping, Sequence
+from ctypes import byref, c_long, c_uint
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,9 +48,20 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from flexff.cosim.engine import (CALLS, FAILED, MAX_LISTED_OVERRUNS, OK, OVERRUN, TYPED_HOOK,
-                                 EngineRun, EngineSlave, function_address, library, pointer,
-                                 start_schedule)
+from flexff.cosim.engine import (
+    CALLS,
+    FAILED,
+    MAX_LISTED_OVERRUNS,
+    OK,
+    OVERRUN,
+    TYPED_HOOK,
+    EngineRun,
+    EngineSlave,
+    function_address,
+    library,
+    pointer,
+    start_schedule,
+)
 from flexff.cosim.recording import Recording
 from flexff.cosim.schema import ALGORITHMS
 from flexff.cosim.timing import Pacing, StepTiming
@@ -286,8 +297,8 @@ class Master:
         if status == OVERRUN:
             end = run.failed_k + 1  # points 0 .. failed_k were recorded, the step was made
         signals: dict[str, np.ndarray] = {}
-        float_columns = dict((j, c) for c, (j, _) in enumerate(floats))
-        typed_columns = dict((j, c) for c, (j, _) in enumerate(typed))
+        float_columns = {j: c for c, (j, _) in enumerate(floats)}
+        typed_columns = {j: c for c, (j, _) in enumerate(typed)}
         for j, name in enumerate(record):
             signals[name] = (np.ascontiguousarray(out[:end, float_columns[j]])
                              if j in float_columns
@@ -320,7 +331,7 @@ class Master:
             lateness=pointer(self._lateness), paced=pacing is not None,
             period=self.step / pacing.rt_factor if pacing else self.step,
             max_overruns=pacing.max_overruns if pacing else 0,
-            grace_steps=int(math.ceil(pacing.grace / self.step - 1e-9)) if pacing else 0)
+            grace_steps=math.ceil(pacing.grace / self.step - 1e-9) if pacing else 0)
 
     def resolve(self, name: str) -> str:
         """The full name of a signal: `fmu.output`, a source, or a unique output's own name."""
@@ -421,7 +432,7 @@ class _TypedHook:
             else:
                 for column, name in self.columns:
                     column[k] = self.master._typed[name]
-        except Exception as error:  # noqa: BLE001  (re-raised by Master.run)
+        except Exception as error:
             self.error = error
             return 1
         return 0

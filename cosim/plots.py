@@ -16,14 +16,18 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (after selecting the backend)
+import matplotlib.pyplot as plt
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from flexff.cosim.recording import Recording, atomic_write  # noqa: E402
-from flexff.cosim.timing import US, StepTiming  # noqa: E402
-from flexff.plant.signals import (  # noqa: E402
-    FEEDBACK_FORCES, FEEDFORWARD_FORCES, POSITION_REFERENCE, TRUE_POSITION, names)
+from flexff.cosim.recording import Recording, atomic_write
+from flexff.cosim.timing import US, StepTiming
+from flexff.plant.signals import (
+    FEEDBACK_FORCES,
+    FEEDFORWARD_FORCES,
+    POSITION_REFERENCE,
+    TRUE_POSITION,
+    names,
+)
 
 PLOT_SIGNALS = names(POSITION_REFERENCE, TRUE_POSITION, FEEDBACK_FORCES, FEEDFORWARD_FORCES)
 MAX_PANELS = 8

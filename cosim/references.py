@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -79,7 +79,7 @@ class Reference:
         """Write a table with columns t, x_ref, y_ref, vx_ref, vy_ref, ax_ref, ay_ref."""
         with open(path, "w", newline="") as handle:
             writer = csv.writer(handle)
-            writer.writerow(("t",) + self.SIGNALS)
+            writer.writerow(("t", *self.SIGNALS))
             writer.writerows(np.column_stack(self._arrays()).tolist())
 
 
@@ -244,7 +244,7 @@ class Chain(Segment):
 def sample(path: Segment, step: float = 1e-3) -> Reference:
     """`path` on the grid 0, step, 2 step, ... up to its duration."""
     _positive("step", step, "s")
-    n = int(math.floor(path.duration / step + 1e-9)) + 1
+    n = math.floor(path.duration / step + 1e-9) + 1
     check_memory(SAMPLED_ARRAYS * n, f"sampling the {path.duration:g} s reference every "
                                      f"{step:g} s")
     t = np.arange(n) * step
@@ -307,11 +307,11 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
         raise ValueError(f"{path}: time column t is not strictly increasing at data row {k + 1} "
                          f"(t = {t[k - 1]:.9g} then {t[k]:.9g})")
     check_workspace(NOMINAL, columns["x_ref"], columns["y_ref"], f"{path}: point")
-    n = int(math.floor((t[-1] - t[0]) / step + 1e-9)) + 1
+    n = math.floor((t[-1] - t[0]) / step + 1e-9) + 1
     check_memory(SAMPLED_ARRAYS * n, f"{path}: resampling the {t[-1] - t[0]:g} s table every "
                                      f"{step:g} s")
     grid = t[0] + np.arange(n) * step
-    window = 2 * int(round(smoothing_window / step / 2)) + 1
+    window = 2 * round(smoothing_window / step / 2) + 1
     if grid.size < max(window, 4):
         raise ValueError(f"{path}: the table spans {t[-1] - t[0]:.6g} s, too short for the "
                          f"{smoothing_window} s smoothing window at the {step} s step")
@@ -342,7 +342,7 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
     if len(body) < 2:
         raise ValueError(f"{path}: needs at least two data rows, found {len(body)}")
     columns = {}
-    for name in ("t",) + Reference.SIGNALS:
+    for name in ("t", *Reference.SIGNALS):
         if name not in header:
             continue
         j, values = header.index(name), []

@@ -31,8 +31,17 @@ from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ConfigError, RunConfig
 from flexff.cosim.timing import OverrunError, Pacing
-from flexff.plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES,
-                                  REFERENCE, TORQUES, TRUE_POSITION, TRUE_VELOCITY, names)
+from flexff.plant.signals import (
+    CURRENTS,
+    ENCODERS,
+    FEEDBACK_FORCES,
+    FEEDFORWARD_FORCES,
+    REFERENCE,
+    TORQUES,
+    TRUE_POSITION,
+    TRUE_VELOCITY,
+    names,
+)
 
 # DESIGN.md's signals of the manipulator, kept under their short names in recordings
 MANIPULATOR_SIGNALS = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, ENCODERS,

@@ -116,7 +116,7 @@ class RunConfig:
 
     @property
     def steps(self) -> int:
-        return int(round(self.stop / self.step))
+        return round(self.stop / self.step)
 
     def builtin(self, kind: str) -> FmuConfig | None:
         """The first FMU that is the built-in `kind`, or None."""

@@ -158,7 +158,7 @@ def _has_connector(info: FmuInfo, name: str, connected: bool) -> bool:
     """Whether the variable gets a connector (module doc)."""
     v = info.variables[name]
     kind = SSP_TYPES.get(v.kind)
-    return bool(kind and v.scalar and (connected or kind in ALWAYS and name not in info.inputs))
+    return bool(kind and v.scalar and (connected or (kind in ALWAYS and name not in info.inputs)))
 
 
 def _connectors(parent: etree._Element, info: FmuInfo, names: list[str],

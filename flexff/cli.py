@@ -14,8 +14,8 @@ import json
 import os
 import sys
 import traceback
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Sequence
 
 from flexff.cosim.timing import OverrunError
 from flexff.learning.dataset import SETS

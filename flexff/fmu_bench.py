@@ -84,7 +84,8 @@ def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3, repeats:
         args = [str(len(inputs)), *(str(s.variables[n].valueReference) for n in inputs),
                 *(repr(float(s.variables[n].start)) for n in inputs),
                 str(len(outputs)), *(str(s.variables[n].valueReference) for n in outputs)]
-        run = subprocess.run([str(cached_program(BENCH_SOURCE, "bench")), str(s.library), s.model_description.guid,
+        run = subprocess.run([str(cached_program(BENCH_SOURCE, "bench")), str(s.library),
+                              s.model_description.guid,
                               str(steps), repr(step), str(repeats), *args],
                              capture_output=True, text=True, check=True)
     c_result = json.loads(run.stdout)

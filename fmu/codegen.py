@@ -26,7 +26,8 @@ def _check_vector(shape: tuple[int, int], n: int, what: str) -> None:
 
 
 def _normalized(f: ca.Function, name: str, sizes: list[int], n_out: int, what: str) -> ca.Function:
-    """`f` renamed to `name`, checked against the expected sizes, with a dense, CSE-reduced result."""
+    """`f` renamed to `name`, checked against the expected sizes, with a dense, CSE-reduced
+    result."""
     if f.n_in() != len(sizes) or f.n_out() != 1:
         raise ValueError(f"{what} must take {len(sizes)} arguments and return 1 result, "
                          f"got {f.n_in()} -> {f.n_out()}")

@@ -26,8 +26,13 @@ from typing import Any
 
 import fmpy
 from fmpy import extract, read_model_description
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.fmi2 import (
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+)
 from fmpy.fmi3 import FMU3Slave
 from fmpy.logging import addLoggerProxy
 
@@ -245,8 +250,8 @@ class FmuInstance:
         cwd = os.getcwd()
         try:
             self.library = self._library_path()
-            kwargs = dict(guid=info.token, unzipDirectory=self._unzipdir,
-                          modelIdentifier=info.identifier, instanceName=name)
+            kwargs = {"guid": info.token, "unzipDirectory": self._unzipdir,
+                          "modelIdentifier": info.identifier, "instanceName": name}
             if info.fmi_version == "2.0":
                 self.fmu = FMU2Slave(**kwargs)
                 self._callbacks, self._log_key = _FMI2_LOG.callbacks(self.messages)

@@ -127,7 +127,7 @@ def runtime_library() -> Path:
     if spec is None or not spec.submodule_search_locations:
         raise RuntimeError("onnxruntime is not installed: pip install onnxruntime (its wheel "
                            "holds the libonnxruntime the network FMU bundles)")
-    folder = Path(list(spec.submodule_search_locations)[0]) / "capi"
+    folder = Path(next(iter(spec.submodule_search_locations))) / "capi"
     found = sorted(folder.glob("libonnxruntime.so.*")) + sorted(folder.glob("onnxruntime.dll"))
     found += sorted(folder.glob("libonnxruntime.*.dylib"))
     if not found:

@@ -32,7 +32,7 @@ def window_roles(lengths: list[int], window: int, val_fraction: float,
     roles = [interior(n, edge) for n in lengths]
     blocks = [(i, start) for i, r in enumerate(roles) for start in range(0, len(r), window)
               if (r[start:start + window] == TRAIN).any()]
-    n_val = int(round(val_fraction * len(blocks)))
+    n_val = round(val_fraction * len(blocks))
     if n_val < 1 or n_val >= len(blocks):
         raise ValueError(
             f"the training trajectories give {len(blocks)} window(s) of {window} samples, too few "
@@ -66,7 +66,7 @@ class SequenceSet:
 
     @classmethod
     def build(cls, xs: list[np.ndarray], ys: list[np.ndarray], roles: list[np.ndarray],
-              device: torch.device) -> "SequenceSet":
+              device: torch.device) -> SequenceSet:
         length = max(len(x) for x in xs)
         x = np.zeros((len(xs), length, xs[0].shape[1]), dtype=np.float32)
         y = np.zeros((len(xs), length, ys[0].shape[1]), dtype=np.float32)
@@ -96,7 +96,7 @@ class WindowSampler:
         role = data.role.cpu().numpy()
         self.starts = [(i, s) for i in range(len(data)) for s in range(0, role.shape[1], window)
                        if (role[i, s:s + window] == TRAIN).any()]
-        n, length, width = data.x.shape
+        n, _, width = data.x.shape
         self._x = torch.cat([data.x.new_zeros(n, history, width), data.x,
                              data.x.new_zeros(n, window, width)], dim=1)
         self._y = torch.cat([data.y, data.y.new_zeros(n, window, data.y.shape[2])], dim=1)

@@ -8,7 +8,7 @@ a straight-line program of scalar operations, and each scalar becomes a tensor o
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import casadi as ca
 import torch

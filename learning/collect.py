@@ -40,12 +40,12 @@ import json
 import os
 import tempfile
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -54,11 +54,30 @@ from flexff.cosim.recording import Recording, atomic_write
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import Scenario, reference_signals, resolve
 from flexff.cosim.schema import ConfigError, RecordConfig, RunConfig
-from flexff.learning.dataset import (COLLECTED, ENCODER_SIGNALS, FORMAT, LABEL_SIGNALS, MANIFEST,
-                                     POSITION_SIGNALS, REFERENCE_SIGNALS, SIGNALS, VERSION,
-                                     save_signals, write_manifest)
-from flexff.learning.loop import (OWN_TAPS, Tap, current_limit, dataset_taps, default_loop,
-                                  loop_differences, loop_record, on_reference, plant_record)
+from flexff.learning.dataset import (
+    COLLECTED,
+    ENCODER_SIGNALS,
+    FORMAT,
+    LABEL_SIGNALS,
+    MANIFEST,
+    POSITION_SIGNALS,
+    REFERENCE_SIGNALS,
+    SIGNALS,
+    VERSION,
+    save_signals,
+    write_manifest,
+)
+from flexff.learning.loop import (
+    OWN_TAPS,
+    Tap,
+    current_limit,
+    dataset_taps,
+    default_loop,
+    loop_differences,
+    loop_record,
+    on_reference,
+    plant_record,
+)
 from flexff.learning.trajectories import TrajectorySet, TrajectorySpec, trajectory_set
 from flexff.learning.workers import die_with_parent
 from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
@@ -310,7 +329,7 @@ def _present(job: _Job, listed: str | None) -> bool:
     try:
         with np.load(job.path) as data:
             signals = {n: data[n] for n in SIGNALS}
-    except Exception:  # noqa: BLE001  (missing, truncated, not a zip, lacks a signal: run it)
+    except Exception:
         return False
     if listed is not None and hashlib.sha256(job.path.read_bytes()).hexdigest() != listed:
         return False
@@ -347,7 +366,7 @@ def _collect_one(job: _Job) -> Outcome:
         saturated = (float("nan") if job.current_limit is None else
                      float(np.mean(currents >= job.current_limit)))
         return Outcome(name, recording.wall_s, float(currents.max()), saturated)
-    except Exception as error:  # noqa: BLE001  (reported; the other trajectories go on)
+    except Exception as error:
         return Outcome(name, error=_one_line(error),
                        stops_all=isinstance(error, OSError) and error.errno in STOPPING)
 
@@ -408,7 +427,7 @@ def _settle(futures: dict, finished: Iterable, cancel: Callable[[], object]) -> 
             continue
         try:
             outcome = future.result()
-        except Exception as error:  # noqa: BLE001  (a worker that died)
+        except Exception as error:
             outcome = Outcome(name, error=_one_line(error),
                               stops_all=isinstance(error, BrokenProcessPool))
         yield outcome

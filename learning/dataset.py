@@ -21,9 +21,10 @@ import hashlib
 import io
 import json
 import zipfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -43,8 +44,8 @@ REFERENCE_SIGNALS = names(REFERENCE)
 ENCODER_SIGNALS = names(ENCODERS)
 POSITION_SIGNALS = names(TRUE_POSITION)
 LABEL_SIGNALS = names(FORCES)
-SIGNALS = ("time",) + REFERENCE_SIGNALS + ENCODER_SIGNALS + POSITION_SIGNALS + LABEL_SIGNALS
-TRAINED = ("time",) + ENCODER_SIGNALS + LABEL_SIGNALS  # what training reads (learning.features)
+SIGNALS = ("time", *REFERENCE_SIGNALS, *ENCODER_SIGNALS, *POSITION_SIGNALS, *LABEL_SIGNALS)
+TRAINED = ("time", *ENCODER_SIGNALS, *LABEL_SIGNALS)  # what training reads (learning.features)
 RECOLLECT = "collect the data again with this flexff version: flexff data collect ..."
 
 

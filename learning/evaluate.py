@@ -13,9 +13,9 @@
    cost) and the figures.
 
 Given a run configuration (`loop`, learning.loop), steps 1 and 3 run on that loop instead of
-the environment's plant: the set is collected on it under PID alone, and every scenario is that loop on the
-environment's evaluation reference with its feedforward replaced (PID alone, rigid-body, or
-the learned one stepped right before the controller).
+the environment's plant: the set is collected on it under PID alone, and every scenario is that
+loop on the environment's evaluation reference with its feedforward replaced (PID alone,
+rigid-body, or the learned one stepped right before the controller).
 
 Preprocessing beyond the thesis (Environment.features): the thesis low-passes the measured motion
 and forces at 1.8 Hz and re-quantizes its ideal simulated encoders. The sim evaluation

@@ -52,6 +52,7 @@ from flexff.cosim.recording import atomic_write
 from flexff.learning.deploy import EnsembleSIModel, SIModel
 from flexff.learning.run_folder import Run, flexff_version, load_run
 from flexff.learning.threads import torch_threads
+
 OPSET = 17
 TOLERANCE = 1e-5  # largest |onnxruntime - torch| relative to the largest |force|
 

@@ -25,11 +25,14 @@ import casadi as ca
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from flexff.controllers.features import (FEATURE_SETS, evaluate_samples, motion_features,
-                                         nominal_model)
+from flexff.controllers.features import (
+    FEATURE_SETS,
+    evaluate_samples,
+    motion_features,
+    nominal_model,
+)
 from flexff.learning.dataset import ENCODER_SIGNALS, LABEL_SIGNALS, Trajectory
 from flexff.plant.kinematics import SHOULDER_INDEX
-
 
 
 @dataclass(frozen=True)
@@ -87,7 +90,7 @@ def encoder_positions(theta: np.ndarray, encoders: int = 2) -> np.ndarray:
                             np.asarray(theta, dtype=float)[:, :encoders])
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _forward_kinematics(encoders: int) -> ca.Function:
     model = nominal_model()
     fk = model.fk2 if encoders == 2 else model.fk3
@@ -120,7 +123,7 @@ def decimation(rate_hz: float, model_rate_hz: float | None) -> int:
     if model_rate_hz <= 0 or factor < 1 or abs(factor - round(factor)) > 1e-9:
         raise ValueError(f"model_rate_hz {model_rate_hz} must divide the data rate {rate_hz} Hz "
                          f"by a whole number")
-    return int(round(factor))
+    return round(factor)
 
 
 def prepare_trajectory(traj: Trajectory, rate_hz: float, config: FeatureConfig,

@@ -63,7 +63,7 @@ def identify_friction(features: list[np.ndarray], forces: list[np.ndarray], feat
     return {**dict(zip(LINEAR, coefficients.tolist())), "w_stribeck": width}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _regressor_function(width: float) -> ca.Function:
     """(pos, vel) -> dF/d(LINEAR), column by column (2 x 6, flattened): the nominal inverse
     dynamics' force is linear in the friction torques, so this is its whole friction part."""

@@ -46,9 +46,18 @@ from scipy.io.matlab import matfile_version
 from scipy.signal import savgol_filter
 
 from flexff.cosim.csv_text import read_rows
-from flexff.learning.dataset import (ENCODER_SIGNALS, IMPORTED, POSITION_SIGNALS, REFERENCE_SIGNALS,
-                                     TRAINED, Dataset, file_sha256, load_dataset, save_signals,
-                                     write_manifest)
+from flexff.learning.dataset import (
+    ENCODER_SIGNALS,
+    IMPORTED,
+    POSITION_SIGNALS,
+    REFERENCE_SIGNALS,
+    TRAINED,
+    Dataset,
+    file_sha256,
+    load_dataset,
+    save_signals,
+    write_manifest,
+)
 from flexff.learning.features import decimation, encoder_positions
 from flexff.learning.presets import PRESETS, make_config
 
@@ -185,14 +194,14 @@ def _is_number(text: str) -> bool:
 def _read_mat(path: Path) -> _Log:
     try:
         major, _ = matfile_version(str(path))
-    except Exception:  # noqa: BLE001  (scipy raises several kinds for a file of other bytes)
+    except Exception:
         raise LogError(f"{path}: not a MATLAB .mat file") from None
     if major == 2:
         variables, kind = _read_hdf5(path), "MATLAB v7.3"
     else:
         try:
             variables = loadmat(str(path))
-        except Exception as error:  # noqa: BLE001  (a damaged file: scipy's reasons vary)
+        except Exception as error:
             raise LogError(f"{path}: not a readable MATLAB file ({error})") from None
         kind = "MATLAB v4" if major == 0 else "MATLAB v5/v7"
     _require(path, [n for n in REQUIRED if n not in variables], "the variables")

@@ -25,8 +25,12 @@ from flexff.cosim.recording import Recording
 from flexff.cosim.scenario import Scenario
 from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
 from flexff.fmu.importer import read_fmu, typed_value
-from flexff.learning.dataset import (ENCODER_SIGNALS, POSITION_SIGNALS, REFERENCE_SIGNALS,
-                                     file_sha256)
+from flexff.learning.dataset import (
+    ENCODER_SIGNALS,
+    POSITION_SIGNALS,
+    REFERENCE_SIGNALS,
+    file_sha256,
+)
 from flexff.plant.model import VARIANTS
 from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
 from flexff.plant.system import plant_system
@@ -105,7 +109,7 @@ def with_feedforward(loop: RunConfig, builtin: str | None = None,
             sources.append(replace(s, values=values))
     fmus = [f for f in loop.fmus if f.name not in gone]
     if builtin is None:
-        sources.insert(0, SourceConfig("constant", {n: 0.0 for n in names(FEEDFORWARD_FORCES)}))
+        sources.insert(0, SourceConfig("constant", dict.fromkeys(names(FEEDFORWARD_FORCES), 0.0)))
     else:
         name = "feedforward"
         while any(f.name == name for f in fmus):

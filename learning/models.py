@@ -27,7 +27,7 @@ and a unit forget-gate bias.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import torch
 from torch import nn
@@ -230,10 +230,10 @@ class CNNLSTM(SequenceNetwork):
         return self.lstm.head
 
     def state_shapes(self, batch: int) -> list[tuple[int, ...]]:
-        return [(batch, self.n_features, self.history)] + self.lstm.state_shapes(batch)
+        return [(batch, self.n_features, self.history), *self.lstm.state_shapes(batch)]
 
     def state_names(self) -> list[str]:
-        return ["input_buffer"] + self.lstm.state_names()
+        return ["input_buffer", *self.lstm.state_names()]
 
     def forward(self, x: torch.Tensor, state: State | None = None) -> tuple[torch.Tensor, State]:
         buffer, h, c = state if state is not None else self._zero_state(x)

@@ -87,7 +87,7 @@ class TrainConfig:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "TrainConfig":
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
         data = dict(data)
         data["features"] = FeatureConfig(**data["features"])
         return cls(**data)
@@ -101,20 +101,22 @@ _FAST_LSTM = {**_LSTM, "hidden": 64, "layers": 1, "linear_skip": True}
 
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "thesis": {
-        "lstm": dict(architecture=_LSTM, epochs=1000, learning_rate=2e-5, schedule="constant"),
-        "cnn-lstm": dict(architecture=_CNN_LSTM, epochs=1000, learning_rate=2e-5,
-                         schedule="constant"),
-        "tcn": dict(architecture=_TCN, epochs=1500, learning_rate=2e-4, schedule="constant"),
-        "pgnn": dict(architecture={**_PGNN, "levels": 6}, epochs=1500, learning_rate=2e-4,
-                     schedule="constant"),
+        "lstm": {"architecture": _LSTM, "epochs": 1000, "learning_rate": 2e-5,
+                 "schedule": "constant"},
+        "cnn-lstm": {"architecture": _CNN_LSTM, "epochs": 1000, "learning_rate": 2e-5,
+                         "schedule": "constant"},
+        "tcn": {"architecture": _TCN, "epochs": 1500, "learning_rate": 2e-4,
+                "schedule": "constant"},
+        "pgnn": {"architecture": {**_PGNN, "levels": 6}, "epochs": 1500, "learning_rate": 2e-4,
+                     "schedule": "constant"},
     },
     "fast": {
-        "lstm": dict(architecture=_FAST_LSTM, epochs=60, learning_rate=3e-3, batch_size=4),
-        "cnn-lstm": dict(architecture={**_CNN_LSTM, **_FAST_LSTM}, epochs=60,
-                         learning_rate=3e-3, batch_size=4),
-        "tcn": dict(architecture={**_TCN, "channels": 64, "levels": 4, "linear_skip": True},
-                    epochs=120, learning_rate=3e-3, batch_size=16),
-        "pgnn": dict(architecture=_PGNN, epochs=60, learning_rate=3e-3, batch_size=32),
+        "lstm": {"architecture": _FAST_LSTM, "epochs": 60, "learning_rate": 3e-3, "batch_size": 4},
+        "cnn-lstm": {"architecture": {**_CNN_LSTM, **_FAST_LSTM}, "epochs": 60,
+                         "learning_rate": 3e-3, "batch_size": 4},
+        "tcn": {"architecture": {**_TCN, "channels": 64, "levels": 4, "linear_skip": True},
+                    "epochs": 120, "learning_rate": 3e-3, "batch_size": 16},
+        "pgnn": {"architecture": _PGNN, "epochs": 60, "learning_rate": 3e-3, "batch_size": 32},
     },
 }
 _PRESET_FEATURES = {"thesis": FeatureConfig(),

@@ -25,19 +25,23 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import matplotlib
 import numpy as np
 
-import matplotlib
-
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (after selecting the backend)
-from matplotlib.patches import Rectangle  # noqa: E402
+import matplotlib.pyplot as plt
+from matplotlib.patches import Rectangle
 
-from flexff.cosim.metrics import AXES, tracking_metrics  # noqa: E402
-from flexff.cosim.plots import MM, save_figure  # noqa: E402
-from flexff.cosim.recording import Recording, atomic_write  # noqa: E402
-from flexff.plant.signals import (  # noqa: E402
-    FEEDBACK_FORCES, FEEDFORWARD_FORCES, POSITION_REFERENCE, TRUE_POSITION, names)
+from flexff.cosim.metrics import AXES, tracking_metrics
+from flexff.cosim.plots import MM, save_figure
+from flexff.cosim.recording import Recording, atomic_write
+from flexff.plant.signals import (
+    FEEDBACK_FORCES,
+    FEEDFORWARD_FORCES,
+    POSITION_REFERENCE,
+    TRUE_POSITION,
+    names,
+)
 
 SCENARIO_LABELS: dict[str, str] = {
     "pid": "PID alone",

@@ -32,7 +32,7 @@ def rigid_function(parameters: Parameters | None = None) -> ca.Function:
     return _frozen_inverse_dynamics(tuple(sorted((parameters or {}).items())))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _frozen_inverse_dynamics(parameters: tuple[tuple[str, float], ...]) -> ca.Function:
     model = nominal_model()
     return frozen(model.inverse_dynamics, [3], [model.parameter_values(**dict(parameters))])

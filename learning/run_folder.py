@@ -147,7 +147,7 @@ def load_run(path: str | Path) -> Run:
     try:
         network.load_state_dict(torch.load(io.BytesIO(content), map_location="cpu",
                                            weights_only=True))
-    except Exception:  # noqa: BLE001  (torch reports damage with many types, and many lines)
+    except Exception:
         raise RunFolderError(f"{path / WEIGHTS_FILE} is damaged or does not hold the weights of "
                              f"the network {RUN_FILE} describes: {again}") from None
     network.eval()
@@ -230,7 +230,7 @@ def load_checkpoint(out: Path) -> dict[str, Any] | None:
             raise ValueError
         if not isinstance(json.loads(checkpoint["settings"]).get("config"), dict):
             raise ValueError
-    except Exception:  # noqa: BLE001  (torch reports damage with many types, and many lines)
+    except Exception:
         raise RunFolderError(f"{path} is damaged or not a flexff checkpoint: start again with "
                              f"--force") from None
     return checkpoint

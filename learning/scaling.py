@@ -6,8 +6,8 @@ applied unchanged to validation and test data; the test MSE it reports is in the
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 import numpy as np
 
@@ -20,7 +20,7 @@ class MinMaxScaler:
     high: np.ndarray
 
     @classmethod
-    def fit(cls, arrays: Iterable[np.ndarray]) -> "MinMaxScaler":
+    def fit(cls, arrays: Iterable[np.ndarray]) -> MinMaxScaler:
         """Fit on the rows of all `arrays` (each (n_i, k))."""
         stacked = np.concatenate([np.asarray(a, dtype=float) for a in arrays], axis=0)
         if stacked.size == 0:
@@ -42,6 +42,6 @@ class MinMaxScaler:
         return {"low": self.low.tolist(), "high": self.high.tolist()}
 
     @classmethod
-    def from_dict(cls, data: dict[str, list[float]]) -> "MinMaxScaler":
+    def from_dict(cls, data: dict[str, list[float]]) -> MinMaxScaler:
         return cls(low=np.asarray(data["low"], dtype=float),
                    high=np.asarray(data["high"], dtype=float))

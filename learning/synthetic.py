@@ -75,7 +75,7 @@ def random_motion(rng: np.random.Generator, t: np.ndarray,
             return motion, {"kind": "spline", "points": points.tolist(), "laps": laps}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _label_function(friction: bool) -> ca.Function:
     """(pos, vel, acc) -> (force, shoulder angles): the nominal inverse dynamics, with the
     hardware variant's motor friction when `friction`, and theta_s1..3."""
@@ -105,7 +105,7 @@ def synthetic_trajectory(name: str, split: str, seed: int, duration: float = 15.
                          rate_hz: float = 1000.0, friction: bool = True,
                          force_noise: float = 0.02) -> Trajectory:
     """One random trajectory with all signals of the dataset format."""
-    t = np.arange(int(round(duration * rate_hz))) / rate_hz
+    t = np.arange(round(duration * rate_hz)) / rate_hz
     motion, spec = random_motion(np.random.default_rng(seed), t, duration)
     return motion_trajectory(name, split, seed, t, motion, spec, friction, force_noise)
 

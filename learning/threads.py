@@ -10,8 +10,8 @@ more only pay where the cores are free, and `threads` in the training configurat
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Iterator
 
 import torch
 

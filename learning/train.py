@@ -18,9 +18,10 @@ import copy
 import json
 import math
 import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import numpy as np
 import torch
@@ -28,17 +29,35 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from flexff.controllers.features import feature_names
-from flexff.learning.batches import (TRAIN, VALIDATION, SequenceSet, WindowSampler, interior,
-                                     window_roles)
+from flexff.learning.batches import (
+    TRAIN,
+    VALIDATION,
+    SequenceSet,
+    WindowSampler,
+    interior,
+    window_roles,
+)
 from flexff.learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
 from flexff.learning.features import decimation, prepare_trajectory
 from flexff.learning.friction import identify_friction
-from flexff.learning.models import (RECURRENT, SequenceNetwork, build_network, fit_linear_skip,
-                                    parameter_count, uses_prior)
+from flexff.learning.models import (
+    RECURRENT,
+    SequenceNetwork,
+    build_network,
+    fit_linear_skip,
+    parameter_count,
+    uses_prior,
+)
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
 from flexff.learning.rigid import rigid_forces
-from flexff.learning.run_folder import (CHECKPOINT_FILE, RunFolderError, save_best, save_checkpoint,
-                                        save_run, start_run)
+from flexff.learning.run_folder import (
+    CHECKPOINT_FILE,
+    RunFolderError,
+    save_best,
+    save_checkpoint,
+    save_run,
+    start_run,
+)
 from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.threads import torch_threads
 
@@ -226,7 +245,7 @@ def _restore(checkpoint: dict[str, Any], network: SequenceNetwork,
         if checkpoint["cuda_rng"] and torch.cuda.is_available():
             torch.cuda.set_rng_state_all(checkpoint["cuda_rng"])
         history = json.loads(checkpoint["history"])
-    except Exception:  # noqa: BLE001  (torch reports a mismatch in many lines)
+    except Exception:
         raise RunFolderError(f"{out / CHECKPOINT_FILE} does not fit the network of its settings "
                              f"(damaged): start again with --force") from None
     return history, float(checkpoint["best"]), dict(checkpoint["best_state"]) or None

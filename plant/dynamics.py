@@ -17,8 +17,14 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from flexff.plant.kinematics import ELBOW_INDEX, EE_INDEX, N_COORDINATES, SHOULDER_INDEX
-from flexff.plant.kinematics import flexure_deflections, generalized_coordinates
+from flexff.plant.kinematics import (
+    EE_INDEX,
+    ELBOW_INDEX,
+    N_COORDINATES,
+    SHOULDER_INDEX,
+    flexure_deflections,
+    generalized_coordinates,
+)
 from flexff.plant.parameters import PlantParameters
 
 

@@ -25,10 +25,9 @@ import numpy as np
 from flexff.plant.parameters import PlantParameters
 
 MOUNT_ANGLES_DEG = (90.0, -30.0, 210.0)
-COORDINATE_NAMES = tuple(
-    f"{name}{i}" for i in (1, 2, 3)
-    for name in ("x_up", "y_up", "theta_s", "x_low", "y_low", "theta_e")
-) + ("x_ee", "y_ee", "theta_ee")
+COORDINATE_NAMES = (*(f"{name}{i}" for i in (1, 2, 3)
+                      for name in ("x_up", "y_up", "theta_s", "x_low", "y_low", "theta_e")),
+                    "x_ee", "y_ee", "theta_ee")
 N_COORDINATES = len(COORDINATE_NAMES)  # 21
 SHOULDER_INDEX = (2, 8, 14)
 ELBOW_INDEX = (5, 11, 17)
@@ -118,7 +117,7 @@ def _elbow(p: PlantParameters, chain: int, theta_s: Any) -> tuple[Any, Any]:
     return mx + p.l_up * ca.cos(theta_s), my + p.l_up * ca.sin(theta_s)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _branch_sign() -> float:
     """Which of the two circle intersections is the wrist: fixed by the assembly branch.
 
@@ -153,7 +152,8 @@ def forward_kinematics_3(p: PlantParameters, thetas: Any, iterations: int = 4) -
     With consistent angles it returns the exact position; with quantized ones it averages.
     """
     z = ca.SX.sym("z", 2)
-    residual = ca.vertcat(*shoulder_angles(p, z[0], z[1])) - ca.vertcat(*[thetas[k] for k in range(3)])
+    residual = (ca.vertcat(*shoulder_angles(p, z[0], z[1]))
+                - ca.vertcat(*[thetas[k] for k in range(3)]))
     jac = ca.jacobian(residual, z)
     update = z - ca.solve(jac.T @ jac, jac.T @ residual)
     pos = ca.vertcat(*forward_kinematics_2(p, thetas[0], thetas[1]))

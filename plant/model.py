@@ -18,8 +18,13 @@ import numpy as np
 
 from flexff.plant.actuator import encoder_reading, friction_torque, motor_torque
 from flexff.plant.dynamics import reduced_dynamics
-from flexff.plant.kinematics import flexure_deflections, forward_kinematics_2, forward_kinematics_3
-from flexff.plant.kinematics import generalized_coordinates, shoulder_angles
+from flexff.plant.kinematics import (
+    flexure_deflections,
+    forward_kinematics_2,
+    forward_kinematics_3,
+    generalized_coordinates,
+    shoulder_angles,
+)
 from flexff.plant.parameters import HARDWARE, NOMINAL, PlantParameters
 from flexff.plant.signals import CURRENTS, ENCODERS, TORQUES, TRUE_POSITION, TRUE_VELOCITY
 
@@ -113,7 +118,7 @@ class PlantModel:
         if not self.variant.parasitic_mode:
             rhs = ca.vertcat(x[2:4], self._substitute_state(dyn.acceleration(force)))
         else:
-            deflection, rate, mount = self._tool()
+            _, rate, mount = self._tool()
             acc = self._substitute_state(dyn.acceleration(force + mount))
             rhs = ca.vertcat(x[2:4], acc, rate, -mount / pp.m_tool - acc)
         return ca.Function("forward_dynamics", [x, i, self.p], [rhs],

@@ -16,8 +16,9 @@ are SX scalars, and the dynamics are written once for numbers and symbols alike.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field, fields, replace
-from typing import Any, Iterator
+from typing import Any
 
 CHAINS = (1, 2, 3)
 MOTOR_FRICTION = ("tau_coulomb", "b_viscous", "w_stribeck")  # fields of plant.actuator's model
@@ -72,7 +73,7 @@ class PlantParameters:
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
-    def from_vector(cls, vector: Any) -> "PlantParameters":
+    def from_vector(cls, vector: Any) -> PlantParameters:
         """Rebuild from a flat vector ordered as `names()` (numbers or CasADi expressions)."""
         values, k = {}, 0
         for f in fields(cls):
@@ -114,7 +115,7 @@ class PlantParameters:
                          f.metadata["positive"]))
         return rows
 
-    def with_values(self, **overrides: float) -> "PlantParameters":
+    def with_values(self, **overrides: float) -> PlantParameters:
         """Copy with flat parameters replaced by name (`m_up2=0.3`, `l_up=0.31`), validated."""
         unknown = sorted(set(overrides) - set(self.names()))
         if unknown:
@@ -151,7 +152,7 @@ class PlantParameters:
         if problems:
             raise ValueError("invalid plant parameters: " + "; ".join(problems))
 
-    def scaled(self, **factors: tuple | float) -> "PlantParameters":
+    def scaled(self, **factors: tuple | float) -> PlantParameters:
         """Copy with fields multiplied by factors (a 3-tuple scales chains separately)."""
         changes = {}
         for name, factor in factors.items():
@@ -221,14 +222,14 @@ NOMINAL = PlantParameters(
 # 2 Hz crossover; the thesis's notch filter targets such a parasitic mode; its static deflection
 # under the reference's accelerations stays below 0.1 mm) and encoder noise of a third of a
 # count before quantization.
-HARDWARE_MISMATCH = dict(
-    m_up=(1.06, 1.10, 1.03), j_up=(1.06, 1.10, 1.03),
-    m_low=(1.05, 0.97, 1.08), j_low=(1.05, 0.97, 1.08),
-    m_ee=1.25, j_ee=1.25,
-    k_s=(0.95, 1.06, 0.92), k_e=(1.04, 0.96, 0.91), k_w=(0.97, 1.09, 1.0),
-    d_s=3.0, d_e=3.0, d_w=3.0,
-    k_t=(0.97, 0.98, 0.96),
-)
+HARDWARE_MISMATCH = {
+    "m_up": (1.06, 1.10, 1.03), "j_up": (1.06, 1.10, 1.03),
+    "m_low": (1.05, 0.97, 1.08), "j_low": (1.05, 0.97, 1.08),
+    "m_ee": 1.25, "j_ee": 1.25,
+    "k_s": (0.95, 1.06, 0.92), "k_e": (1.04, 0.96, 0.91), "k_w": (0.97, 1.09, 1.0),
+    "d_s": 3.0, "d_e": 3.0, "d_w": 3.0,
+    "k_t": (0.97, 0.98, 0.96),
+}
 
 HARDWARE = replace(
     NOMINAL.scaled(**HARDWARE_MISMATCH),

@@ -42,8 +42,22 @@ import re
 import struct
 import sys
 import time
-from ctypes import (CFUNCTYPE, POINTER, Structure, addressof, byref, c_char, c_char_p, c_double,
-                    c_int, c_size_t, c_uint, c_void_p, cast, create_string_buffer)
+from ctypes import (
+    CFUNCTYPE,
+    POINTER,
+    Structure,
+    addressof,
+    byref,
+    c_char,
+    c_char_p,
+    c_double,
+    c_int,
+    c_size_t,
+    c_uint,
+    c_void_p,
+    cast,
+    create_string_buffer,
+)
 
 OK, WARNING, DISCARD, ERROR, FATAL, PENDING = range(6)
 CO_SIMULATION = 1
@@ -564,10 +578,10 @@ class Sequence:
         status = self.call("fmi2GetFMUstate", comp, target, shown=_hex(state.value))
         if status == OK and state.value not in self.states:
             self.states.append(state.value)
-        if status == OK and rng.random() < 0.3:  # a state just taken must restore
-            if self.call("fmi2SetFMUstate", comp, state, shown=_hex(state.value)) != OK:
-                raise Violation("fmi2SetFMUstate refused the state fmi2GetFMUstate just gave: "
-                                f"{self.f.last_errors}")
+        restore = status == OK and rng.random() < 0.3  # a state just taken must restore
+        if restore and self.call("fmi2SetFMUstate", comp, state, shown=_hex(state.value)) != OK:
+            raise Violation("fmi2SetFMUstate refused the state fmi2GetFMUstate just gave: "
+                            f"{self.f.last_errors}")
 
     def set_state(self) -> None:
         state = self.pick_state()
@@ -657,11 +671,11 @@ class Sequence:
             header = 24                # a time, a mode, a value
             offset = header + 4 * rng.randrange(max((len(data) - header) // 4 - 1, 1))
             if how == "int":
-                word = struct.pack("<i", rng.choice(SPECIAL_INTS + (4, 8, 16, 1 << 5)))
+                word = struct.pack("<i", rng.choice((*SPECIAL_INTS, 4, 8, 16, 1 << 5)))
             elif rng.random() < 0.5:
                 offset -= offset % 8
-                word = struct.pack("<q", rng.choice(INT64_WORDS + (len(self.f.table or ()),
-                                                                   len(self.f.table or ()) - 1)))
+                size = len(self.f.table or ())
+                word = struct.pack("<q", rng.choice((*INT64_WORDS, size, size - 1)))
             else:
                 offset -= offset % 8
                 word = struct.pack("<d", rng.choice(DOUBLE_WORDS))

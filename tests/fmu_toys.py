@@ -97,7 +97,7 @@ def rk4_reference(system: System, params: dict[str, float], forces: np.ndarray,
     x = np.array(system.initial_state(p)).ravel()
     out = [x]
     for u, (h, n) in zip(forces, steps, strict=True):
-        x = rk4(lambda state: np.array(system.dynamics(state, u, p)).ravel(), x, h / n, n)
+        x = rk4(lambda state, u=u: np.array(system.dynamics(state, u, p)).ravel(), x, h / n, n)
         out.append(x)
     return np.array(out)
 

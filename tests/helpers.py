@@ -5,7 +5,8 @@ from pathlib import Path
 import numpy as np
 
 REPOSITORY = Path(__file__).resolve().parents[1]
-SHARED_FMUS = REPOSITORY.parent / "shared" / "fmus"  # the Modelica Reference-FMUs
+# the Modelica Reference-FMUs, kept in the repository (README.md and LICENSE.txt beside them)
+REFERENCE_FMUS = REPOSITORY / "cosim" / "examples" / "reference-fmus"
 
 
 def workspace_points(rng: np.random.Generator, n: int, radius: float = 0.05) -> np.ndarray:

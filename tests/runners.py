@@ -68,7 +68,7 @@ def run_fmu_libcosim(path: str | Path, steps: int, step: float = 1e-3,
         n for n, v in variables.items() if v.causality == "output"]
     series = {n: np.broadcast_to(np.asarray(u, dtype=float), (steps,))
               for n, u in (inputs or {}).items()}
-    execution = CosimExecution.from_step_size(int(round(step * 1e9)))
+    execution = CosimExecution.from_step_size(round(step * 1e9))
     index = execution.add_local_slave(CosimLocalSlave(fmu_path=str(path), instance_name="slave"))
     for name, value in (parameters or {}).items():
         v = variables[name]

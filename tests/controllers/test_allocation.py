@@ -8,8 +8,12 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from flexff.controllers.allocation import (actuation_jacobian, allocate_torques, measured_position,
-                                           motor_currents)
+from flexff.controllers.allocation import (
+    actuation_jacobian,
+    allocate_torques,
+    measured_position,
+    motor_currents,
+)
 from flexff.controllers.feedback import HOME_ANGLES, controller_design, controller_system
 from flexff.controllers.feedforward import rigid_body_feedforward_system
 from flexff.plant.kinematics import shoulder_angles

@@ -10,6 +10,7 @@ import re
 import numpy as np
 import onnx
 import pytest
+from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error
 
 from flexff.controllers.features import feature_names, reference_features
@@ -61,7 +62,7 @@ def metadata(model) -> dict[str, str]:
 def independent_forces(model, reference) -> np.ndarray:
     """The documented scheme with onnxruntime's Python API, step by step at the model rate."""
     meta = metadata(model)
-    period = int(round(1e3 / float(meta["sample_rate_hz"])))
+    period = round(1e3 / float(meta["sample_rate_hz"]))
     features = reference_features(reference, meta["feature_set"])
     runtime = session(model)
     names = [o.name for o in runtime.get_outputs()]
@@ -197,7 +198,7 @@ def test_models_that_do_not_fit_are_refused(models, tmp_path):
         onnx.helper.set_model_props(graph, {**metadata(models / "pgnn.onnx"),
                                             "prior_parameters": bad})
         onnx.save(graph, str(tmp_path / "bad.onnx"))
-        with pytest.raises(ValueError, match="metadata prior_parameters .*export the model"):
+        with pytest.raises(ValueError, match=r"metadata prior_parameters .*export the model"):
             learned_feedforward_system(tmp_path / "bad.onnx")
 
 
@@ -227,7 +228,7 @@ def test_a_reference_outside_the_workspace_is_named(models, fmus, reference, tmp
     fmu = build_fmu(learned_feedforward_system(models / "lstm.onnx", 1e-3, away),
                     tmp_path / "away.fmu")
     s = LoggedSlave(fmu)
-    with pytest.raises(Exception):
+    with pytest.raises(FMICallException):
         s.initialize()  # the precomputation runs over the whole table
     _named_feature(s.log(), models / "lstm.onnx")
     assert "at t = 0.02: it is not defined for the inputs x_ref = 0.5" in s.log()

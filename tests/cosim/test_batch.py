@@ -59,7 +59,7 @@ def test_sweep(tmp_path):
     assert [c.name for c in configs] == ["base-controller.crossover_hz=2.0",
                                          "base-controller.crossover_hz=3.0"]
     assert [c.builtin("controller").options["crossover_hz"] for c in configs] == [2.0, 3.0]
-    with pytest.raises(ValueError, match="controller.crossover_hz: expected a number"):
+    with pytest.raises(ValueError, match=r"controller.crossover_hz: expected a number"):
         sweep(path, "controller.crossover_hz", ["fast"])
 
 
@@ -79,7 +79,7 @@ def test_sweep_folder_names_are_safe_and_unique(tmp_path):
                      "base-reference.path=__a_b.csv", "base-reference.path=__a_b.csv-2"]
     for name in names:
         assert re.fullmatch(r"[A-Za-z0-9._=+-]+", name) and ".." not in name
-    with pytest.raises(ValueError, match="the sweep lists the same value twice: '../ref.csv'"):
+    with pytest.raises(ValueError, match=r"the sweep lists the same value twice: '../ref.csv'"):
         sweep(path, "reference.path", ["../ref.csv", "../a b.csv", "../ref.csv"])
 
 

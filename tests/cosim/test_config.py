@@ -117,23 +117,23 @@ def test_the_old_name_of_the_rigid_body_feedforward_still_reads(tmp_path):
 
 def test_onnx_feedforward_model_is_checked(tmp_path):
     text = GOOD + '[feedforward]\nkind = "onnx"\nmodel = "ff.onnx"\n'
-    with pytest.raises(ConfigError, match="feedforward.model: no such file"):
+    with pytest.raises(ConfigError, match=r"feedforward.model: no such file"):
         load_config(write(tmp_path, text))
     (tmp_path / "ff.onnx").write_bytes(b"")
-    with pytest.raises(ConfigError, match="feedforward.model: .*not a flexff feedforward model"):
+    with pytest.raises(ConfigError, match=r"feedforward.model: .*not a flexff feedforward model"):
         load_config(write(tmp_path, text))
 
 
 def test_bad_configuration_fails_before_anything_is_written(tmp_path):
     path = write(tmp_path, GOOD.replace("stop = 2.0", "stop = 2.0005"))
-    with pytest.raises(ConfigError, match="run.stop"):
+    with pytest.raises(ConfigError, match=r"run.stop"):
         run_config(path, tmp_path / "out")
     assert not (tmp_path / "out").exists()
 
 
 def test_unknown_record_signal_fails_before_the_run(tmp_path):
     path = write(tmp_path, GOOD + '[record]\nsignals = ["x", "z"]\n')
-    with pytest.raises(ConfigError, match="record.signals: cannot record unknown signal 'z'"):
+    with pytest.raises(ConfigError, match=r"record.signals: cannot record unknown signal 'z'"):
         run_config(path, tmp_path / "out")
     assert not (tmp_path / "out" / "signals.npz").exists()
 

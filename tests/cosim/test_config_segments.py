@@ -26,7 +26,7 @@ def build(segments, start=(0.002, 0.003)):
 
 
 def index(t):
-    return int(round(t / STEP))
+    return round(t / STEP)
 
 
 def test_segments_chain_end_to_start_and_durations_add_up():

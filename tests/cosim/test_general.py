@@ -1,6 +1,6 @@
 """The general form of a run configuration ([fmu.NAME], [[connection]], cosim.schema) on
 third-party FMUs: the Reference-FMUs of the Modelica Association (VanDerPol, Feedthrough; FMI 2.0
-and 3.0), which must lie in ../shared/fmus beside the repository (missing -> the tests fail).
+and 3.0), kept in the repository (tests.helpers.REFERENCE_FMUS; missing -> the tests fail).
 
 Checked against:
   - fmpy.simulate_fmu of the same FMU, and the reference result shipped inside the FMU
@@ -36,7 +36,7 @@ from flexff.cosim.recording import NPZ_NAME, load_recording
 from flexff.cosim.run import run_config, simulate_config
 from flexff.cosim.scenario import resolve
 from flexff.cosim.schema import ConfigError
-from tests.helpers import SHARED_FMUS
+from tests.helpers import REFERENCE_FMUS
 
 VDP_REFERENCE_CSV = "extra/org.fmi-standard.fmi-ls-ref/VanDerPol_out.csv"
 FT_IN, FT_OUT = "ft.Float64_continuous_input", "ft.Float64_continuous_output"
@@ -48,10 +48,10 @@ DROP = object()  # in `merged`: remove this key
 @pytest.fixture(scope="module")
 def ref_fmu():
     """`ref_fmu("VanDerPol", 3)`: the path of a Reference-FMU; fails (never skips) without one."""
-    assert SHARED_FMUS.is_dir(), f"the Reference-FMUs are missing: expected them in {SHARED_FMUS}"
+    assert REFERENCE_FMUS.is_dir(), f"the Reference-FMUs are missing: expected {REFERENCE_FMUS}"
 
     def path(model: str, version: int = 2) -> Path:
-        fmu = SHARED_FMUS / f"fmi{version}" / f"{model}.fmu"
+        fmu = REFERENCE_FMUS / f"fmi{version}" / f"{model}.fmu"
         assert fmu.is_file(), f"Reference-FMU missing: {fmu}"
         return fmu
 

@@ -13,7 +13,7 @@ from flexff.fmu.importer import read_fmu
 from tests.loops import STEP, loop_systems, monolithic
 
 STOP = 15.0
-STEPS = int(round(STOP / STEP))
+STEPS = round(STOP / STEP)
 MAX_SUBSTEP = 2.5e-4  # four RK4 sub-steps per communication step
 
 
@@ -71,9 +71,9 @@ def test_connections_by_name(fmus):
     with pytest.raises(ValueError, match="input 'Fx_ff' is not connected"):
         wire(ports[1:], sources)
     with pytest.raises(ValueError, match="algebraic loop"):  # the currents come back
-        wire([ports[2], ports[1]], sources + ["Fx_ff", "Fy_ff"])
-    with pytest.raises(ValueError, match="'theta_s1' matches theta_s1 and plant.theta_s1"):
-        wire(ports, sources + ["theta_s1"])
+        wire([ports[2], ports[1]], [*sources, "Fx_ff", "Fy_ff"])
+    with pytest.raises(ValueError, match=r"'theta_s1' matches theta_s1 and plant.theta_s1"):
+        wire(ports, [*sources, "theta_s1"])
 
 
 def test_an_unconnected_input_fails_at_load_time(fmus):

@@ -18,12 +18,11 @@ from flexff.cosim.master import Master, SlaveSpec
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import load_recording
 from flexff.cosim.timing import Pacing
-from tests.helpers import SHARED_FMUS
-
+from tests.helpers import REFERENCE_FMUS
 
 
 def van_der_pol(version: int = 2) -> list[SlaveSpec]:
-    path = SHARED_FMUS / f"fmi{version}" / "VanDerPol.fmu"
+    path = REFERENCE_FMUS / f"fmi{version}" / "VanDerPol.fmu"
     assert path.is_file(), f"the Reference-FMUs are missing: expected {path}"
     return [SlaveSpec("vdp", path)]
 
@@ -99,15 +98,14 @@ def test_the_process_setup_reports_what_it_did():
         assert report.cpu == 0
         assert report.sched_fifo or any("SCHED_FIFO" in w for w in report.warnings)
         assert report.memory_locked or any("memory" in w for w in report.warnings)
-    with pytest.raises(ValueError, match="--cpu 4096"):
-        with realtime_process(cpu=4096):
-            pass
+    with pytest.raises(ValueError, match="--cpu 4096"), realtime_process(cpu=4096):
+        pass
 
 
 def write_config(folder: Path, step: float, stop: float) -> Path:
     path = folder / "vdp.toml"
     path.write_text(f'[run]\nstep = {step}\nstop = {stop}\n[fmu.vdp]\n'
-                    f'path = "{SHARED_FMUS / "fmi2" / "VanDerPol.fmu"}"\n')
+                    f'path = "{REFERENCE_FMUS / "fmi2" / "VanDerPol.fmu"}"\n')
     return path
 
 

@@ -7,8 +7,18 @@ import numpy as np
 import pytest
 
 from flexff.cosim.memory import MemoryNeeded, available_memory
-from flexff.cosim.references import (Chain, Circle, Hold, Line, Reference, Spline, read_csv, sample,
-                                     thesis_evaluation, thesis_evaluation_path)
+from flexff.cosim.references import (
+    Chain,
+    Circle,
+    Hold,
+    Line,
+    Reference,
+    Spline,
+    read_csv,
+    sample,
+    thesis_evaluation,
+    thesis_evaluation_path,
+)
 
 STEP = 1e-3
 
@@ -61,7 +71,7 @@ def test_thesis_evaluation_landmarks():
     ref = thesis_evaluation(STEP)
     assert ref.t[0] == 0 and ref.t[-1] == pytest.approx(15.0) and ref.duration == pytest.approx(15)
     assert len(ref.t) == 15001
-    k3 = int(round(3.0 / STEP))
+    k3 = round(3.0 / STEP)
     assert (ref.x[k3], ref.y[k3]) == (pytest.approx(0.0098, abs=1e-15),
                                       pytest.approx(-0.0098, abs=1e-15))
     assert (ref.x[0], ref.y[0]) == (0, 0)
@@ -78,7 +88,7 @@ def test_thesis_evaluation_landmarks():
     assert (swept[-1] - swept[0]) / (2 * math.pi) == pytest.approx(11.5, abs=1e-12)
     assert np.all(np.diff(swept) >= 0)  # one way round, counter-clockwise
     # the mean turning rate of the thesis: 0.958 Hz
-    assert 11.5 / 12 == pytest.approx(0.958, abs=1e-3)
+    assert pytest.approx(0.958, abs=1e-3) == 11.5 / 12
 
 
 def test_signals_use_the_cosimulation_names():
@@ -122,7 +132,7 @@ def test_chain_is_continuous_and_switches_segments_at_the_joins():
     ref = sample(paths["chain"], STEP)
     assert ref.duration == pytest.approx(2.0 + 0.5 + 5.0 + 0.7)
     assert np.abs(np.diff(ref.x)).max() < 1e-3 and np.abs(np.diff(ref.y)).max() < 1e-3
-    k = int(round(2.2 / STEP))  # inside the first hold
+    k = round(2.2 / STEP)  # inside the first hold
     assert (ref.x[k], ref.y[k]) == (0.02, 0.01) and ref.vx[k] == 0
 
 

@@ -7,8 +7,14 @@ import pytest
 
 from flexff.cosim.metrics import error_norms, run_metrics, tracking_metrics
 from flexff.cosim.plots import write_plots
-from flexff.cosim.recording import CSV_NAME, NPZ_NAME, Recording, atomic_write, load_recording
-from flexff.cosim.recording import save_recording
+from flexff.cosim.recording import (
+    CSV_NAME,
+    NPZ_NAME,
+    Recording,
+    atomic_write,
+    load_recording,
+    save_recording,
+)
 
 
 def synthetic():

@@ -19,7 +19,7 @@ from flexff.cosim.run import run_config, simulate_config
 from flexff.cosim.schema import ConfigError
 from flexff.cosim.ssp import NS, SSD, export_ssp, load_ssp
 from flexff.fmu.importer import read_fmu
-from tests.helpers import SHARED_FMUS
+from tests.helpers import REFERENCE_FMUS
 
 STEPS = 200
 X0, X1, FT = "vdp.x0", "vdp.x1", "ft.Float64_continuous_output"
@@ -29,11 +29,11 @@ def write_config(folder: Path, fmi: str = "fmi2", algorithm: str = "jacobi",
                  mu: float | None = 1.5, **tables) -> Path:
     """The configuration as a TOML file (mu None: VanDerPol's default, 1); `tables` adds
     [[source]] tables and further connections."""
-    vdp = {"path": str(SHARED_FMUS / fmi / "VanDerPol.fmu")}
+    vdp = {"path": str(REFERENCE_FMUS / fmi / "VanDerPol.fmu")}
     if mu is not None:
         vdp["parameters"] = {"mu": mu}
     data = {"run": {"step": 0.01, "stop": 2.0, "algorithm": algorithm},
-            "fmu": {"vdp": vdp, "ft": {"path": str(SHARED_FMUS / fmi / "Feedthrough.fmu"),
+            "fmu": {"vdp": vdp, "ft": {"path": str(REFERENCE_FMUS / fmi / "Feedthrough.fmu"),
                                        "unconnected": "start"}},
             "connection": [{"from": "vdp.x0", "to": "ft.Float64_continuous_input",
                             "gain": 2.0, "offset": 0.5}, *tables.pop("connection", [])],
@@ -124,7 +124,7 @@ def test_libcosim_runs_the_ssp(ssp, flexff):
     variables = {}
     for name in (X0, X1, FT):
         slave, variable = name.split(".")
-        info = read_fmu(SHARED_FMUS / "fmi2" / ("VanDerPol.fmu" if slave == "vdp" else
+        info = read_fmu(REFERENCE_FMUS / "fmi2" / ("VanDerPol.fmu" if slave == "vdp" else
                                          "Feedthrough.fmu"))
         variables[name] = (execution.slave_index_from_instance_name(slave),
                            info.variables[variable].value_reference)
@@ -206,7 +206,7 @@ def test_typed_connections_and_start_values_round_trip(tmp_path):
     values = {"Int32_input": 7, "Boolean_input": True, "String_input": "hello",
               "Enumeration_input": 2, "Float64_continuous_input": 1.25}
     signals = ("Int32", "Boolean", "String", "Enumeration")
-    feedthrough = str(SHARED_FMUS / "fmi2" / "Feedthrough.fmu")
+    feedthrough = str(REFERENCE_FMUS / "fmi2" / "Feedthrough.fmu")
     path = tmp_path / "typed.toml"
     path.write_text(tomli_w.dumps({
         "run": {"step": 0.5, "stop": 2.0},

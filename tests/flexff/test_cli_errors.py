@@ -16,7 +16,6 @@ from flexff.cli import main
 from flexff.cosim.master import CosimError
 from tests.cosim.test_batch import SHORT  # a 1 s run of the manipulator
 
-
 # commands that write: {out} is the output folder (or the folder of the output file)
 WRITERS = {
     "run": ["run", "{config}", "-o", "{out}"],

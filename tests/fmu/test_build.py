@@ -92,7 +92,7 @@ def test_model_description_of_duffing(tmp_path_factory):
     assert (v["seed"].type, v["seed"].variability, v["seed"].start) == ("Integer", "fixed", "0")
     deps = {o.variable.name: [d.name for d in o.dependencies] for o in md.outputs}
     assert deps == {"q_meas": [], "q_true": [], "v_true": [], "a": ["F"]}  # feedthrough of F to a
-    assert [c for c in md.logCategories] and float(md.defaultExperiment.stepSize) == 1e-3
+    assert list(md.logCategories) and float(md.defaultExperiment.stepSize) == 1e-3
 
 
 def test_rebuild_from_sources(toy_fmu, tmp_path):

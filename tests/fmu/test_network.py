@@ -38,11 +38,13 @@ def _save(graph: onnx.GraphProto, path) -> str:
 def running_sum_graph(path, n: int = 2) -> str:
     """forces[t] = acc + sum of inputs[0..t]; acc_out = acc + sum of all inputs (float32)."""
     nodes = [
-        oh.make_node("Constant", [], ["axis"], value=oh.make_tensor("axis", TensorProto.INT64, [], [0])),
+        oh.make_node("Constant", [], ["axis"],
+                     value=oh.make_tensor("axis", TensorProto.INT64, [], [0])),
         oh.make_node("CumSum", ["inputs", "axis"], ["running"]),
         oh.make_node("Cast", ["acc"], ["acc64"], to=TensorProto.DOUBLE),
         oh.make_node("Add", ["running", "acc64"], ["forces"]),
-        oh.make_node("Constant", [], ["axes"], value=oh.make_tensor("axes", TensorProto.INT64, [1], [0])),
+        oh.make_node("Constant", [], ["axes"],
+                     value=oh.make_tensor("axes", TensorProto.INT64, [1], [0])),
         oh.make_node("ReduceSum", ["inputs", "axes"], ["total"], keepdims=1),
         oh.make_node("Cast", ["total"], ["total32"], to=TensorProto.FLOAT),
         oh.make_node("Add", ["acc", "total32"], ["acc_out"]),
@@ -170,7 +172,7 @@ def test_restored_state_continues_exactly(step_fmu, split):
 
 def test_read_network_names_what_does_not_fit(graph, tmp_path):
     x, u, p = ca.SX.sym("x", 0), ca.SX.sym("u", 3), ca.SX.sym("p", 0)
-    with pytest.raises(ValueError, match="takes 2 inputs per step.*gives 3"):
+    with pytest.raises(ValueError, match=r"takes 2 inputs per step.*gives 3"):
         read_network(graph, ca.Function("f", [x, u, p], [u]))
     with pytest.raises(ValueError, match="does not exist"):
         read_network(tmp_path / "missing.onnx", ca.Function("f", [x, u, p], [u]))
@@ -182,7 +184,7 @@ def test_read_network_names_what_does_not_fit(graph, tmp_path):
         oh.make_tensor_value_info("h", TensorProto.FLOAT, [1, 2])], [
         oh.make_tensor_value_info("forces", TensorProto.DOUBLE, ["time", 2])])
     v = ca.SX.sym("v", 2)
-    with pytest.raises(ValueError, match="state input 'h'.*needs an output 'h_out'"):
+    with pytest.raises(ValueError, match=r"state input 'h'.*needs an output 'h_out'"):
         read_network(_save(lonely, tmp_path / "lonely.onnx"), ca.Function("f", [x, v, p], [v]))
 
 

@@ -230,13 +230,13 @@ def test_graphs_that_cannot_be_an_fmu_are_named(tmp_path):
         oh.make_tensor_value_info("k", TensorProto.INT64, [1])], [
         oh.make_tensor_value_info("y", TensorProto.FLOAT, [1])],
         [oh.make_node("Cast", ["k"], ["y"], to=TensorProto.FLOAT)])
-    with pytest.raises(ValueError, match="counts.onnx: input 'k' holds INT64.*float32 or float64"):
+    with pytest.raises(ValueError, match=r"counts.onnx: input 'k' holds INT64.*float32 or float64"):
         onnx_system(counts)
     (tmp_path / "weights.onnx").write_text("time,x\n0,1\n")
-    with pytest.raises(ValueError, match="weights.onnx is not a readable ONNX model"):
+    with pytest.raises(ValueError, match=r"weights.onnx is not a readable ONNX model"):
         onnx_system(tmp_path / "weights.onnx")
     (tmp_path / "empty.onnx").write_bytes(b"")
-    with pytest.raises(ValueError, match="empty.onnx is not a readable ONNX model"):
+    with pytest.raises(ValueError, match=r"empty.onnx is not a readable ONNX model"):
         onnx_system(tmp_path / "empty.onnx")
     identity = [oh.make_tensor_value_info("u", TensorProto.FLOAT, [2])], [
         oh.make_tensor_value_info("y", TensorProto.FLOAT, [2])], [
@@ -247,7 +247,7 @@ def test_graphs_that_cannot_be_an_fmu_are_named(tmp_path):
         onnx_system(missing)
     misnamed = _graph_file(tmp_path / "misnamed.onnx", *identity,
                            {"output_signals": json.dumps(["only one"])})
-    with pytest.raises(ValueError, match="'output_signals' must list 2 names.*y \\(2\\)"):
+    with pytest.raises(ValueError, match=r"'output_signals' must list 2 names.*y \\(2\\)"):
         onnx_system(misnamed)
 
 

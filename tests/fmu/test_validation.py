@@ -13,15 +13,15 @@ from fmpy.fmi3 import FMU3Slave
 from flexff.cli import main
 from flexff.fmu.importer import FmuInstance
 from flexff.fmu.validation import FMI3_CS_FUNCTIONS, validate_fmu
-from tests.helpers import SHARED_FMUS
+from tests.helpers import REFERENCE_FMUS
 
-REFERENCE_FMUS = [f"fmi{v}/{m}.fmu" for v in (2, 3) for m in ("Dahlquist", "Feedthrough",
-                                                               "VanDerPol")]
+REFERENCE_NAMES = [f"fmi{v}/{m}.fmu" for v in (2, 3) for m in ("Dahlquist", "Feedthrough",
+                                                                "VanDerPol")]
 
 
 def reference(name: str) -> Path:
-    """A Reference-FMU of the shared folder; a missing one fails the test."""
-    path = SHARED_FMUS / name
+    """A Reference-FMU of the repository's copy; a missing one fails the test."""
+    path = REFERENCE_FMUS / name
     assert path.is_file(), f"{path} is missing"
     return path
 
@@ -61,7 +61,7 @@ def without_co_simulation(text: str) -> str:
                   flags=re.S)
 
 
-@pytest.mark.parametrize("name", REFERENCE_FMUS)
+@pytest.mark.parametrize("name", REFERENCE_NAMES)
 def test_reference_fmus_pass(name):
     assert validate_fmu(reference(name)) == []
 

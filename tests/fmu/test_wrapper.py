@@ -6,8 +6,16 @@ the process (and, where documented, the instance) in a usable state.
 
 import struct
 import time
-from ctypes import (addressof, byref, c_char, c_double, c_size_t, c_uint, c_void_p,
-                    create_string_buffer)
+from ctypes import (
+    addressof,
+    byref,
+    c_char,
+    c_double,
+    c_size_t,
+    c_uint,
+    c_void_p,
+    create_string_buffer,
+)
 
 import numpy as np
 import pytest

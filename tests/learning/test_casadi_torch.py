@@ -9,7 +9,6 @@ from flexff.controllers.features import motion_features, motion_function
 from flexff.learning.casadi_torch import TorchFunction, atan2, frozen
 from flexff.learning.rigid import RigidBodyForce, rigid_forces
 
-
 pytestmark = pytest.mark.usefixtures("few_threads")
 
 

@@ -76,7 +76,7 @@ def test_an_interrupted_run_resumes_to_the_same_weights(data, other, uninterrupt
     assert sorted(p.name for p in out.iterdir()) == ["best.pt", "checkpoint.pt"]
     best = torch.load(out / "best.pt", weights_only=True)
     assert best["val_mse"] == min(metrics["history"]["val"][:2]) and best["epoch"] in (1, 2)
-    with pytest.raises(RunFolderError, match="unfinished training run \\(checkpoint after epoch 2 "
+    with pytest.raises(RunFolderError, match=r"unfinished training run \\(checkpoint after epoch 2 "
                                              "of 3\\).*--resume.*--force"):
         train("lstm", "fast", data, out, progress=False, epochs=3, resume=False, force=False)
     with pytest.raises(RunFolderError, match="other settings \\(epochs: 3 there, 4 here\\)"):
@@ -93,16 +93,16 @@ def test_an_interrupted_run_resumes_to_the_same_weights(data, other, uninterrupt
 def test_a_finished_or_foreign_folder_needs_force(data, uninterrupted, tmp_path, capsys):
     whole, _ = uninterrupted
     before = {name: (whole / name).stat().st_mtime_ns for name in FILES}
-    with pytest.raises(RunFolderError, match="holds a finished training run.*--force"):
+    with pytest.raises(RunFolderError, match=r"holds a finished training run.*--force"):
         train("lstm", "fast", data, whole, progress=False, epochs=1, force=False)
     assert main(["train", "--model", "lstm", "--data", str(data), "-o", str(whole)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "holds a finished training run" in err and "--force" in err
     assert {name: (whole / name).stat().st_mtime_ns for name in FILES} == before
-    with pytest.raises(RunFolderError, match="holds no checkpoint.pt to resume"):
+    with pytest.raises(RunFolderError, match=r"holds no checkpoint.pt to resume"):
         train("lstm", "fast", data, whole, progress=False, epochs=3, resume=True)
     (tmp_path / "notes.txt").write_text("mine")
-    with pytest.raises(RunFolderError, match="is not empty \\(notes.txt\\).*--force"):
+    with pytest.raises(RunFolderError, match=r"is not empty \\(notes.txt\\).*--force"):
         train("lstm", "fast", data, tmp_path, progress=False, epochs=1, force=False)
     with pytest.raises(ValueError, match="checkpoint_every must be at least 1"):
         train("lstm", "fast", data, tmp_path / "new", progress=False, checkpoint_every=0)
@@ -134,7 +134,7 @@ def test_a_failed_final_write_keeps_the_finished_run(data, uninterrupted, tmp_pa
         train("lstm", "fast", data, out, progress=False, epochs=2)
     monkeypatch.undo()
     assert {name: (out / name).read_bytes() for name in FILES} == before
-    assert sorted(p.name for p in out.iterdir()) == sorted(FILES + ("best.pt", "checkpoint.pt"))
+    assert sorted(p.name for p in out.iterdir()) == sorted((*FILES, "best.pt", "checkpoint.pt"))
     assert load_run(out).config.epochs == 3
     export(out, tmp_path / "model.onnx")
     resumed = train("lstm", "fast", data, out, progress=False, epochs=2, resume=True)
@@ -168,7 +168,7 @@ def test_training_killed_after_its_first_checkpoint_resumes(data, uninterrupted,
         process.wait()
         process.stderr.close()
     assert not (out / "run.json").exists()
-    assert main(args + ["--resume"]) == 0
+    assert main([*args, "--resume"]) == 0
     saved = json.loads((out / "metrics.json").read_text())
     assert saved["epochs"] == 3 and len(saved["history"]["train"]) == 3
     assert saved["history"]["val"] == uninterrupted[1]["history"]["val"]

@@ -21,8 +21,16 @@ import psutil
 import pytest
 
 from flexff.cosim.run import simulate_config
-from flexff.learning.collect import (CollectionError, CollectionReport, DataFolderError, Outcome,
-                                     collect, dataset_signals, run_collection, trajectory_config)
+from flexff.learning.collect import (
+    CollectionError,
+    CollectionReport,
+    DataFolderError,
+    Outcome,
+    collect,
+    dataset_signals,
+    run_collection,
+    trajectory_config,
+)
 from flexff.learning.dataset import MANIFEST, SIGNALS, DatasetError, load_dataset
 from flexff.learning.trajectories import trajectory_set
 
@@ -243,14 +251,15 @@ def test_a_full_disk_stops_the_collection_with_one_message(tmp_path, monkeypatch
     `flexff data collect` says so in one line, without stack frames."""
     from flexff.cli import main
 
-    monkeypatch.setattr("flexff.learning.collect.save_signals", _full_disk)  # forked workers inherit it
+    # forked workers inherit it
+    monkeypatch.setattr("flexff.learning.collect.save_signals", _full_disk)
     args = ["data", "collect", "--set", "sim", "-o", str(tmp_path / "sim"), "--workers", "1"]
     if scheduler:
         from dask.distributed import LocalCluster
 
         cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                dashboard_address=None)
-        args = args[:-2] + ["--scheduler", cluster.scheduler_address]
+        args = [*args[:-2], "--scheduler", cluster.scheduler_address]
     try:
         assert main(args) == 1
     finally:

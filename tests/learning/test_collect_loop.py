@@ -14,7 +14,7 @@ import pytest
 from flexff.cosim.config import parse_config
 from flexff.cosim.schema import ConfigError
 from flexff.fmu.build import build_fmu
-from flexff.learning.collect import DataFolderError, PROGRESS, collect, run_collection
+from flexff.learning.collect import PROGRESS, DataFolderError, collect, run_collection
 from flexff.learning.dataset import MANIFEST, REFERENCE_SIGNALS, SIGNALS, file_sha256, load_dataset
 from flexff.learning.evaluate import evaluate, scenario_config
 from flexff.learning.synthetic import synthetic_dataset

@@ -85,9 +85,9 @@ def test_wrong_time_step_is_refused(folder):
 
 def test_missing_file_and_missing_folder(folder, tmp_path):
     (folder / "train_000.npz").unlink()
-    with pytest.raises(DatasetError, match="train_000.npz is listed.*missing"):
+    with pytest.raises(DatasetError, match=r"train_000.npz is listed.*missing"):
         load_dataset(folder)
-    with pytest.raises(DatasetError, match="manifest.json is missing"):
+    with pytest.raises(DatasetError, match=r"manifest.json is missing"):
         load_dataset(tmp_path / "nowhere")
 
 
@@ -130,7 +130,7 @@ def test_swapped_files_are_refused(folder, tmp_path):
                                         ("sample_rate_hz", 200.0)])
 def test_an_edited_manifest_is_refused(folder, key, value):
     _edit_manifest(folder, **{key: value})
-    with pytest.raises(DatasetError, match="manifest.json was edited.*only a trajectory's "
+    with pytest.raises(DatasetError, match=r"manifest.json was edited.*only a trajectory's "
                                            "'split' may be changed"):
         load_dataset(folder)
 

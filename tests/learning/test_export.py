@@ -138,7 +138,7 @@ def test_scaling_lives_inside_the_graph(runs):
 
 
 def test_export_of_a_missing_run_says_what_to_do(tmp_path):
-    with pytest.raises(ValueError, match="not a finished training run.*train one"):
+    with pytest.raises(ValueError, match=r"not a finished training run.*train one"):
         export(tmp_path / "nothing", tmp_path / "x.onnx")
 
 

@@ -3,11 +3,23 @@
 import numpy as np
 import pytest
 
-from flexff.controllers.features import (feature_names, feature_units, motion_columns,
-                                         motion_features, reference_features)
+from flexff.controllers.features import (
+    feature_names,
+    feature_units,
+    motion_columns,
+    motion_features,
+    reference_features,
+)
 from flexff.learning.dataset import REFERENCE_SIGNALS
-from flexff.learning.features import (FeatureConfig, decimation, differentiate, encoder_positions,
-                                      lowpass, prepare_trajectory, quantize_encoders)
+from flexff.learning.features import (
+    FeatureConfig,
+    decimation,
+    differentiate,
+    encoder_positions,
+    lowpass,
+    prepare_trajectory,
+    quantize_encoders,
+)
 from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.synthetic import skew_sine_circle, synthetic_trajectory
 from flexff.plant.kinematics import COORDINATE_NAMES, SHOULDER_INDEX
@@ -124,6 +136,7 @@ def test_prepare_trajectory_down_samples_and_adds_noise_only_with_a_generator():
     x2, f2 = prepare_trajectory(traj, 1000.0, config)
     assert x1.shape == (400, 63) and f1.shape == (400, 2)
     np.testing.assert_array_equal(x1, x2)
+    np.testing.assert_array_equal(f1, f2)
     x3, _ = prepare_trajectory(traj, 1000.0, config, np.random.default_rng(0))
     assert not np.array_equal(x1, x3)
     # filtered encoder positions follow the true motion to within the quantization (about 1 mm)

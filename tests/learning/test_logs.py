@@ -13,9 +13,16 @@ import pytest
 from scipy.io import savemat
 
 from flexff.learning.collect import collect
-from flexff.learning.dataset import (ENCODER_SIGNALS, LABEL_SIGNALS, POSITION_SIGNALS,
-                                     REFERENCE_SIGNALS, DatasetError, Trajectory, load_dataset,
-                                     write_manifest)
+from flexff.learning.dataset import (
+    ENCODER_SIGNALS,
+    LABEL_SIGNALS,
+    POSITION_SIGNALS,
+    REFERENCE_SIGNALS,
+    DatasetError,
+    Trajectory,
+    load_dataset,
+    write_manifest,
+)
 from flexff.learning.features import prepare_trajectory
 from flexff.learning.logs import FK, import_logs
 from flexff.learning.presets import make_config
@@ -114,7 +121,7 @@ def test_a_damaged_import_says_to_import_again(imported, tmp_path):
     damaged = tmp_path / "data"
     shutil.copytree(imported, damaged)
     (damaged / "circle-01.npz").unlink()
-    with pytest.raises(DatasetError, match="circle-01.npz is listed in manifest.json but "
+    with pytest.raises(DatasetError, match=r"circle-01.npz is listed in manifest.json but "
                                            "missing; import the logs again"):
         load_dataset(damaged)
 

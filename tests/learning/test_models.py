@@ -4,8 +4,14 @@ import numpy as np
 import pytest
 import torch
 
-from flexff.learning.models import (TemporalConvNet, build_network, fit_linear_skip,
-                                    parameter_count, receptive_field, uses_prior)
+from flexff.learning.models import (
+    TemporalConvNet,
+    build_network,
+    fit_linear_skip,
+    parameter_count,
+    receptive_field,
+    uses_prior,
+)
 
 SMALL = {
     "lstm": {"hidden": 12, "layers": 2, "dropout": 0.05},
@@ -141,7 +147,7 @@ def test_pgnn_starts_as_the_rigid_body_model():
 
 
 def test_unknown_model_and_bad_sizes_are_refused():
-    with pytest.raises(ValueError, match="unknown model 'gru'.*lstm, cnn-lstm, tcn, pgnn"):
+    with pytest.raises(ValueError, match=r"unknown model 'gru'.*lstm, cnn-lstm, tcn, pgnn"):
         build_network("gru", 6)
     with pytest.raises(ValueError, match="levels"):
         build_network("tcn", 6, levels=0)

@@ -16,8 +16,13 @@ import pytest
 
 from flexff.cosim.metrics import tracking_metrics
 from flexff.cosim.recording import Recording
-from flexff.learning.report import SCENARIO_LABELS, THESIS_TABLES, markdown_table, summarize
-from flexff.learning.report import write_report
+from flexff.learning.report import (
+    SCENARIO_LABELS,
+    THESIS_TABLES,
+    markdown_table,
+    summarize,
+    write_report,
+)
 
 STEP, N = 1e-3, 2000
 T = N * STEP
@@ -194,7 +199,7 @@ def test_write_report_refuses_bad_input_before_writing(tmp_path, case, match):
 
 def test_summarize_and_table_checks():
     norms = {"x": {"e2": 1.0, "einf": 1.0, "rms": 1.0}, "y": {"e2": 1.0, "einf": 1.0, "rms": 1.0}}
-    with pytest.raises(ValueError, match="no 'pid' scenario .*include the PID-alone run"):
+    with pytest.raises(ValueError, match=r"no 'pid' scenario .*include the PID-alone run"):
         summarize({"lstm": norms})
     with pytest.raises(ValueError, match="unknown environment 'nominal': use 'sim'"):
         markdown_table(summarize({"pid": norms}), "nominal")

@@ -19,7 +19,8 @@ from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.threads import cpu_threads, torch_threads
 from flexff.learning.train import learning_rate, train
 
-TINY = {"lstm": {"hidden": 16, "layers": 2, "linear_skip": False}, "pgnn": {"channels": 8, "levels": 3}, "tcn": {"channels": 8}}
+TINY = {"lstm": {"hidden": 16, "layers": 2, "linear_skip": False},
+        "pgnn": {"channels": 8, "levels": 3}, "tcn": {"channels": 8}}
 
 
 @pytest.fixture(scope="module")
@@ -149,7 +150,7 @@ def test_empty_split_and_bad_data_are_refused(data, tmp_path):
         (copy_dir / entry["file"]).write_bytes((data / entry["file"]).read_bytes())
         entry["split"] = "train"
     (copy_dir / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(DatasetError, match="'test' split is empty.*manifest.json"):
+    with pytest.raises(DatasetError, match=r"'test' split is empty.*manifest.json"):
         train("lstm", "fast", copy_dir, tmp_path / "run", progress=False)
     manifest["version"] = 0
     (copy_dir / "manifest.json").write_text(json.dumps(manifest))
@@ -159,7 +160,7 @@ def test_empty_split_and_bad_data_are_refused(data, tmp_path):
 
 
 def test_run_folder_must_exist(tmp_path):
-    with pytest.raises(ValueError, match="not a finished training run.*run.json is missing"):
+    with pytest.raises(ValueError, match=r"not a finished training run.*run.json is missing"):
         load_run(tmp_path)
 
 

@@ -198,7 +198,8 @@ def test_linearized_frequency_matches_free_vibration(variant, nominal, hardware)
     model = nominal if variant == "nominal" else hardware
     p = model.parameter_values(**NO_DAMPING, **FRICTION_FREE)
     frequency, _, vector = modes(model, p)[0]
-    x0 = np.array(model.initial_state([0, 0], p)).ravel() + 1e-5 * np.real(vector) / np.abs(vector[:2]).max()
+    x0 = (np.array(model.initial_state([0, 0], p)).ravel()
+          + 1e-5 * np.real(vector) / np.abs(vector[:2]).max())
     t = np.linspace(0, 6, 6001)
     k = int(np.argmax(np.abs(x0[:2])))
     signal = simulate(model, x0, p, t, rtol=1e-11, atol=1e-16)[k]

@@ -4,6 +4,7 @@ import fmpy.validation
 import numpy as np
 import pytest
 from fmpy import read_model_description
+from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error
 from scipy.integrate import solve_ivp
 
@@ -59,7 +60,10 @@ def test_fmu_matches_tight_tolerance_scipy_reference(plant_fmus, variant):
     reference = [x[:4]]
     for piece in range(STEPS // 100):
         u = [c[piece * 100] for c in currents.values()]
-        rhs = lambda t, s: np.array(model.forward_dynamics(s, u, params)).ravel()  # noqa: E731
+
+        def rhs(t, s, u=u):
+            return np.array(model.forward_dynamics(s, u, params)).ravel()
+
         solution = solve_ivp(rhs, (0.0, 0.1), x, method="DOP853", rtol=1e-12, atol=1e-14,
                              t_eval=np.linspace(0.0, 0.1, 101)[1:])
         reference += list(solution.y[:4].T)
@@ -131,7 +135,7 @@ def test_encoder_noise_is_seeded_and_survives_state_round_trip(plant_fmus):
 @pytest.mark.parametrize("name", ["m_up2", "k_e1", "encoder_counts"])
 def test_bad_physical_parameter_is_rejected_by_name(plant_fmus, name):
     slave = LoggedSlave(str(plant_fmus["nominal"]))
-    with pytest.raises(Exception):
+    with pytest.raises(FMICallException):
         slave.initialize(**{name: 0.0})
     assert name in slave.log()
     slave.free()

@@ -23,7 +23,8 @@ def test_inverse_kinematics_satisfies_the_geometry(nominal, rng):
         q = np.array(nominal.coordinates(pos, p)).ravel()
         lower_angles = []
         for i, m in enumerate(MOUNTS):
-            up, th_s, low, th_e = q[6 * i:6 * i + 2], q[6 * i + 2], q[6 * i + 3:6 * i + 5], q[6 * i + 5]
+            up, th_s = q[6 * i:6 * i + 2], q[6 * i + 2]
+            low, th_e = q[6 * i + 3:6 * i + 5], q[6 * i + 5]
             elbow = m + L * unit(th_s)
             assert np.allclose(up, m + L / 2 * unit(th_s), atol=1e-13)
             assert np.allclose(low, elbow + L / 2 * unit(th_s + th_e), atol=1e-13)
@@ -40,7 +41,8 @@ def test_elbow_branch_at_the_centre_is_the_symmetric_one(nominal):
     q = np.array(nominal.coordinates([0, 0], nominal.parameter_values())).ravel()
     # r_mount = sqrt(2) l puts every elbow at 90 degrees, bent the same way
     assert np.allclose(q[[5, 11, 17]], np.pi / 2, atol=1e-12)
-    assert np.allclose(np.diff(q[[2, 8, 14]] % (2 * np.pi)) % (2 * np.pi), 4 * np.pi / 3, atol=1e-12)
+    assert np.allclose(np.diff(q[[2, 8, 14]] % (2 * np.pi)) % (2 * np.pi), 4 * np.pi / 3,
+                       atol=1e-12)
 
 
 @pytest.mark.parametrize("encoders", [2, 3])
@@ -63,7 +65,7 @@ def test_three_encoder_forward_kinematics_is_the_least_squares_solution(nominal,
         measured = q[[2, 8, 14]] + rng.uniform(-resolution / 2, resolution / 2, 3)
         ours = np.array(nominal.fk3(measured, p)).ravel()
 
-        def residual(z):
+        def residual(z, measured=measured):
             return np.array(nominal.coordinates(z, p)).ravel()[[2, 8, 14]] - measured
 
         reference = least_squares(residual, pos, xtol=1e-15, ftol=1e-15, gtol=1e-15).x
@@ -81,7 +83,8 @@ def test_jacobians_match_finite_differences(nominal, rng):
         analytic_q = np.array(q_jac(pos))
         analytic_a = np.array(nominal.terms(pos, [0, 0], p)[4])
         numeric = np.column_stack([
-            (np.array(nominal.coordinates(pos + h * e, p)) - np.array(nominal.coordinates(pos - h * e, p))).ravel() / (2 * h)
+            (np.array(nominal.coordinates(pos + h * e, p))
+             - np.array(nominal.coordinates(pos - h * e, p))).ravel() / (2 * h)
             for e in np.eye(2)])
         assert np.allclose(analytic_q, numeric, atol=1e-7)
         assert np.allclose(analytic_a, numeric[[2, 8, 14]], atol=1e-7)

@@ -5,9 +5,19 @@ import pytest
 
 from flexff.controllers.feedback import INPUTS, OUTPUTS
 from flexff.controllers.feedforward import rigid_body_feedforward_system
-from flexff.plant.signals import (CURRENTS, ENCODERS, FEEDBACK_FORCES, FEEDFORWARD_FORCES,
-                                  REFERENCE, TRUE_POSITION, TRUE_VELOCITY, names, pick,
-                                  reference_motion, units)
+from flexff.plant.signals import (
+    CURRENTS,
+    ENCODERS,
+    FEEDBACK_FORCES,
+    FEEDFORWARD_FORCES,
+    REFERENCE,
+    TRUE_POSITION,
+    TRUE_VELOCITY,
+    names,
+    pick,
+    reference_motion,
+    units,
+)
 from flexff.plant.system import plant_system
 
 
@@ -28,7 +38,7 @@ def test_the_fmus_take_their_signals_from_there():
                                     "tau1", "tau2", "tau3")
     assert names(INPUTS) == names(REFERENCE[:2], ENCODERS, FEEDFORWARD_FORCES)
     assert [v.unit for v in INPUTS] == [*units(REFERENCE[:2], ENCODERS, FEEDFORWARD_FORCES)]
-    assert OUTPUTS == (*CURRENTS, *FEEDBACK_FORCES)
+    assert (*CURRENTS, *FEEDBACK_FORCES) == OUTPUTS
     feedforward = rigid_body_feedforward_system()
     assert feedforward.inputs == REFERENCE and feedforward.outputs == FEEDFORWARD_FORCES
 
