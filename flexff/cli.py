@@ -86,15 +86,20 @@ def _fmu_build(args: argparse.Namespace) -> int:
 
 
 def _fmu_validate(args: argparse.Namespace) -> int:
+    """Exit 0 when every FMU passes, 1 when one has problems, 2 when a path is not a file."""
     from flexff.fmu.validation import validate_fmu
 
     status = 0
     for path in args.files:
+        if not Path(path).is_file():
+            print(f"flexff: error: {path}: no such file", file=sys.stderr)
+            status = 2
+            continue
         problems = validate_fmu(path)
         print(f"{path}: {'OK' if not problems else f'{len(problems)} problem(s)'}")
         for problem in problems:
             print(f"  - {problem}")
-        status |= bool(problems)
+        status = max(status, int(bool(problems)))
     return status
 
 

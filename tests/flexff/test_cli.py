@@ -6,6 +6,8 @@ import sys
 
 import pytest
 
+from tests.helpers import REFERENCE_FMUS
+
 
 def flexff(*args):
     return subprocess.run([sys.executable, "-m", "flexff", *args], capture_output=True, text=True)
@@ -42,12 +44,19 @@ def test_fmu_build_and_validate(tmp_path):
     assert result.returncode == 0 and "OK" in result.stdout
 
 
-def test_fmu_validate_reports_bad_files(tmp_path):
+def test_fmu_validate_exit_codes(tmp_path):
+    """0 every FMU passes, 1 one has problems, 2 a path is no file (the others still checked)."""
     junk = tmp_path / "junk.fmu"
     junk.write_text("not a zip")
-    result = flexff("fmu", "validate", str(junk), str(tmp_path / "missing.fmu"))
+    good = REFERENCE_FMUS / "fmi2" / "Dahlquist.fmu"
+    assert flexff("fmu", "validate", str(good)).returncode == 0
+    result = flexff("fmu", "validate", str(junk), str(good))
     assert result.returncode == 1
-    assert "is not an FMU" in result.stdout and "does not exist" in result.stdout
+    assert "is not an FMU" in result.stdout and f"{good}: OK" in result.stdout
+    result = flexff("fmu", "validate", str(junk), str(tmp_path / "missing.fmu"), str(good))
+    assert result.returncode == 2, result.stderr
+    assert result.stderr == f"flexff: error: {tmp_path / 'missing.fmu'}: no such file\n"
+    assert "is not an FMU" in result.stdout and f"{good}: OK" in result.stdout
 
 
 def test_bench_prints_json(tmp_path):
