@@ -82,7 +82,7 @@ def controller_design(variant: str = "nominal", crossover_hz: float | None = Non
 def controller_system(variant: str = "nominal", crossover_hz: float | None = None,
                       notch_hz: float | None = None, encoders: int = 2,
                       step: float = 1e-3) -> System:
-    """Discrete feedback controller (sample time `step`) with the signals of DESIGN.md."""
+    """Discrete feedback controller (sample time `step`) with the signals of plant.signals."""
     design = controller_design(variant, crossover_hz, notch_hz, step)
     ss = design.discrete
     n = ss.A.shape[0]

@@ -1,4 +1,4 @@
-"""Tracking metrics of a run (DESIGN.md): per axis e = reference - true position.
+"""Tracking metrics of a run: per axis e = reference - true position.
 
   e2   = sqrt(sum_k e_k^2 * dt) / T   the thesis's "average 2-norm" [m/sqrt(s)]
   einf = max_k |e_k|                  [m]

@@ -1,7 +1,8 @@
 """Recorded signals of a run and their files.
 
 Format: `signals.npz` (numpy's uncompressed zip of .npy arrays) holds `time` [s] and one float64
-array per recorded signal, by its DESIGN.md name; it is the exact record (a reload is bit-equal).
+array per recorded signal, by its name (plant.signals for the manipulator's); it is the exact
+record (a reload is bit-equal).
 `signals.csv` is a copy for people and spreadsheets: a header `time,<signal>,...` and one row
 per communication point, numbers written with 17 significant digits (also exact). Both files
 are written to a temporary name in the same folder and then renamed, so an interrupted run

@@ -43,7 +43,7 @@ from flexff.plant.signals import (
     names,
 )
 
-# DESIGN.md's signals of the manipulator, kept under their short names in recordings
+# the manipulator's signals (plant.signals), kept under their short names in recordings
 MANIPULATOR_SIGNALS = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, ENCODERS,
                             TRUE_POSITION, TRUE_VELOCITY, TORQUES)
 

@@ -57,7 +57,7 @@ def _thesis(exponent: int, rows: Mapping[str, tuple[float, float, float, float]]
     """A thesis table in SI units from its printed rows (‖E_x‖₂, ‖E_y‖₂, ‖E_x‖∞, ‖E_y‖∞), which
     are in units of 10**exponent; read as decimal literals so 42.930 x 1e-4 is 0.004293.
 
-    The thesis's ‖E‖₂ is stored as "rms": its values are the rms error, not DESIGN.md's e2 =
+    The thesis's ‖E‖₂ is stored as "rms": its values are the rms error, not flexff's e2 =
     rms / sqrt(T). Read as e2, its PID alone in simulation (42.93e-4 over 15 s) would be an rms
     of 16.6 mm, above its own largest error of 14.2 mm; read as the rms it is 4.29 mm, next to
     flexff's 3.85 mm on the same reference."""
@@ -159,7 +159,7 @@ def _cell(norms: Mapping[str, float | None], norm: str, scale: float, with_ratio
 
 def markdown_table(summary: dict[str, dict], env: str) -> str:
     """The thesis's table for `env` ("sim" or "hardware") as Markdown: rows ‖E_x‖₂, ‖E_y‖₂
-    (the rms, as the thesis's), e2 x, e2 y (DESIGN.md's rms/√T), ‖E_x‖∞, ‖E_y‖∞; a column
+    (the rms, as the thesis's), e2 x, e2 y (flexff's rms/√T), ‖E_x‖∞, ‖E_y‖∞; a column
     per flexff scenario of `summary` (from `summarize`), then the thesis's columns for the
     same environment, values in the thesis's scale and each feedforward's improvement ratio
     in parentheses, so both can be read side by side."""

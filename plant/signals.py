@@ -1,4 +1,4 @@
-"""The manipulator's signals of DESIGN.md, declared once: name, SI unit, description.
+"""The manipulator's signals, declared once: name, SI unit, description.
 
 The FMUs (plant, controller, feedforwards), run configurations, recordings, datasets, features,
 plots and reports take their names and units from here, and code that needs some of a

@@ -1,4 +1,4 @@
-"""The signals of DESIGN.md, declared once (plant/signals.py), and what takes them."""
+"""The manipulator's signals, declared once (plant/signals.py), and what takes them."""
 
 import casadi as ca
 import pytest
