@@ -247,7 +247,7 @@ def test_graphs_that_cannot_be_an_fmu_are_named(tmp_path):
         onnx_system(missing)
     misnamed = _graph_file(tmp_path / "misnamed.onnx", *identity,
                            {"output_signals": json.dumps(["only one"])})
-    with pytest.raises(ValueError, match=r"'output_signals' must list 2 names.*y \\(2\\)"):
+    with pytest.raises(ValueError, match=r"'output_signals' must list 2 names.*y \(2\)"):
         onnx_system(misnamed)
 
 

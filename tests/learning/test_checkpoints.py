@@ -76,8 +76,8 @@ def test_an_interrupted_run_resumes_to_the_same_weights(data, other, uninterrupt
     assert sorted(p.name for p in out.iterdir()) == ["best.pt", "checkpoint.pt"]
     best = torch.load(out / "best.pt", weights_only=True)
     assert best["val_mse"] == min(metrics["history"]["val"][:2]) and best["epoch"] in (1, 2)
-    with pytest.raises(RunFolderError, match=r"unfinished training run \\(checkpoint after epoch 2 "
-                                             "of 3\\).*--resume.*--force"):
+    with pytest.raises(RunFolderError, match=r"unfinished training run \(checkpoint after epoch 2 "
+                                             r"of 3\).*--resume.*--force"):
         train("lstm", "fast", data, out, progress=False, epochs=3, resume=False, force=False)
     with pytest.raises(RunFolderError, match="other settings \\(epochs: 3 there, 4 here\\)"):
         train("lstm", "fast", data, out, progress=False, epochs=4, resume=True)
@@ -102,7 +102,7 @@ def test_a_finished_or_foreign_folder_needs_force(data, uninterrupted, tmp_path,
     with pytest.raises(RunFolderError, match=r"holds no checkpoint.pt to resume"):
         train("lstm", "fast", data, whole, progress=False, epochs=3, resume=True)
     (tmp_path / "notes.txt").write_text("mine")
-    with pytest.raises(RunFolderError, match=r"is not empty \\(notes.txt\\).*--force"):
+    with pytest.raises(RunFolderError, match=r"is not empty \(notes.txt\).*--force"):
         train("lstm", "fast", data, tmp_path, progress=False, epochs=1, force=False)
     with pytest.raises(ValueError, match="checkpoint_every must be at least 1"):
         train("lstm", "fast", data, tmp_path / "new", progress=False, checkpoint_every=0)
