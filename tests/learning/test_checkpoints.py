@@ -9,10 +9,12 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 import torch
 
+import flexff
 import flexff.learning.train as training
 from flexff.cli import main
 from flexff.learning.export import export
@@ -77,7 +79,7 @@ def test_an_interrupted_run_resumes_to_the_same_weights(data, other, uninterrupt
     best = torch.load(out / "best.pt", weights_only=True)
     assert best["val_mse"] == min(metrics["history"]["val"][:2]) and best["epoch"] in (1, 2)
     with pytest.raises(RunFolderError, match=r"unfinished training run \(checkpoint after epoch 2 "
-                                             "of 3\\).*--resume.*--force"):
+                                             r"of 3\).*--resume.*--force"):
         train("lstm", "fast", data, out, progress=False, epochs=3, resume=False, force=False)
     with pytest.raises(RunFolderError, match="other settings \\(epochs: 3 there, 4 here\\)"):
         train("lstm", "fast", data, out, progress=False, epochs=4, resume=True)
@@ -142,32 +144,54 @@ def test_a_failed_final_write_keeps_the_finished_run(data, uninterrupted, tmp_pa
     assert sorted(p.name for p in out.iterdir()) == sorted(FILES)
 
 
+# the child of the kill test: `flexff train` with the checkpoint writer of the module the CLI
+# really runs (flexff.learning.train) wrapped so that, once its first checkpoint is on disk, it
+# says so in a file and then waits there until it is killed
+_HELD_CHILD = """
+import sys, time
+from pathlib import Path
+import flexff.learning.train as training
+from flexff.cli import main
+held, args = Path(sys.argv[1]), sys.argv[2:]
+real = training._Saver.epoch_done
+def held_after_the_first(self, epochs, network, optimizer, rng, history, *rest):
+    real(self, epochs, network, optimizer, rng, history, *rest)
+    if len(history["train"]) == 1:
+        held.write_text("held")
+        time.sleep(600)
+training._Saver.epoch_done = held_after_the_first
+sys.exit(main(args))
+"""
+
+
 def test_training_killed_after_its_first_checkpoint_resumes(data, uninterrupted, tmp_path):
     """kill -9 of `flexff train` (held after its first checkpoint, so the kill lands mid-run);
     `flexff train --resume` then ends with three epochs and the uninterrupted run's weights."""
-    out = tmp_path / "run"
+    out, held = tmp_path / "run", tmp_path / "held"
     args = ["train", "--model", "lstm", "--data", str(data), "-o", str(out), "--epochs", "3",
             "--checkpoint-every", "1"]
-    code = ("import time, learning.train as t; from flexff.cli import main\n"
-            "real = t._Saver.epoch_done\n"
-            "def held(*a):\n"
-            "    real(*a)\n"
-            "    time.sleep(600)\n"
-            "t._Saver.epoch_done = held\n"
-            f"main({args!r})\n")
-    process = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE)
+    # the child imports the flexff this test imports, from whatever folder pytest started in
+    root = str(Path(flexff.__file__).resolve().parents[1])
+    env = {**os.environ,
+           "PYTHONPATH": os.pathsep.join(filter(None, (root, os.environ.get("PYTHONPATH"))))}
+    process = subprocess.Popen([sys.executable, "-c", _HELD_CHILD, str(held), *args],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env,
+                               cwd=tmp_path)
     try:
         deadline = time.monotonic() + 60
-        while not (out / "checkpoint.pt").exists():
-            assert process.poll() is None, process.stderr.read().decode()
-            assert time.monotonic() < deadline
+        while not held.exists():
+            assert process.poll() is None, ("the child ended without being held after its "
+                                            "first checkpoint: " + process.stderr.read().decode())
+            assert time.monotonic() < deadline, "the child was not held within 60 s"
             time.sleep(0.01)
     finally:
         process.send_signal(signal.SIGKILL)
         process.wait()
         process.stderr.close()
+    assert process.returncode == -signal.SIGKILL  # killed while held, not finished
     assert not (out / "run.json").exists()
+    assert sorted(p.name for p in out.iterdir()) == ["best.pt", "checkpoint.pt"]
+    assert torch.load(out / "checkpoint.pt", weights_only=True)["epoch"] == 1
     assert main([*args, "--resume"]) == 0
     saved = json.loads((out / "metrics.json").read_text())
     assert saved["epochs"] == 3 and len(saved["history"]["train"]) == 3

@@ -60,6 +60,7 @@ def test_forward_kinematics_round_trip_of_all_21_coordinates(nominal, rng, encod
 def test_three_encoder_forward_kinematics_is_the_least_squares_solution(nominal, rng):
     p = nominal.parameter_values()
     resolution = 2 * np.pi / 2048
+    errors = {2: [], 3: []}  # distance of each estimate from the true position
     for pos in workspace_points(rng, 10, radius=0.045).T:
         q = np.array(nominal.coordinates(pos, p)).ravel()
         measured = q[[2, 8, 14]] + rng.uniform(-resolution / 2, resolution / 2, 3)
@@ -70,8 +71,15 @@ def test_three_encoder_forward_kinematics_is_the_least_squares_solution(nominal,
 
         reference = least_squares(residual, pos, xtol=1e-15, ftol=1e-15, gtol=1e-15).x
         assert np.allclose(ours, reference, atol=1e-10)
-        # and averaging three encoders beats the two-encoder solution on average
         assert np.linalg.norm(ours - pos) < 3 * resolution * L
+        for _ in range(40):  # quantization-like noise on every encoder, the same for both
+            noisy = q[[2, 8, 14]] + rng.uniform(-resolution / 2, resolution / 2, 3)
+            for encoders, fk in ((2, nominal.fk2), (3, nominal.fk3)):
+                estimate = np.array(fk(noisy[:encoders], p)).ravel()
+                errors[encoders].append(np.linalg.norm(estimate - pos))
+    # and averaging three encoders beats the two-encoder solution on average: over 400 noisy
+    # readings the mean error is 0.64x to 0.75x the two-encoder one's (measured on 30 seeds)
+    assert np.mean(errors[3]) < 0.85 * np.mean(errors[2])
 
 
 def test_jacobians_match_finite_differences(nominal, rng):
