@@ -60,6 +60,7 @@ def _with_unused_last(f: ca.Function) -> ca.Function:
 
 
 def _with_empty_argument(f: ca.Function, sym: type[_Sym]) -> ca.Function:
+    """`f` on fresh `sym` arguments and one more, empty, that it does not use."""
     args = [sym.sym(f"a{i}", f.size_in(i)) for i in range(f.n_in())]
     outputs = f.call(args)
     args.append(sym(0, 1))  # the unused argument, empty
