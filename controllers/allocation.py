@@ -24,11 +24,14 @@ def measured_position(theta: ca.SX, encoders: int = 2,
     `encoders=2` intersects chains 1 and 2 as the thesis does; `encoders=3` is the
     least-squares fit to all three (less sensitive to quantization).
     """
+    if encoders not in ENCODER_CHOICES:
+        raise ValueError(f"encoders must be one of {ENCODER_CHOICES}, got {encoders!r}")
     if encoders == 2:
-        return ca.vertcat(*forward_kinematics_2(params, theta[0], theta[1]))
-    if encoders == 3:
-        return ca.vertcat(*forward_kinematics_3(params, theta))
-    raise ValueError(f"encoders must be one of {ENCODER_CHOICES}, got {encoders!r}")
+        x, y = forward_kinematics_2(params, theta[0], theta[1])
+    else:
+        x, y = forward_kinematics_3(params, theta)
+    position: ca.SX = ca.vertcat(x, y)
+    return position
 
 
 def actuation_jacobian(pos: ca.SX, params: PlantParameters = NOMINAL) -> ca.SX:

@@ -40,12 +40,13 @@ class StateSpace:
     D: np.ndarray
     step: float | None = None
 
-    def response(self, w: np.ndarray) -> np.ndarray:
+    def response(self, w: float | np.ndarray) -> np.ndarray:
         """Complex frequency response at angular frequencies w [rad/s] (z = exp(j w step))."""
         w = np.atleast_1d(np.asarray(w, dtype=float))
         points = 1j * w if self.step is None else np.exp(1j * w * self.step)
         pencil = points[:, None, None] * np.eye(self.A.shape[0]) - self.A
-        return (self.C @ np.linalg.solve(pencil, self.B))[:, 0, 0] + self.D[0, 0]
+        values: np.ndarray = (self.C @ np.linalg.solve(pencil, self.B))[:, 0, 0] + self.D[0, 0]
+        return values
 
 
 @dataclass(frozen=True)
@@ -198,12 +199,12 @@ def design_pid(crossover_hz: float = 2.66, step: float = 1e-3, notch_hz: float |
     kp = float(1.0 / abs(loop))
     pid = _from_polynomials(*_pid_polynomials(kp, wd, wt, wi))
     continuous, discrete = pid, _tustin(pid, step, wc)
-    if notch is not None:
+    if notch is not None and notch_hz is not None:
         continuous = _series(pid, notch)
         discrete = _series(discrete, _tustin(notch, step, 2 * math.pi * notch_hz))
     return PIDDesign(
         crossover_hz=crossover_hz, step=step, kp=kp, wd=wd, wt=wt, wi=wi, notch_hz=notch_hz,
-        notch_zeta=tuple(notch_zeta) if notch_hz is not None else None, plant=plant,
+        notch_zeta=(notch_zeta[0], notch_zeta[1]) if notch_hz is not None else None, plant=plant,
         continuous=continuous, discrete=discrete,
         margins=loop_margins(discrete, plant))
 

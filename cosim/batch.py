@@ -33,7 +33,7 @@ class BatchResult:
 
     name: str
     output_dir: Path
-    metrics: dict | None = None
+    metrics: dict[str, Any] | None = None
     error: str | None = None
 
     @property
@@ -112,8 +112,8 @@ def run_batch(configs: Sequence[RunConfig | str | Path], output_dir: str | Path,
         pool.shutdown(cancel_futures=True)
 
 
-def _run_dask(configs: list, folders: list[Path], debug: list[bool], scheduler: str
-              ) -> list[BatchResult]:
+def _run_dask(configs: list[RunConfig | str | Path], folders: list[Path], debug: list[bool],
+              scheduler: str) -> list[BatchResult]:
     try:
         from dask.distributed import Client
     except ImportError:
@@ -126,7 +126,8 @@ def _run_dask(configs: list, folders: list[Path], debug: list[bool], scheduler: 
             from None
     with client:
         futures = client.map(_run_one, configs, folders, debug, pure=False)
-        return client.gather(futures)
+        results: list[BatchResult] = client.gather(futures)
+        return results
 
 
 def sweep(path: str | Path, key: str, values: Sequence[Any]) -> list[RunConfig]:
@@ -142,7 +143,8 @@ def sweep(path: str | Path, key: str, values: Sequence[Any]) -> list[RunConfig]:
     if twice is not None:
         raise ValueError(f"--sweep {key}: the sweep lists the same value twice: {twice!r}")
     base = tomllib.loads(path.read_text())
-    configs, names = [], []
+    configs: list[RunConfig] = []
+    names: list[str] = []
     for value in values:
         data = copy.deepcopy(base)
         table = data

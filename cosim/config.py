@@ -62,7 +62,7 @@ import tomli_w
 from flexff.controllers.allocation import ENCODER_CHOICES
 from flexff.controllers.model_card import read_card
 from flexff.cosim.memory import MemoryNeeded
-from flexff.cosim.references import REFERENCE_KINDS, SegmentError, build_reference
+from flexff.cosim.references import REFERENCE_KINDS, Reference, SegmentError, build_reference
 from flexff.cosim.schema import (
     ALGORITHMS,
     BUILTIN_OPTIONS,
@@ -225,7 +225,8 @@ class _Parser:
             record=self.record(self.table(data, "record")), source=self.source)
 
     # -- run ----------------------------------------------------------------------------
-    def sampled(self, reference: ReferenceConfig, table: Mapping[str, Any], step: float):
+    def sampled(self, reference: ReferenceConfig, table: Mapping[str, Any], step: float
+                ) -> Reference:
         try:
             return build_reference(reference.kind, reference.options, step)
         except SegmentError as error:
@@ -237,7 +238,7 @@ class _Parser:
             given = [f"reference.{k}" for k in table if k != "kind"]
             raise self.error(", ".join(given) or "reference.kind", str(error)) from None
 
-    def stop(self, run: Mapping[str, Any], signal, fmus: Sequence[FmuConfig],
+    def stop(self, run: Mapping[str, Any], signal: Reference | None, fmus: Sequence[FmuConfig],
              step: float) -> float:
         """run.stop; default the reference's duration, else the first FMU's experiment."""
         default = signal.duration if signal is not None else None
@@ -260,13 +261,14 @@ class _Parser:
         return tuple(next(f for f in fmus if f.name == n) for n in order)
 
     # -- the manipulator's short form ---------------------------------------------------
-    def short_form(self, data: Mapping[str, Any], start: tuple[float, float]
+    def short_form(self, data: Mapping[str, Any], start: tuple[float, float] | None
                    ) -> tuple[list[FmuConfig], list[SourceConfig]]:
         """[feedforward], [controller], [plant] as built-in FMUs in that order; without a
         feedforward, its forces are constant zero sources."""
         plant = self.table(data, "plant")
         variant = self.choice(plant, "plant", "variant", tuple(VARIANTS), "nominal")
-        fmus, sources = [], []
+        fmus: list[FmuConfig] = []
+        sources: list[SourceConfig] = []
         ff = self.table(data, "feedforward")
         if ff.get("kind") in RENAMED_KINDS:
             new = RENAMED_KINDS[ff["kind"]]
@@ -289,7 +291,7 @@ class _Parser:
         values = {k: v for k, v in plant.items() if k not in ("variant", "seed")}
         fmus.append(FmuConfig("plant", builtin="plant", options={
             "variant": variant, **self.seed(plant, "plant")},
-            parameters=self.plant_parameters(values, variant, "plant", start)))
+            parameters=self.plant_parameters(values, variant, "plant", start or (0.0, 0.0))))
         return fmus, sources
 
     # -- [fmu.NAME] ---------------------------------------------------------------------
@@ -420,7 +422,8 @@ class _Parser:
         if not isinstance(specs, list):
             raise self.error("connection", "expected [[connection]] tables")
         names = {f.name for f in fmus}
-        out, targets = [], {}
+        out: list[ConnectionConfig] = []
+        targets: dict[str, str] = {}  # connected input -> the connection's table
         for k, spec in enumerate(specs):
             where = f"connection[{k}]"
             if not isinstance(spec, dict):
@@ -596,7 +599,7 @@ class _Parser:
         if value not in options:
             raise self.error(f"{table}.{key}", f"unknown {key} {value!r}: choose one of "
                                                f"{', '.join(options)}")
-        return value
+        return str(value)
 
     def path(self, t: Mapping[str, Any], table: str, key: str) -> Path:
         value = t.get(key)
@@ -618,7 +621,8 @@ class _Parser:
             raise self.error(f"{table}.{key}", f"expected [x, y] in m, got {value!r}")
         return float(value[0]), float(value[1])
 
-    def points(self, t: Mapping[str, Any], table: str, key: str, minimum: int = 3) -> tuple:
+    def points(self, t: Mapping[str, Any], table: str, key: str, minimum: int = 3
+               ) -> tuple[tuple[float, float], ...]:
         value = t.get(key)
         if not isinstance(value, list) or len(value) < minimum:
             raise self.error(f"{table}.{key}", f"expected at least {minimum} [x, y] points, got "

@@ -14,6 +14,7 @@ import tempfile
 import time
 from ctypes import CFUNCTYPE, POINTER, Structure, c_double, c_int, c_long, c_uint, c_void_p, cast
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -80,16 +81,20 @@ def library() -> ctypes.CDLL:
     return lib
 
 
-def pointer(array: np.ndarray | None, ctype=c_double):
+def pointer(array: np.ndarray | None, ctype: type[ctypes._SimpleCData[Any]] = c_double
+            ) -> ctypes._Pointer[Any] | None:
     """A ctypes pointer to a numpy array's data (None: NULL); the array must outlive it."""
     if array is None:
         return None
     return array.ctypes.data_as(POINTER(ctype))
 
 
-def function_address(dll, name: str) -> int:
+def function_address(dll: ctypes.CDLL, name: str) -> int:
     """The address of an exported function of a loaded FMU binary."""
-    return cast(getattr(dll, name), c_void_p).value
+    address = cast(getattr(dll, name), c_void_p).value
+    if address is None:
+        raise RuntimeError(f"the FMU's {name} is a null pointer")
+    return address
 
 
 def start_schedule(run: EngineRun, lead: float = 1e-3) -> None:

@@ -12,6 +12,7 @@ import subprocess
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ def loop_program() -> Path:
     return cached_program(SOURCE, "cosim_loop")
 
 
-def _plan_text(layout: dict, steps: int) -> str:
+def _plan_text(layout: dict[str, Any], steps: int) -> str:
     lines = ["flexff-cosim-plan 1",
              f"{layout['step']!r} {len(layout['signals'])} {layout['n_sources']} {steps} "
              f"{len(layout['slaves'])}"]

@@ -77,7 +77,8 @@ class _Execution:
     def vr(self, slave: str, name: str) -> int:
         return self.variables[slave][name].value_reference
 
-    def initial_value(self, slave: str, name: str, value: float | int) -> None:
+    def initial_value(self, slave: str, name: str, value: float | np.ndarray) -> None:
+        """Set a parameter or a constant input (a scalar, np.ndim 0) before the run."""
         i, vr = self.index[slave], self.vr(slave, name)
         ok = (self.execution.integer_initial_value(i, vr, int(value))
               if self.variables[slave][name].kind == "int32" else

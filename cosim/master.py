@@ -203,7 +203,7 @@ class Master:
                 read_after=jacobi or feeds_back[spec.name]))
         self.typed_signals = tuple(f"{p.name}.{n}" for p in self._plans for n in p.typed_outputs)
 
-    def layout(self) -> dict:
+    def layout(self) -> dict[str, Any]:
         """The bus layout and every FMU's call plan, as plain data (for the C loop, which runs
         FMI 2.0 FMUs with float inputs and outputs, no gains, Gauss-Seidel)."""
         for p in self._plans:
@@ -408,7 +408,7 @@ class Master:
     def __enter__(self) -> Master:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
@@ -418,7 +418,8 @@ class _TypedHook:
     point (phase 2). An exception is kept in `error` (it cannot cross the C frames)."""
 
     def __init__(self, master: Master, columns: list[tuple[np.ndarray, str]]) -> None:
-        self.master, self.columns, self.error = master, columns, None
+        self.master, self.columns = master, columns
+        self.error: Exception | None = None
         self.needed = bool(columns) or any(p.typed_inputs or p.typed_outputs
                                            for p in master._plans)
 

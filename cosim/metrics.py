@@ -11,6 +11,7 @@ the plant's `x`, `y` outputs, which only evaluation ever sees.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -36,7 +37,7 @@ def tracking_metrics(recording: Recording) -> dict[str, dict[str, float]]:
             for axis in AXES}
 
 
-def run_metrics(recording: Recording) -> dict:
+def run_metrics(recording: Recording) -> dict[str, Any]:
     """The content of metrics.json: tracking metrics (where the run records a reference and a
     true position), wall time of the loop, its real-time factor (simulated seconds per
     wall-clock second) and the step timing (cosim.timing: the `realtime` table)."""

@@ -18,6 +18,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from flexff.cosim.recording import Recording, atomic_write
 from flexff.cosim.timing import US, StepTiming
@@ -34,7 +35,7 @@ MAX_PANELS = 8
 MM = 1e3
 
 
-def save_figure(figure, path: Path) -> Path:
+def save_figure(figure: Figure, path: Path) -> Path:
     """Lay out, write atomically as PNG and close `figure`."""
     figure.tight_layout()
     atomic_write(path, lambda tmp: figure.savefig(tmp, dpi=120, format="png"))

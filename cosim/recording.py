@@ -67,8 +67,9 @@ class Recording:
         return float(self.time[1] - self.time[0]) if self.time.size > 1 else 0.0
 
 
-def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
-    """Call `write(tmp)` on a temporary file next to `path`, then rename it to `path`."""
+def atomic_write(path: str | Path, write: Callable[[Path], object]) -> Path:
+    """Call `write(tmp)` on a temporary file next to `path`, then rename it to `path` (what
+    `write` returns is ignored)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -90,7 +91,8 @@ def save_recording(recording: Recording, folder: str | Path, csv: bool = True) -
 
     def write_npz(tmp: Path) -> None:
         with open(tmp, "wb") as handle:  # a file object keeps numpy from appending ".npz"
-            np.savez(handle, **arrays)
+            # numpy's stub types savez's **kwds and its allow_pickle: bool alike
+            np.savez(handle, **arrays)  # type: ignore[arg-type]
 
     def write_csv(tmp: Path) -> None:
         if all(a.dtype == np.float64 for a in arrays.values()):

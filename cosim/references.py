@@ -18,7 +18,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -89,7 +89,9 @@ class Segment:
     `evaluate` returns a (6, n) array: x, y, vx, vy, ax, ay at the local times t.
     """
 
-    duration: float
+    if TYPE_CHECKING:  # a field of the plain segments, a property of Chain: read-only here
+        @property
+        def duration(self) -> float: ...
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
         raise NotImplementedError

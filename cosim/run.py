@@ -18,10 +18,13 @@ import dataclasses
 import errno
 import json
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from flexff.controllers.training_range import MARGIN, training_range_excess
 from flexff.cosim.config import expanded, load_config
+from flexff.cosim.master import Master
 from flexff.cosim.memory import MemoryNeeded, check_memory
 from flexff.cosim.metrics import run_metrics
 from flexff.cosim.plots import PLOT_SIGNALS, plot_tet, write_plots
@@ -98,7 +101,7 @@ def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | 
     plus those the metrics and plots need. With `pacing` the steps follow the wall clock, in a
     process set up for real time (cosim.realtime: pinned to `cpu`, SCHED_FIFO, locked memory
     where permitted); the recording's timing then carries that setup's report."""
-    wanted = scenario.config.record.signals
+    wanted: Sequence[str] | None = scenario.config.record.signals
     with scenario.master() as master:
         if wanted is not None:
             for name in wanted:
@@ -120,7 +123,7 @@ def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | 
             recording.timing, process=process))
 
 
-def _known(master, name: str) -> bool:
+def _known(master: Master, name: str) -> bool:
     try:
         master.resolve(name)
     except ValueError:
@@ -135,18 +138,21 @@ def simulate_config(config: RunConfig, progress: bool | None = None) -> Recordin
         return simulate(resolve(config, folder), progress)
 
 
-def feedforward_range(scenario: Scenario) -> dict | None:
+def feedforward_range(scenario: Scenario) -> dict[str, Any] | None:
     """Where the reference of a learned-feedforward run leaves the model's training range
     (controllers.training_range): {"margin", "outside": [features, farthest first]}, or None
     for a model exported without its range."""
-    model = scenario.config.learned_feedforward.options["model"]
+    learned = scenario.config.learned_feedforward
+    if learned is None:
+        raise ValueError("the run has no learned feedforward")
+    model = learned.options["model"]
     excess = training_range_excess(model, scenario.reference(), scenario.step)
     if excess is None:
         return None
     return {"margin": MARGIN, "outside": [dataclasses.asdict(e) for e in excess]}
 
 
-def range_warning(metrics: dict) -> str | None:
+def range_warning(metrics: dict[str, Any]) -> str | None:
     """A line saying the learned feedforward extrapolates in this run, or None."""
     outside = (metrics.get("feedforward_range") or {}).get("outside")
     if not outside:
@@ -157,7 +163,7 @@ def range_warning(metrics: dict) -> str | None:
             f"beyond): the feedforward extrapolates; train on motion like this reference")
 
 
-def _write_json(path: Path, data: dict) -> None:
+def _write_json(path: Path, data: dict[str, Any]) -> None:
     text = json.dumps(data, indent=2, default=str) + "\n"
     atomic_write(path, lambda tmp: tmp.write_text(text))
 
@@ -176,7 +182,7 @@ def _kept(recording: Recording, config: RunConfig) -> Recording:
 
 def run_config(config: RunConfig | str | Path, output_dir: str | Path,
                progress: bool | None = None, pacing: Pacing | None = None,
-               cpu: int | None = None) -> dict:
+               cpu: int | None = None) -> dict[str, Any]:
     """Run one configuration (or the TOML / SSP file at that path) into `output_dir`; return
     the metrics written to metrics.json. A paced run (`pacing`) also writes tet.png, and one
     that its overruns stopped raises OverrunError after writing what it recorded."""

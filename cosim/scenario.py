@@ -55,7 +55,7 @@ class Scenario:
 
     def reference(self) -> dict[str, np.ndarray]:
         """The sampled reference signals (empty without a [reference])."""
-        return {n: self.sources[n] for n in Reference.SIGNALS if n in self.sources}
+        return {n: np.asarray(self.sources[n]) for n in Reference.SIGNALS if n in self.sources}
 
 
 def resolve(config: RunConfig, folder: str | Path) -> Scenario:
@@ -119,6 +119,8 @@ def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, 
     def fail(message: str) -> ConfigError:
         return ConfigError(config.source, key, f"{source.path}: {message}")
 
+    if source.path is None:
+        raise fail("a CSV source needs a path")
     try:
         rows = read_rows(source.path)
     except ValueError as error:

@@ -117,7 +117,8 @@ def _ssd(scenario: Scenario) -> etree._Element:
     root = etree.Element(_q("ssd:SystemStructureDescription"), nsmap=NS,
                          version="1.0", name=config.name, generationTool="flexff")
     system = _sub(root, "ssd:System", name=config.name)
-    elements, enumerations = _sub(system, "ssd:Elements"), {}
+    elements = _sub(system, "ssd:Elements")
+    enumerations: dict[str, etree._Element] = {}
     links = [k for k in scenario.links if k.source != SOURCE]
     used = {(k.source, k.signal) for k in links} | {(k.target, k.input) for k in links}
     for slave in scenario.slaves:
@@ -171,8 +172,8 @@ def _connectors(parent: etree._Element, info: FmuInfo, names: list[str],
         kind = SSP_TYPES[v.kind]
         if kind == "Enumeration":
             enum = _enumeration(info, name)
-            enumerations[enum.get("name")] = enum
-            _sub(connector, "ssc:Enumeration", name=enum.get("name"))
+            enumerations[enum.attrib["name"]] = enum
+            _sub(connector, "ssc:Enumeration", name=enum.attrib["name"])
         else:
             _sub(connector, f"ssc:{kind}")
 
@@ -235,12 +236,14 @@ def load_ssp(path: str | Path) -> RunConfig:
         raise error(entry.path or SSD, f"not valid SSP 1.0 (line {entry.line}): "
                                        f"{entry.message}")
     system = root.find("ssd:System", NS)
+    if system is None:  # the schema requires one
+        raise error("ssd:System", "the SSD has no system")
     if system.find("ssd:Connectors", NS) is not None:
         raise error("ssd:System/ssd:Connectors", "system connectors are not supported: "
                     "flexff runs a flat system of FMU components")
     fmus = []
     for element in system.iterfind("ssd:Elements/*", NS):
-        name = element.get("name")
+        name = element.get("name", "")  # the schema requires a name
         key = f"ssd:{etree.QName(element).localname}[@name='{name}']"
         if element.tag != _q("ssd:Component") or element.get("type", FMU_TYPE) != FMU_TYPE:
             raise error(key, f"flexff runs a flat system of FMU components (type {FMU_TYPE}),"
@@ -285,8 +288,10 @@ def _extracted(path: Path) -> Path:
     return folder
 
 
-def _member(folder: Path, source: str) -> Path | None:
+def _member(folder: Path, source: str | None) -> Path | None:
     """The extracted file at the SSD-relative `source`, None if the archive has none."""
+    if source is None:
+        return None
     path = (folder / source).resolve()
     return path if path.is_relative_to(folder) and path.is_file() else None
 
@@ -310,7 +315,7 @@ def _bindings(element: etree._Element, info: FmuInfo, folder: Path, key: str, er
             sets = binding.findall("ssd:ParameterValues/ssv:ParameterSet", NS)
         prefix = binding.get("prefix", "")
         for parameter in (p for s in sets for p in s.findall("ssv:Parameters/ssv:Parameter", NS)):
-            name = parameter.get("name").removeprefix(prefix)
+            name = parameter.get("name", "").removeprefix(prefix)  # the schema requires a name
             v = info.variables.get(name)
             if v is None or v.causality not in ("parameter", "structuralParameter", "input"):
                 raise error(f"{where}/ssv:Parameter[@name='{name}']",
@@ -329,16 +334,17 @@ def _experiment(root: etree._Element, fmus: list[FmuConfig], error: Fail
     """Step, stop and algorithm: our annotation, else libcosim's, else the defaults."""
     key = "ssd:DefaultExperiment"
     experiment = root.find(key, NS)
-    attrib = experiment.attrib if experiment is not None else {}
+    attrib = dict(experiment.attrib) if experiment is not None else {}
     ours = root.find(f"{key}/ssd:Annotations/ssc:Annotation[@type='{FLEXFF}']/flexff:Run", NS)
     osp = root.find(f"{key}/ssd:Annotations/ssc:Annotation[@type='{OSP}']/osp:Algorithm/"
                     f"osp:FixedStepAlgorithm", NS)
     step = (ours.get("step") if ours is not None else
             osp.get("baseStepSize") if osp is not None else DEFAULT_STEP)
     algorithm = ours.get("algorithm", "jacobi") if ours is not None else "jacobi"
-    stop = attrib.get("stopTime") or read_fmu(fmus[0].path).default_stop
+    first = fmus[0].path
+    stop = attrib.get("stopTime") or (read_fmu(first).default_stop if first is not None else None)
     try:
-        step, stop = float(step), float(stop)
+        step, stop = _float(step), _float(stop)
     except (TypeError, ValueError):
         raise error(key, f"no stop time (stopTime, or the first FMU's default experiment), "
                          f"or a step that is not a number ({step!r})") from None
@@ -354,10 +360,18 @@ def _experiment(root: etree._Element, fmus: list[FmuConfig], error: Fail
     return step, stop, algorithm
 
 
+def _float(value: str | float | None) -> float:
+    """float(value); TypeError for None, as float(None) raises."""
+    if value is None:
+        raise TypeError("no value")
+    return float(value)
+
+
 def _connections(system: etree._Element, names: set[str], error: Fail
                  ) -> tuple[ConnectionConfig, ...]:
     """The connections between components, with gain and offset of a LinearTransformation."""
-    out, targets = [], {}
+    out: list[ConnectionConfig] = []
+    targets: dict[str, str] = {}  # connected input -> the connection's key
     for k, c in enumerate(system.findall("ssd:Connections/ssd:Connection", NS), 1):
         key = f"ssd:Connection[{k}]"
         start, end = c.get("startElement"), c.get("endElement")
@@ -368,7 +382,7 @@ def _connections(system: etree._Element, names: set[str], error: Fail
         if transformation is not None and transformation.tag != _q("ssc:LinearTransformation"):
             raise error(key, f"{etree.QName(transformation).localname} is not supported "
                              f"(LinearTransformation is)")
-        scale = transformation.attrib if transformation is not None else {}
+        scale = dict(transformation.attrib) if transformation is not None else {}
         target = f"{end}.{c.get('endConnector')}"
         if target in targets:
             raise error(key, f"{target} is already connected by {targets[target]}")

@@ -54,18 +54,18 @@ class StepTiming:
     first_overruns: tuple[int, ...]  # step indices of the first overruns
     stopped_at: int | None  # the step at which max_overruns stopped the run
     process: Any = None  # cosim.realtime.ProcessReport of a paced run
-    network_calls: dict = dataclasses.field(default_factory=dict)  # FMU -> its network's
-    # call times (calls; p50, p99, max in us), for FMUs that embed one
+    # FMU -> its network's call times (calls; p50, p99, max in us), for FMUs that embed one
+    network_calls: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
 
     @property
     def period(self) -> float:
         """Wall-clock seconds per step."""
         return self.step / (self.pacing.rt_factor if self.pacing else 1.0)
 
-    def table(self, wall_s: float) -> dict:
+    def table(self, wall_s: float) -> dict[str, Any]:
         """The `realtime` table of metrics.json (times in microseconds)."""
         simulated = self.tet.size * self.step
-        table = {
+        table: dict[str, Any] = {
             "period_us": self.period * US,
             "target_real_time_factor": self.pacing.rt_factor if self.pacing else None,
             "achieved_real_time_factor": simulated / wall_s if wall_s > 0 else None,
@@ -91,10 +91,12 @@ class StepTiming:
 
     def stop_message(self) -> str:
         """Why max_overruns stopped the run: when, and how late its last step ended."""
-        k = self.stopped_at
+        k, pacing = self.stopped_at, self.pacing
+        if k is None or pacing is None:
+            raise ValueError("the run was not stopped by max_overruns")
         over = (self.tet[k] + self.lateness[k] - self.period) * US
         return (f"stopped after {self.overruns} overruns (--max-overruns "
-                f"{self.pacing.max_overruns}): the step from t = {k * self.step:.6g} s took "
+                f"{pacing.max_overruns}): the step from t = {k * self.step:.6g} s took "
                 f"{self.tet[k] * US:.1f} us and started {self.lateness[k] * US:.1f} us late, "
                 f"{over:.1f} us past its {self.period * US:.1f} us period")
 

@@ -15,6 +15,7 @@ from flexff.cosim.engine import idle_timing
 from flexff.cosim.floor import run_c_loop
 from flexff.cosim.libcosim import run_libcosim, time_libcosim_engine
 from flexff.cosim.master import Master, SlaveSpec
+from flexff.cosim.recording import Recording
 from flexff.cosim.run import simulate
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.timing import Pacing
@@ -54,7 +55,7 @@ def closed_loop_benchmark(folder: Path, repeats: int = 3) -> dict[str, Any]:
     end effector by up to `libcosim_max_position_gap_m`."""
     scenario = closed_loop_scenario(folder)
     steps, step, sources = scenario.steps, scenario.step, scenario.sources
-    ours = []
+    ours: list[Recording] = []
     for _ in range(repeats):
         with scenario.master() as master:
             if not ours:

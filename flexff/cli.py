@@ -16,8 +16,9 @@ import sys
 import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
-from flexff.cosim.timing import OverrunError
+from flexff.cosim.timing import OverrunError, Pacing
 from flexff.learning.dataset import SETS
 from flexff.plant.model import VARIANTS
 
@@ -142,7 +143,7 @@ def _run(args: argparse.Namespace) -> int:
     status = 0
     for result in run_batch(configs, args.output, args.workers, args.scheduler,
                             subfolders=len(configs) > 1 or bool(args.sweep)):
-        if result.ok:
+        if result.ok and result.metrics is not None:
             _print_result(result.name, result.metrics, result.output_dir)
         else:
             print(f"{result.name}: FAILED: {result.error}", file=sys.stderr)
@@ -150,10 +151,8 @@ def _run(args: argparse.Namespace) -> int:
     return status
 
 
-def _pacing(args: argparse.Namespace):
+def _pacing(args: argparse.Namespace) -> Pacing | None:
     """The run's Pacing from --realtime and its options (None: as fast as it goes)."""
-    from flexff.cosim.timing import Pacing
-
     options = {"--rt-factor": args.rt_factor, "--max-overruns": args.max_overruns,
                "--grace": args.grace, "--cpu": args.cpu}
     if not args.realtime:
@@ -165,7 +164,7 @@ def _pacing(args: argparse.Namespace):
                   max_overruns=args.max_overruns or 0, grace=args.grace or 0.0)
 
 
-def _sweep_values(text: str) -> tuple[str, list]:
+def _sweep_values(text: str) -> tuple[str, list[Any]]:
     """`table.key=v1,v2,...` -> (table.key, [values]), the values read as TOML."""
     import tomllib
 
@@ -179,7 +178,7 @@ def _sweep_values(text: str) -> tuple[str, list]:
             from None
 
 
-def _print_result(name: object, metrics: dict, output: object) -> None:
+def _print_result(name: object, metrics: dict[str, Any], output: object) -> None:
     """One line per run, and a second where its learned feedforward extrapolates."""
     from flexff.cosim.run import range_warning
 

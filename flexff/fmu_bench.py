@@ -13,6 +13,7 @@ import subprocess
 import time
 from ctypes import c_double, c_int, c_size_t, c_uint
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -32,7 +33,7 @@ def _python_loop(s: Slave, steps: int, step: float, repeats: int) -> dict[str, f
     u = (c_double * len(inputs))(*(float(s.variables[n].start) for n in inputs))
     vr_out = (c_uint * len(outputs))(*(s.variables[n].valueReference for n in outputs))
     y = (c_double * len(outputs))()
-    y_view = np.frombuffer(y)
+    y_view = np.frombuffer(memoryview(y))
     record = np.empty((repeats * steps, len(outputs)))
     fmu, c = s.fmu, s.fmu.component
     bare = bare_calls(fmu)
@@ -70,7 +71,8 @@ def _python_loop(s: Slave, steps: int, step: float, repeats: int) -> dict[str, f
     return {name: seconds / steps for name, seconds in best.items()} | {"checksum": checksum}
 
 
-def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3, repeats: int = 5) -> dict:
+def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
+              repeats: int = 5) -> dict[str, Any]:
     """Microseconds per co-simulation step through fmpy and in C, their ratio, and a cross-check.
 
     A step cycle is fmi2SetReal(inputs), fmi2DoStep, fmi2GetReal(outputs) with the outputs

@@ -94,7 +94,8 @@ def fmu_key(system: System) -> str:
 def _with_guid(files: dict[str, str | bytes], key: str) -> dict[str, str | bytes]:
     """The files with the placeholder replaced by the GUID derived from the key."""
     guid = "{" + str(uuid.UUID(key[:32])) + "}"
-    return {name: text.replace(GUID_PLACEHOLDER, guid) if name in GUID_FILES else text
+    return {name: text.replace(GUID_PLACEHOLDER, guid)
+            if name in GUID_FILES and isinstance(text, str) else text
             for name, text in files.items()}
 
 
@@ -106,7 +107,11 @@ def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: st
         src.mkdir()
         for name, text in files.items():
             if name.startswith("sources/"):
-                (src / name.removeprefix("sources/")).write_text(text)
+                target_file = src / name.removeprefix("sources/")
+                if isinstance(text, str):
+                    target_file.write_text(text)
+                else:
+                    target_file.write_bytes(text)
         library = Path(tmp) / f"{identifier}{fmpy.sharedLibraryExtension}"
         run_compiler([src / name for name in sources], library, [src],
                      extra_flags=("-shared", *sanitizer_flags()), libraries=("-lm", "-ldl"))

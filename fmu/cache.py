@@ -25,7 +25,8 @@ def digest(parts: Mapping[str, str | bytes]) -> str:
     """sha256 hex digest of named parts, independent of their order, unambiguous in framing."""
     h = hashlib.sha256()
     for name in sorted(parts):
-        data = parts[name].encode() if isinstance(parts[name], str) else parts[name]
+        part = parts[name]
+        data = part.encode() if isinstance(part, str) else part
         for chunk in (name.encode(), data):
             h.update(len(chunk).to_bytes(8, "little"))
             h.update(chunk)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
+from typing import TypeVar
 
 import casadi as ca
 import numpy as np
@@ -17,6 +18,8 @@ import numpy as np
 from flexff.fmu.layout import Layout
 from flexff.fmu.network import MAX_RANK, Network, runtime_library
 from flexff.fmu.system import System
+
+_Sym = TypeVar("_Sym", ca.SX, ca.MX)  # the symbols a function is written in
 
 
 def _check_vector(shape: tuple[int, int], n: int, what: str) -> None:
@@ -34,7 +37,14 @@ def _normalized(f: ca.Function, name: str, sizes: list[int], n_out: int, what: s
     for i, n in enumerate(sizes):
         _check_vector(f.size_in(i), n, f"argument {i} of {what}")
     _check_vector(f.size_out(0), n_out, f"the result of {what}")
-    sym = ca.SX if f.is_a("SXFunction") else ca.MX
+    if f.is_a("SXFunction"):
+        return _dense(f, name, ca.SX, sizes, n_out)
+    return _dense(f, name, ca.MX, sizes, n_out)
+
+
+def _dense(f: ca.Function, name: str, sym: type[_Sym], sizes: list[int],
+           n_out: int) -> ca.Function:
+    """`f` on fresh `sym` arguments, named `name`, with a dense result (for SX CSE-reduced)."""
     args = [sym.sym(f"a{i}", n, 1) for i, n in enumerate(sizes)]
     result = ca.densify(ca.reshape(f(*args), n_out, 1))
     if sym is ca.SX:
@@ -44,9 +54,17 @@ def _normalized(f: ca.Function, name: str, sizes: list[int], n_out: int, what: s
 
 def _with_unused_last(f: ca.Function) -> ca.Function:
     """`f` with one more, empty, argument: output(x, u, p, w) as output(x, u, p, w, r)."""
-    sym = ca.SX if f.is_a("SXFunction") else ca.MX
+    if f.is_a("SXFunction"):
+        return _with_empty_argument(f, ca.SX)
+    return _with_empty_argument(f, ca.MX)
+
+
+def _with_empty_argument(f: ca.Function, sym: type[_Sym]) -> ca.Function:
+    """`f` on fresh `sym` arguments and one more, empty, that it does not use."""
     args = [sym.sym(f"a{i}", f.size_in(i)) for i in range(f.n_in())]
-    return ca.Function(f.name(), [*args, sym(0, 1)], f.call(args))
+    outputs = f.call(args)
+    args.append(sym(0, 1))  # the unused argument, empty
+    return ca.Function(f.name(), args, outputs)
 
 
 def _no_network_input(nx: int, nu: int, npar: int) -> ca.Function:
@@ -101,13 +119,16 @@ def _c_array(ctype: str, name: str, values: list[str]) -> str:
 def generate_config_h(system: System, layout: Layout, identifier: str, guid: str) -> str:
     """Sizes, value references, names, start values and flags of one model, for the wrapper."""
     discrete = system.kind == "discrete"
+    step = system.sample_time if discrete else 0.0
+    if step is None:
+        raise ValueError("a discrete system needs a positive sample_time")
     params = layout.block("parameter")
     inputs = layout.block("input")
     reals = [v for v in layout.variables if v.type == "Real"]
     defines = {
         "MODEL_GUID": _c_string(guid),
         "IS_DISCRETE": int(discrete),
-        "SAMPLE_TIME": repr(float(system.sample_time)) if discrete else "0.0",
+        "SAMPLE_TIME": repr(float(step)),
         "MAX_SUBSTEP_START": repr(float(system.max_substep)),
         "SEED_START": layout.block("seed")[0].start,
         "N_P": len(params),

@@ -214,7 +214,8 @@ class _Fmi2Log:
         self.callback = fmi2CallbackLoggerTYPE(self._log)
         self._next = 1
 
-    def _log(self, env, instance, status, category, message) -> None:
+    def _log(self, env: int | None, instance: bytes | None, status: int,
+             category: bytes | None, message: bytes | None) -> None:
         sink = self.sinks.get(env or 0)
         if sink is not None:
             sink.append(_message(status, message))
@@ -271,14 +272,15 @@ class FmuInstance:
 
     def _library_path(self) -> Path:
         folder = fmpy.platform if self.info.fmi_version == "2.0" else fmpy.platform_tuple
-        path = (Path(self._unzipdir) / "binaries" / folder
-                / f"{self.info.identifier}{fmpy.sharedLibraryExtension}")
+        path = Path(self._unzipdir, "binaries", folder,
+                    f"{self.info.identifier}{fmpy.sharedLibraryExtension}")
         if not path.is_file():
             raise FmuError(f"{self.info.path}: no binary for this platform "
                            f"(binaries/{folder}/{path.name} is missing)")
         return path
 
-    def _log3(self, env, status, category, message) -> None:
+    def _log3(self, env: int | None, status: int, category: bytes | None,
+              message: bytes | None) -> None:
         self.messages.append(_message(status, message))
 
     def _log_text(self) -> str:
@@ -289,8 +291,11 @@ class FmuInstance:
         log = "; ".join(self.messages[-5:]) or "no message from the FMU"
         return FmuError(f"{self.name}: {what} failed: {log}")
 
-    def call(self, what: str, function: Callable[[], Any]) -> Any:
-        """Run one fmpy call; an error status or exception becomes FmuError naming `what`."""
+    def call(self, what: str, function: Callable[..., Any]) -> Any:
+        """Run one fmpy call; an error status or exception becomes FmuError naming `what`.
+
+        `function` is called without arguments (`...` admits lambdas that bind loop variables
+        as defaults)."""
         try:
             return function()
         except Exception:
@@ -319,11 +324,13 @@ class FmuInstance:
             out.append(value)
         return out
 
-    def _setter(self, v: Variable) -> Callable:
-        return getattr(self.fmu, "set" + self._type_name(v))
+    def _setter(self, v: Variable) -> Callable[..., Any]:
+        setter: Callable[..., Any] = getattr(self.fmu, "set" + self._type_name(v))
+        return setter
 
-    def _getter(self, v: Variable) -> Callable:
-        return getattr(self.fmu, "get" + self._type_name(v))
+    def _getter(self, v: Variable) -> Callable[..., Any]:
+        getter: Callable[..., Any] = getattr(self.fmu, "get" + self._type_name(v))
+        return getter
 
     def _type_name(self, v: Variable) -> str:
         if self.info.fmi_version == "2.0":
@@ -383,5 +390,5 @@ class FmuInstance:
     def __enter__(self) -> FmuInstance:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

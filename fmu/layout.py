@@ -14,10 +14,12 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
-from flexff.fmu.system import System
+from flexff.fmu.system import Parameter, System, Variable
 
 Role = Literal["parameter", "max_substep", "input", "output", "state", "seed"]
 ROLES: tuple[Role, ...] = ("parameter", "max_substep", "input", "output", "state", "seed")
+# (role, causality, variability, variable): one Real of the layout; None for max_substep
+_Row = tuple[Role, str, str, Variable | None]
 
 
 @dataclass(frozen=True)
@@ -79,22 +81,23 @@ def make_layout(system: System) -> Layout:
         raise ValueError("n_noise must be >= 0")
 
     time_kind = "discrete" if discrete else "continuous"
-    rows: list[tuple[Role, str, str, object]] = [
+    substep: list[_Row] = [] if discrete else [("max_substep", "parameter", "tunable", None)]
+    rows: list[_Row] = [
         *(("parameter", "parameter", "tunable", p) for p in system.parameters),
-        *([] if discrete else [("max_substep", "parameter", "tunable", None)]),
+        *substep,
         *(("input", "input", "continuous", u) for u in system.inputs),
         *(("output", "output", "continuous", y) for y in system.outputs),
         *(("state", "local", time_kind, x) for x in system.states),
     ]
     variables = []
     for vr, (role, causality, variability, var) in enumerate(rows):
-        if role == "max_substep":
+        if var is None:  # the max_substep row
             variables.append(ScalarVariable(
                 "max_substep", vr, role, "Real", causality, variability, unit="s",
                 description="largest RK4 sub-step inside one communication step",
                 start=float(system.max_substep), positive=True))
             continue
-        if role == "parameter" and var.fixed:
+        if role == "parameter" and isinstance(var, Parameter) and var.fixed:
             variability = "fixed"
         has_start = role in ("parameter", "input")
         if has_start and not math.isfinite(var.start):

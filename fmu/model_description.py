@@ -35,7 +35,7 @@ def output_dependencies(system: System) -> list[list[int]]:
         via_result = np.array(system.output.sparsity_jac(4, 0), dtype=bool)
         of_input = np.array(net.input_function.sparsity_jac(1, 0), dtype=bool)
         # each result of the graph may depend on each of its inputs
-        direct |= via_result.any(axis=1)[:, None] & of_input.any(axis=0)[None, :]
+        direct |= via_result.any(axis=1, keepdims=True) & of_input.any(axis=0, keepdims=True)
     return [np.flatnonzero(row).tolist() for row in direct]
 
 
@@ -84,6 +84,8 @@ def model_description_xml(system: System, layout: Layout, identifier: str, guid:
         ET.SubElement(categories, "Category", {"name": name, "description": text})
 
     step = system.sample_time if discrete else 1e-3
+    if step is None:
+        raise ValueError("a discrete system needs a positive sample_time")
     ET.SubElement(root, "DefaultExperiment", {"startTime": "0.0", "stepSize": repr(float(step))})
 
     if system.extra:

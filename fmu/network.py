@@ -23,7 +23,8 @@ import onnx
 
 MAX_RANK = 4  # of a state tensor (NET_MAX_RANK in onnx_network.h)
 MAX_TENSORS = 64  # inputs, or outputs, of one graph (MAX_TENSORS in onnx_network.c)
-ELEMENT_TYPES = {onnx.TensorProto.FLOAT: "float32", onnx.TensorProto.DOUBLE: "float64"}
+ELEMENT_TYPES: dict[int, str] = {onnx.TensorProto.FLOAT: "float32",
+                                 onnx.TensorProto.DOUBLE: "float64"}
 
 
 @dataclass(frozen=True)
@@ -147,7 +148,7 @@ def _tensor(value: onnx.ValueInfoProto, path: Path) -> tuple[str, tuple[int | st
     return kind, shape
 
 
-def _describe(tensors: dict[str, tuple[str, tuple]]) -> str:
+def _describe(tensors: dict[str, tuple[str, tuple[int | str, ...]]]) -> str:
     return ", ".join(f"{n} {kind} {list(shape)}" for n, (kind, shape) in tensors.items())
 
 

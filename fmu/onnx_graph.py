@@ -36,7 +36,7 @@ from onnx import helper as oh
 from flexff.fmu import cache
 from flexff.fmu.network import Network, load_model, read_network
 
-FLOATS = {TensorProto.FLOAT: "float32", TensorProto.DOUBLE: "float64"}
+FLOATS: dict[int, str] = {TensorProto.FLOAT: "float32", TensorProto.DOUBLE: "float64"}
 RESERVED = "flexff/"  # names of the adapter: FMU_INPUTS, FMU_OUTPUTS, the graph's under GRAPH
 FMU_INPUTS, FMU_OUTPUTS, GRAPH = f"{RESERVED}inputs", f"{RESERVED}outputs", f"{RESERVED}graph/"
 MIN_OPSET = 6  # Gather, Cast (`to` an integer), Reshape, Concat, Identity as the adapter uses them
@@ -125,8 +125,8 @@ def graph_network(graph: Graph, input_function: ca.Function, period: int = 1,
     return read_network(file, input_function, period, table)
 
 
-def _states(path: Path, meta: dict[str, str], inputs: dict, outputs: dict
-            ) -> tuple[tuple[str, str], ...]:
+def _states(path: Path, meta: dict[str, str], inputs: dict[str, onnx.ValueInfoProto],
+            outputs: dict[str, onnx.ValueInfoProto]) -> tuple[tuple[str, str], ...]:
     """The (input, output) names of the state tensors that metadata `state` declares."""
     try:
         declared = json.loads(meta.get("state", "[]"))
@@ -165,7 +165,7 @@ def _ports(path: Path, meta: dict[str, str], role: str, tensors: list[onnx.Value
         raise ValueError(f"{path}: the graph has no {role} besides its state tensors; the FMU "
                          f"needs at least one")
     shapes = [_port_shape(path, role, v, time_axis) for v in tensors]
-    sizes = [math.prod(shape[1:] if time_axis else shape) for shape in shapes]
+    sizes = [math.prod(_fixed(shape[1:] if time_axis else shape)) for shape in shapes]
     names = iter(_element_names(path, meta, f"{role}_signals", [v.name for v in tensors], sizes))
     return tuple(Port(v.name, v.type.tensor_type.elem_type, shape,
                       tuple(next(names) for _ in range(n)))
@@ -195,7 +195,12 @@ def _port_shape(path: Path, role: str, value: onnx.ValueInfoProto, time_axis: bo
     return shape
 
 
-def _dynamic(path: Path, role: str, name: str, shape: tuple, dim: str) -> str:
+def _fixed(dims: tuple[int | str, ...]) -> list[int]:
+    """Dimensions that `_port_shape` checked to be fixed, as ints."""
+    return [int(d) for d in dims]
+
+
+def _dynamic(path: Path, role: str, name: str, shape: tuple[int | str, ...], dim: str) -> str:
     """What to do about the dynamic dimension `dim` of a tensor."""
     fix = "python -m onnxruntime.tools.make_dynamic_shape_fixed"
     fixed = ",".join(str(d) if isinstance(d, int) else "1" for d in shape)
@@ -244,7 +249,9 @@ def _adapter(graph: Graph) -> onnx.ModelProto:
     model = onnx.compose.add_prefix(graph.model, GRAPH)
     inner = model.graph
     rows = "time" if graph.time_axis else 1
-    nodes, constants, offset = [], [], 0
+    nodes: list[onnx.NodeProto] = []
+    constants: list[onnx.TensorProto] = []
+    offset = 0
 
     def constant(values: list[int]) -> str:
         name = f"{RESERVED}constant{len(constants)}"
@@ -254,7 +261,8 @@ def _adapter(graph: Graph) -> onnx.ModelProto:
     for k, port in enumerate(graph.inputs):
         n = len(port.elements)
         index = constant(list(range(offset, offset + n)))
-        shape = constant([-1, *port.shape[1:]] if graph.time_axis else list(port.shape))
+        shape = constant([-1, *_fixed(port.shape[1:])] if graph.time_axis
+                         else _fixed(port.shape))
         nodes += [oh.make_node("Gather", [FMU_INPUTS, index], [f"{RESERVED}in{k}"], axis=1),
                   oh.make_node("Cast", [f"{RESERVED}in{k}"], [f"{RESERVED}in{k}/cast"],
                                to=port.dtype),

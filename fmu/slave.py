@@ -11,6 +11,7 @@ from collections.abc import Callable, Mapping, Sequence
 from ctypes import CFUNCTYPE, c_int, c_void_p, cast
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import fmpy
 from fmpy import extract, read_model_description
@@ -38,7 +39,10 @@ def bare_calls(fmu: FMU2Slave) -> BareCalls:
     prototype = CFUNCTYPE(c_int)
 
     def pointer(name: str) -> Callable[..., int]:
-        return prototype(cast(getattr(fmu.dll, name), c_void_p).value)
+        address = cast(getattr(fmu.dll, name), c_void_p).value
+        if address is None:
+            raise RuntimeError(f"the FMU's {name} is a null pointer")
+        return prototype(address)
 
     return BareCalls(c_void_p(fmu.component), pointer("fmi2SetReal"), pointer("fmi2GetReal"),
                      pointer("fmi2DoStep"))
@@ -47,7 +51,8 @@ def bare_calls(fmu: FMU2Slave) -> BareCalls:
 class Slave:
     """One instantiated FMU, addressed by variable names; use it as a context manager."""
 
-    def __init__(self, path: str | Path, instance_name: str = "instance", **instantiate_kw):
+    def __init__(self, path: str | Path, instance_name: str = "instance",
+                 **instantiate_kw: Any) -> None:
         self.model_description = read_model_description(str(path))
         self.variables = {v.name: v for v in self.model_description.modelVariables}
         self._unzipdir = extract(str(path))
@@ -60,7 +65,7 @@ class Slave:
     def library(self) -> Path:
         """The FMU's shared library in the extracted folder."""
         ident = self.model_description.coSimulation.modelIdentifier
-        binaries = Path(self._unzipdir) / "binaries" / fmpy.platform
+        binaries = Path(self._unzipdir, "binaries", fmpy.platform)
         return binaries / f"{ident}{fmpy.sharedLibraryExtension}"
 
     def names(self, causality: str) -> list[str]:
@@ -78,7 +83,8 @@ class Slave:
 
     def get(self, names: Sequence[str]) -> list[float]:
         """Real values by name."""
-        return self.fmu.getReal([self.variables[n].valueReference for n in names])
+        values: list[float] = self.fmu.getReal([self.variables[n].valueReference for n in names])
+        return values
 
     def initialize(self, parameters: Mapping[str, float | int] | None = None,
                    start_time: float = 0.0) -> None:
@@ -96,5 +102,5 @@ class Slave:
     def __enter__(self) -> Slave:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

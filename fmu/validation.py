@@ -16,6 +16,7 @@ import io
 import math
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import fmpy.validation
 
@@ -99,7 +100,7 @@ def _run_problems(instance: FmuInstance, steps: int = 20) -> list[str]:
     get_state, set_state, free_state, serialize, deserialize = (
         getattr(instance.fmu, name) for name in _STATE_METHODS[info.fmi_version])
 
-    def advance(k: int) -> list:
+    def advance(k: int) -> list[Any]:
         """Step from t_k, then apply the inputs of t_k+1 (a Gauss-Seidel master's order)."""
         instance.do_step(start + k * step, step)
         if table:
@@ -110,13 +111,13 @@ def _run_problems(instance: FmuInstance, steps: int = 20) -> list[str]:
     if table:
         instance.set(table[0])
     rows = [instance.get(outputs)] + [advance(k) for k in range(steps // 2)]
-    states = {}
+    states: dict[str | None, Any] = {}  # by label; None labels the uninterrupted run
     if cs.canGetAndSetFMUstate:
         saved = states["a saved FMU state"] = instance.call("getting the FMU state", get_state)
         if cs.canSerializeFMUstate:
             states["a serialized FMU state"] = instance.call(
                 "serializing and restoring the FMU state", lambda: deserialize(serialize(saved)))
-    runs = {}
+    runs: dict[str | None, list[list[Any]]] = {}
     for label, state in {None: None, **states}.items():
         if state is not None:
             instance.call(f"restoring {label}", lambda state=state: set_state(state))
@@ -147,7 +148,7 @@ def validate_fmu(path: str | Path) -> list[str]:
         info = read_fmu(path)
     except FmuError as error:
         return [str(error)]
-    problems = fmpy.validation.validate_fmu(str(path))
+    problems: list[str] = fmpy.validation.validate_fmu(str(path))
     if problems:
         return problems
     try:

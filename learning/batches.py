@@ -16,12 +16,15 @@ as the zero initial buffer at deployment).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 PAD, TRAIN, VALIDATION = 0, 1, 2
+# (history x, window x, window y, window mask) of a batch of windows
+Batch = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
 
 
 def window_roles(lengths: list[int], window: int, val_fraction: float,
@@ -103,7 +106,7 @@ class WindowSampler:
         self._mask = torch.cat([data.role == TRAIN,
                                 data.role.new_zeros(n, window, dtype=torch.bool)], dim=1)
 
-    def batches(self, batch_size: int, rng: np.random.Generator):
+    def batches(self, batch_size: int, rng: np.random.Generator) -> Iterator[Batch]:
         """Yield shuffled batches covering every training window once."""
         order = rng.permutation(len(self.starts))
         span = torch.arange(self.history + self.window, device=self._x.device)

@@ -9,6 +9,7 @@ a straight-line program of scalar operations, and each scalar becomes a tensor o
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import casadi as ca
 import torch
@@ -35,7 +36,8 @@ _UNARY: dict[int, Callable[[torch.Tensor], torch.Tensor]] = {
     ca.OP_CEIL: torch.ceil,
 }
 # arithmetic takes a Python float for either operand; the rest need tensors (see __call__)
-_ARITHMETIC: dict[int, Callable] = {
+_ARITHMETIC: dict[int, Callable[[torch.Tensor | float, torch.Tensor | float],
+                                 torch.Tensor | float]] = {
     ca.OP_ADD: lambda a, b: a + b,
     ca.OP_SUB: lambda a, b: a - b,
     ca.OP_MUL: lambda a, b: a * b,
@@ -103,9 +105,11 @@ class TorchFunction:
                 raise ValueError(f"{self.name}: input {k} must end in size {n}, got {x.shape}")
         like = inputs[0]
         work: dict[int, torch.Tensor | float] = {}
-        outputs: list[list] = [[None] * m for m in self.n_out]
+        outputs: list[list[Any]] = [[None] * m for m in self.n_out]  # set by OP_OUTPUT
         for op, args, res, constant in self._program:
             if op == ca.OP_CONST:
+                if constant is None:
+                    raise ValueError(f"{self.name}: a constant without a value")
                 work[res[0]] = constant
             elif op == ca.OP_INPUT:
                 work[res[0]] = inputs[args[0]][..., args[1]]
@@ -129,12 +133,12 @@ def _tensor(value: torch.Tensor | float, like: torch.Tensor) -> torch.Tensor:
     return torch.tensor(value, dtype=like.dtype, device=like.device)
 
 
-def frozen(function: ca.Function, fixed: Sequence[int], values: Sequence) -> ca.Function:
+def frozen(function: ca.Function, fixed: Sequence[int], values: Sequence[Any]) -> ca.Function:
     """`function` with the inputs at positions `fixed` replaced by numeric `values` (an SX
     Function of the remaining inputs), so that constants fold into the expression graph."""
     symbols = [ca.SX.sym(function.name_in(k), function.sparsity_in(k))
                for k in range(function.n_in())]
-    args = list(symbols)
+    args: list[ca.SX | ca.DM] = list(symbols)
     for k, value in zip(fixed, values):
         args[k] = ca.DM(value)
     free = [k for k in range(function.n_in()) if k not in fixed]

@@ -164,7 +164,7 @@ class _Folder:
     """What a dataset folder holds already: the sha256 its manifest lists per file, and the
     loop it records (None: collected by an earlier flexff, on the set's own loop)."""
 
-    listed: Mapping[str, str]
+    listed: Mapping[Any, Any]  # file -> sha256 as the manifest's JSON has them (unchecked)
     loop: Mapping[str, Any] | None
 
 
@@ -207,7 +207,8 @@ def run_collection(set_name: str, out: str | Path, workers: int | None = None,
         taps, record = dataset_taps(scenario), loop_record(scenario)
     _check_loop(out, folder.loop, record, config is None)
     recorded = RecordConfig(tuple(dict.fromkeys(t.signal for t in taps.values())), csv=False)
-    jobs, skipped = [], []
+    jobs: list[_Job] = []
+    skipped: list[_Job] = []
     for c in configs:
         job = _Job(replace(c, record=recorded), out / f"{c.name}.npz", decimation, taps,
                    current_limit(loop))
@@ -268,7 +269,8 @@ def _check_folder(out: Path, trajectories: TrajectorySet) -> _Folder:
     if out.exists() and not out.is_dir():
         raise DataFolderError(f"{out} exists and is not a folder")
     manifest = out / MANIFEST
-    listed, loop = {}, None
+    listed: dict[Any, Any] = {}
+    loop = None
     if manifest.is_file():
         try:
             found = json.loads(manifest.read_text())
@@ -416,7 +418,8 @@ def _on_dask(jobs: list[_Job], scheduler: str) -> Iterator[Outcome]:
                            lambda: client.cancel([f for f in futures if not f.done()]))
 
 
-def _settle(futures: dict, finished: Iterable, cancel: Callable[[], object]) -> Iterator[Outcome]:
+def _settle(futures: dict[Any, _Job], finished: Iterable[Any], cancel: Callable[[], object]
+            ) -> Iterator[Outcome]:
     """The outcomes of `futures` (future -> job) in the order `finished` yields them; after
     the first error that would fail every trajectory, `cancel` the ones not started."""
     stopped = False

@@ -142,7 +142,8 @@ def save_signals(path: Path, signals: Mapping[str, np.ndarray]) -> None:
 
     def write(tmp: Path) -> None:
         with open(tmp, "wb") as handle:  # a file object keeps numpy from adding ".npz"
-            np.savez(handle, **arrays)
+            # numpy's stub types savez's **kwds and its allow_pickle: bool alike
+            np.savez(handle, **arrays)  # type: ignore[arg-type]
 
     atomic_write(path, write)
 

@@ -11,6 +11,8 @@ needs the reference.
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 import torch
 from torch import nn
@@ -33,6 +35,12 @@ class SIModel(nn.Module):
     training span (theta_ee: 1.309 rad +- 0.5 mrad), which float32 would resolve to only 1e-4
     of the span. The network and its state (batch size 1, zeros at the start) are float32.
     """
+
+    # the scalers' buffers (register_buffer in __init__)
+    feature_low: torch.Tensor
+    feature_span: torch.Tensor
+    label_low: torch.Tensor
+    label_span: torch.Tensor
 
     def __init__(self, run: Run, inputs: str = "features", prior: bool = True) -> None:
         super().__init__()
@@ -104,11 +112,15 @@ class EnsembleSIModel(nn.Module):
             start += count
         return (torch.stack(forces).mean(dim=0), *new_state)
 
+    def _each(self) -> list[SIModel]:
+        """The members (the ModuleList holds only SIModels)."""
+        return [cast(SIModel, member) for member in self.members]
+
     def initial_state(self) -> tuple[torch.Tensor, ...]:
-        return tuple(s for member in self.members for s in member.initial_state())
+        return tuple(s for member in self._each() for s in member.initial_state())
 
     def state_names(self) -> list[str]:
-        return [f"member{i}_{name}" for i, member in enumerate(self.members)
+        return [f"member{i}_{name}" for i, member in enumerate(self._each())
                 for name in member.state_names()]
 
 
@@ -117,5 +129,6 @@ def predict(run: Run, inputs: np.ndarray, kind: str = "features") -> np.ndarray:
     """Forces (T, 2) [N] for a whole sequence of SI inputs (T, n_inputs), from the zero state."""
     model = SIModel(run, kind)
     with torch_threads():
-        return model(torch.as_tensor(inputs, dtype=torch.float64),
-                     *model.initial_state())[0].numpy()
+        forces: np.ndarray = model(torch.as_tensor(inputs, dtype=torch.float64),
+                                   *model.initial_state())[0].numpy()
+        return forces

@@ -118,7 +118,7 @@ def scenario_config(env: str, name: str, model: Path | None = None, mode: str = 
 def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[str] = MODELS,
              data: str | Path | None = None, epochs: int | None = None,
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
-             progress: bool = True) -> dict:
+             progress: bool = True) -> dict[str, Any]:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
     collects and evaluates on that run configuration instead of the environment's plant."""
@@ -172,7 +172,7 @@ def _member_jobs(kind: str, preset: str, overrides: dict[str, Any], members: int
                      cost, f"{kind}-seed{seed}") for seed in range(members)]
 
 
-def _ensemble_metrics(members: list[dict]) -> dict:
+def _ensemble_metrics(members: list[dict[str, Any]]) -> dict[str, Any]:
     """One model's training metrics; for an ensemble, its members' summed time and
     parameters, mean test and validation MSE and latest kept epoch."""
     if len(members) == 1:
@@ -194,7 +194,7 @@ def _cost(config: TrainConfig) -> float:
     return config.epochs * parameter_count(network) * (config.features.model_rate_hz or 1.0)
 
 
-def _finished(job: TrainJob) -> dict | None:
+def _finished(job: TrainJob) -> dict[str, Any] | None:
     """The metrics of a finished training run in the job's folder with the job's settings
     (where it ran, on which device and threads, aside), or None."""
     try:

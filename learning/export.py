@@ -94,7 +94,7 @@ def _si_model(runs: list[Run], inputs: str) -> SIModel | EnsembleSIModel:
 
 def _check_members(runs: list[Run]) -> None:
     """Ensemble members must run alike: same model kind, features, rate and prior."""
-    def key(r: Run) -> tuple:
+    def key(r: Run) -> tuple[str, str, float, str]:
         return (r.config.model, r.config.features.feature_set, r.model_rate_hz,
                 json.dumps(r.prior_parameters, sort_keys=True))
 
@@ -150,7 +150,8 @@ def session(path: str | Path) -> ort.InferenceSession:
 def run_sequence(session: ort.InferenceSession, inputs: np.ndarray) -> np.ndarray:
     """Forces (T, 2) for a whole sequence, from the zero state."""
     feed = {"inputs": inputs.astype(np.float64), **_zero_state(session)}
-    return session.run(["forces"], feed)[0]
+    forces: np.ndarray = session.run(["forces"], feed)[0]
+    return forces
 
 
 def run_steps(session: ort.InferenceSession, inputs: np.ndarray) -> np.ndarray:
@@ -199,4 +200,5 @@ def _probe(run: Run, inputs: str, length: int) -> np.ndarray:
                                 -r * w * w * np.sin(w * t)])
     low, high = run.feature_scaler.low, run.feature_scaler.high
     phase = np.linspace(0.0, 2 * np.pi, low.size)[None, :]
-    return low + (high - low) * (0.5 + 0.4 * np.sin(2 * np.pi * t + phase))
+    features: np.ndarray = low + (high - low) * (0.5 + 0.4 * np.sin(2 * np.pi * t + phase))
+    return features

@@ -81,7 +81,9 @@ def quantize_encoders(theta: np.ndarray) -> np.ndarray:
     p = model.parameter_values()
     home = np.asarray(model.coordinates([0.0, 0.0], p), dtype=float).ravel()[list(SHOULDER_INDEX)]
     count = 2 * np.pi / model.variant.parameters.encoder_counts
-    return home + count * np.floor((np.asarray(theta, dtype=float) - home) / count + 0.5)
+    counts = np.floor((np.asarray(theta, dtype=float) - home) / count + 0.5)
+    counted: np.ndarray = home + count * counts
+    return counted
 
 
 def encoder_positions(theta: np.ndarray, encoders: int = 2) -> np.ndarray:

@@ -39,6 +39,7 @@ import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.io import loadmat
@@ -347,7 +348,8 @@ def _derive(log: _Log, signals: dict[str, np.ndarray], rate: float) -> dict[str,
 
 
 # -- writing ----------------------------------------------------------------------------------
-def _write(out: Path, rate: float, entries: list[dict], signals: list[dict]) -> None:
+def _write(out: Path, rate: float, entries: list[dict[str, Any]],
+           signals: list[dict[str, Any]]) -> None:
     """The dataset folder, written under a temporary name beside `out`, then renamed."""
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))

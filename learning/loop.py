@@ -73,7 +73,10 @@ def on_reference(loop: RunConfig, reference: Mapping[str, Any], name: str,
     with the built-in plant's noise `seed` (None keeps the loop's)."""
     own = parse_config({"run": {"step": loop.step, **({"stop": stop} if stop else {})},
                         "reference": dict(reference)}, name=name, source=f"{loop.source}, {name}")
-    start = {k: own.builtin("plant").parameters[k] for k in START_VALUES}
+    plant = own.builtin("plant")
+    if plant is None:  # the short form always has one
+        raise ValueError(f"{name}: the reference run has no built-in plant")
+    start = {k: plant.parameters[k] for k in START_VALUES}
     return replace(loop, name=name, reference=own.reference, stop=own.stop,
                    fmus=tuple(_started(f, start, seed) for f in loop.fmus))
 
@@ -186,7 +189,8 @@ def loop_record(scenario: Scenario) -> dict[str, Any]:
     fmus = {f.name: {**({"builtin": f.builtin} if f.builtin else {"path": str(f.path)}),
                      "sha256": file_sha256(s.fmu)}
             for f, s in zip(scenario.config.fmus, scenario.slaves)}
-    return json.loads(json.dumps({"configuration": configuration, "fmus": fmus}))
+    plain: dict[str, Any] = json.loads(json.dumps({"configuration": configuration, "fmus": fmus}))
+    return plain
 
 
 def plant_record(scenario: Scenario, taps: Mapping[str, Tap], record: Mapping[str, Any]

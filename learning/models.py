@@ -28,6 +28,7 @@ and a unit forget-gate bias.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 from torch import nn
@@ -151,10 +152,10 @@ class StreamingTCN(SequenceNetwork):
         super().__init__()
         self.history = tcn.history
         self.blocks, self.head = tcn.blocks, tcn.head
-        self.lengths = [block.shrink for block in tcn.blocks]
+        self.lengths = [block.shrink for block in _levels(tcn)]
         level_input = torch.zeros(1, tcn.n_features, 1, dtype=tcn.head.weight.dtype)
         with torch.no_grad():
-            for i, block in enumerate(tcn.blocks):
+            for i, block in enumerate(_levels(tcn)):
                 self.register_buffer(f"rest{i}", level_input.clone())
                 level_input = block(level_input.expand(-1, -1, block.shrink + 1))
 
@@ -174,6 +175,11 @@ class StreamingTCN(SequenceNetwork):
             new_state.append(padded[:, :, -self.lengths[i]:] - rest)
             hidden = block(padded)
         return self.head(hidden.transpose(1, 2)), tuple(new_state)
+
+
+def _levels(tcn: TemporalConvNet) -> list[TemporalBlock]:
+    """The temporal blocks of a TCN, in order."""
+    return [block for block in tcn.blocks if isinstance(block, TemporalBlock)]
 
 
 class LSTMNet(SequenceNetwork):
@@ -291,8 +297,9 @@ def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor) 
     with torch.no_grad():
         network.linear.weight.copy_(solution[:-1].T)
         network.linear.bias.copy_(solution[-1])
-        nn.init.zeros_(network.network.head.weight)
-        nn.init.zeros_(network.network.head.bias)
+        head = _head(network.network)
+        nn.init.zeros_(head.weight)
+        nn.init.zeros_(head.bias)
 
 
 # kind -> (class, whether its target is the residual over the rigid-body prior)
@@ -312,15 +319,23 @@ def check_kind(kind: str) -> None:
 
 
 def build_network(kind: str, n_features: int, linear_skip: bool = False,
-                  **architecture) -> SequenceNetwork:
+                  **architecture: Any) -> SequenceNetwork:
     """A fresh network of `kind` ('lstm', 'cnn-lstm', 'tcn', 'pgnn') for n_features inputs,
     wrapped in a LinearSkip when `linear_skip`."""
     check_kind(kind)
     cls, prior = NETWORKS[kind]
     network = cls(n_features, **architecture)
     if prior:  # a zero head: training starts from the rigid-body model itself
-        nn.init.zeros_(network.head.weight)
+        nn.init.zeros_(_head(network).weight)
     return LinearSkip(network, n_features) if linear_skip else network
+
+
+def _head(network: SequenceNetwork) -> nn.Linear:
+    """The output layer of a network that has one (LinearSkip has none)."""
+    head = network.head
+    if not isinstance(head, nn.Linear):
+        raise TypeError(f"{type(network).__name__} has no linear output layer")
+    return head
 
 
 def uses_prior(kind: str) -> bool:
@@ -345,7 +360,8 @@ def glorot_init(module: nn.Module) -> None:
     for sub in module.modules():
         if isinstance(sub, (nn.Conv1d, nn.Linear)):
             nn.init.xavier_uniform_(sub.weight)
-            nn.init.zeros_(sub.bias)
+            if sub.bias is not None:
+                nn.init.zeros_(sub.bias)
         elif isinstance(sub, nn.LSTM):
             for name, param in sub.named_parameters():
                 if name.startswith("weight_ih"):

@@ -53,7 +53,8 @@ SCENARIO_LABELS: dict[str, str] = {
 }
 
 
-def _thesis(exponent: int, rows: Mapping[str, tuple[float, float, float, float]]) -> dict:
+def _thesis(exponent: int, rows: Mapping[str, tuple[float, float, float, float]]
+            ) -> dict[str, Any]:
     """A thesis table in SI units from its printed rows (‖E_x‖₂, ‖E_y‖₂, ‖E_x‖∞, ‖E_y‖∞), which
     are in units of 10**exponent; read as decimal literals so 42.930 x 1e-4 is 0.004293.
 
@@ -70,7 +71,7 @@ def _thesis(exponent: int, rows: Mapping[str, tuple[float, float, float, float]]
 
 
 # ‖E‖₂ (the rms) and ‖E‖∞ in m, as printed (x 1e-4 in Table 5.2, x 1e-3 in Table 6.2)
-THESIS_TABLES: dict[str, dict] = {
+THESIS_TABLES: dict[str, dict[str, Any]] = {
     "sim": _thesis(-4, {"pid": (42.930, 42.940, 142.23, 140.00),
                         "lstm": (0.457, 1.102, 3.467, 4.032),
                         "cnn-lstm": (10.550, 16.648, 42.146, 72.34),
@@ -118,7 +119,7 @@ def _pid_first(names: Mapping[str, object]) -> list[str]:
     return ["pid", *(name for name in names if name != "pid")]
 
 
-def summarize(metrics: dict[str, dict]) -> dict[str, dict]:
+def summarize(metrics: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per scenario and axis: rms, e2, einf and their improvement ratios rms_ratio (equal to
     e2_ratio on one reference), e2_ratio, einf_ratio (PID alone / scenario, so the PID's are
     1.0 and higher is better), PID alone first.
@@ -127,7 +128,7 @@ def summarize(metrics: dict[str, dict]) -> dict[str, dict]:
     {"x": {"e2", "einf", "rms"}, "y": {...}}; it must hold "pid", the base of every ratio.
     """
     _check_pid(metrics, "metrics")
-    summary: dict[str, dict] = {}
+    summary: dict[str, dict[str, Any]] = {}
     for name in _pid_first(metrics):
         summary[name] = {}
         for axis in AXES:
@@ -146,9 +147,10 @@ def _number(value: float) -> str:
 def _cell(norms: Mapping[str, float | None], norm: str, scale: float, with_ratio: bool) -> str:
     """One table entry: the value in the table's scale, with its improvement ratio ("–" for
     a norm the column does not have: the thesis gives no e2)."""
-    if norm not in norms:
+    value = norms.get(norm)
+    if value is None:
         return "–"
-    text = _number(norms[norm] / scale)
+    text = _number(value / scale)
     if not with_ratio:
         return text
     ratio = norms[f"{norm}_ratio"]
@@ -157,7 +159,7 @@ def _cell(norms: Mapping[str, float | None], norm: str, scale: float, with_ratio
     return f"{text} ({ratio:.0f}x)" if ratio >= 10 else f"{text} ({ratio:.2g}x)"
 
 
-def markdown_table(summary: dict[str, dict], env: str) -> str:
+def markdown_table(summary: dict[str, dict[str, Any]], env: str) -> str:
     """The thesis's table for `env` ("sim" or "hardware") as Markdown: rows ‖E_x‖₂, ‖E_y‖₂
     (the rms, as the thesis's), e2 x, e2 y (flexff's rms/√T), ‖E_x‖∞, ‖E_y‖∞; a column
     per flexff scenario of `summary` (from `summarize`), then the thesis's columns for the
@@ -306,7 +308,7 @@ def training_table(training: Mapping[str, Mapping[str, Any]]) -> str:
 
 
 def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
-                 training: Mapping[str, Mapping[str, Any]] | None = None) -> dict:
+                 training: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Any]:
     """Write summary.json, table.md, paths.png, errors.png and forces.png into `out`; return
     the summary.json content. `training` (model -> learning.train metrics) adds what each
     model's training cost and reached, in both files.

@@ -81,7 +81,7 @@ class Run:
 def save_run(out: Path, config: TrainConfig, network: SequenceNetwork,
              feature_scaler: MinMaxScaler, label_scaler: MinMaxScaler, feature_names: list[str],
              model_rate_hz: float, extra: dict[str, Any],
-             files: Mapping[str, Callable[[Path], None]]) -> None:
+             files: Mapping[str, Callable[[Path], object]]) -> None:
     """Write model.pt, run.json and `files` (name -> writer of that file) into `out`, then
     delete the checkpoints; a finished run's files there change only once all new ones are
     complete."""
@@ -224,7 +224,7 @@ def load_checkpoint(out: Path) -> dict[str, Any] | None:
     if not path.is_file():
         return None
     try:
-        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        checkpoint: dict[str, Any] = torch.load(path, map_location="cpu", weights_only=True)
         if checkpoint.get("format") != CHECKPOINT_FORMAT or \
                 not all(k in checkpoint for k in CHECKPOINT_KEYS):
             raise ValueError

@@ -33,10 +33,12 @@ class MinMaxScaler:
         return np.where(span > 0, span, 1.0)
 
     def transform(self, x: np.ndarray) -> np.ndarray:
-        return (np.asarray(x, dtype=float) - self.low) / self.span
+        scaled: np.ndarray = (np.asarray(x, dtype=float) - self.low) / self.span
+        return scaled
 
     def inverse(self, z: np.ndarray) -> np.ndarray:
-        return np.asarray(z, dtype=float) * self.span + self.low
+        unscaled: np.ndarray = np.asarray(z, dtype=float) * self.span + self.low
+        return unscaled
 
     def to_dict(self) -> dict[str, list[float]]:
         return {"low": self.low.tolist(), "high": self.high.tolist()}

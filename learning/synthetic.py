@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -52,22 +53,23 @@ def periodic_spline(t: np.ndarray, lap: float, points: np.ndarray) -> np.ndarray
 
 
 def random_motion(rng: np.random.Generator, t: np.ndarray,
-                  duration: float) -> tuple[np.ndarray, dict]:
+                  duration: float) -> tuple[np.ndarray, dict[str, Any]]:
     """A circle (two times in three) or a spline (1 to 4 laps) with random, feasible parameters."""
     if rng.uniform() < 2 / 3:
         radius = rng.uniform(0.007, 0.045)
         max_turns = duration / (4 * np.pi) * np.sqrt(MAX_ACCELERATION / radius)
         most = min(15.0, max_turns)
         turns = float(rng.uniform(min(1.0, most), most))
-        spec = {"kind": "circle", "radius": radius, "turns": turns,
-                "start_angle": float(rng.uniform(-np.pi, np.pi)),
-                "direction": int(rng.choice([-1, 1]))}
-        return skew_sine_circle(t, duration, **{k: v for k, v in spec.items() if k != "kind"}), spec
+        start_angle = float(rng.uniform(-np.pi, np.pi))
+        direction = int(rng.choice([-1, 1]))
+        spec = {"kind": "circle", "radius": radius, "turns": turns, "start_angle": start_angle,
+                "direction": direction}
+        return skew_sine_circle(t, duration, radius, turns, start_angle, direction), spec
     while True:
         count = int(rng.integers(4, 7))
-        radius = 0.045 * np.sqrt(rng.uniform(0, 1, count))
+        radii = 0.045 * np.sqrt(rng.uniform(0, 1, count))
         angle = rng.uniform(-np.pi, np.pi, count)
-        points = np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
+        points = np.column_stack([radii * np.cos(angle), radii * np.sin(angle)])
         laps = int(rng.integers(1, 5))
         motion = periodic_spline(t, duration / laps, points)
         if (np.hypot(motion[0], motion[1]).max() < WORKSPACE
@@ -88,7 +90,7 @@ def _label_function(friction: bool) -> ca.Function:
 
 
 def motion_trajectory(name: str, split: str, seed: int, t: np.ndarray, motion: np.ndarray,
-                      reference: dict, friction: bool = True,
+                      reference: dict[str, Any], friction: bool = True,
                       force_noise: float = 0.02) -> Trajectory:
     """The dataset signals of a wrist motion (rows x, y, vx, vy, ax, ay at times t)."""
     force, theta = _label_function(friction).map(len(t), "thread", 2)(
@@ -144,7 +146,7 @@ def synthetic_collection_set(path: str | Path, set_name: str = "sim", friction: 
                          _plant(friction, force_noise), written)
 
 
-def _plant(friction: bool, force_noise: float) -> dict:
+def _plant(friction: bool, force_noise: float) -> dict[str, Any]:
     model = nominal_model()
     return {"variant": "nominal",
             "parameters": dict(zip(model.variant.parameters.names(),

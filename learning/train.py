@@ -167,7 +167,8 @@ def _settings(config: TrainConfig, dataset: Dataset) -> dict[str, Any]:
     """What a checkpoint must share to be resumed: the configuration (where it runs aside)
     and the data."""
     settings = {k: v for k, v in config.to_dict().items() if k not in ("device", "threads")}
-    return json.loads(json.dumps({"config": settings, "data": dataset.digest}))
+    plain: dict[str, Any] = json.loads(json.dumps({"config": settings, "data": dataset.digest}))
+    return plain
 
 
 def _splits(dataset: Dataset) -> tuple[list[Trajectory], list[Trajectory]]:
@@ -267,7 +268,7 @@ def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
     for epoch in bar:
         start = time.perf_counter()
         network.train()
-        if recurrent:
+        if sampler is None:  # a recurrent network
             loss = _recurrent_epoch(network, config, data, optimizer, rng, epoch)
         else:
             loss = _window_epoch(network, config, sampler, optimizer, rng, epoch)

@@ -148,8 +148,9 @@ def _hardware_set() -> TrajectorySet:
     return _assemble("hardware", "hardware", HW_DURATION, 10, train, test, next(streams))
 
 
-def _assemble(name: str, variant: str, duration: float, decimation: int, train: list,
-              test: list, seed_rng: np.random.Generator) -> TrajectorySet:
+def _assemble(name: str, variant: str, duration: float, decimation: int,
+              train: list[tuple[str, dict[str, Any]]], test: list[tuple[str, dict[str, Any]]],
+              seed_rng: np.random.Generator) -> TrajectorySet:
     labelled = [(n, "train", r) for n, r in train] + [(n, "test", r) for n, r in test]
     seeds = seed_rng.integers(1, 2**31 - 1, size=len(labelled))
     specs = tuple(TrajectorySpec(n, split, r, variant, int(s))
@@ -228,7 +229,8 @@ def _spline_points(rng: np.random.Generator, n: int) -> list[list[float]]:
             continue
         xy = path.evaluate(np.linspace(0.0, 1.0, 4001))[:2]
         if np.hypot(*xy).max() <= R_MAX:
-            return points.tolist()
+            coordinates: list[list[float]] = points.tolist()
+            return coordinates
 
 
 def _laps(points: list[list[float]], laps: int, duration: float) -> list[dict[str, Any]]:

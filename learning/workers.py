@@ -90,22 +90,23 @@ def train_parallel(jobs: Sequence[TrainJob], workers: int | None = None,
         return {futures[f].name: f.result() for f in futures}
 
 
-def _follow(futures: dict[Future, TrainJob], epochs: Any, bars: dict[str, tqdm]) -> None:
+def _follow(futures: dict[Future[dict[str, Any]], TrainJob], epochs: Any,
+            bars: dict[str, tqdm[Any]]) -> None:
     """Update the bars from the workers' epoch reports until every job is done; stop at the
     first failure (the jobs not started are cancelled)."""
     pending = set(futures)
     while pending:
         done, pending = wait(pending, timeout=POLL_S, return_when=FIRST_EXCEPTION)
         _drain(epochs, bars)
-        failed = [f for f in done if f.exception() is not None]
+        failed = [error for f in done if (error := f.exception()) is not None]
         if failed:
             for f in pending:
                 f.cancel()
-            raise failed[0].exception()
+            raise failed[0]
     _drain(epochs, bars)
 
 
-def _drain(epochs: Any, bars: dict[str, tqdm]) -> None:
+def _drain(epochs: Any, bars: dict[str, tqdm[Any]]) -> None:
     while True:
         try:
             model, report = epochs.get_nowait()

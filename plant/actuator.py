@@ -17,7 +17,8 @@ def saturated_current(p: PlantParameters, current: Any) -> Any:
 
 def motor_torque(p: PlantParameters, current: Any) -> ca.SX:
     """Shoulder torques [N m] = torque constant * saturated current, per motor."""
-    return ca.vertcat(*[p.k_t[i] * saturated_current(p, current[i]) for i in range(3)])
+    torques: ca.SX = ca.vertcat(*[p.k_t[i] * saturated_current(p, current[i]) for i in range(3)])
+    return torques
 
 
 def friction_torque(p: PlantParameters, speed: Any) -> ca.SX:
@@ -25,9 +26,10 @@ def friction_torque(p: PlantParameters, speed: Any) -> ca.SX:
 
     The tanh keeps the right-hand side smooth for fixed-step RK4; w_stribeck sets how sharp.
     """
-    return ca.vertcat(*[
+    torques: ca.SX = ca.vertcat(*[
         -p.tau_coulomb[i] * ca.tanh(speed[i] / p.w_stribeck) - p.b_viscous[i] * speed[i]
         for i in range(3)])
+    return torques
 
 
 def encoder_resolution(p: PlantParameters) -> Any:

@@ -49,11 +49,13 @@ def body_mass_matrix(p: PlantParameters) -> ca.SX:
     return m
 
 
-def flexure_stiffness(p: PlantParameters) -> ca.SX:
+def flexure_stiffness(p: PlantParameters) -> ca.SX | ca.DM:
+    """The nine flexure stiffnesses: SX for symbolic parameters, DM for numbers."""
     return ca.vertcat(*p.k_s, *p.k_e, *p.k_w)
 
 
-def flexure_damping(p: PlantParameters) -> ca.SX:
+def flexure_damping(p: PlantParameters) -> ca.SX | ca.DM:
+    """The nine flexure dampings: SX for symbolic parameters, DM for numbers."""
     return ca.vertcat(*p.d_s, *p.d_e, *p.d_w)
 
 

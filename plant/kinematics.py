@@ -108,8 +108,9 @@ def flexure_deflections(p: PlantParameters, x: Any, y: Any) -> ca.SX:
         shoulders.append(_angle_between(rest.upper, pose.upper))
         lowers.append(_angle_between(rest.lower, pose.lower))
     wrist = (lowers[0] + lowers[1] + lowers[2]) / 3
-    return ca.vertcat(*shoulders, *[lw - sh for lw, sh in zip(lowers, shoulders)],
-                      *[lw - wrist for lw in lowers])
+    deflections: ca.SX = ca.vertcat(*shoulders, *[lw - sh for lw, sh in zip(lowers, shoulders)],
+                                    *[lw - wrist for lw in lowers])
+    return deflections
 
 
 def _elbow(p: PlantParameters, chain: int, theta_s: Any) -> tuple[Any, Any]:
@@ -131,7 +132,7 @@ def _branch_sign() -> float:
     return 1.0 if float(ca.norm_2(ca.vertcat(*guess))) < 1e-9 else -1.0
 
 
-def _intersection(p: PlantParameters, theta_s1: Any, theta_s2: Any, sign: float) -> tuple:
+def _intersection(p: PlantParameters, theta_s1: Any, theta_s2: Any, sign: float) -> tuple[Any, Any]:
     (ax, ay), (bx, by) = _elbow(p, 0, theta_s1), _elbow(p, 1, theta_s2)
     dx, dy = bx - ax, by - ay
     dist = ca.sqrt(dx**2 + dy**2)

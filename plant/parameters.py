@@ -17,11 +17,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from dataclasses import Field, dataclass, field, fields, replace
+from typing import Any, TypeAlias
 
 CHAINS = (1, 2, 3)
 MOTOR_FRICTION = ("tau_coulomb", "b_viscous", "w_stribeck")  # fields of plant.actuator's model
+# a per-chain field: one entry per chain (numbers, or CasADi symbols from `from_vector`); the
+# name is what `_is_per_chain` looks for in a field's (string) annotation
+PerChain: TypeAlias = tuple[float, float, float]
 
 
 def _param(unit: str, description: str, positive: bool = True) -> Any:
@@ -38,24 +41,24 @@ class PlantParameters:
     r_mount: float = _param("m", "radius of the circle on which the three motors are mounted")
     workspace_radius: float = _param("m", "radius of the admissible end-effector workspace")
     # rigid bodies (centre of mass on the arm axis)
-    m_up: tuple = _param("kg", "upper arm mass")
-    j_up: tuple = _param("kg*m^2", "upper arm inertia about its centre of mass")
-    c_up: tuple = _param("m", "shoulder hinge to upper arm centre of mass")
-    m_low: tuple = _param("kg", "lower arm mass")
-    j_low: tuple = _param("kg*m^2", "lower arm inertia about its centre of mass")
-    c_low: tuple = _param("m", "elbow hinge to lower arm centre of mass")
+    m_up: PerChain = _param("kg", "upper arm mass")
+    j_up: PerChain = _param("kg*m^2", "upper arm inertia about its centre of mass")
+    c_up: PerChain = _param("m", "shoulder hinge to upper arm centre of mass")
+    m_low: PerChain = _param("kg", "lower arm mass")
+    j_low: PerChain = _param("kg*m^2", "lower arm inertia about its centre of mass")
+    c_low: PerChain = _param("m", "elbow hinge to lower arm centre of mass")
     m_ee: float = _param("kg", "wrist (end-effector) mass")
     j_ee: float = _param("kg*m^2", "wrist (end-effector) inertia about its centre")
     # flexure hinges: rotational stiffness and light damping
-    k_s: tuple = _param("N*m/rad", "shoulder flexure stiffness")
-    k_e: tuple = _param("N*m/rad", "elbow flexure stiffness")
-    k_w: tuple = _param("N*m/rad", "wrist flexure stiffness (lower arm to wrist)")
-    d_s: tuple = _param("N*m*s/rad", "shoulder flexure damping", positive=False)
-    d_e: tuple = _param("N*m*s/rad", "elbow flexure damping", positive=False)
-    d_w: tuple = _param("N*m*s/rad", "wrist flexure damping", positive=False)
+    k_s: PerChain = _param("N*m/rad", "shoulder flexure stiffness")
+    k_e: PerChain = _param("N*m/rad", "elbow flexure stiffness")
+    k_w: PerChain = _param("N*m/rad", "wrist flexure stiffness (lower arm to wrist)")
+    d_s: PerChain = _param("N*m*s/rad", "shoulder flexure damping", positive=False)
+    d_e: PerChain = _param("N*m*s/rad", "elbow flexure damping", positive=False)
+    d_w: PerChain = _param("N*m*s/rad", "wrist flexure damping", positive=False)
     # motors and amplifiers
-    j_rotor: tuple = _param("kg*m^2", "motor rotor inertia")
-    k_t: tuple = _param("N*m/A", "motor torque constant")
+    j_rotor: PerChain = _param("kg*m^2", "motor rotor inertia")
+    k_t: PerChain = _param("N*m/A", "motor torque constant")
     i_max: float = _param("A", "amplifier current limit (saturation)")
     # encoder
     encoder_counts: float = _param("1/rev", "encoder resolution in counts per revolution")
@@ -63,8 +66,8 @@ class PlantParameters:
         "1", "1: the encoder reads whole counts; 0: the exact angle (the ideal sensor of the "
         "thesis's simulation model)", positive=False)
     # non-ideal effects (zero switches them off, except the tool mount, which is structural)
-    tau_coulomb: tuple = _param("N*m", "Coulomb friction torque at the motor", positive=False)
-    b_viscous: tuple = _param("N*m*s/rad", "viscous friction at the motor", positive=False)
+    tau_coulomb: PerChain = _param("N*m", "Coulomb friction torque at the motor", positive=False)
+    b_viscous: PerChain = _param("N*m*s/rad", "viscous friction at the motor", positive=False)
     w_stribeck: float = _param("rad/s", "velocity scale of the smooth (tanh) Coulomb friction")
     m_tool: float = _param("kg", "tool on a compliant mount at the wrist (parasitic mode)")
     k_tool: float = _param("N/m", "stiffness of the tool mount, per direction")
@@ -75,7 +78,8 @@ class PlantParameters:
     @classmethod
     def from_vector(cls, vector: Any) -> PlantParameters:
         """Rebuild from a flat vector ordered as `names()` (numbers or CasADi expressions)."""
-        values, k = {}, 0
+        values: dict[str, Any] = {}
+        k = 0
         for f in fields(cls):
             if _is_per_chain(f):
                 values[f.name] = tuple(vector[k + j] for j in range(3))
@@ -152,9 +156,9 @@ class PlantParameters:
         if problems:
             raise ValueError("invalid plant parameters: " + "; ".join(problems))
 
-    def scaled(self, **factors: tuple | float) -> PlantParameters:
+    def scaled(self, **factors: tuple[float, ...] | float) -> PlantParameters:
         """Copy with fields multiplied by factors (a 3-tuple scales chains separately)."""
-        changes = {}
+        changes: dict[str, Any] = {}
         for name, factor in factors.items():
             value = getattr(self, name)
             if isinstance(value, tuple):
@@ -165,8 +169,8 @@ class PlantParameters:
         return replace(self, **changes)
 
 
-def _is_per_chain(f: Any) -> bool:
-    return f.type in ("tuple", tuple)
+def _is_per_chain(f: Field[Any]) -> bool:
+    return f.type in ("PerChain", PerChain)
 
 
 def _rod(mass: float, length: float) -> float:
@@ -222,7 +226,7 @@ NOMINAL = PlantParameters(
 # 2 Hz crossover; the thesis's notch filter targets such a parasitic mode; its static deflection
 # under the reference's accelerations stays below 0.1 mm) and encoder noise of a third of a
 # count before quantization.
-HARDWARE_MISMATCH = {
+HARDWARE_MISMATCH: dict[str, tuple[float, ...] | float] = {
     "m_up": (1.06, 1.10, 1.03), "j_up": (1.06, 1.10, 1.03),
     "m_low": (1.05, 0.97, 1.08), "j_low": (1.05, 0.97, 1.08),
     "m_ee": 1.25, "j_ee": 1.25,

@@ -62,5 +62,7 @@ def pick(vector: ca.SX, layout: Sequence[Variable], wanted: Sequence[Variable]) 
 
 def reference_motion(reference: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
     """(position, velocity, acceleration) of a vector of the REFERENCE signals."""
-    return tuple(pick(reference, REFERENCE, part)
-                 for part in (POSITION_REFERENCE, VELOCITY_REFERENCE, ACCELERATION_REFERENCE))
+    position, velocity, acceleration = (
+        pick(reference, REFERENCE, part)
+        for part in (POSITION_REFERENCE, VELOCITY_REFERENCE, ACCELERATION_REFERENCE))
+    return position, velocity, acceleration
