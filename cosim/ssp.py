@@ -7,10 +7,12 @@ ssc:LinearTransformation where gain or offset is not 1 or 0, the FMUs' start val
 ssv:ParameterSet, and the run's times in ssd:DefaultExperiment. SSP 1.0 has no step size there:
 it goes into two annotations, libcosim's own ("com.opensimulationplatform": osp:FixedStepAlgorithm
 baseStepSize, which CosimExecution.from_ssp_file uses) and ours ("org.flexff": step and
-algorithm). An SSP 1.0 system has no time-varying sources: a configuration whose inputs are fed
-by the reference or a CSV series cannot be exported; inputs fed by constant sources get the
-constant (with gain and offset applied) as their start value. The [record] list and source
-signals that feed no input are left out.
+algorithm). An SSP 1.0 system has no time-varying sources: inputs fed by a constant source get
+the constant (with gain and offset applied) as their start value, inputs fed by the [reference]
+its value at t = 0 (other tools hold the loop at rest at the reference's start), and a
+configuration with a CSV series feeding an input cannot be exported. Our annotation also
+carries the whole configuration in the general form (flexff:Configuration: built-ins with their
+options, the [reference], [record]), FMUs by path named by their member of the archive.
 
 Connectors (SSP requires only those that connections use): every connected variable, and the
 other outputs and parameters of type Real, Integer or Boolean. Unconnected inputs get none: FMPy
@@ -24,7 +26,11 @@ general-form RunConfig: FMUs from the archive (extracted once into the FMU cache
 archive's sha256), start values from the parameter bindings, connections with their linear
 transformations, every FMU with unconnected = "start" (an SSP system leaves unconnected inputs
 at their start values), and the Jacobi algorithm unless our annotation says otherwise (SSP tools
-run Jacobi). Every problem is a ConfigError naming the SSD element at fault.
+run Jacobi). Every problem is a ConfigError naming the SSD element at fault. A file that carries
+flexff:Configuration reads back as that configuration (the same RunConfig as the TOML it was
+exported from: built-ins, reference and all) when the SSD and FMUs are still what that
+configuration exports; changed by another tool since, it is read as the plain system above,
+with a warning.
 
 The XML is written and read with lxml and checked against the SSP 1.0 schema that
 pyssp_standard ships; its own classes (0.9.1) drop ssc:LinearTransformation on reading and
@@ -38,19 +44,24 @@ import math
 import os
 import shutil
 import tempfile
+import tomllib
+import warnings
 import zipfile
 import zlib
 from collections.abc import Callable
+from dataclasses import replace
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomli_w
 from lxml import etree
 
-from flexff.cosim.config import STEP_TOLERANCE
+from flexff.cosim.config import STEP_TOLERANCE, expanded, parse_config
 from flexff.cosim.recording import atomic_write
+from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ALGORITHMS, ConfigError, ConnectionConfig, FmuConfig, RunConfig
 from flexff.cosim.wiring import SOURCE
@@ -90,11 +101,12 @@ def _sub(parent: etree._Element, tag: str, /, **attrib: str) -> etree._Element:
 # -- export ------------------------------------------------------------------------------
 def export_ssp(config: RunConfig, path: str | Path) -> Path:
     """Write `config` as an SSP 1.0 archive at `path` (module doc); ValueError if it has
-    time-varying source signals feeding FMU inputs."""
+    time-varying source signals other than the reference feeding FMU inputs."""
     with tempfile.TemporaryDirectory(prefix="flexff-ssp-") as folder:
         scenario = resolve(config, folder)
-        varying = sorted({k.signal for k in scenario.links
-                          if k.source == SOURCE and np.ndim(scenario.sources[k.signal])})
+        varying = sorted({k.signal for k in scenario.links if k.source == SOURCE
+                          and np.ndim(scenario.sources[k.signal])
+                          and k.signal not in Reference.SIGNALS})
         if varying:
             raise ValueError(f"{config.source}: SSP 1.0 cannot carry time-varying source "
                              f"signals, and {', '.join(varying)} feed FMU inputs: an SSP system "
@@ -129,8 +141,8 @@ def _ssd(scenario: Scenario) -> etree._Element:
                       if _has_connector(info, n, (slave.name, n) in used)]
         if connectors:
             _connectors(_sub(component, "ssd:Connectors"), info, connectors, enumerations)
-        values = {**slave.parameters, **{  # inputs fed by constant sources: start values
-            k.input: k.gain * float(scenario.sources[k.signal]) + k.offset
+        values = {**slave.parameters, **{  # inputs fed by sources: their value at t = 0
+            k.input: k.gain * float(np.ravel(scenario.sources[k.signal])[0]) + k.offset
             for k in scenario.links if k.target == slave.name and k.source == SOURCE}}
         if values:
             binding = _sub(_sub(component, "ssd:ParameterBindings"), "ssd:ParameterBinding")
@@ -150,9 +162,19 @@ def _ssd(scenario: Scenario) -> etree._Element:
     annotations = _sub(experiment, "ssd:Annotations")
     osp = _sub(_sub(annotations, "ssc:Annotation", type=OSP), "osp:Algorithm")
     _sub(osp, "osp:FixedStepAlgorithm", baseStepSize=repr(float(config.step)))
-    _sub(_sub(annotations, "ssc:Annotation", type=FLEXFF), "flexff:Run",
-         step=repr(float(config.step)), algorithm=config.algorithm)
+    run = _sub(_sub(annotations, "ssc:Annotation", type=FLEXFF), "flexff:Run",
+               step=repr(float(config.step)), algorithm=config.algorithm)
+    _sub(run, "flexff:Configuration").text = _configuration_text(config)
     return root
+
+
+def _configuration_text(config: RunConfig) -> str:
+    """The configuration in the general form, FMUs by path named by their archive member."""
+    tables = expanded(config)
+    for name, table in tables["fmu"].items():
+        if "path" in table:
+            table["path"] = f"resources/{name}.fmu"
+    return tomli_w.dumps(tables)
 
 
 def _has_connector(info: FmuInfo, name: str, connected: bool) -> bool:
@@ -263,9 +285,52 @@ def load_ssp(path: str | Path) -> RunConfig:
     if not fmus:
         raise error("ssd:System/ssd:Elements", "the system has no FMU component")
     step, stop, algorithm = _experiment(root, fmus, error)
-    return RunConfig(name=path.stem, step=step, stop=stop, fmus=tuple(fmus),
-                     connections=_connections(system, {f.name for f in fmus}, error),
-                     algorithm=algorithm, source=source)
+    plain = RunConfig(name=path.stem, step=step, stop=stop, fmus=tuple(fmus),
+                      connections=_connections(system, {f.name for f in fmus}, error),
+                      algorithm=algorithm, source=source)
+    return _annotated(root, folder, plain) or plain
+
+
+def _annotated(root: etree._Element, folder: Path, plain: RunConfig) -> RunConfig | None:
+    """The configuration flexff:Configuration carries, if the SSD and FMUs are still the ones
+    it exports (module doc); None without one, or with a warning where they changed."""
+    text = root.findtext("ssd:DefaultExperiment/ssd:Annotations/ssc:Annotation"
+                         f"[@type='{FLEXFF}']/flexff:Run/flexff:Configuration", namespaces=NS)
+    if text is None:
+        return None
+    try:
+        config = parse_config(tomllib.loads(text), name=plain.name, base=folder,
+                              source=plain.source)
+        with tempfile.TemporaryDirectory(prefix="flexff-ssp-") as built:
+            scenario = resolve(replace(config, name=root.get("name", "")), built)
+            same = (_without_configuration(_ssd(scenario)) == _without_configuration(root)
+                    and all(_sha256(s.fmu) == _sha256(folder / "resources" / f"{s.name}.fmu")
+                            for s in scenario.slaves))
+    except (ValueError, OSError) as exc:
+        same, config = False, plain
+        reason = f": {exc}"
+    else:
+        reason = ""
+    if not same:
+        warnings.warn(f"{plain.source}: the system is no longer the flexff configuration it "
+                      f"carries{reason}; read as a plain SSP system (FMUs by file, no reference)",
+                      stacklevel=3)
+        return None
+    return config
+
+
+def _without_configuration(root: etree._Element) -> bytes:
+    """The SSD's canonical XML without flexff:Configuration, for comparison."""
+    copy = etree.fromstring(etree.tostring(root), etree.XMLParser(remove_blank_text=True))
+    for element in copy.findall(".//flexff:Configuration", NS):
+        parent = element.getparent()
+        if parent is not None:
+            parent.remove(element)
+    return etree.tostring(copy, method="c14n")
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else ""
 
 
 def _extracted(path: Path) -> Path:

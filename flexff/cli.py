@@ -14,9 +14,10 @@ import json
 import os
 import sys
 import traceback
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from flexff.cosim.timing import OverrunError, Pacing
 from flexff.learning.dataset import SETS
@@ -494,8 +495,15 @@ def _failure(error: BaseException, command: str) -> tuple[int, str]:
     return 1, f"flexff: error: {type(error).__name__}: {error} (flexff --debug shows where)"
 
 
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: TextIO | None = None, line: str | None = None) -> None:
+    """A warning as one line on stderr, as errors are (the traceback's place: --debug)."""
+    print(f"flexff: warning: {message}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command of `argv` (default: sys.argv); return its exit code, never raise."""
+    warnings.showwarning = _show_warning
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as done:  # --help, or a usage error argparse has printed

@@ -5,7 +5,9 @@ The system: the Reference-FMUs VanDerPol (mu = 1.5) -> Feedthrough, x0 into
 Float64_continuous_input through gain 2 and offset 0.5, Jacobi, 0.01 s steps to 2 s.
 """
 
+import re
 import zipfile
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 
@@ -14,7 +16,8 @@ import pytest
 import tomli_w
 from lxml import etree
 
-from flexff.cosim.config import load_config
+from flexff.cosim.config import expanded, load_config
+from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.run import run_config, simulate_config
 from flexff.cosim.schema import ConfigError
 from flexff.cosim.ssp import NS, SSD, export_ssp, load_ssp
@@ -91,20 +94,65 @@ def test_export_is_valid_ssp_1_0(ssp):
     assert {"Float64_continuous_output", "Int32_output", "Boolean_output"} <= ft
 
 
+def without_configuration(text: str) -> str:
+    """The SSD text without flexff's copy of the configuration: a plain SSP system."""
+    return re.sub(r"\s*<flexff:Configuration>.*</flexff:Configuration>", "", text, flags=re.S)
+
+
 def test_round_trip_runs_bit_equal_in_flexff(tmp_path, ssp):
-    config = load_ssp(ssp)
-    assert config.algorithm == "jacobi" and (config.step, config.stop) == (0.01, 2.0)
-    assert [(f.name, dict(f.parameters), f.unconnected) for f in config.fmus] == [
+    toml = load_config(write_config(tmp_path))
+    config = load_ssp(ssp)  # flexff's annotation: the configuration it was written from
+    assert expanded(replace(config, fmus=toml.fmus)) == expanded(toml)
+    assert [read_fmu(f.path).token for f in config.fmus] == [read_fmu(f.path).token
+                                                             for f in toml.fmus]
+    plain = load_ssp(rewritten(ssp, tmp_path / "plain.ssp", without_configuration))
+    assert plain.algorithm == "jacobi" and (plain.step, plain.stop) == (0.01, 2.0)
+    assert [(f.name, dict(f.parameters), f.unconnected) for f in plain.fmus] == [
         ("vdp", {"mu": 1.5}, "start"), ("ft", {}, "start")]
-    (c,) = config.connections
+    (c,) = plain.connections
     assert (c.source, c.target, c.gain, c.offset) == ("vdp.x0", "ft.Float64_continuous_input",
                                                       2.0, 0.5)
     run_config(write_config(tmp_path), tmp_path / "toml")
-    run_config(ssp, tmp_path / "ssp")
-    original, loaded = np.load(tmp_path / "toml/signals.npz"), np.load(tmp_path / "ssp/signals.npz")
-    assert sorted(original.files) == sorted(loaded.files)
-    for name in original.files:
-        assert np.array_equal(original[name], loaded[name]), name
+    for name, path in (("ssp", ssp), ("plain", tmp_path / "plain.ssp")):
+        run_config(path, tmp_path / name)
+        original = np.load(tmp_path / "toml/signals.npz")
+        loaded = np.load(tmp_path / name / "signals.npz")
+        assert sorted(original.files) == sorted(loaded.files)
+        for signal in original.files:
+            assert np.array_equal(original[signal], loaded[signal]), (name, signal)
+
+
+def test_an_ssp_changed_by_another_tool_is_read_as_it_now_is(tmp_path, ssp):
+    """Another tool set mu = 2.5 in the SSD: flexff's copy of the configuration no longer
+    describes the system, so the SSD is read as it stands, with a warning."""
+    edited = rewritten(ssp, tmp_path / "edited.ssp",
+                       lambda text: text.replace('<ssv:Real value="1.5"/>',
+                                                 '<ssv:Real value="2.5"/>'))
+    with pytest.warns(UserWarning, match="no longer the flexff configuration it carries"):
+        config = load_ssp(edited)
+    assert config.fmus[0].parameters == {"mu": 2.5} and config.fmus[0].unconnected == "start"
+
+
+def test_the_manipulator_loop_round_trips_with_its_reference(tmp_path):
+    """A manipulator run: its [reference] is flexff's to carry (SSP 1.0 has no time-varying
+    sources), the controller's reference inputs start at the reference's first point, and the
+    built-in FMUs read back as built-ins."""
+    path = tmp_path / "loop.toml"
+    path.write_text('[run]\nstop = 0.3\n[reference]\nkind = "thesis-eval"\n'
+                    '[plant]\nm_up1 = 0.13\n')
+    toml = load_config(path)
+    ssp = export_ssp(toml, tmp_path / "loop.ssp")
+    root = ssd_of(ssp)
+    assert_valid_ssp_1_0(root)
+    x_ref = root.find(".//ssd:Component[@name='controller']//ssv:Parameter[@name='x_ref']/"
+                      "ssv:Real", NS)
+    assert float(x_ref.get("value")) == thesis_evaluation().signals()["x_ref"][0]
+    config = load_ssp(ssp)
+    assert expanded(config) == expanded(toml) and config.builtin("controller") is not None
+    original, again = simulate_config(toml), simulate_config(config)
+    assert original.signals.keys() == again.signals.keys()
+    for name in original.signals:
+        assert np.array_equal(original[name], again[name]), name
 
 
 def test_libcosim_runs_the_ssp(ssp, flexff):
@@ -233,14 +281,15 @@ def test_typed_connections_and_start_values_round_trip(tmp_path):
 
 def test_sources_in_an_ssp(tmp_path):
     """A constant source becomes the start value of the input it feeds (gain and offset
-    applied); a time-varying one cannot be exported."""
+    applied); a time-varying one other than the reference cannot be exported."""
     constant = write_config(
         tmp_path, source=[{"kind": "constant", "values": {"u": 0.25}}],
         connection=[{"from": "u", "to": "ft.Float64_discrete_input", "gain": 4.0,
                      "offset": 1.0}])
     config = load_config(constant)
     path = export_ssp(config, tmp_path / "constant.ssp")
-    loaded = load_ssp(path)
+    assert load_ssp(path).sources == config.sources  # flexff's copy of the configuration
+    loaded = load_ssp(rewritten(path, tmp_path / "plain.ssp", without_configuration))
     assert loaded.fmus[1].parameters == {"Float64_discrete_input": 2.0}
     original, again = simulate_config(config), simulate_config(loaded)
     assert np.all(again["ft.Float64_discrete_output"][1:] == 2.0)

@@ -215,6 +215,29 @@ def test_data_collect_on_your_own_loop(tmp_path, monkeypatch, capsys):
         assert np.all(np.isfinite(force)) and force.max() > 0.01  # N: the labels
 
 
+def test_data_collect_on_your_own_loop_as_ssp(tmp_path, monkeypatch, capsys):
+    """The same loop exported with `flexff ssp export` and collected with `--config
+    SYSTEM.ssp`: the SSP reads back as the loop it was written from (built-in controller and
+    plant, the heavier arm), so the trajectories equal the TOML's bit for bit, and the TOML's
+    dataset folder takes it as the same loop."""
+    monkeypatch.setattr(collect, "run_collection", partial(collect.run_collection, limit=2))
+    config, system = tmp_path / "heavy.toml", tmp_path / "heavy.ssp"
+    config.write_text(HEAVY)
+    assert main(["ssp", "export", str(config), "-o", str(system)]) == 0
+    for given, out in ((config, "from-toml"), (system, "from-ssp")):
+        assert main(["data", "collect", "--set", "sim", "--config", str(given), "-o",
+                     str(tmp_path / out)]) == 0
+    toml, ssp = (load_dataset(tmp_path / out) for out in ("from-toml", "from-ssp"))
+    assert [t.name for t in ssp.trajectories] == [t.name for t in toml.trajectories]
+    for a, b in zip(toml.trajectories, ssp.trajectories):
+        assert a.signals.keys() == b.signals.keys()
+        assert all(np.array_equal(a.signals[n], b.signals[n]) for n in a.signals), a.name
+    capsys.readouterr()
+    assert main(["data", "collect", "--set", "sim", "--config", str(system), "-o",
+                 str(tmp_path / "from-toml")]) == 0
+    assert "0 run, 2 skipped (already there)" in capsys.readouterr().out
+
+
 def test_train_thesis_preset(tiny, tmp_path, capsys):
     """`flexff train --preset thesis` (one epoch): the thesis's LSTM of two layers of 100 units
     on the 63 features, and its run folder."""
