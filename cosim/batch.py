@@ -9,20 +9,20 @@ the same file system as this process (configuration files and output folder).
 from __future__ import annotations
 
 import copy
+import itertools
 import os
 import re
 import signal
-import tomllib
 import traceback
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flexff.cosim.config import parse_config
+from flexff.cosim.config import expanded, parse_config, read_tables
 from flexff.cosim.run import run_config
-from flexff.cosim.schema import RunConfig
+from flexff.cosim.schema import ConfigError, RunConfig
 
 SCHEDULER_TIMEOUT = "10s"  # how long to try to reach a Dask scheduler
 
@@ -130,33 +130,58 @@ def _run_dask(configs: list[RunConfig | str | Path], folders: list[Path], debug:
         return results
 
 
-def sweep(path: str | Path, key: str, values: Sequence[Any]) -> list[RunConfig]:
-    """Copies of the configuration file at `path` with the key `key` (dotted: `plant.m_up1`,
-    `fmu.vdp.parameters.mu`) set to each value, named <stem>-<key>=<value>; each copy is
-    checked like any configuration. Names are safe folder names (see _folder_name), made
+def sweep(path: str | Path, axes: Mapping[str, Sequence[Any]]) -> list[RunConfig]:
+    """Copies of the run configuration at `path` (TOML or SSP) with each key of `axes`
+    (dotted: `plant.m_up1`, `fmu.vdp.parameters.mu`, `run.step`) set to each of its values, one
+    copy per combination (the product, the last key varying fastest), named
+    <stem>-<key>=<value>-...; each copy is checked like any configuration, its errors naming
+    the file and key. A TOML file is edited as written (its short form included), an SSP file
+    in the general form it reads as. Names are safe folder names (see _folder_name), made
     unique by a suffix; a value given twice is an error."""
     path = Path(path)
-    *tables, name = key.split(".")
-    if not tables or not all(tables) or not name:
-        raise ValueError(f"a sweep key is table.key (e.g. plant.m_up1), got {key!r}")
-    twice = next((v for k, v in enumerate(values) if v in values[:k]), None)
-    if twice is not None:
-        raise ValueError(f"--sweep {key}: the sweep lists the same value twice: {twice!r}")
-    base = tomllib.loads(path.read_text())
+    for key, values in axes.items():
+        *tables, name = key.split(".")
+        if not tables or not all(tables) or not name:
+            raise ValueError(f"a sweep key is table.key (e.g. plant.m_up1), got {key!r}")
+        twice = next((v for k, v in enumerate(values) if v in values[:k]), None)
+        if twice is not None:
+            raise ValueError(f"--sweep {key}: the sweep lists the same value twice: {twice!r}")
+    base = _sweep_base(path)
     configs: list[RunConfig] = []
     names: list[str] = []
-    for value in values:
+    for combination in itertools.product(*axes.values()):
         data = copy.deepcopy(base)
-        table = data
-        for part in tables:
-            table = table.setdefault(part, {})
-            if not isinstance(table, dict):
-                raise ValueError(f"--sweep {key}: {part!r} is not a table in {path}")
-        table[name] = value
-        names.append(_unique(_folder_name(f"{path.stem}-{key}={value}"), names))
+        for key, value in zip(axes, combination):
+            _set(data, key, value, path)
+        label = "-".join(f"{k}={v}" for k, v in zip(axes, combination))
+        names.append(_unique(_folder_name(f"{path.stem}-{label}"), names))
         configs.append(parse_config(data, name=names[-1], base=path.resolve().parent,
                                     source=str(path)))
     return configs
+
+
+def _sweep_base(path: Path) -> dict[str, Any]:
+    """The tables a sweep edits: a TOML file's own, an SSP file's in the general form."""
+    if path.suffix.lower() == ".ssp":
+        from flexff.cosim.ssp import load_ssp
+
+        return expanded(load_ssp(path))
+    return read_tables(path)
+
+
+def _set(data: dict[str, Any], key: str, value: Any, path: Path) -> None:
+    """Set the dotted `key` in the tables `data`; an FMU it names must be in the file."""
+    *tables, name = key.split(".")
+    fmus = data.get("fmu", {})
+    if tables[0] == "fmu" and len(tables) > 1 and tables[1] not in fmus:
+        raise ConfigError(str(path), key, f"no FMU {tables[1]!r} in the file (its FMUs: "
+                                          f"{', '.join(fmus) or 'none'})")
+    table = data
+    for part in tables:
+        table = table.setdefault(part, {})
+        if not isinstance(table, dict):
+            raise ConfigError(str(path), key, f"{part!r} is not a table")
+    table[name] = value
 
 
 def _folder_name(text: str) -> str:

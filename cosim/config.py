@@ -101,13 +101,19 @@ SETTABLE = ("parameter", "structuralParameter", "input")  # causalities `paramet
 def load_config(path: str | Path) -> RunConfig:
     """Read and check a TOML run configuration (relative paths against its folder)."""
     path = Path(path)
+    return parse_config(read_tables(path), name=path.stem, base=path.resolve().parent,
+                        source=str(path))
+
+
+def read_tables(path: Path) -> dict[str, Any]:
+    """The tables of the TOML file at `path`, unchecked; ConfigError naming the file when it
+    is missing or not TOML."""
     if not path.is_file():
         raise ConfigError(str(path), "file", "no such configuration file")
     try:
-        data = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
         raise ConfigError(str(path), "file", f"not valid TOML: {error}") from None
-    return parse_config(data, name=path.stem, base=path.resolve().parent, source=str(path))
 
 
 def parse_config(data: Mapping[str, Any] | str, name: str = "config",

@@ -133,8 +133,13 @@ def _run(args: argparse.Namespace) -> int:
     if args.sweep:
         if len(configs) != 1:
             raise ValueError("--sweep takes exactly one configuration")
-        key, values = _sweep_values(args.sweep)
-        configs = sweep(configs[0], key, values)
+        axes: dict[str, list[Any]] = {}
+        for text in args.sweep:
+            key, values = _sweep_values(text)
+            if key in axes:
+                raise ValueError(f"--sweep {key} is given twice: list its values once")
+            axes[key] = values
+        configs = sweep(configs[0], axes)
     elif len(configs) == 1 and args.scheduler is None:
         metrics = run_config(configs[0], args.output, pacing=_pacing(args), cpu=args.cpu)
         _print_result(configs[0], metrics, args.output)
@@ -352,8 +357,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="output folder (several configurations: one subfolder each)")
     run.add_argument("--workers", type=int, help="parallel local processes (default: CPUs)")
     run.add_argument("--scheduler", help="address of a Dask scheduler to run on instead")
-    run.add_argument("--sweep", metavar="TABLE.KEY=V1,V2,...",
-                     help="run one configuration once per value of a key")
+    run.add_argument("--sweep", metavar="TABLE.KEY=V1,V2,...", action="append",
+                     help="run one configuration once per value of a key; repeated, once per "
+                          "combination of their values")
     run.add_argument("--realtime", action="store_true",
                      help="pace the steps to the wall clock and report task execution times "
                           "(TET) and overruns, as Simulink Real-Time does (tet.png, "

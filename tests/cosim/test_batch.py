@@ -1,16 +1,23 @@
 """Batches (local processes; Dask only when installed), sweeps, and the `flexff run` and
 `flexff config example` commands."""
 
+import itertools
 import json
 import re
 import subprocess
 import sys
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
+from flexff.cli import main
 from flexff.cosim.batch import run_batch, sweep
-from flexff.cosim.config import config_examples, parse_config
+from flexff.cosim.config import config_examples, load_config, parse_config
+from flexff.cosim.recording import load_recording
+from flexff.cosim.run import simulate_config
+from flexff.cosim.ssp import export_ssp
+from tests.helpers import REFERENCE_FMUS
 
 SHORT = """
 [run]
@@ -55,12 +62,12 @@ def test_a_failure_inside_an_fmu_is_reported(tmp_path):
 def test_sweep(tmp_path):
     path = tmp_path / "base.toml"
     path.write_text(SHORT)
-    configs = sweep(path, "controller.crossover_hz", [2.0, 3.0])
+    configs = sweep(path, {"controller.crossover_hz": [2.0, 3.0]})
     assert [c.name for c in configs] == ["base-controller.crossover_hz=2.0",
                                          "base-controller.crossover_hz=3.0"]
     assert [c.builtin("controller").options["crossover_hz"] for c in configs] == [2.0, 3.0]
     with pytest.raises(ValueError, match=r"controller.crossover_hz: expected a number"):
-        sweep(path, "controller.crossover_hz", ["fast"])
+        sweep(path, {"controller.crossover_hz": ["fast"]})
 
 
 def test_sweep_folder_names_are_safe_and_unique(tmp_path):
@@ -74,13 +81,13 @@ def test_sweep_folder_names_are_safe_and_unique(tmp_path):
     path = tmp_path / "sub" / "base.toml"
     path.write_text('[reference]\nkind = "csv"\npath = "../ref.csv"\n')
     values = ["../ref.csv", "../sub/../ref.csv", "../a b.csv", "../a_b.csv"]
-    names = [c.name for c in sweep(path, "reference.path", values)]
+    names = [c.name for c in sweep(path, {"reference.path": values})]
     assert names == ["base-reference.path=__ref.csv", "base-reference.path=__sub___ref.csv",
                      "base-reference.path=__a_b.csv", "base-reference.path=__a_b.csv-2"]
     for name in names:
         assert re.fullmatch(r"[A-Za-z0-9._=+-]+", name) and ".." not in name
     with pytest.raises(ValueError, match=r"the sweep lists the same value twice: '../ref.csv'"):
-        sweep(path, "reference.path", ["../ref.csv", "../a b.csv", "../ref.csv"])
+        sweep(path, {"reference.path": ["../ref.csv", "../a b.csv", "../ref.csv"]})
 
 
 def test_a_failed_run_carries_its_traceback_only_when_debugging(tmp_path):
@@ -151,3 +158,70 @@ def test_cli_run_one_and_several(tmp_path):
         run = json.loads((tmp_path / "sweep" / f"one-controller.encoders={encoders}" /
                           "run.json").read_text())
         assert run["fmu"]["controller"]["encoders"] == encoders
+
+
+# -- sweeps that compose, on TOML and SSP alike ------------------------------------------------
+def vdp_run(folder, text=""):
+    """The Reference-FMU VanDerPol (FMI 2.0) alone for 1 s, as a TOML file."""
+    path = folder / "vdp.toml"
+    path.write_text(f'[run]\nstep = 0.01\nstop = 1.0\n[fmu.vdp]\npath = '
+                    f'"{REFERENCE_FMUS / "fmi2" / "VanDerPol.fmu"}"\n{text}')
+    return path
+
+
+def test_repeated_sweeps_run_every_combination(tmp_path, capsys):
+    """Two --sweep options: four runs, each named by both values and run with both."""
+    out = tmp_path / "out"
+    assert main(["run", str(vdp_run(tmp_path)), "-o", str(out), "--workers", "2",
+                 "--sweep", "fmu.vdp.parameters.mu=0.5,1.5", "--sweep", "run.step=0.01,0.005"]
+                ) == 0, capsys.readouterr().err
+    for mu, step in itertools.product((0.5, 1.5), (0.01, 0.005)):
+        folder = out / f"vdp-fmu.vdp.parameters.mu={mu}-run.step={step}"
+        run = json.loads((folder / "run.json").read_text())
+        assert run["fmu"]["vdp"]["parameters"] == {"mu": mu} and run["run"]["step"] == step
+        expected = simulate_config(parse_config(
+            {"run": {"step": step, "stop": 1.0},
+             "fmu": {"vdp": {"path": str(REFERENCE_FMUS / "fmi2" / "VanDerPol.fmu"),
+                             "parameters": {"mu": mu}}}}))
+        assert np.array_equal(load_recording(folder)["vdp.x0"], expected["vdp.x0"])
+    assert len(list(out.iterdir())) == 4
+
+
+def test_a_sweep_over_an_ssp_sets_component_parameters(tmp_path, capsys):
+    ssp = export_ssp(load_config(vdp_run(tmp_path)), tmp_path / "vdp.ssp")
+    out = tmp_path / "out"
+    assert main(["run", str(ssp), "-o", str(out), "--sweep", "fmu.vdp.parameters.mu=0.5,2.0"]
+                ) == 0, capsys.readouterr().err
+    for mu in (0.5, 2.0):
+        expected = simulate_config(load_config(vdp_run(tmp_path, f"parameters = {{mu = {mu}}}")))
+        got = load_recording(out / f"vdp-fmu.vdp.parameters.mu={mu}")
+        assert np.array_equal(got["vdp.x0"], expected["vdp.x0"]), mu
+
+
+@pytest.mark.parametrize("case, fragment", [
+    ("not toml", "bad.toml: file: not valid TOML"),
+    ("missing", "missing.toml: file: no such configuration file"),
+    ("no such fmu", "vdp.toml: fmu.nosuch.parameters.mu: no FMU 'nosuch' in the file "
+                    "(its FMUs: vdp)"),
+    ("bad value", "vdp.toml: fmu.vdp.parameters.mu: Real variable: expected a number"),
+    ("key twice", "--sweep run.step is given twice"),
+])
+def test_sweep_errors_name_the_file_and_key(tmp_path, capsys, case, fragment):
+    path, sweeps = vdp_run(tmp_path), ["fmu.vdp.parameters.mu=0.5,1.5"]
+    if case == "not toml":
+        path = tmp_path / "bad.toml"
+        path.write_text("[run\n")
+    elif case == "missing":
+        path = tmp_path / "missing.toml"
+    elif case == "no such fmu":
+        sweeps = ["fmu.nosuch.parameters.mu=0.5,1.5"]
+    elif case == "bad value":
+        sweeps = ['fmu.vdp.parameters.mu="fast","slow"']
+    else:
+        sweeps = ["run.step=0.01,0.005", "run.step=0.002"]
+    argv = ["run", str(path), "-o", str(tmp_path / "out")]
+    for text in sweeps:
+        argv += ["--sweep", text]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("flexff: error: ") and err.count("\n") == 1 and fragment in err, err
