@@ -13,10 +13,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
 
@@ -36,15 +32,15 @@ MM = 1e3
 
 
 def save_figure(figure: Figure, path: Path) -> Path:
-    """Lay out, write atomically as PNG and close `figure`."""
+    """Lay out and write `figure` atomically as PNG."""
     figure.tight_layout()
     atomic_write(path, lambda tmp: figure.savefig(tmp, dpi=120, format="png"))
-    plt.close(figure)
     return path
 
 
 def plot_path(rec: Recording, path: Path) -> Path:
-    figure, ax = plt.subplots(figsize=(5.5, 5.5))
+    figure = Figure(figsize=(5.5, 5.5))
+    ax = figure.subplots()
     ax.plot(rec["x_ref"] * MM, rec["y_ref"] * MM, "k--", lw=1, label="reference")
     ax.plot(rec["x"] * MM, rec["y"] * MM, lw=1, label="end effector")
     ax.set(xlabel="x [mm]", ylabel="y [mm]", aspect="equal", title="x-y path")
@@ -53,7 +49,8 @@ def plot_path(rec: Recording, path: Path) -> Path:
 
 
 def plot_error(rec: Recording, path: Path) -> Path:
-    figure, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+    figure = Figure(figsize=(8, 5))
+    axes = figure.subplots(2, 1, sharex=True)
     for ax, axis in zip(axes, ("x", "y")):
         ax.plot(rec.time, (rec[f"{axis}_ref"] - rec[axis]) * MM, lw=0.8)
         ax.set(ylabel=f"e_{axis} [mm]")
@@ -64,7 +61,8 @@ def plot_error(rec: Recording, path: Path) -> Path:
 
 
 def plot_forces(rec: Recording, path: Path) -> Path:
-    figure, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+    figure = Figure(figsize=(8, 5))
+    axes = figure.subplots(2, 1, sharex=True)
     for ax, axis in zip(axes, ("x", "y")):
         fb, ff = rec[f"F{axis}_fb"], rec[f"F{axis}_ff"]
         ax.plot(rec.time, fb, lw=0.8, label="feedback")
@@ -81,8 +79,8 @@ def plot_forces(rec: Recording, path: Path) -> Path:
 def plot_signals(rec: Recording, path: Path) -> Path:
     """The first MAX_PANELS float signals, one panel each."""
     names = [n for n, v in rec.signals.items() if v.dtype.kind == "f"][:MAX_PANELS]
-    figure, axes = plt.subplots(max(len(names), 1), 1, sharex=True, squeeze=False,
-                                figsize=(8, 1.2 + 1.4 * max(len(names), 1)))
+    figure = Figure(figsize=(8, 1.2 + 1.4 * max(len(names), 1)))
+    axes = figure.subplots(max(len(names), 1), 1, sharex=True, squeeze=False)
     for ax, name in zip(axes[:, 0], names):
         ax.plot(rec.time, rec.signals[name], lw=0.8)
         ax.set_ylabel(name, fontsize="small")
@@ -93,7 +91,8 @@ def plot_signals(rec: Recording, path: Path) -> Path:
 
 def plot_tet(timing: StepTiming, path: Path) -> Path:
     """TET over time (total and per FMU, in microseconds) against the period."""
-    figure, ax = plt.subplots(figsize=(9, 4))
+    figure = Figure(figsize=(9, 4))
+    ax = figure.subplots()
     t = np.arange(timing.tet.size) * timing.step
     for i, name in enumerate(timing.names):
         ax.plot(t, timing.fmu_tet[:, i] * US, lw=0.5, alpha=0.7, label=name)

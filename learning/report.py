@@ -25,11 +25,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import matplotlib
 import numpy as np
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
+from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
 from flexff.cosim.metrics import AXES, tracking_metrics
@@ -218,7 +215,8 @@ def plot_paths(recordings: Mapping[str, Recording], path: Path) -> Path:
     to hold that error three times over: the view that tells the feedforwards apart."""
     ref = recordings["pid"]
     colors = _colors(recordings)
-    figure, (full, zoom) = plt.subplots(1, 2, figsize=(11, 5.5))
+    figure = Figure(figsize=(11, 5.5))
+    full, zoom = figure.subplots(1, 2)
     for ax in (full, zoom):
         ax.plot(ref["x_ref"] * MM, ref["y_ref"] * MM, "k--", lw=1, label="reference", zorder=3)
         for name, rec in recordings.items():
@@ -249,7 +247,8 @@ def plot_errors(recordings: Mapping[str, Recording], path: Path) -> Path:
     beyond) so a feedforward that cuts the error fifty-fold is still readable next to PID
     alone; lines with smaller errors are drawn on top."""
     colors = _colors(recordings)
-    figure, axes = plt.subplots(2, 1, sharex=True, figsize=(9, 6))
+    figure = Figure(figsize=(9, 6))
+    axes = figure.subplots(2, 1, sharex=True)
     for ax, axis in zip(axes, AXES):
         errors = {name: (rec[f"{axis}_ref"] - rec[axis]) * MM for name, rec in recordings.items()}
         peaks = {name: float(np.max(np.abs(e))) for name, e in errors.items()}
@@ -271,8 +270,8 @@ def plot_errors(recordings: Mapping[str, Recording], path: Path) -> Path:
 
 def plot_force_split(recordings: Mapping[str, Recording], path: Path) -> Path:
     """Feedback, feedforward and total force per axis, a row of panels per scenario."""
-    figure, axes = plt.subplots(len(recordings), 2, sharex=True, squeeze=False,
-                                figsize=(11, 2.6 * len(recordings) + 0.6))
+    figure = Figure(figsize=(11, 2.6 * len(recordings) + 0.6))
+    axes = figure.subplots(len(recordings), 2, sharex=True, squeeze=False)
     for row, (name, rec) in zip(axes, recordings.items()):
         for ax, axis in zip(row, AXES):
             fb, ff = rec[f"F{axis}_fb"], rec[f"F{axis}_ff"]

@@ -1,6 +1,9 @@
 """Metrics against hand-computed values, the recording's round trip and atomic writes, plots."""
 
 import math
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -98,3 +101,13 @@ def test_plots_are_written(tmp_path):
     for path in paths:
         data = path.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+
+
+def test_importing_flexff_leaves_matplotlib_backend_alone():
+    """A notebook's backend stays what it was: flexff draws on Figure objects, never pyplot."""
+    code = ("import matplotlib; import flexff.cosim.run, flexff.learning.report, "
+            "flexff.learning.train; print(matplotlib.get_backend())")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env={**os.environ, "MPLBACKEND": "svg"})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "svg"
