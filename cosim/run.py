@@ -1,12 +1,12 @@
 """run_config: one configured run, from TOML (or SSP) to a folder of results.
 
 The folder gets signals.npz (and signals.csv, see cosim.recording) with every recorded signal
-named `fmu.output` (sources by their own names), and the manipulator's signals under their
-short names as well; metrics.json (cosim.metrics: wall time and real-time factor, and the
-tracking errors where the run has a reference and a true position; with a learned feedforward
-also `feedforward_range`, where the reference leaves the model's training range); the plots
-(cosim.plots); and run.json, the checked configuration in the general form. The built-in FMUs
-are built into the fmu/ cache and loaded from a temporary copy.
+named `fmu.output` (sources by their own names), and in a manipulator run the manipulator's
+signals under their short names as well; metrics.json (cosim.metrics: wall time and real-time
+factor, and the tracking errors where the run has a reference and a true position; with a
+learned feedforward also `feedforward_range`, where the reference leaves the model's training
+range); the plots (cosim.plots); and run.json, the checked configuration in the general form.
+The built-in FMUs are built into the fmu/ cache and loaded from a temporary copy.
 
 Before anything runs, the output folder must take a file and the recording must fit into the
 available memory, so that neither shows only after the simulation.
@@ -169,11 +169,13 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
 
 
 def _kept(recording: Recording, config: RunConfig) -> Recording:
-    """The recorded signals the configuration asked for, with the manipulator's short
-    names beside their full ones."""
+    """The recorded signals the configuration asked for, and in a manipulator run (one with a
+    reference or one of flexff's built-in FMUs) the manipulator's short names beside their
+    full ones."""
     names = config.record.signals
     signals = dict(recording.signals) if names is None else {n: recording[n] for n in names}
-    for short in MANIPULATOR_SIGNALS:
+    manipulator = config.reference is not None or any(f.builtin for f in config.fmus)
+    for short in MANIPULATOR_SIGNALS if manipulator else ():
         if short not in signals and short in recording and (names is None or any(
                 n.partition(".")[2] == short for n in names)):
             signals[short] = recording[short]

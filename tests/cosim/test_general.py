@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import copy
 import io
+import json
 import shutil
 import tomllib
 import zipfile
@@ -333,3 +334,15 @@ def test_csv_source_feeds_an_input_by_connection(ref_fmu, tmp_path):
     (tmp_path / "u.csv").write_text("time,u\n0,0\n0,1\n")
     with pytest.raises(ConfigError, match=r"source\[0\].path: .*not strictly increasing"):
         simulate_config(load_config(write_config(tmp_path, data)))
+
+
+def test_short_names_only_in_manipulator_runs(ref_fmu, tmp_path, capsys):
+    """Dahlquist's output is called x: a run of it alone records dq.x, not a manipulator x."""
+    config = tmp_path / "dq.toml"
+    config.write_text(f'[run]\nstep = 0.1\nstop = 1.0\n[fmu.dq]\npath = "{ref_fmu("Dahlquist")}"\n')
+    code, _, err = run_cli(["run", config, "-o", tmp_path / "out"], capsys)
+    assert code == 0, err
+    assert sorted(load_recording(tmp_path / "out").signals) == ["dq.x"]
+    header = (tmp_path / "out" / "signals.csv").read_text().splitlines()[0]
+    assert header == "time,dq.x"
+    assert "x" not in json.loads((tmp_path / "out" / "metrics.json").read_text())
