@@ -1,4 +1,5 @@
-"""Several runs in parallel: local processes by default, or a Dask cluster.
+"""Several runs in parallel (cosim.executor: local processes by default, or a Dask cluster),
+and sweeps that make them from one configuration.
 
 Each run writes into <output_dir>/<config name>/. A run that fails (a bad configuration
 included) is reported with its error in one line (and its traceback where FLEXFF_DEBUG=1,
@@ -12,19 +13,16 @@ import copy
 import itertools
 import os
 import re
-import signal
 import traceback
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from flexff.cosim.config import expanded, parse_config, read_tables
+from flexff.cosim.executor import execute
 from flexff.cosim.run import run_config
 from flexff.cosim.schema import ConfigError, RunConfig
-
-SCHEDULER_TIMEOUT = "10s"  # how long to try to reach a Dask scheduler
 
 
 @dataclass(frozen=True)
@@ -58,41 +56,14 @@ def _run_one(config: RunConfig | str | Path, output_dir: Path, debug: bool = Fal
         return BatchResult(name, output_dir, error=f"{type(error).__name__}: {error}{detail}")
 
 
-_worker = {"running": False, "interrupted": False}  # a pool process's state, for Ctrl-C
-
-
-def _on_interrupt(signum: int, frame: object) -> None:
-    """Ctrl-C in a pool process: it starts no further run, and stops the one in progress
-    (an idle one stays quiet: a KeyboardInterrupt there would print a traceback)."""
-    _worker["interrupted"] = True
-    if _worker["running"]:
-        raise KeyboardInterrupt
-
-
-def _init_worker() -> None:
-    signal.signal(signal.SIGINT, _on_interrupt)
-
-
-def _run_in_worker(config: RunConfig | str | Path, output_dir: Path, debug: bool
-                   ) -> BatchResult:
-    """_run_one in a pool process, unless Ctrl-C was pressed (the pool queues ahead)."""
-    if _worker["interrupted"]:
-        raise KeyboardInterrupt
-    _worker["running"] = True
-    try:
-        return _run_one(config, output_dir, debug)
-    finally:
-        _worker["running"] = False
-
-
 def run_batch(configs: Sequence[RunConfig | str | Path], output_dir: str | Path,
               workers: int | None = None, scheduler: str | None = None,
               subfolders: bool = True) -> list[BatchResult]:
     """Run every configuration into output_dir/<name>/, in parallel; results in input order.
 
     `workers` caps the local processes (default: one per CPU); `scheduler` is the address of
-    a Dask scheduler (dask.distributed, imported only then) to run on instead. A single
-    configuration may write straight into output_dir (`subfolders=False`).
+    a Dask scheduler to run on instead (cosim.executor). A single configuration may write
+    straight into output_dir (`subfolders=False`).
     """
     if not subfolders and len(configs) != 1:
         raise ValueError("several runs need one subfolder each")
@@ -101,33 +72,20 @@ def run_batch(configs: Sequence[RunConfig | str | Path], output_dir: str | Path,
     if twice:
         raise ValueError(f"configurations share the name(s) {twice}: each run needs its own "
                          f"output folder")
-    folders = [Path(output_dir) / n if subfolders else Path(output_dir) for n in names]
-    debug = [os.environ.get("FLEXFF_DEBUG") == "1"] * len(folders)
-    if scheduler is not None:
-        return _run_dask(list(configs), folders, debug, scheduler)
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker)
-    try:
-        return list(pool.map(_run_in_worker, configs, folders, debug))
-    finally:  # on Ctrl-C: the runs not started are dropped, those in progress stop
-        pool.shutdown(cancel_futures=True)
+    debug = os.environ.get("FLEXFF_DEBUG") == "1"
+    jobs = [(c, Path(output_dir) / n if subfolders else Path(output_dir), debug)
+            for c, n in zip(configs, names)]
+    results: list[BatchResult | None] = [None] * len(jobs)
+    with execute(_run_job, jobs, workers, scheduler) as running:
+        for finished in running:
+            results[finished.index] = finished.result or BatchResult(
+                names[finished.index], jobs[finished.index][1],
+                error=f"{type(finished.error).__name__}: {finished.error}")
+    return [r for r in results if r is not None]
 
 
-def _run_dask(configs: list[RunConfig | str | Path], folders: list[Path], debug: list[bool],
-              scheduler: str) -> list[BatchResult]:
-    try:
-        from dask.distributed import Client
-    except ImportError:
-        raise RuntimeError("running on a Dask cluster needs dask.distributed: "
-                           "pip install 'flexff[cluster]'") from None
-    try:
-        client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
-    except OSError as error:  # refused, timed out, unknown host
-        raise ConnectionError(f"cannot reach the Dask scheduler at {scheduler}: {error}") \
-            from None
-    with client:
-        futures = client.map(_run_one, configs, folders, debug, pure=False)
-        results: list[BatchResult] = client.gather(futures)
-        return results
+def _run_job(job: tuple[RunConfig | str | Path, Path, bool]) -> BatchResult:
+    return _run_one(*job)
 
 
 def sweep(path: str | Path, axes: Mapping[str, Sequence[Any]]) -> list[RunConfig]:

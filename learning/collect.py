@@ -37,11 +37,9 @@ from __future__ import annotations
 import errno
 import hashlib
 import json
-import os
 import tempfile
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Iterable, Iterator, Mapping
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -50,6 +48,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from flexff.cosim.executor import Finished, execute
 from flexff.cosim.recording import Recording, atomic_write
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import Scenario, reference_signals, resolve
@@ -79,7 +78,6 @@ from flexff.learning.loop import (
     plant_record,
 )
 from flexff.learning.trajectories import TrajectorySet, TrajectorySpec, trajectory_set
-from flexff.learning.workers import die_with_parent
 from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
 
 PROGRESS = "collection.json"  # the loop of a collection under way (see the module docstring)
@@ -379,61 +377,33 @@ def _one_line(error: BaseException) -> str:
 
 def _execute(jobs: list[_Job], workers: int | None, scheduler: str | None, progress: bool,
              total: int, set_name: str) -> Iterator[Outcome]:
-    """Run the jobs in parallel, yielding outcomes as they finish, under a progress bar."""
+    """Run the jobs in parallel (cosim.executor), yielding outcomes as they finish, under a
+    progress bar; after the first error that would fail every trajectory, the jobs not started
+    are cancelled."""
     failed = 0
     with tqdm(total=total, initial=total - len(jobs), disable=not progress, unit="traj",
-              desc=f"collect {set_name}") as bar:
-        for outcome in (_on_dask(jobs, scheduler) if scheduler is not None
-                        else _on_processes(jobs, workers)):
+              desc=f"collect {set_name}") as bar, \
+            execute(_collect_one, jobs, workers, scheduler) as running:
+        stopped = False
+        for finished in running:
+            outcome = _outcome(jobs[finished.index], finished)
             if outcome.error is not None:
                 failed += 1
                 bar.set_postfix(failed=failed)
             bar.update(1)
             yield outcome
+            if outcome.stops_all and not stopped:
+                stopped = True
+                running.cancel()
 
 
-def _on_processes(jobs: list[_Job], workers: int | None) -> Iterator[Outcome]:
-    if not jobs:
-        return
-    workers = min(workers or os.cpu_count() or 1, len(jobs))
-    with ProcessPoolExecutor(max_workers=workers, initializer=die_with_parent,
-                             initargs=(os.getpid(),)) as pool:
-        futures = {pool.submit(_collect_one, job): job for job in jobs}
-        yield from _settle(futures, as_completed(futures),
-                           lambda: [f.cancel() for f in futures])
-
-
-def _on_dask(jobs: list[_Job], scheduler: str) -> Iterator[Outcome]:
-    if not jobs:
-        return
-    try:
-        from dask.distributed import Client
-        from dask.distributed import as_completed as dask_completed
-    except ImportError:
-        raise RuntimeError("running on a Dask cluster needs dask.distributed: "
-                           "pip install 'flexff[cluster]'") from None
-    with Client(scheduler) as client:
-        futures = client.map(_collect_one, jobs, pure=False)
-        yield from _settle(dict(zip(futures, jobs)), dask_completed(futures),
-                           lambda: client.cancel([f for f in futures if not f.done()]))
-
-
-def _settle(futures: dict[Any, _Job], finished: Iterable[Any], cancel: Callable[[], object]
-            ) -> Iterator[Outcome]:
-    """The outcomes of `futures` (future -> job) in the order `finished` yields them; after
-    the first error that would fail every trajectory, `cancel` the ones not started."""
-    stopped = False
-    for future in finished:
-        name = futures[future].config.name
-        if future.cancelled():
-            yield Outcome(name, cancelled=True)
-            continue
-        try:
-            outcome = future.result()
-        except Exception as error:
-            outcome = Outcome(name, error=_one_line(error),
-                              stops_all=isinstance(error, BrokenProcessPool))
-        yield outcome
-        if outcome.stops_all and not stopped:
-            stopped = True
-            cancel()
+def _outcome(job: _Job, finished: Finished[Outcome]) -> Outcome:
+    """The outcome of a job, also when it was cancelled or its worker died."""
+    name = job.config.name
+    if finished.cancelled:
+        return Outcome(name, cancelled=True)
+    if finished.error is not None:
+        return Outcome(name, error=_one_line(finished.error),
+                       stops_all=isinstance(finished.error, BrokenProcessPool))
+    assert finished.result is not None
+    return finished.result

@@ -13,12 +13,9 @@ its last checkpoint (learning.train).
 
 from __future__ import annotations
 
-import ctypes
 import multiprocessing
 import os
 import queue
-import signal
-import sys
 from collections.abc import Mapping, Sequence
 from concurrent.futures import FIRST_EXCEPTION, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
@@ -27,9 +24,9 @@ from typing import Any
 
 from tqdm import tqdm
 
+from flexff.cosim.executor import die_with_parent
 from flexff.learning.threads import granted_cores
 
-PR_SET_PDEATHSIG = 1  # linux/prctl.h
 POLL_S = 0.2  # how often the bars are redrawn while the workers run
 
 
@@ -50,16 +47,6 @@ class TrainJob:
     @property
     def name(self) -> str:
         return self.label or self.model
-
-
-def die_with_parent(parent: int) -> None:
-    """Pool initializer: have the kernel kill this worker when the process that started it
-    dies (Linux), even by SIGKILL, instead of leaving it blocked on a queue nobody serves. (The
-    signal follows the thread that started the worker: the pool's user, which outlives it.)"""
-    if sys.platform.startswith("linux"):
-        ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    if os.getppid() != parent:  # it died before that took effect
-        os._exit(1)
 
 
 def train_parallel(jobs: Sequence[TrainJob], workers: int | None = None,

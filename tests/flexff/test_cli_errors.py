@@ -131,7 +131,7 @@ def test_a_run_that_failed(capsys, monkeypatch, tmp_path, config, error, message
 
 
 def test_an_unreachable_scheduler(capsys, monkeypatch, tmp_path, config):
-    monkeypatch.setattr("flexff.cosim.batch.SCHEDULER_TIMEOUT", "1s")
+    monkeypatch.setattr("flexff.cosim.executor.SCHEDULER_TIMEOUT", "1s")
     code, line = fails(capsys, WRITERS["run"] + ["--scheduler", "tcp://127.0.0.1:9"],
                        config=config, out=tmp_path / "out")
     assert code == 1

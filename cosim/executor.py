@@ -1,0 +1,139 @@
+"""Jobs in parallel, in local processes or on a Dask cluster: the one executor of runs
+(cosim.batch) and data collection (learning.collect).
+
+`execute(function, jobs, workers, scheduler)` is a context manager that yields each job's
+Finished (its index, result or error, or that it was cancelled) as the jobs end, in the order
+they end; `cancel()` drops the jobs not started yet. Local worker processes die with the
+process that started them (even when it is killed) and take Ctrl-C as the user means it: the
+run in progress stops, an idle worker stays quiet, and no further job starts. A Dask scheduler
+that cannot be reached is a ConnectionError naming it, after SCHEDULER_TIMEOUT.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+Job = TypeVar("Job")
+Result = TypeVar("Result")
+
+SCHEDULER_TIMEOUT = "10s"  # how long to try to reach a Dask scheduler
+PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent thread dies
+
+
+@dataclass(frozen=True)
+class Finished(Generic[Result]):
+    """How one job ended: its result, the error it raised, or cancelled before it started."""
+
+    index: int  # the job's position in the list given to execute
+    result: Result | None = None
+    error: BaseException | None = None
+    cancelled: bool = False
+
+
+class Execution(Generic[Result]):
+    """The jobs under way: iterate for each Finished as it comes; cancel() the rest."""
+
+    def __init__(self, futures: dict[Any, int], finished: Iterator[Any],
+                 cancel: Callable[[], object]) -> None:
+        self._futures, self._finished, self._cancel = futures, finished, cancel
+
+    def __iter__(self) -> Iterator[Finished[Result]]:
+        for future in self._finished:
+            index = self._futures[future]
+            if future.cancelled():
+                yield Finished(index, cancelled=True)
+                continue
+            try:
+                yield Finished(index, result=future.result())
+            except Exception as error:
+                yield Finished(index, error=error)
+
+    def cancel(self) -> None:
+        """Drop the jobs that have not started."""
+        self._cancel()
+
+
+@contextmanager
+def execute(function: Callable[[Job], Result], jobs: Sequence[Job], workers: int | None = None,
+            scheduler: str | None = None) -> Iterator[Execution[Result]]:
+    """Run `function(job)` for every job: in up to `workers` local processes (default: one
+    per CPU), or on the Dask scheduler at `scheduler` (dask.distributed, imported only then)."""
+    if scheduler is not None:
+        with _on_dask(function, jobs, scheduler) as execution:
+            yield execution
+        return
+    pool = ProcessPoolExecutor(max_workers=max(1, min(workers or os.cpu_count() or 1,
+                                                      len(jobs) or 1)),
+                               initializer=_start_worker, initargs=(os.getpid(),))
+    try:
+        futures: dict[Future[Result], int] = {pool.submit(_guarded, function, job): k
+                                              for k, job in enumerate(jobs)}
+        yield Execution(futures, as_completed(futures),
+                        lambda: [f.cancel() for f in futures])
+    finally:  # on Ctrl-C too: the jobs not started are dropped, those in progress stop
+        pool.shutdown(cancel_futures=True)
+
+
+@contextmanager
+def _on_dask(function: Callable[[Job], Result], jobs: Sequence[Job], scheduler: str
+             ) -> Iterator[Execution[Result]]:
+    try:
+        from dask.distributed import Client
+        from dask.distributed import as_completed as dask_completed
+    except ImportError:
+        raise RuntimeError("running on a Dask cluster needs dask.distributed: "
+                           "pip install 'flexff[cluster]'") from None
+    try:
+        client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
+    except OSError as error:  # refused, timed out, unknown host
+        raise ConnectionError(f"cannot reach the Dask scheduler at {scheduler}: {error}") \
+            from None
+    with client:
+        futures = client.map(function, list(jobs), pure=False)
+        yield Execution(dict(zip(futures, range(len(futures)))), dask_completed(futures),
+                        lambda: client.cancel([f for f in futures if not f.done()]))
+
+
+def die_with_parent(parent: int) -> None:
+    """Pool initializer: have the kernel kill this worker when the process that started it
+    dies (Linux), even by SIGKILL, instead of leaving it blocked on a queue nobody serves. (The
+    signal follows the thread that started the worker: the pool's user, which outlives it.)"""
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:  # it died before that took effect
+        os._exit(1)
+
+
+_worker = {"running": False, "interrupted": False}  # a pool process's state, for Ctrl-C
+
+
+def _start_worker(parent: int) -> None:
+    die_with_parent(parent)
+    signal.signal(signal.SIGINT, _on_interrupt)
+
+
+def _on_interrupt(signum: int, frame: object) -> None:
+    """Ctrl-C in a pool process: it starts no further job, and stops the one in progress
+    (an idle one stays quiet: a KeyboardInterrupt there would print a traceback)."""
+    _worker["interrupted"] = True
+    if _worker["running"]:
+        raise KeyboardInterrupt
+
+
+def _guarded(function: Callable[[Job], Result], job: Job) -> Result:
+    """`function(job)` in a pool process, unless Ctrl-C was pressed (the pool queues ahead)."""
+    if _worker["interrupted"]:
+        raise KeyboardInterrupt
+    _worker["running"] = True
+    try:
+        return function(job)
+    finally:
+        _worker["running"] = False
