@@ -97,8 +97,8 @@ class _Plan:
                  read_before: bool, read_after: bool) -> None:
         info = instance.info
         self.instance, self.name, self.parameters = instance, spec.name, dict(spec.parameters)
-        floats = [k for k in links if k.float64]
-        self.typed_inputs = [k for k in links if not k.float64]  # set by Python (_set_typed)
+        floats = [k for k in links if k.on_bus]
+        self.typed_inputs = [k for k in links if not k.on_bus]  # set by Python (_set_typed)
         self.inputs = tuple(k.input for k in floats)
         self.outputs = tuple(n for n in info.outputs if info.variables[n].kind == "float64")
         self.typed_outputs = [n for n in info.outputs if info.variables[n].kind != "float64"]

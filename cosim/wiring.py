@@ -90,8 +90,8 @@ class Link:
         return self.gain != 1.0 or self.offset != 0.0
 
     @property
-    def float64(self) -> bool:
-        """float64 into float64: the bus carries it, in compiled code (cosim.master)."""
+    def on_bus(self) -> bool:
+        """float64 into float64: carried on the bus, in compiled code (cosim.master)."""
         return self.kind == self.into == "float64"
 
     def __str__(self) -> str:
