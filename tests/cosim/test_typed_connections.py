@@ -208,7 +208,8 @@ def test_integer_connection_passes_values_unchanged(tmp_path, version, prefix, d
                          ids=[f"fmi{v}-{p}" for v, p, _ in INTEGERS])
 def test_integer_gain_is_refused(tmp_path, capsys, version, prefix, dtype):
     """Gain or offset on an integer connection: exit 2, one line naming connection[1], from
-    TOML; a plain SSP with a LinearTransformation on Integer connectors, likewise."""
+    TOML (and no SSP exported from it); a plain SSP with a LinearTransformation on Integer
+    connectors is refused likewise, naming its ssd:Connection."""
     for algorithm in ALGORITHMS:
         for gain, offset in ((GAIN, 0.0), (1.0, OFFSET)):
             path = config_file(tmp_path, algorithm, {"a": feedthrough(version),
@@ -216,6 +217,9 @@ def test_integer_gain_is_refused(tmp_path, capsys, version, prefix, dtype):
                 connection("a.Float64_continuous_output", "b.Float64_continuous_input"),
                 connection(f"a.{prefix}_output", f"b.{prefix}_input", gain, offset)])
             assert_refused(path, tmp_path, "connection[1]", "gain and offset", capsys)
+            with pytest.raises(ConfigError, match="gain and offset") as error:
+                export_ssp(load_config(path), tmp_path / "refused.ssp")
+            assert error.value.key == "connection[1]"
     plain = integer_ssp_with_transformation(tmp_path, version, prefix)
     with pytest.raises(ConfigError) as error:
         simulate_config(load_ssp(plain))
