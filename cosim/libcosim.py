@@ -59,7 +59,7 @@ class _Execution:
                 self.initial_value(s.name, name, value)
         self.varying: dict[str, list[tuple[int, str]]] = {}  # slave -> (value ref., source)
         for c in links:
-            if c.affine or c.kind != "float64":
+            if c.affine or not c.on_bus:
                 raise ValueError(f"{c}: libcosim's API connects Real signals as they are; "
                                  f"run the SSP export for linear transformations")
             if c.source != SOURCE:

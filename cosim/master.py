@@ -6,7 +6,10 @@ the bus: the external source signals first, then each FMU's float64 outputs as o
 the set calls read straight from it whenever an FMU's inputs form a block of the bus in order
 with no gain or offset (otherwise they are gathered, scaled and shifted into a buffer first).
 Signals of other types (integers, booleans, strings, ...) go through fmpy's typed calls and a
-small table beside the bus. Communication point k (t_k = k * step), for k = 0 .. steps:
+small table beside the bus, and so does every connection that is not float64 into float64 (a
+Float32 input, or a Float64 input fed by a Float32 output): its value is converted, with its
+gain and offset, by cosim.wiring's rule (`carried`) in Python. Communication point k
+(t_k = k * step), for k = 0 .. steps:
 
   1. the source signals of point k are copied into the bus;
   2. in order, each FMU gets its inputs and, if a later FMU or no FMU reads its outputs, gives
@@ -65,7 +68,7 @@ from flexff.cosim.engine import (
 from flexff.cosim.recording import Recording
 from flexff.cosim.schema import ALGORITHMS
 from flexff.cosim.timing import Pacing, StepTiming
-from flexff.cosim.wiring import SOURCE, Link, Port, wire
+from flexff.cosim.wiring import SOURCE, Link, Port, carried, wire
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 
 PROGRESS_MIN_STEPS = 100_000  # runs this long show a progress bar (on a terminal)
@@ -94,8 +97,8 @@ class _Plan:
                  read_before: bool, read_after: bool) -> None:
         info = instance.info
         self.instance, self.name, self.parameters = instance, spec.name, dict(spec.parameters)
-        floats = [k for k in links if k.kind == "float64"]
-        self.typed_inputs = [(k.input, k.producer) for k in links if k.kind != "float64"]
+        floats = [k for k in links if k.on_bus]
+        self.typed_inputs = [k for k in links if not k.on_bus]  # set by Python (_set_typed)
         self.inputs = tuple(k.input for k in floats)
         self.outputs = tuple(n for n in info.outputs if info.variables[n].kind == "float64")
         self.typed_outputs = [n for n in info.outputs if info.variables[n].kind != "float64"]
@@ -186,7 +189,7 @@ class Master:
             names += [f"{spec.name}.{n}" for n in info.outputs
                       if info.variables[n].kind == "float64"]
         self.signals = tuple(names)
-        index = {n: i for i, n in enumerate(names)}
+        self._index = index = {n: i for i, n in enumerate(names)}
         self._bus = np.zeros(len(names))
         self._typed: dict[str, Any] = {}
         jacobi = self.algorithm == "jacobi"
@@ -394,11 +397,21 @@ class Master:
 
     def _set_typed(self, p: _Plan, when: str) -> None:
         if p.typed_inputs:
+            values = {k.input: self._carried(k, when) for k in p.typed_inputs}
             try:
-                p.instance.set({name: self._typed[producer]
-                                for name, producer in p.typed_inputs})
+                p.instance.set(values)
             except FmuError:
                 raise p.fail(f"setting its inputs {when}") from None
+
+    def _carried(self, link: Link, when: str) -> Any:
+        """What a link off the float64 bus gives its input now (cosim.wiring.carried): its
+        producer's value from the bus (float64) or the typed table, converted."""
+        value = (self._bus[self._index[link.producer]] if link.kind == "float64"
+                 else self._typed[link.producer])
+        try:
+            return carried(link, value)
+        except OverflowError as error:
+            raise CosimError(f"{link} {when}: {error}") from None
 
     def close(self) -> None:
         """Terminate and free every FMU (safe to call twice)."""

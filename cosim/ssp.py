@@ -8,11 +8,12 @@ ssv:ParameterSet, and the run's times in ssd:DefaultExperiment. SSP 1.0 has no s
 it goes into two annotations, libcosim's own ("com.opensimulationplatform": osp:FixedStepAlgorithm
 baseStepSize, which CosimExecution.from_ssp_file uses) and ours ("org.flexff": step and
 algorithm). An SSP 1.0 system has no time-varying sources: inputs fed by a constant source get
-the constant (with gain and offset applied) as their start value, inputs fed by the [reference]
-its value at t = 0 (other tools hold the loop at rest at the reference's start), and a
-configuration with a CSV series feeding an input cannot be exported. Our annotation also
-carries the whole configuration in the general form (flexff:Configuration: built-ins with their
-options, the [reference], [record]), FMUs by path named by their member of the archive.
+the constant (with gain and offset applied and converted to the input's type, as the run does:
+cosim.wiring.carried) as their start value, inputs fed by the [reference] its value at t = 0
+(other tools hold the loop at rest at the reference's start), and a configuration with a CSV
+series feeding an input cannot be exported. Our annotation also carries the whole configuration
+in the general form (flexff:Configuration: built-ins with their options, the [reference],
+[record]), FMUs by path named by their member of the archive.
 
 Connectors (SSP requires only those that connections use): every connected variable, and the
 other outputs and parameters of type Real, Integer or Boolean. Unconnected inputs get none: FMPy
@@ -20,6 +21,10 @@ other outputs and parameters of type Real, Integer or Boolean. Unconnected input
 where there is none. String, Enumeration and Binary connectors only where a connection needs
 them: libcosim aborts the process on reading an ssc:Enumeration connector, and FMPy cannot get
 or set a String. Units are left to the FMUs (SSP 1.0 would need ssd:Units definitions for them).
+FMI 3.0 Float32 and Float64 variables are both ssc:Real connectors, and a connection between
+them converts as in a run from TOML; a LinearTransformation is only ever written on Real
+connectors, and one read on others is refused by the wiring (cosim.wiring's rule, which SSP
+1.0's "valid for parameters of a continuous type" agrees with).
 
 load_ssp reads such a file, or a flat system of FMU components from another tool, into a
 general-form RunConfig: FMUs from the archive (extracted once into the FMU cache, under the
@@ -64,7 +69,7 @@ from flexff.cosim.recording import atomic_write
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ALGORITHMS, ConfigError, ConnectionConfig, FmuConfig, RunConfig
-from flexff.cosim.wiring import SOURCE
+from flexff.cosim.wiring import SOURCE, Link, carried
 from flexff.fmu.cache import cache_dir
 from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
 
@@ -142,8 +147,8 @@ def _ssd(scenario: Scenario) -> etree._Element:
         if connectors:
             _connectors(_sub(component, "ssd:Connectors"), info, connectors, enumerations)
         values = {**slave.parameters, **{  # inputs fed by sources: their value at t = 0
-            k.input: k.gain * float(np.ravel(scenario.sources[k.signal])[0]) + k.offset
-            for k in scenario.links if k.target == slave.name and k.source == SOURCE}}
+            k.input: _at_start(k, scenario) for k in scenario.links
+            if k.target == slave.name and k.source == SOURCE}}
         if values:
             binding = _sub(_sub(component, "ssd:ParameterBindings"), "ssd:ParameterBinding")
             _parameter_set(_sub(binding, "ssd:ParameterValues"), slave.name, info, values)
@@ -166,6 +171,14 @@ def _ssd(scenario: Scenario) -> etree._Element:
                step=repr(float(config.step)), algorithm=config.algorithm)
     _sub(run, "flexff:Configuration").text = _configuration_text(config)
     return root
+
+
+def _at_start(link: Link, scenario: Scenario) -> Any:
+    """The value a source's link gives its input at t = 0 (cosim.wiring.carried)."""
+    try:
+        return carried(link, np.ravel(scenario.sources[link.signal])[0])
+    except OverflowError as error:
+        raise ValueError(f"{scenario.config.source}: {link}: {error}") from None
 
 
 def _configuration_text(config: RunConfig) -> str:

@@ -5,9 +5,23 @@ of Links) that can be printed and checked.
 Every input of every FMU gets one Link: from an explicit [[connection]] ("fmu.output" or a
 source signal, with an optional gain and offset), else by name from the one source signal or
 FMU output of the same name. An input with no producer is an error, unless its FMU keeps the
-start values of unconnected inputs or the configuration gives it a value. Connected values
-must be of the same kind (cosim's importer: an FMI 2.0 Real and an FMI 3.0 Float64 agree),
-gains and offsets apply to floats, and units must agree where both sides declare one.
+start values of unconnected inputs or the configuration gives it a value. Units must agree
+where both sides declare one.
+
+What a Link does with each pair of kinds (fmu.importer.TYPE_KINDS: an FMI 2.0 Real and an FMI
+3.0 Float64 are both float64, an FMI 2.0 Integer and an FMI 3.0 Int32 both int32; source
+signals are float64), one rule, `refusal` and `carried`:
+  - float64 and float32 feed each other: gain * value + offset is computed in float64 (a
+    float32 value widens exactly), then converted to the input's kind. Into float32 that is
+    rounding to the nearest float32, ties to even (numpy.float32); a finite value beyond
+    float32's range stops the run with an error naming the connection and the time, rather
+    than giving the input an infinity.
+  - every other kind (int8 .. uint64, boolean, string, binary, enumeration, clock) feeds the
+    same kind only, unchanged, with no gain or offset; anything else is refused when the run
+    is wired, naming the connection. For integers that is a choice: SSP 1.0 defines its
+    LinearTransformation for continuous (Real) connectors only, float64 arithmetic would
+    silently change int64 and uint64 values beyond 2**53, and how to round (nearest, floor,
+    toward zero) or to narrow a width is a modelling decision that belongs in an FMU.
 
 Order (Gauss-Seidel): a Link whose producer steps at or after its consumer is `feedback`: it
 carries the producer's value from the end of its previous step. Such an output must not depend
@@ -19,12 +33,17 @@ from __future__ import annotations
 
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
 
 from flexff.cosim.schema import ConnectionConfig
 from flexff.fmu.importer import FmuInfo
 
 SOURCE = "sources"  # producer name of the external signals
-FLOAT_KINDS = ("float64", "float32")
+SOURCE_KIND = "float64"  # the kind of every source signal
+FLOAT_KINDS = ("float64", "float32")  # the kinds that convert into each other (module doc)
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 class WiringError(ValueError):
@@ -48,7 +67,8 @@ class Port:
 @dataclass(frozen=True)
 class Link:
     """One input's producer: `source`.`signal` (source SOURCE: an external signal) into
-    `target`.`input`, as gain * value + offset."""
+    `target`.`input`, as gain * value + offset; `kind` is the producer's kind, `into` the
+    input's (`carried`)."""
 
     source: str
     signal: str
@@ -58,6 +78,7 @@ class Link:
     gain: float = 1.0
     offset: float = 0.0
     feedback: bool = False
+    into: str = "float64"
 
     @property
     def producer(self) -> str:
@@ -68,10 +89,44 @@ class Link:
     def affine(self) -> bool:
         return self.gain != 1.0 or self.offset != 0.0
 
+    @property
+    def on_bus(self) -> bool:
+        """float64 into float64: carried on the bus, in compiled code (cosim.master)."""
+        return self.kind == self.into == "float64"
+
     def __str__(self) -> str:
         scale = f" (x {self.gain:g} + {self.offset:g})" if self.affine else ""
-        return (f"{self.producer} -> {self.target}.{self.input}{scale}"
+        into = f" [{self.kind} -> {self.into}]" if self.kind != self.into else ""
+        return (f"{self.producer} -> {self.target}.{self.input}{scale}{into}"
                 f"{' [feedback]' if self.feedback else ''}")
+
+
+def refusal(kind: str, into: str, affine: bool) -> str | None:
+    """Why a value of `kind` cannot feed an input of kind `into` (through a gain or offset if
+    `affine`) under the module doc's rule; None where it can."""
+    if kind != into and not (kind in FLOAT_KINDS and into in FLOAT_KINDS):
+        return (f"type mismatch: {kind} cannot feed {into} (only float64 and float32 convert "
+                f"into each other; other kinds connect to their own kind only)")
+    if affine and into not in FLOAT_KINDS:
+        return (f"gain and offset apply to float64 and float32 signals only, not to {into} "
+                f"(an FMU can do the arithmetic and the rounding it means)")
+    return None
+
+
+def carried(link: Link, value: Any) -> Any:
+    """The value `link` gives its input for its producer's `value` (module doc): a float
+    through gain and offset in float64, then converted to the input's kind; any other value
+    unchanged. OverflowError for a finite value beyond the range of a float32 input."""
+    if link.into not in FLOAT_KINDS:
+        return value
+    result = link.gain * float(value) + link.offset if link.affine else float(value)
+    if link.into == "float64":
+        return result
+    with np.errstate(over="ignore"):
+        narrowed = np.float32(result)
+    if np.isinf(narrowed) and np.isfinite(result):
+        raise OverflowError(f"{result!r} is beyond the range of float32 (+-{FLOAT32_MAX!r})")
+    return float(narrowed)
 
 
 def wire(ports: Sequence[Port], sources: Collection[str],
@@ -156,7 +211,7 @@ def _checked(link: Link, c: ConnectionConfig | None, ports: Mapping[str, Port],
     key = c.key if c is not None else f"fmu.{link.target}"
     to = ports[link.target].info.variables[link.input]
     if link.source == SOURCE:
-        kind, unit, feeds_back = "float64", None, False
+        kind, unit, feeds_back = SOURCE_KIND, None, False
     else:
         producer = ports[link.source].info
         frm = producer.variables[link.signal]
@@ -170,14 +225,12 @@ def _checked(link: Link, c: ConnectionConfig | None, ports: Mapping[str, Port],
         if not frm.scalar or not to.scalar:
             raise WiringError(key, f"{link.producer} -> {link.target}.{link.input}: array "
                                    f"variables cannot be connected")
-    if kind != to.kind:
-        raise WiringError(key, f"type mismatch: {link.producer} is {kind}, "
-                               f"{link.target}.{link.input} is {to.kind} ({to.type})")
-    if link.affine and kind not in FLOAT_KINDS:
-        raise WiringError(key, f"gain and offset apply to float signals, {link.producer} is "
-                               f"{kind}")
+    refused = refusal(kind, to.kind, link.affine)
+    if refused:
+        raise WiringError(key, f"{link.producer} ({kind}) -> {link.target}.{link.input} "
+                               f"({to.type}): {refused}")
     if unit and to.unit and unit != to.unit:
         raise WiringError(key, f"units differ: {link.producer} is in {unit}, "
                                f"{link.target}.{link.input} in {to.unit}")
     return Link(link.source, link.signal, link.target, link.input, kind, link.gain,
-                link.offset, feeds_back)
+                link.offset, feeds_back, to.kind)
