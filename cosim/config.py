@@ -95,7 +95,6 @@ TABLES = ("run", "reference", "source", "fmu", "connection", "record", *SHORT_FO
 STEP_TOLERANCE = 1e-9  # relative: stop / step must be this close to a whole number
 PLANT_EXTRA = ("max_substep",)  # plant FMU parameters beyond the System's own
 START_PARAMETERS = ("x_start", "y_start")
-SETTABLE = ("parameter", "structuralParameter", "input")  # causalities `parameters` may set
 
 
 def load_config(path: str | Path) -> RunConfig:
@@ -351,8 +350,8 @@ class _Parser:
         checked = {}
         for key, value in values.items():
             v = info.variables.get(key)
-            if v is None or v.causality not in SETTABLE:
-                settable = [n for n, w in info.variables.items() if w.causality in SETTABLE]
+            if v is None or not v.settable:
+                settable = [n for n, w in info.variables.items() if w.settable]
                 raise self.error(f"{where}.parameters.{key}", f"{path.name} has no parameter or "
                                  f"input {key!r} (known: {', '.join(settable) or 'none'})")
             try:

@@ -454,8 +454,7 @@ class _TypedHook:
 
 def _check_parameters(spec: SlaveSpec, info: FmuInfo) -> None:
     """Start values may be given to parameters and inputs the FMU has."""
-    settable = [n for n, v in info.variables.items()
-                if v.causality in ("parameter", "structuralParameter", "input")]
+    settable = [n for n, v in info.variables.items() if v.settable]
     for name in spec.parameters:
         if name not in settable:
             raise ValueError(f"{spec.name}: unknown parameter {name!r} (known: "

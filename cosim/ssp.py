@@ -395,7 +395,7 @@ def _bindings(element: etree._Element, info: FmuInfo, folder: Path, key: str, er
         for parameter in (p for s in sets for p in s.findall("ssv:Parameters/ssv:Parameter", NS)):
             name = parameter.get("name", "").removeprefix(prefix)  # the schema requires a name
             v = info.variables.get(name)
-            if v is None or v.causality not in ("parameter", "structuralParameter", "input"):
+            if v is None or not v.settable:
                 raise error(f"{where}/ssv:Parameter[@name='{name}']",
                             f"{info.path.name} has no parameter or input {name!r}")
             typed = parameter.find("ssv:*", NS)  # ssv:Real, ssv:Integer, ...

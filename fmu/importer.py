@@ -54,6 +54,9 @@ class FmuError(ValueError):
     """An FMU that cannot be read, loaded or used as asked; the message names the file."""
 
 
+SETTABLE = ("parameter", "structuralParameter", "input")  # causalities a run may set
+
+
 @dataclass(frozen=True)
 class Variable:
     """One scalar variable of an FMU, with its start value in its Python type."""
@@ -72,6 +75,12 @@ class Variable:
     def kind(self) -> str:
         """The kind of value it carries (TYPE_KINDS); equal kinds can be connected."""
         return TYPE_KINDS[self.type]
+
+    @property
+    def settable(self) -> bool:
+        """Whether a run may give it a start value: the one rule, for TOML, SSP and the
+        master alike."""
+        return self.causality in SETTABLE
 
 
 @dataclass(frozen=True)

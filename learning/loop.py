@@ -37,7 +37,6 @@ from flexff.plant.system import plant_system
 
 START_VALUES = ("x_start", "y_start")
 FEEDFORWARDS = ("rigid-body-feedforward", "learned-feedforward")
-SETTABLE = ("parameter", "input")
 
 
 @dataclass(frozen=True)
@@ -88,7 +87,7 @@ def _started(f: FmuConfig, start: Mapping[str, float], seed: int | None) -> FmuC
     if f.path is None:
         return f
     variables = read_fmu(f.path).variables
-    if not all(k in variables and variables[k].causality in SETTABLE for k in START_VALUES):
+    if not all(k in variables and variables[k].settable for k in START_VALUES):
         return f
     return replace(f, parameters={**f.parameters, **{
         k: typed_value(variables[k].kind, v) for k, v in start.items()}})
