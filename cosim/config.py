@@ -81,7 +81,7 @@ from flexff.plant.kinematics import check_workspace
 from flexff.plant.model import VARIANTS
 from flexff.plant.parameters import NOMINAL
 from flexff.plant.signals import FEEDFORWARD_FORCES, names
-from flexff.plant.system import plant_system
+from flexff.plant.system import plant_parameters
 
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
                 "circle": ("kind", "centre", "turns", "duration"),
@@ -102,6 +102,12 @@ def load_config(path: str | Path) -> RunConfig:
     path = Path(path)
     return parse_config(read_tables(path), name=path.stem, base=path.resolve().parent,
                         source=str(path))
+
+
+def checked(config: RunConfig) -> RunConfig:
+    """`config` checked again, as its file was: after a change in code (dataclasses.replace),
+    the same rules hold as for TOML and SSP; a ConfigError names the key at fault."""
+    return parse_config(expanded(config), name=config.name, source=config.source)
 
 
 def read_tables(path: Path) -> dict[str, Any]:
@@ -362,12 +368,12 @@ class _Parser:
         return checked
 
     def plant_parameter_names(self, variant: str) -> tuple[str, ...]:
-        return (*(p.name for p in plant_system(variant).parameters), *PLANT_EXTRA)
+        return (*(p.name for p in plant_parameters(variant)), *PLANT_EXTRA)
 
     def plant_parameters(self, t: Mapping[str, Any], variant: str, where: str,
                          start: tuple[float, float]) -> dict[str, float]:
         """Plant parameter values, checked physically; x_start, y_start default to `start`."""
-        known = {p.name: p for p in plant_system(variant).parameters}
+        known = {p.name: p for p in plant_parameters(variant)}
         values = dict(zip(START_PARAMETERS, start))
         for key in t:
             positive = key in PLANT_EXTRA or known[key].positive

@@ -23,7 +23,7 @@ from typing import Any
 
 from flexff.cosim.batch import BatchResult, sweep
 from flexff.cosim.batch import run_batch as run_many
-from flexff.cosim.config import expanded, parse_config
+from flexff.cosim.config import checked as check
 from flexff.cosim.recording import Recording, load_recording
 from flexff.cosim.run import load_run_config as load
 from flexff.cosim.run import run_config as run
@@ -51,9 +51,3 @@ def read(folder: str | Path) -> RunResult:
     return RunResult(folder, load_recording(folder),
                      json.loads((folder / "metrics.json").read_text()),
                      json.loads((folder / "run.json").read_text()))
-
-
-def check(config: RunConfig) -> RunConfig:
-    """`config` checked again as a file is (after a dataclasses.replace, say): the same
-    configuration, or a ConfigError naming the key at fault."""
-    return parse_config(expanded(config), name=config.name, source=config.source)

@@ -2,13 +2,14 @@
 (cosim.schema.RunConfig) with flexff's built-in controller, put on one reference, its
 feedforward swapped, and the dataset's signals located in its wiring.
 
-A loop is changed with dataclasses.replace, never by editing its text: `on_reference` sets the
-reference, run.stop and the start values (x_start, y_start of the built-in plant, and of an FMU
-by path that has such parameters) and the built-in plant's noise seed; `with_feedforward`
-replaces whatever feeds the controller's Fx_ff, Fy_ff. `dataset_taps` finds, in a resolved
-loop, where each signal of the dataset is read: the encoders and the feedforward force as the
-controller receives them (through the wiring's gain and offset), its feedback force, and the
-true position `x`, `y` by name; a loop that lacks one is refused before anything runs.
+A loop is changed with dataclasses.replace, never by editing its text, and every changed loop is
+checked again as a file is (cosim.config.checked): `on_reference` sets the reference, run.stop
+and the start values (x_start, y_start of the built-in plant, and of an FMU by path that has
+such parameters) and the built-in plant's noise seed; `with_feedforward` replaces whatever feeds
+the controller's Fx_ff, Fy_ff. `dataset_taps` finds, in a resolved loop, where each signal of
+the dataset is read: the encoders and the feedforward force as the controller receives them
+(through the wiring's gain and offset), its feedback force, and the true position `x`, `y` by
+name; a loop that lacks one is refused before anything runs.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from flexff.cosim.config import expanded, parse_config
+from flexff.cosim.config import checked, expanded, parse_config
 from flexff.cosim.recording import Recording
 from flexff.cosim.scenario import Scenario
 from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
@@ -33,7 +34,7 @@ from flexff.learning.dataset import (
 )
 from flexff.plant.model import VARIANTS
 from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
-from flexff.plant.system import plant_system
+from flexff.plant.system import plant_parameters
 
 START_VALUES = ("x_start", "y_start")
 FEEDFORWARDS = ("rigid-body-feedforward", "learned-feedforward")
@@ -76,8 +77,8 @@ def on_reference(loop: RunConfig, reference: Mapping[str, Any], name: str,
     if plant is None:  # the short form always has one
         raise ValueError(f"{name}: the reference run has no built-in plant")
     start = {k: plant.parameters[k] for k in START_VALUES}
-    return replace(loop, name=name, reference=own.reference, stop=own.stop,
-                   fmus=tuple(_started(f, start, seed) for f in loop.fmus))
+    return checked(replace(loop, name=name, reference=own.reference, stop=own.stop,
+                           fmus=tuple(_started(f, start, seed) for f in loop.fmus)))
 
 
 def _started(f: FmuConfig, start: Mapping[str, float], seed: int | None) -> FmuConfig:
@@ -118,7 +119,8 @@ def with_feedforward(loop: RunConfig, builtin: str | None = None,
             name += "_"
         fmus.insert(fmus.index(controller),
                     FmuConfig(name, builtin=builtin, options=dict(options or {})))
-    return replace(loop, fmus=tuple(fmus), sources=tuple(sources), connections=connections)
+    return checked(replace(loop, fmus=tuple(fmus), sources=tuple(sources),
+                           connections=connections))
 
 
 def _controller(loop: RunConfig) -> FmuConfig:
@@ -203,7 +205,7 @@ def plant_record(scenario: Scenario, taps: Mapping[str, Tap], record: Mapping[st
     if plant.builtin != "plant":
         return {"fmu": name, **record["fmus"][name], "parameters": given}
     variant = plant.options["variant"]
-    defaults = {p.name: p.start for p in plant_system(variant).parameters
+    defaults = {p.name: p.start for p in plant_parameters(variant)
                 if p.name not in START_VALUES}
     return {"variant": variant, "parameters": {**defaults, **given}}
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import cache
+
 import casadi as ca
 
 from flexff.fmu.system import Parameter, System, Variable
@@ -57,3 +59,10 @@ def plant_system(variant: Variant | str = "nominal") -> System:
         n_noise=3,
         max_substep=1e-3,
     )
+
+
+@cache
+def plant_parameters(variant: str) -> tuple[Parameter, ...]:
+    """The plant FMU's parameters of one variant (plant_system's, built once per process: the
+    configuration checks ask for them per key)."""
+    return plant_system(variant).parameters
