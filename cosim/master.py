@@ -1,4 +1,5 @@
-"""Fixed-step co-simulation master over fmpy's low-level FMI 2.0 and 3.0 co-simulation APIs.
+"""Fixed-step co-simulation master: FMI 2.0 and 3.0 co-simulation FMUs loaded in-process (fmpy
+loads the libraries and declares their functions), stepped by one compiled engine.
 
 FMUs run in a fixed order, wired by cosim.wiring. Float64 signals live in one float64 array,
 the bus: the external source signals first, then each FMU's float64 outputs as one block
