@@ -19,6 +19,7 @@
 #include <string.h>
 #include <time.h>
 
+typedef void (*function_t)(void); /* any function: cast to its type before the call */
 typedef int (*set2_t)(void *, const unsigned *, size_t, const double *);
 typedef int (*set3_t)(void *, const unsigned *, size_t, const double *, size_t);
 typedef int (*get2_t)(void *, const unsigned *, size_t, double *);
@@ -34,7 +35,7 @@ enum { CALL_SET = 1, CALL_GET_BEFORE = 2, CALL_STEP = 3, CALL_GET_AFTER = 4, CAL
 typedef struct {
     int fmi3;
     void *component;
-    void *set_float64, *get_float64, *do_step;
+    function_t set_float64, get_float64, do_step;
     long n_in;
     const unsigned *in_vr;
     const long *gather;       /* bus index of every input, NULL: in_values is a view of the bus */
