@@ -4,6 +4,11 @@ The library is compiled once into the FMU cache (rebuilt when its source or the 
 changes). `EngineRun` mirrors the C structures; the master fills it with the FMUs' function
 pointers, the bus and the buffers, all allocated before the loop, then calls `run(k0, k1)` in
 chunks. Timing: TET per step and per FMU, and lateness against the schedule when paced.
+
+The mirrors are checked against the C layout (engine.c's engine_layout: the size of each
+structure, the offset and size of each field) when the library loads, so a field added on one
+side only is an error naming it, not memory misread. The engine checks every index of the plan
+before each chunk; a plan that does not fit raises EnginePlanError before any FMI call.
 """
 
 from __future__ import annotations
@@ -12,7 +17,22 @@ import ctypes
 import functools
 import tempfile
 import time
-from ctypes import CFUNCTYPE, POINTER, Structure, c_double, c_int, c_long, c_uint, c_void_p, cast
+from collections.abc import Mapping
+from ctypes import (
+    CFUNCTYPE,
+    POINTER,
+    Structure,
+    byref,
+    c_char,
+    c_char_p,
+    c_double,
+    c_int,
+    c_long,
+    c_size_t,
+    c_uint,
+    c_void_p,
+    cast,
+)
 from pathlib import Path
 from typing import Any
 
@@ -26,8 +46,18 @@ SOURCE = Path(__file__).parent / "c" / "engine.c"
 TYPED_HOOK = CFUNCTYPE(c_int, c_long, c_int, c_long)  # (slave, phase, k) -> 0 if ok
 CALLS = {1: "setting its inputs", 2: "getting its outputs", 3: "the step", 4: "getting its "
          "outputs after the step", 5: "exchanging values of other types"}
-OK, FAILED, OVERRUN = 0, 1, 2
+OK, FAILED, OVERRUN, BAD_PLAN = 0, 1, 2, 3  # engine_run's results (RUN_* in engine.c)
 MAX_LISTED_OVERRUNS = 16
+ERROR_SIZE = 256  # Run.error
+Layout = dict[str, tuple[int, int]]  # field -> (offset, size); "": the structure's own size
+
+
+class EngineLayoutError(RuntimeError):
+    """A ctypes mirror disagrees with the C structure it mirrors."""
+
+
+class EnginePlanError(ValueError):
+    """The engine refused a plan whose counts, pointers or indices do not fit."""
 
 
 class _Timespec(Structure):
@@ -60,7 +90,52 @@ class EngineRun(Structure):
                 ("start", _Timespec), ("max_overruns", c_long), ("grace_steps", c_long),
                 ("overruns", c_long), ("counted", c_long),
                 ("first_overruns", c_long * MAX_LISTED_OVERRUNS), ("failed_slave", c_long),
-                ("failed_k", c_long), ("failed_call", c_int)]
+                ("failed_k", c_long), ("failed_call", c_int), ("error", c_char * ERROR_SIZE)]
+
+
+MIRRORS: dict[str, type[Structure]] = {"struct timespec": _Timespec, "Slave": EngineSlave,
+                                       "Run": EngineRun}  # C name -> ctypes mirror
+
+
+def c_layouts(lib: ctypes.CDLL) -> dict[str, Layout]:
+    """The layout engine.c reports of each structure, by C name."""
+    structure, field = c_char_p(), c_char_p()
+    offset, size = c_size_t(), c_size_t()
+    layouts: dict[str, Layout] = {}
+    i = 0
+    while lib.engine_layout(i, byref(structure), byref(field), byref(offset), byref(size)) == 0:
+        name = (structure.value or b"").decode()
+        layouts.setdefault(name, {})[(field.value or b"").decode()] = (offset.value, size.value)
+        i += 1
+    return layouts
+
+
+def check_layout(mirror: type[Structure], c_name: str, layout: Layout) -> None:
+    """Raise EngineLayoutError naming the first field where `mirror` and the C layout of
+    `c_name` differ (missing on either side, at another offset or of another size), then their
+    sizes."""
+    ours: Layout = {"": (0, ctypes.sizeof(mirror))}
+    for name, *_ in mirror._fields_:
+        described = getattr(mirror, name)
+        ours[name] = (described.offset, described.size)
+    fields = [*(n for n in layout if n), *(n for n in ours if n and n not in layout)]
+    for name in [*fields, ""]:
+        if ours.get(name) == layout.get(name):
+            continue
+        c_side, py_side = (f"at offset {v[0]}, {v[1]} bytes" if v else "absent"
+                           for v in (layout.get(name), ours.get(name)))
+        what = (f"field {name!r} is {c_side} in C, {py_side} in ctypes" if name else
+                f"its size is {layout[''][1]} bytes in C, {ours[''][1]} in ctypes")
+        raise EngineLayoutError(f"{mirror.__module__}.{mirror.__qualname__} does not match the "
+                                f"C structure {c_name}: {what}")
+
+
+def _check_result(result: Any, func: Any, args: tuple[Any, ...]) -> Any:
+    """engine_run's errcheck: a plan the engine refused raises, with the engine's reason."""
+    if result == BAD_PLAN:
+        run = getattr(args[0], "_obj", None) or args[0].contents  # byref() or pointer()
+        raise EnginePlanError(f"the engine refused the run's plan: {run.error.decode()}")
+    return result
 
 
 @functools.cache
@@ -76,9 +151,24 @@ def library() -> ctypes.CDLL:
             run_compiler([SOURCE], built, [])
             cache.store(key, ".engine.so", built)
     lib = ctypes.CDLL(str(path))
+    lib.engine_layout.argtypes = [c_long, POINTER(c_char_p), POINTER(c_char_p),
+                                  POINTER(c_size_t), POINTER(c_size_t)]
+    lib.engine_layout.restype = c_int
+    check_layouts(c_layouts(lib))
     lib.engine_run.argtypes = [POINTER(EngineRun), c_long, c_long]
     lib.engine_run.restype = c_int
+    lib.engine_run.errcheck = _check_result
     return lib
+
+
+def check_layouts(layouts: Mapping[str, Layout]) -> None:
+    """Every mirror against the C layout of its structure; C structures no mirror covers are
+    an error too."""
+    if set(layouts) != set(MIRRORS):
+        raise EngineLayoutError(f"cosim/c/engine.c reports the structures {sorted(layouts)}, "
+                                f"cosim/engine.py mirrors {sorted(MIRRORS)}")
+    for c_name, mirror in MIRRORS.items():
+        check_layout(mirror, c_name, layouts[c_name])
 
 
 def pointer(array: np.ndarray | None, ctype: type[ctypes._SimpleCData[Any]] = c_double

@@ -11,6 +11,8 @@
  *   N_IN, then "VR BUS_INDEX" lines, N_OUT OUTPUT_OFFSET, then "VR" lines,
  *   READ_BEFORE READ_AFTER (0 or 1).
  * SOURCES holds (STEPS + 1) x N_SOURCES doubles (row k: the source signals at point k).
+ * Every count and index is checked (bus indices against N_BUS, the sources and each FMU's
+ * output block inside the bus): a plan that does not fit is an error naming the index.
  * The whole run (instantiate, initialize, loop, terminate, free) is repeated REPEATS times;
  * the bus at every point of the last run is written to RECORD as (STEPS + 1) x N_BUS
  * doubles. Prints one JSON object: the best loop time per step in microseconds.
@@ -19,7 +21,10 @@
 #define _POSIX_C_SOURCE 200809L
 
 #include <dlfcn.h>
+#include <errno.h>
+#include <math.h>
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -68,8 +73,24 @@ static void *symbol(Slave *s, const char *name) {
 
 static void *xcalloc(size_t n, size_t size) {
     void *p = calloc(n ? n : 1, size);
-    if (p == NULL) die("out of memory");
+    if (p == NULL) die("out of memory allocating %zu x %zu bytes", n, size);
     return p;
+}
+
+/* a * b, or an error if it does not fit in a size_t */
+static size_t product(size_t a, size_t b, const char *what) {
+    if (b != 0 && a > SIZE_MAX / b) die("%s: %zu x %zu is too large", what, a, b);
+    return a * b;
+}
+
+/* A whole non-negative number that is all of `text`; `what` names it in the error. */
+static size_t parse_count(const char *text, const char *what) {
+    char *end;
+    errno = 0;
+    const unsigned long long value = strtoull(text, &end, 10);
+    if (end == text || *end != '\0' || errno != 0 || text[0] == '-' || value > SIZE_MAX)
+        die("%s: expected a whole number, got '%s'", what, text);
+    return (size_t)value;
 }
 
 /* Read one line (without its newline) into buf. */
@@ -78,13 +99,13 @@ static void read_line(FILE *f, char *buf, size_t size) {
     buf[strcspn(buf, "\r\n")] = '\0';
 }
 
-static void read_slave(FILE *f, Slave *s) {
+static void read_slave(FILE *f, Slave *s, size_t n_bus) {
     char line[4096];
     read_line(f, s->library, sizeof s->library);
     read_line(f, s->guid, sizeof s->guid);
     read_line(f, s->name, sizeof s->name);
     read_line(f, line, sizeof line);
-    s->n_params = strtoul(line, NULL, 10);
+    s->n_params = parse_count(line, "plan: parameter count");
     s->param_vr = xcalloc(s->n_params, sizeof *s->param_vr);
     s->param_type = xcalloc(s->n_params, 1);
     s->param_value = xcalloc(s->n_params, sizeof *s->param_value);
@@ -92,12 +113,14 @@ static void read_slave(FILE *f, Slave *s) {
         unsigned vr;
         char type;
         read_line(f, line, sizeof line);
-        if (sscanf(line, "%u %c %lf", &vr, &type, &s->param_value[i]) != 3) die("plan: bad parameter line '%s'", line);
+        if (sscanf(line, "%u %c %lf", &vr, &type, &s->param_value[i]) != 3 ||
+            (type != 'I' && type != 'R'))
+            die("plan: bad parameter line '%s'", line);
         s->param_vr[i] = vr;
         s->param_type[i] = type;
     }
     read_line(f, line, sizeof line);
-    s->n_in = strtoul(line, NULL, 10);
+    s->n_in = parse_count(line, "plan: input count");
     s->in_vr = xcalloc(s->n_in, sizeof *s->in_vr);
     s->in_index = xcalloc(s->n_in, sizeof *s->in_index);
     s->in_buf = xcalloc(s->n_in, sizeof *s->in_buf);
@@ -106,18 +129,29 @@ static void read_slave(FILE *f, Slave *s) {
         size_t index;
         read_line(f, line, sizeof line);
         if (sscanf(line, "%u %zu", &vr, &index) != 2) die("plan: bad input line '%s'", line);
+        if (index >= n_bus)
+            die("plan: %s: input %zu reads bus index %zu, the bus has %zu signals", s->name, i,
+                index, n_bus);
         s->in_vr[i] = vr;
         s->in_index[i] = index;
     }
     read_line(f, line, sizeof line);
-    if (sscanf(line, "%zu %zu", &s->n_out, &s->out_offset) != 2) die("plan: bad output header '%s'", line);
+    if (sscanf(line, "%zu %zu", &s->n_out, &s->out_offset) != 2)
+        die("plan: bad output header '%s'", line);
+    if (s->out_offset > n_bus || s->n_out > n_bus - s->out_offset)
+        die("plan: %s: outputs at bus index %zu .. %zu + %zu, the bus has %zu signals", s->name,
+            s->out_offset, s->out_offset, s->n_out, n_bus);
     s->out_vr = xcalloc(s->n_out, sizeof *s->out_vr);
     for (size_t i = 0; i < s->n_out; i++) {
         read_line(f, line, sizeof line);
-        s->out_vr[i] = (fmi2ValueReference)strtoul(line, NULL, 10);
+        const size_t vr = parse_count(line, "plan: output value reference");
+        if (vr > UINT32_MAX) die("plan: %s: output value reference %zu", s->name, vr);
+        s->out_vr[i] = (fmi2ValueReference)vr;
     }
     read_line(f, line, sizeof line);
-    if (sscanf(line, "%d %d", &s->read_before, &s->read_after) != 2) die("plan: bad read flags '%s'", line);
+    if (sscanf(line, "%d %d", &s->read_before, &s->read_after) != 2 ||
+        (s->read_before != 0 && s->read_before != 1) || (s->read_after != 0 && s->read_after != 1))
+        die("plan: bad read flags '%s'", line);
 
     s->lib = dlopen(s->library, RTLD_NOW | RTLD_LOCAL);
     if (s->lib == NULL) die("%s", dlerror());
@@ -155,6 +189,11 @@ static void instantiate(Slave *s, double stop_time) {
     check(s->exit_init(s->c), s, "fmi2ExitInitializationMode", 0.0);
 }
 
+/* The FMU's outputs into its block of the bus. */
+static void read_outputs(const Slave *s, double *bus, double t) {
+    check(s->get_real(s->c, s->out_vr, s->n_out, bus + s->out_offset), s, "fmi2GetReal", t);
+}
+
 static double now(void) {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -172,27 +211,34 @@ int main(int argc, char **argv) {
     size_t n_bus, n_src, n_slaves;
     long steps;
     read_line(plan, line, sizeof line);
-    if (sscanf(line, "%lf %zu %zu %ld %zu", &h, &n_bus, &n_src, &steps, &n_slaves) != 5) die("plan: bad header '%s'", line);
+    if (sscanf(line, "%lf %zu %zu %ld %zu", &h, &n_bus, &n_src, &steps, &n_slaves) != 5 ||
+        !(h > 0.0 && isfinite(h)) || steps < 1 || n_src > n_bus)
+        die("plan: bad header '%s' (a step > 0, at least one step, no more sources than bus "
+            "signals)", line);
     Slave *slaves = xcalloc(n_slaves, sizeof *slaves);
-    for (size_t i = 0; i < n_slaves; i++) read_slave(plan, &slaves[i]);
+    for (size_t i = 0; i < n_slaves; i++) read_slave(plan, &slaves[i], n_bus);
     fclose(plan);
 
     const size_t rows = (size_t)steps + 1;
-    double *table = xcalloc(rows * n_src, sizeof *table);
+    const size_t n_table = product(rows, n_src, "sources");
+    const size_t n_record = product(rows, n_bus, "record");
+    double *table = xcalloc(n_table, sizeof *table);
     FILE *f = fopen(argv[2], "rb");
-    if (f == NULL || fread(table, sizeof *table, rows * n_src, f) != rows * n_src) die("cannot read %s", argv[2]);
+    if (f == NULL || fread(table, sizeof *table, n_table, f) != n_table)
+        die("cannot read %s", argv[2]);
     fclose(f);
-    double *record = xcalloc(rows * n_bus, sizeof *record);
+    double *record = xcalloc(n_record, sizeof *record);
     double *bus = xcalloc(n_bus, sizeof *bus);
-    const int repeats = atoi(argv[4]);
+    const size_t repeats = parse_count(argv[4], "REPEATS");
+    if (repeats < 1) die("REPEATS must be at least 1");
     double best = 1e300;
 
-    for (int r = 0; r < repeats; r++) {
+    for (size_t r = 0; r < repeats; r++) {
         memset(bus, 0, n_bus * sizeof *bus);
         for (size_t i = 0; i < n_slaves; i++) {
             Slave *s = &slaves[i];
             instantiate(s, (double)steps * h);
-            if (s->read_after) check(s->get_real(s->c, s->out_vr, s->n_out, bus + s->out_offset), s, "fmi2GetReal", 0.0);
+            if (s->read_after) read_outputs(s, bus, 0.0);
         }
         const double start = now();
         for (long k = 0; k <= steps; k++) {
@@ -200,9 +246,10 @@ int main(int argc, char **argv) {
             for (size_t i = 0; i < n_slaves; i++) {
                 Slave *s = &slaves[i];
                 for (size_t j = 0; j < s->n_in; j++) s->in_buf[j] = bus[s->in_index[j]];
-                if (s->n_in) check(s->set_real(s->c, s->in_vr, s->n_in, s->in_buf), s, "fmi2SetReal", (double)k * h);
-                if (s->read_before && s->n_out)
-                    check(s->get_real(s->c, s->out_vr, s->n_out, bus + s->out_offset), s, "fmi2GetReal", (double)k * h);
+                if (s->n_in)
+                    check(s->set_real(s->c, s->in_vr, s->n_in, s->in_buf), s, "fmi2SetReal",
+                          (double)k * h);
+                if (s->read_before && s->n_out) read_outputs(s, bus, (double)k * h);
             }
             memcpy(record + (size_t)k * n_bus, bus, n_bus * sizeof *bus);
             if (k == steps) break;
@@ -210,18 +257,20 @@ int main(int argc, char **argv) {
             for (size_t i = 0; i < n_slaves; i++) {
                 Slave *s = &slaves[i];
                 check(s->do_step(s->c, t, h, fmi2True), s, "fmi2DoStep", t);
-                if (s->read_after) check(s->get_real(s->c, s->out_vr, s->n_out, bus + s->out_offset), s, "fmi2GetReal", t + h);
+                if (s->read_after) read_outputs(s, bus, t + h);
             }
         }
         const double elapsed = now() - start;
         if (elapsed < best) best = elapsed;
         for (size_t i = 0; i < n_slaves; i++) {
-            check(slaves[i].terminate(slaves[i].c), &slaves[i], "fmi2Terminate", (double)steps * h);
+            check(slaves[i].terminate(slaves[i].c), &slaves[i], "fmi2Terminate",
+                  (double)steps * h);
             slaves[i].free_instance(slaves[i].c);
         }
     }
     f = fopen(argv[3], "wb");
-    if (f == NULL || fwrite(record, sizeof *record, rows * n_bus, f) != rows * n_bus) die("cannot write %s", argv[3]);
+    if (f == NULL || fwrite(record, sizeof *record, n_record, f) != n_record)
+        die("cannot write %s", argv[3]);
     fclose(f);
     printf("{\"us_per_step\": %.6f}\n", 1e6 * best / (double)steps);
     return 0;

@@ -6,7 +6,10 @@
  * order cosim/master.py documents (Gauss-Seidel or Jacobi by the read flags), records the bus,
  * and measures each step: its task execution time (TET: the first FMI call of the step to the
  * end of its last), each FMU's share of it, and, when paced, how late the step started
- * against its absolute schedule start + k * period. Nothing is allocated here.
+ * against its absolute schedule start + k * period. Nothing is allocated here. Every index
+ * the plan holds is checked against the sizes it gives before a chunk runs (check_plan), and
+ * engine_layout() reports the structures' layout for cosim/engine.py to check its ctypes
+ * mirrors against when it loads the library.
  *
  * Values of other types than float64 go through a hook into Python (`typed`), called where
  * such an FMU sets its inputs or reads its outputs.
@@ -14,11 +17,15 @@
 
 #define _POSIX_C_SOURCE 200809L
 
+#include <stdarg.h>
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
 #include <string.h>
 #include <time.h>
 
+typedef void (*function_t)(void); /* any function: cast to its type before the call */
 typedef int (*set2_t)(void *, const unsigned *, size_t, const double *);
 typedef int (*set3_t)(void *, const unsigned *, size_t, const double *, size_t);
 typedef int (*get2_t)(void *, const unsigned *, size_t, double *);
@@ -30,11 +37,12 @@ typedef int (*step3_t)(void *, double, double, bool, bool *, bool *, bool *, dou
 typedef int (*typed_t)(long, int, long);
 
 enum { CALL_SET = 1, CALL_GET_BEFORE = 2, CALL_STEP = 3, CALL_GET_AFTER = 4, CALL_TYPED = 5 };
+enum { RUN_OK = 0, RUN_FAILED = 1, RUN_OVERRUN = 2, RUN_BAD_PLAN = 3 }; /* engine_run's result */
 
 typedef struct {
     int fmi3;
     void *component;
-    void *set_float64, *get_float64, *do_step;
+    function_t set_float64, get_float64, do_step;
     long n_in;
     const unsigned *in_vr;
     const long *gather;       /* bus index of every input, NULL: in_values is a view of the bus */
@@ -76,7 +84,48 @@ typedef struct {
     /* where it stopped: failed slave, call and point (or the step of the last overrun) */
     long failed_slave, failed_k;
     int failed_call;
+    char error[256];          /* RUN_BAD_PLAN: what does not fit */
 } Run;
+
+/* The layout of every structure cosim/engine.py mirrors: one entry per field, and one with no
+ * field for the structure's own size. */
+typedef struct {
+    const char *structure, *field;
+    size_t offset, size;
+} Layout;
+
+#define SIZE(T) {#T, NULL, 0, sizeof(T)}
+#define FIELD(T, f) {#T, #f, offsetof(T, f), sizeof(((T *)0)->f)}
+
+static const Layout LAYOUT[] = {
+    SIZE(struct timespec), FIELD(struct timespec, tv_sec), FIELD(struct timespec, tv_nsec),
+    SIZE(Slave), FIELD(Slave, fmi3), FIELD(Slave, component), FIELD(Slave, set_float64),
+    FIELD(Slave, get_float64), FIELD(Slave, do_step), FIELD(Slave, n_in), FIELD(Slave, in_vr),
+    FIELD(Slave, gather), FIELD(Slave, gain), FIELD(Slave, offset), FIELD(Slave, in_values),
+    FIELD(Slave, n_out), FIELD(Slave, out_vr), FIELD(Slave, out_values),
+    FIELD(Slave, read_before), FIELD(Slave, read_after), FIELD(Slave, typed_in),
+    FIELD(Slave, typed_out),
+    SIZE(Run), FIELD(Run, step), FIELD(Run, steps), FIELD(Run, n_slaves), FIELD(Run, slaves),
+    FIELD(Run, bus), FIELD(Run, n_bus), FIELD(Run, n_sources), FIELD(Run, sources),
+    FIELD(Run, record), FIELD(Run, columns), FIELD(Run, n_columns), FIELD(Run, typed),
+    FIELD(Run, typed_record), FIELD(Run, tet), FIELD(Run, slave_tet), FIELD(Run, lateness),
+    FIELD(Run, paced), FIELD(Run, period), FIELD(Run, start), FIELD(Run, max_overruns),
+    FIELD(Run, grace_steps), FIELD(Run, overruns), FIELD(Run, counted),
+    FIELD(Run, first_overruns), FIELD(Run, failed_slave), FIELD(Run, failed_k),
+    FIELD(Run, failed_call), FIELD(Run, error),
+};
+
+/* Entry i of the layout table (field NULL: the structure's size); 0, or -1 past its end. */
+__attribute__((visibility("default"))) int engine_layout(long i, const char **structure,
+                                                         const char **field, size_t *offset,
+                                                         size_t *size) {
+    if (i < 0 || (size_t)i >= sizeof LAYOUT / sizeof *LAYOUT) return -1;
+    *structure = LAYOUT[i].structure;
+    *field = LAYOUT[i].field;
+    *offset = LAYOUT[i].offset;
+    *size = LAYOUT[i].size;
+    return 0;
+}
 
 static double seconds(const struct timespec *a, const struct timespec *b) {
     return (double)(b->tv_sec - a->tv_sec) + 1e-9 * (double)(b->tv_nsec - a->tv_nsec);
@@ -95,7 +144,68 @@ static int fail(Run *r, long slave, int call, long k) {
     r->failed_slave = slave;
     r->failed_call = call;
     r->failed_k = k;
-    return 1;
+    return RUN_FAILED;
+}
+
+/* RUN_BAD_PLAN with the message in r->error. */
+__attribute__((format(printf, 2, 3))) static int bad_plan(Run *r, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(r->error, sizeof r->error, fmt, ap);
+    va_end(ap);
+    return RUN_BAD_PLAN;
+}
+
+/* n doubles from p lie inside the bus. */
+static bool in_bus(const Run *r, const double *p, long n) {
+    const uintptr_t start = (uintptr_t)r->bus, at = (uintptr_t)p;
+    return p != NULL && n >= 0 && n <= r->n_bus && at >= start &&
+           (at - start) % sizeof *p == 0 && (at - start) / sizeof *p <= (size_t)(r->n_bus - n);
+}
+
+/* Slave i's counts, pointers and bus indices against the bus; 0 if they fit. */
+static int check_slave(Run *r, long i) {
+    const Slave *s = &r->slaves[i];
+    if (s->component == NULL || s->set_float64 == NULL || s->get_float64 == NULL ||
+        s->do_step == NULL || s->n_in < 0 || s->n_out < 0 ||
+        (s->n_in > 0 && (s->in_vr == NULL || s->in_values == NULL)) ||
+        (s->n_out > 0 && s->out_vr == NULL) || (s->gain != NULL && s->offset == NULL) ||
+        ((s->typed_in || s->typed_out) && r->typed == NULL))
+        return bad_plan(r, "slave %ld: a count is negative or a pointer is missing", i);
+    if (!in_bus(r, s->out_values, s->n_out))
+        return bad_plan(r, "slave %ld: its %ld outputs do not lie inside the bus of %ld", i,
+                        s->n_out, r->n_bus);
+    if (s->gather == NULL && !in_bus(r, s->in_values, s->n_in))
+        return bad_plan(r, "slave %ld: its %ld inputs do not lie inside the bus of %ld", i,
+                        s->n_in, r->n_bus);
+    for (long j = 0; s->gather != NULL && j < s->n_in; j++)
+        if (s->gather[j] < 0 || s->gather[j] >= r->n_bus)
+            return bad_plan(r, "slave %ld: input %ld reads bus index %ld", i, j, s->gather[j]);
+    return RUN_OK;
+}
+
+/* Every count, pointer and index of the plan against the sizes it gives, before points
+ * k0 .. k1 - 1 run; RUN_OK or RUN_BAD_PLAN. */
+static int check_plan(Run *r, long k0, long k1) {
+    r->error[0] = '\0';
+    if (r->steps < 0 || k0 < 0 || k1 < k0 || k1 > r->steps + 1)
+        return bad_plan(r, "points %ld .. %ld asked for, the run has points 0 .. %ld", k0,
+                        k1 - 1, r->steps);
+    if (r->n_slaves < 0 || r->n_bus < 0 || r->n_sources < 0 || r->n_sources > r->n_bus ||
+        r->n_columns < 0 || (r->columns == NULL && r->n_columns != r->n_bus))
+        return bad_plan(r, "%ld slaves, %ld sources or %ld columns do not fit the bus",
+                        r->n_slaves, r->n_sources, r->n_columns);
+    if ((r->n_slaves > 0 && r->slaves == NULL) || r->bus == NULL || r->sources == NULL ||
+        r->record == NULL || r->tet == NULL || r->slave_tet == NULL || r->lateness == NULL ||
+        (r->typed_record && r->typed == NULL))
+        return bad_plan(r, "a buffer is missing");
+    for (long j = 0; r->columns != NULL && j < r->n_columns; j++)
+        if (r->columns[j] < 0 || r->columns[j] >= r->n_bus)
+            return bad_plan(r, "recorded column %ld is bus index %ld, the bus has %ld", j,
+                            r->columns[j], r->n_bus);
+    for (long i = 0; i < r->n_slaves; i++)
+        if (check_slave(r, i) != RUN_OK) return RUN_BAD_PLAN;
+    return RUN_OK;
 }
 
 /* Gather, scale and shift one FMU's float inputs, then set them. */
@@ -132,10 +242,12 @@ static int advance(Slave *s, double t, double h) {
     return terminate ? 3 : status;
 }
 
-/* Points k0 .. k1 - 1. Returns 0, 1 for a failed call (failed_* say which), 2 when the
- * overruns reached max_overruns (failed_k: the step of the last one). */
+/* Points k0 .. k1 - 1. Returns RUN_OK, RUN_FAILED for a failed call (failed_* say which),
+ * RUN_OVERRUN when the overruns reached max_overruns (failed_k: the step of the last one), or
+ * RUN_BAD_PLAN, before any call, when the plan does not fit (error says why). */
 __attribute__((visibility("default"))) int engine_run(Run *r, long k0, long k1) {
     const double h = r->step;
+    if (check_plan(r, k0, k1) != RUN_OK) return RUN_BAD_PLAN;
     for (long k = k0; k < k1; k++) {
         struct timespec t0, t1, ts;
         double late = 0.0;
@@ -171,7 +283,7 @@ __attribute__((visibility("default"))) int engine_run(Run *r, long k0, long k1) 
         else
             for (long j = 0; j < r->n_columns; j++) row[j] = r->bus[r->columns[j]];
         if (r->typed_record && r->typed(-1, 2, k)) return fail(r, -1, CALL_TYPED, k);
-        if (k == r->steps) return 0;
+        if (k == r->steps) return RUN_OK;
         const double t = (double)k * h;
         for (long i = 0; i < r->n_slaves; i++) {
             Slave *s = &r->slaves[i];
@@ -194,9 +306,9 @@ __attribute__((visibility("default"))) int engine_run(Run *r, long k0, long k1) 
             if (k >= r->grace_steps) r->counted++;
             if (r->max_overruns > 0 && r->counted >= r->max_overruns) {
                 r->failed_k = k;
-                return 2;
+                return RUN_OVERRUN;
             }
         }
     }
-    return 0;
+    return RUN_OK;
 }

@@ -218,7 +218,7 @@ static fmi2Status check_initial(Instance *c, const char *what, const fmi2Real *v
     describe_changed_parameters(c, changed, sizeof changed);
     if (vr == VR_Y) describe_inputs(c->d.u, inputs, sizeof inputs);
     return fail(c, "Initial %s '%s' = %g is not finite: the model has no valid initial point for "
-                   "%s%s%s%s%s.", what, REAL_NAMES[vr + bad], v[bad],
+                   "%s%s%s%s%s.", what, real_name(vr + (fmi2ValueReference)bad), v[bad],
                 changed[0] ? "the parameters set (" : "the parameters at their start values",
                 changed, changed[0] ? ")" : "", inputs[0] ? " and the inputs " : "", inputs);
 }
@@ -415,7 +415,7 @@ static int data_problem(const Instance *c, const Data *d, char *why, size_t size
         (d->stop_time_defined && isnan(d->stop_time)))
         PROBLEM("stop time %g (defined: %d)", d->stop_time, d->stop_time_defined);
     if ((bad = first_nonfinite(d->u, N_U)) >= 0)
-        PROBLEM("input '%s' = %g", REAL_NAMES[VR_U + bad], d->u[bad]);
+        PROBLEM("input '%s' = %g", real_name(VR_U + bad), d->u[bad]);
     if (first_nonfinite(d->w, N_W) >= 0 || (d->rng.has_spare != 0 && d->rng.has_spare != 1) ||
         !isfinite(d->rng.spare))
         PROBLEM("noise generator");
@@ -428,7 +428,7 @@ static int data_problem(const Instance *c, const Data *d, char *why, size_t size
         if (problem) PROBLEM("parameter '%s' = %g %s", REAL_NAMES[vr], value, problem);
     }
     if (initialized && (bad = first_nonfinite(d->x, N_X)) >= 0)
-        PROBLEM("state '%s' = %g", REAL_NAMES[VR_X + bad], d->x[bad]);
+        PROBLEM("state '%s' = %g", real_name(VR_X + bad), d->x[bad]);
 #if HAS_NETWORK
     if (d->net_step < 0 || d->net_step > NET_STEP_MAX)
         PROBLEM("network step counter %ld", d->net_step);
@@ -644,7 +644,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h,
     if (bad >= 0) {
         c->d.mode = MODE_ERROR;
         return fail(c, "fmi2DoStep(): state '%s' became %g in the step from t = %.17g.",
-                    REAL_NAMES[VR_X + bad], c->xn[bad], t);
+                    real_name(VR_X + bad), c->xn[bad], t);
     }
     memcpy(c->d.x, c->xn, sizeof c->xn);
 #if HAS_NETWORK

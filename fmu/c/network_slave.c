@@ -40,6 +40,16 @@ static int resource_path(const char *uri, const char *name, char *path, size_t s
     return snprintf(path + j, size - j, "/%s", name) < (int)(size - j) ? 0 : -1;
 }
 
+/* Double the table's capacity in rows; -1 (the table as it was) if memory runs out. */
+static int grow_table(Instance *c, long *capacity) {
+    double *grown = (double *)realloc(c->table,
+                                      sizeof(double) * (size_t)(2 * *capacity) * (1 + N_U));
+    if (grown == NULL) return -1;
+    c->table = grown;
+    *capacity *= 2;
+    return 0;
+}
+
 /* resources/NET_TABLE_FILE: a header "time,<inputs>" and one row per communication point. */
 static int load_table(Instance *c, const char *path, char *error, size_t size) {
     FILE *f = fopen(path, "r");
@@ -63,11 +73,11 @@ static int load_table(Instance *c, const char *path, char *error, size_t size) {
     c->table_rows = 0;
     while (c->table != NULL && fgets(line, sizeof line, f) != NULL) {
         char *s = line, *end;
-        if (c->table_rows == capacity) {
-            double *grown = (double *)realloc(c->table, sizeof(double) * (size_t)(2 * capacity) * (1 + N_U));
-            if (grown == NULL) break;
-            c->table = grown;
-            capacity *= 2;
+        if (c->table_rows == capacity && grow_table(c, &capacity) != 0) {
+            snprintf(error, size, "out of memory reading %s (at row %ld)", path,
+                     c->table_rows + 1);
+            fclose(f);
+            return -1;
         }
         double *row = c->table + c->table_rows * (1 + N_U);
         for (int k = 0; k < 1 + N_U; k++) {
@@ -112,7 +122,11 @@ int net_load(Instance *c, fmi2String resources, char *error, size_t size) {
     if (c->net == NULL) return -1;
     if (NET_PRECOMPUTED) {
         char table[4096];
-        resource_path(resources, NET_TABLE_FILE, table, sizeof table);
+        if (resource_path(resources, NET_TABLE_FILE, table, sizeof table) != 0) {
+            snprintf(error, size, "the path of %s in '%s' is too long", NET_TABLE_FILE,
+                     resources);
+            return -1;
+        }
         return load_table(c, table, error, size);
     }
     return 0;

@@ -150,6 +150,10 @@ int compute_initial(Instance *c) {
     return eval_initial_state(c, c->d.x);
 }
 
+/* The name of value reference vr, checked against the table: an index found in data (the
+ * first bad entry of a block) never reads past REAL_NAMES. */
+const char *real_name(fmi2ValueReference vr) { return vr < N_REAL ? REAL_NAMES[vr] : "?"; }
+
 /* Index of the first non-finite entry of v[0..n), or -1. */
 int first_nonfinite(const fmi2Real *v, int n) {
     for (int i = 0; i < n; i++)

@@ -175,6 +175,7 @@ int eval_initial_state(Instance *c, fmi2Real *x);
 int eval_dynamics(Instance *c, const fmi2Real *x, fmi2Real *out);
 void draw_noise(Instance *c);
 int compute_initial(Instance *c);
+const char *real_name(fmi2ValueReference vr);
 int first_nonfinite(const fmi2Real *v, int n);
 void describe_inputs(const fmi2Real *u, char *text, size_t size);
 int rk4_step(Instance *c, fmi2Real dt);

@@ -9,6 +9,7 @@ import zipfile
 from ctypes import byref, c_char
 
 import casadi as ca
+import fmpy
 import numpy as np
 import onnx
 import pytest
@@ -17,6 +18,8 @@ from fmpy.fmi2 import FMU2Slave, fmi2Error, fmi2FMUstate, fmi2OK
 from onnx import TensorProto
 from onnx import helper as oh
 
+from flexff.fmu.codegen import NET_TABLE_FILE
+from flexff.fmu.compile import run_compiler
 from flexff.fmu.network import read_network
 from flexff.fmu.system import System, Variable
 from flexff.fmu.validation import validate_fmu
@@ -230,6 +233,37 @@ def test_inputs_off_the_precomputed_table_are_refused(precomputed_fmu):
     assert status_of(s.slave.doStep, H, H) == fmi2Error
     assert "Input 'u1'" in s.log() and "differs from the precomputation table" in s.log()
     s.free()
+
+
+def _with_long_table(fmu, folder, rows: int):
+    """The FMU unpacked in `folder` with a precomputation table of `rows` valid rows."""
+    folder = _unpacked(fmu, folder)
+    lines = ["time,u1,u2", *(f"{k * H!r},0.0,0.0" for k in range(rows))]
+    (folder / "resources" / NET_TABLE_FILE).write_text("\n".join(lines) + "\n")
+    return folder
+
+
+def test_a_table_that_cannot_grow_is_an_error(precomputed_fmu, tmp_path):
+    """The table starts with room for 1024 rows and doubles; when realloc fails (a library
+    rebuilt from sources/ with a realloc that always fails), fmi2Instantiate fails with a
+    message, never with a truncated table."""
+    md = read_model_description(str(precomputed_fmu))
+    intact = _with_long_table(precomputed_fmu, tmp_path / "intact", 2000)
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=str(intact), instanceName="x",
+                      modelIdentifier=md.coSimulation.modelIdentifier)
+    slave.instantiate()  # the table itself is valid
+    slave.freeInstance()
+    folder = _with_long_table(precomputed_fmu, tmp_path / "no-realloc", 2000)
+    (tmp_path / "failing.c").write_text(
+        "#include <stddef.h>\nvoid *failing_realloc(void *p, size_t n) "
+        "{ (void)p; (void)n; return NULL; }\n")
+    sources = [folder / "sources" / f for f in
+               md.buildConfigurations[0].sourceFileSets[0].sourceFiles]
+    library = folder / "binaries" / fmpy.platform / f"{md.coSimulation.modelIdentifier}.so"
+    run_compiler([*sources, tmp_path / "failing.c"], library, [folder / "sources"],
+                 extra_flags=("-shared", "-Drealloc=failing_realloc"), libraries=("-lm", "-ldl"))
+    assert ("out of memory reading" in (log := _instantiate_log(precomputed_fmu, folder))
+            and "(at row 1025)" in log), log
 
 
 def test_a_non_finite_result_stops_the_step(tmp_path_factory):

@@ -1,0 +1,83 @@
+"""Every C file flexff ships compiles without a warning under -Wall -Wextra -pedantic -Werror,
+with the build's own flags (so -O2: gcc's flow-sensitive warnings such as -Warray-bounds only
+run when optimizing, which -fsyntax-only skips).
+
+The FMU's generic slave is compiled against the config.h of three toy FMUs (continuous,
+discrete without states, with an embedded network), since its code paths depend on the sizes
+there; the helper programs and the engine as they are built. CasADi's generated model.c (the
+toys' and the plant's) is held to the same flags but -Wunused-parameter: its functions take
+CasADi's fixed calling convention (arg, res, iw, w, mem), used or not.
+"""
+
+import os
+import subprocess
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from flexff.fmu.build import NETWORK_SOURCES, SLAVE_SOURCES
+from flexff.fmu.codegen import generate_model_c
+from flexff.fmu.compile import CFLAGS, HOST_HEADER, compiler, fmi_headers
+from flexff.plant.system import plant_system
+from tests.fmu.test_network import network_system, running_sum_graph
+from tests.fmu_toys import build_toy, discrete_pi, duffing
+from tests.helpers import REPOSITORY
+
+WARNINGS = ("-Wall", "-Wextra", "-pedantic", "-Werror")
+GENERATED = ("-Wno-unused-parameter",)  # CasADi's calling convention, see above
+FMU_C = REPOSITORY / "fmu" / "c"
+HELPERS = (REPOSITORY / "cosim" / "c", REPOSITORY / "flexff" / "c")
+
+
+def compile_warnings(source: Path, include_dirs: list[Path], extra: tuple[str, ...] = ()) -> str:
+    """gcc's messages for `source` compiled with the build's flags and WARNINGS ("": none)."""
+    result = subprocess.run([compiler(), *CFLAGS, *WARNINGS, *extra, "-c", "-o", os.devnull,
+                             *(f"-I{d}" for d in include_dirs), str(source)],
+                            capture_output=True, text=True)
+    return "" if result.returncode == 0 else result.stderr
+
+
+@pytest.fixture(scope="module")
+def toy_sources(tmp_path_factory) -> dict[str, Path]:
+    """The sources/ folder of each toy FMU, by toy."""
+    graph = running_sum_graph(tmp_path_factory.mktemp("graph") / "sum.onnx")
+    folders = {}
+    for system in (duffing(), discrete_pi(), network_system(graph)):
+        folder = tmp_path_factory.mktemp(system.name)
+        with zipfile.ZipFile(build_toy(system, tmp_path_factory)) as zf:
+            zf.extractall(folder)
+        folders[system.name] = folder / "sources"
+    return folders
+
+
+def test_every_fmu_source_is_shipped():
+    """The toys below compile what an FMU ships: every C file of fmu/c is one of those."""
+    assert sorted(p.name for p in FMU_C.glob("*.c")) == sorted(SLAVE_SOURCES + NETWORK_SOURCES)
+
+
+def test_the_fmu_sources_compile_without_warnings(toy_sources):
+    found = {}
+    for toy, sources in toy_sources.items():
+        for name in sorted(p.name for p in sources.glob("*.c")):
+            generated = name == "model.c"  # CasADi's; the others are fmu/c's own files
+            source = sources / name if generated else FMU_C / name
+            found[f"{toy}: {name}"] = compile_warnings(source, [sources],
+                                                       GENERATED if generated else ())
+    assert {f: w for f, w in found.items() if w} == {}
+
+
+def test_the_plant_model_compiles_without_warnings(tmp_path):
+    for name, text in generate_model_c(plant_system(), "plant").items():
+        (tmp_path / name).write_text(text)
+    assert compile_warnings(tmp_path / "model.c", [tmp_path], GENERATED) == ""
+
+
+def test_the_helpers_and_the_engine_compile_without_warnings(tmp_path):
+    for name, text in fmi_headers().items():
+        (tmp_path / name).write_text(text)
+    sources = sorted(p for folder in HELPERS for p in folder.glob("*.c"))
+    assert [p.name for p in sources] == ["cosim_loop.c", "engine.c", "bench_loop.c"]
+    found = {str(p.relative_to(REPOSITORY)): compile_warnings(p, [tmp_path, HOST_HEADER.parent])
+             for p in sources}
+    assert {f: w for f, w in found.items() if w} == {}
