@@ -66,6 +66,7 @@ from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ALGORITHMS, ConfigError, ConnectionConfig, FmuConfig, RunConfig
 from flexff.cosim.wiring import SOURCE
 from flexff.fmu.cache import cache_dir
+from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
 
 NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -108,7 +109,7 @@ def export_ssp(config: RunConfig, path: str | Path) -> Path:
                           and np.ndim(scenario.sources[k.signal])
                           and k.signal not in Reference.SIGNALS})
         if varying:
-            raise ValueError(f"{config.source}: SSP 1.0 cannot carry time-varying source "
+            raise InputError(f"{config.source}: SSP 1.0 cannot carry time-varying source "
                              f"signals, and {', '.join(varying)} feed FMU inputs: an SSP system "
                              f"holds FMUs, their connections and start values only")
         ssd = etree.tostring(_ssd(scenario), xml_declaration=True, encoding="UTF-8",

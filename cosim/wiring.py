@@ -21,13 +21,14 @@ from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 from flexff.cosim.schema import ConnectionConfig
+from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuInfo
 
 SOURCE = "sources"  # producer name of the external signals
 FLOAT_KINDS = ("float64", "float32")
 
 
-class WiringError(ValueError):
+class WiringError(InputError):
     """A connection problem; `key` names the configuration table at fault."""
 
     def __init__(self, key: str, message: str) -> None:

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from flexff.cosim.timing import OverrunError, Pacing
+from flexff.fmu.errors import InputError
 from flexff.learning.dataset import SETS
 from flexff.plant.model import VARIANTS
 
@@ -63,20 +64,20 @@ def _fmu_build(args: argparse.Namespace) -> int:
     from flexff.fmu.build import build_fmu
 
     if args.kind != "onnx" and (args.graph is not None or args.every is not None):
-        raise ValueError("only fmu build onnx takes a graph file and --every (a learned "
+        raise InputError("only fmu build onnx takes a graph file and --every (a learned "
                          "feedforward takes --model M.onnx and runs at the model's rate)")
     if args.kind == "onnx":
         from flexff.fmu.onnx_fmu import onnx_system
 
         if args.graph is None:
-            raise ValueError("fmu build onnx needs the graph: flexff fmu build onnx MODEL.onnx "
+            raise InputError("fmu build onnx needs the graph: flexff fmu build onnx MODEL.onnx "
                              "-o M.fmu")
         system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every)
     elif args.kind == "feedforward":
         from flexff.controllers.learned_feedforward import learned_feedforward_system
 
         if args.model is None:
-            raise ValueError("fmu build feedforward needs --model M.onnx (flexff export)")
+            raise InputError("fmu build feedforward needs --model M.onnx (flexff export)")
         system = learned_feedforward_system(args.model, args.step)
     else:
         from flexff.plant.system import plant_system
@@ -112,7 +113,7 @@ def _bench(args: argparse.Namespace) -> int:
     if args.models:
         models = {p.stem: p for p in sorted(Path(args.models).glob("*.onnx"))}
         if not models:
-            raise ValueError(f"no .onnx files in {args.models}")
+            raise InputError(f"no .onnx files in {args.models}")
     if args.output:
         _output_file(args.output)
     text = json.dumps(run_benchmarks(steps=args.steps, models=models,
@@ -132,12 +133,12 @@ def _run(args: argparse.Namespace) -> int:
     configs = args.configs
     if args.sweep:
         if len(configs) != 1:
-            raise ValueError("--sweep takes exactly one configuration")
+            raise InputError("--sweep takes exactly one configuration")
         axes: dict[str, list[Any]] = {}
         for text in args.sweep:
             key, values = _sweep_values(text)
             if key in axes:
-                raise ValueError(f"--sweep {key} is given twice: list its values once")
+                raise InputError(f"--sweep {key} is given twice: list its values once")
             axes[key] = values
         configs = sweep(configs[0], axes)
     elif len(configs) == 1 and args.scheduler is None:
@@ -145,7 +146,7 @@ def _run(args: argparse.Namespace) -> int:
         _print_result(configs[0], metrics, args.output)
         return 0
     if args.realtime:
-        raise ValueError("--realtime runs one configuration, in this process")
+        raise InputError("--realtime runs one configuration, in this process")
     status = 0
     for result in run_batch(configs, args.output, args.workers, args.scheduler,
                             subfolders=len(configs) > 1 or bool(args.sweep)):
@@ -164,7 +165,7 @@ def _pacing(args: argparse.Namespace) -> Pacing | None:
     if not args.realtime:
         given = [name for name, value in options.items() if value is not None]
         if given:
-            raise ValueError(f"{', '.join(given)} apply to paced runs: add --realtime")
+            raise InputError(f"{', '.join(given)} apply to paced runs: add --realtime")
         return None
     return Pacing(rt_factor=1.0 if args.rt_factor is None else args.rt_factor,
                   max_overruns=args.max_overruns or 0, grace=args.grace or 0.0)
@@ -176,11 +177,11 @@ def _sweep_values(text: str) -> tuple[str, list[Any]]:
 
     key, sep, values = text.partition("=")
     if not sep or not values:
-        raise ValueError(f"--sweep expects TABLE.KEY=V1,V2,..., got {text!r}")
+        raise InputError(f"--sweep expects TABLE.KEY=V1,V2,..., got {text!r}")
     try:
         return key.strip(), tomllib.loads(f"v = [{values}]")["v"]
     except tomllib.TOMLDecodeError:
-        raise ValueError(f"--sweep values must be TOML values (strings quoted): {values!r}") \
+        raise InputError(f"--sweep values must be TOML values (strings quoted): {values!r}") \
             from None
 
 
@@ -215,7 +216,7 @@ def _config_example(args: argparse.Namespace) -> int:
         print("\n".join(examples))
         return 0
     if args.name not in examples:
-        raise ValueError(f"no example {args.name!r}; examples: {', '.join(examples)}")
+        raise InputError(f"no example {args.name!r}; examples: {', '.join(examples)}")
     print(examples[args.name], end="")
     return 0
 

@@ -47,6 +47,7 @@ from scipy.io.matlab import matfile_version
 from scipy.signal import savgol_filter
 
 from flexff.cosim.csv_text import read_rows
+from flexff.fmu.errors import InputError
 from flexff.learning.dataset import (
     ENCODER_SIGNALS,
     IMPORTED,
@@ -72,7 +73,7 @@ SET = "hardware"  # logs of a real machine
 FK = "forward kinematics of theta_s1..3 (nominal model, least squares)"
 
 
-class LogError(ValueError):
+class LogError(InputError):
     """A log that cannot be imported; the message names the file, column and row."""
 
 

@@ -16,6 +16,7 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
+from flexff.fmu.errors import InputError
 from flexff.plant.actuator import encoder_reading, friction_torque, motor_torque
 from flexff.plant.dynamics import reduced_dynamics
 from flexff.plant.kinematics import (
@@ -49,7 +50,7 @@ def get_variant(name: str) -> Variant:
     try:
         return VARIANTS[name]
     except KeyError:
-        raise ValueError(
+        raise InputError(
             f"unknown plant variant {name!r}: choose one of {', '.join(VARIANTS)}") from None
 
 
