@@ -2,8 +2,9 @@
 
 main() is the one place that turns a failure into one line on stderr and an exit code: 0 ok,
 1 a run that failed (an FMU error, a full disk, an unreachable Dask scheduler, memory), 2 bad
-input (a configuration, a path, an option, an unwritable output folder), 130 interrupted
-(3 is kept for real-time overruns). A Python traceback only with `flexff --debug`.
+input (InputError: a configuration, a path, an option, an unwritable output folder), 130
+interrupted (3 is kept for real-time overruns); any other error is a bug: 1, its type and a hint
+to rerun with `flexff --debug`, which prints the Python traceback.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from flexff.cosim.timing import OverrunError, Pacing
-from flexff.fmu.errors import InputError
+from flexff.fmu.errors import InputError, RunError
 from flexff.learning.dataset import SETS
 from flexff.plant.model import VARIANTS
 
@@ -29,6 +30,7 @@ PRESETS = ("fast", "thesis")
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
                 PermissionError)  # OSErrors about paths the user gave: exit code 2, as are
 INPUT_ERRNOS = (errno.EROFS, errno.ENAMETOOLONG, errno.ELOOP)  # these (others: 1)
+BUG_HINT = " (rerun with flexff --debug for the traceback)"  # an error that is not documented
 KEPT = {  # what an interrupted command keeps, by command (and subcommand)
     "run": "the runs that finished keep their folders; no file is left half-written",
     "data collect": "the trajectories collected so far are kept: run the same command again "
@@ -482,8 +484,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _failure(error: BaseException, command: str) -> tuple[int, str]:
-    """The exit code and the line on stderr for an error that stopped `command`."""
+def _failure(error: BaseException, command: str, debug: bool = False) -> tuple[int, str]:
+    """The exit code and the line on stderr for an error that stopped `command`: bad input
+    (InputError, an OSError about a path) 2, a run that failed (RunError, an OSError such as a
+    full disk, MemoryError) 1, anything else, a bug, 1 and how to see its traceback."""
     if isinstance(error, KeyboardInterrupt):
         kept = KEPT.get(command)
         return 130, "flexff: interrupted" + (f"; {kept}" if kept else "")
@@ -497,9 +501,9 @@ def _failure(error: BaseException, command: str) -> tuple[int, str]:
         if error.filename is not None:
             message = f"{error.filename}: {message}"
         return code, f"flexff: error: {message}"
-    if isinstance(error, (ValueError, RuntimeError)):
-        return (2 if isinstance(error, ValueError) else 1), f"flexff: error: {error}"
-    return 1, f"flexff: error: {type(error).__name__}: {error} (flexff --debug shows where)"
+    if isinstance(error, (InputError, RunError)):
+        return (2 if isinstance(error, InputError) else 1), f"flexff: error: {error}"
+    return 1, f"flexff: error: {type(error).__name__}: {error}{'' if debug else BUG_HINT}"
 
 
 def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
@@ -521,10 +525,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return handler(args)
     except (Exception, KeyboardInterrupt) as error:
-        if os.environ.get("FLEXFF_DEBUG") == "1":
+        debug = os.environ.get("FLEXFF_DEBUG") == "1"
+        if debug:
             traceback.print_exc()
         command = " ".join(filter(None, (args.command, getattr(args, "data_command", None))))
-        code, line = _failure(error, command)
+        code, line = _failure(error, command, debug)
         print(line, file=sys.stderr)
         return code
 
