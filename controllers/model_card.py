@@ -76,7 +76,7 @@ class ModelCard:
 
     @classmethod
     def from_metadata(cls, props: Mapping[str, str], where: str | Path) -> ModelCard:
-        """The card of the metadata `props` of the graph `where`; ValueError (what is wrong,
+        """The card of the metadata `props` of the graph `where`; InputError (what is wrong,
         what to do) if they are not those of a flexff feedforward model."""
         if props.get("format") != FORMAT:
             raise InputError(f"{where} is not a flexff feedforward model (metadata format "
@@ -117,7 +117,7 @@ class ModelCard:
 
 
 def read_card(model: str | Path) -> ModelCard:
-    """The card of an exported feedforward model; ValueError (what to do) if the file is not
+    """The card of an exported feedforward model; InputError (what to do) if the file is not
     one."""
     path = Path(model)
     if not path.is_file():

@@ -7,8 +7,8 @@ must be continuous) and `sample` evaluates a path on the communication grid. Tab
 files are resampled onto the grid, with missing derivatives from a Savitzky-Golay filter.
 
 Every segment checks its arguments and that it stays inside the nominal workspace, and raises
-ValueError naming the offending point otherwise. Sampling checks first that the samples fit
-into the available memory (MemoryNeeded, a ValueError, says how much they need).
+InputError naming the offending point otherwise. Sampling checks first that the samples fit
+into the available memory (MemoryNeeded, an InputError, says how much they need).
 """
 
 from __future__ import annotations

@@ -158,7 +158,7 @@ def read_fmu(path: str | Path) -> FmuInfo:
 
 def typed_value(kind: str, value: Any) -> Any:
     """`value` (a TOML value, or a start value as written in XML) as a value of `kind`
-    (TYPE_KINDS); ValueError saying what was expected."""
+    (TYPE_KINDS); InputError saying what was expected."""
     if kind in ("float64", "float32"):
         if isinstance(value, str):
             try:

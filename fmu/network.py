@@ -70,7 +70,7 @@ class Network:
 
 def read_network(model: str | Path, input_function: ca.Function, period: int = 1,
                  table: np.ndarray | None = None) -> Network:
-    """The Network of the ONNX file `model`; ValueError (what is wrong) if the graph does not
+    """The Network of the ONNX file `model`; InputError (what is wrong) if the graph does not
     follow the convention of this module or does not fit `input_function`."""
     path = Path(model)
     graph = load_model(path).graph
@@ -109,7 +109,7 @@ def read_network(model: str | Path, input_function: ca.Function, period: int = 1
 
 
 def load_model(model: str | Path) -> onnx.ModelProto:
-    """The ONNX model in the file `model`; ValueError naming the file if it is missing or is not
+    """The ONNX model in the file `model`; InputError naming the file if it is missing or is not
     an ONNX model."""
     path = Path(model)
     if not path.is_file():

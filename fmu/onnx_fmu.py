@@ -21,7 +21,7 @@ from flexff.fmu.system import System, Variable
 
 
 def onnx_system(model: str | Path, step: float = 1e-3, every: int = 1) -> System:
-    """The System of the FMU running the ONNX graph in the file `model`; ValueError (what is
+    """The System of the FMU running the ONNX graph in the file `model`; InputError (what is
     wrong, what to do) if the graph cannot be one (see fmu.onnx_graph.read_graph)."""
     if not step > 0:
         raise InputError(f"the communication step must be positive, got {step}")

@@ -77,7 +77,7 @@ class Graph:
 
 
 def read_graph(model: str | Path, time_axis: bool = False) -> Graph:
-    """The Graph of the ONNX file `model`; ValueError naming the file and tensor if it is not
+    """The Graph of the ONNX file `model`; InputError naming the file and tensor if it is not
     ONNX, a tensor is not float32/float64 or has a dynamic size, or the metadata does not fit.
 
     With `time_axis`, the first dimension of every input and output that is not state is time

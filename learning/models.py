@@ -315,7 +315,7 @@ RECURRENT = ("lstm", "cnn-lstm")
 
 
 def check_kind(kind: str) -> None:
-    """Raise ValueError naming the known model kinds if `kind` is not one."""
+    """Raise InputError naming the known model kinds if `kind` is not one."""
     if kind not in NETWORKS:
         raise InputError(f"unknown model {kind!r}: choose one of {', '.join(NETWORKS)}")
 

@@ -165,7 +165,7 @@ def forward_kinematics_3(p: PlantParameters, thetas: Any, iterations: int = 4) -
 
 
 def check_workspace(p: PlantParameters, x: Any, y: Any, what: str = "point") -> None:
-    """Raise ValueError if any (x, y) [m] lies outside the workspace disc or is not finite."""
+    """Raise InputError if any (x, y) [m] lies outside the workspace disc or is not finite."""
     xs, ys = np.atleast_1d(np.asarray(x, dtype=float)), np.atleast_1d(np.asarray(y, dtype=float))
     if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ys))):
         raise InputError(f"{what} has non-finite coordinates")

@@ -46,7 +46,7 @@ VARIANTS = {
 
 
 def get_variant(name: str) -> Variant:
-    """The variant called `name`, or a ValueError listing the known ones."""
+    """The variant called `name`, or an InputError listing the known ones."""
     try:
         return VARIANTS[name]
     except KeyError:

@@ -142,7 +142,7 @@ class PlantParameters:
                 for name, attr, _, j in self._flat_fields() if attr in fields_}
 
     def validate(self) -> None:
-        """Raise ValueError naming every parameter that is not finite or not positive."""
+        """Raise InputError naming every parameter that is not finite or not positive."""
         problems = []
         for name, value, unit, _, positive in self.describe():
             if not math.isfinite(value):
