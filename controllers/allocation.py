@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import casadi as ca
 
+from flexff.fmu.errors import InputError
 from flexff.plant.kinematics import forward_kinematics_2, forward_kinematics_3, shoulder_angles
 from flexff.plant.parameters import NOMINAL, PlantParameters
 
@@ -25,7 +26,7 @@ def measured_position(theta: ca.SX, encoders: int = 2,
     least-squares fit to all three (less sensitive to quantization).
     """
     if encoders not in ENCODER_CHOICES:
-        raise ValueError(f"encoders must be one of {ENCODER_CHOICES}, got {encoders!r}")
+        raise InputError(f"encoders must be one of {ENCODER_CHOICES}, got {encoders!r}")
     if encoders == 2:
         x, y = forward_kinematics_2(params, theta[0], theta[1])
     else:

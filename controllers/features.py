@@ -16,6 +16,7 @@ import functools
 import casadi as ca
 import numpy as np
 
+from flexff.fmu.errors import InputError
 from flexff.plant.kinematics import COORDINATE_NAMES, EE_INDEX
 from flexff.plant.model import PlantModel
 from flexff.plant.signals import REFERENCE, names, reference_motion, units
@@ -31,7 +32,7 @@ def feature_names(feature_set: str) -> list[str]:
     if feature_set == "full":
         return (list(COORDINATE_NAMES) + [f"{n}_dot" for n in COORDINATE_NAMES]
                 + [f"{n}_ddot" for n in COORDINATE_NAMES])
-    raise ValueError(f"unknown feature set {feature_set!r}: choose one of "
+    raise InputError(f"unknown feature set {feature_set!r}: choose one of "
                      f"{', '.join(FEATURE_SETS)}")
 
 

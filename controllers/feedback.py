@@ -19,6 +19,7 @@ import numpy as np
 
 from flexff.controllers.allocation import measured_position, motor_currents
 from flexff.controllers.loop_shaping import PIDDesign, StateSpace, design_pid
+from flexff.fmu.errors import InputError
 from flexff.fmu.system import Parameter, System, Variable
 from flexff.plant.analysis import plant_info
 from flexff.plant.kinematics import shoulder_angles
@@ -70,7 +71,7 @@ def controller_design(variant: str = "nominal", crossover_hz: float | None = Non
     try:
         defaults = DEFAULTS[variant]
     except KeyError:
-        raise ValueError(f"unknown controller variant {variant!r}: choose one of "
+        raise InputError(f"unknown controller variant {variant!r}: choose one of "
                          f"{', '.join(DEFAULTS)}") from None
     if notch_hz is None and defaults.notch:
         notch_hz = parasitic_mode_hz()

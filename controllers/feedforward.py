@@ -13,6 +13,7 @@ from typing import Any
 import casadi as ca
 
 from flexff.controllers.features import nominal_model
+from flexff.fmu.errors import InputError
 from flexff.fmu.system import System
 from flexff.plant.signals import FEEDFORWARD_FORCES, REFERENCE, reference_motion
 
@@ -53,7 +54,7 @@ def feedforward_system(name: str, description: str, reference: ca.SX, force: ca.
 def rigid_body_feedforward_system(step: float = 1e-3) -> System:
     """Discrete, stateless System: reference (position, velocity, acceleration) -> F_ff."""
     if not step > 0:
-        raise ValueError(f"step must be positive, got {step}")
+        raise InputError(f"step must be positive, got {step}")
     reference = ca.SX.sym("u", len(REFERENCE))
     return feedforward_system(
         "rigid_body_feedforward", "rigid-body feedforward, eq. (2.4) on the nominal plant model",

@@ -29,6 +29,7 @@ import numpy as np
 from flexff.controllers.features import feature_names, reference_feature_function
 from flexff.controllers.feedforward import feedforward_system, rigid_body_force
 from flexff.controllers.model_card import ModelCard, read_card
+from flexff.fmu.errors import InputError
 from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System
 from flexff.plant.signals import FEEDFORWARD_FORCES, REFERENCE, names
@@ -49,14 +50,14 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
         expected = feature_names(card.feature_set)
         inputs = reference_feature_function(card.feature_set)(u)
     if card.input_signals != expected:
-        raise ValueError(f"{model}: its input signals {card.input_signals} are not the "
+        raise InputError(f"{model}: its input signals {card.input_signals} are not the "
                          f"{card.input_kind} signals {expected} the FMU computes")
     x, p = ca.SX.sym("x", 0), ca.SX.sym("p", 0)
     network = graph_network(read_graph(model, time_axis=True),
                             ca.Function("network_input", [x, u, p], [inputs]), period,
                             None if reference is None else _table(reference, step))
     if network.n_outputs != len(FEEDFORWARD_FORCES):
-        raise ValueError(f"{model}: the graph returns {network.n_outputs} values per step, the "
+        raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
                          f"feedforward needs {len(FEEDFORWARD_FORCES)} "
                          f"({', '.join(names(FEEDFORWARD_FORCES))})")
     r = ca.SX.sym("r", network.n_outputs)
@@ -86,10 +87,10 @@ def model_period(card: ModelCard, step: float, model: str | Path) -> int:
     """Communication steps per model call: the step must divide the model's sample period."""
     rate = card.sample_rate_hz
     if not (step > 0 and rate > 0):
-        raise ValueError(f"step ({step}) and the model's sample rate ({rate}) must be positive")
+        raise InputError(f"step ({step}) and the model's sample rate ({rate}) must be positive")
     ratio = 1.0 / (rate * step)
     if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
-        raise ValueError(f"{model}: the model runs at {rate:g} Hz; the step {step:g} s must "
+        raise InputError(f"{model}: the model runs at {rate:g} Hz; the step {step:g} s must "
                          f"divide its period {1 / rate:g} s by a whole number")
     return round(ratio)
 

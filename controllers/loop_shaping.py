@@ -23,6 +23,7 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.signal import cont2discrete, tf2ss
 
+from flexff.fmu.errors import InputError
 from flexff.plant.analysis import linearization
 from flexff.plant.model import PlantModel
 
@@ -173,7 +174,7 @@ def _notch(wn: float, zeta: tuple[float, float]) -> StateSpace:
     """(s^2 + 2 z1 wn s + wn^2) / (s^2 + 2 z2 wn s + wn^2): depth z1/z2 at wn, unity elsewhere."""
     z1, z2 = zeta
     if not 0 <= z1 < z2:
-        raise ValueError(f"notch damping ratios {zeta} must satisfy 0 <= z1 < z2")
+        raise InputError(f"notch damping ratios {zeta} must satisfy 0 <= z1 < z2")
     return _from_polynomials(np.array([1, 2 * z1 * wn, wn**2]), np.array([1, 2 * z2 * wn, wn**2]))
 
 
@@ -182,11 +183,11 @@ def design_pid(crossover_hz: float = 2.66, step: float = 1e-3, notch_hz: float |
                plant: AxisPlant | None = None) -> PIDDesign:
     """Loop-shaped PID (and notch) for one axis with crossover `crossover_hz`, sampled at `step`."""
     if not (crossover_hz > 0 and step > 0 and math.isfinite(crossover_hz + step)):
-        raise ValueError(f"crossover ({crossover_hz} Hz) and step ({step} s) must be positive")
+        raise InputError(f"crossover ({crossover_hz} Hz) and step ({step} s) must be positive")
     nyquist_hz = 0.5 / step
     for what, f in (("crossover", crossover_hz), ("notch", notch_hz)):
         if f is not None and not 0 < f < nyquist_hz:
-            raise ValueError(f"{what} frequency {f} Hz must lie in (0, {nyquist_hz:g}) Hz, "
+            raise InputError(f"{what} frequency {f} Hz must lie in (0, {nyquist_hz:g}) Hz, "
                              f"below the Nyquist frequency of the {step} s step")
     plant = plant or axis_plant()
     wc = 2 * math.pi * crossover_hz

@@ -19,6 +19,7 @@ from typing import Any
 
 import onnx
 
+from flexff.fmu.errors import InputError
 from flexff.plant.parameters import NOMINAL
 from flexff.plant.signals import FEEDFORWARD_FORCES, names, units
 
@@ -75,15 +76,15 @@ class ModelCard:
 
     @classmethod
     def from_metadata(cls, props: Mapping[str, str], where: str | Path) -> ModelCard:
-        """The card of the metadata `props` of the graph `where`; ValueError (what is wrong,
+        """The card of the metadata `props` of the graph `where`; InputError (what is wrong,
         what to do) if they are not those of a flexff feedforward model."""
         if props.get("format") != FORMAT:
-            raise ValueError(f"{where} is not a flexff feedforward model (metadata format "
+            raise InputError(f"{where} is not a flexff feedforward model (metadata format "
                              f"{props.get('format')!r}, expected {FORMAT!r}): export a trained "
                              f"run with `flexff export RUN -o MODEL.onnx`")
         missing = [k for k in REQUIRED if k not in props]
         if missing:
-            raise ValueError(f"{where}: metadata lacks {', '.join(missing)}; export it again "
+            raise InputError(f"{where}: metadata lacks {', '.join(missing)}; export it again "
                              f"with `flexff export`")
         known = cls.__dataclass_fields__
         values: dict[str, Any] = {}
@@ -94,7 +95,7 @@ class ModelCard:
                 values[key] = (json.loads(text) if key in _JSON
                                else _NUMBERS[key](text) if key in _NUMBERS else text)
             except (ValueError, TypeError) as error:
-                raise ValueError(f"{where}: metadata {key} = {text!r} is not valid ({error}); "
+                raise InputError(f"{where}: metadata {key} = {text!r} is not valid ({error}); "
                                  f"export the model again with `flexff export`") from None
         card = cls(**values)
         card._check(where)
@@ -102,28 +103,28 @@ class ModelCard:
 
     def _check(self, where: str | Path) -> None:
         if self.input_kind not in INPUT_KINDS:
-            raise ValueError(f"{where}: unknown input kind {self.input_kind!r} (known: "
+            raise InputError(f"{where}: unknown input kind {self.input_kind!r} (known: "
                              f"{', '.join(INPUT_KINDS)})")
         if self.prior not in PRIORS:
-            raise ValueError(f"{where}: unknown prior {self.prior!r} (known: {', '.join(PRIORS)})")
+            raise InputError(f"{where}: unknown prior {self.prior!r} (known: {', '.join(PRIORS)})")
         try:
             NOMINAL.with_values(**self.prior_parameters)  # names and values
         except (TypeError, ValueError) as error:
-            raise ValueError(f"{where}: metadata prior_parameters "
+            raise InputError(f"{where}: metadata prior_parameters "
                              f"{json.dumps(self.prior_parameters)} are not nominal-model "
                              f"parameters ({error}); export the model again with "
                              f"`flexff export`") from None
 
 
 def read_card(model: str | Path) -> ModelCard:
-    """The card of an exported feedforward model; ValueError (what to do) if the file is not
+    """The card of an exported feedforward model; InputError (what to do) if the file is not
     one."""
     path = Path(model)
     if not path.is_file():
-        raise ValueError(f"ONNX model {path} does not exist")
+        raise InputError(f"ONNX model {path} does not exist")
     try:
         props = {p.key: p.value for p in onnx.load(str(path), load_external_data=False)
                  .metadata_props}
     except Exception as exc:  # onnx raises DecodeError and others for a broken file
-        raise ValueError(f"{path} is not a readable ONNX model: {exc}") from exc
+        raise InputError(f"{path} is not a readable ONNX model: {exc}") from exc
     return ModelCard.from_metadata(props, path)

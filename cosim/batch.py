@@ -23,6 +23,7 @@ from flexff.cosim.config import expanded, parse_config, read_tables
 from flexff.cosim.executor import execute
 from flexff.cosim.run import run_config
 from flexff.cosim.schema import ConfigError, RunConfig
+from flexff.fmu.errors import InputError
 
 
 @dataclass(frozen=True)
@@ -70,7 +71,7 @@ def run_batch(configs: Sequence[RunConfig | str | Path], output_dir: str | Path,
     names = [_name(c) for c in configs]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise ValueError(f"configurations share the name(s) {twice}: each run needs its own "
+        raise InputError(f"configurations share the name(s) {twice}: each run needs its own "
                          f"output folder")
     debug = os.environ.get("FLEXFF_DEBUG") == "1"
     jobs = [(c, Path(output_dir) / n if subfolders else Path(output_dir), debug)
@@ -100,10 +101,10 @@ def sweep(path: str | Path, axes: Mapping[str, Sequence[Any]]) -> list[RunConfig
     for key, values in axes.items():
         *tables, name = key.split(".")
         if not tables or not all(tables) or not name:
-            raise ValueError(f"a sweep key is table.key (e.g. plant.m_up1), got {key!r}")
+            raise InputError(f"a sweep key is table.key (e.g. plant.m_up1), got {key!r}")
         twice = next((v for k, v in enumerate(values) if v in values[:k]), None)
         if twice is not None:
-            raise ValueError(f"--sweep {key}: the sweep lists the same value twice: {twice!r}")
+            raise InputError(f"--sweep {key}: the sweep lists the same value twice: {twice!r}")
     base = _sweep_base(path)
     configs: list[RunConfig] = []
     names: list[str] = []

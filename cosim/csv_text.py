@@ -6,9 +6,11 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+from flexff.fmu.errors import InputError
 
-def read_rows(path: Path, error: type[ValueError] = ValueError) -> list[tuple[int, list[str]]]:
-    """(line number, cells) of every row of the CSV file at `path`; `error` (a ValueError
+
+def read_rows(path: Path, error: type[InputError] = InputError) -> list[tuple[int, list[str]]]:
+    """(line number, cells) of every row of the CSV file at `path`; `error` (an InputError
     type) for a file that is not UTF-8 CSV text or is empty."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:

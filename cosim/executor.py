@@ -21,6 +21,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
+from flexff.fmu.errors import MissingPackage
+
 Job = TypeVar("Job")
 Result = TypeVar("Result")
 
@@ -89,8 +91,8 @@ def _on_dask(function: Callable[[Job], Result], jobs: Sequence[Job], scheduler: 
         from dask.distributed import Client
         from dask.distributed import as_completed as dask_completed
     except ImportError:
-        raise RuntimeError("running on a Dask cluster needs dask.distributed: "
-                           "pip install 'flexff[cluster]'") from None
+        raise MissingPackage("running on a Dask cluster needs dask.distributed: "
+                             "pip install 'flexff[cluster]'") from None
     try:
         client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
     except OSError as error:  # refused, timed out, unknown host

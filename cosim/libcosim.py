@@ -22,6 +22,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from flexff.fmu.errors import InputError, MissingPackage, RunError
+
 try:
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
@@ -29,8 +31,8 @@ try:
     from libcosimpy.CosimObserver import CosimObserver
     from libcosimpy.CosimSlave import CosimLocalSlave
 except ImportError:  # an optional dependency: the extra "libcosim"
-    raise ImportError("runs under libcosim need libcosimpy: pip install 'flexff[libcosim]'"
-                      ) from None
+    raise MissingPackage("runs under libcosim need libcosimpy: pip install 'flexff[libcosim]'"
+                         ) from None
 
 from flexff.cosim.master import SlaveSpec
 from flexff.cosim.recording import Recording
@@ -60,14 +62,14 @@ class _Execution:
         self.varying: dict[str, list[tuple[int, str]]] = {}  # slave -> (value ref., source)
         for c in links:
             if c.affine or not c.on_bus:
-                raise ValueError(f"{c}: libcosim's API connects Real signals as they are; "
+                raise InputError(f"{c}: libcosim's API connects Real signals as they are; "
                                  f"run the SSP export for linear transformations")
             if c.source != SOURCE:
                 status = execution.connect_real_variables(
                     self.index[c.source], self.vr(c.source, c.signal),
                     self.index[c.target], self.vr(c.target, c.input))
                 if not (status is True or (type(status) is int and status == 0)):  # int in 0.0.6
-                    raise RuntimeError(f"libcosim refused to connect {c}")
+                    raise RunError(f"libcosim refused to connect {c}")
             elif np.ndim(sources[c.signal]) == 0:
                 self.initial_value(c.target, c.input, sources[c.signal])
             else:
@@ -84,7 +86,7 @@ class _Execution:
               if self.variables[slave][name].kind == "int32" else
               self.execution.real_initial_value(i, vr, float(value)))
         if not ok:
-            raise RuntimeError(f"libcosim rejected {slave}.{name} = {value!r}")
+            raise RunError(f"libcosim rejected {slave}.{name} = {value!r}")
 
 
 def run_libcosim(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
@@ -112,9 +114,9 @@ def run_libcosim(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray |
         for slave, inputs in ex.varying.items():
             if not manipulator.slave_real_values(ex.index[slave], [r for r, _ in inputs],
                                                  [float(table[n][k]) for _, n in inputs]):
-                raise RuntimeError(f"libcosim rejected the inputs of {slave} at step {k}")
+                raise RunError(f"libcosim rejected the inputs of {slave} at step {k}")
         if not ex.execution.step(1):
-            raise RuntimeError(f"libcosim failed in the step from t = {k * step:.9g} s")
+            raise RunError(f"libcosim failed in the step from t = {k * step:.9g} s")
         for slave, values in out.items():
             values[k] = observer.last_real_values(ex.index[slave], refs[slave])
     wall = time.perf_counter() - start
@@ -133,5 +135,5 @@ def time_libcosim_engine(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.n
     ex = _Execution(slaves, {n: float(np.ravel(v)[0]) for n, v in sources.items()}, step)
     start = time.perf_counter()
     if not ex.execution.step(steps):
-        raise RuntimeError("libcosim failed")
+        raise RunError("libcosim failed")
     return time.perf_counter() - start

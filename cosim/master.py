@@ -70,6 +70,7 @@ from flexff.cosim.recording import Recording
 from flexff.cosim.schema import ALGORITHMS
 from flexff.cosim.timing import Pacing, StepTiming
 from flexff.cosim.wiring import SOURCE, Link, Port, carried, wire
+from flexff.fmu.errors import InputError, RunError
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 
 PROGRESS_MIN_STEPS = 100_000  # runs this long show a progress bar (on a terminal)
@@ -85,7 +86,7 @@ class SlaveSpec:
     parameters: Mapping[str, Any] = field(default_factory=dict)
 
 
-class CosimError(RuntimeError):
+class CosimError(RunError):
     """An FMI call failed during a co-simulation (the message carries the FMU's log)."""
 
 
@@ -157,9 +158,9 @@ class Master:
     def __init__(self, slaves: Sequence[SlaveSpec], sources: Sequence[str], step: float,
                  links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel") -> None:
         if not step > 0:
-            raise ValueError(f"step must be positive, got {step}")
+            raise InputError(f"step must be positive, got {step}")
         if algorithm not in ALGORITHMS:
-            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
+            raise InputError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
         self.step, self.algorithm = float(step), algorithm
         self.sources = tuple(sources)
         self.specs = list(slaves)
@@ -213,7 +214,7 @@ class Master:
         for p in self._plans:
             if (p.instance.info.fmi_version != "2.0" or p.gain is not None or p.typed_inputs
                     or p.typed_outputs or self.algorithm != "gauss-seidel"):
-                raise ValueError(f"the C loop runs FMI 2.0 FMUs with Real signals and no gains "
+                raise InputError(f"the C loop runs FMI 2.0 FMUs with Real signals and no gains "
                                  f"under Gauss-Seidel; {p.name} does not fit")
         index = {n: i for i, n in enumerate(self.signals)}
         by_target = {(k.target, k.input): k.producer for k in self.links}
@@ -346,8 +347,8 @@ class Master:
         if len(matches) == 1:
             return matches[0]
         if matches:
-            raise ValueError(f"signal {name!r} is ambiguous: {', '.join(matches)}")
-        raise ValueError(f"cannot record unknown signal {name!r}; known: "
+            raise InputError(f"signal {name!r} is ambiguous: {', '.join(matches)}")
+        raise InputError(f"cannot record unknown signal {name!r}; known: "
                          f"{', '.join(everything)}")
 
     def _source_table(self, values: Mapping[str, np.ndarray | float], steps: int) -> np.ndarray:
@@ -458,7 +459,7 @@ def _check_parameters(spec: SlaveSpec, info: FmuInfo) -> None:
     settable = [n for n, v in info.variables.items() if v.settable]
     for name in spec.parameters:
         if name not in settable:
-            raise ValueError(f"{spec.name}: unknown parameter {name!r} (known: "
+            raise InputError(f"{spec.name}: unknown parameter {name!r} (known: "
                              f"{', '.join(settable)})")
 
 

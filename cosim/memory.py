@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import os
 
+from flexff.fmu.errors import InputError
 
-class MemoryNeeded(ValueError):
+
+class MemoryNeeded(InputError):
     """Values that would not fit into the available memory, found before allocating them."""
 
 

@@ -13,6 +13,8 @@ import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
+from flexff.fmu.errors import InputError
+
 FIFO_PRIORITY = 50  # mid-range: above ordinary processes, below the kernel's own threads
 MCL_CURRENT, MCL_FUTURE = 1, 2
 
@@ -34,7 +36,7 @@ def realtime_process(cpu: int | None = None) -> Iterator[ProcessReport]:
     affinity = os.sched_getaffinity(0)
     if cpu is not None:
         if cpu not in affinity:
-            raise ValueError(f"--cpu {cpu}: this process may run on CPUs "
+            raise InputError(f"--cpu {cpu}: this process may run on CPUs "
                              f"{sorted(affinity)} only")
         os.sched_setaffinity(0, {cpu})
     policy, param = os.sched_getscheduler(0), os.sched_getparam(0)

@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from flexff.fmu.errors import InputError
+
 NPZ_NAME = "signals.npz"
 CSV_NAME = "signals.csv"
 
@@ -36,7 +38,7 @@ class Recording:
 
     def __post_init__(self) -> None:
         if "time" in self.signals:
-            raise ValueError("'time' is reserved for the time axis and cannot be a signal name")
+            raise InputError("'time' is reserved for the time axis and cannot be a signal name")
         for name, values in self.signals.items():
             if values.shape != self.time.shape:
                 raise ValueError(f"signal {name!r} has {values.shape} samples, time has "
@@ -120,6 +122,6 @@ def load_recording(path: str | Path) -> Recording:
     with np.load(path) as data:
         arrays = {name: data[name] for name in data.files}
     if "time" not in arrays:
-        raise ValueError(f"{path}: no 'time' array, not a flexff recording")
+        raise InputError(f"{path}: no 'time' array, not a flexff recording")
     time = arrays.pop("time")
     return Recording(time, arrays)

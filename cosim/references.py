@@ -7,8 +7,8 @@ must be continuous) and `sample` evaluates a path on the communication grid. Tab
 files are resampled onto the grid, with missing derivatives from a Savitzky-Golay filter.
 
 Every segment checks its arguments and that it stays inside the nominal workspace, and raises
-ValueError naming the offending point otherwise. Sampling checks first that the samples fit
-into the available memory (MemoryNeeded, a ValueError, says how much they need).
+InputError naming the offending point otherwise. Sampling checks first that the samples fit
+into the available memory (MemoryNeeded, an InputError, says how much they need).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from scipy.signal import savgol_filter
 
 from flexff.cosim.csv_text import read_rows
 from flexff.cosim.memory import check_memory
+from flexff.fmu.errors import InputError
 from flexff.plant.kinematics import check_workspace
 from flexff.plant.parameters import NOMINAL
 from flexff.plant.signals import REFERENCE, names
@@ -148,7 +149,7 @@ class Circle(Segment):
         _finite_point("centre", self.centre)
         _positive("radius", self.radius, "m")
         if not (math.isfinite(self.start_angle) and math.isfinite(self.turns) and self.turns):
-            raise ValueError(f"start_angle ({self.start_angle}) must be finite and turns "
+            raise InputError(f"start_angle ({self.start_angle}) must be finite and turns "
                              f"({self.turns}) finite and nonzero")
         self._validate()
 
@@ -195,12 +196,12 @@ class Spline(Segment):
     def __post_init__(self) -> None:
         pts = np.asarray(self.points, dtype=float)
         if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2 or not np.all(np.isfinite(pts)):
-            raise ValueError(f"points must be at least two finite (x, y) pairs, got {self.points}")
+            raise InputError(f"points must be at least two finite (x, y) pairs, got {self.points}")
         closed = np.vstack([pts, pts[:1]])
         chords = np.hypot(*np.diff(closed, axis=0).T)
         if np.any(chords == 0):
             k = int(np.argmin(chords))
-            raise ValueError(f"consecutive spline points {k} and {(k + 1) % len(pts)} coincide "
+            raise InputError(f"consecutive spline points {k} and {(k + 1) % len(pts)} coincide "
                              f"at ({pts[k][0]:g}, {pts[k][1]:g}) m")
         _positive("duration", self.duration, "s")
         knots = np.concatenate([[0.0], np.cumsum(chords)]) / chords.sum() * self.duration
@@ -219,11 +220,11 @@ class Chain(Segment):
 
     def __post_init__(self) -> None:
         if not self.segments:
-            raise ValueError("a chain needs at least one segment")
+            raise InputError("a chain needs at least one segment")
         for k, (a, b) in enumerate(zip(self.segments[:-1], self.segments[1:])):
             jump = np.linalg.norm(b.start - a.end)
             if jump > JOIN_TOLERANCE:
-                raise ValueError(
+                raise InputError(
                     f"segment {k + 1} ({type(b).__name__}) starts at {tuple(b.start)} m but "
                     f"segment {k} ({type(a).__name__}) ends at {tuple(a.end)} m: a jump of "
                     f"{jump:.3g} m")
@@ -306,7 +307,7 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
     t = columns["t"]
     if np.any(np.diff(t) <= 0):
         k = int(np.argmax(np.diff(t) <= 0)) + 1
-        raise ValueError(f"{path}: time column t is not strictly increasing at data row {k + 1} "
+        raise InputError(f"{path}: time column t is not strictly increasing at data row {k + 1} "
                          f"(t = {t[k - 1]:.9g} then {t[k]:.9g})")
     check_workspace(NOMINAL, columns["x_ref"], columns["y_ref"], f"{path}: point")
     n = math.floor((t[-1] - t[0]) / step + 1e-9) + 1
@@ -315,7 +316,7 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
     grid = t[0] + np.arange(n) * step
     window = 2 * round(smoothing_window / step / 2) + 1
     if grid.size < max(window, 4):
-        raise ValueError(f"{path}: the table spans {t[-1] - t[0]:.6g} s, too short for the "
+        raise InputError(f"{path}: the table spans {t[-1] - t[0]:.6g} s, too short for the "
                          f"{smoothing_window} s smoothing window at the {step} s step")
     resampled = {name: CubicSpline(t, values)(grid) for name, values in columns.items()
                  if name != "t"}
@@ -337,12 +338,12 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
     header = [name.strip() for name in rows[0]]
     missing = [name for name in ("t", "x_ref", "y_ref") if name not in header]
     if missing:
-        raise ValueError(f"{path}: missing column(s) {', '.join(missing)}: the first line must "
+        raise InputError(f"{path}: missing column(s) {', '.join(missing)}: the first line must "
                          f"name the columns t, x_ref, y_ref (and optionally vx_ref, vy_ref, "
                          f"ax_ref, ay_ref), separated by commas")
     body = [row for row in rows[1:] if any(cell.strip() for cell in row)]  # blank lines
     if len(body) < 2:
-        raise ValueError(f"{path}: needs at least two data rows, found {len(body)}")
+        raise InputError(f"{path}: needs at least two data rows, found {len(body)}")
     columns = {}
     for name in ("t", *Reference.SIGNALS):
         if name not in header:
@@ -354,7 +355,7 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
             except (IndexError, ValueError):
                 value = math.nan
             if not math.isfinite(value):
-                raise ValueError(f"{path}: column {name} has a missing, non-numeric or "
+                raise InputError(f"{path}: column {name} has a missing, non-numeric or "
                                  f"non-finite value at data row {k + 1}")
             values.append(value)
         columns[name] = np.array(values)
@@ -372,12 +373,12 @@ def _skew_sine(t: np.ndarray, duration: float) -> tuple[np.ndarray, np.ndarray, 
 def _positive(name: str, value: float, unit: str) -> None:
     if not (isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value)
             and value > 0):
-        raise ValueError(f"{name} must be a positive finite number of {unit}, got {value!r}")
+        raise InputError(f"{name} must be a positive finite number of {unit}, got {value!r}")
 
 
 def _finite_point(name: str, point: Sequence[float]) -> None:
     if len(point) != 2 or not all(math.isfinite(float(v)) for v in point):
-        raise ValueError(f"{name} must be a finite (x, y) pair in m, got {point!r}")
+        raise InputError(f"{name} must be a finite (x, y) pair in m, got {point!r}")
 
 
 REFERENCE_KINDS = ("thesis-eval", "thesis-hardware-eval", "circle", "line-circle", "spline",
@@ -407,7 +408,7 @@ def build_reference(kind: str, options: Mapping[str, Any], step: float) -> Refer
     return sample(Chain((line, circle)), step)
 
 
-class SegmentError(ValueError):
+class SegmentError(InputError):
     """A segment of a `segments` reference that cannot be built; `index` says which."""
 
     def __init__(self, index: int, message: str) -> None:
@@ -441,7 +442,7 @@ def _segment(point: tuple[float, float], spec: Mapping[str, Any]) -> Segment:
         dx, dy = point[0] - centre[0], point[1] - centre[1]
         radius = math.hypot(dx, dy)
         if radius == 0:
-            raise ValueError(f"the circle starts at its centre {tuple(centre)} m (radius 0): "
+            raise InputError(f"the circle starts at its centre {tuple(centre)} m (radius 0): "
                              f"move the centre or the point before it")
         return Circle(tuple(centre), radius, math.atan2(dy, dx), spec["turns"],
                                  duration)

@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from flexff.fmu.errors import InputError
+
 ALGORITHMS = ("gauss-seidel", "jacobi")
 UNCONNECTED = ("error", "start")
 BUILTIN_OPTIONS = {  # built-in FMU -> its options
@@ -45,7 +47,7 @@ BUILTIN_OPTIONS = {  # built-in FMU -> its options
 SOURCE_KINDS = ("constant", "csv")
 
 
-class ConfigError(ValueError):
+class ConfigError(InputError):
     """A configuration problem, naming the file and the `table.key` at fault."""
 
     def __init__(self, source: str, key: str, message: str) -> None:

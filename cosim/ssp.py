@@ -71,6 +71,7 @@ from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ALGORITHMS, ConfigError, ConnectionConfig, FmuConfig, RunConfig
 from flexff.cosim.wiring import SOURCE, Link, carried
 from flexff.fmu.cache import cache_dir
+from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
 
 NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -113,7 +114,7 @@ def export_ssp(config: RunConfig, path: str | Path) -> Path:
                           and np.ndim(scenario.sources[k.signal])
                           and k.signal not in Reference.SIGNALS})
         if varying:
-            raise ValueError(f"{config.source}: SSP 1.0 cannot carry time-varying source "
+            raise InputError(f"{config.source}: SSP 1.0 cannot carry time-varying source "
                              f"signals, and {', '.join(varying)} feed FMU inputs: an SSP system "
                              f"holds FMUs, their connections and start values only")
         ssd = etree.tostring(_ssd(scenario), xml_declaration=True, encoding="UTF-8",
@@ -178,7 +179,7 @@ def _at_start(link: Link, scenario: Scenario) -> Any:
     try:
         return carried(link, np.ravel(scenario.sources[link.signal])[0])
     except OverflowError as error:
-        raise ValueError(f"{scenario.config.source}: {link}: {error}") from None
+        raise InputError(f"{scenario.config.source}: {link}: {error}") from None
 
 
 def _configuration_text(config: RunConfig) -> str:

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from flexff.fmu.errors import InputError
+
 US = 1e6
 PERCENTILES = {"p50": 50.0, "p99": 99.0, "p99.9": 99.9}
 
@@ -35,9 +37,9 @@ class Pacing:
 
     def __post_init__(self) -> None:
         if not self.rt_factor > 0:
-            raise ValueError(f"the real-time factor must be positive, got {self.rt_factor}")
+            raise InputError(f"the real-time factor must be positive, got {self.rt_factor}")
         if self.max_overruns < 0 or self.grace < 0:
-            raise ValueError("max_overruns and grace must not be negative")
+            raise InputError("max_overruns and grace must not be negative")
 
 
 @dataclass(frozen=True, eq=False)

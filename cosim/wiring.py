@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from flexff.cosim.schema import ConnectionConfig
+from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuInfo
 
 SOURCE = "sources"  # producer name of the external signals
@@ -46,7 +47,7 @@ FLOAT_KINDS = ("float64", "float32")  # the kinds that convert into each other (
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
-class WiringError(ValueError):
+class WiringError(InputError):
     """A connection problem; `key` names the configuration table at fault."""
 
     def __init__(self, key: str, message: str) -> None:

@@ -20,6 +20,7 @@ from flexff.cosim.run import simulate
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.timing import Pacing
 from flexff.fmu.build import build_fmu
+from flexff.fmu.errors import InputError
 from flexff.fmu.onnx_fmu import onnx_system
 from flexff.fmu_bench import bench_fmu
 from flexff.plant.system import plant_system
@@ -185,7 +186,7 @@ def run_benchmarks(steps: int = 20000, repeats: int = 5,
     100 s; default all) with its two floors."""
     for name, value in (("steps", steps), ("repeats", repeats)):
         if not isinstance(value, int) or value < 1:
-            raise ValueError(f"bench {name} must be a whole number of at least 1, got {value!r}")
+            raise InputError(f"bench {name} must be a whole number of at least 1, got {value!r}")
     results: dict[str, Any] = {"machine": platform.processor() or platform.machine(),
                                "python": platform.python_version(), "plant_step": {}}
     with tempfile.TemporaryDirectory() as tmp:

@@ -2,8 +2,9 @@
 
 main() is the one place that turns a failure into one line on stderr and an exit code: 0 ok,
 1 a run that failed (an FMU error, a full disk, an unreachable Dask scheduler, memory), 2 bad
-input (a configuration, a path, an option, an unwritable output folder), 130 interrupted
-(3 is kept for real-time overruns). A Python traceback only with `flexff --debug`.
+input (InputError: a configuration, a path, an option, an unwritable output folder), 130
+interrupted (3 is kept for real-time overruns); any other error is a bug: 1, its type and a hint
+to rerun with `flexff --debug`, which prints the Python traceback.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from flexff.cosim.timing import OverrunError, Pacing
+from flexff.fmu.errors import InputError, RunError
 from flexff.learning.dataset import SETS
 from flexff.plant.model import VARIANTS
 
@@ -28,6 +30,7 @@ PRESETS = ("fast", "thesis")
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
                 PermissionError)  # OSErrors about paths the user gave: exit code 2, as are
 INPUT_ERRNOS = (errno.EROFS, errno.ENAMETOOLONG, errno.ELOOP)  # these (others: 1)
+BUG_HINT = " (rerun with flexff --debug for the traceback)"  # an error that is not documented
 KEPT = {  # what an interrupted command keeps, by command (and subcommand)
     "run": "the runs that finished keep their folders; no file is left half-written",
     "data collect": "the trajectories collected so far are kept: run the same command again "
@@ -63,20 +66,20 @@ def _fmu_build(args: argparse.Namespace) -> int:
     from flexff.fmu.build import build_fmu
 
     if args.kind != "onnx" and (args.graph is not None or args.every is not None):
-        raise ValueError("only fmu build onnx takes a graph file and --every (a learned "
+        raise InputError("only fmu build onnx takes a graph file and --every (a learned "
                          "feedforward takes --model M.onnx and runs at the model's rate)")
     if args.kind == "onnx":
         from flexff.fmu.onnx_fmu import onnx_system
 
         if args.graph is None:
-            raise ValueError("fmu build onnx needs the graph: flexff fmu build onnx MODEL.onnx "
+            raise InputError("fmu build onnx needs the graph: flexff fmu build onnx MODEL.onnx "
                              "-o M.fmu")
         system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every)
     elif args.kind == "feedforward":
         from flexff.controllers.learned_feedforward import learned_feedforward_system
 
         if args.model is None:
-            raise ValueError("fmu build feedforward needs --model M.onnx (flexff export)")
+            raise InputError("fmu build feedforward needs --model M.onnx (flexff export)")
         system = learned_feedforward_system(args.model, args.step)
     else:
         from flexff.plant.system import plant_system
@@ -112,7 +115,7 @@ def _bench(args: argparse.Namespace) -> int:
     if args.models:
         models = {p.stem: p for p in sorted(Path(args.models).glob("*.onnx"))}
         if not models:
-            raise ValueError(f"no .onnx files in {args.models}")
+            raise InputError(f"no .onnx files in {args.models}")
     if args.output:
         _output_file(args.output)
     text = json.dumps(run_benchmarks(steps=args.steps, models=models,
@@ -132,12 +135,12 @@ def _run(args: argparse.Namespace) -> int:
     configs = args.configs
     if args.sweep:
         if len(configs) != 1:
-            raise ValueError("--sweep takes exactly one configuration")
+            raise InputError("--sweep takes exactly one configuration")
         axes: dict[str, list[Any]] = {}
         for text in args.sweep:
             key, values = _sweep_values(text)
             if key in axes:
-                raise ValueError(f"--sweep {key} is given twice: list its values once")
+                raise InputError(f"--sweep {key} is given twice: list its values once")
             axes[key] = values
         configs = sweep(configs[0], axes)
     elif len(configs) == 1 and args.scheduler is None:
@@ -145,7 +148,7 @@ def _run(args: argparse.Namespace) -> int:
         _print_result(configs[0], metrics, args.output)
         return 0
     if args.realtime:
-        raise ValueError("--realtime runs one configuration, in this process")
+        raise InputError("--realtime runs one configuration, in this process")
     status = 0
     for result in run_batch(configs, args.output, args.workers, args.scheduler,
                             subfolders=len(configs) > 1 or bool(args.sweep)):
@@ -164,7 +167,7 @@ def _pacing(args: argparse.Namespace) -> Pacing | None:
     if not args.realtime:
         given = [name for name, value in options.items() if value is not None]
         if given:
-            raise ValueError(f"{', '.join(given)} apply to paced runs: add --realtime")
+            raise InputError(f"{', '.join(given)} apply to paced runs: add --realtime")
         return None
     return Pacing(rt_factor=1.0 if args.rt_factor is None else args.rt_factor,
                   max_overruns=args.max_overruns or 0, grace=args.grace or 0.0)
@@ -176,11 +179,11 @@ def _sweep_values(text: str) -> tuple[str, list[Any]]:
 
     key, sep, values = text.partition("=")
     if not sep or not values:
-        raise ValueError(f"--sweep expects TABLE.KEY=V1,V2,..., got {text!r}")
+        raise InputError(f"--sweep expects TABLE.KEY=V1,V2,..., got {text!r}")
     try:
         return key.strip(), tomllib.loads(f"v = [{values}]")["v"]
     except tomllib.TOMLDecodeError:
-        raise ValueError(f"--sweep values must be TOML values (strings quoted): {values!r}") \
+        raise InputError(f"--sweep values must be TOML values (strings quoted): {values!r}") \
             from None
 
 
@@ -215,7 +218,7 @@ def _config_example(args: argparse.Namespace) -> int:
         print("\n".join(examples))
         return 0
     if args.name not in examples:
-        raise ValueError(f"no example {args.name!r}; examples: {', '.join(examples)}")
+        raise InputError(f"no example {args.name!r}; examples: {', '.join(examples)}")
     print(examples[args.name], end="")
     return 0
 
@@ -481,8 +484,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _failure(error: BaseException, command: str) -> tuple[int, str]:
-    """The exit code and the line on stderr for an error that stopped `command`."""
+def _failure(error: BaseException, command: str, debug: bool = False) -> tuple[int, str]:
+    """The exit code and the line on stderr for an error that stopped `command`: bad input
+    (InputError, an OSError about a path) 2, a run that failed (RunError, an OSError such as a
+    full disk, MemoryError) 1, anything else, a bug, 1 and how to see its traceback."""
     if isinstance(error, KeyboardInterrupt):
         kept = KEPT.get(command)
         return 130, "flexff: interrupted" + (f"; {kept}" if kept else "")
@@ -496,9 +501,9 @@ def _failure(error: BaseException, command: str) -> tuple[int, str]:
         if error.filename is not None:
             message = f"{error.filename}: {message}"
         return code, f"flexff: error: {message}"
-    if isinstance(error, (ValueError, RuntimeError)):
-        return (2 if isinstance(error, ValueError) else 1), f"flexff: error: {error}"
-    return 1, f"flexff: error: {type(error).__name__}: {error} (flexff --debug shows where)"
+    if isinstance(error, (InputError, RunError)):
+        return (2 if isinstance(error, InputError) else 1), f"flexff: error: {error}"
+    return 1, f"flexff: error: {type(error).__name__}: {error}{'' if debug else BUG_HINT}"
 
 
 def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
@@ -520,10 +525,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return handler(args)
     except (Exception, KeyboardInterrupt) as error:
-        if os.environ.get("FLEXFF_DEBUG") == "1":
+        debug = os.environ.get("FLEXFF_DEBUG") == "1"
+        if debug:
             traceback.print_exc()
         command = " ".join(filter(None, (args.command, getattr(args, "data_command", None))))
-        code, line = _failure(error, command)
+        code, line = _failure(error, command, debug)
         print(line, file=sys.stderr)
         return code
 

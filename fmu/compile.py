@@ -17,6 +17,7 @@ from pathlib import Path
 import fmpy
 
 from flexff.fmu import cache
+from flexff.fmu.errors import InputError, RunError
 
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = ("-O2", "-std=c99", "-fPIC", "-fvisibility=hidden", "-ffp-contract=off")
@@ -36,7 +37,7 @@ def sanitizer_flags() -> tuple[str, ...]:
     if not value:
         return ()
     if not re.fullmatch(r"[a-z0-9_-]+(,[a-z0-9_-]+)*", value):
-        raise ValueError(f"${SANITIZE_ENV} = {value!r}: expected a comma-separated list of "
+        raise InputError(f"${SANITIZE_ENV} = {value!r}: expected a comma-separated list of "
                          f"sanitizers such as 'address,undefined'")
     return (f"-fsanitize={value}", "-fno-omit-frame-pointer", "-g")
 
@@ -67,7 +68,7 @@ def run_compiler(sources: list[Path], output: Path, include_dirs: list[Path],
            *map(str, sources), "-o", str(output), *libraries]
     result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:
-        raise RuntimeError(f"compilation failed: {' '.join(cmd)}\n{result.stderr}")
+        raise RunError(f"compilation failed: {' '.join(cmd)}\n{result.stderr}")
 
 
 HOST_HEADER = Path(__file__).parent / "c" / "fmi2_host_logger.h"

@@ -36,6 +36,8 @@ from fmpy.fmi2 import (
 from fmpy.fmi3 import FMU3Slave
 from fmpy.logging import addLoggerProxy
 
+from flexff.fmu.errors import InputError
+
 TYPE_KINDS = {
     "Real": "float64", "Float64": "float64", "Float32": "float32",
     "Integer": "int32", "Int32": "int32", "Int8": "int8", "UInt8": "uint8", "Int16": "int16",
@@ -50,7 +52,7 @@ INTEGER_RANGES = {"int8": (-2**7, 2**7), "uint8": (0, 2**8), "int16": (-2**15, 2
 STATUS_LABELS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 
 
-class FmuError(ValueError):
+class FmuError(InputError):
     """An FMU that cannot be read, loaded or used as asked; the message names the file."""
 
 
@@ -165,7 +167,7 @@ def read_fmu(path: str | Path) -> FmuInfo:
 
 def typed_value(kind: str, value: Any) -> Any:
     """`value` (a TOML value, or a start value as written in XML) as a value of `kind`
-    (TYPE_KINDS); ValueError saying what was expected."""
+    (TYPE_KINDS); InputError saying what was expected."""
     if kind in ("float64", "float32"):
         if isinstance(value, str):
             try:
@@ -174,28 +176,28 @@ def typed_value(kind: str, value: Any) -> Any:
                 pass
         elif isinstance(value, (int, float)) and not isinstance(value, bool):
             return float(value)
-        raise ValueError(f"expected a number, got {value!r}")
+        raise InputError(f"expected a number, got {value!r}")
     if kind in INTEGER_RANGES:
         if isinstance(value, str):
             try:
                 value = int(value)
             except ValueError:
-                raise ValueError(f"expected an integer, got {value!r}") from None
+                raise InputError(f"expected an integer, got {value!r}") from None
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"expected an integer, got {value!r}")
+            raise InputError(f"expected an integer, got {value!r}")
         low, high = INTEGER_RANGES[kind]
         if not low <= value < high:
-            raise ValueError(f"{value} is outside the range of {kind} [{low}, {high - 1}]")
+            raise InputError(f"{value} is outside the range of {kind} [{low}, {high - 1}]")
         return value
     if kind in ("boolean", "clock"):
         if isinstance(value, str) and value in ("true", "false", "1", "0"):
             return value in ("true", "1")
         if not isinstance(value, bool):
-            raise ValueError(f"expected true or false, got {value!r}")
+            raise InputError(f"expected true or false, got {value!r}")
         return value
     if kind == "string":
         if not isinstance(value, str):
-            raise ValueError(f"expected a string, got {value!r}")
+            raise InputError(f"expected a string, got {value!r}")
         return value
     if kind == "binary":
         if isinstance(value, bytes):
@@ -205,8 +207,8 @@ def typed_value(kind: str, value: Any) -> Any:
                 return bytes.fromhex(value)
             except ValueError:
                 pass
-        raise ValueError(f"expected bytes as a hexadecimal string, got {value!r}")
-    raise ValueError(f"values of kind {kind!r} cannot be set")
+        raise InputError(f"expected bytes as a hexadecimal string, got {value!r}")
+    raise InputError(f"values of kind {kind!r} cannot be set")
 
 
 # -- instances ------------------------------------------------------------------------------

@@ -14,6 +14,7 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
+from flexff.fmu.errors import InputError
 from flexff.fmu.system import Parameter, System, Variable
 
 Role = Literal["parameter", "max_substep", "input", "output", "state", "seed"]
@@ -114,7 +115,7 @@ def make_layout(system: System) -> Layout:
     names = [v.name for v in variables]
     duplicates = sorted({n for n in names if names.count(n) > 1})
     if duplicates:
-        raise ValueError("variable names must be unique across parameters, inputs, outputs and "
+        raise InputError("variable names must be unique across parameters, inputs, outputs and "
                          f"states (max_substep and seed are reserved); duplicated: {duplicates}")
     if any(not n for n in names):
         raise ValueError("variable names must not be empty")

@@ -21,6 +21,8 @@ import casadi as ca
 import numpy as np
 import onnx
 
+from flexff.fmu.errors import InputError, MissingPackage
+
 MAX_RANK = 4  # of a state tensor (NET_MAX_RANK in onnx_network.h)
 MAX_TENSORS = 64  # inputs, or outputs, of one graph (MAX_TENSORS in onnx_network.c)
 ELEMENT_TYPES: dict[int, str] = {onnx.TensorProto.FLOAT: "float32",
@@ -59,7 +61,7 @@ class Network:
 
     def __post_init__(self) -> None:
         if self.period < 1:
-            raise ValueError(f"the network's period must be at least one step, got {self.period}")
+            raise InputError(f"the network's period must be at least one step, got {self.period}")
         if self.table is not None and (self.table.ndim != 2 or self.table.shape[0] < 1
                                        or not np.all(np.isfinite(self.table))):
             raise ValueError("the precomputation table must be a finite 2-D array with rows "
@@ -68,7 +70,7 @@ class Network:
 
 def read_network(model: str | Path, input_function: ca.Function, period: int = 1,
                  table: np.ndarray | None = None) -> Network:
-    """The Network of the ONNX file `model`; ValueError (what is wrong) if the graph does not
+    """The Network of the ONNX file `model`; InputError (what is wrong) if the graph does not
     follow the convention of this module or does not fit `input_function`."""
     path = Path(model)
     graph = load_model(path).graph
@@ -77,7 +79,7 @@ def read_network(model: str | Path, input_function: ca.Function, period: int = 1
     sequence_in = [n for n, (kind, _) in inputs.items() if kind == "float64"]
     sequence_out = [n for n, (kind, _) in outputs.items() if kind == "float64"]
     if len(sequence_in) != 1 or len(sequence_out) != 1:
-        raise ValueError(f"{path}: the graph needs exactly one float64 input and one float64 "
+        raise InputError(f"{path}: the graph needs exactly one float64 input and one float64 "
                          f"output (T, n), found inputs {_describe(inputs)} and outputs "
                          f"{_describe(outputs)}")
     n_in, n_out = (_columns(path, name, table[name][1])
@@ -90,34 +92,34 @@ def read_network(model: str | Path, input_function: ca.Function, period: int = 1
         out_kind, out_shape = outputs.get(state.output, (None, ()))
         if out_kind != kind or len(out_shape) != len(shape) or any(
                 isinstance(o, int) and o != d for o, d in zip(out_shape, shape)):
-            raise ValueError(f"{path}: state input {name!r} {list(shape)} needs an output "
+            raise InputError(f"{path}: state input {name!r} {list(shape)} needs an output "
                              f"{state.output!r} of the same type and shape")
         states.append(state)
     if 1 + len(states) > MAX_TENSORS:
-        raise ValueError(f"{path}: {len(states)} state tensors; the FMU runs graphs with at most "
+        raise InputError(f"{path}: {len(states)} state tensors; the FMU runs graphs with at most "
                          f"{MAX_TENSORS - 1}")
     if len(outputs) != 1 + len(states):
-        raise ValueError(f"{path}: outputs {_describe(outputs)} are not the float64 output and "
+        raise InputError(f"{path}: outputs {_describe(outputs)} are not the float64 output and "
                          f"one NAME_out per state input")
     if input_function.n_out() != 1 or input_function.numel_out(0) != n_in:
-        raise ValueError(f"{path}: the graph takes {n_in} inputs per step, but the network's "
+        raise InputError(f"{path}: the graph takes {n_in} inputs per step, but the network's "
                          f"input function gives {input_function.numel_out(0)}")
     return Network(path, sequence_in[0], sequence_out[0], n_in, n_out, tuple(states),
                    input_function, period, table)
 
 
 def load_model(model: str | Path) -> onnx.ModelProto:
-    """The ONNX model in the file `model`; ValueError naming the file if it is missing or is not
+    """The ONNX model in the file `model`; InputError naming the file if it is missing or is not
     an ONNX model."""
     path = Path(model)
     if not path.is_file():
-        raise ValueError(f"ONNX model {path} does not exist")
+        raise InputError(f"ONNX model {path} does not exist")
     try:
         loaded = onnx.load(str(path))
     except Exception as exc:  # onnx raises DecodeError and others for a broken file
-        raise ValueError(f"{path} is not a readable ONNX model: {exc}") from exc
+        raise InputError(f"{path} is not a readable ONNX model: {exc}") from exc
     if loaded.ir_version < 1 or not loaded.graph.output:  # protobuf reads some junk as empty
-        raise ValueError(f"{path} is not a readable ONNX model: it has no IR version or no "
+        raise InputError(f"{path} is not a readable ONNX model: it has no IR version or no "
                          f"graph outputs")
     return loaded
 
@@ -126,13 +128,13 @@ def runtime_library() -> Path:
     """libonnxruntime of the installed onnxruntime wheel (its capi/ folder)."""
     spec = importlib.util.find_spec("onnxruntime")
     if spec is None or not spec.submodule_search_locations:
-        raise RuntimeError("onnxruntime is not installed: pip install onnxruntime (its wheel "
-                           "holds the libonnxruntime the network FMU bundles)")
+        raise MissingPackage("onnxruntime is not installed: pip install onnxruntime (its wheel "
+                             "holds the libonnxruntime the network FMU bundles)")
     folder = Path(next(iter(spec.submodule_search_locations))) / "capi"
     found = sorted(folder.glob("libonnxruntime.so.*")) + sorted(folder.glob("onnxruntime.dll"))
     found += sorted(folder.glob("libonnxruntime.*.dylib"))
     if not found:
-        raise RuntimeError(f"no libonnxruntime in {folder}: reinstall onnxruntime")
+        raise MissingPackage(f"no libonnxruntime in {folder}: reinstall onnxruntime")
     return found[0]
 
 
@@ -140,7 +142,7 @@ def _tensor(value: onnx.ValueInfoProto, path: Path) -> tuple[str, tuple[int | st
     tensor = value.type.tensor_type
     kind = ELEMENT_TYPES.get(tensor.elem_type)
     if kind is None:
-        raise ValueError(f"{path}: tensor {value.name!r} has element type "
+        raise InputError(f"{path}: tensor {value.name!r} has element type "
                          f"{onnx.TensorProto.DataType.Name(tensor.elem_type)}; only float32 "
                          f"(state) and float64 (input, output) are supported")
     shape = tuple(d.dim_value if d.HasField("dim_value") else (d.dim_param or "?")
@@ -154,7 +156,7 @@ def _describe(tensors: dict[str, tuple[str, tuple[int | str, ...]]]) -> str:
 
 def _columns(path: Path, name: str, shape: tuple[int | str, ...]) -> int:
     if len(shape) != 2 or not isinstance(shape[1], int) or shape[1] < 1:
-        raise ValueError(f"{path}: {name!r} must have the shape (T, n) with a fixed n, "
+        raise InputError(f"{path}: {name!r} must have the shape (T, n) with a fixed n, "
                          f"not {list(shape)}")
     return shape[1]
 
@@ -162,6 +164,6 @@ def _columns(path: Path, name: str, shape: tuple[int | str, ...]) -> int:
 def _fixed_shape(path: Path, name: str, kind: str, shape: tuple[int | str, ...]) -> tuple[int, ...]:
     if kind != "float32" or not 1 <= len(shape) <= MAX_RANK or not all(
             isinstance(d, int) and d > 0 for d in shape):
-        raise ValueError(f"{path}: state tensor {name!r} must be float32 with a fixed shape of "
+        raise InputError(f"{path}: state tensor {name!r} must be float32 with a fixed shape of "
                          f"rank 1 to {MAX_RANK}, not {kind} {list(shape)}")
     return tuple(int(d) for d in shape)

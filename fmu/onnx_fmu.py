@@ -15,15 +15,16 @@ from pathlib import Path
 
 import casadi as ca
 
+from flexff.fmu.errors import InputError
 from flexff.fmu.onnx_graph import Port, graph_network, read_graph
 from flexff.fmu.system import System, Variable
 
 
 def onnx_system(model: str | Path, step: float = 1e-3, every: int = 1) -> System:
-    """The System of the FMU running the ONNX graph in the file `model`; ValueError (what is
+    """The System of the FMU running the ONNX graph in the file `model`; InputError (what is
     wrong, what to do) if the graph cannot be one (see fmu.onnx_graph.read_graph)."""
     if not step > 0:
-        raise ValueError(f"the communication step must be positive, got {step}")
+        raise InputError(f"the communication step must be positive, got {step}")
     graph = read_graph(model)
     x, p, w = ca.SX.sym("x", 0), ca.SX.sym("p", 0), ca.SX.sym("w", 0)
     u = ca.SX.sym("u", len(graph.input_names))

@@ -34,6 +34,7 @@ from onnx import TensorProto
 from onnx import helper as oh
 
 from flexff.fmu import cache
+from flexff.fmu.errors import InputError
 from flexff.fmu.network import Network, load_model, read_network
 
 FLOATS: dict[int, str] = {TensorProto.FLOAT: "float32", TensorProto.DOUBLE: "float64"}
@@ -76,7 +77,7 @@ class Graph:
 
 
 def read_graph(model: str | Path, time_axis: bool = False) -> Graph:
-    """The Graph of the ONNX file `model`; ValueError naming the file and tensor if it is not
+    """The Graph of the ONNX file `model`; InputError naming the file and tensor if it is not
     ONNX, a tensor is not float32/float64 or has a dynamic size, or the metadata does not fit.
 
     With `time_axis`, the first dimension of every input and output that is not state is time
@@ -104,7 +105,7 @@ def graph_network(graph: Graph, input_function: ca.Function, period: int = 1,
     to the build cache. The precomputed mode (`table`) runs all calls in one: it needs the
     time axis."""
     if table is not None and not graph.time_axis:
-        raise ValueError(f"{graph.path}: the precomputed mode needs a graph with a time axis")
+        raise InputError(f"{graph.path}: the precomputed mode needs a graph with a time axis")
     if _follows_convention(graph):
         file = graph.path
     else:
@@ -120,7 +121,7 @@ def graph_network(graph: Graph, input_function: ca.Function, period: int = 1,
         options.intra_op_num_threads = options.inter_op_num_threads = 1
         ort.InferenceSession(str(file), options, providers=["CPUExecutionProvider"])
     except Exception as exc:  # onnxruntime raises its own Fail, InvalidGraph, ...
-        raise ValueError(f"{graph.path}: onnxruntime {ort.__version__}, which the FMU bundles, "
+        raise InputError(f"{graph.path}: onnxruntime {ort.__version__}, which the FMU bundles, "
                          f"cannot load the graph: {exc}") from exc
     return read_network(file, input_function, period, table)
 
@@ -132,11 +133,11 @@ def _states(path: Path, meta: dict[str, str], inputs: dict[str, onnx.ValueInfoPr
         declared = json.loads(meta.get("state", "[]"))
         pairs = tuple((str(s["input"]), str(s["output"])) for s in declared)
     except (ValueError, TypeError, KeyError) as exc:
-        raise ValueError(f"{path}: metadata 'state' must be a JSON list of "
+        raise InputError(f"{path}: metadata 'state' must be a JSON list of "
                          f'{{"input": NAME, "output": NAME}}, not {meta["state"]!r}') from exc
     for name_in, name_out in pairs:
         if name_in not in inputs or name_out not in outputs:
-            raise ValueError(f"{path}: metadata 'state' declares the state input {name_in!r} "
+            raise InputError(f"{path}: metadata 'state' declares the state input {name_in!r} "
                              f"and output {name_out!r}, but the graph's inputs are "
                              f"{list(inputs)} and its outputs {list(outputs)}")
         shape_in, shape_out = ([d.dim_value if d.HasField("dim_value") else None
@@ -145,7 +146,7 @@ def _states(path: Path, meta: dict[str, str], inputs: dict[str, onnx.ValueInfoPr
         types = {v.type.tensor_type.elem_type for v in (inputs[name_in], outputs[name_out])}
         if (types != {TensorProto.FLOAT} or None in shape_in or len(shape_out) != len(shape_in)
                 or any(o not in (None, i) for o, i in zip(shape_out, shape_in))):
-            raise ValueError(f"{path}: state tensors {name_in!r} and {name_out!r} must both be "
+            raise InputError(f"{path}: state tensors {name_in!r} and {name_out!r} must both be "
                              f"float32, the input of a fixed shape and the output of the same "
                              f"(the FMU carries its state in float32)")
     names = [n for pair in pairs for n in pair]
@@ -153,7 +154,7 @@ def _states(path: Path, meta: dict[str, str], inputs: dict[str, onnx.ValueInfoPr
                                           for n in (name_in, f"{name_in}_out")]]
     if len(set(names)) != len(names) or len(set(wrapped)) != len(wrapped) or any(
             n.startswith(RESERVED) for n in names):
-        raise ValueError(f"{path}: state tensors {names} must be distinct, no input NAME may be "
+        raise InputError(f"{path}: state tensors {names} must be distinct, no input NAME may be "
                          f"another's NAME_out, and no name may start with {RESERVED!r}")
     return pairs
 
@@ -162,7 +163,7 @@ def _ports(path: Path, meta: dict[str, str], role: str, tensors: list[onnx.Value
            time_axis: bool) -> tuple[Port, ...]:
     """The inputs (or outputs) that are not state, their elements named."""
     if not tensors:
-        raise ValueError(f"{path}: the graph has no {role} besides its state tensors; the FMU "
+        raise InputError(f"{path}: the graph has no {role} besides its state tensors; the FMU "
                          f"needs at least one")
     shapes = [_port_shape(path, role, v, time_axis) for v in tensors]
     sizes = [math.prod(_fixed(shape[1:] if time_axis else shape)) for shape in shapes]
@@ -179,19 +180,19 @@ def _port_shape(path: Path, role: str, value: onnx.ValueInfoProto, time_axis: bo
     if not value.type.HasField("tensor_type") or tensor.elem_type not in FLOATS:
         kind = (TensorProto.DataType.Name(tensor.elem_type) if value.type.HasField("tensor_type")
                 else value.type.WhichOneof("value"))
-        raise ValueError(f"{path}: {role} {value.name!r} holds {kind}; FMU variables are reals, "
+        raise InputError(f"{path}: {role} {value.name!r} holds {kind}; FMU variables are reals, "
                          f"so every input and output must be a float32 or float64 tensor")
     if not tensor.HasField("shape"):
-        raise ValueError(f"{path}: {role} {value.name!r} has no shape in the graph; export it "
+        raise InputError(f"{path}: {role} {value.name!r} has no shape in the graph; export it "
                          f"with its shape")
     shape = tuple(d.dim_value if d.HasField("dim_value") else (d.dim_param or "?")
                   for d in tensor.shape.dim)
     if time_axis and not shape:
-        raise ValueError(f"{path}: {role} {value.name!r} is a scalar, but the graph's first "
+        raise InputError(f"{path}: {role} {value.name!r} is a scalar, but the graph's first "
                          f"dimension must be time")
     for dim in shape[1:] if time_axis else shape:
         if not isinstance(dim, int):
-            raise ValueError(_dynamic(path, role, value.name, shape, dim))
+            raise InputError(_dynamic(path, role, value.name, shape, dim))
     return shape
 
 
@@ -220,10 +221,10 @@ def _element_names(path: Path, meta: dict[str, str], key: str, tensors: list[str
     try:
         names = json.loads(meta[key])
     except ValueError as exc:
-        raise ValueError(f"{path}: metadata {key!r} is not JSON: {exc}") from exc
+        raise InputError(f"{path}: metadata {key!r} is not JSON: {exc}") from exc
     if (not isinstance(names, list) or len(names) != sum(sizes)
             or not all(isinstance(n, str) and n for n in names)):
-        raise ValueError(f"{path}: metadata {key!r} must list {sum(sizes)} names, one per element "
+        raise InputError(f"{path}: metadata {key!r} must list {sum(sizes)} names, one per element "
                          f"of {', '.join(f'{t} ({n})' for t, n in zip(tensors, sizes))}; "
                          f"got {meta[key]!r}")
     return names
@@ -244,7 +245,7 @@ def _adapter(graph: Graph) -> onnx.ModelProto:
     opset = max((o.version for o in graph.model.opset_import if o.domain in ("", "ai.onnx")),
                 default=0)
     if opset < MIN_OPSET:
-        raise ValueError(f"{graph.path}: the graph uses opset {opset}; the FMU needs {MIN_OPSET} "
+        raise InputError(f"{graph.path}: the graph uses opset {opset}; the FMU needs {MIN_OPSET} "
                          f"or newer (onnx.version_converter.convert_version converts it)")
     model = onnx.compose.add_prefix(graph.model, GRAPH)
     inner = model.graph

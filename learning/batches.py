@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from flexff.fmu.errors import InputError
+
 PAD, TRAIN, VALIDATION = 0, 1, 2
 # (history x, window x, window y, window mask) of a batch of windows
 Batch = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
@@ -37,7 +39,7 @@ def window_roles(lengths: list[int], window: int, val_fraction: float,
               if (r[start:start + window] == TRAIN).any()]
     n_val = round(val_fraction * len(blocks))
     if n_val < 1 or n_val >= len(blocks):
-        raise ValueError(
+        raise InputError(
             f"the training trajectories give {len(blocks)} window(s) of {window} samples, too few "
             f"to hold out {val_fraction:.1%} for validation: collect more or longer training "
             f"trajectories, or lower `window`")

@@ -53,6 +53,7 @@ from flexff.cosim.recording import Recording, atomic_write
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import Scenario, reference_signals, resolve
 from flexff.cosim.schema import ConfigError, RecordConfig, RunConfig
+from flexff.fmu.errors import InputError, RunError
 from flexff.learning.dataset import (
     COLLECTED,
     ENCODER_SIGNALS,
@@ -84,11 +85,11 @@ PROGRESS = "collection.json"  # the loop of a collection under way (see the modu
 STOPPING = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES)  # fail every trajectory
 
 
-class DataFolderError(ValueError):
+class DataFolderError(InputError):
     """The output folder belongs to another set, format, loop or trajectory definition."""
 
 
-class CollectionError(RuntimeError):
+class CollectionError(RunError):
     """Some trajectories failed (the others were written); `report` says which and why."""
 
     def __init__(self, report: CollectionReport) -> None:
@@ -190,9 +191,9 @@ def run_collection(set_name: str, out: str | Path, workers: int | None = None,
     start = time.perf_counter()
     trajectories = trajectory_set(set_name)
     if limit is not None and limit < 1:
-        raise ValueError(f"limit must be at least 1, got {limit}")
+        raise InputError(f"limit must be at least 1, got {limit}")
     if workers is not None and workers < 1:
-        raise ValueError(f"workers must be at least 1, got {workers} (leave it out for one "
+        raise InputError(f"workers must be at least 1, got {workers} (leave it out for one "
                          f"process per CPU)")
     specs = trajectories.trajectories[:limit]
     out = Path(out)

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from flexff.cosim.recording import atomic_write
+from flexff.fmu.errors import InputError
 from flexff.plant.signals import ENCODERS, FORCES, REFERENCE, TRUE_POSITION, names
 
 FORMAT = "flexff-dataset"
@@ -49,7 +50,7 @@ TRAINED = ("time", *ENCODER_SIGNALS, *LABEL_SIGNALS)  # what training reads (lea
 RECOLLECT = "collect the data again with this flexff version: flexff data collect ..."
 
 
-class DatasetError(ValueError):
+class DatasetError(InputError):
     """A dataset folder that cannot be used; the message says which file and what to do."""
 
 

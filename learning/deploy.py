@@ -19,6 +19,7 @@ from torch import nn
 
 from flexff.controllers.features import feature_units, reference_feature_function
 from flexff.controllers.model_card import INPUT_KINDS
+from flexff.fmu.errors import InputError
 from flexff.learning.casadi_torch import TorchFunction
 from flexff.learning.models import uses_prior
 from flexff.learning.rigid import RigidBodyForce
@@ -45,7 +46,7 @@ class SIModel(nn.Module):
     def __init__(self, run: Run, inputs: str = "features", prior: bool = True) -> None:
         super().__init__()
         if inputs not in INPUT_KINDS:
-            raise ValueError(f"inputs must be one of {INPUT_KINDS}, got {inputs!r}")
+            raise InputError(f"inputs must be one of {INPUT_KINDS}, got {inputs!r}")
         feature_set = run.config.features.feature_set
         self.network = run.network.eval()
         self.inputs = inputs

@@ -40,6 +40,7 @@ from flexff.controllers.features import feature_names
 from flexff.cosim.recording import Recording, load_recording
 from flexff.cosim.run import range_warning, run_config
 from flexff.cosim.schema import RecordConfig, RunConfig
+from flexff.fmu.errors import InputError
 from flexff.learning.collect import collect
 from flexff.learning.export import export
 from flexff.learning.loop import default_loop, on_reference, with_feedforward
@@ -106,7 +107,7 @@ def scenario_config(env: str, name: str, model: Path | None = None, mode: str = 
         builtin = "rigid-body-feedforward"
     elif name != "pid":
         if model is None:
-            raise ValueError(f"scenario {name!r} needs an ONNX model")
+            raise InputError(f"scenario {name!r} needs an ONNX model")
         builtin, options = "learned-feedforward", {"model": Path(model).resolve(), "mode": mode}
     environment = ENVIRONMENTS[env]
     config = on_reference(with_feedforward(loop or default_loop(environment.plant), builtin,
@@ -123,7 +124,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
     collects and evaluates on that run configuration instead of the environment's plant."""
     if env not in ENVIRONMENTS:
-        raise ValueError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
+        raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
     for kind in models:
         check_kind(kind)
     out = Path(out)

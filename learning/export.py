@@ -49,6 +49,7 @@ import torch
 
 from flexff.controllers.model_card import ModelCard
 from flexff.cosim.recording import atomic_write
+from flexff.fmu.errors import InputError, RunError
 from flexff.learning.deploy import EnsembleSIModel, SIModel
 from flexff.learning.run_folder import Run, flexff_version, load_run
 from flexff.learning.threads import torch_threads
@@ -70,7 +71,7 @@ def export(run: str | Path | Sequence[str | Path], out: str | Path,
     """
     folders = [run] if isinstance(run, (str, Path)) else list(run)
     if not folders:
-        raise ValueError("export needs at least one training run folder")
+        raise InputError("export needs at least one training run folder")
     with torch_threads():
         return _export([load_run(folder) for folder in folders], Path(out), inputs)
 
@@ -99,7 +100,7 @@ def _check_members(runs: list[Run]) -> None:
                 json.dumps(r.prior_parameters, sort_keys=True))
 
     if len({key(r) for r in runs}) > 1:
-        raise ValueError("the runs of one export must share model kind, feature set, model "
+        raise InputError("the runs of one export must share model kind, feature set, model "
                          "rate and prior (the same training data): "
                          + ", ".join(f"{r.path} {key(r)}" for r in runs))
 
@@ -178,8 +179,8 @@ def check_export(model: SIModel | EnsembleSIModel, path: Path, inputs: np.ndarra
     worst = max(float(np.abs(run(runtime, inputs) - expected).max()) / scale
                 for run in (run_sequence, run_steps))
     if not worst <= TOLERANCE:
-        raise RuntimeError(f"{name or path}: onnxruntime deviates from PyTorch by {worst:.3g} "
-                           f"(relative), more than {TOLERANCE:g}; the export is not usable")
+        raise RunError(f"{name or path}: onnxruntime deviates from PyTorch by {worst:.3g} "
+                       f"(relative), more than {TOLERANCE:g}; the export is not usable")
     return worst
 
 

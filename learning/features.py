@@ -31,6 +31,7 @@ from flexff.controllers.features import (
     motion_features,
     nominal_model,
 )
+from flexff.fmu.errors import InputError
 from flexff.learning.dataset import ENCODER_SIGNALS, LABEL_SIGNALS, Trajectory
 from flexff.plant.kinematics import SHOULDER_INDEX
 
@@ -64,14 +65,14 @@ class FeatureConfig:
 
     def __post_init__(self) -> None:
         if self.feature_set not in FEATURE_SETS:
-            raise ValueError(f"unknown feature set {self.feature_set!r}: choose one of "
+            raise InputError(f"unknown feature set {self.feature_set!r}: choose one of "
                              f"{', '.join(FEATURE_SETS)}")
         if self.encoders not in (2, 3):
-            raise ValueError(f"encoders must be 2 or 3, got {self.encoders!r}")
+            raise InputError(f"encoders must be 2 or 3, got {self.encoders!r}")
         if not (self.cutoff_hz > 0 and self.filter_order >= 1):
-            raise ValueError("cutoff_hz must be positive and filter_order at least 1")
+            raise InputError("cutoff_hz must be positive and filter_order at least 1")
         if self.position_noise_m < 0 or self.force_noise_n < 0 or self.edge_periods < 0:
-            raise ValueError("noise levels and edge_periods must not be negative")
+            raise InputError("noise levels and edge_periods must not be negative")
 
 
 def quantize_encoders(theta: np.ndarray) -> np.ndarray:
@@ -104,7 +105,7 @@ def lowpass(signal: np.ndarray, rate_hz: float, cutoff_hz: float = 1.8,
             order: int = 4) -> np.ndarray:
     """Zero-phase Butterworth low-pass of `signal` along axis 0 (forwards and backwards)."""
     if cutoff_hz >= rate_hz / 2:
-        raise ValueError(f"cutoff {cutoff_hz} Hz must lie below the Nyquist frequency "
+        raise InputError(f"cutoff {cutoff_hz} Hz must lie below the Nyquist frequency "
                          f"{rate_hz / 2} Hz")
     sos = butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
     return sosfiltfilt(sos, signal, axis=0)
@@ -123,7 +124,7 @@ def decimation(rate_hz: float, model_rate_hz: float | None) -> int:
         return 1
     factor = rate_hz / model_rate_hz
     if model_rate_hz <= 0 or factor < 1 or abs(factor - round(factor)) > 1e-9:
-        raise ValueError(f"model_rate_hz {model_rate_hz} must divide the data rate {rate_hz} Hz "
+        raise InputError(f"model_rate_hz {model_rate_hz} must divide the data rate {rate_hz} Hz "
                          f"by a whole number")
     return round(factor)
 

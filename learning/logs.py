@@ -47,6 +47,7 @@ from scipy.io.matlab import matfile_version
 from scipy.signal import savgol_filter
 
 from flexff.cosim.csv_text import read_rows
+from flexff.fmu.errors import InputError
 from flexff.learning.dataset import (
     ENCODER_SIGNALS,
     IMPORTED,
@@ -72,7 +73,7 @@ SET = "hardware"  # logs of a real machine
 FK = "forward kinematics of theta_s1..3 (nominal model, least squares)"
 
 
-class LogError(ValueError):
+class LogError(InputError):
     """A log that cannot be imported; the message names the file, column and row."""
 
 
@@ -94,7 +95,7 @@ def import_logs(files: Sequence[str | Path], out: str | Path, rate_hz: float | N
                 test: Sequence[str] | None = None) -> Dataset:
     """Import the log `files` into the new dataset folder `out` at `rate_hz` (default: the
     logs' own), the logs named in `test` (default: the last one) forming the test split;
-    return the dataset. Raises LogError (a ValueError) naming file, column and row."""
+    return the dataset. Raises LogError (an InputError) naming file, column and row."""
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise LogError(f"{out} exists and is not an empty folder: import into a new folder")

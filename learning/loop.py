@@ -25,6 +25,7 @@ from flexff.cosim.config import checked, expanded, parse_config
 from flexff.cosim.recording import Recording
 from flexff.cosim.scenario import Scenario
 from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
+from flexff.fmu.errors import InputError
 from flexff.fmu.importer import read_fmu, typed_value
 from flexff.learning.dataset import (
     ENCODER_SIGNALS,
@@ -75,7 +76,7 @@ def on_reference(loop: RunConfig, reference: Mapping[str, Any], name: str,
                         "reference": dict(reference)}, name=name, source=f"{loop.source}, {name}")
     plant = own.builtin("plant")
     if plant is None:  # the short form always has one
-        raise ValueError(f"{name}: the reference run has no built-in plant")
+        raise InputError(f"{name}: the reference run has no built-in plant")
     start = {k: plant.parameters[k] for k in START_VALUES}
     return checked(replace(loop, name=name, reference=own.reference, stop=own.stop,
                            fmus=tuple(_started(f, start, seed) for f in loop.fmus)))

@@ -33,6 +33,8 @@ from typing import Any
 import torch
 from torch import nn
 
+from flexff.fmu.errors import InputError
+
 State = tuple[torch.Tensor, ...]
 N_OUTPUTS = 2
 
@@ -109,7 +111,7 @@ class TemporalConvNet(SequenceNetwork):
                  dropout: float = 0.05) -> None:
         super().__init__()
         if levels < 1 or kernel < 2:
-            raise ValueError(f"a TCN needs levels >= 1 and kernel >= 2, got {levels}, {kernel}")
+            raise InputError(f"a TCN needs levels >= 1 and kernel >= 2, got {levels}, {kernel}")
         dilations = [2 ** i for i in range(levels)]
         self.receptive_field = receptive_field(kernel, dilations)
         self.history = self.receptive_field - 1
@@ -215,9 +217,9 @@ class CNNLSTM(SequenceNetwork):
                  dropout: float = 0.05) -> None:
         super().__init__()
         if len(conv_channels) != len(conv_kernels) or not conv_channels or min(conv_kernels) < 1:
-            raise ValueError("conv_channels and conv_kernels must be non-empty and of equal length")
+            raise InputError("conv_channels and conv_kernels must be non-empty and of equal length")
         if sum(k - 1 for k in conv_kernels) < 1:
-            raise ValueError("the convolutions must span more than one sample (some kernel > 1)")
+            raise InputError("the convolutions must span more than one sample (some kernel > 1)")
         self.n_features = n_features
         self.history = sum(k - 1 for k in conv_kernels)
         self.pad = CausalHistory(self.history)
@@ -313,9 +315,9 @@ RECURRENT = ("lstm", "cnn-lstm")
 
 
 def check_kind(kind: str) -> None:
-    """Raise ValueError naming the known model kinds if `kind` is not one."""
+    """Raise InputError naming the known model kinds if `kind` is not one."""
     if kind not in NETWORKS:
-        raise ValueError(f"unknown model {kind!r}: choose one of {', '.join(NETWORKS)}")
+        raise InputError(f"unknown model {kind!r}: choose one of {', '.join(NETWORKS)}")
 
 
 def build_network(kind: str, n_features: int, linear_skip: bool = False,

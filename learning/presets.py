@@ -46,6 +46,7 @@ import dataclasses
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from flexff.fmu.errors import InputError
 from flexff.learning.features import FeatureConfig
 from flexff.learning.models import check_kind
 
@@ -74,14 +75,14 @@ class TrainConfig:
     def __post_init__(self) -> None:
         check_kind(self.model)
         if self.schedule not in SCHEDULES:
-            raise ValueError(f"unknown schedule {self.schedule!r}: choose one of "
+            raise InputError(f"unknown schedule {self.schedule!r}: choose one of "
                              f"{', '.join(SCHEDULES)}")
         if self.epochs < 1 or self.batch_size < 1 or self.window < 1:
-            raise ValueError("epochs, batch_size and window must be at least 1")
+            raise InputError("epochs, batch_size and window must be at least 1")
         if not 0 < self.val_fraction < 1:
-            raise ValueError(f"val_fraction must lie between 0 and 1, got {self.val_fraction}")
+            raise InputError(f"val_fraction must lie between 0 and 1, got {self.val_fraction}")
         if not self.learning_rate > 0 or self.grad_clip < 0 or self.threads < 0:
-            raise ValueError("learning_rate must be positive, grad_clip and threads not negative")
+            raise InputError("learning_rate must be positive, grad_clip and threads not negative")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -134,7 +135,7 @@ def make_config(model: str, preset: str, **overrides: Any) -> TrainConfig:
     """
     check_kind(model)
     if preset not in PRESETS:
-        raise ValueError(f"unknown preset {preset!r}: choose one of {', '.join(PRESETS)}")
+        raise InputError(f"unknown preset {preset!r}: choose one of {', '.join(PRESETS)}")
     settings = dict(PRESETS[preset][model])
     settings["architecture"] = dict(settings["architecture"])
     features = _PRESET_FEATURES[preset]
@@ -151,6 +152,6 @@ def make_config(model: str, preset: str, **overrides: Any) -> TrainConfig:
             settings["architecture"][key] = value
         else:
             known = sorted(top | feature_fields | set(settings["architecture"]))
-            raise ValueError(f"unknown setting {key!r} for a {model} run; known: {known}")
+            raise InputError(f"unknown setting {key!r} for a {model} run; known: {known}")
     return TrainConfig(model=model, preset=preset, features=replace(features, **feature_overrides),
                        **settings)

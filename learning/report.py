@@ -32,6 +32,7 @@ from matplotlib.patches import Rectangle
 from flexff.cosim.metrics import AXES, tracking_metrics
 from flexff.cosim.plots import MM, save_figure
 from flexff.cosim.recording import Recording, atomic_write
+from flexff.fmu.errors import InputError
 from flexff.plant.signals import (
     FEEDBACK_FORCES,
     FEEDFORWARD_FORCES,
@@ -94,13 +95,13 @@ FORCES = names(FEEDBACK_FORCES, FEEDFORWARD_FORCES)
 
 def _check_env(env: str) -> None:
     if env not in _ENVS:
-        raise ValueError(f"unknown environment {env!r}: use 'sim' (compared with thesis Table "
+        raise InputError(f"unknown environment {env!r}: use 'sim' (compared with thesis Table "
                          f"5.2) or 'hardware' (Table 6.2)")
 
 
 def _check_pid(names: Mapping[str, object], what: str) -> None:
     if "pid" not in names:
-        raise ValueError(f"the {what} have no 'pid' scenario (got {sorted(names)}): the "
+        raise InputError(f"the {what} have no 'pid' scenario (got {sorted(names)}): the "
                          f"improvement ratios are PID alone / scenario, so include the PID-alone "
                          f"run under the name 'pid'")
 
@@ -191,16 +192,16 @@ def _check_recordings(recordings: Mapping[str, Recording]) -> None:
         needed = TRACKING if name == "pid" else TRACKING + FORCES
         missing = [s for s in needed if s not in rec.signals]
         if missing:
-            raise ValueError(f"recording {name!r} lacks {missing} (it has "
+            raise InputError(f"recording {name!r} lacks {missing} (it has "
                              f"{sorted(rec.signals)}): record {list(needed)} in its run")
     base = recordings["pid"]
     for name, rec in recordings.items():
         if rec.time.size != base.time.size:
-            raise ValueError(f"recording {name!r} has {rec.time.size} points, 'pid' has "
+            raise InputError(f"recording {name!r} has {rec.time.size} points, 'pid' has "
                              f"{base.time.size}: run every scenario with the same reference, "
                              f"step and stop time")
         if not math.isclose(rec.step, base.step, rel_tol=1e-9):
-            raise ValueError(f"recording {name!r} steps {rec.step:g} s, 'pid' {base.step:g} s: "
+            raise InputError(f"recording {name!r} steps {rec.step:g} s, 'pid' {base.step:g} s: "
                              f"run every scenario with the same communication step")
 
 

@@ -29,6 +29,7 @@ from typing import Any
 import torch
 
 from flexff.cosim.recording import atomic_write
+from flexff.fmu.errors import InputError
 from flexff.learning.dataset import file_sha256
 from flexff.learning.models import SequenceNetwork, build_network
 from flexff.learning.presets import TrainConfig
@@ -46,7 +47,7 @@ CHECKPOINT_KEYS = ("settings", "epoch", "epochs", "network", "optimizer", "best"
 STAGING = ".staging-"  # prefix of the hidden folder a run's files are written to first
 
 
-class RunFolderError(ValueError):
+class RunFolderError(InputError):
     """A run folder that cannot be used or written as asked; the message says what to do."""
 
 

@@ -29,6 +29,7 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from flexff.controllers.features import feature_names
+from flexff.fmu.errors import InputError, RunError
 from flexff.learning.batches import (
     TRAIN,
     VALIDATION,
@@ -92,7 +93,7 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
     start = time.perf_counter()
     every = CHECKPOINT_EVERY[config.preset] if checkpoint_every is None else checkpoint_every
     if every < 1:
-        raise ValueError(f"checkpoint_every must be at least 1 epoch, got {every}")
+        raise InputError(f"checkpoint_every must be at least 1 epoch, got {every}")
     settings = _settings(config, dataset)
     checkpoint = start_run(out, settings, resume, force)
     train_set, test_set = _splits(dataset)
@@ -286,8 +287,8 @@ def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
             on_epoch({"epoch": epoch + 1, "epochs": config.epochs, "train": loss, "val": val,
                       "best_epoch": history.get("best_epoch")})
     if best_state is None:
-        raise RuntimeError(f"training diverged (validation loss {history['val'][-1]}): lower "
-                           f"learning_rate (now {config.learning_rate:g}) or grad_clip")
+        raise RunError(f"training diverged (validation loss {history['val'][-1]}): lower "
+                       f"learning_rate (now {config.learning_rate:g}) or grad_clip")
     network.load_state_dict(best_state)
     return history
 
@@ -393,7 +394,7 @@ def pick_device(name: str) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if name.startswith("cuda") and not torch.cuda.is_available():
-        raise ValueError(f"device {name!r} asked for, but CUDA is not available: "
+        raise InputError(f"device {name!r} asked for, but CUDA is not available: "
                          f"use 'cpu' or 'auto'")
     return torch.device(name)
 

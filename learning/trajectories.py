@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from flexff.cosim.references import Spline
+from flexff.fmu.errors import InputError
 from flexff.learning.dataset import SETS
 
 STEP = 1e-3  # s: the co-simulation step of every run
@@ -104,7 +105,7 @@ def trajectory_set(name: str) -> TrajectorySet:
         return _sim_set()
     if name == "hardware":
         return _hardware_set()
-    raise ValueError(f"unknown trajectory set {name!r}: choose one of {', '.join(SETS)}")
+    raise InputError(f"unknown trajectory set {name!r}: choose one of {', '.join(SETS)}")
 
 
 # -- sets -------------------------------------------------------------------------------------

@@ -22,6 +22,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from flexff.fmu.errors import InputError
 from flexff.plant.parameters import PlantParameters
 
 MOUNT_ANGLES_DEG = (90.0, -30.0, 210.0)
@@ -164,14 +165,14 @@ def forward_kinematics_3(p: PlantParameters, thetas: Any, iterations: int = 4) -
 
 
 def check_workspace(p: PlantParameters, x: Any, y: Any, what: str = "point") -> None:
-    """Raise ValueError if any (x, y) [m] lies outside the workspace disc or is not finite."""
+    """Raise InputError if any (x, y) [m] lies outside the workspace disc or is not finite."""
     xs, ys = np.atleast_1d(np.asarray(x, dtype=float)), np.atleast_1d(np.asarray(y, dtype=float))
     if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ys))):
-        raise ValueError(f"{what} has non-finite coordinates")
+        raise InputError(f"{what} has non-finite coordinates")
     radius = np.hypot(xs, ys)
     k = int(np.argmax(radius))
     if radius[k] > float(p.workspace_radius):
-        raise ValueError(
+        raise InputError(
             f"{what} ({xs[k]:.6g}, {ys[k]:.6g}) m lies outside the workspace: its distance "
             f"{radius[k]:.6g} m from the centre exceeds the workspace radius "
             f"{float(p.workspace_radius):.6g} m")

@@ -16,6 +16,7 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
+from flexff.fmu.errors import InputError
 from flexff.plant.actuator import encoder_reading, friction_torque, motor_torque
 from flexff.plant.dynamics import reduced_dynamics
 from flexff.plant.kinematics import (
@@ -45,11 +46,11 @@ VARIANTS = {
 
 
 def get_variant(name: str) -> Variant:
-    """The variant called `name`, or a ValueError listing the known ones."""
+    """The variant called `name`, or an InputError listing the known ones."""
     try:
         return VARIANTS[name]
     except KeyError:
-        raise ValueError(
+        raise InputError(
             f"unknown plant variant {name!r}: choose one of {', '.join(VARIANTS)}") from None
 
 

@@ -20,6 +20,8 @@ from collections.abc import Iterator
 from dataclasses import Field, dataclass, field, fields, replace
 from typing import Any, TypeAlias
 
+from flexff.fmu.errors import InputError
+
 CHAINS = (1, 2, 3)
 MOTOR_FRICTION = ("tau_coulomb", "b_viscous", "w_stribeck")  # fields of plant.actuator's model
 # a per-chain field: one entry per chain (numbers, or CasADi symbols from `from_vector`); the
@@ -123,7 +125,7 @@ class PlantParameters:
         """Copy with flat parameters replaced by name (`m_up2=0.3`, `l_up=0.31`), validated."""
         unknown = sorted(set(overrides) - set(self.names()))
         if unknown:
-            raise ValueError(f"unknown plant parameter(s) {unknown}; known: {self.names()}")
+            raise InputError(f"unknown plant parameter(s) {unknown}; known: {self.names()}")
         flat = dict(zip(self.names(), self.vector()))
         flat.update({k: float(v) for k, v in overrides.items()})
         result = self.from_vector([flat[n] for n in self.names()])
@@ -140,7 +142,7 @@ class PlantParameters:
                 for name, attr, _, j in self._flat_fields() if attr in fields_}
 
     def validate(self) -> None:
-        """Raise ValueError naming every parameter that is not finite or not positive."""
+        """Raise InputError naming every parameter that is not finite or not positive."""
         problems = []
         for name, value, unit, _, positive in self.describe():
             if not math.isfinite(value):
@@ -154,7 +156,7 @@ class PlantParameters:
         if self.l_up + self.l_low <= self.r_mount + self.workspace_radius:
             problems.append("l_up + l_low must exceed r_mount + workspace_radius (reach)")
         if problems:
-            raise ValueError("invalid plant parameters: " + "; ".join(problems))
+            raise InputError("invalid plant parameters: " + "; ".join(problems))
 
     def scaled(self, **factors: tuple[float, ...] | float) -> PlantParameters:
         """Copy with fields multiplied by factors (a 3-tuple scales chains separately)."""

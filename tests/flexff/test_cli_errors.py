@@ -160,7 +160,8 @@ def test_a_traceback_only_with_debug(capsys, monkeypatch, tmp_path, config, debu
     args = ["--debug"] * debug + ["run", str(config), "-o", str(tmp_path / "out")]
     assert main(args) == 1
     err = capsys.readouterr().err
-    assert err.endswith("flexff: error: KeyError: 'x_ref' (flexff --debug shows where)\n")
+    hint = "" if debug else " (rerun with flexff --debug for the traceback)"
+    assert err.endswith(f"flexff: error: KeyError: 'x_ref'{hint}\n")
     assert ("Traceback" in err) == debug
 
 
