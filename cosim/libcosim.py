@@ -37,7 +37,6 @@ except ImportError:  # an optional dependency: the extra "libcosim"
 from flexff.cosim.master import SlaveSpec
 from flexff.cosim.recording import Recording
 from flexff.cosim.wiring import SOURCE, Link, Port, wire
-from flexff.fmu.importer import read_fmu
 
 
 class _Execution:
@@ -48,7 +47,7 @@ class _Execution:
     def __init__(self, slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
                  step: float, links: Sequence[Link] | None = None) -> None:
         log_output_level(CosimLogLevel.WARNING)  # libcosim traces every FMI call otherwise
-        infos = {s.name: read_fmu(s.fmu) for s in slaves}
+        infos = {s.name: s.described() for s in slaves}
         self.variables = {name: info.variables for name, info in infos.items()}
         self.ports = [Port(s.name, infos[s.name]) for s in slaves]
         if links is None:

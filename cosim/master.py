@@ -79,11 +79,21 @@ PROGRESS_CHUNK = 1000  # steps between progress bar updates
 
 @dataclass(frozen=True)
 class SlaveSpec:
-    """One FMU of a co-simulation: its instance name, its file and start values by name."""
+    """One FMU of a co-simulation: its instance name, its file and start values by name, and
+    its model description once read (a resolved scenario's, whose start values are checked)."""
 
     name: str
     fmu: Path
     parameters: Mapping[str, Any] = field(default_factory=dict)
+    info: FmuInfo | None = field(default=None, compare=False, repr=False)
+
+    def described(self) -> FmuInfo:
+        """The model description: the one carried, else read and the start values checked."""
+        if self.info is not None:
+            return self.info
+        info = read_fmu(self.fmu)
+        _check_parameters(self, info)
+        return info
 
 
 class CosimError(RunError):
@@ -166,9 +176,7 @@ class Master:
         self.specs = list(slaves)
         self._plans: list[_Plan] = []
         self._instances: list[FmuInstance] = []
-        infos = [read_fmu(s.fmu) for s in slaves]
-        for spec, info in zip(slaves, infos):
-            _check_parameters(spec, info)
+        infos = [s.described() for s in slaves]
         if links is None:
             links = wire([Port(s.name, i) for s, i in zip(slaves, infos)], self.sources,
                          algorithm=algorithm)

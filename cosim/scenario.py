@@ -62,21 +62,22 @@ def resolve(config: RunConfig, folder: str | Path) -> Scenario:
     """Build the built-in FMUs into `folder`, sample the sources, wire everything."""
     folder = Path(folder)
     sources = source_signals(config)
-    slaves = tuple(SlaveSpec(f.name, _fmu_file(f, config, sources, folder), _start_values(f))
-                   for f in config.fmus)
-    ports = []
-    for f, s in zip(config.fmus, slaves):
+    slaves = []
+    for f in config.fmus:
+        path = _fmu_file(f, config, sources, folder)
         try:
-            info = read_fmu(s.fmu)
+            info = read_fmu(path)
         except FmuError as error:
             raise ConfigError(config.source, f"fmu.{f.name}", str(error)) from None
-        ports.append(Port(f.name, info, f.unconnected,
-                          frozenset(n for n in f.parameters if n in info.inputs)))
+        slaves.append(SlaveSpec(f.name, path, _start_values(f), info))
+    ports = [Port(f.name, s.described(), f.unconnected,
+                  frozenset(n for n in f.parameters if n in s.described().inputs))
+             for f, s in zip(config.fmus, slaves)]
     try:
         links = wire(ports, list(sources), config.connections, config.algorithm)
     except WiringError as error:
         raise ConfigError(config.source, error.key, error.message) from None
-    return Scenario(config, slaves, tuple(links), sources)
+    return Scenario(config, tuple(slaves), tuple(links), sources)
 
 
 def source_signals(config: RunConfig) -> dict[str, np.ndarray | float]:

@@ -140,7 +140,7 @@ def _ssd(scenario: Scenario) -> etree._Element:
     links = [k for k in scenario.links if k.source != SOURCE]
     used = {(k.source, k.signal) for k in links} | {(k.target, k.input) for k in links}
     for slave in scenario.slaves:
-        info = read_fmu(slave.fmu)
+        info = slave.described()
         component = _sub(elements, "ssd:Component", name=slave.name, type=FMU_TYPE,
                          source=f"resources/{slave.name}.fmu", implementation="CoSimulation")
         connectors = [n for n in (*info.inputs, *info.outputs, *info.parameters)

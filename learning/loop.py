@@ -149,7 +149,7 @@ def dataset_taps(scenario: Scenario) -> dict[str, Tap]:
                 f"\"PLANT.OUTPUT\", to = \"{controller}.{name}\")"))
         taps[name] = Tap(link.producer, link.gain, link.offset)
     taps.update({n: Tap(f"{controller}.{n}") for n in names(FEEDBACK_FORCES, CURRENTS)})
-    outputs = [(s.name, read_fmu(s.fmu).outputs) for s in scenario.slaves]
+    outputs = [(s.name, s.described().outputs) for s in scenario.slaves]
     for name in POSITION_SIGNALS:
         found = [f"{fmu}.{name}" for fmu, names in outputs if name in names]
         if len(found) != 1:
