@@ -1,10 +1,16 @@
 """CSV text files read the one careful way: UTF-8 (a byte-order mark allowed), each row with its
-line number, and a file that is no CSV text an error naming the problem, never its content."""
+line number, and a file that is no CSV text an error naming the problem, never its content;
+and the one reader of time tables on top (references, [[source]] tables, machine logs)."""
 
 from __future__ import annotations
 
 import csv
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from flexff.fmu.errors import InputError
 
@@ -24,3 +30,81 @@ def read_rows(path: Path, error: type[InputError] = InputError) -> list[tuple[in
     if not rows:
         raise error(f"{path}: empty file")
     return rows
+
+
+@dataclass(frozen=True)
+class TimeTable:
+    """A CSV table of samples as read: its columns by name (`time` first) and the file line of
+    each data row, for messages."""
+
+    path: Path
+    columns: dict[str, np.ndarray]
+    lines: tuple[int, ...]
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.columns[TIME]
+
+    def row(self, k: int) -> str:
+        """Data row k (from 0) as messages name it."""
+        return f"data row {k + 1} (line {self.lines[k]})"
+
+
+TIME = "time"  # the time column; files written before flexff named it so may call it `t`
+OLD_TIME = "t"
+
+
+def read_time_table(path: Path, required: Sequence[str] = (),
+                    optional: Sequence[str] | None = None,
+                    error: type[InputError] = InputError) -> TimeTable:
+    """The time table in the CSV file at `path`: a header row naming `time` (or `t`) and the
+    `required` columns, then rows of numbers, every one finite, time strictly increasing. It
+    keeps the `required` and `optional` columns (every column when `optional` is None). Every
+    problem is an `error` naming the file, column and row (never the file's content): the one
+    reader of references, [[source]] tables and machine logs."""
+    rows = read_rows(path, error)
+    header = [name.strip() for name in rows[0][1]]
+    if TIME not in header and OLD_TIME in header:
+        header[header.index(OLD_TIME)] = TIME
+    wanted = [TIME, *(n for n in required if n != TIME)]
+    missing = [n for n in wanted if n not in header]
+    if missing:
+        also = f" (optionally {', '.join(optional)})" if optional else ""
+        raise error(f"{path}: missing column(s) {', '.join(missing)}: the header row must name "
+                    f"{', '.join(wanted)}{also}")
+    kept = [n for n in header if n in wanted or optional is None or n in optional]
+    for name in kept:
+        if header.count(name) > 1:
+            raise error(f"{path}: column {name} appears {header.count(name)} times in the "
+                        f"header row")
+    body = [(line, row) for line, row in rows[1:] if any(cell.strip() for cell in row)]
+    table = TimeTable(path, {}, tuple(line for line, _ in body))
+    for k, (_, cells) in enumerate(body):
+        if len(cells) != len(header):
+            raise error(f"{path}: {table.row(k)} has {len(cells)} cells, the header "
+                        f"{len(header)}")
+    for name in kept:
+        table.columns[name] = _numbers(table, name, [cells[header.index(name)]
+                                                     for _, cells in body], error)
+    if len(body) < 2:
+        raise error(f"{path}: {len(body)} data row(s): a time table needs at least two")
+    steps = np.diff(table.time)
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0)) + 1
+        raise error(f"{path}: column time, {table.row(k)}: time does not increase "
+                    f"(t = {table.time[k - 1]:.9g} s, then {table.time[k]:.9g} s)")
+    return table
+
+
+def _numbers(table: TimeTable, name: str, cells: list[str], error: type[InputError]
+             ) -> np.ndarray:
+    """A column's cells as finite float64 numbers."""
+    values = np.empty(len(cells))
+    for k, cell in enumerate(cells):
+        try:
+            values[k] = float(cell)
+        except ValueError:
+            raise error(f"{table.path}: column {name}, {table.row(k)}: not a number") from None
+        if not math.isfinite(values[k]):
+            raise error(f"{table.path}: column {name}, {table.row(k)}: NaN or Inf")
+    return values

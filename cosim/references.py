@@ -24,7 +24,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_filter
 
-from flexff.cosim.csv_text import read_rows
+from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.memory import check_memory
 from flexff.fmu.errors import InputError
 from flexff.plant.kinematics import check_workspace
@@ -80,7 +80,7 @@ class Reference:
         """Write a table with columns t, x_ref, y_ref, vx_ref, vy_ref, ax_ref, ay_ref."""
         with open(path, "w", newline="") as handle:
             writer = csv.writer(handle)
-            writer.writerow(("t", *self.SIGNALS))
+            writer.writerow((TIME, *self.SIGNALS))
             writer.writerows(np.column_stack(self._arrays()).tolist())
 
 
@@ -295,20 +295,17 @@ def thesis_hardware_evaluation(step: float = 1e-3) -> Reference:
 
 
 def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.025) -> Reference:
-    """A reference from a CSV table with columns t, x_ref, y_ref (and optionally vx_ref, vy_ref,
-    ax_ref, ay_ref), resampled onto the grid t0, t0 + step, ... by cubic interpolation.
+    """A reference from a CSV table with columns time (or t), x_ref, y_ref (and optionally
+    vx_ref, vy_ref, ax_ref, ay_ref; cosim.csv_text's time table), resampled onto the grid t0,
+    t0 + step, ... by cubic interpolation.
 
     Missing velocities and accelerations come from a cubic Savitzky-Golay filter over
     `smoothing_window` seconds of the resampled positions, which also smooths measured data.
     """
     _positive("step", step, "s")
     _positive("smoothing_window", smoothing_window, "s")
-    columns = _read_columns(Path(path))
-    t = columns["t"]
-    if np.any(np.diff(t) <= 0):
-        k = int(np.argmax(np.diff(t) <= 0)) + 1
-        raise InputError(f"{path}: time column t is not strictly increasing at data row {k + 1} "
-                         f"(t = {t[k - 1]:.9g} then {t[k]:.9g})")
+    table = read_time_table(Path(path), ("x_ref", "y_ref"), Reference.SIGNALS[2:])
+    columns, t = table.columns, table.time
     check_workspace(NOMINAL, columns["x_ref"], columns["y_ref"], f"{path}: point")
     n = math.floor((t[-1] - t[0]) / step + 1e-9) + 1
     check_memory(SAMPLED_ARRAYS * n, f"{path}: resampling the {t[-1] - t[0]:g} s table every "
@@ -319,7 +316,7 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
         raise InputError(f"{path}: the table spans {t[-1] - t[0]:.6g} s, too short for the "
                          f"{smoothing_window} s smoothing window at the {step} s step")
     resampled = {name: CubicSpline(t, values)(grid) for name, values in columns.items()
-                 if name != "t"}
+                 if name != TIME}
     for axis in ("x", "y"):
         for order, prefix in ((1, "v"), (2, "a")):
             name = f"{prefix}{axis}_ref"
@@ -329,37 +326,6 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
     check_workspace(NOMINAL, resampled["x_ref"], resampled["y_ref"],
                     f"{path}: resampled point")
     return Reference(grid, *(resampled[name] for name in Reference.SIGNALS))
-
-
-def _read_columns(path: Path) -> dict[str, np.ndarray]:
-    """The known columns of a CSV table, checked to be present, numeric and finite. Errors
-    name the problem, never the file's content (which may be anything)."""
-    rows = [row for _, row in read_rows(path)]
-    header = [name.strip() for name in rows[0]]
-    missing = [name for name in ("t", "x_ref", "y_ref") if name not in header]
-    if missing:
-        raise InputError(f"{path}: missing column(s) {', '.join(missing)}: the first line must "
-                         f"name the columns t, x_ref, y_ref (and optionally vx_ref, vy_ref, "
-                         f"ax_ref, ay_ref), separated by commas")
-    body = [row for row in rows[1:] if any(cell.strip() for cell in row)]  # blank lines
-    if len(body) < 2:
-        raise InputError(f"{path}: needs at least two data rows, found {len(body)}")
-    columns = {}
-    for name in ("t", *Reference.SIGNALS):
-        if name not in header:
-            continue
-        j, values = header.index(name), []
-        for k, row in enumerate(body):
-            try:
-                value = float(row[j])
-            except (IndexError, ValueError):
-                value = math.nan
-            if not math.isfinite(value):
-                raise InputError(f"{path}: column {name} has a missing, non-numeric or "
-                                 f"non-finite value at data row {k + 1}")
-            values.append(value)
-        columns[name] = np.array(values)
-    return columns
 
 
 def _skew_sine(t: np.ndarray, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

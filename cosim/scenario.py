@@ -20,12 +20,13 @@ import numpy as np
 from flexff.controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
 from flexff.controllers.feedforward import rigid_body_feedforward_system
 from flexff.controllers.learned_feedforward import learned_feedforward_system
-from flexff.cosim.csv_text import read_rows
+from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.master import Master, SlaveSpec
 from flexff.cosim.references import Reference, build_reference
 from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
 from flexff.cosim.wiring import Link, Port, WiringError, wire
 from flexff.fmu.build import build_fmu
+from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, read_fmu
 from flexff.fmu.system import System
 from flexff.plant.system import plant_system
@@ -116,38 +117,24 @@ def reference_samples(reference: Reference, steps: int) -> dict[str, np.ndarray]
 
 
 def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, np.ndarray]:
-    """The columns of a CSV source, linearly interpolated onto the run's points."""
-    def fail(message: str) -> ConfigError:
-        return ConfigError(config.source, key, f"{source.path}: {message}")
-
+    """The columns of a CSV source (cosim.csv_text's time table), linearly interpolated onto
+    the run's points and held after the table's end."""
     if source.path is None:
-        raise fail("a CSV source needs a path")
+        raise ConfigError(config.source, key, "a CSV source needs a path")
     try:
-        rows = read_rows(source.path)
-    except ValueError as error:
+        table = read_time_table(source.path)
+    except InputError as error:
         raise ConfigError(config.source, key, str(error)) from None
-    header = [h.strip() for h in rows[0][1]]
-    try:
-        data = np.array([[float(cell) for cell in row] for _, row in rows[1:]
-                         if any(cell.strip() for cell in row)], ndmin=2)
-    except ValueError:
-        raise fail("not a table of numbers under its header") from None
-    if not header or header[0] != "time" or len(header) < 2:
-        raise fail("the header must be `time,<signal>,...`")
-    if data.shape[1] != len(header) or data.shape[0] < 2:
-        raise fail(f"expected at least two rows of {len(header)} numbers")
-    if not np.all(np.isfinite(data)):
-        raise fail("holds NaN or Inf values")
-    time = data[:, 0]
-    if np.any(np.diff(time) <= 0):
-        row = int(np.argmax(np.diff(time) <= 0)) + 2
-        raise fail(f"time is not strictly increasing at data row {row}")
-    for name in header[1:]:
+    names = [n for n in table.columns if n != TIME]
+    if not names:
+        raise ConfigError(config.source, key, f"{source.path}: no signal column beside time")
+    for name in names:
         if "." in name or not name:
-            raise fail(f"column {name!r}: a source signal's name is plain (no dot); "
-                       f"connect it with a [[connection]]")
+            raise ConfigError(config.source, key, (
+                f"{source.path}: column {name!r}: a source signal's name is plain (no dot); "
+                f"connect it with a [[connection]]"))
     grid = np.arange(config.steps + 1) * config.step
-    return {name: np.interp(grid, time, data[:, j + 1]) for j, name in enumerate(header[1:])}
+    return {name: np.interp(grid, table.time, table.columns[name]) for name in names}
 
 
 def _start_values(f: FmuConfig) -> dict[str, Any]:

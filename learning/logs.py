@@ -46,7 +46,7 @@ from scipy.io import loadmat
 from scipy.io.matlab import matfile_version
 from scipy.signal import savgol_filter
 
-from flexff.cosim.csv_text import read_rows
+from flexff.cosim.csv_text import read_time_table
 from flexff.fmu.errors import InputError
 from flexff.learning.dataset import (
     ENCODER_SIGNALS,
@@ -156,41 +156,9 @@ def _read(path: Path) -> _Log:
 
 
 def _read_csv(path: Path) -> _Log:
-    rows = read_rows(path, LogError)
-    header = [name.strip() for name in rows[0][1]]
-    body = [(line, row) for line, row in rows[1:] if any(cell.strip() for cell in row)]
-    lines = [line for line, _ in body]
-
-    def row(k: int) -> str:
-        return f"data row {k + 1} (line {lines[k]})"
-
-    _require(path, [n for n in REQUIRED if n not in header], "the header row")
-    for name in COLUMNS:
-        if header.count(name) > 1:
-            raise LogError(f"{path}: column {name} appears {header.count(name)} times in the "
-                           f"header row")
-    for k, (_, cells) in enumerate(body):
-        if len(cells) != len(header):
-            raise LogError(f"{path}: {row(k)} has {len(cells)} cells, the header {len(header)}")
-    columns = {name: _numbers(path, name, [cells[header.index(name)] for _, cells in body], row)
-               for name in COLUMNS if name in header}
-    return _Log(path, "csv", columns, row)
-
-
-def _numbers(path: Path, name: str, cells: list[str], row: Callable[[int], str]) -> np.ndarray:
-    try:
-        return np.array([float(c) for c in cells], dtype=np.float64)
-    except ValueError:
-        k = next(k for k, c in enumerate(cells) if not _is_number(c))
-        raise LogError(f"{path}: column {name}, {row(k)}: not a number") from None
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
+    """A CSV log: cosim.csv_text's time table of the known columns."""
+    table = read_time_table(path, REQUIRED, REFERENCE_SIGNALS, LogError)
+    return _Log(path, "csv", table.columns, table.row)
 
 
 def _read_mat(path: Path) -> _Log:

@@ -332,7 +332,8 @@ def test_csv_source_feeds_an_input_by_connection(ref_fmu, tmp_path):
     assert np.array_equal(recording["ft.Float64_discrete_output"],
                           np.interp(t, [0, 1, 2], [5, 5, 7]))
     (tmp_path / "u.csv").write_text("time,u\n0,0\n0,1\n")
-    with pytest.raises(ConfigError, match=r"source\[0\].path: .*not strictly increasing"):
+    with pytest.raises(ConfigError, match=r"source\[0\].path: .*data row 2 \(line 3\): time "
+                                          r"does not increase"):
         simulate_config(load_config(write_config(tmp_path, data)))
 
 

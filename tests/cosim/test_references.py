@@ -177,10 +177,14 @@ def test_csv_positions_only_get_smooth_derivatives(tmp_path):
 
 @pytest.mark.parametrize("text, message", [
     ("t,x_ref\n0,0\n1,0\n", "missing column.*y_ref"),
-    ("t,x_ref,y_ref\n0,0,0\n1,0,0\n1,0,0\n2,0,0\n", "not strictly increasing at data row 3"),
-    ("t,x_ref,y_ref\n0,0,0\n1,nan,0\n2,0,0\n", "x_ref has a missing"),
-    ("t,x_ref,y_ref\n0,0,0\n1,abc,0\n2,0,0\n", "x_ref has a missing"),
-    ("t,x_ref,y_ref\n0,0,0\n1,0\n2,0,0\n", "y_ref has a missing"),
+    ("t,x_ref,y_ref\n0,0,0\n1,0,0\n1,0,0\n2,0,0\n",
+     r"column time, data row 3 \(line 4\): time does not increase \(t = 1 s, then 1 s\)"),
+    ("time,x_ref,y_ref\n0,0,0\n1,nan,0\n2,0,0\n",
+     r"column x_ref, data row 2 \(line 3\): NaN or Inf"),
+    ("t,x_ref,y_ref\n0,0,0\n1,abc,0\n2,0,0\n",
+     r"column x_ref, data row 2 \(line 3\): not a number"),
+    ("t,x_ref,y_ref\n0,0,0\n1,0\n2,0,0\n", r"data row 2 \(line 3\) has 2 cells, the header 3"),
+    ("t,x_ref,y_ref,x_ref\n0,0,0,0\n1,0,0,0\n", "column x_ref appears 2 times"),
     ("t,x_ref,y_ref\n0,0,0\n1,0.07,0\n2,0,0\n", r"\(0.07, 0\) m lies outside"),
     ("t,x_ref,y_ref\n0,0,0\n0.005,0,0\n", "too short"),
     ("", "empty"),
@@ -202,8 +206,9 @@ def test_csv_with_a_byte_order_mark(tmp_path):
 @pytest.mark.parametrize("content, message", [
     (b"\x89PNG\r\n\x1a\n\x00\x00secret,t,x_ref", "not a CSV text file"),
     (b"t,x_ref,y_ref\n" + b"secret" * 40000, "not a CSV table"),
-    (b"t,x_ref,y_ref\n0,0,0\n1,\x00secret,0\n", "column x_ref has a missing, non-numeric"),
-    (b"secret,x_ref,y_ref\n0,0,0\n1,0,0\n", "missing column.* t: the first line must name"),
+    (b"t,x_ref,y_ref\n0,0,0\n1,\x00secret,0\n", r"column x_ref, data row 2 \(line 3\): not a"),
+    (b"secret,x_ref,y_ref\n0,0,0\n1,0,0\n",
+     "missing column.* time: the header row must name time, x_ref, y_ref"),
 ])
 def test_csv_errors_name_the_problem_not_the_content(tmp_path, content, message):
     (tmp_path / "bad.csv").write_bytes(content)
