@@ -14,7 +14,9 @@ into the available memory (MemoryNeeded, an InputError, says how much they need)
 from __future__ import annotations
 
 import csv
+import json
 import math
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -77,7 +79,7 @@ class Reference:
         return dict(zip(self.SIGNALS, self._arrays()[1:]))
 
     def to_csv(self, path: str | Path) -> None:
-        """Write a table with columns t, x_ref, y_ref, vx_ref, vy_ref, ax_ref, ay_ref."""
+        """Write a table with columns time, x_ref, y_ref, vx_ref, vy_ref, ax_ref, ay_ref."""
         with open(path, "w", newline="") as handle:
             writer = csv.writer(handle)
             writer.writerow((TIME, *self.SIGNALS))
@@ -353,7 +355,30 @@ REFERENCE_KINDS = ("thesis-eval", "thesis-hardware-eval", "circle", "line-circle
 
 def build_reference(kind: str, options: Mapping[str, Any], step: float) -> Reference:
     """The reference of a checked [reference] table (cosim.config), sampled every `step`
-    seconds from t = 0."""
+    seconds from t = 0: once per process for the last few tables (the configuration's check
+    and the run both ask for it; a Reference is not changed by its users)."""
+    stamp = None  # a CSV file changed since is read again
+    if kind == "csv" and Path(options["path"]).is_file():
+        stat = Path(options["path"]).stat()
+        stamp = (stat.st_mtime_ns, stat.st_size)
+    key = json.dumps({"kind": kind, "options": options, "step": step, "file": stamp},
+                     sort_keys=True, default=str)
+    if key not in _SAMPLED:
+        reference = _built(kind, options, step)
+        for values in (reference.t, *reference.signals().values()):
+            values.flags.writeable = False  # shared: nobody changes it in place
+        _SAMPLED[key] = reference
+        while len(_SAMPLED) > SAMPLED_KEPT:
+            _SAMPLED.popitem(last=False)
+    _SAMPLED.move_to_end(key)
+    return _SAMPLED[key]
+
+
+SAMPLED_KEPT = 4  # references kept sampled (a 100 s one at 1 kHz: 5.6 MB)
+_SAMPLED: OrderedDict[str, Reference] = OrderedDict()
+
+
+def _built(kind: str, options: Mapping[str, Any], step: float) -> Reference:
     o = options
     if kind == "thesis-eval":
         return thesis_evaluation(step)
