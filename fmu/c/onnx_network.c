@@ -1,10 +1,11 @@
 /*
  * onnx_network.c -- see onnx_network.h.
  *
- * onnxruntime's C API is a table of function pointers (struct OrtApi) that only ever grows at
- * its end, returned by OrtGetApiBase()->GetApi(version). The slots used here are declared by
- * their index in onnxruntime_c_api.h; they all exist since API version 1, and the version
- * asked for below is the oldest onnxruntime flexff supports.
+ * onnxruntime's C API is a table of function pointers (struct OrtApi, declared by
+ * onnxruntime_c_api.h, its own MIT-licensed header kept beside this file) that only ever grows
+ * at its end, returned by OrtGetApiBase()->GetApi(version). Every function used here exists
+ * since API version 2, and the version asked for below is the oldest onnxruntime flexff
+ * supports, so a newer runtime serves it as well.
  */
 
 #define _GNU_SOURCE /* dladdr */
@@ -17,6 +18,7 @@
 #include <time.h>
 
 #include "onnx_network.h"
+#include "onnxruntime_c_api.h"
 
 #define TIME_BINS 180     /* 20 per decade from 100 ns to 100 s */
 #define TIME_FLOOR 1e-7   /* [s] */
@@ -24,110 +26,14 @@
 
 #define ORT_API_VERSION_USED 17 /* onnxruntime 1.17 */
 
-typedef struct OrtEnv OrtEnv;
-typedef struct OrtStatus OrtStatus;
-typedef struct OrtSession OrtSession;
-typedef struct OrtSessionOptions OrtSessionOptions;
-typedef struct OrtValue OrtValue;
-typedef struct OrtMemoryInfo OrtMemoryInfo;
-typedef struct OrtTypeInfo OrtTypeInfo;
-typedef struct OrtTensorTypeAndShapeInfo OrtTensorTypeAndShapeInfo;
-typedef struct OrtAllocator OrtAllocator;
-typedef struct OrtRunOptions OrtRunOptions;
-typedef struct OrtModelMetadata OrtModelMetadata;
-
-enum { ORT_LOGGING_LEVEL_ERROR = 3 };
-enum { ELEMENT_FLOAT = 1, ELEMENT_DOUBLE = 11 };
-enum { ORT_ARENA_ALLOCATOR = 1, ORT_MEM_TYPE_DEFAULT = 0 };
-
-typedef struct {
-    const void *(*GetApi)(uint32_t version);
-    const char *(*GetVersionString)(void);
-} OrtApiBase;
-
-/* Slot indices in struct OrtApi (onnxruntime_c_api.h). */
-enum {
-    SLOT_GetErrorMessage = 2,
-    SLOT_CreateEnv = 3,
-    SLOT_CreateSession = 7,
-    SLOT_Run = 9,
-    SLOT_CreateSessionOptions = 10,
-    SLOT_SetIntraOpNumThreads = 24,
-    SLOT_SetInterOpNumThreads = 25,
-    SLOT_SessionGetInputCount = 30,
-    SLOT_SessionGetOutputCount = 31,
-    SLOT_SessionGetInputTypeInfo = 33,
-    SLOT_SessionGetOutputTypeInfo = 34,
-    SLOT_SessionGetInputName = 36,
-    SLOT_SessionGetOutputName = 37,
-    SLOT_CreateTensorWithDataAsOrtValue = 49,
-    SLOT_CastTypeInfoToTensorInfo = 55,
-    SLOT_GetTensorElementType = 60,
-    SLOT_GetDimensionsCount = 61,
-    SLOT_GetDimensions = 62,
-    SLOT_CreateCpuMemoryInfo = 69,
-    SLOT_AllocatorFree = 76,
-    SLOT_GetAllocatorWithDefaultOptions = 78,
-    SLOT_ReleaseEnv = 92,
-    SLOT_ReleaseStatus = 93,
-    SLOT_ReleaseMemoryInfo = 94,
-    SLOT_ReleaseSession = 95,
-    SLOT_ReleaseValue = 96,
-    SLOT_ReleaseTypeInfo = 98,
-    SLOT_ReleaseSessionOptions = 100,
-    SLOT_SessionGetModelMetadata = 111, /* API version 2 */
-    SLOT_ModelMetadataLookupCustomMetadataMap = 116,
-    SLOT_ReleaseModelMetadata = 118
-};
-
-typedef const char *(*GetErrorMessageFn)(const OrtStatus *);
-typedef OrtStatus *(*CreateEnvFn)(int, const char *, OrtEnv **);
-typedef OrtStatus *(*CreateSessionFn)(const OrtEnv *, const char *, const OrtSessionOptions *,
-                                      OrtSession **);
-typedef OrtStatus *(*RunFn)(OrtSession *, const OrtRunOptions *, const char *const *,
-                            const OrtValue *const *, size_t, const char *const *, size_t,
-                            OrtValue **);
-typedef OrtStatus *(*CreateSessionOptionsFn)(OrtSessionOptions **);
-typedef OrtStatus *(*SetIntraOpNumThreadsFn)(OrtSessionOptions *, int);
-typedef OrtStatus *(*SetInterOpNumThreadsFn)(OrtSessionOptions *, int);
-typedef OrtStatus *(*SessionGetInputCountFn)(const OrtSession *, size_t *);
-typedef OrtStatus *(*SessionGetOutputCountFn)(const OrtSession *, size_t *);
-typedef OrtStatus *(*SessionGetInputTypeInfoFn)(const OrtSession *, size_t, OrtTypeInfo **);
-typedef OrtStatus *(*SessionGetOutputTypeInfoFn)(const OrtSession *, size_t, OrtTypeInfo **);
-typedef OrtStatus *(*SessionGetInputNameFn)(const OrtSession *, size_t, OrtAllocator *, char **);
-typedef OrtStatus *(*SessionGetOutputNameFn)(const OrtSession *, size_t, OrtAllocator *, char **);
-typedef OrtStatus *(*CreateTensorWithDataAsOrtValueFn)(const OrtMemoryInfo *, void *, size_t,
-                                                       const int64_t *, size_t, int, OrtValue **);
-typedef OrtStatus *(*CastTypeInfoToTensorInfoFn)(const OrtTypeInfo *,
-                                                 const OrtTensorTypeAndShapeInfo **);
-typedef OrtStatus *(*GetTensorElementTypeFn)(const OrtTensorTypeAndShapeInfo *, int *);
-typedef OrtStatus *(*GetDimensionsCountFn)(const OrtTensorTypeAndShapeInfo *, size_t *);
-typedef OrtStatus *(*GetDimensionsFn)(const OrtTensorTypeAndShapeInfo *, int64_t *, size_t);
-typedef OrtStatus *(*CreateCpuMemoryInfoFn)(int, int, OrtMemoryInfo **);
-typedef OrtStatus *(*AllocatorFreeFn)(OrtAllocator *, void *);
-typedef OrtStatus *(*GetAllocatorWithDefaultOptionsFn)(OrtAllocator **);
-typedef void (*ReleaseEnvFn)(OrtEnv *);
-typedef void (*ReleaseStatusFn)(OrtStatus *);
-typedef void (*ReleaseMemoryInfoFn)(OrtMemoryInfo *);
-typedef void (*ReleaseSessionFn)(OrtSession *);
-typedef void (*ReleaseValueFn)(OrtValue *);
-typedef void (*ReleaseTypeInfoFn)(OrtTypeInfo *);
-typedef void (*ReleaseSessionOptionsFn)(OrtSessionOptions *);
-typedef OrtStatus *(*SessionGetModelMetadataFn)(const OrtSession *, OrtModelMetadata **);
-typedef OrtStatus *(*ModelMetadataLookupCustomMetadataMapFn)(const OrtModelMetadata *,
-                                                             OrtAllocator *, const char *, char **);
-typedef void (*ReleaseModelMetadataFn)(OrtModelMetadata *);
-
-typedef void (*AnyFn)(void);
-
-/* The function in slot SLOT_<name> of the table, with its type. */
-#define ORT(net, name) ((name##Fn)((net)->api[SLOT_##name]))
+/* The function `name` of onnxruntime's API table. */
+#define ORT(net, name) ((net)->api->name)
 
 #define MAX_TENSORS 64 /* inputs or outputs of one graph */
 
 struct Network {
     void *library;
-    const AnyFn *api;
+    const OrtApi *api;
     const NetSpec *spec;
     OrtEnv *env;
     OrtSession *session;
@@ -154,13 +60,20 @@ static int check(Network *net, OrtStatus *status, const char *what, char *error,
     return -1;
 }
 
+/* Free memory onnxruntime's allocator gave; a failure to free has nobody to tell. */
+static void free_ort(Network *net, OrtAllocator *allocator, void *memory) {
+    OrtStatus *status = ORT(net, AllocatorFree)(allocator, memory);
+    if (status != NULL) ORT(net, ReleaseStatus)(status);
+}
+
 /* Check one tensor of the graph: element type and shape (a wanted dimension < 0 matches any
  * size; a dimension the graph leaves dynamic matches any wanted size, onnxruntime checks it
  * when it writes the tensor). */
-static int check_tensor(Network *net, OrtTypeInfo *info, const char *name, int want_type,
+static int check_tensor(Network *net, OrtTypeInfo *info, const char *name,
+                        ONNXTensorElementDataType want_type,
                         int want_rank, const int64_t *want_dims, char *error, size_t size) {
     const OrtTensorTypeAndShapeInfo *tensor = NULL;
-    int type = 0;
+    ONNXTensorElementDataType type = ONNX_TENSOR_ELEMENT_DATA_TYPE_UNDEFINED;
     size_t rank = 0;
     int64_t dims[NET_MAX_RANK];
     if (check(net, ORT(net, CastTypeInfoToTensorInfo)(info, &tensor), name, error, size) ||
@@ -173,7 +86,7 @@ static int check_tensor(Network *net, OrtTypeInfo *info, const char *name, int w
         return -1;
     if (type != want_type) {
         set_error(error, size, "graph tensor '%s' holds element type %d, expected %s", name, type,
-                  want_type == ELEMENT_DOUBLE ? "float64" : "float32");
+                  want_type == ONNX_TENSOR_ELEMENT_DATA_TYPE_DOUBLE ? "float64" : "float32");
         return -1;
     }
     if ((int)rank != want_rank) {
@@ -192,11 +105,12 @@ static int check_tensor(Network *net, OrtTypeInfo *info, const char *name, int w
 }
 
 /* The tensor that `name` denotes: its type, rank and dims as the spec wants them. */
-static int wanted(const NetSpec *s, const char *name, int is_input, int *type, int *rank,
+static int wanted(const NetSpec *s, const char *name, int is_input,
+                  ONNXTensorElementDataType *type, int *rank,
                   int64_t *dims) {
     const char *sequence = is_input ? s->input : s->output;
     if (strcmp(name, sequence) == 0) {
-        *type = ELEMENT_DOUBLE;
+        *type = ONNX_TENSOR_ELEMENT_DATA_TYPE_DOUBLE;
         *rank = 2;
         dims[0] = -1;
         dims[1] = is_input ? s->n_in : s->n_out;
@@ -204,7 +118,7 @@ static int wanted(const NetSpec *s, const char *name, int is_input, int *type, i
     }
     for (int k = 0; k < s->n_states; k++) {
         if (strcmp(name, is_input ? s->state_inputs[k] : s->state_outputs[k]) == 0) {
-            *type = ELEMENT_FLOAT;
+            *type = ONNX_TENSOR_ELEMENT_DATA_TYPE_FLOAT;
             *rank = s->state_rank[k];
             memcpy(dims, s->state_dims[k], sizeof(int64_t) * (size_t)s->state_rank[k]);
             return 1;
@@ -234,7 +148,8 @@ static int check_signature(Network *net, int is_input, char *error, size_t size)
     for (size_t i = 0; i < count; i++) {
         char *name = NULL;
         OrtTypeInfo *info = NULL;
-        int type = 0, rank = 0, result = -1;
+        ONNXTensorElementDataType type = ONNX_TENSOR_ELEMENT_DATA_TYPE_UNDEFINED;
+        int rank = 0, result = -1;
         int64_t dims[NET_MAX_RANK];
         status = is_input ? ORT(net, SessionGetInputName)(net->session, i, allocator, &name)
                           : ORT(net, SessionGetOutputName)(net->session, i, allocator, &name);
@@ -249,7 +164,7 @@ static int check_signature(Network *net, int is_input, char *error, size_t size)
                 ORT(net, ReleaseTypeInfo)(info);
             }
         }
-        ORT(net, AllocatorFree)(allocator, name);
+        free_ort(net, allocator, name);
         if (result != 0) return -1;
     }
     return 0;
@@ -303,7 +218,7 @@ static void read_input_names(Network *net) {
         parse_names(value, net->spec->n_in, &net->input_names, &net->input_name) != 0)
         net->input_name = NULL;
     if (status != NULL) ORT(net, ReleaseStatus)(status);
-    if (value != NULL) ORT(net, AllocatorFree)(allocator, value);
+    if (value != NULL) free_ort(net, allocator, value);
     if (metadata != NULL) ORT(net, ReleaseModelMetadata)(metadata);
 }
 
@@ -330,7 +245,7 @@ Network *net_open(const char *library_path, const char *model_path, const NetSpe
     const OrtApiBase *(*get_base)(void) = NULL;
     *(void **)&get_base = dlsym(net->library, "OrtGetApiBase");
     const OrtApiBase *base = get_base ? get_base() : NULL;
-    net->api = base ? (const AnyFn *)base->GetApi(ORT_API_VERSION_USED) : NULL;
+    net->api = base ? base->GetApi(ORT_API_VERSION_USED) : NULL;
     if (net->api == NULL) {
         set_error(error, size, "%s (onnxruntime %s) does not provide the C API version %d "
                   "(onnxruntime >= 1.17 is needed)", library_path,
@@ -345,7 +260,7 @@ Network *net_open(const char *library_path, const char *model_path, const NetSpe
         check(net, ORT(net, SetInterOpNumThreads)(options, 1), "threads", error, size) ||
         check(net, ORT(net, CreateSession)(net->env, model_path, options, &net->session),
               model_path, error, size) ||
-        check(net, ORT(net, CreateCpuMemoryInfo)(ORT_ARENA_ALLOCATOR, ORT_MEM_TYPE_DEFAULT,
+        check(net, ORT(net, CreateCpuMemoryInfo)(OrtArenaAllocator, OrtMemTypeDefault,
                                                   &net->memory), "memory info", error, size) ||
         check_signature(net, 1, error, size) || check_signature(net, 0, error, size)) {
         if (options) ORT(net, ReleaseSessionOptions)(options);
@@ -358,9 +273,10 @@ Network *net_open(const char *library_path, const char *model_path, const NetSpe
 }
 
 /* An OrtValue over caller memory: `data` of `count` elements of the element type. */
-static int wrap(Network *net, void *data, size_t count, int type, const int64_t *dims, int rank,
+static int wrap(Network *net, void *data, size_t count, ONNXTensorElementDataType type,
+                const int64_t *dims, int rank,
                 OrtValue **value, char *error, size_t size) {
-    size_t bytes = count * (type == ELEMENT_DOUBLE ? sizeof(double) : sizeof(float));
+    size_t bytes = count * (type == ONNX_TENSOR_ELEMENT_DATA_TYPE_DOUBLE ? sizeof(double) : sizeof(float));
     return check(net, ORT(net, CreateTensorWithDataAsOrtValue)(net->memory, data, bytes, dims,
                                                                (size_t)rank, type, value),
                  "wrapping a tensor", error, size);
@@ -407,17 +323,17 @@ int net_run(Network *net, const double *inputs, int64_t steps, float *state_in,
     in_names[0] = s->input;
     out_names[0] = s->output;
     if (!err)
-        err = wrap(net, (void *)inputs, (size_t)(steps * s->n_in), ELEMENT_DOUBLE, in_dims, 2,
+        err = wrap(net, (void *)inputs, (size_t)(steps * s->n_in), ONNX_TENSOR_ELEMENT_DATA_TYPE_DOUBLE, in_dims, 2,
                    &in_values[0], error, size) ||
-              wrap(net, outputs, (size_t)(steps * s->n_out), ELEMENT_DOUBLE, out_dims, 2,
+              wrap(net, outputs, (size_t)(steps * s->n_out), ONNX_TENSOR_ELEMENT_DATA_TYPE_DOUBLE, out_dims, 2,
                    &out_values[0], error, size);
     for (int k = 0; k < s->n_states && !err; k++) {
         const size_t count = (size_t)element_count(s->state_dims[k], s->state_rank[k]);
         in_names[1 + k] = s->state_inputs[k];
         out_names[1 + k] = s->state_outputs[k];
-        err = wrap(net, state_in + s->state_offset[k], count, ELEMENT_FLOAT, s->state_dims[k],
+        err = wrap(net, state_in + s->state_offset[k], count, ONNX_TENSOR_ELEMENT_DATA_TYPE_FLOAT, s->state_dims[k],
                    s->state_rank[k], &in_values[1 + k], error, size) ||
-              wrap(net, state_out + s->state_offset[k], count, ELEMENT_FLOAT, s->state_dims[k],
+              wrap(net, state_out + s->state_offset[k], count, ONNX_TENSOR_ELEMENT_DATA_TYPE_FLOAT, s->state_dims[k],
                    s->state_rank[k], &out_values[1 + k], error, size);
     }
     if (!err) {
