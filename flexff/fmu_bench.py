@@ -86,7 +86,7 @@ def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
         args = [str(len(inputs)), *(str(s.variables[n].valueReference) for n in inputs),
                 *(repr(float(s.variables[n].start)) for n in inputs),
                 str(len(outputs)), *(str(s.variables[n].valueReference) for n in outputs)]
-        run = subprocess.run([str(cached_program(BENCH_SOURCE, "bench")), str(s.library),
+        run = subprocess.run([str(cached_program("bench", [BENCH_SOURCE])), str(s.library),
                               s.model_description.guid,
                               str(steps), repr(step), str(repeats), *args],
                              capture_output=True, text=True, check=True)

@@ -49,7 +49,7 @@ def test_bench_full(tmp_path_factory):
 ], ids=["inputs", "outputs", "value", "value reference"])
 def test_bad_bench_arguments_are_refused(counts, message):
     """Every count is checked against the arguments given before anything is read by it."""
-    program = cached_program(BENCH_SOURCE, "bench")
+    program = cached_program("bench", [BENCH_SOURCE])
     result = subprocess.run([str(program), "/nonexistent.so", "guid", "10", "0.001", "2",
                              *counts], capture_output=True, text=True)
     assert result.returncode == 2 and message in result.stderr, result.stderr
@@ -57,7 +57,7 @@ def test_bad_bench_arguments_are_refused(counts, message):
 
 @pytest.mark.parametrize("steps, repeats", [("0", "2"), ("10", "0"), ("ten", "2")])
 def test_bad_bench_loop_sizes_are_refused(steps, repeats):
-    program = cached_program(BENCH_SOURCE, "bench")
+    program = cached_program("bench", [BENCH_SOURCE])
     result = subprocess.run([str(program), "/nonexistent.so", "guid", steps, "0.001", repeats,
                              "0", "0"], capture_output=True, text=True)
     assert result.returncode == 2 and "must be a whole number of at least 1" in result.stderr
