@@ -86,6 +86,9 @@ static void *xcalloc(size_t n, size_t size) {
     return p;
 }
 
+/* A value reference read as a long fits fmi2ValueReference. */
+static bool is_value_reference(long vr) { return vr >= 0 && vr <= (long)UINT32_MAX; }
+
 /* a * b for counts already checked to be non-negative, or an error if it does not fit */
 static size_t product(long a, long b, const char *what) {
     if (b != 0 && (size_t)a > SIZE_MAX / (size_t)b) die("%s: %ld x %ld is too large", what, a, b);
@@ -116,11 +119,12 @@ static void read_parameters(FILE *plan, Fmu *f) {
     f->param_type = xcalloc((size_t)f->n_params, 1);
     f->param_value = xcalloc((size_t)f->n_params, sizeof *f->param_value);
     for (long i = 0; i < f->n_params; i++) {
+        long vr;
         read_line(plan, line, sizeof line);
-        if (sscanf(line, "%u %c %lf", &f->param_vr[i], &f->param_type[i],
-                   &f->param_value[i]) != 3 ||
-            (f->param_type[i] != 'I' && f->param_type[i] != 'R'))
+        if (sscanf(line, "%ld %c %lf", &vr, &f->param_type[i], &f->param_value[i]) != 3 ||
+            !is_value_reference(vr) || (f->param_type[i] != 'I' && f->param_type[i] != 'R'))
             die("plan: bad parameter line '%s'", line);
+        f->param_vr[i] = (fmi2ValueReference)vr;
     }
 }
 
@@ -134,9 +138,11 @@ static void read_signals(FILE *plan, Fmu *f, Slave *s, double *bus, long n_bus) 
     unsigned *in_vr = xcalloc((size_t)s->n_in, sizeof *in_vr);
     long *gather = xcalloc((size_t)s->n_in, sizeof *gather);
     for (long i = 0; i < s->n_in; i++) {
+        long vr;
         read_line(plan, line, sizeof line);
-        if (sscanf(line, "%u %ld", &in_vr[i], &gather[i]) != 2)
+        if (sscanf(line, "%ld %ld", &vr, &gather[i]) != 2 || !is_value_reference(vr))
             die("plan: bad input line '%s'", line);
+        in_vr[i] = (unsigned)vr;
     }
     s->in_vr = in_vr, s->gather = gather;
     s->in_values = xcalloc((size_t)s->n_in, sizeof *s->in_values);
@@ -148,7 +154,7 @@ static void read_signals(FILE *plan, Fmu *f, Slave *s, double *bus, long n_bus) 
     for (long i = 0; i < s->n_out; i++) {
         read_line(plan, line, sizeof line);
         const long vr = parse_count(line, "plan: output value reference");
-        if (vr > (long)UINT32_MAX) die("plan: %s: output value reference %ld", f->name, vr);
+        if (!is_value_reference(vr)) die("plan: %s: output value reference %ld", f->name, vr);
         out_vr[i] = (unsigned)vr;
     }
     s->out_vr = out_vr;

@@ -14,7 +14,7 @@ from tests.helpers import REFERENCE_FMUS
 
 FEEDTHROUGH = REFERENCE_FMUS / "fmi2" / "Feedthrough.fmu"
 HEADER = "flexff-cosim-plan 1\n0.001 3 1 10 1\n"
-UNREAD = "/nonexistent/fmu.so\n{guid}\nplant\n0\n"  # never loaded: the plan's form fails first
+UNREAD = "/nonexistent/fmu.so\n{guid}\nplant\n"  # never loaded: the plan's form fails first
 
 
 @pytest.fixture(scope="module")
@@ -36,21 +36,32 @@ def feedthrough(tmp_path_factory):
     return f"{library}\n{fmpy.read_model_description(str(FEEDTHROUGH)).guid}\nft\n0\n"
 
 
-def refusal(program, folder, plan):
+def refusal(program, folder, plan, repeats="1"):
     """The floor's exit code and message on `plan` with 10 steps of sources."""
     (folder / "plan.txt").write_text(plan)
     (folder / "sources.bin").write_bytes(bytes(8 * 11 * 4))
     result = subprocess.run([str(program), str(folder / "plan.txt"), str(folder / "sources.bin"),
-                             str(folder / "record.bin"), "1"], capture_output=True, text=True)
+                             str(folder / "record.bin"), repeats], capture_output=True, text=True)
     return result.returncode, result.stderr
 
 
+@pytest.mark.parametrize("repeats, message", [
+    ("0", "REPEATS must be at least 1"), ("ten", "REPEATS: expected a whole number, got 'ten'"),
+])
+def test_bad_repeats_are_refused(program, tmp_path, repeats, message):
+    code, stderr = refusal(program, tmp_path, HEADER + UNREAD, repeats)
+    assert code == 1 and message in stderr, stderr
+
+
 @pytest.mark.parametrize("plan, message", [
-    (HEADER + UNREAD + "x\n", "plan: input count: expected a whole number, got 'x'"),
-    (HEADER + UNREAD + "-1\n", "plan: input count: expected a whole number, got '-1'"),
-    (HEADER + UNREAD + "0\n-2 0\n", "plan: bad output header '-2 0'"),
+    (HEADER + UNREAD + "0\nx\n", "plan: input count: expected a whole number, got 'x'"),
+    (HEADER + UNREAD + "0\n-1\n", "plan: input count: expected a whole number, got '-1'"),
+    (HEADER + UNREAD + "0\n0\n-2 0\n", "plan: bad output header '-2 0'"),
+    (HEADER + UNREAD + "0\n1\n-7 0\n", "plan: bad input line '-7 0'"),
+    (HEADER + UNREAD + "1\n7 X 1.0\n", "plan: bad parameter line '7 X 1.0'"),
     ("flexff-cosim-plan 1\n0.001 3 1 0 0\n", "at least one step"),
-], ids=["count", "negative count", "negative output count", "steps"])
+], ids=["count", "negative count", "negative output count", "value reference", "parameter",
+        "steps"])
 def test_a_plan_of_the_wrong_form_is_refused(program, tmp_path, plan, message):
     code, stderr = refusal(program, tmp_path, plan)
     assert code == 1 and message in stderr, stderr
