@@ -189,7 +189,7 @@ static void load(Fmu *f, Slave *s) {
 }
 
 static void check(fmi2Status status, const Fmu *f, const char *what) {
-    if (status > fmi2Warning) die("%s: %s failed at t = 0 s", f->name, what);
+    if (status > fmi2Warning) die("%s: %s failed", f->name, what);
 }
 
 static fmi2CallbackFunctions callbacks = {fmi2_host_logger, calloc, free, NULL, NULL};
