@@ -1,6 +1,6 @@
 """Co-simulation: run configurations (TOML or SSP), their resolution into FMUs and wiring, the
 fixed-step master over fmpy (FMI 2.0 and 3.0), recording, metrics, plots, the evaluation report,
-batches, and the same runs under libcosim and as a plain C loop.
+batches, and the same runs under libcosim and through the engine alone in C (the floor).
 
 Public API: `config.load_config` / `parse_config` / `config_examples` / `expanded`,
 `schema.RunConfig` (the configuration as data), `scenario.resolve`, `run.run_config`,

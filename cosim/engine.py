@@ -43,6 +43,7 @@ from flexff.fmu import cache
 from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
 
 SOURCE = Path(__file__).parent / "c" / "engine.c"
+HEADER = SOURCE.with_suffix(".h")  # its structures, for the programs compiled with it
 TYPED_HOOK = CFUNCTYPE(c_int, c_long, c_int, c_long)  # (slave, phase, k) -> 0 if ok
 CALLS = {1: "setting its inputs", 2: "getting its outputs", 3: "the step", 4: "getting its "
          "outputs after the step", 5: "exchanging values of other types"}
@@ -141,9 +142,8 @@ def _check_result(result: Any, func: Any, args: tuple[Any, ...]) -> Any:
 @functools.cache
 def library() -> ctypes.CDLL:
     """The compiled engine, from the cache when its source and the compiler are unchanged."""
-    text = SOURCE.read_text()
-    key = cache.digest({SOURCE.name: text, "cflags": " ".join(CFLAGS),
-                        "compiler": compiler_version()})
+    key = cache.digest({SOURCE.name: SOURCE.read_text(), HEADER.name: HEADER.read_text(),
+                        "cflags": " ".join(CFLAGS), "compiler": compiler_version()})
     path = cache.cached_path(key, ".engine.so")
     if not path.exists():
         with tempfile.TemporaryDirectory() as tmp:

@@ -1,8 +1,10 @@
-"""The speed floor: cosim/c/cosim_loop.c runs the master's loop in plain C.
+"""The speed floor: the master's loop in C alone (cosim/c/floor.c, compiled with the engine).
 
-It loads the FMU libraries a Master has extracted, follows the Master's bus layout and call
-plan exactly (same calls, same order, same times), and returns its record of the bus, which
-must equal the Master's bit for bit, with the best time per step over a few repeats.
+The program loads the FMU libraries a Master has extracted, builds the engine's plan from the
+Master's bus layout and call plan (same calls, same order, same times) and runs every point in
+one call of the engine (cosim/c/engine.c): the engine's own loop, with no Python between its
+chunks. It returns its record of the bus, which must equal the Master's bit for bit, with the
+best time per step over a few repeats.
 """
 
 from __future__ import annotations
@@ -16,15 +18,17 @@ from typing import Any
 
 import numpy as np
 
+from flexff.cosim import engine
 from flexff.cosim.master import Master
 from flexff.fmu.compile import cached_program
 
-SOURCE = Path(__file__).parent / "c" / "cosim_loop.c"
+SOURCE = Path(__file__).parent / "c" / "floor.c"
 
 
 def loop_program() -> Path:
-    """The compiled C loop, from the fmu/ cache when its source and compiler are unchanged."""
-    return cached_program(SOURCE, "cosim_loop")
+    """The floor program (floor.c and the engine), from the fmu/ cache when its sources and
+    the compiler are unchanged."""
+    return cached_program("floor", [SOURCE, engine.SOURCE], [engine.HEADER])
 
 
 def _plan_text(layout: dict[str, Any], steps: int) -> str:
@@ -43,8 +47,8 @@ def _plan_text(layout: dict[str, Any], steps: int) -> str:
 
 def run_c_loop(master: Master, sources: Mapping[str, np.ndarray | float], steps: int,
                repeats: int = 3) -> tuple[dict[str, np.ndarray], float]:
-    """The bus at every point (by signal name) and the best microseconds per step of the C
-    loop on `master`'s FMUs and plan; `master` need not have run."""
+    """The bus at every point (by signal name) and the best microseconds per step of the
+    floor on `master`'s FMUs and plan; `master` need not have run."""
     layout = master.layout()
     table = np.empty((steps + 1, layout["n_sources"]))
     for j, name in enumerate(layout["signals"][:layout["n_sources"]]):
@@ -56,7 +60,7 @@ def run_c_loop(master: Master, sources: Mapping[str, np.ndarray | float], steps:
         result = subprocess.run([str(loop_program()), str(plan), str(src), str(rec),
                                  str(repeats)], capture_output=True, text=True)
         if result.returncode != 0:
-            raise RuntimeError(f"the C loop failed: {result.stderr.strip()}")
+            raise RuntimeError(f"the C floor failed: {result.stderr.strip()}")
         bus = np.fromfile(rec).reshape(steps + 1, len(layout["signals"]))
     us_per_step = json.loads(result.stdout)["us_per_step"]
     return {n: bus[:, j].copy() for j, n in enumerate(layout["signals"])}, us_per_step

@@ -217,12 +217,12 @@ class Master:
         self.typed_signals = tuple(f"{p.name}.{n}" for p in self._plans for n in p.typed_outputs)
 
     def layout(self) -> dict[str, Any]:
-        """The bus layout and every FMU's call plan, as plain data (for the C loop, which runs
-        FMI 2.0 FMUs with float inputs and outputs, no gains, Gauss-Seidel)."""
+        """The bus layout and every FMU's call plan, as plain data (for the C floor, whose plan
+        holds FMI 2.0 FMUs with float inputs and outputs, no gains, Gauss-Seidel)."""
         for p in self._plans:
             if (p.instance.info.fmi_version != "2.0" or p.gain is not None or p.typed_inputs
                     or p.typed_outputs or self.algorithm != "gauss-seidel"):
-                raise InputError(f"the C loop runs FMI 2.0 FMUs with Real signals and no gains "
+                raise InputError(f"the C floor runs FMI 2.0 FMUs with Real signals and no gains "
                                  f"under Gauss-Seidel; {p.name} does not fit")
         index = {n: i for i, n in enumerate(self.signals)}
         by_target = {(k.target, k.input): k.producer for k in self.links}

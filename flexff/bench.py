@@ -49,11 +49,11 @@ def _best_wall(scenario: Scenario, repeats: int) -> float:
 def closed_loop_benchmark(folder: Path, repeats: int = 3) -> dict[str, Any]:
     """Real-time factor of PID + nominal plant on the thesis's evaluation reference through
     cosim.master, libcosim's master (fed and read through libcosimpy every step, and its engine
-    alone: all steps in one call) and the same loop in C, best of `repeats` runs each (libcosim
-    steps its FMUs on a thread pool, whose hand-offs make its times vary from run to run).
-    Cross-checks: the C loop must record
-    the master's numbers bit for bit; libcosim's Jacobi timing (cosim.libcosim) moves the
-    end effector by up to `libcosim_max_position_gap_m`."""
+    alone: all steps in one call) and the C floor (cosim.floor: the engine's loop run from C,
+    no Python between chunks), best of `repeats` runs each (libcosim steps its FMUs on a thread
+    pool, whose hand-offs make its times vary from run to run). Cross-checks: the floor must
+    record the master's numbers bit for bit; libcosim's Jacobi timing (cosim.libcosim) moves
+    the end effector by up to `libcosim_max_position_gap_m`."""
     scenario = closed_loop_scenario(folder)
     steps, step, sources = scenario.steps, scenario.step, scenario.sources
     ours: list[Recording] = []

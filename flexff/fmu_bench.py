@@ -1,15 +1,15 @@
 """bench_fmu: cost of one co-simulation step of an FMU, through fmpy and in plain C.
 
-Both loops do the same work per step (fmi2SetReal of every input at its start value,
-fmi2DoStep, fmi2GetReal of every output) on a fresh instance with default parameters; the
-ratio shows how much of a Python master's step time is interpreter overhead. The sums of all
-outputs read by both loops must agree, which checks that they really ran the same steps.
+Both do the same FMI calls per step (fmi2SetReal of every input at its start value,
+fmi2DoStep, fmi2GetReal of every output) on a fresh instance with default parameters: Python
+through fmpy, and C through the C floor (cosim.floor), the co-simulation engine's own loop on a
+plan of this one FMU with its inputs fed from sources. The ratio shows how much of a Python
+master's step time is interpreter overhead. Both record every output, and the records must be
+equal, which checks that they really ran the same steps.
 """
 
 from __future__ import annotations
 
-import json
-import subprocess
 import time
 from ctypes import c_double, c_int, c_size_t, c_uint
 from pathlib import Path
@@ -17,17 +17,16 @@ from typing import Any
 
 import numpy as np
 
-from flexff.fmu.compile import cached_program
+from flexff.cosim.floor import run_c_loop
+from flexff.cosim.master import Master, SlaveSpec
 from flexff.fmu.slave import Slave, bare_calls
 
-BENCH_SOURCE = Path(__file__).parent / "c" / "bench_loop.c"
 
-
-def _python_loop(s: Slave, steps: int, step: float, repeats: int) -> dict[str, float]:
+def _python_loop(s: Slave, steps: int, step: float, repeats: int
+                 ) -> tuple[dict[str, float], np.ndarray]:
     """Best seconds per step cycle through fmpy's FMU2Slave calls and through the bare C
     pointers the co-simulation master uses (fmu.slave.bare_calls), per bare fmi2DoStep
-    through fmpy, and the checksum of the outputs the first cycle recorded (summed afterwards,
-    in the C loop's order)."""
+    through fmpy, and the outputs after each of the first `steps` cycles."""
     inputs, outputs = s.names("input"), s.names("output")
     vr_in = (c_uint * len(inputs))(*(s.variables[n].valueReference for n in inputs))
     u = (c_double * len(inputs))(*(float(s.variables[n].start) for n in inputs))
@@ -65,10 +64,7 @@ def _python_loop(s: Slave, steps: int, step: float, repeats: int) -> dict[str, f
             fmu.fmi2DoStep(c, k * step, step, 1)
             k += 1
         best["do_step"] = min(best["do_step"], time.perf_counter() - start)
-    checksum = 0.0
-    for value in record.ravel().tolist():
-        checksum += value
-    return {name: seconds / steps for name, seconds in best.items()} | {"checksum": checksum}
+    return {name: seconds / steps for name, seconds in best.items()}, record[:steps]
 
 
 def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
@@ -77,20 +73,18 @@ def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
 
     A step cycle is fmi2SetReal(inputs), fmi2DoStep, fmi2GetReal(outputs) with the outputs
     recorded; `python_bare_us_per_step` is the same cycle through the bare C pointers the
-    co-simulation master calls; `python_us_per_do_step` times fmi2DoStep alone through fmpy.
+    co-simulation master calls; `python_us_per_do_step` times fmi2DoStep alone through fmpy;
+    `c_us_per_step` is the C floor's step on this FMU alone (the engine's: its inputs set from
+    the bus, its outputs read into it, the bus recorded, the step timed; the outputs are read
+    before the next step rather than after this one, which gives the same values).
     """
     with Slave(path) as s:
         s.initialize()
-        python = _python_loop(s, steps, step, repeats)
-        inputs, outputs = s.names("input"), s.names("output")
-        args = [str(len(inputs)), *(str(s.variables[n].valueReference) for n in inputs),
-                *(repr(float(s.variables[n].start)) for n in inputs),
-                str(len(outputs)), *(str(s.variables[n].valueReference) for n in outputs)]
-        run = subprocess.run([str(cached_program(BENCH_SOURCE, "bench")), str(s.library),
-                              s.model_description.guid,
-                              str(steps), repr(step), str(repeats), *args],
-                             capture_output=True, text=True, check=True)
-    c_result = json.loads(run.stdout)
+        python, outputs = _python_loop(s, steps, step, repeats)
+        starts = {n: float(s.variables[n].start) for n in s.names("input")}
+        names = s.names("output")
+    with Master([SlaveSpec("fmu", Path(path))], list(starts), step) as master:
+        floor, c_us = run_c_loop(master, starts, steps, repeats)
     python_us = 1e6 * python["cycle"]
     return {
         "steps": steps,
@@ -99,7 +93,8 @@ def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
         "python_us_per_step": python_us,
         "python_bare_us_per_step": 1e6 * python["bare_cycle"],
         "python_us_per_do_step": 1e6 * python["do_step"],
-        "c_us_per_step": c_result["us_per_step"],
-        "ratio": python_us / c_result["us_per_step"],
-        "same_outputs": c_result["checksum"] == python["checksum"],
+        "c_us_per_step": c_us,
+        "ratio": python_us / c_us,
+        "same_outputs": all(np.array_equal(floor[f"fmu.{n}"][1:], outputs[:, j])
+                            for j, n in enumerate(names)),
     }

@@ -12,6 +12,7 @@ import os
 import re
 import subprocess
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import fmpy
@@ -74,20 +75,21 @@ def run_compiler(sources: list[Path], output: Path, include_dirs: list[Path],
 HOST_HEADER = Path(__file__).parent / "c" / "fmi2_host_logger.h"
 
 
-def cached_program(source: Path, name: str) -> Path:
-    """A stand-alone C program (FMI headers and fmi2_host_logger.h on the include path, linked
-    with -ldl) compiled from `source` into the build cache; rebuilt only when the source, the
-    header or the compiler changes."""
-    text = source.read_text()
-    key = cache.digest({source.name: text, HOST_HEADER.name: HOST_HEADER.read_text(),
+def cached_program(name: str, sources: Sequence[Path], headers: Sequence[Path] = ()) -> Path:
+    """A stand-alone C program (FMI headers, fmi2_host_logger.h and the folders of `headers` on
+    the include path, linked with -ldl) compiled from `sources` into the build cache; rebuilt
+    only when a source, a header or the compiler changes."""
+    files = [*sources, *headers, HOST_HEADER]
+    key = cache.digest({**{f.name: f.read_text() for f in files},
                         "cflags": " ".join(CFLAGS), "compiler": compiler_version()})
     program = cache.cached_path(key, f".{name}")
     if not program.exists():
         with tempfile.TemporaryDirectory() as tmp:
             for header, header_text in fmi_headers().items():
                 (Path(tmp) / header).write_text(header_text)
-            (Path(tmp) / HOST_HEADER.name).write_text(HOST_HEADER.read_text())
             exe = Path(tmp) / name
-            run_compiler([source], exe, [Path(tmp)], extra_flags=(), libraries=("-ldl",))
+            folders = dict.fromkeys(h.parent for h in [*headers, HOST_HEADER])
+            run_compiler(list(sources), exe, [Path(tmp), *folders], extra_flags=(),
+                         libraries=("-ldl",))
             cache.store(key, f".{name}", exe)
     return program

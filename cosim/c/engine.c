@@ -9,7 +9,8 @@
  * against its absolute schedule start + k * period. Nothing is allocated here. Every index
  * the plan holds is checked against the sizes it gives before a chunk runs (check_plan), and
  * engine_layout() reports the structures' layout for cosim/engine.py to check its ctypes
- * mirrors against when it loads the library.
+ * mirrors against when it loads the library. The structures are declared in engine.h, which
+ * the programs compiled with the engine include (cosim/c/floor.c, the speed floor).
  *
  * Values of other types than float64 go through a hook into Python (`typed`), called where
  * such an FMU sets its inputs or reads its outputs.
@@ -18,74 +19,11 @@
 #define _POSIX_C_SOURCE 200809L
 
 #include <stdarg.h>
-#include <stdbool.h>
-#include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
-#include <time.h>
 
-typedef void (*function_t)(void); /* any function: cast to its type before the call */
-typedef int (*set2_t)(void *, const unsigned *, size_t, const double *);
-typedef int (*set3_t)(void *, const unsigned *, size_t, const double *, size_t);
-typedef int (*get2_t)(void *, const unsigned *, size_t, double *);
-typedef int (*get3_t)(void *, const unsigned *, size_t, double *, size_t);
-typedef int (*step2_t)(void *, double, double, int);
-typedef int (*step3_t)(void *, double, double, bool, bool *, bool *, bool *, double *);
-/* typed(slave, phase, k): phase 0 sets the slave's typed inputs, 1 reads its typed outputs, 2
- * (slave -1) records the typed signals of point k; returns 0 if ok */
-typedef int (*typed_t)(long, int, long);
-
-enum { CALL_SET = 1, CALL_GET_BEFORE = 2, CALL_STEP = 3, CALL_GET_AFTER = 4, CALL_TYPED = 5 };
-enum { RUN_OK = 0, RUN_FAILED = 1, RUN_OVERRUN = 2, RUN_BAD_PLAN = 3 }; /* engine_run's result */
-
-typedef struct {
-    int fmi3;
-    void *component;
-    function_t set_float64, get_float64, do_step;
-    long n_in;
-    const unsigned *in_vr;
-    const long *gather;       /* bus index of every input, NULL: in_values is a view of the bus */
-    const double *gain;       /* NULL: no gain or offset */
-    const double *offset;
-    double *in_values;
-    long n_out;
-    const unsigned *out_vr;
-    double *out_values;       /* the FMU's block of the bus */
-    int read_before, read_after, typed_in, typed_out;
-} Slave;
-
-typedef struct {
-    double step;              /* communication step [s] */
-    long steps;               /* the run's last point */
-    long n_slaves;
-    Slave *slaves;
-    double *bus;
-    long n_bus, n_sources;
-    const double *sources;    /* (steps + 1) x n_sources */
-    double *record;           /* (steps + 1) x n_columns */
-    const long *columns;      /* bus index of every recorded column; NULL: the whole bus */
-    long n_columns;
-    typed_t typed;
-    int typed_record;         /* 1: call typed(-1, 2, k) after recording point k */
-    /* measurement, one value per step k (the point's calls and the step to k + 1) */
-    double *tet;              /* [s] */
-    double *slave_tet;        /* steps x n_slaves [s] */
-    double *lateness;         /* [s], 0 when not paced */
-    /* pacing */
-    int paced;
-    double period;            /* wall-clock seconds per step (step / real-time factor) */
-    struct timespec start;    /* the schedule's origin: point 0 is due then */
-    long max_overruns;        /* 0: never stop */
-    long grace_steps;         /* overruns before this step are counted but never stop the run */
-    long overruns;            /* every step whose TET plus lateness passed its period */
-    long counted;             /* those after the grace steps, which max_overruns limits */
-    long first_overruns[16];
-    /* where it stopped: failed slave, call and point (or the step of the last overrun) */
-    long failed_slave, failed_k;
-    int failed_call;
-    char error[256];          /* RUN_BAD_PLAN: what does not fit */
-} Run;
+#include "engine.h"
 
 /* The layout of every structure cosim/engine.py mirrors: one entry per field, and one with no
  * field for the structure's own size. */
@@ -115,10 +53,8 @@ static const Layout LAYOUT[] = {
     FIELD(Run, failed_call), FIELD(Run, error),
 };
 
-/* Entry i of the layout table (field NULL: the structure's size); 0, or -1 past its end. */
-__attribute__((visibility("default"))) int engine_layout(long i, const char **structure,
-                                                         const char **field, size_t *offset,
-                                                         size_t *size) {
+int engine_layout(long i, const char **structure, const char **field, size_t *offset,
+                  size_t *size) {
     if (i < 0 || (size_t)i >= sizeof LAYOUT / sizeof *LAYOUT) return -1;
     *structure = LAYOUT[i].structure;
     *field = LAYOUT[i].field;
@@ -242,10 +178,7 @@ static int advance(Slave *s, double t, double h) {
     return terminate ? 3 : status;
 }
 
-/* Points k0 .. k1 - 1. Returns RUN_OK, RUN_FAILED for a failed call (failed_* say which),
- * RUN_OVERRUN when the overruns reached max_overruns (failed_k: the step of the last one), or
- * RUN_BAD_PLAN, before any call, when the plan does not fit (error says why). */
-__attribute__((visibility("default"))) int engine_run(Run *r, long k0, long k1) {
+int engine_run(Run *r, long k0, long k1) {
     const double h = r->step;
     if (check_plan(r, k0, k1) != RUN_OK) return RUN_BAD_PLAN;
     for (long k = k0; k < k1; k++) {

@@ -1,4 +1,4 @@
-"""The master against the monolithic closed loop (tests/loops.py), the C loop, and its
+"""The master against the monolithic closed loop (tests/loops.py), the C floor, and its
 load-time and run-time errors."""
 
 import numpy as np

@@ -1,18 +1,17 @@
-"""bench_fmu: both step loops run the same steps; the full-length benchmark is marked slow."""
+"""bench_fmu: the Python loop and the C floor run the same steps; the full-length benchmark is
+marked slow. (The floor's own checks of its plan and arguments: tests/cosim/test_floor.py.)"""
 
-import subprocess
 import time
 
 import pytest
 
-from flexff.fmu.compile import cached_program
-from flexff.fmu_bench import BENCH_SOURCE, bench_fmu
+from flexff.fmu_bench import bench_fmu
 from tests.fmu_toys import build_toy, discrete_pi, duffing
 
 
 @pytest.fixture(autouse=True)
 def session_cache(tmp_path_factory, monkeypatch):
-    """The compiled C bench program goes to the session's cache, not the user's."""
+    """The compiled C floor goes to the session's cache, not the user's."""
     monkeypatch.setenv("FLEXFF_CACHE", str(tmp_path_factory.getbasetemp() / "flexff-cache"))
 
 
@@ -39,25 +38,3 @@ def test_bench_full(tmp_path_factory):
     result = bench_fmu(build_toy(duffing(), tmp_path_factory), steps=20000, repeats=5)
     assert result["same_outputs"]
     assert result["ratio"] > 1.0  # Python's call overhead cannot make it faster than C
-
-
-@pytest.mark.parametrize("counts, message", [
-    (["2", "7", "1.0", "0"], "fewer arguments than N_IN asks for: 2"),
-    (["1", "7", "1.0", "2", "8"], "N_OUT does not match the arguments: 2"),
-    (["1", "7", "x", "0"], "bad input value: x"),
-    (["1", "-7", "1.0", "0"], "bad value reference: -7"),
-], ids=["inputs", "outputs", "value", "value reference"])
-def test_bad_bench_arguments_are_refused(counts, message):
-    """Every count is checked against the arguments given before anything is read by it."""
-    program = cached_program(BENCH_SOURCE, "bench")
-    result = subprocess.run([str(program), "/nonexistent.so", "guid", "10", "0.001", "2",
-                             *counts], capture_output=True, text=True)
-    assert result.returncode == 2 and message in result.stderr, result.stderr
-
-
-@pytest.mark.parametrize("steps, repeats", [("0", "2"), ("10", "0"), ("ten", "2")])
-def test_bad_bench_loop_sizes_are_refused(steps, repeats):
-    program = cached_program(BENCH_SOURCE, "bench")
-    result = subprocess.run([str(program), "/nonexistent.so", "guid", steps, "0.001", repeats,
-                             "0", "0"], capture_output=True, text=True)
-    assert result.returncode == 2 and "must be a whole number of at least 1" in result.stderr
