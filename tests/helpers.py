@@ -1,5 +1,9 @@
 """Helpers shared by the tests."""
 
+import os
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -27,3 +31,22 @@ def simulate(model, x0, params, times, current=(0.0, 0.0, 0.0), rtol=1e-12, atol
                            {"abstol": atol, "reltol": rtol, "max_num_steps": 10**7})
     result = np.array(solver(x0=x0)["xf"])
     return np.column_stack([np.asarray(x0, dtype=float), result])
+
+
+def run_readme_snippet(folder: Path, name: str) -> str:
+    """The README's `<!-- NAME.py -->` block saved as NAME.py in `folder`, then its
+    `<!-- NAME.sh -->` block run there with this Python first on the PATH; its output."""
+    (folder / f"{name}.py").write_text(readme_block(f"{name}.py"))
+    environment = {**os.environ, "PATH": f"{os.path.dirname(sys.executable)}:{os.environ['PATH']}"}
+    done = subprocess.run(["bash", "-euo", "pipefail", "-c", readme_block(f"{name}.sh")],
+                          cwd=folder, env=environment, capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done.stdout
+
+
+def readme_block(marker: str) -> str:
+    """The fenced code block right after `<!-- marker -->` in the README."""
+    text = (REPOSITORY / "README.md").read_text()
+    found = re.search(rf"<!-- {re.escape(marker)} -->\n```\w+\n(.*?)```", text, re.DOTALL)
+    assert found, f"README.md has no code block after <!-- {marker} -->"
+    return found.group(1)

@@ -2,9 +2,6 @@
 function against the command line's own results."""
 
 import dataclasses
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -12,16 +9,11 @@ import pytest
 from flexff import api
 from flexff.cli import main
 from flexff.cosim.schema import ConfigError
-from tests.fmu.test_readme_network import readme_block
+from tests.helpers import run_readme_snippet
 
 
 def test_readme_python_snippet_runs_as_written(tmp_path):
-    (tmp_path / "python-api.py").write_text(readme_block("python-api.py"))
-    environment = {**os.environ, "PATH": f"{os.path.dirname(sys.executable)}:{os.environ['PATH']}"}
-    done = subprocess.run(["bash", "-euo", "pipefail", "-c", readme_block("python-api.sh")],
-                          cwd=tmp_path, env=environment, capture_output=True, text=True)
-    assert done.returncode == 0, done.stdout + done.stderr
-    lines = done.stdout.splitlines()
+    lines = run_readme_snippet(tmp_path, "python-api").splitlines()
     assert lines[0].startswith("x0 at 20.0 s: ") and len(lines) == 3
     assert [line.split(" peak")[0] for line in lines[1:]] == [
         "run-fmu.vdp.parameters.mu=0.5", "run-fmu.vdp.parameters.mu=1.5"]
