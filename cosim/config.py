@@ -75,6 +75,7 @@ from flexff.cosim.schema import (
     ReferenceConfig,
     RunConfig,
     SourceConfig,
+    whole_steps,
 )
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
 from flexff.plant.kinematics import check_workspace
@@ -92,7 +93,6 @@ RENAMED_KINDS = {"model": "rigid-body"}  # old [feedforward] kind -> its name no
 FEEDFORWARD_MODES = ("step", "precomputed")
 SHORT_FORM = ("plant", "controller", "feedforward")
 TABLES = ("run", "reference", "source", "fmu", "connection", "record", *SHORT_FORM)
-STEP_TOLERANCE = 1e-9  # relative: stop / step must be this close to a whole number
 PLANT_EXTRA = ("max_substep",)  # plant FMU parameters beyond the System's own
 START_PARAMETERS = ("x_start", "y_start")
 
@@ -256,7 +256,7 @@ class _Parser:
         if default is None:
             default = next((read_fmu(f.path).default_stop for f in fmus if f.path), None)
         stop = self.number(run, "run", "stop", default, positive=True)
-        if abs(stop / step - round(stop / step)) > STEP_TOLERANCE * max(1.0, stop / step):
+        if not whole_steps(stop, step):
             raise self.error("run.stop", f"{stop!r} s is not a whole number of steps of "
                                          f"{step!r} s (run.step)")
         return stop

@@ -37,6 +37,7 @@ from typing import Any
 from flexff.fmu.errors import InputError
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
+STEP_TOLERANCE = 1e-9  # relative: stop / step must be this close to a whole number
 UNCONNECTED = ("error", "start")
 BUILTIN_OPTIONS = {  # built-in FMU -> its options
     "plant": ("variant", "seed"),
@@ -45,6 +46,12 @@ BUILTIN_OPTIONS = {  # built-in FMU -> its options
     "learned-feedforward": ("model", "mode"),
 }
 SOURCE_KINDS = ("constant", "csv")
+
+
+def whole_steps(stop: float, step: float) -> bool:
+    """Whether `stop` is a whole number of steps of `step` (within STEP_TOLERANCE): the one
+    rule for a run's length, in TOML and SSP alike."""
+    return abs(stop / step - round(stop / step)) <= STEP_TOLERANCE * max(1.0, stop / step)
 
 
 class ConfigError(InputError):

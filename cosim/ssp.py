@@ -64,11 +64,18 @@ import numpy as np
 import tomli_w
 from lxml import etree
 
-from flexff.cosim.config import STEP_TOLERANCE, expanded, parse_config
+from flexff.cosim.config import expanded, parse_config
 from flexff.cosim.recording import atomic_write
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
-from flexff.cosim.schema import ALGORITHMS, ConfigError, ConnectionConfig, FmuConfig, RunConfig
+from flexff.cosim.schema import (
+    ALGORITHMS,
+    ConfigError,
+    ConnectionConfig,
+    FmuConfig,
+    RunConfig,
+    whole_steps,
+)
 from flexff.cosim.wiring import SOURCE, Link, carried
 from flexff.fmu.cache import cache_dir
 from flexff.fmu.errors import InputError
@@ -431,7 +438,7 @@ def _experiment(root: etree._Element, fmus: list[FmuConfig], error: Fail
         raise error(f"{key}/@startTime", "flexff runs from t = 0")
     if not (math.isfinite(step) and step > 0 and math.isfinite(stop) and stop > 0):
         raise error(key, f"step {step!r} and stop time {stop!r} must be positive and finite")
-    if abs(stop / step - round(stop / step)) > STEP_TOLERANCE * max(1.0, stop / step):
+    if not whole_steps(stop, step):
         raise error(key, f"the stop time {stop!r} s is not a whole number of steps of {step!r} s")
     if algorithm not in ALGORITHMS:
         raise error(f"{key}/ssd:Annotations", f"unknown algorithm {algorithm!r} "
