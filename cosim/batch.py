@@ -76,13 +76,13 @@ def run_batch(configs: Sequence[RunConfig | str | Path], output_dir: str | Path,
     debug = os.environ.get("FLEXFF_DEBUG") == "1"
     jobs = [(c, Path(output_dir) / n if subfolders else Path(output_dir), debug)
             for c, n in zip(configs, names)]
-    results: list[BatchResult | None] = [None] * len(jobs)
+    results: dict[int, BatchResult] = {}
     with execute(_run_job, jobs, workers, scheduler) as running:
-        for finished in running:
+        for finished in running:  # _run_one returns its error; a dead worker gives one
             results[finished.index] = finished.result or BatchResult(
                 names[finished.index], jobs[finished.index][1],
                 error=f"{type(finished.error).__name__}: {finished.error}")
-    return [r for r in results if r is not None]
+    return [results[k] for k in range(len(jobs))]
 
 
 def _run_job(job: tuple[RunConfig | str | Path, Path, bool]) -> BatchResult:

@@ -63,7 +63,7 @@ def resolve(config: RunConfig, folder: str | Path) -> Scenario:
     """Build the built-in FMUs into `folder`, sample the sources, wire everything."""
     folder = Path(folder)
     sources = source_signals(config)
-    slaves = []
+    slaves, ports = [], []
     for f in config.fmus:
         path = _fmu_file(f, config, sources, folder)
         try:
@@ -71,9 +71,8 @@ def resolve(config: RunConfig, folder: str | Path) -> Scenario:
         except FmuError as error:
             raise ConfigError(config.source, f"fmu.{f.name}", str(error)) from None
         slaves.append(SlaveSpec(f.name, path, _start_values(f), info))
-    ports = [Port(f.name, s.described(), f.unconnected,
-                  frozenset(n for n in f.parameters if n in s.described().inputs))
-             for f, s in zip(config.fmus, slaves)]
+        ports.append(Port(f.name, info, f.unconnected,
+                          frozenset(n for n in f.parameters if n in info.inputs)))
     try:
         links = wire(ports, list(sources), config.connections, config.algorithm)
     except WiringError as error:

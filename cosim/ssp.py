@@ -44,7 +44,6 @@ writing.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 import shutil
@@ -77,7 +76,7 @@ from flexff.cosim.schema import (
     whole_steps,
 )
 from flexff.cosim.wiring import SOURCE, Link, carried
-from flexff.fmu.cache import cache_dir
+from flexff.fmu.cache import cache_dir, file_sha256
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
 
@@ -325,11 +324,10 @@ def _annotated(root: etree._Element, folder: Path, plain: RunConfig) -> RunConfi
         with tempfile.TemporaryDirectory(prefix="flexff-ssp-") as built:
             scenario = resolve(replace(config, name=root.get("name", "")), built)
             same = (_without_configuration(_ssd(scenario)) == _without_configuration(root)
-                    and all(_sha256(s.fmu) == _sha256(folder / "resources" / f"{s.name}.fmu")
+                    and all(_member_sha256(folder, s.name) == file_sha256(s.fmu)
                             for s in scenario.slaves))
     except (ValueError, OSError) as exc:
-        same, config = False, plain
-        reason = f": {exc}"
+        same, reason = False, f": {exc}"
     else:
         reason = ""
     if not same:
@@ -350,14 +348,16 @@ def _without_configuration(root: etree._Element) -> bytes:
     return etree.tostring(copy, method="c14n")
 
 
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else ""
+def _member_sha256(folder: Path, name: str) -> str | None:
+    """The sha256 of the archive's FMU of component `name` (None if it has none)."""
+    member = folder / "resources" / f"{name}.fmu"
+    return file_sha256(member) if member.is_file() else None
 
 
 def _extracted(path: Path) -> Path:
     """The archive's files in the FMU cache, extracted once (by its sha256), so that the
     configuration's FMU paths stay valid after load_ssp returns."""
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    digest = file_sha256(path)
     folder = cache_dir() / "ssp" / digest
     if not folder.is_dir():
         folder.parent.mkdir(parents=True, exist_ok=True)

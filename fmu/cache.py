@@ -21,6 +21,11 @@ def cache_dir() -> Path:
     return folder
 
 
+def file_sha256(path: Path) -> str:
+    """The sha256 of a file's bytes, as hex."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
 def digest(parts: Mapping[str, str | bytes]) -> str:
     """sha256 hex digest of named parts, independent of their order, unambiguous in framing."""
     h = hashlib.sha256()

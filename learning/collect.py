@@ -35,7 +35,6 @@ Runs go to local processes, which end with the collecting process even when it i
 from __future__ import annotations
 
 import errno
-import hashlib
 import json
 import tempfile
 import time
@@ -53,6 +52,7 @@ from flexff.cosim.recording import Recording, atomic_write
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import Scenario, reference_signals, resolve
 from flexff.cosim.schema import ConfigError, RecordConfig, RunConfig
+from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError, RunError
 from flexff.learning.dataset import (
     COLLECTED,
@@ -332,7 +332,7 @@ def _present(job: _Job, listed: str | None) -> bool:
             signals = {n: data[n] for n in SIGNALS}
     except Exception:
         return False
-    if listed is not None and hashlib.sha256(job.path.read_bytes()).hexdigest() != listed:
+    if listed is not None and file_sha256(job.path) != listed:
         return False
     c = job.config
     expected = {n: v[::job.decimation] for n, v in reference_signals(c).items()}

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from flexff.cosim.recording import atomic_write
+from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
 from flexff.plant.signals import ENCODERS, FORCES, REFERENCE, TRUE_POSITION, names
 
@@ -163,11 +164,6 @@ def write_manifest(path: Path, set_name: str, sample_rate_hz: float, plant: Mapp
     _check_manifest(manifest, path / MANIFEST)
     text = json.dumps(manifest, indent=2) + "\n"
     atomic_write(path / MANIFEST, lambda tmp: tmp.write_text(text))
-
-
-def file_sha256(path: Path) -> str:
-    """The sha256 of a file's bytes, as hex."""
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def _digest(manifest: Mapping[str, Any], splits: bool) -> str:

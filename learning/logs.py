@@ -47,6 +47,7 @@ from scipy.io.matlab import matfile_version
 from scipy.signal import savgol_filter
 
 from flexff.cosim.csv_text import read_time_table
+from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
 from flexff.learning.dataset import (
     ENCODER_SIGNALS,
@@ -55,7 +56,6 @@ from flexff.learning.dataset import (
     REFERENCE_SIGNALS,
     TRAINED,
     Dataset,
-    file_sha256,
     load_dataset,
     save_signals,
     write_manifest,

@@ -25,13 +25,13 @@ from flexff.cosim.config import checked, expanded, parse_config
 from flexff.cosim.recording import Recording
 from flexff.cosim.scenario import Scenario
 from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
+from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import read_fmu, typed_value
 from flexff.learning.dataset import (
     ENCODER_SIGNALS,
     POSITION_SIGNALS,
     REFERENCE_SIGNALS,
-    file_sha256,
 )
 from flexff.plant.model import VARIANTS
 from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names

@@ -29,8 +29,8 @@ from typing import Any
 import torch
 
 from flexff.cosim.recording import atomic_write
+from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
-from flexff.learning.dataset import file_sha256
 from flexff.learning.models import SequenceNetwork, build_network
 from flexff.learning.presets import TrainConfig
 from flexff.learning.scaling import MinMaxScaler

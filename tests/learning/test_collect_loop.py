@@ -14,8 +14,9 @@ import pytest
 from flexff.cosim.config import parse_config
 from flexff.cosim.schema import ConfigError
 from flexff.fmu.build import build_fmu
+from flexff.fmu.cache import file_sha256
 from flexff.learning.collect import PROGRESS, DataFolderError, collect, run_collection
-from flexff.learning.dataset import MANIFEST, REFERENCE_SIGNALS, SIGNALS, file_sha256, load_dataset
+from flexff.learning.dataset import MANIFEST, REFERENCE_SIGNALS, SIGNALS, load_dataset
 from flexff.learning.evaluate import evaluate, scenario_config
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.plant.system import plant_system
