@@ -115,7 +115,7 @@ def sweep(path: str | Path, axes: Mapping[str, Sequence[Any]]) -> list[RunConfig
         label = "-".join(f"{k}={v}" for k, v in zip(axes, combination))
         names.append(_unique(_folder_name(f"{path.stem}-{label}"), names))
         configs.append(parse_config(data, name=names[-1], base=path.resolve().parent,
-                                    source=str(path)))
+                                    origin=str(path)))
     return configs
 
 

@@ -32,7 +32,7 @@ short form:
                  x_start, y_start default to the reference's first point
   [controller]   crossover_hz, notch (true / false / Hz), encoders (2 or 3); defaults follow
                  the plant variant (controllers.feedback.DEFAULTS)
-  [feedforward]  kind = "none" | "rigid-body" | "onnx" (with model = "file.onnx", an
+  [feedforward]  kind = "none" | "rigid-body" | "learned" (with model = "file.onnx", an
                  exported learned model, and mode = "step" (default) | "precomputed")
 
 A configuration without [fmu.*] tables is the manipulator's loop: the short form, with the
@@ -53,6 +53,7 @@ import re
 import tomllib
 import warnings
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -87,9 +88,8 @@ from flexff.plant.system import plant_parameters
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
                 "circle": ("kind", "centre", "turns", "duration"),
                 "spline": ("kind", "points", "duration")}
-FEEDFORWARD_KINDS = ("none", "rigid-body", "onnx")
-FEEDFORWARD_BUILTINS = {"rigid-body": "rigid-body-feedforward", "onnx": "learned-feedforward"}
-RENAMED_KINDS = {"model": "rigid-body"}  # old [feedforward] kind -> its name now
+FEEDFORWARD_KINDS = ("none", "rigid-body", "learned")  # kind K is the built-in "K-feedforward"
+RENAMED_KINDS = {"model": "rigid-body", "onnx": "learned"}  # old [feedforward] kind -> now
 FEEDFORWARD_MODES = ("step", "precomputed")
 SHORT_FORM = ("plant", "controller", "feedforward")
 TABLES = ("run", "reference", "source", "fmu", "connection", "record", *SHORT_FORM)
@@ -101,13 +101,20 @@ def load_config(path: str | Path) -> RunConfig:
     """Read and check a TOML run configuration (relative paths against its folder)."""
     path = Path(path)
     return parse_config(read_tables(path), name=path.stem, base=path.resolve().parent,
-                        source=str(path))
+                        origin=str(path))
 
 
 def checked(config: RunConfig) -> RunConfig:
-    """`config` checked again, as its file was: after a change in code (dataclasses.replace),
-    the same rules hold as for TOML and SSP; a ConfigError names the key at fault."""
-    return parse_config(expanded(config), name=config.name, source=config.source)
+    """`config` as the parser makes it (itself, if the parser made it): after a change in
+    code (dataclasses.replace) the same rules hold as for TOML and SSP; a ConfigError names the
+    key at fault. Connections keep their keys (an SSP file's `ssd:Connection[k]`) for later
+    errors."""
+    if config.checked:
+        return config
+    again = parse_config(expanded(config), name=config.name, origin=config.origin)
+    keys = tuple(replace(c, key=old.key) for c, old in zip(again.connections, config.connections))
+    object.__setattr__(again, "connections", keys)  # still the parser's own, checked object
+    return again
 
 
 def read_tables(path: Path) -> dict[str, Any]:
@@ -122,14 +129,14 @@ def read_tables(path: Path) -> dict[str, Any]:
 
 
 def parse_config(data: Mapping[str, Any] | str, name: str = "config",
-                 base: str | Path = ".", source: str = "<config>") -> RunConfig:
+                 base: str | Path = ".", origin: str = "<config>") -> RunConfig:
     """Check a configuration given as TOML text or as its parsed tables."""
     if isinstance(data, str):
         try:
             data = tomllib.loads(data)
         except tomllib.TOMLDecodeError as error:
-            raise ConfigError(source, "file", f"not valid TOML: {error}") from None
-    return _Parser(source, Path(base)).parse(data, name)
+            raise ConfigError(origin, "file", f"not valid TOML: {error}") from None
+    return _Parser(origin, Path(base)).parse(data, name)
 
 
 EXAMPLE_PATH = re.compile(r'^(\s*path\s*=\s*)"([^"/][^"]*)"', re.MULTILINE)  # a relative path
@@ -166,7 +173,7 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                                if f.unconnected != "error" else {})}
                    for f in config.fmus}
     if config.connections:
-        data["connection"] = [{"from": c.source, "to": c.target,
+        data["connection"] = [{"from": c.from_name, "to": c.to_name,
                                **({"gain": c.gain} if c.gain != 1.0 else {}),
                                **({"offset": c.offset} if c.offset != 0.0 else {})}
                               for c in config.connections]
@@ -178,7 +185,7 @@ def expanded(config: RunConfig) -> dict[str, Any]:
 
 def expanded_text(config: RunConfig) -> str:
     """`expanded` as TOML text, with a comment naming where it came from."""
-    return f"# {config.source}, in the general form\n" + tomli_w.dumps(expanded(config))
+    return f"# {config.origin}, in the general form\n" + tomli_w.dumps(expanded(config))
 
 
 def _plain(value: Any) -> Any:
@@ -193,11 +200,11 @@ def _plain(value: Any) -> Any:
 class _Parser:
     """Checks one configuration; every error names the file and `table.key`."""
 
-    def __init__(self, source: str, base: Path) -> None:
-        self.source, self.base = source, base
+    def __init__(self, origin: str, base: Path) -> None:
+        self.origin, self.base = origin, base
 
     def error(self, key: str, message: str) -> ConfigError:
-        return ConfigError(self.source, key, message)
+        return ConfigError(self.origin, key, message)
 
     def parse(self, data: Mapping[str, Any], name: str) -> RunConfig:
         for table in data:
@@ -228,12 +235,14 @@ class _Parser:
             raise self.error("fmu", "no FMU to run: add an [fmu.NAME] table")
         stop = self.stop(run, signal, fmus, step)
         sources += self.sources(data.get("source", []))
-        return RunConfig(
+        config = RunConfig(
             name=name, step=step, stop=stop, fmus=self.order(run, fmus), reference=reference,
             sources=tuple(sources), connections=self.connections(data.get("connection", []),
                                                                  fmus),
             algorithm=self.choice(run, "run", "algorithm", ALGORITHMS, "gauss-seidel"),
-            record=self.record(self.table(data, "record")), source=self.source)
+            record=self.record(self.table(data, "record")), origin=self.origin)
+        object.__setattr__(config, "checked", True)  # frozen; see RunConfig
+        return config
 
     # -- run ----------------------------------------------------------------------------
     def sampled(self, reference: ReferenceConfig, table: Mapping[str, Any], step: float
@@ -283,16 +292,17 @@ class _Parser:
         ff = self.table(data, "feedforward")
         if ff.get("kind") in RENAMED_KINDS:
             new = RENAMED_KINDS[ff["kind"]]
-            warnings.warn(f"{self.source}: [feedforward] kind = {ff['kind']!r} is deprecated, "
-                          f"write kind = {new!r} (the same rigid-body feedforward)",
+            warnings.warn(f"{self.origin}: [feedforward] kind = {ff['kind']!r} is deprecated, "
+                          f"write kind = {new!r} (the same feedforward: the built-in "
+                          f"{new}-feedforward)",
                           FutureWarning, stacklevel=2)
             ff = {**ff, "kind": new}
         kind = self.choice(ff, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
-        self.keys(ff, "feedforward", ("kind", "model", "mode") if kind == "onnx" else ("kind",))
+        self.keys(ff, "feedforward", ("kind", "model", "mode") if kind == "learned" else ("kind",))
         if kind == "none":
             sources.append(SourceConfig("constant", dict.fromkeys(names(FEEDFORWARD_FORCES), 0.0)))
         else:
-            fmus.append(FmuConfig("feedforward", builtin=FEEDFORWARD_BUILTINS[kind],
+            fmus.append(FmuConfig("feedforward", builtin=f"{kind}-feedforward",
                                   options=self.feedforward_options(ff, "feedforward")))
         controller = self.table(data, "controller")
         self.keys(controller, "controller", ("crossover_hz", "notch", "encoders"))

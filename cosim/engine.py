@@ -44,7 +44,7 @@ from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
 
 SOURCE = Path(__file__).parent / "c" / "engine.c"
 HEADER = SOURCE.with_suffix(".h")  # its structures, for the programs compiled with it
-TYPED_HOOK = CFUNCTYPE(c_int, c_long, c_int, c_long)  # (slave, phase, k) -> 0 if ok
+TYPED_HOOK = CFUNCTYPE(c_int, c_long, c_int, c_long)  # (fmu, phase, k) -> 0 if ok
 CALLS = {1: "setting its inputs", 2: "getting its outputs", 3: "the step", 4: "getting its "
          "outputs after the step", 5: "exchanging values of other types"}
 OK, FAILED, OVERRUN, BAD_PLAN = 0, 1, 2, 3  # engine_run's results (RUN_* in engine.c)
@@ -65,8 +65,8 @@ class _Timespec(Structure):
     _fields_ = [("tv_sec", c_long), ("tv_nsec", c_long)]
 
 
-class EngineSlave(Structure):
-    """One FMU's calls and its place on the bus (struct Slave of engine.c)."""
+class EngineFmuPlan(Structure):
+    """One FMU's calls and its place on the bus (struct FmuPlan of engine.c)."""
 
     _fields_ = [("fmi3", c_int), ("component", c_void_p), ("set_float64", c_void_p),
                 ("get_float64", c_void_p), ("do_step", c_void_p), ("n_in", c_long),
@@ -81,20 +81,20 @@ class EngineSlave(Structure):
 class EngineRun(Structure):
     """A run's plan, buffers and measurements (struct Run of engine.c)."""
 
-    _fields_ = [("step", c_double), ("steps", c_long), ("n_slaves", c_long),
-                ("slaves", POINTER(EngineSlave)), ("bus", POINTER(c_double)),
+    _fields_ = [("step", c_double), ("steps", c_long), ("n_fmus", c_long),
+                ("fmus", POINTER(EngineFmuPlan)), ("bus", POINTER(c_double)),
                 ("n_bus", c_long), ("n_sources", c_long), ("sources", POINTER(c_double)),
                 ("record", POINTER(c_double)), ("columns", POINTER(c_long)),
                 ("n_columns", c_long), ("typed", TYPED_HOOK), ("typed_record", c_int),
-                ("tet", POINTER(c_double)), ("slave_tet", POINTER(c_double)),
+                ("tet", POINTER(c_double)), ("fmu_tet", POINTER(c_double)),
                 ("lateness", POINTER(c_double)), ("paced", c_int), ("period", c_double),
                 ("start", _Timespec), ("max_overruns", c_long), ("grace_steps", c_long),
                 ("overruns", c_long), ("counted", c_long),
-                ("first_overruns", c_long * MAX_LISTED_OVERRUNS), ("failed_slave", c_long),
+                ("first_overruns", c_long * MAX_LISTED_OVERRUNS), ("failed_fmu", c_long),
                 ("failed_k", c_long), ("failed_call", c_int), ("error", c_char * ERROR_SIZE)]
 
 
-MIRRORS: dict[str, type[Structure]] = {"struct timespec": _Timespec, "Slave": EngineSlave,
+MIRRORS: dict[str, type[Structure]] = {"struct timespec": _Timespec, "FmuPlan": EngineFmuPlan,
                                        "Run": EngineRun}  # C name -> ctypes mirror
 
 
@@ -202,7 +202,7 @@ def idle_timing(seconds: float, period: float = 1e-3) -> StepTiming:
     scratch = np.zeros(1)  # bus, sources and record: no column, so nothing is written there
     run = EngineRun(step=period, steps=steps, bus=pointer(scratch), sources=pointer(scratch),
                     record=pointer(scratch), typed=TYPED_HOOK(),
-                    tet=pointer(tet), slave_tet=pointer(scratch), lateness=pointer(lateness),
+                    tet=pointer(tet), fmu_tet=pointer(scratch), lateness=pointer(lateness),
                     paced=1, period=period)
     start_schedule(run)
     library().engine_run(ctypes.byref(run), 0, steps + 1)

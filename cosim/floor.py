@@ -34,8 +34,8 @@ def loop_program() -> Path:
 def _plan_text(layout: dict[str, Any], steps: int) -> str:
     lines = ["flexff-cosim-plan 1",
              f"{layout['step']!r} {len(layout['signals'])} {layout['n_sources']} {steps} "
-             f"{len(layout['slaves'])}"]
-    for s in layout["slaves"]:
+             f"{len(layout['fmus'])}"]
+    for s in layout["fmus"]:
         lines += [s["library"], s["guid"], s["name"], str(len(s["parameters"]))]
         lines += [f"{vr} {'I' if kind == 'Integer' else 'R'} {float(value)!r}"
                   for vr, kind, value in s["parameters"]]

@@ -34,7 +34,7 @@ except ImportError:  # an optional dependency: the extra "libcosim"
     raise MissingPackage("runs under libcosim need libcosimpy: pip install 'flexff[libcosim]'"
                          ) from None
 
-from flexff.cosim.master import SlaveSpec
+from flexff.cosim.master import ResolvedFmu
 from flexff.cosim.recording import Recording
 from flexff.cosim.wiring import SOURCE, Link, Port, wire
 
@@ -44,51 +44,51 @@ class _Execution:
     with parameters and constant sources as initial values; `varying` lists the inputs fed
     from time-varying sources."""
 
-    def __init__(self, slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
+    def __init__(self, fmus: Sequence[ResolvedFmu], sources: Mapping[str, np.ndarray | float],
                  step: float, links: Sequence[Link] | None = None) -> None:
         log_output_level(CosimLogLevel.WARNING)  # libcosim traces every FMI call otherwise
-        infos = {s.name: s.described() for s in slaves}
+        infos = {s.name: s.described() for s in fmus}
         self.variables = {name: info.variables for name, info in infos.items()}
-        self.ports = [Port(s.name, infos[s.name]) for s in slaves]
+        self.ports = [Port(s.name, infos[s.name]) for s in fmus]
         if links is None:
             links = wire(self.ports, list(sources), algorithm="jacobi")
         self.execution = execution = CosimExecution.from_step_size(round(step * 1e9))
         self.index = {s.name: execution.add_local_slave(
-            CosimLocalSlave(fmu_path=str(s.fmu), instance_name=s.name)) for s in slaves}
-        for s in slaves:
+            CosimLocalSlave(fmu_path=str(s.path), instance_name=s.name)) for s in fmus}
+        for s in fmus:
             for name, value in s.parameters.items():
                 self.initial_value(s.name, name, value)
-        self.varying: dict[str, list[tuple[int, str]]] = {}  # slave -> (value ref., source)
+        self.varying: dict[str, list[tuple[int, str]]] = {}  # fmu -> (value ref., source)
         for c in links:
             if c.affine or not c.on_bus:
                 raise InputError(f"{c}: libcosim's API connects Real signals as they are; "
                                  f"run the SSP export for linear transformations")
-            if c.source != SOURCE:
+            if c.producer != SOURCE:
                 status = execution.connect_real_variables(
-                    self.index[c.source], self.vr(c.source, c.signal),
-                    self.index[c.target], self.vr(c.target, c.input))
+                    self.index[c.producer], self.vr(c.producer, c.signal),
+                    self.index[c.consumer], self.vr(c.consumer, c.input))
                 if not (status is True or (type(status) is int and status == 0)):  # int in 0.0.6
                     raise RunError(f"libcosim refused to connect {c}")
             elif np.ndim(sources[c.signal]) == 0:
-                self.initial_value(c.target, c.input, sources[c.signal])
+                self.initial_value(c.consumer, c.input, sources[c.signal])
             else:
-                self.varying.setdefault(c.target, []).append(
-                    (self.vr(c.target, c.input), c.signal))
+                self.varying.setdefault(c.consumer, []).append(
+                    (self.vr(c.consumer, c.input), c.signal))
 
-    def vr(self, slave: str, name: str) -> int:
-        return self.variables[slave][name].value_reference
+    def vr(self, fmu: str, name: str) -> int:
+        return self.variables[fmu][name].value_reference
 
-    def initial_value(self, slave: str, name: str, value: float | np.ndarray) -> None:
+    def initial_value(self, fmu: str, name: str, value: float | np.ndarray) -> None:
         """Set a parameter or a constant input (a scalar, np.ndim 0) before the run."""
-        i, vr = self.index[slave], self.vr(slave, name)
+        i, vr = self.index[fmu], self.vr(fmu, name)
         ok = (self.execution.integer_initial_value(i, vr, int(value))
-              if self.variables[slave][name].kind == "int32" else
+              if self.variables[fmu][name].kind == "int32" else
               self.execution.real_initial_value(i, vr, float(value)))
         if not ok:
-            raise RunError(f"libcosim rejected {slave}.{name} = {value!r}")
+            raise RunError(f"libcosim rejected {fmu}.{name} = {value!r}")
 
 
-def run_libcosim(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
+def run_libcosim(fmus: Sequence[ResolvedFmu], sources: Mapping[str, np.ndarray | float],
                  step: float, steps: int, record: Sequence[str] | None = None,
                  links: Sequence[Link] | None = None) -> Recording:
     """Run `steps` steps; the recording holds the FMU outputs (all, or `record`) at
@@ -97,41 +97,41 @@ def run_libcosim(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray |
     Its wall time includes libcosimpy's per-step calls (manipulator and observer), which
     build their ctypes prototypes on every call: see `time_libcosim_engine` for the rest.
     """
-    ex = _Execution(slaves, sources, step, links)
+    ex = _Execution(fmus, sources, step, links)
     manipulator, observer = CosimManipulator.create_override(), CosimObserver.create_last_value()
     ex.execution.add_manipulator(manipulator)
     ex.execution.add_observer(observer)
-    by_slave = {p.name: [n for n in p.info.outputs if record is None or n in record
+    by_fmu = {p.name: [n for n in p.info.outputs if record is None or n in record
                          or f"{p.name}.{n}" in record] for p in ex.ports}
-    by_slave = {s: names for s, names in by_slave.items() if names}
-    refs = {s: [ex.vr(s, n) for n in names] for s, names in by_slave.items()}
-    out = {s: np.empty((steps, len(names))) for s, names in by_slave.items()}
+    by_fmu = {s: names for s, names in by_fmu.items() if names}
+    refs = {s: [ex.vr(s, n) for n in names] for s, names in by_fmu.items()}
+    out = {s: np.empty((steps, len(names))) for s, names in by_fmu.items()}
     table = {n: np.broadcast_to(np.asarray(v, dtype=float), (steps + 1,))
              for n, v in sources.items()}
     start = time.perf_counter()
     for k in range(steps):
-        for slave, inputs in ex.varying.items():
-            if not manipulator.slave_real_values(ex.index[slave], [r for r, _ in inputs],
+        for fmu, inputs in ex.varying.items():
+            if not manipulator.slave_real_values(ex.index[fmu], [r for r, _ in inputs],
                                                  [float(table[n][k]) for _, n in inputs]):
-                raise RunError(f"libcosim rejected the inputs of {slave} at step {k}")
+                raise RunError(f"libcosim rejected the inputs of {fmu} at step {k}")
         if not ex.execution.step(1):
             raise RunError(f"libcosim failed in the step from t = {k * step:.9g} s")
-        for slave, values in out.items():
-            values[k] = observer.last_real_values(ex.index[slave], refs[slave])
+        for fmu, values in out.items():
+            values[k] = observer.last_real_values(ex.index[fmu], refs[fmu])
     wall = time.perf_counter() - start
     signals = {n: np.ascontiguousarray(table[n][1:]) for n in sources
                if record is None or n in record}
-    for slave, names in by_slave.items():
-        signals.update({f"{slave}.{n}": np.ascontiguousarray(out[slave][:, j])
+    for fmu, names in by_fmu.items():
+        signals.update({f"{fmu}.{n}": np.ascontiguousarray(out[fmu][:, j])
                         for j, n in enumerate(names)})
     return Recording((np.arange(steps) + 1) * step, signals, wall)
 
 
-def time_libcosim_engine(slaves: Sequence[SlaveSpec], sources: Mapping[str, np.ndarray | float],
+def time_libcosim_engine(fmus: Sequence[ResolvedFmu], sources: Mapping[str, np.ndarray | float],
                          step: float, steps: int) -> float:
     """Seconds libcosim takes for `steps` steps of the connected FMUs in one call, the
     varying sources held at their first sample: the engine's cost without per-step Python."""
-    ex = _Execution(slaves, {n: float(np.ravel(v)[0]) for n, v in sources.items()}, step)
+    ex = _Execution(fmus, {n: float(np.ravel(v)[0]) for n, v in sources.items()}, step)
     start = time.perf_counter()
     if not ex.execution.step(steps):
         raise RunError("libcosim failed")

@@ -59,8 +59,8 @@ from flexff.cosim.engine import (
     OK,
     OVERRUN,
     TYPED_HOOK,
+    EngineFmuPlan,
     EngineRun,
-    EngineSlave,
     function_address,
     library,
     pointer,
@@ -78,12 +78,12 @@ PROGRESS_CHUNK = 1000  # steps between progress bar updates
 
 
 @dataclass(frozen=True)
-class SlaveSpec:
+class ResolvedFmu:
     """One FMU of a co-simulation: its instance name, its file and start values by name, and
     its model description once read (a resolved scenario's, whose start values are checked)."""
 
     name: str
-    fmu: Path
+    path: Path
     parameters: Mapping[str, Any] = field(default_factory=dict)
     info: FmuInfo | None = field(default=None, compare=False, repr=False)
 
@@ -91,7 +91,7 @@ class SlaveSpec:
         """The model description: the one carried, else read and the start values checked."""
         if self.info is not None:
             return self.info
-        info = read_fmu(self.fmu)
+        info = read_fmu(self.path)
         _check_parameters(self, info)
         return info
 
@@ -102,20 +102,20 @@ class CosimError(RunError):
 
 class _Plan:
     """How one FMU reads its inputs from and writes its outputs to the bus (numpy arrays the
-    engine's EngineSlave points into)."""
+    engine's EngineFmuPlan points into)."""
 
-    def __init__(self, instance: FmuInstance, spec: SlaveSpec, links: Sequence[Link],
+    def __init__(self, instance: FmuInstance, fmu: ResolvedFmu, links: Sequence[Link],
                  bus_index: Mapping[str, int], bus: np.ndarray, out_offset: int,
                  read_before: bool, read_after: bool) -> None:
         info = instance.info
-        self.instance, self.name, self.parameters = instance, spec.name, dict(spec.parameters)
+        self.instance, self.name, self.parameters = instance, fmu.name, dict(fmu.parameters)
         floats = [k for k in links if k.on_bus]
         self.typed_inputs = [k for k in links if not k.on_bus]  # set by Python (_set_typed)
         self.inputs = tuple(k.input for k in floats)
         self.outputs = tuple(n for n in info.outputs if info.variables[n].kind == "float64")
         self.typed_outputs = [n for n in info.outputs if info.variables[n].kind != "float64"]
         self.out_offset, self.read_before, self.read_after = out_offset, read_before, read_after
-        gather = np.array([bus_index[k.producer] for k in floats], dtype=np.int64)
+        gather = np.array([bus_index[k.from_name] for k in floats], dtype=np.int64)
         affine = any(k.affine for k in floats)
         contiguous = gather.size == 0 or np.array_equal(
             gather, np.arange(gather[0], gather[0] + gather.size))
@@ -141,12 +141,12 @@ class _Plan:
         values = bus[self.gather]
         return values if self.gain is None else values * self.gain + self.offset
 
-    def engine_slave(self) -> EngineSlave:
+    def engine_plan(self) -> EngineFmuPlan:
         dll = self.instance.fmu.dll
         fmi3 = self.instance.info.fmi_version == "3.0"
         names = (("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep") if fmi3 else
                  ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"))
-        return EngineSlave(
+        return EngineFmuPlan(
             fmi3, self.instance.component.value, *(function_address(dll, n) for n in names),
             len(self.inputs), pointer(self.in_vr, c_uint), pointer(self.gather, c_long),
             pointer(self.gain), pointer(self.offset), pointer(self.in_values),
@@ -165,7 +165,7 @@ class Master:
     is the wiring (cosim.wiring.wire; default: every input by name).
     """
 
-    def __init__(self, slaves: Sequence[SlaveSpec], sources: Sequence[str], step: float,
+    def __init__(self, fmus: Sequence[ResolvedFmu], sources: Sequence[str], step: float,
                  links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel") -> None:
         if not step > 0:
             raise InputError(f"step must be positive, got {step}")
@@ -173,17 +173,17 @@ class Master:
             raise InputError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
         self.step, self.algorithm = float(step), algorithm
         self.sources = tuple(sources)
-        self.specs = list(slaves)
+        self.fmus = list(fmus)
         self._plans: list[_Plan] = []
         self._instances: list[FmuInstance] = []
-        infos = [s.described() for s in slaves]
+        infos = [s.described() for s in fmus]
         if links is None:
-            links = wire([Port(s.name, i) for s, i in zip(slaves, infos)], self.sources,
+            links = wire([Port(s.name, i) for s, i in zip(fmus, infos)], self.sources,
                          algorithm=algorithm)
         self.links = tuple(links)
         try:
-            for spec, info in zip(slaves, infos):
-                self._instances.append(FmuInstance(info, spec.name))
+            for fmu, info in zip(fmus, infos):
+                self._instances.append(FmuInstance(info, fmu.name))
             self._layout(infos)
         except BaseException:
             self.close()
@@ -194,26 +194,26 @@ class Master:
     def _layout(self, infos: Sequence[FmuInfo]) -> None:
         names = list(self.sources)
         offsets = {}
-        for spec, info in zip(self.specs, infos):
-            offsets[spec.name] = len(names)
-            names += [f"{spec.name}.{n}" for n in info.outputs
+        for fmu, info in zip(self.fmus, infos):
+            offsets[fmu.name] = len(names)
+            names += [f"{fmu.name}.{n}" for n in info.outputs
                       if info.variables[n].kind == "float64"]
         self.signals = tuple(names)
         self._index = index = {n: i for i, n in enumerate(names)}
         self._bus = np.zeros(len(names))
         self._typed: dict[str, Any] = {}
         jacobi = self.algorithm == "jacobi"
-        feeds_later = {s.name: False for s in self.specs}
+        feeds_later = {s.name: False for s in self.fmus}
         feeds_back = dict(feeds_later)
         for link in self.links:
-            if link.source != SOURCE:
-                (feeds_back if link.feedback else feeds_later)[link.source] = True
-        for spec, instance in zip(self.specs, self._instances):
-            links = [k for k in self.links if k.target == spec.name]
+            if link.producer != SOURCE:
+                (feeds_back if link.feedback else feeds_later)[link.producer] = True
+        for fmu, instance in zip(self.fmus, self._instances):
+            links = [k for k in self.links if k.consumer == fmu.name]
             self._plans.append(_Plan(
-                instance, spec, links, index, self._bus, offsets[spec.name],
-                read_before=not jacobi and (feeds_later[spec.name] or not feeds_back[spec.name]),
-                read_after=jacobi or feeds_back[spec.name]))
+                instance, fmu, links, index, self._bus, offsets[fmu.name],
+                read_before=not jacobi and (feeds_later[fmu.name] or not feeds_back[fmu.name]),
+                read_after=jacobi or feeds_back[fmu.name]))
         self.typed_signals = tuple(f"{p.name}.{n}" for p in self._plans for n in p.typed_outputs)
 
     def layout(self) -> dict[str, Any]:
@@ -225,10 +225,10 @@ class Master:
                 raise InputError(f"the C floor runs FMI 2.0 FMUs with Real signals and no gains "
                                  f"under Gauss-Seidel; {p.name} does not fit")
         index = {n: i for i, n in enumerate(self.signals)}
-        by_target = {(k.target, k.input): k.producer for k in self.links}
+        by_target = {(k.consumer, k.input): k.from_name for k in self.links}
         return {
             "step": self.step, "signals": list(self.signals), "n_sources": len(self.sources),
-            "slaves": [{
+            "fmus": [{
                 "name": p.name, "library": str(p.instance.library),
                 "guid": p.instance.info.token,
                 "parameters": [(p.instance.info.variables[n].value_reference,
@@ -269,7 +269,7 @@ class Master:
             columns, np.arange(len(self.signals)))
         out = np.empty((steps + 1, len(floats)))
         typed_out = [np.empty(steps + 1, dtype=object) for _ in typed]
-        needed = {q for _, q in typed} | {k.producer for k in self.links if k.kind != "float64"}
+        needed = {q for _, q in typed} | {k.from_name for k in self.links if k.kind != "float64"}
         for p in self._plans:  # typed outputs cost a call each: read only those in use
             p.typed_outputs = [n for n in p.typed_outputs if f"{p.name}.{n}" in needed]
         for p in self._plans:
@@ -305,7 +305,7 @@ class Master:
             if gc_was_enabled:
                 gc.enable()
         if status == FAILED:
-            raise hook.error or self._plans[run.failed_slave].fail(
+            raise hook.error or self._plans[run.failed_fmu].fail(
                 f"{CALLS[run.failed_call]} at t = {run.failed_k * self.step:.9g} s")
         if status == OVERRUN:
             end = run.failed_k + 1  # points 0 .. failed_k were recorded, the step was made
@@ -318,7 +318,7 @@ class Master:
                              else _typed_array(typed_out[typed_columns[j]][:end]))
         made = end if status == OVERRUN else steps  # the steps the engine made
         timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
-                            self._slave_tet[:made], self._lateness[:made], pacing, run.overruns,
+                            self._fmu_tet[:made], self._lateness[:made], pacing, run.overruns,
                             tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
                             run.failed_k if status == OVERRUN else None,
                             network_calls={p.name: times for p in self._plans
@@ -328,19 +328,19 @@ class Master:
     def _engine_run(self, table: np.ndarray, out: np.ndarray, columns: np.ndarray | None,
                     hook: _TypedHook, steps: int, pacing: Pacing | None) -> EngineRun:
         """The engine's plan and buffers, all allocated here, before the loop."""
-        self._slave_structs = (EngineSlave * len(self._plans))(
-            *(p.engine_slave() for p in self._plans))
+        self._plan_structs = (EngineFmuPlan * len(self._plans))(
+            *(p.engine_plan() for p in self._plans))
         self._tet = np.zeros(steps)
-        self._slave_tet = np.zeros((steps, len(self._plans)))
+        self._fmu_tet = np.zeros((steps, len(self._plans)))
         self._lateness = np.zeros(steps)
         self._arrays = (table, out, columns)  # what the engine points into lives as long
         self._hook = TYPED_HOOK(hook) if hook.needed else TYPED_HOOK()
         return EngineRun(
-            step=self.step, steps=steps, n_slaves=len(self._plans), slaves=self._slave_structs,
+            step=self.step, steps=steps, n_fmus=len(self._plans), fmus=self._plan_structs,
             bus=pointer(self._bus), n_bus=self._bus.size, n_sources=len(self.sources),
             sources=pointer(table), record=pointer(out), columns=pointer(columns, c_long),
             n_columns=out.shape[1], typed=self._hook, typed_record=bool(hook.columns),
-            tet=pointer(self._tet), slave_tet=pointer(self._slave_tet),
+            tet=pointer(self._tet), fmu_tet=pointer(self._fmu_tet),
             lateness=pointer(self._lateness), paced=pacing is not None,
             period=self.step / pacing.rt_factor if pacing else self.step,
             max_overruns=pacing.max_overruns if pacing else 0,
@@ -416,8 +416,8 @@ class Master:
     def _carried(self, link: Link, when: str) -> Any:
         """What a link off the float64 bus gives its input now (cosim.wiring.carried): its
         producer's value from the bus (float64) or the typed table, converted."""
-        value = (self._bus[self._index[link.producer]] if link.kind == "float64"
-                 else self._typed[link.producer])
+        value = (self._bus[self._index[link.from_name]] if link.kind == "float64"
+                 else self._typed[link.from_name])
         try:
             return carried(link, value)
         except OverflowError as error:
@@ -446,13 +446,13 @@ class _TypedHook:
         self.needed = bool(columns) or any(p.typed_inputs or p.typed_outputs
                                            for p in master._plans)
 
-    def __call__(self, slave: int, phase: int, k: int) -> int:
+    def __call__(self, fmu: int, phase: int, k: int) -> int:
         try:
             when = f"at t = {k * self.master.step:.9g} s"
             if phase == 0:
-                self.master._set_typed(self.master._plans[slave], when)
+                self.master._set_typed(self.master._plans[fmu], when)
             elif phase == 1:
-                self.master._read_typed(self.master._plans[slave], when)
+                self.master._read_typed(self.master._plans[fmu], when)
             else:
                 for column, name in self.columns:
                     column[k] = self.master._typed[name]
@@ -462,12 +462,12 @@ class _TypedHook:
         return 0
 
 
-def _check_parameters(spec: SlaveSpec, info: FmuInfo) -> None:
+def _check_parameters(fmu: ResolvedFmu, info: FmuInfo) -> None:
     """Start values may be given to parameters and inputs the FMU has."""
     settable = [n for n, v in info.variables.items() if v.settable]
-    for name in spec.parameters:
+    for name in fmu.parameters:
         if name not in settable:
-            raise InputError(f"{spec.name}: unknown parameter {name!r} (known: "
+            raise InputError(f"{fmu.name}: unknown parameter {name!r} (known: "
                              f"{', '.join(settable)})")
 
 

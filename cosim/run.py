@@ -84,7 +84,7 @@ def check_recording_memory(config: RunConfig, signals: int) -> None:
         check_memory((config.steps + 1) * signals, f"recording {signals} signals at "
                                                    f"{config.steps + 1} points")
     except MemoryNeeded as error:
-        raise ConfigError(config.source, "run.stop, run.step",
+        raise ConfigError(config.origin, "run.stop, run.step",
                           f"{error}: record fewer signals ([record] signals), shorten "
                           f"run.stop or enlarge run.step") from None
 
@@ -108,7 +108,7 @@ def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | 
                 try:
                     master.resolve(name)
                 except ValueError as error:
-                    raise ConfigError(scenario.config.source, "record.signals",
+                    raise ConfigError(scenario.config.origin, "record.signals",
                                       str(error)) from None
             extra = [n for n in PLOT_SIGNALS if n not in wanted and _known(master, n)]
             wanted = list(wanted) + extra

@@ -20,8 +20,9 @@ import numpy as np
 from flexff.controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
 from flexff.controllers.feedforward import rigid_body_feedforward_system
 from flexff.controllers.learned_feedforward import learned_feedforward_system
+from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME, read_time_table
-from flexff.cosim.master import Master, SlaveSpec
+from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.references import Reference, build_reference
 from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
 from flexff.cosim.wiring import Link, Port, WiringError, wire
@@ -37,7 +38,7 @@ class Scenario:
     """Everything a run needs, resolved: FMU files in order, wiring, sampled sources."""
 
     config: RunConfig
-    slaves: tuple[SlaveSpec, ...]
+    fmus: tuple[ResolvedFmu, ...]
     links: tuple[Link, ...]
     sources: Mapping[str, np.ndarray | float]
 
@@ -51,7 +52,7 @@ class Scenario:
 
     def master(self) -> Master:
         """The FMUs loaded and wired, ready to run (a context manager)."""
-        return Master(self.slaves, list(self.sources), self.step, self.links,
+        return Master(self.fmus, list(self.sources), self.step, self.links,
                       self.config.algorithm)
 
     def reference(self) -> dict[str, np.ndarray]:
@@ -60,24 +61,26 @@ class Scenario:
 
 
 def resolve(config: RunConfig, folder: str | Path) -> Scenario:
-    """Build the built-in FMUs into `folder`, sample the sources, wire everything."""
+    """Build the built-in FMUs into `folder`, sample the sources, wire everything; a
+    configuration the parser did not make is checked first (cosim.config.checked)."""
+    config = checked(config)
     folder = Path(folder)
     sources = source_signals(config)
-    slaves, ports = [], []
+    fmus, ports = [], []
     for f in config.fmus:
         path = _fmu_file(f, config, sources, folder)
         try:
             info = read_fmu(path)
         except FmuError as error:
-            raise ConfigError(config.source, f"fmu.{f.name}", str(error)) from None
-        slaves.append(SlaveSpec(f.name, path, _start_values(f), info))
+            raise ConfigError(config.origin, f"fmu.{f.name}", str(error)) from None
+        fmus.append(ResolvedFmu(f.name, path, _start_values(f), info))
         ports.append(Port(f.name, info, f.unconnected,
                           frozenset(n for n in f.parameters if n in info.inputs)))
     try:
         links = wire(ports, list(sources), config.connections, config.algorithm)
     except WiringError as error:
-        raise ConfigError(config.source, error.key, error.message) from None
-    return Scenario(config, tuple(slaves), tuple(links), sources)
+        raise ConfigError(config.origin, error.key, error.message) from None
+    return Scenario(config, tuple(fmus), tuple(links), sources)
 
 
 def source_signals(config: RunConfig) -> dict[str, np.ndarray | float]:
@@ -88,7 +91,7 @@ def source_signals(config: RunConfig) -> dict[str, np.ndarray | float]:
                   _csv_series(source, config, f"source[{k}].path"))
         for name, value in values.items():
             if name in out:
-                raise ConfigError(config.source, f"source[{k}]",
+                raise ConfigError(config.origin, f"source[{k}]",
                                   f"source signal {name!r} is given twice")
             out[name] = value
     return out
@@ -119,17 +122,17 @@ def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, 
     """The columns of a CSV source (cosim.csv_text's time table), linearly interpolated onto
     the run's points and held after the table's end."""
     if source.path is None:
-        raise ConfigError(config.source, key, "a CSV source needs a path")
+        raise ConfigError(config.origin, key, "a CSV source needs a path")
     try:
         table = read_time_table(source.path)
     except InputError as error:
-        raise ConfigError(config.source, key, str(error)) from None
+        raise ConfigError(config.origin, key, str(error)) from None
     names = [n for n in table.columns if n != TIME]
     if not names:
-        raise ConfigError(config.source, key, f"{source.path}: no signal column beside time")
+        raise ConfigError(config.origin, key, f"{source.path}: no signal column beside time")
     for name in names:
         if "." in name or not name:
-            raise ConfigError(config.source, key, (
+            raise ConfigError(config.origin, key, (
                 f"{source.path}: column {name!r}: a source signal's name is plain (no dot); "
                 f"connect it with a [[connection]]"))
     grid = np.arange(config.steps + 1) * config.step
@@ -163,7 +166,7 @@ def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any])
     if o["mode"] == "precomputed":
         reference = {n: sources[n] for n in Reference.SIGNALS if n in sources}
         if len(reference) != len(Reference.SIGNALS):
-            raise ConfigError(config.source, f"fmu.{f.name}.mode", "the precomputed mode needs "
+            raise ConfigError(config.origin, f"fmu.{f.name}.mode", "the precomputed mode needs "
                               "a [reference] to precompute the feedforward over")
     return learned_feedforward_system(o["model"], config.step, reference)
 

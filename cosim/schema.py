@@ -57,8 +57,8 @@ def whole_steps(stop: float, step: float) -> bool:
 class ConfigError(InputError):
     """A configuration problem, naming the file and the `table.key` at fault."""
 
-    def __init__(self, source: str, key: str, message: str) -> None:
-        super().__init__(f"{source}: {key}: {message}")
+    def __init__(self, origin: str, key: str, message: str) -> None:
+        super().__init__(f"{origin}: {key}: {message}")
         self.key = key
 
 
@@ -95,8 +95,8 @@ class FmuConfig:
 class ConnectionConfig:
     """An explicit connection; `key` names its table in errors (`connection[k]`)."""
 
-    source: str  # "fmu.output" or a source signal
-    target: str  # "fmu.input"
+    from_name: str  # TOML `from`: "fmu.output" or a source signal
+    to_name: str  # TOML `to`: "fmu.input"
     gain: float = 1.0
     offset: float = 0.0
     key: str = "connection"
@@ -110,7 +110,9 @@ class RecordConfig:
 
 @dataclass(frozen=True)
 class RunConfig:
-    """A checked run configuration in the general form."""
+    """A run configuration in the general form. `checked` is true only on the object
+    cosim.config's parser made: a copy changed in code (dataclasses.replace) starts unchecked,
+    and cosim.scenario.resolve checks it (cosim.config.checked) before anything is built."""
 
     name: str
     step: float
@@ -121,7 +123,8 @@ class RunConfig:
     connections: tuple[ConnectionConfig, ...] = ()
     algorithm: str = "gauss-seidel"
     record: RecordConfig = RecordConfig()
-    source: str = "<config>"
+    origin: str = "<config>"  # where it was read from, for errors
+    checked: bool = field(default=False, init=False, compare=False, repr=False)
 
     @property
     def steps(self) -> int:

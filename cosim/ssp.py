@@ -63,7 +63,7 @@ import numpy as np
 import tomli_w
 from lxml import etree
 
-from flexff.cosim.config import expanded, parse_config
+from flexff.cosim.config import checked, expanded, parse_config
 from flexff.cosim.recording import atomic_write
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
@@ -116,11 +116,11 @@ def export_ssp(config: RunConfig, path: str | Path) -> Path:
     time-varying source signals other than the reference feeding FMU inputs."""
     with tempfile.TemporaryDirectory(prefix="flexff-ssp-") as folder:
         scenario = resolve(config, folder)
-        varying = sorted({k.signal for k in scenario.links if k.source == SOURCE
+        varying = sorted({k.signal for k in scenario.links if k.producer == SOURCE
                           and np.ndim(scenario.sources[k.signal])
                           and k.signal not in Reference.SIGNALS})
         if varying:
-            raise InputError(f"{config.source}: SSP 1.0 cannot carry time-varying source "
+            raise InputError(f"{config.origin}: SSP 1.0 cannot carry time-varying source "
                              f"signals, and {', '.join(varying)} feed FMU inputs: an SSP system "
                              f"holds FMUs, their connections and start values only")
         ssd = etree.tostring(_ssd(scenario), xml_declaration=True, encoding="UTF-8",
@@ -129,8 +129,8 @@ def export_ssp(config: RunConfig, path: str | Path) -> Path:
         def write(tmp: Path) -> None:
             with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
                 archive.writestr(SSD, ssd)
-                for slave in scenario.slaves:
-                    archive.write(slave.fmu, f"resources/{slave.name}.fmu")
+                for fmu in scenario.fmus:
+                    archive.write(fmu.path, f"resources/{fmu.name}.fmu")
 
         return atomic_write(path, write)
 
@@ -143,27 +143,27 @@ def _ssd(scenario: Scenario) -> etree._Element:
     system = _sub(root, "ssd:System", name=config.name)
     elements = _sub(system, "ssd:Elements")
     enumerations: dict[str, etree._Element] = {}
-    links = [k for k in scenario.links if k.source != SOURCE]
-    used = {(k.source, k.signal) for k in links} | {(k.target, k.input) for k in links}
-    for slave in scenario.slaves:
-        info = slave.described()
-        component = _sub(elements, "ssd:Component", name=slave.name, type=FMU_TYPE,
-                         source=f"resources/{slave.name}.fmu", implementation="CoSimulation")
+    links = [k for k in scenario.links if k.producer != SOURCE]
+    used = {(k.producer, k.signal) for k in links} | {(k.consumer, k.input) for k in links}
+    for fmu in scenario.fmus:
+        info = fmu.described()
+        component = _sub(elements, "ssd:Component", name=fmu.name, type=FMU_TYPE,
+                         source=f"resources/{fmu.name}.fmu", implementation="CoSimulation")
         connectors = [n for n in (*info.inputs, *info.outputs, *info.parameters)
-                      if _has_connector(info, n, (slave.name, n) in used)]
+                      if _has_connector(info, n, (fmu.name, n) in used)]
         if connectors:
             _connectors(_sub(component, "ssd:Connectors"), info, connectors, enumerations)
-        values = {**slave.parameters, **{  # inputs fed by sources: their value at t = 0
+        values = {**fmu.parameters, **{  # inputs fed by sources: their value at t = 0
             k.input: _at_start(k, scenario) for k in scenario.links
-            if k.target == slave.name and k.source == SOURCE}}
+            if k.consumer == fmu.name and k.producer == SOURCE}}
         if values:
             binding = _sub(_sub(component, "ssd:ParameterBindings"), "ssd:ParameterBinding")
-            _parameter_set(_sub(binding, "ssd:ParameterValues"), slave.name, info, values)
+            _parameter_set(_sub(binding, "ssd:ParameterValues"), fmu.name, info, values)
     if links:
         connections = _sub(system, "ssd:Connections")
         for k in links:
-            connection = _sub(connections, "ssd:Connection", startElement=k.source,
-                              startConnector=k.signal, endElement=k.target, endConnector=k.input)
+            connection = _sub(connections, "ssd:Connection", startElement=k.producer,
+                              startConnector=k.signal, endElement=k.consumer, endConnector=k.input)
             if k.affine:
                 _sub(connection, "ssc:LinearTransformation", factor=repr(float(k.gain)),
                      offset=repr(float(k.offset)))
@@ -185,7 +185,7 @@ def _at_start(link: Link, scenario: Scenario) -> Any:
     try:
         return carried(link, np.ravel(scenario.sources[link.signal])[0])
     except OverflowError as error:
-        raise InputError(f"{scenario.config.source}: {link}: {error}") from None
+        raise InputError(f"{scenario.config.origin}: {link}: {error}") from None
 
 
 def _configuration_text(config: RunConfig) -> str:
@@ -255,10 +255,10 @@ def load_ssp(path: str | Path) -> RunConfig:
     """The run configuration of an SSP 1.0 file (module doc); ConfigError naming the SSD
     element at fault."""
     path = Path(path)
-    source = str(path)
+    origin = str(path)
 
     def error(key: str, message: str) -> ConfigError:
-        return ConfigError(source, key, message)
+        return ConfigError(origin, key, message)
 
     if not path.is_file():
         raise error("file", "no such SSP file")
@@ -307,8 +307,8 @@ def load_ssp(path: str | Path) -> RunConfig:
     step, stop, algorithm = _experiment(root, fmus, error)
     plain = RunConfig(name=path.stem, step=step, stop=stop, fmus=tuple(fmus),
                       connections=_connections(system, {f.name for f in fmus}, error),
-                      algorithm=algorithm, source=source)
-    return _annotated(root, folder, plain) or plain
+                      algorithm=algorithm, origin=origin)
+    return _annotated(root, folder, plain) or checked(plain)
 
 
 def _annotated(root: etree._Element, folder: Path, plain: RunConfig) -> RunConfig | None:
@@ -320,18 +320,18 @@ def _annotated(root: etree._Element, folder: Path, plain: RunConfig) -> RunConfi
         return None
     try:
         config = parse_config(tomllib.loads(text), name=plain.name, base=folder,
-                              source=plain.source)
+                              origin=plain.origin)
         with tempfile.TemporaryDirectory(prefix="flexff-ssp-") as built:
             scenario = resolve(replace(config, name=root.get("name", "")), built)
             same = (_without_configuration(_ssd(scenario)) == _without_configuration(root)
-                    and all(_member_sha256(folder, s.name) == file_sha256(s.fmu)
-                            for s in scenario.slaves))
+                    and all(_member_sha256(folder, s.name) == file_sha256(s.path)
+                            for s in scenario.fmus))
     except (ValueError, OSError) as exc:
         same, reason = False, f": {exc}"
     else:
         reason = ""
     if not same:
-        warnings.warn(f"{plain.source}: the system is no longer the flexff configuration it "
+        warnings.warn(f"{plain.origin}: the system is no longer the flexff configuration it "
                       f"carries{reason}; read as a plain SSP system (FMUs by file, no reference)",
                       stacklevel=3)
         return None

@@ -67,13 +67,13 @@ class Port:
 
 @dataclass(frozen=True)
 class Link:
-    """One input's producer: `source`.`signal` (source SOURCE: an external signal) into
-    `target`.`input`, as gain * value + offset; `kind` is the producer's kind, `into` the
+    """One input's feed: `producer`.`signal` (producer SOURCE: an external signal) into
+    `consumer`.`input`, as gain * value + offset; `kind` is the producer's kind, `into` the
     input's (`carried`)."""
 
-    source: str
+    producer: str
     signal: str
-    target: str
+    consumer: str
     input: str
     kind: str = "float64"
     gain: float = 1.0
@@ -82,9 +82,9 @@ class Link:
     into: str = "float64"
 
     @property
-    def producer(self) -> str:
-        """The signal's name on the bus: a source signal, or `fmu.output`."""
-        return self.signal if self.source == SOURCE else f"{self.source}.{self.signal}"
+    def from_name(self) -> str:
+        """The signal as a connection's `from` names it: a source signal, or `fmu.output`."""
+        return self.signal if self.producer == SOURCE else f"{self.producer}.{self.signal}"
 
     @property
     def affine(self) -> bool:
@@ -98,7 +98,7 @@ class Link:
     def __str__(self) -> str:
         scale = f" (x {self.gain:g} + {self.offset:g})" if self.affine else ""
         into = f" [{self.kind} -> {self.into}]" if self.kind != self.into else ""
-        return (f"{self.producer} -> {self.target}.{self.input}{scale}{into}"
+        return (f"{self.from_name} -> {self.consumer}.{self.input}{scale}{into}"
                 f"{' [feedback]' if self.feedback else ''}")
 
 
@@ -139,7 +139,7 @@ def wire(ports: Sequence[Port], sources: Collection[str],
         raise WiringError("fmu", f"FMU names must be unique and not {SOURCE!r}: {names}")
     by_name = {p.name: p for p in ports}
     position = {n: i for i, n in enumerate(names)}
-    explicit = {c.target: c for c in connections}
+    explicit = {c.to_name: c for c in connections}
     producers = _producers(ports, sources)
     links = []
     for port in ports:
@@ -163,14 +163,14 @@ def wire(ports: Sequence[Port], sources: Collection[str],
                                       f"output of that name (connect it, give it a value in "
                                       f"parameters, or set unconnected = \"start\" to keep the "
                                       f"start values of unconnected inputs)")
-                source, _, signal = found[0].rpartition(".")
-                link = Link(source or SOURCE, signal, port.name, name)
+                producer, _, signal = found[0].rpartition(".")
+                link = Link(producer or SOURCE, signal, port.name, name)
                 c = None
             links.append(_checked(link, c, by_name, position, algorithm))
     for c in connections:
-        target, _, name = c.target.partition(".")
-        if name not in by_name[target].info.inputs:
-            raise WiringError(f"{c.key}.to", _unknown(by_name[target], name, "input"))
+        consumer, _, name = c.to_name.partition(".")
+        if name not in by_name[consumer].info.inputs:
+            raise WiringError(f"{c.key}.to", _unknown(by_name[consumer], name, "input"))
     return links
 
 
@@ -185,19 +185,19 @@ def _producers(ports: Sequence[Port], sources: Collection[str]) -> dict[str, lis
 
 def _explicit(c: ConnectionConfig, ports: Mapping[str, Port], sources: Collection[str]
               ) -> Link:
-    target, _, name = c.target.partition(".")
-    if name not in ports[target].info.inputs:
-        raise WiringError(f"{c.key}.to", _unknown(ports[target], name, "input"))
-    if "." in c.source:
-        source, _, signal = c.source.partition(".")
-        if signal not in ports[source].info.outputs:
-            raise WiringError(f"{c.key}.from", _unknown(ports[source], signal, "output"))
-    elif c.source in sources:
-        source, signal = SOURCE, c.source
+    consumer, _, name = c.to_name.partition(".")
+    if name not in ports[consumer].info.inputs:
+        raise WiringError(f"{c.key}.to", _unknown(ports[consumer], name, "input"))
+    if "." in c.from_name:
+        producer, _, signal = c.from_name.partition(".")
+        if signal not in ports[producer].info.outputs:
+            raise WiringError(f"{c.key}.from", _unknown(ports[producer], signal, "output"))
+    elif c.from_name in sources:
+        producer, signal = SOURCE, c.from_name
     else:
-        raise WiringError(f"{c.key}.from", f"{c.source!r} is neither \"fmu.output\" nor a "
+        raise WiringError(f"{c.key}.from", f"{c.from_name!r} is neither \"fmu.output\" nor a "
                           f"source signal (sources: {', '.join(sources) or 'none'})")
-    return Link(source, signal, target, name, gain=c.gain, offset=c.offset)
+    return Link(producer, signal, consumer, name, gain=c.gain, offset=c.offset)
 
 
 def _unknown(port: Port, name: str, causality: str) -> str:
@@ -209,29 +209,29 @@ def _unknown(port: Port, name: str, causality: str) -> str:
 def _checked(link: Link, c: ConnectionConfig | None, ports: Mapping[str, Port],
              position: Mapping[str, int], algorithm: str) -> Link:
     """The link with its kind and feedback flag, after the type, unit and loop checks."""
-    key = c.key if c is not None else f"fmu.{link.target}"
-    to = ports[link.target].info.variables[link.input]
-    if link.source == SOURCE:
+    key = c.key if c is not None else f"fmu.{link.consumer}"
+    to = ports[link.consumer].info.variables[link.input]
+    if link.producer == SOURCE:
         kind, unit, feeds_back = SOURCE_KIND, None, False
     else:
-        producer = ports[link.source].info
+        producer = ports[link.producer].info
         frm = producer.variables[link.signal]
         kind, unit = frm.kind, frm.unit
-        feeds_back = algorithm == "jacobi" or position[link.source] >= position[link.target]
+        feeds_back = algorithm == "jacobi" or position[link.producer] >= position[link.consumer]
         if feeds_back and algorithm != "jacobi" and producer.dependencies[link.signal]:
-            raise WiringError(key, f"{link.producer} feeds {link.target}.{link.input}, which "
-                              f"steps before {link.source} (run.order), and depends directly on "
-                              f"{link.source}'s inputs: an algebraic loop; reorder the FMUs, or "
+            raise WiringError(key, f"{link.from_name} feeds {link.consumer}.{link.input}, which "
+                              f"steps before {link.producer} (run.order), and depends directly on "
+                              f"{link.producer}'s inputs: an algebraic loop; reorder the FMUs, or "
                               f"run with algorithm = \"jacobi\"")
         if not frm.scalar or not to.scalar:
-            raise WiringError(key, f"{link.producer} -> {link.target}.{link.input}: array "
+            raise WiringError(key, f"{link.from_name} -> {link.consumer}.{link.input}: array "
                                    f"variables cannot be connected")
     refused = refusal(kind, to.kind, link.affine)
     if refused:
-        raise WiringError(key, f"{link.producer} ({kind}) -> {link.target}.{link.input} "
+        raise WiringError(key, f"{link.from_name} ({kind}) -> {link.consumer}.{link.input} "
                                f"({to.type}): {refused}")
     if unit and to.unit and unit != to.unit:
-        raise WiringError(key, f"units differ: {link.producer} is in {unit}, "
-                               f"{link.target}.{link.input} in {to.unit}")
-    return Link(link.source, link.signal, link.target, link.input, kind, link.gain,
+        raise WiringError(key, f"units differ: {link.from_name} is in {unit}, "
+                               f"{link.consumer}.{link.input} in {to.unit}")
+    return Link(link.producer, link.signal, link.consumer, link.input, kind, link.gain,
                 link.offset, feeds_back, to.kind)

@@ -14,7 +14,7 @@ from flexff.cosim.config import parse_config
 from flexff.cosim.engine import idle_timing
 from flexff.cosim.floor import run_c_loop
 from flexff.cosim.libcosim import run_libcosim, time_libcosim_engine
-from flexff.cosim.master import Master, SlaveSpec
+from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.recording import Recording
 from flexff.cosim.run import simulate
 from flexff.cosim.scenario import Scenario, resolve
@@ -63,9 +63,9 @@ def closed_loop_benchmark(folder: Path, repeats: int = 3) -> dict[str, Any]:
                 c_record, c_us = run_c_loop(master, sources, steps, repeats)
             ours.append(master.run(sources, steps, progress=False))
     best = min(r.wall_s for r in ours)
-    theirs = [run_libcosim(scenario.slaves, sources, step, steps, ["x", "y"])
+    theirs = [run_libcosim(scenario.fmus, sources, step, steps, ["x", "y"])
               for _ in range(repeats)]
-    engine_s = min(time_libcosim_engine(scenario.slaves, sources, step, steps)
+    engine_s = min(time_libcosim_engine(scenario.fmus, sources, step, steps)
                    for _ in range(repeats))
     master_us, engine_us = 1e6 * best / steps, 1e6 * engine_s / steps
     libcosim_us = 1e6 * min(r.wall_s for r in theirs) / steps
@@ -112,7 +112,7 @@ def learned_feedforward_benchmark(folder: Path, models: dict[str, Path],
                                "without_feedforward_us_per_step": 1e6 * base / steps}
     for kind, model in models.items():
         for mode in ("step", "precomputed"):
-            scenario = closed_loop_scenario(folder, {"kind": "onnx", "model": str(model),
+            scenario = closed_loop_scenario(folder, {"kind": "learned", "model": str(model),
                                                      "mode": mode})
             wall = _best_wall(scenario, repeats)
             results[f"{kind}_{mode}"] = {
@@ -136,7 +136,7 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
             "run": {"stop": seconds} if seconds else {},
             "reference": {"kind": "thesis-hardware-eval"},
             "plant": {"variant": "hardware", "seed": 1},
-            "feedforward": {"kind": "onnx", "model": str(models[kind]), "mode": "step"}},
+            "feedforward": {"kind": "learned", "model": str(models[kind]), "mode": "step"}},
             name=f"realtime-{kind}")
         scenario = resolve(config, folder)
         recording = simulate(scenario, progress=False, pacing=Pacing(rt_factor=1.0))
@@ -169,7 +169,7 @@ def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
     fmu = build_fmu(onnx_system(folder / "one_node.onnx", step, every), folder / "one_node.fmu")
     steps = max(1, round(seconds / step))
     inputs = {"u[0]": 1.0, "u[1]": 2.0}
-    with Master([SlaveSpec("graph", fmu)], list(inputs), step) as master:
+    with Master([ResolvedFmu("graph", fmu)], list(inputs), step) as master:
         recording = master.run(inputs, steps, pacing=Pacing(rt_factor=1.0))
     table = recording.timing.table(recording.wall_s)
     return {"every_steps": every, "tet_us": table["tet_us"],

@@ -75,11 +75,16 @@ def _fmu_build(args: argparse.Namespace) -> int:
             raise InputError("fmu build onnx needs the graph: flexff fmu build onnx MODEL.onnx "
                              "-o M.fmu")
         system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every)
-    elif args.kind == "feedforward":
+    elif args.kind in ("learned-feedforward", "feedforward"):
         from flexff.controllers.learned_feedforward import learned_feedforward_system
 
+        if args.kind == "feedforward":
+            print("flexff: warning: 'fmu build feedforward' is now 'fmu build "
+                  "learned-feedforward' (the built-in's name in run configurations)",
+                  file=sys.stderr)
         if args.model is None:
-            raise InputError("fmu build feedforward needs --model M.onnx (flexff export)")
+            raise InputError("fmu build learned-feedforward needs --model M.onnx (flexff "
+                             "export)")
         system = learned_feedforward_system(args.model, args.step)
     else:
         from flexff.plant.system import plant_system
@@ -334,15 +339,15 @@ def build_parser() -> argparse.ArgumentParser:
     fmu = commands.add_parser("fmu", help="build and validate FMUs")
     fmu_commands = fmu.add_subparsers(dest="fmu_command", required=True)
     build = fmu_commands.add_parser("build", help="build an FMU")
-    build.add_argument("kind", choices=["plant", "feedforward", "onnx"],
+    build.add_argument("kind", choices=["plant", "learned-feedforward", "onnx", "feedforward"],
                        help="the plant, a learned feedforward from an exported ONNX model, or "
                             "any ONNX graph of fixed-size float tensors")
     build.add_argument("graph", nargs="?", help="onnx: the .onnx file")
     build.add_argument("--variant", choices=sorted(VARIANTS), default="nominal",
                        help="plant variant")
-    build.add_argument("--model", help="feedforward: the .onnx file (flexff export)")
+    build.add_argument("--model", help="learned-feedforward: the .onnx file (flexff export)")
     build.add_argument("--step", type=float, default=1e-3,
-                       help="feedforward, onnx: communication step [s] (default 0.001)")
+                       help="learned-feedforward, onnx: communication step [s] (default 0.001)")
     build.add_argument("--every", type=int,
                        help="onnx: communication steps between calls of the graph, its results "
                             "extrapolated linearly in between (default 1)")

@@ -18,14 +18,14 @@ from typing import Any
 import numpy as np
 
 from flexff.cosim.floor import run_c_loop
-from flexff.cosim.master import Master, SlaveSpec
-from flexff.fmu.slave import Slave, bare_calls
+from flexff.cosim.master import Master, ResolvedFmu
+from flexff.fmu.fmpy_instance import FmpyInstance, bare_calls
 
 
-def _python_loop(s: Slave, steps: int, step: float, repeats: int
+def _python_loop(s: FmpyInstance, steps: int, step: float, repeats: int
                  ) -> tuple[dict[str, float], np.ndarray]:
     """Best seconds per step cycle through fmpy's FMU2Slave calls and through the bare C
-    pointers the co-simulation master uses (fmu.slave.bare_calls), per bare fmi2DoStep
+    pointers the co-simulation master uses (fmu.fmpy_instance.bare_calls), per bare fmi2DoStep
     through fmpy, and the outputs after each of the first `steps` cycles."""
     inputs, outputs = s.names("input"), s.names("output")
     vr_in = (c_uint * len(inputs))(*(s.variables[n].valueReference for n in inputs))
@@ -78,12 +78,12 @@ def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
     the bus, its outputs read into it, the bus recorded, the step timed; the outputs are read
     before the next step rather than after this one, which gives the same values).
     """
-    with Slave(path) as s:
+    with FmpyInstance(path) as s:
         s.initialize()
         python, outputs = _python_loop(s, steps, step, repeats)
         starts = {n: float(s.variables[n].start) for n in s.names("input")}
         names = s.names("output")
-    with Master([SlaveSpec("fmu", Path(path))], list(starts), step) as master:
+    with Master([ResolvedFmu("fmu", Path(path))], list(starts), step) as master:
         floor, c_us = run_c_loop(master, starts, steps, repeats)
     python_us = 1e6 * python["cycle"]
     return {

@@ -28,10 +28,10 @@ from flexff.fmu.network import Network, runtime_library
 from flexff.fmu.system import System
 
 C_DIR = Path(__file__).parent / "c"
-# the generic slave (see c/slave.h), compiled with the generated model.c of each FMU
-SLAVE_SOURCES = ("fmi2Functions.c", "slave.c", "rng.c")
-SLAVE_HEADERS = ("slave.h", "rng.h")
-NETWORK_SOURCES = ("network_slave.c", "onnx_network.c")
+# the generic wrapper (see c/wrapper.h), compiled with the generated model.c of each FMU
+WRAPPER_C_FILES = ("fmi2Functions.c", "wrapper.c", "rng.c")
+WRAPPER_HEADERS = ("wrapper.h", "rng.h")
+NETWORK_C_FILES = ("wrapper_network.c", "onnx_network.c")
 NETWORK_HEADERS = ("onnx_network.h", "onnxruntime_c_api.h", "onnxruntime_c_api.LICENSE.txt")
 GUID_PLACEHOLDER = "{00000000-0000-0000-0000-000000000000}"
 GUID_FILES = ("modelDescription.xml", "sources/config.h")
@@ -40,15 +40,15 @@ ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps keep the archive reproducib
 
 def _source_files(system: System) -> list[str]:
     """The C files compiled into the FMU's library."""
-    return [*SLAVE_SOURCES, "model.c", *(NETWORK_SOURCES if system.network else ())]
+    return [*WRAPPER_C_FILES, "model.c", *(NETWORK_C_FILES if system.network else ())]
 
 
 def _files(system: System, guid: str) -> dict[str, str | bytes]:
     """Every file of the FMU but its compiled library, by archive path."""
     identifier = model_identifier(system)
     layout = make_layout(system)
-    generic = (*SLAVE_SOURCES, *SLAVE_HEADERS,
-               *((*NETWORK_SOURCES, *NETWORK_HEADERS) if system.network else ()))
+    generic = (*WRAPPER_C_FILES, *WRAPPER_HEADERS,
+               *((*NETWORK_C_FILES, *NETWORK_HEADERS) if system.network else ()))
     sources = {
         **{name: (C_DIR / name).read_text() for name in generic},
         "config.h": generate_config_h(system, layout, identifier, guid),

@@ -1,7 +1,7 @@
 """C sources of one model: CasADi-generated functions (model.c/h) and config.h.
 
 The System's functions are wrapped under fixed, model-prefixed names with dense column
-arguments and results, so that the generic slave (c/slave.h) can call them without
+arguments and results, so that the generic wrapper (c/wrapper.h) can call them without
 knowing anything about the model. CasADi's output is deterministic for a given CasADi version,
 which the build cache relies on.
 """

@@ -256,7 +256,7 @@ def _decimation(loop: RunConfig, trajectories: TrajectorySet) -> int:
     period = 1.0 / trajectories.sample_rate_hz
     ratio = period / loop.step
     if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
-        raise ConfigError(loop.source, "run.step", f"{loop.step:g} s does not divide the "
+        raise ConfigError(loop.origin, "run.step", f"{loop.step:g} s does not divide the "
                           f"{trajectories.name} set's sample period of {period:g} s")
     return round(ratio)
 

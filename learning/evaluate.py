@@ -131,7 +131,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     environment = ENVIRONMENTS[env]
     set_name = environment.trajectory_set
     if data is None:
-        on = f" on {loop.source}" if loop is not None else ""
+        on = f" on {loop.origin}" if loop is not None else ""
         say(f"collecting the {set_name} set (PID only){on} into {out / f'data-{set_name}'}")
         data = collect(set_name, out / f"data-{set_name}",
                        config=None if loop is None else with_feedforward(loop))

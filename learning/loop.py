@@ -64,7 +64,7 @@ def default_loop(variant: str) -> RunConfig:
     """flexff's own loop: PID alone on the built-in plant `variant` (the short form; its
     reference is a placeholder that `on_reference` replaces)."""
     return parse_config({"reference": {"kind": "thesis-eval"}, "plant": {"variant": variant}},
-                        name=f"{variant}-pid", source=f"the {variant} plant under PID")
+                        name=f"{variant}-pid", origin=f"the {variant} plant under PID")
 
 
 def on_reference(loop: RunConfig, reference: Mapping[str, Any], name: str,
@@ -73,7 +73,7 @@ def on_reference(loop: RunConfig, reference: Mapping[str, Any], name: str,
     `stop` seconds (default: the reference's duration), starting at rest on its first point,
     with the built-in plant's noise `seed` (None keeps the loop's)."""
     own = parse_config({"run": {"step": loop.step, **({"stop": stop} if stop else {})},
-                        "reference": dict(reference)}, name=name, source=f"{loop.source}, {name}")
+                        "reference": dict(reference)}, name=name, origin=f"{loop.origin}, {name}")
     plant = own.builtin("plant")
     if plant is None:  # the short form always has one
         raise InputError(f"{name}: the reference run has no built-in plant")
@@ -104,8 +104,8 @@ def with_feedforward(loop: RunConfig, builtin: str | None = None,
     controller = _controller(loop)
     gone = {f.name for f in loop.fmus if f.builtin in FEEDFORWARDS}
     targets = {f"{controller.name}.{n}" for n in names(FEEDFORWARD_FORCES)}
-    connections = tuple(c for c in loop.connections if c.target not in targets and not
-                        {c.source.partition(".")[0], c.target.partition(".")[0]} & gone)
+    connections = tuple(c for c in loop.connections if c.to_name not in targets and not
+                        {c.from_name.partition(".")[0], c.to_name.partition(".")[0]} & gone)
     sources = []
     for s in loop.sources:
         values = {k: v for k, v in s.values.items() if k not in names(FEEDFORWARD_FORCES)}
@@ -127,7 +127,7 @@ def with_feedforward(loop: RunConfig, builtin: str | None = None,
 def _controller(loop: RunConfig) -> FmuConfig:
     controller = loop.builtin("controller")
     if controller is None:
-        raise ConfigError(loop.source, "fmu", "the loop has no flexff controller: data "
+        raise ConfigError(loop.origin, "fmu", "the loop has no flexff controller: data "
                           "collection and the evaluation run flexff's PID; add [fmu.controller] "
                           "builtin = \"controller\" (or use the short form's [controller])")
     return controller
@@ -138,24 +138,24 @@ def dataset_taps(scenario: Scenario) -> dict[str, Tap]:
     a ConfigError names a missing one and how to provide it."""
     config = scenario.config
     controller = _controller(config).name
-    into = {(k.target, k.input): k for k in scenario.links}
+    into = {(k.consumer, k.input): k for k in scenario.links}
     taps = {n: Tap(n) for n in REFERENCE_SIGNALS}  # the [reference]: source signals
     for name in (*ENCODER_SIGNALS, *names(FEEDFORWARD_FORCES)):
         link = into.get((controller, name))
         if link is None:
-            raise ConfigError(config.source, f"fmu.{controller}", (
+            raise ConfigError(config.origin, f"fmu.{controller}", (
                 f"the dataset's {name} is what the controller's input {controller}.{name} "
                 f"receives, and it receives no signal: connect it ([[connection]] from = "
                 f"\"PLANT.OUTPUT\", to = \"{controller}.{name}\")"))
-        taps[name] = Tap(link.producer, link.gain, link.offset)
+        taps[name] = Tap(link.from_name, link.gain, link.offset)
     taps.update({n: Tap(f"{controller}.{n}") for n in names(FEEDBACK_FORCES, CURRENTS)})
-    outputs = [(s.name, s.described().outputs) for s in scenario.slaves]
+    outputs = [(s.name, s.described().outputs) for s in scenario.fmus]
     for name in POSITION_SIGNALS:
         found = [f"{fmu}.{name}" for fmu, names in outputs if name in names]
         if len(found) != 1:
             problem = (f"{' and '.join(found)} both output it" if found else
                        "no FMU of the loop outputs it")
-            raise ConfigError(config.source, "fmu", (
+            raise ConfigError(config.origin, "fmu", (
                 f"the dataset's {name} (the true wrist position, m, a label of the dataset) is "
                 f"the plant's output named {name}, and {problem}: give the plant FMU one "
                 f"output {name} (logs of a machine without it: flexff data import)"))
@@ -189,8 +189,8 @@ def loop_record(scenario: Scenario) -> dict[str, Any]:
         if table.get("builtin") == "plant":
             table.pop("seed", None)
     fmus = {f.name: {**({"builtin": f.builtin} if f.builtin else {"path": str(f.path)}),
-                     "sha256": file_sha256(s.fmu)}
-            for f, s in zip(scenario.config.fmus, scenario.slaves)}
+                     "sha256": file_sha256(s.path)}
+            for f, s in zip(scenario.config.fmus, scenario.fmus)}
     plain: dict[str, Any] = json.loads(json.dumps({"configuration": configuration, "fmus": fmus}))
     return plain
 

@@ -104,7 +104,7 @@ def rk4_reference(system: System, params: dict[str, float], forces: np.ndarray,
 
 def rk4(f, x, dt: float, substeps: int):
     """`substeps` RK4 steps of length dt from x under dx/dt = f(x), in the FMU wrapper's order
-    of operations (fmu/c/slave.c: rk4_step), on numbers or on CasADi symbols alike."""
+    of operations (fmu/c/wrapper.c: rk4_step), on numbers or on CasADi symbols alike."""
     for _ in range(substeps):
         k1 = f(x)
         k2 = f(x + 0.5 * dt * k1)

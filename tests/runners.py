@@ -1,4 +1,4 @@
-"""Fixed-step runners of one FMU for the tests: through fmpy (fmu.slave.Slave) and through
+"""Fixed-step runners of one FMU for the tests: through fmpy (fmu.fmpy_instance) and through
 libcosim, the second importer.
 
 Inputs are given as arrays, there are no connections. With `run_fmu` sample k is read at
@@ -19,7 +19,7 @@ from libcosimpy.CosimManipulator import CosimManipulator
 from libcosimpy.CosimObserver import CosimObserver
 from libcosimpy.CosimSlave import CosimLocalSlave
 
-from flexff.fmu.slave import Slave
+from flexff.fmu.fmpy_instance import FmpyInstance
 
 
 def run_fmu(path: str | Path, steps: int, step: float = 1e-3,
@@ -33,7 +33,7 @@ def run_fmu(path: str | Path, steps: int, step: float = 1e-3,
     outputs and may name any Real variable (states too). The last sample is read after the last
     step, with the last inputs still applied.
     """
-    with Slave(path) as s:
+    with FmpyInstance(path) as s:
         record = list(record) if record is not None else s.names("output")
         series = {n: np.broadcast_to(np.asarray(u, dtype=float), (steps,))
                   for n, u in (inputs or {}).items()}

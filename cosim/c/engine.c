@@ -37,19 +37,19 @@ typedef struct {
 
 static const Layout LAYOUT[] = {
     SIZE(struct timespec), FIELD(struct timespec, tv_sec), FIELD(struct timespec, tv_nsec),
-    SIZE(Slave), FIELD(Slave, fmi3), FIELD(Slave, component), FIELD(Slave, set_float64),
-    FIELD(Slave, get_float64), FIELD(Slave, do_step), FIELD(Slave, n_in), FIELD(Slave, in_vr),
-    FIELD(Slave, gather), FIELD(Slave, gain), FIELD(Slave, offset), FIELD(Slave, in_values),
-    FIELD(Slave, n_out), FIELD(Slave, out_vr), FIELD(Slave, out_values),
-    FIELD(Slave, read_before), FIELD(Slave, read_after), FIELD(Slave, typed_in),
-    FIELD(Slave, typed_out),
-    SIZE(Run), FIELD(Run, step), FIELD(Run, steps), FIELD(Run, n_slaves), FIELD(Run, slaves),
+    SIZE(FmuPlan), FIELD(FmuPlan, fmi3), FIELD(FmuPlan, component), FIELD(FmuPlan, set_float64),
+    FIELD(FmuPlan, get_float64), FIELD(FmuPlan, do_step), FIELD(FmuPlan, n_in), FIELD(FmuPlan, in_vr),
+    FIELD(FmuPlan, gather), FIELD(FmuPlan, gain), FIELD(FmuPlan, offset), FIELD(FmuPlan, in_values),
+    FIELD(FmuPlan, n_out), FIELD(FmuPlan, out_vr), FIELD(FmuPlan, out_values),
+    FIELD(FmuPlan, read_before), FIELD(FmuPlan, read_after), FIELD(FmuPlan, typed_in),
+    FIELD(FmuPlan, typed_out),
+    SIZE(Run), FIELD(Run, step), FIELD(Run, steps), FIELD(Run, n_fmus), FIELD(Run, fmus),
     FIELD(Run, bus), FIELD(Run, n_bus), FIELD(Run, n_sources), FIELD(Run, sources),
     FIELD(Run, record), FIELD(Run, columns), FIELD(Run, n_columns), FIELD(Run, typed),
-    FIELD(Run, typed_record), FIELD(Run, tet), FIELD(Run, slave_tet), FIELD(Run, lateness),
+    FIELD(Run, typed_record), FIELD(Run, tet), FIELD(Run, fmu_tet), FIELD(Run, lateness),
     FIELD(Run, paced), FIELD(Run, period), FIELD(Run, start), FIELD(Run, max_overruns),
     FIELD(Run, grace_steps), FIELD(Run, overruns), FIELD(Run, counted),
-    FIELD(Run, first_overruns), FIELD(Run, failed_slave), FIELD(Run, failed_k),
+    FIELD(Run, first_overruns), FIELD(Run, failed_fmu), FIELD(Run, failed_k),
     FIELD(Run, failed_call), FIELD(Run, error),
 };
 
@@ -76,8 +76,8 @@ static struct timespec due(const Run *r, long k) {
     return t;
 }
 
-static int fail(Run *r, long slave, int call, long k) {
-    r->failed_slave = slave;
+static int fail(Run *r, long fmu, int call, long k) {
+    r->failed_fmu = fmu;
     r->failed_call = call;
     r->failed_k = k;
     return RUN_FAILED;
@@ -99,24 +99,24 @@ static bool in_bus(const Run *r, const double *p, long n) {
            (at - start) % sizeof *p == 0 && (at - start) / sizeof *p <= (size_t)(r->n_bus - n);
 }
 
-/* Slave i's counts, pointers and bus indices against the bus; 0 if they fit. */
-static int check_slave(Run *r, long i) {
-    const Slave *s = &r->slaves[i];
+/* FMU i's counts, pointers and bus indices against the bus; 0 if they fit. */
+static int check_fmu(Run *r, long i) {
+    const FmuPlan *s = &r->fmus[i];
     if (s->component == NULL || s->set_float64 == NULL || s->get_float64 == NULL ||
         s->do_step == NULL || s->n_in < 0 || s->n_out < 0 ||
         (s->n_in > 0 && (s->in_vr == NULL || s->in_values == NULL)) ||
         (s->n_out > 0 && s->out_vr == NULL) || (s->gain != NULL && s->offset == NULL) ||
         ((s->typed_in || s->typed_out) && r->typed == NULL))
-        return bad_plan(r, "slave %ld: a count is negative or a pointer is missing", i);
+        return bad_plan(r, "fmu %ld: a count is negative or a pointer is missing", i);
     if (!in_bus(r, s->out_values, s->n_out))
-        return bad_plan(r, "slave %ld: its %ld outputs do not lie inside the bus of %ld", i,
+        return bad_plan(r, "fmu %ld: its %ld outputs do not lie inside the bus of %ld", i,
                         s->n_out, r->n_bus);
     if (s->gather == NULL && !in_bus(r, s->in_values, s->n_in))
-        return bad_plan(r, "slave %ld: its %ld inputs do not lie inside the bus of %ld", i,
+        return bad_plan(r, "fmu %ld: its %ld inputs do not lie inside the bus of %ld", i,
                         s->n_in, r->n_bus);
     for (long j = 0; s->gather != NULL && j < s->n_in; j++)
         if (s->gather[j] < 0 || s->gather[j] >= r->n_bus)
-            return bad_plan(r, "slave %ld: input %ld reads bus index %ld", i, j, s->gather[j]);
+            return bad_plan(r, "fmu %ld: input %ld reads bus index %ld", i, j, s->gather[j]);
     return RUN_OK;
 }
 
@@ -127,25 +127,25 @@ static int check_plan(Run *r, long k0, long k1) {
     if (r->steps < 0 || k0 < 0 || k1 < k0 || k1 > r->steps + 1)
         return bad_plan(r, "points %ld .. %ld asked for, the run has points 0 .. %ld", k0,
                         k1 - 1, r->steps);
-    if (r->n_slaves < 0 || r->n_bus < 0 || r->n_sources < 0 || r->n_sources > r->n_bus ||
+    if (r->n_fmus < 0 || r->n_bus < 0 || r->n_sources < 0 || r->n_sources > r->n_bus ||
         r->n_columns < 0 || (r->columns == NULL && r->n_columns != r->n_bus))
-        return bad_plan(r, "%ld slaves, %ld sources or %ld columns do not fit the bus",
-                        r->n_slaves, r->n_sources, r->n_columns);
-    if ((r->n_slaves > 0 && r->slaves == NULL) || r->bus == NULL || r->sources == NULL ||
-        r->record == NULL || r->tet == NULL || r->slave_tet == NULL || r->lateness == NULL ||
+        return bad_plan(r, "%ld FMUs, %ld sources or %ld columns do not fit the bus",
+                        r->n_fmus, r->n_sources, r->n_columns);
+    if ((r->n_fmus > 0 && r->fmus == NULL) || r->bus == NULL || r->sources == NULL ||
+        r->record == NULL || r->tet == NULL || r->fmu_tet == NULL || r->lateness == NULL ||
         (r->typed_record && r->typed == NULL))
         return bad_plan(r, "a buffer is missing");
     for (long j = 0; r->columns != NULL && j < r->n_columns; j++)
         if (r->columns[j] < 0 || r->columns[j] >= r->n_bus)
             return bad_plan(r, "recorded column %ld is bus index %ld, the bus has %ld", j,
                             r->columns[j], r->n_bus);
-    for (long i = 0; i < r->n_slaves; i++)
-        if (check_slave(r, i) != RUN_OK) return RUN_BAD_PLAN;
+    for (long i = 0; i < r->n_fmus; i++)
+        if (check_fmu(r, i) != RUN_OK) return RUN_BAD_PLAN;
     return RUN_OK;
 }
 
 /* Gather, scale and shift one FMU's float inputs, then set them. */
-static int put(const Run *r, Slave *s) {
+static int put(const Run *r, FmuPlan *s) {
     if (s->gather != NULL) {
         for (long j = 0; j < s->n_in; j++) s->in_values[j] = r->bus[s->gather[j]];
         if (s->gain != NULL)
@@ -161,7 +161,7 @@ static int put(const Run *r, Slave *s) {
                                                s->in_values);
 }
 
-static int get(Slave *s) {
+static int get(FmuPlan *s) {
     if (s->n_out == 0) return 0;
     return s->fmi3 ? ((get3_t)s->get_float64)(s->component, s->out_vr, (size_t)s->n_out,
                                                s->out_values, (size_t)s->n_out)
@@ -169,7 +169,7 @@ static int get(Slave *s) {
                                                s->out_values);
 }
 
-static int advance(Slave *s, double t, double h) {
+static int advance(FmuPlan *s, double t, double h) {
     if (!s->fmi3) return ((step2_t)s->do_step)(s->component, t, h, 1);
     bool event = false, terminate = false, early = false;
     double last = t;
@@ -195,8 +195,8 @@ int engine_run(Run *r, long k0, long k1) {
         memcpy(r->bus, r->sources + (size_t)k * (size_t)r->n_sources,
                (size_t)r->n_sources * sizeof *r->bus);
         ts = t0;
-        for (long i = 0; i < r->n_slaves; i++) {
-            Slave *s = &r->slaves[i];
+        for (long i = 0; i < r->n_fmus; i++) {
+            FmuPlan *s = &r->fmus[i];
             if (put(r, s) > 1) return fail(r, i, CALL_SET, k);
             if (s->typed_in && r->typed(i, 0, k)) return fail(r, i, CALL_TYPED, k);
             if (s->read_before) {
@@ -206,7 +206,7 @@ int engine_run(Run *r, long k0, long k1) {
             if (k < r->steps) {
                 struct timespec te;
                 clock_gettime(CLOCK_MONOTONIC, &te);
-                r->slave_tet[(size_t)k * (size_t)r->n_slaves + (size_t)i] = seconds(&ts, &te);
+                r->fmu_tet[(size_t)k * (size_t)r->n_fmus + (size_t)i] = seconds(&ts, &te);
                 ts = te;
             }
         }
@@ -218,8 +218,8 @@ int engine_run(Run *r, long k0, long k1) {
         if (r->typed_record && r->typed(-1, 2, k)) return fail(r, -1, CALL_TYPED, k);
         if (k == r->steps) return RUN_OK;
         const double t = (double)k * h;
-        for (long i = 0; i < r->n_slaves; i++) {
-            Slave *s = &r->slaves[i];
+        for (long i = 0; i < r->n_fmus; i++) {
+            FmuPlan *s = &r->fmus[i];
             struct timespec a, b;
             clock_gettime(CLOCK_MONOTONIC, &a);
             if (advance(s, t, h) > 1) return fail(r, i, CALL_STEP, k);
@@ -228,7 +228,7 @@ int engine_run(Run *r, long k0, long k1) {
                 if (s->typed_out && r->typed(i, 1, k + 1)) return fail(r, i, CALL_TYPED, k);
             }
             clock_gettime(CLOCK_MONOTONIC, &b);
-            r->slave_tet[(size_t)k * (size_t)r->n_slaves + (size_t)i] += seconds(&a, &b);
+            r->fmu_tet[(size_t)k * (size_t)r->n_fmus + (size_t)i] += seconds(&a, &b);
         }
         clock_gettime(CLOCK_MONOTONIC, &t1);
         r->tet[k] = seconds(&t0, &t1);

@@ -18,8 +18,8 @@ typedef int (*get2_t)(void *, const unsigned *, size_t, double *);
 typedef int (*get3_t)(void *, const unsigned *, size_t, double *, size_t);
 typedef int (*step2_t)(void *, double, double, int);
 typedef int (*step3_t)(void *, double, double, bool, bool *, bool *, bool *, double *);
-/* typed(slave, phase, k): phase 0 sets the slave's typed inputs, 1 reads its typed outputs, 2
- * (slave -1) records the typed signals of point k; returns 0 if ok */
+/* typed(fmu, phase, k): phase 0 sets FMU fmu's typed inputs, 1 reads its typed outputs, 2
+ * (fmu -1) records the typed signals of point k; returns 0 if ok */
 typedef int (*typed_t)(long, int, long);
 
 enum { CALL_SET = 1, CALL_GET_BEFORE = 2, CALL_STEP = 3, CALL_GET_AFTER = 4, CALL_TYPED = 5 };
@@ -39,13 +39,13 @@ typedef struct {
     const unsigned *out_vr;
     double *out_values;       /* the FMU's block of the bus */
     int read_before, read_after, typed_in, typed_out;
-} Slave;
+} FmuPlan;
 
 typedef struct {
     double step;              /* communication step [s] */
     long steps;               /* the run's last point */
-    long n_slaves;
-    Slave *slaves;
+    long n_fmus;
+    FmuPlan *fmus;
     double *bus;
     long n_bus, n_sources;
     const double *sources;    /* (steps + 1) x n_sources */
@@ -56,7 +56,7 @@ typedef struct {
     int typed_record;         /* 1: call typed(-1, 2, k) after recording point k */
     /* measurement, one value per step k (the point's calls and the step to k + 1) */
     double *tet;              /* [s] */
-    double *slave_tet;        /* steps x n_slaves [s] */
+    double *fmu_tet;        /* steps x n_fmus [s] */
     double *lateness;         /* [s], 0 when not paced */
     /* pacing */
     int paced;
@@ -67,8 +67,8 @@ typedef struct {
     long overruns;            /* every step whose TET plus lateness passed its period */
     long counted;             /* those after the grace steps, which max_overruns limits */
     long first_overruns[16];
-    /* where it stopped: failed slave, call and point (or the step of the last overrun) */
-    long failed_slave, failed_k;
+    /* where it stopped: failed FMU, call and point (or the step of the last overrun) */
+    long failed_fmu, failed_k;
     int failed_call;
     char error[256];          /* RUN_BAD_PLAN: what does not fit */
 } Run;

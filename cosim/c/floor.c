@@ -7,7 +7,7 @@
  *
  * PLAN is a text file written by cosim/floor.py (one item per line, so paths may hold spaces):
  *   flexff-cosim-plan 1
- *   STEP N_BUS N_SOURCES STEPS N_SLAVES
+ *   STEP N_BUS N_SOURCES STEPS N_FMUS
  *   then per FMU: LIBRARY / GUID / NAME (a line each), N_PARAMS, then "VR R|I VALUE" lines,
  *   N_IN, then "VR BUS_INDEX" lines, N_OUT OUTPUT_OFFSET, then "VR" lines,
  *   READ_BEFORE READ_AFTER (0 or 1).
@@ -38,7 +38,7 @@
 #include "fmi2Functions.h"
 #include "fmi2_host_logger.h"
 
-/* What the engine's Slave does not hold: how to load, start and stop one FMU. */
+/* What the engine's FmuPlan does not hold: how to load, start and stop one FMU. */
 typedef struct {
     void *lib;
     char library[4096], guid[256], name[256];
@@ -128,10 +128,10 @@ static void read_parameters(FILE *plan, Fmu *f) {
     }
 }
 
-/* The FMU's inputs and outputs into the engine's Slave: input values gathered from the bus
+/* The FMU's inputs and outputs into the engine's FmuPlan: input values gathered from the bus
  * by index, outputs written into their block of `bus` (NULL where the block starts outside
  * it, which the engine refuses). */
-static void read_signals(FILE *plan, Fmu *f, Slave *s, double *bus, long n_bus) {
+static void read_signals(FILE *plan, Fmu *f, FmuPlan *s, double *bus, long n_bus) {
     char line[4096];
     read_line(plan, line, sizeof line);
     s->n_in = parse_count(line, "plan: input count");
@@ -164,7 +164,7 @@ static void read_signals(FILE *plan, Fmu *f, Slave *s, double *bus, long n_bus) 
         die("plan: bad read flags '%s'", line);
 }
 
-static void read_fmu(FILE *plan, Fmu *f, Slave *s, double *bus, long n_bus) {
+static void read_fmu(FILE *plan, Fmu *f, FmuPlan *s, double *bus, long n_bus) {
     read_line(plan, f->library, sizeof f->library);
     read_line(plan, f->guid, sizeof f->guid);
     read_line(plan, f->name, sizeof f->name);
@@ -172,8 +172,8 @@ static void read_fmu(FILE *plan, Fmu *f, Slave *s, double *bus, long n_bus) {
     read_signals(plan, f, s, bus, n_bus);
 }
 
-/* dlopen the FMU's library and look its functions up, the engine's three into its Slave. */
-static void load(Fmu *f, Slave *s) {
+/* dlopen the FMU's library and look its functions up, the engine's three into its FmuPlan. */
+static void load(Fmu *f, FmuPlan *s) {
     f->lib = dlopen(f->library, RTLD_NOW | RTLD_LOCAL);
     if (f->lib == NULL) die("%s", dlerror());
     f->instantiate = (fmi2InstantiateTYPE *)symbol(f, "fmi2Instantiate");
@@ -194,7 +194,7 @@ static void check(fmi2Status status, const Fmu *f, const char *what) {
 
 static fmi2CallbackFunctions callbacks = {fmi2_host_logger, calloc, free, NULL, NULL};
 
-static void instantiate(const Fmu *f, Slave *s) {
+static void instantiate(const Fmu *f, FmuPlan *s) {
     s->component = f->instantiate(f->name, fmi2CoSimulation, f->guid, "", &callbacks, fmi2False,
                                   fmi2False);
     if (s->component == NULL) die("%s: fmi2Instantiate failed", f->name);
@@ -202,7 +202,7 @@ static void instantiate(const Fmu *f, Slave *s) {
 
 /* Set up, set the parameters in initialization mode, leave it, and read the outputs of an
  * FMU read after its step into the bus (as the master does for point 0). */
-static void initialize(const Fmu *f, const Slave *s, double stop_time) {
+static void initialize(const Fmu *f, const FmuPlan *s, double stop_time) {
     fmi2SetRealTYPE *set_real = (fmi2SetRealTYPE *)s->set_float64;
     fmi2GetRealTYPE *get_real = (fmi2GetRealTYPE *)s->get_float64;
     check(f->setup(s->component, fmi2False, 0.0, 0.0, fmi2True, stop_time), f,
@@ -228,7 +228,7 @@ static void initialize(const Fmu *f, const Slave *s, double stop_time) {
 static void check_run(int status, const Run *run, const Fmu *fmus) {
     if (status == RUN_BAD_PLAN) die("plan: %s", run->error);
     if (status != RUN_OK)
-        die("%s: %s failed at t = %.9g s", fmus[run->failed_slave].name,
+        die("%s: %s failed at t = %.9g s", fmus[run->failed_fmu].name,
             CALL_NAMES[run->failed_call], (double)run->failed_k * run->step);
 }
 
@@ -241,23 +241,23 @@ static double now(void) {
 /* One whole run: instantiate, the engine's check of the plan (an empty chunk: no call),
  * initialize, every point in one engine_run, terminate and free. Returns the loop's seconds. */
 static double run_once(Run *run, const Fmu *fmus) {
-    for (long i = 0; i < run->n_slaves; i++) instantiate(&fmus[i], &run->slaves[i]);
+    for (long i = 0; i < run->n_fmus; i++) instantiate(&fmus[i], &run->fmus[i]);
     check_run(engine_run(run, 0, 0), run, fmus);
     memset(run->bus, 0, (size_t)run->n_bus * sizeof *run->bus);
-    for (long i = 0; i < run->n_slaves; i++)
-        initialize(&fmus[i], &run->slaves[i], (double)run->steps * run->step);
+    for (long i = 0; i < run->n_fmus; i++)
+        initialize(&fmus[i], &run->fmus[i], (double)run->steps * run->step);
     const double start = now();
     const int status = engine_run(run, 0, run->steps + 1);
     const double elapsed = now() - start;
     check_run(status, run, fmus);
-    for (long i = 0; i < run->n_slaves; i++) {
-        check(fmus[i].terminate(run->slaves[i].component), &fmus[i], "fmi2Terminate");
-        fmus[i].free_instance(run->slaves[i].component);
+    for (long i = 0; i < run->n_fmus; i++) {
+        check(fmus[i].terminate(run->fmus[i].component), &fmus[i], "fmi2Terminate");
+        fmus[i].free_instance(run->fmus[i].component);
     }
     return elapsed;
 }
 
-/* The plan file into `run` (its slaves, bus and sources) and `*fmus`. */
+/* The plan file into `run` (its FMUs, bus and sources) and `*fmus`. */
 static void read_plan(const char *path, const char *sources, Run *run, Fmu **fmus) {
     FILE *plan = fopen(path, "r");
     if (plan == NULL) die("cannot open %s", path);
@@ -266,15 +266,15 @@ static void read_plan(const char *path, const char *sources, Run *run, Fmu **fmu
     if (strcmp(line, "flexff-cosim-plan 1") != 0) die("%s: not a cosim plan", path);
     read_line(plan, line, sizeof line);
     if (sscanf(line, "%lf %ld %ld %ld %ld", &run->step, &run->n_bus, &run->n_sources,
-               &run->steps, &run->n_slaves) != 5 ||
+               &run->steps, &run->n_fmus) != 5 ||
         !(run->step > 0.0 && isfinite(run->step)) || run->steps < 1 || run->n_bus < 0 ||
-        run->n_sources < 0 || run->n_slaves < 0)
+        run->n_sources < 0 || run->n_fmus < 0)
         die("plan: bad header '%s' (a step > 0, whole counts, at least one step)", line);
     run->bus = xcalloc((size_t)run->n_bus, sizeof *run->bus);
-    run->slaves = xcalloc((size_t)run->n_slaves, sizeof *run->slaves);
-    *fmus = xcalloc((size_t)run->n_slaves, sizeof **fmus);
-    for (long i = 0; i < run->n_slaves; i++)
-        read_fmu(plan, &(*fmus)[i], &run->slaves[i], run->bus, run->n_bus);
+    run->fmus = xcalloc((size_t)run->n_fmus, sizeof *run->fmus);
+    *fmus = xcalloc((size_t)run->n_fmus, sizeof **fmus);
+    for (long i = 0; i < run->n_fmus; i++)
+        read_fmu(plan, &(*fmus)[i], &run->fmus[i], run->bus, run->n_bus);
     fclose(plan);
     const size_t n_table = product(run->steps + 1, run->n_sources, "sources");
     double *table = xcalloc(n_table, sizeof *table);
@@ -296,9 +296,9 @@ int main(int argc, char **argv) {
     run.record = xcalloc(n_record, sizeof *run.record);
     run.n_columns = run.n_bus; /* columns NULL: the whole bus */
     run.tet = xcalloc((size_t)run.steps, sizeof *run.tet);
-    run.slave_tet = xcalloc(product(run.steps, run.n_slaves, "timing"), sizeof *run.slave_tet);
+    run.fmu_tet = xcalloc(product(run.steps, run.n_fmus, "timing"), sizeof *run.fmu_tet);
     run.lateness = xcalloc((size_t)run.steps, sizeof *run.lateness);
-    for (long i = 0; i < run.n_slaves; i++) load(&fmus[i], &run.slaves[i]);
+    for (long i = 0; i < run.n_fmus; i++) load(&fmus[i], &run.fmus[i]);
 
     double best = INFINITY;
     for (long r = 0; r < repeats; r++) {

@@ -1,8 +1,8 @@
 /*
- * fmi2Functions.c -- the FMI 2.0 co-simulation API of flexff's generic slave (see slave.h).
+ * fmi2Functions.c -- the FMI 2.0 co-simulation API of flexff's generic wrapper (see wrapper.h).
  */
 
-#include "slave.h"
+#include "wrapper.h"
 
 /* The machine states each function is allowed in, one line per function (as the Modelica
  * Reference-FMUs keep them); ENTER(f) checks the instance and its state before anything else. */

@@ -153,9 +153,13 @@ def test_restored_state_continues_exactly(fmus, reference):
 
 def test_closed_loop_with_the_learned_feedforward(models, tmp_path):
     text = config_examples()["thesis-eval-pid"].replace(
-        'kind = "none"', f'kind = "onnx"\nmodel = "{models / "pgnn.onnx"}"').replace(
+        'kind = "none"', f'kind = "learned"\nmodel = "{models / "pgnn.onnx"}"').replace(
         "stop = 15.0", "stop = 4.0")  # into the circle
-    metrics = run_config(parse_config(text, name="pgnn"), tmp_path / "run")
+    config = parse_config(text, name="pgnn")
+    with pytest.warns(FutureWarning, match="kind = 'onnx' is deprecated, write kind = 'learned'"):
+        old = parse_config(text.replace('kind = "learned"', 'kind = "onnx"'), name="pgnn")
+    assert old.fmus == config.fmus and config.fmus[0].builtin == "learned-feedforward"
+    metrics = run_config(config, tmp_path / "run")
     assert (tmp_path / "run" / "forces.png").is_file()
     assert np.isfinite(metrics["x"]["e2"]) and metrics["real_time_factor"] > 1
     # the synthetic set's random motion covers the reference: nothing to warn of

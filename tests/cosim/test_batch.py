@@ -50,13 +50,18 @@ def test_a_broken_run_is_reported_and_the_others_finish(tmp_path):
 
 
 def test_a_failure_inside_an_fmu_is_reported(tmp_path):
+    """A configuration that passes every check but fails in the FMU (1e7 RK4 sub-steps per
+    step, past the wrapper's limit) is reported with the FMU's message; one changed in code
+    past the checks (dataclasses.replace) is checked before it runs, and refused."""
     config = parse_config(SHORT, name="good")
-    fmus = tuple(replace(f, parameters={**f.parameters, "k_s1": -5.0})  # past the checks
+    failing = parse_config(SHORT + "[plant]\nmax_substep = 1e-10\n", name="failing")
+    fmus = tuple(replace(f, parameters={**f.parameters, "k_s1": -5.0})
                  if f.name == "plant" else f for f in config.fmus)
-    unchecked = replace(config, name="bad", fmus=fmus)
-    results = run_batch([config, unchecked], tmp_path, workers=1)
+    unchecked = replace(config, name="unchecked", fmus=fmus)
+    results = run_batch([config, failing, unchecked], tmp_path, workers=1)
     assert results[0].ok
-    assert "CosimError" in results[1].error and "k_s1" in results[1].error
+    assert "CosimError" in results[1].error and "max_substep" in results[1].error
+    assert "ConfigError" in results[2].error and "k_s1: must be positive" in results[2].error
 
 
 def test_sweep(tmp_path):

@@ -116,7 +116,7 @@ def test_the_old_name_of_the_rigid_body_feedforward_still_reads(tmp_path):
 
 
 def test_onnx_feedforward_model_is_checked(tmp_path):
-    text = GOOD + '[feedforward]\nkind = "onnx"\nmodel = "ff.onnx"\n'
+    text = GOOD + '[feedforward]\nkind = "learned"\nmodel = "ff.onnx"\n'
     with pytest.raises(ConfigError, match=r"feedforward.model: no such file"):
         load_config(write(tmp_path, text))
     (tmp_path / "ff.onnx").write_bytes(b"")

@@ -11,10 +11,10 @@ import pytest
 from flexff.cosim.engine import (
     MIRRORS,
     TYPED_HOOK,
+    EngineFmuPlan,
     EngineLayoutError,
     EnginePlanError,
     EngineRun,
-    EngineSlave,
     Layout,
     c_layouts,
     check_layout,
@@ -45,15 +45,15 @@ def test_the_mirrors_match_the_engine(layouts):
 
 
 def _without_gain():
-    return _variant(EngineSlave, [f for f in _fields(EngineSlave) if f[0] != "gain"])
+    return _variant(EngineFmuPlan, [f for f in _fields(EngineFmuPlan) if f[0] != "gain"])
 
 
 def _long_flag():
-    return _variant(EngineSlave, [("fmi3", c_long), *_fields(EngineSlave)[1:]])
+    return _variant(EngineFmuPlan, [("fmi3", c_long), *_fields(EngineFmuPlan)[1:]])
 
 
 def _extra_field():
-    return _variant(EngineSlave, [*_fields(EngineSlave), ("spare", c_int)])
+    return _variant(EngineFmuPlan, [*_fields(EngineFmuPlan), ("spare", c_int)])
 
 
 def _short_array():
@@ -62,9 +62,9 @@ def _short_array():
 
 
 @pytest.mark.parametrize("make, c_name, message", [
-    (_without_gain, "Slave", "field 'gain' is at offset 64, 8 bytes in C, absent in ctypes"),
-    (_long_flag, "Slave", "field 'fmi3' is at offset 0, 4 bytes in C, at offset 0, 8 bytes"),
-    (_extra_field, "Slave", "field 'spare' is absent in C"),
+    (_without_gain, "FmuPlan", "field 'gain' is at offset 64, 8 bytes in C, absent in ctypes"),
+    (_long_flag, "FmuPlan", "field 'fmi3' is at offset 0, 4 bytes in C, at offset 0, 8 bytes"),
+    (_extra_field, "FmuPlan", "field 'spare' is absent in C"),
     (_short_array, "Run", "field 'first_overruns' is at offset 192, 128 bytes in C, at offset "
                           "192, 120 bytes in ctypes"),
 ], ids=["missing", "type", "extra", "array"])
@@ -95,26 +95,26 @@ def test_the_fuzz_drivers_callbacks_match_the_fmi_header(tmp_path):
 
 
 def _run(bus: np.ndarray, gather: np.ndarray, columns: np.ndarray | None, steps: int = 2):
-    """A one-slave plan whose FMU is never called (dummy pointers): the plan is refused first.
+    """A one-FMU plan whose FMU is never called (dummy pointers): the plan is refused first.
     Returns the run and what it points into, which must outlive it."""
     values, vr = np.zeros(gather.size), np.zeros(gather.size, dtype=np.uint32)
     out = bus[1:2]
-    slave = EngineSlave(0, 1, 1, 1, 1, gather.size, pointer(vr, c_uint), pointer(gather, c_long),
+    plan = EngineFmuPlan(0, 1, 1, 1, 1, gather.size, pointer(vr, c_uint), pointer(gather, c_long),
                         None, None, pointer(values), 1, pointer(vr, c_uint), pointer(out))
-    slaves = (EngineSlave * 1)(slave)
+    plans = (EngineFmuPlan * 1)(plan)
     buffers = np.zeros((steps + 1, bus.size)), np.zeros(steps), np.zeros(steps), np.zeros(steps)
-    record, tet, slave_tet, lateness = buffers
-    run = EngineRun(step=1e-3, steps=steps, n_slaves=1, slaves=slaves, bus=pointer(bus),
+    record, tet, fmu_tet, lateness = buffers
+    run = EngineRun(step=1e-3, steps=steps, n_fmus=1, fmus=plans, bus=pointer(bus),
                     n_bus=bus.size, n_sources=0, sources=pointer(bus), record=pointer(record),
                     columns=pointer(columns, c_long),
                     n_columns=bus.size if columns is None else columns.size, typed=TYPED_HOOK(),
-                    tet=pointer(tet), slave_tet=pointer(slave_tet), lateness=pointer(lateness))
-    return run, (bus, gather, columns, values, vr, slaves, buffers)
+                    tet=pointer(tet), fmu_tet=pointer(fmu_tet), lateness=pointer(lateness))
+    return run, (bus, gather, columns, values, vr, plans, buffers)
 
 
 @pytest.mark.parametrize("gather, columns, points, message", [
-    ([0, 7], None, (0, 1), "slave 0: input 1 reads bus index 7"),
-    ([0, -1], None, (0, 1), "slave 0: input 1 reads bus index -1"),
+    ([0, 7], None, (0, 1), "fmu 0: input 1 reads bus index 7"),
+    ([0, -1], None, (0, 1), "fmu 0: input 1 reads bus index -1"),
     ([0], [2, 3], (0, 1), "recorded column 1 is bus index 3, the bus has 3"),
     ([0], None, (0, 4), "points 0 .. 3 asked for, the run has points 0 .. 2"),
 ], ids=["input index", "negative index", "column", "points"])
@@ -131,7 +131,7 @@ def test_outputs_outside_the_bus_are_refused():
     bus = np.zeros(3)
     run, alive = _run(bus, np.array([0], dtype=np.int64), None)
     outside = np.zeros(1)  # not a block of the bus
-    run.slaves[0].out_values = pointer(outside)
-    with pytest.raises(EnginePlanError, match="slave 0: its 1 outputs do not lie inside the bus"):
+    run.fmus[0].out_values = pointer(outside)
+    with pytest.raises(EnginePlanError, match="fmu 0: its 1 outputs do not lie inside the bus"):
         library().engine_run(byref(run), 0, 1)
     assert alive

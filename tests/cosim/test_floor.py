@@ -67,17 +67,17 @@ def test_a_plan_of_the_wrong_form_is_refused(program, tmp_path, plan, message):
     assert code == 1 and message in stderr, stderr
 
 
-@pytest.mark.parametrize("slave, message", [
-    ("1\n7 5\n0 2\n0 1\n", "plan: slave 0: input 0 reads bus index 5"),
-    ("0\n2 2\n10\n11\n0 1\n", "plan: slave 0: its 2 outputs do not lie inside the bus of 3"),
-    ("0\n1 9\n10\n0 1\n", "plan: slave 0: its 1 outputs do not lie inside the bus of 3"),
+@pytest.mark.parametrize("fmu, message", [
+    ("1\n7 5\n0 2\n0 1\n", "plan: fmu 0: input 0 reads bus index 5"),
+    ("0\n2 2\n10\n11\n0 1\n", "plan: fmu 0: its 2 outputs do not lie inside the bus of 3"),
+    ("0\n1 9\n10\n0 1\n", "plan: fmu 0: its 1 outputs do not lie inside the bus of 3"),
 ], ids=["input index", "output block", "output offset"])
 def test_a_plan_that_does_not_fit_is_refused_by_the_engine(program, feedthrough, tmp_path,
-                                                          slave, message):
-    code, stderr = refusal(program, tmp_path, HEADER + feedthrough + slave)
+                                                          fmu, message):
+    code, stderr = refusal(program, tmp_path, HEADER + feedthrough + fmu)
     assert code == 1 and message in stderr, stderr
 
 
 def test_sources_outside_the_bus_are_refused_by_the_engine(program, tmp_path):
     code, stderr = refusal(program, tmp_path, "flexff-cosim-plan 1\n0.001 3 4 10 0\n")
-    assert code == 1 and "plan: 0 slaves, 4 sources or 3 columns do not fit the bus" in stderr
+    assert code == 1 and "plan: 0 FMUs, 4 sources or 3 columns do not fit the bus" in stderr

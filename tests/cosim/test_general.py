@@ -184,11 +184,11 @@ SHORT_FORM = {"run": {"stop": 1.0},
 
 def test_built_fmus_by_path_equal_the_shorthand(tmp_path):
     short = parse_config(SHORT_FORM)
-    built = {s.name: s for s in resolve(short, tmp_path / "build").slaves}
+    built = {s.name: s for s in resolve(short, tmp_path / "build").fmus}
     assert list(built) == ["controller", "plant"]
     copies = tmp_path / "copies"
     copies.mkdir()
-    paths = {name: shutil.copy(s.fmu, copies / f"{name}.fmu") for name, s in built.items()}
+    paths = {name: shutil.copy(s.path, copies / f"{name}.fmu") for name, s in built.items()}
     start = dict(built["plant"].parameters)
     assert set(start) == {"x_start", "y_start"}  # the reference's first point
     general = load_config(write_config(tmp_path, {

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from flexff.cosim.libcosim import run_libcosim
-from flexff.cosim.master import Master, SlaveSpec
+from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.metrics import error_norms
 from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.scenario import reference_samples
 from flexff.cosim.wiring import SOURCE, Port, wire
+from flexff.fmu.fmpy_instance import FmpyInstance
 from flexff.fmu.importer import read_fmu
-from flexff.fmu.slave import Slave
 
 STEP, STEPS = 1e-3, 15000
 NANOSECONDS = 1_000_000
@@ -29,7 +29,7 @@ def libcosim_time(k: int) -> float:
     return k * NANOSECONDS / 1e9
 
 
-def jacobi(slaves, sources, steps, libcosim_clock=True):
+def jacobi(fmus, sources, steps, libcosim_clock=True):
     """The FMUs stepped as libcosim's master steps them, through fmpy; outputs after each step.
     With `libcosim_clock` false the steps are cosim.master's (t_k = k STEP, length STEP).
 
@@ -37,14 +37,14 @@ def jacobi(slaves, sources, steps, libcosim_clock=True):
     step every FMU gets the values transferred after the previous step and steps, and all
     outputs are read and transferred.
     """
-    instances = [Slave(s.fmu, s.name) for s in slaves]
-    for instance, spec in zip(instances, slaves):
-        instance.initialize(dict(spec.parameters))
-    ports = [Port(s.name, read_fmu(s.fmu)) for s in slaves]
+    instances = [FmpyInstance(s.path, s.name) for s in fmus]
+    for instance, fmu in zip(instances, fmus):
+        instance.initialize(dict(fmu.parameters))
+    ports = [Port(s.name, read_fmu(s.path)) for s in fmus]
     connections = wire(ports, list(sources), algorithm="jacobi")
     table = {n: np.broadcast_to(np.asarray(v, dtype=float), (steps + 1,))
              for n, v in sources.items()}
-    inputs = {s.name: {} for s in slaves}
+    inputs = {s.name: {} for s in fmus}
     values = {}
 
     def read_all():
@@ -53,20 +53,20 @@ def jacobi(slaves, sources, steps, libcosim_clock=True):
 
     def transfer(k):
         for c in connections:
-            inputs[c.target][c.input] = table[c.signal][k] if c.source == SOURCE \
+            inputs[c.consumer][c.input] = table[c.signal][k] if c.producer == SOURCE \
                 else values[c.signal]
 
     read_all()
     for _ in range(len(instances) + 1):
         transfer(0)
-        for instance, spec in zip(instances, slaves):
-            instance.set(inputs[spec.name])
+        for instance, fmu in zip(instances, fmus):
+            instance.set(inputs[fmu.name])
         read_all()
     record = []
     for k in range(steps):
         transfer(k)
-        for instance, spec in zip(instances, slaves):
-            instance.set(inputs[spec.name])
+        for instance, fmu in zip(instances, fmus):
+            instance.set(inputs[fmu.name])
             if libcosim_clock:
                 t = libcosim_time(k)
                 instance.fmu.doStep(t, libcosim_time(k + 1) - t)
@@ -89,7 +89,7 @@ def test_plant_alone_equals_the_master(fmus):
     steps = 3000
     t = np.arange(steps + 1) * STEP
     sources = {"i1": 2.0 * np.sin(3 * t), "i2": -1.5 * np.sin(2 * t), "i3": 0.4}
-    plant = [SlaveSpec("plant", fmus["plant"], {"seed": 7, "x_start": 0.01})]
+    plant = [ResolvedFmu("plant", fmus["plant"], {"seed": 7, "x_start": 0.01})]
     with Master(plant, list(sources), STEP) as master:
         ours = master.run(sources, steps)
     theirs = run_libcosim(plant, sources, STEP, steps)
@@ -100,22 +100,22 @@ def test_plant_alone_equals_the_master(fmus):
 
 def test_closed_loop_under_libcosim(fmus):
     reference = reference_samples(thesis_evaluation(STEP), STEPS)
-    slaves = [SlaveSpec("feedforward", fmus["feedforward"]),
-              SlaveSpec("controller", fmus["controller"]),
-              SlaveSpec("plant", fmus["plant"], {"seed": 3})]
-    theirs = run_libcosim(slaves, reference, STEP, STEPS)
-    replica = jacobi(slaves, reference, STEPS)
+    fmus = [ResolvedFmu("feedforward", fmus["feedforward"]),
+              ResolvedFmu("controller", fmus["controller"]),
+              ResolvedFmu("plant", fmus["plant"], {"seed": 3})]
+    theirs = run_libcosim(fmus, reference, STEP, STEPS)
+    replica = jacobi(fmus, reference, STEPS)
     for name, values in replica.items():
         assert np.abs(theirs[name] - values).max() <= 1e-12, name
-    with Master(slaves, list(reference), STEP, algorithm="jacobi") as master:
+    with Master(fmus, list(reference), STEP, algorithm="jacobi") as master:
         jacobi_master = master.run(reference, STEPS)
     # flexff's Jacobi is libcosim's algorithm: equal to the replica on the master's clock.
     # libcosim's nanosecond clock makes step sizes that differ from 1 ms by round-off, which
     # the hardware plant's Coulomb friction amplifies to a few nanometres over the 15 s
-    for name, values in jacobi(slaves, reference, STEPS, libcosim_clock=False).items():
+    for name, values in jacobi(fmus, reference, STEPS, libcosim_clock=False).items():
         assert np.array_equal(values, jacobi_master[name][1:]), name
     assert max(np.abs(theirs[a] - jacobi_master[a][1:]).max() for a in ("x", "y")) < 1e-8
-    with Master(slaves, list(reference), STEP) as master:
+    with Master(fmus, list(reference), STEP) as master:
         ours = master.run(reference, STEPS)
     gap = max(np.abs(theirs[a] - ours[a][1:]).max() for a in ("x", "y"))
     e2_ours = error_norms(ours["x_ref"] - ours["x"], STEP)["e2"]

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from flexff.cosim.floor import run_c_loop
-from flexff.cosim.master import CosimError, Master, SlaveSpec
+from flexff.cosim.master import CosimError, Master, ResolvedFmu
 from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.scenario import reference_samples
 from flexff.cosim.wiring import SOURCE, Port, wire
@@ -32,16 +32,16 @@ def reference():
     return reference_samples(thesis_evaluation(STEP), STEPS)
 
 
-def slaves(fmus, plant_parameters=None):
-    return [SlaveSpec("feedforward", fmus["feedforward"]),
-            SlaveSpec("controller", fmus["controller"]),
-            SlaveSpec("plant", fmus["plant"], plant_parameters or {})]
+def resolved(fmus, plant_parameters=None):
+    return [ResolvedFmu("feedforward", fmus["feedforward"]),
+            ResolvedFmu("controller", fmus["controller"]),
+            ResolvedFmu("plant", fmus["plant"], plant_parameters or {})]
 
 
 def test_closed_loop_equals_the_monolithic_simulation(systems, fmus, reference):
     points = {n: v[:STEPS + 1] for n, v in reference.items()}
     expected = monolithic(systems, points, MAX_SUBSTEP)
-    with Master(slaves(fmus, {"max_substep": MAX_SUBSTEP}), list(reference), STEP) as master:
+    with Master(resolved(fmus, {"max_substep": MAX_SUBSTEP}), list(reference), STEP) as master:
         rec = master.run(reference, STEPS)
     for name, values in expected.items():
         assert np.abs(rec[name] - values).max() <= 1e-9, name
@@ -51,7 +51,7 @@ def test_closed_loop_equals_the_monolithic_simulation(systems, fmus, reference):
 
 def test_the_c_loop_records_the_same_numbers(fmus, reference):
     sources = {n: v[:2001] for n, v in reference.items()}
-    with Master(slaves(fmus), list(sources), STEP) as master:
+    with Master(resolved(fmus), list(sources), STEP) as master:
         c_record, us_per_step = run_c_loop(master, sources, 2000, repeats=1)
         rec = master.run(sources, 2000)
     assert us_per_step > 0
@@ -62,12 +62,12 @@ def test_the_c_loop_records_the_same_numbers(fmus, reference):
 def test_connections_by_name(fmus):
     ports = [Port(name, read_fmu(fmus[name])) for name in ("feedforward", "controller", "plant")]
     sources = ["x_ref", "y_ref", "vx_ref", "vy_ref", "ax_ref", "ay_ref"]
-    by_input = {(c.target, c.input): c for c in wire(ports, sources)}
-    assert by_input["controller", "Fx_ff"].source == "feedforward"
+    by_input = {(c.consumer, c.input): c for c in wire(ports, sources)}
+    assert by_input["controller", "Fx_ff"].producer == "feedforward"
     assert not by_input["controller", "Fx_ff"].feedback
-    assert by_input["controller", "theta_s1"].source == "plant"
+    assert by_input["controller", "theta_s1"].producer == "plant"
     assert by_input["controller", "theta_s1"].feedback
-    assert by_input["feedforward", "x_ref"].source == SOURCE
+    assert by_input["feedforward", "x_ref"].producer == SOURCE
     with pytest.raises(ValueError, match="input 'Fx_ff' is not connected"):
         wire(ports[1:], sources)
     with pytest.raises(ValueError, match="algebraic loop"):  # the currents come back
@@ -78,17 +78,17 @@ def test_connections_by_name(fmus):
 
 def test_an_unconnected_input_fails_at_load_time(fmus):
     with pytest.raises(ValueError, match="input 'Fx_ff' is not connected"):
-        Master([SlaveSpec("controller", fmus["controller"]), SlaveSpec("plant", fmus["plant"])],
+        Master([ResolvedFmu("controller", fmus["controller"]), ResolvedFmu("plant", fmus["plant"])],
                ["x_ref", "y_ref"], STEP)
 
 
 def test_unknown_parameter_fails_at_load_time(fmus):
     with pytest.raises(ValueError, match="plant: unknown parameter 'm_upper'"):
-        Master(slaves(fmus, {"m_upper": 0.3}), ["x_ref", "y_ref"], STEP)
+        Master(resolved(fmus, {"m_upper": 0.3}), ["x_ref", "y_ref"], STEP)
 
 
 def test_a_failing_fmu_call_carries_the_fmu_message(fmus, reference):
-    with Master(slaves(fmus, {"k_t1": -1.0}), list(reference), STEP) as master:
+    with Master(resolved(fmus, {"k_t1": -1.0}), list(reference), STEP) as master:
         with pytest.raises(CosimError, match=r"plant: fmi2ExitInitializationMode failed: "
                                              r"\[Error\] Parameter 'k_t1' = -1 must be > 0"):
             master.run(reference, STEPS)
@@ -96,11 +96,11 @@ def test_a_failing_fmu_call_carries_the_fmu_message(fmus, reference):
 
 def test_recording_a_selection(fmus, reference):
     sources = {n: v[:101] for n, v in reference.items()}
-    with Master(slaves(fmus), list(sources), STEP) as master:
+    with Master(resolved(fmus), list(sources), STEP) as master:
         rec = master.run(sources, 100, record=["y", "x_ref", "i2"])
     assert list(rec.signals) == ["y", "x_ref", "i2"]
     assert np.array_equal(rec["x_ref"], sources["x_ref"])
-    with Master(slaves(fmus), list(sources), STEP) as master:
+    with Master(resolved(fmus), list(sources), STEP) as master:
         with pytest.raises(ValueError, match="cannot record unknown signal"):
             master.run(sources, 100, record=["z"])
 
@@ -108,8 +108,8 @@ def test_recording_a_selection(fmus, reference):
 def test_each_fmu_keeps_its_own_messages(fmus):
     """The failing plant is instantiated first: its message must not go to the controller."""
     sources = {"x_ref": 0.0, "y_ref": 0.0, "Fx_ff": 0.0, "Fy_ff": 0.0}
-    with Master([SlaveSpec("plant", fmus["plant"], {"k_t1": -1.0}),
-                 SlaveSpec("controller", fmus["controller"])], list(sources), STEP,
+    with Master([ResolvedFmu("plant", fmus["plant"], {"k_t1": -1.0}),
+                 ResolvedFmu("controller", fmus["controller"])], list(sources), STEP,
                 algorithm="jacobi") as master:
         with pytest.raises(CosimError, match=r"^plant: .*Parameter 'k_t1' = -1 must be > 0"):
             master.run(sources, 10)

@@ -14,17 +14,17 @@ import pytest
 
 from flexff.cli import main
 from flexff.cosim.engine import idle_timing
-from flexff.cosim.master import Master, SlaveSpec
+from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import load_recording
 from flexff.cosim.timing import Pacing
 from tests.helpers import REFERENCE_FMUS
 
 
-def van_der_pol(version: int = 2) -> list[SlaveSpec]:
+def van_der_pol(version: int = 2) -> list[ResolvedFmu]:
     path = REFERENCE_FMUS / f"fmi{version}" / "VanDerPol.fmu"
     assert path.is_file(), f"the Reference-FMUs are missing: expected {path}"
-    return [SlaveSpec("vdp", path)]
+    return [ResolvedFmu("vdp", path)]
 
 
 def run(step: float, steps: int, pacing: Pacing | None, version: int = 2):

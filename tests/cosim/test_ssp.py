@@ -110,7 +110,7 @@ def test_round_trip_runs_bit_equal_in_flexff(tmp_path, ssp):
     assert [(f.name, dict(f.parameters), f.unconnected) for f in plain.fmus] == [
         ("vdp", {"mu": 1.5}, "start"), ("ft", {}, "start")]
     (c,) = plain.connections
-    assert (c.source, c.target, c.gain, c.offset) == ("vdp.x0", "ft.Float64_continuous_input",
+    assert (c.from_name, c.to_name, c.gain, c.offset) == ("vdp.x0", "ft.Float64_continuous_input",
                                                       2.0, 0.5)
     run_config(write_config(tmp_path), tmp_path / "toml")
     for name, path in (("ssp", ssp), ("plain", tmp_path / "plain.ssp")):

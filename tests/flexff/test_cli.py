@@ -108,10 +108,12 @@ def test_demo_runs(tmp_path):
 def test_feedforward_fmu_build_needs_a_flexff_model(tmp_path):
     from tests.fmu.test_network import running_sum_graph
 
-    result = flexff("fmu", "build", "feedforward", "-o", str(tmp_path / "ff.fmu"))
+    result = flexff("fmu", "build", "feedforward", "-o", str(tmp_path / "ff.fmu"))  # old name
     assert result.returncode == 2 and "needs --model" in result.stderr
+    assert "is now 'fmu build learned-feedforward'" in result.stderr
     toy = running_sum_graph(tmp_path / "toy.onnx")
-    result = flexff("fmu", "build", "feedforward", "--model", toy, "-o", str(tmp_path / "ff.fmu"))
+    result = flexff("fmu", "build", "learned-feedforward", "--model", toy, "-o",
+                    str(tmp_path / "ff.fmu"))
     assert result.returncode == 2 and "not a flexff feedforward model" in result.stderr
     assert not (tmp_path / "ff.fmu").exists()
 

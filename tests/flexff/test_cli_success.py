@@ -89,14 +89,14 @@ def test_ssp_export_and_run(tmp_path, monkeypatch, capsys):
 
 
 def test_fmu_build_feedforward(model, tmp_path, capsys):
-    """`flexff fmu build feedforward --model M.onnx`: a valid FMU whose forces are those of an
-    independent onnxruntime runner of the model; with `--step 0.002` the network still runs at
+    """`flexff fmu build learned-feedforward --model M.onnx`: a valid FMU whose forces are those
+    of an independent onnxruntime runner of the model; with `--step 0.002` the network still runs at
     the model's 100 Hz, so at every call the forces are the 1 ms FMU's."""
     fmus = {step: tmp_path / f"ff{step}.fmu" for step in (0.001, 0.002)}
-    assert main(["fmu", "build", "feedforward", "--model", str(model), "-o",
+    assert main(["fmu", "build", "learned-feedforward", "--model", str(model), "-o",
                  str(fmus[0.001])]) == 0
-    assert main(["fmu", "build", "feedforward", "--model", str(model), "--step", "0.002", "-o",
-                 str(fmus[0.002])]) == 0
+    assert main(["fmu", "build", "learned-feedforward", "--model", str(model), "--step", "0.002",
+                 "-o", str(fmus[0.002])]) == 0
     assert capsys.readouterr().out == "".join(f"wrote {f}\n" for f in fmus.values())
     for step, fmu in fmus.items():
         assert validate_fmu(fmu) == []

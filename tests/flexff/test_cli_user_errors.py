@@ -44,7 +44,7 @@ def test_the_error_classes():
     (["run", "{tmp}/bad.toml", "-o", "{tmp}/out"],
      {"bad.toml": '[run]\nstop = 1.0\nstep = 0.01\n[fmu.a]\npath = "junk.fmu"\n',
       "junk.fmu": "not a zip archive"}, "junk.fmu: not an FMU"),
-    (["fmu", "build", "feedforward", "--model", "{tmp}/junk.onnx", "-o", "{tmp}/ff.fmu"],
+    (["fmu", "build", "learned-feedforward", "--model", "{tmp}/junk.onnx", "-o", "{tmp}/ff.fmu"],
      {"junk.onnx": "not a graph"}, "is not a readable ONNX model"),
     (["fmu", "build", "onnx", "{tmp}/junk.onnx", "-o", "{tmp}/n.fmu"],
      {"junk.onnx": "not a graph"}, "is not a readable ONNX model"),

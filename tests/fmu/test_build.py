@@ -56,12 +56,12 @@ def test_archive_layout(toy_fmu):
     # the Reference-FMUs' layout: the FMI API, the slave core and the noise generator beside
     # the model's generated code and config.h (no network code without a network)
     assert names == {"modelDescription.xml", f"binaries/{fmpy.platform}/{ident}.so",
-                     "sources/fmi2Functions.c", "sources/slave.c", "sources/slave.h",
+                     "sources/fmi2Functions.c", "sources/wrapper.c", "sources/wrapper.h",
                      "sources/rng.c", "sources/rng.h", "sources/model.c", "sources/model.h",
                      "sources/config.h", "sources/fmi2Functions.h",
                      "sources/fmi2FunctionTypes.h", "sources/fmi2TypesPlatform.h"}
     source_files = md.buildConfigurations[0].sourceFileSets[0].sourceFiles
-    assert source_files == ["fmi2Functions.c", "slave.c", "rng.c", "model.c"]
+    assert source_files == ["fmi2Functions.c", "wrapper.c", "rng.c", "model.c"]
     cs = md.coSimulation
     assert cs.canGetAndSetFMUstate and cs.canSerializeFMUstate
     assert cs.canHandleVariableCommunicationStepSize == (ident == "duffing")

@@ -2,7 +2,7 @@
 with the build's own flags (so -O2: gcc's flow-sensitive warnings such as -Warray-bounds only
 run when optimizing, which -fsyntax-only skips).
 
-The FMU's generic slave is compiled against the config.h of three toy FMUs (continuous,
+The FMU's generic wrapper is compiled against the config.h of three toy FMUs (continuous,
 discrete without states, with an embedded network), since its code paths depend on the sizes
 there; the engine and the floor as they are built. CasADi's generated model.c (the
 toys' and the plant's) is held to the same flags but -Wunused-parameter: its functions take
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from flexff.fmu.build import NETWORK_SOURCES, SLAVE_SOURCES
+from flexff.fmu.build import NETWORK_C_FILES, WRAPPER_C_FILES
 from flexff.fmu.codegen import generate_model_c
 from flexff.fmu.compile import CFLAGS, HOST_HEADER, compiler, fmi_headers
 from flexff.plant.system import plant_system
@@ -53,7 +53,7 @@ def toy_sources(tmp_path_factory) -> dict[str, Path]:
 
 def test_every_fmu_source_is_shipped():
     """The toys below compile what an FMU ships: every C file of fmu/c is one of those."""
-    assert sorted(p.name for p in FMU_C.glob("*.c")) == sorted(SLAVE_SOURCES + NETWORK_SOURCES)
+    assert sorted(p.name for p in FMU_C.glob("*.c")) == sorted(WRAPPER_C_FILES + NETWORK_C_FILES)
 
 
 def test_the_fmu_sources_compile_without_warnings(toy_sources):

@@ -19,9 +19,9 @@ from onnx import helper as oh
 
 from flexff.cli import main
 from flexff.fmu.build import build_fmu
+from flexff.fmu.fmpy_instance import FmpyInstance
 from flexff.fmu.onnx_fmu import onnx_system
 from flexff.fmu.onnx_graph import graph_network, read_graph
-from flexff.fmu.slave import Slave
 from flexff.fmu.validation import validate_fmu
 from tests.runners import run_fmu, run_fmu_libcosim
 
@@ -176,7 +176,7 @@ def test_fmus_pass_both_validators(fmus):
 @pytest.mark.parametrize("kind", ["mlp", "lstm"])
 def test_libcosim_gives_the_same_outputs(fmus, kind):
     """libcosim reads the outputs after each step, that step's inputs still applied."""
-    with Slave(fmus[kind]) as s:
+    with FmpyInstance(fmus[kind]) as s:
         s.initialize()
         ours = []
         for k, row in enumerate(ROWS[kind]):

@@ -43,7 +43,7 @@ def nominal(folder) -> Path:
 @pytest.fixture(scope="module")
 def heavy_loop():
     return parse_config({"reference": {"kind": "thesis-eval"}, "plant": HEAVY}, name="heavy",
-                        source="heavy.toml")
+                        origin="heavy.toml")
 
 
 @pytest.fixture(scope="module")
@@ -164,7 +164,7 @@ def test_an_interrupted_collection_keeps_its_loop(heavy_loop, heavy, tmp_path):
 
 def test_a_step_that_does_not_divide_the_sample_period_is_refused(tmp_path):
     loop = parse_config({"run": {"step": 0.0015, "stop": 15.0}, "reference": {"kind": "circle",
-                         "radius": 0.01, "duration": 15.0}}, source="slow.toml")
+                         "radius": 0.01, "duration": 15.0}}, origin="slow.toml")
     with pytest.raises(ConfigError, match=r"slow.toml: run.step: 0.0015 s does not divide the "
                                           r"sim set's sample period of 0.001 s"):
         run_collection("sim", tmp_path / "data", progress=False, limit=1, config=loop)

@@ -42,7 +42,7 @@ def _run(tmp_path, name, feedforward):
 
 def test_the_learned_feedforward_beats_pid_alone(model, tmp_path):
     pid = _run(tmp_path, "pid", 'kind = "none"')
-    learned = _run(tmp_path, "lstm", f'kind = "onnx"\nmodel = "{model}"')
+    learned = _run(tmp_path, "lstm", f'kind = "learned"\nmodel = "{model}"')
     for name in ("pid", "lstm"):
         time = np.load(tmp_path / name / "signals.npz")["time"]
         assert len(time) == round(STOP / 1e-3) + 1 and time[-1] == pytest.approx(STOP)

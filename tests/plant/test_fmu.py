@@ -8,7 +8,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Error
 from scipy.integrate import solve_ivp
 
-from flexff.fmu.slave import Slave
+from flexff.fmu.fmpy_instance import FmpyInstance
 from flexff.fmu.validation import validate_fmu
 from flexff.plant.model import PlantModel
 from flexff.plant.system import plant_system
@@ -113,7 +113,7 @@ def test_outputs_are_encoders_and_saturated_torques(plant_fmus):
 
 def test_encoder_noise_is_seeded_and_survives_state_round_trip(plant_fmus):
     path = plant_fmus["hardware"]
-    with Slave(path) as s:
+    with FmpyInstance(path) as s:
         s.initialize({"seed": 3, **START})
         for k in range(100):
             s.fmu.doStep(k * H, H)

@@ -1,12 +1,12 @@
 /*
- * network_slave.c -- the embedded network of a slave (HAS_NETWORK): an ONNX graph run by
+ * wrapper_network.c -- the embedded network of a wrapped model (HAS_NETWORK): an ONNX graph run by
  * onnxruntime (onnx_network.c) every NET_PERIOD communication steps on network_input(x, u, p);
  * its result r enters output(), extrapolated linearly from the last two results between
  * calls. With NET_PRECOMPUTED the graph runs once at initialization over a table of the inputs
  * in resources/ (each step's inputs are checked against it), with equal results.
  */
 
-#include "slave.h"
+#include "wrapper.h"
 
 #if HAS_NETWORK
 static const NetSpec NET_SPEC = {NET_INPUT, NET_OUTPUT, NET_N_IN, N_R, NET_N_STATES,

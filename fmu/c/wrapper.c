@@ -1,9 +1,9 @@
 /*
- * slave.c -- the core of the generic slave (see slave.h): logging, live instances, model
+ * wrapper.c -- the core of the generic wrapper (see wrapper.h): logging, live instances, model
  * evaluation, RK4, the variables' blocks and checks.
  */
 
-#include "slave.h"
+#include "wrapper.h"
 
 const char *const CATEGORY_NAMES[N_CATEGORIES] = {"logStatusError", "logStatusWarning",
                                                   "logAll", "logNetworkTimes"};

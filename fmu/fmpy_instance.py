@@ -1,5 +1,5 @@
 """One FMU instantiated through fmpy's low-level FMU2Slave and addressed by variable names
-(`Slave`), and its bare hot-loop C calls (`bare_calls`): what the benches and the tests'
+(`FmpyInstance`), and its bare hot-loop C calls (`bare_calls`): what the benches and the tests'
 single-FMU runners (tests/runners.py) stand on. It is not the co-simulation master (that lives
 in cosim/): one FMU, no connections.
 """
@@ -48,7 +48,7 @@ def bare_calls(fmu: FMU2Slave) -> BareCalls:
                      pointer("fmi2DoStep"))
 
 
-class Slave:
+class FmpyInstance:
     """One instantiated FMU, addressed by variable names; use it as a context manager."""
 
     def __init__(self, path: str | Path, instance_name: str = "instance",
@@ -99,7 +99,7 @@ class Slave:
         self.fmu.freeInstance()
         shutil.rmtree(self._unzipdir, ignore_errors=True)
 
-    def __enter__(self) -> Slave:
+    def __enter__(self) -> FmpyInstance:
         return self
 
     def __exit__(self, *exc: object) -> None:

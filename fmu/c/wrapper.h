@@ -1,8 +1,8 @@
 /*
- * slave.h -- the core of flexff's generic FMI 2.0 co-simulation slave, shared by its parts:
+ * wrapper.h -- the core of flexff's generic FMI 2.0 co-simulation wrapper, shared by its parts:
  *   - fmi2Functions.c: the FMI API, each function with the machine states it is allowed in;
- *   - slave.c: instance data, logging, live instances, model evaluation, RK4, variables;
- *   - network_slave.c (models with an embedded network, HAS_NETWORK): the network and the
+ *   - wrapper.c: instance data, logging, live instances, model evaluation, RK4, variables;
+ *   - wrapper_network.c (models with an embedded network, HAS_NETWORK): the network and the
  *     precomputation table;
  *   - rng.c: the noise generator.
  * Per model, config.h holds identity, sizes, value references, names and start values, and
@@ -17,8 +17,8 @@
  * only the fmi2 functions leave the library.
  */
 
-#ifndef FLEXFF_SLAVE_H
-#define FLEXFF_SLAVE_H
+#ifndef FLEXFF_WRAPPER_H
+#define FLEXFF_WRAPPER_H
 
 #ifndef _GNU_SOURCE
 #define _GNU_SOURCE /* dladdr, for models with a network */
@@ -159,7 +159,7 @@ typedef struct {
 } SerialHeader;
 
 /* ---------------------------------------------------------------------------------------- */
-/* slave.c                                                                                   */
+/* wrapper.c                                                                                   */
 
 void vlog_to(const fmi2CallbackFunctions *cb, fmi2String name, fmi2Status status,
              int category, const char *fmt, va_list ap);
@@ -194,7 +194,7 @@ uint64_t model_hash(void);
 
 #if HAS_NETWORK
 /* ---------------------------------------------------------------------------------------- */
-/* network_slave.c                                                                           */
+/* wrapper_network.c                                                                           */
 
 int net_load(Instance *c, fmi2String resources, char *error, size_t size);
 void net_unload(Instance *c);
