@@ -45,6 +45,7 @@ THESIS_HW_LINE_TIME, THESIS_HW_REST, THESIS_HW_CIRCLE_TIME, THESIS_HW_END = 21.0
 THESIS_HW_TURNS = 9.0
 
 JOIN_TOLERANCE = 1e-9  # m: largest position jump accepted between chained segments
+SAVGOL_ORDER = 3  # the polynomial a CSV reference's derivatives are fitted with (read_csv)
 SAMPLED_ARRAYS = 7  # float64 arrays a sampled reference holds: t, x, y, vx, vy, ax, ay
 
 
@@ -313,8 +314,10 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
     check_memory(SAMPLED_ARRAYS * n, f"{path}: resampling the {t[-1] - t[0]:g} s table every "
                                      f"{step:g} s")
     grid = t[0] + np.arange(n) * step
-    window = 2 * round(smoothing_window / step / 2) + 1
-    if grid.size < max(window, 4):
+    # an odd number of samples, at least SAVGOL_ORDER + 2: the cubic fit needs more points
+    # than coefficients, which a window of a few coarse steps would not give
+    window = max(2 * round(smoothing_window / step / 2) + 1, SAVGOL_ORDER + 2)
+    if grid.size < window:
         raise InputError(f"{path}: the table spans {t[-1] - t[0]:.6g} s, too short for the "
                          f"{smoothing_window} s smoothing window at the {step} s step")
     resampled = {name: CubicSpline(t, values)(grid) for name, values in columns.items()
@@ -323,8 +326,8 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
         for order, prefix in ((1, "v"), (2, "a")):
             name = f"{prefix}{axis}_ref"
             if name not in resampled:
-                resampled[name] = savgol_filter(resampled[f"{axis}_ref"], window, 3, deriv=order,
-                                                delta=step)
+                resampled[name] = savgol_filter(resampled[f"{axis}_ref"], window, SAVGOL_ORDER,
+                                                deriv=order, delta=step)
     check_workspace(NOMINAL, resampled["x_ref"], resampled["y_ref"],
                     f"{path}: resampled point")
     return Reference(grid, *(resampled[name] for name in Reference.SIGNALS))

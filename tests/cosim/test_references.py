@@ -229,3 +229,15 @@ def test_sampling_beyond_the_available_memory_is_refused_before_allocating(monke
 def test_reference_arrays_must_agree():
     with pytest.raises(ValueError, match="equal length"):
         Reference(*[np.zeros(3)] * 6, np.zeros(4))
+
+
+def test_csv_at_a_coarse_step_fits_its_derivatives_over_five_points_at_least(tmp_path):
+    """At a 10 ms step the default 25 ms smoothing window is 3 samples, too few for the cubic
+    Savitzky-Golay fit: the window widens to 5 samples, and a parabola's acceleration comes out
+    exact."""
+    t = np.linspace(0.0, 1.0, 11)
+    path = tmp_path / "coarse.csv"
+    np.savetxt(path, np.column_stack([t, 0.01 * t**2, 0 * t]), delimiter=",",
+               header="time,x_ref,y_ref", comments="")
+    reference = read_csv(path, step=0.01)
+    assert np.allclose(reference.ax, 0.02, atol=1e-9)
