@@ -18,6 +18,7 @@ from flexff.fmu.cache import file_sha256
 from flexff.learning.collect import PROGRESS, DataFolderError, collect, run_collection
 from flexff.learning.dataset import MANIFEST, REFERENCE_SIGNALS, SIGNALS, load_dataset
 from flexff.learning.evaluate import evaluate, scenario_config
+from flexff.learning.loop import default_loop, on_reference, with_feedforward
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.plant.system import plant_system
 
@@ -330,3 +331,18 @@ def test_the_sim_evaluation_on_a_plant_of_other_parameters(tmp_path):
         assert rigid[axis]["e2_ratio"] < 10
         assert pgnn[axis]["e2_ratio"] > max(30.0, 5 * rigid[axis]["e2_ratio"])
         assert pgnn[axis]["einf_ratio"] > 20.0
+
+
+def test_the_loops_edits_are_checked_as_a_file_is():
+    """The learning loop changes a run in code (its feedforward, its reference): each result
+    goes through the parser's checks, so a bad option or reference is a ConfigError naming
+    the loop and the key, as in a TOML file."""
+    loop = default_loop("nominal")
+    assert loop.checked
+    with pytest.raises(ConfigError, match=r"under PID: fmu\.feedforward\.bogus: unknown key"):
+        with_feedforward(loop, "rigid-body-feedforward", {"bogus": 1})
+    with pytest.raises(ConfigError, match=r"fmu\.feedforward\.model: no such file"):
+        with_feedforward(loop, "learned-feedforward", {"model": "/nowhere.onnx"})
+    with pytest.raises(ConfigError, match=r"under PID, circle: reference\.duration: required"):
+        on_reference(loop, {"kind": "circle", "radius": 0.005}, "circle", seed=1)
+    assert with_feedforward(loop, "rigid-body-feedforward", {}).checked
