@@ -283,12 +283,29 @@ def _data_import(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from flexff.learning.train import train
-
+    """One run into OUTPUT, or with several --seed or a --scheduler one run per seed into
+    OUTPUT/seedN, side by side (learning.workers); prints the metrics as JSON."""
     overrides = {"epochs": args.epochs} if args.epochs is not None else {}
-    metrics = train(args.model, args.preset, args.data, args.output, resume=args.resume,
-                    force=args.force, checkpoint_every=args.checkpoint_every, **overrides)
-    print(json.dumps(metrics, indent=2, default=str))
+    seeds = args.seed or [0]
+    if len(seeds) == 1 and args.scheduler is None:
+        from flexff.learning.train import train
+
+        metrics = train(args.model, args.preset, args.data, args.output, resume=args.resume,
+                        force=args.force, checkpoint_every=args.checkpoint_every,
+                        **overrides, seed=seeds[0])
+        print(json.dumps(metrics, indent=2, default=str))
+        return 0
+    from flexff.learning.workers import TrainJob, train_parallel
+
+    if args.resume or args.force or args.checkpoint_every is not None:
+        raise InputError("--resume, --force and --checkpoint-every go with one seed trained "
+                         "here; several seeds resume what their folders hold")
+    if len(set(seeds)) != len(seeds):
+        raise InputError(f"--seed: each seed once, got {seeds}")
+    jobs = [TrainJob(args.model, args.preset, Path(args.data), Path(args.output) / f"seed{s}",
+                     {**overrides, "seed": s}, label=f"seed{s}") for s in seeds]
+    results = train_parallel(jobs, scheduler=args.scheduler)
+    print(json.dumps(results, indent=2, default=str))
     return 0
 
 
@@ -306,7 +323,8 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     loop = None if args.config is None else load_run_config(args.config)
     output_folder(args.output)
-    evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop)
+    evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
+             scheduler=args.scheduler)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
           f"forces.png, the .onnx models)")
@@ -446,6 +464,12 @@ def build_parser() -> argparse.ArgumentParser:
                                "(a finished run's files stay until the new ones are complete)")
     train.add_argument("--checkpoint-every", type=int, metavar="N",
                        help="epochs between checkpoints (default: the preset's)")
+    train.add_argument("--seed", type=int, action="append", metavar="S",
+                       help="the training seed (default 0); repeated, one run per seed into "
+                            "OUTPUT/seedS, side by side (flexff export takes them as an "
+                            "ensemble)")
+    train.add_argument("--scheduler", help="address of a Dask scheduler to train on (its "
+                                           "workers see this file system)")
     train.set_defaults(handler=_train)
 
     export = commands.add_parser("export", help="export a training run (or an ensemble of "
@@ -481,6 +505,8 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--models", nargs="+", default=list(MODELS), choices=MODELS)
     evaluation.add_argument("--data", help="a collected dataset folder to use")
     evaluation.add_argument("--epochs", type=int, help="override the preset's number of epochs")
+    evaluation.add_argument("--scheduler", help="address of a Dask scheduler to collect and "
+                                                "train on (its workers see this file system)")
     evaluation.set_defaults(handler=_evaluate)
 
     demo = commands.add_parser("demo", help="the whole pipeline on the embedded defaults")

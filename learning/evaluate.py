@@ -119,10 +119,11 @@ def scenario_config(env: str, name: str, model: Path | None = None, mode: str = 
 def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[str] = MODELS,
              data: str | Path | None = None, epochs: int | None = None,
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
-             progress: bool = True) -> dict[str, Any]:
+             progress: bool = True, scheduler: str | None = None) -> dict[str, Any]:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
-    collects and evaluates on that run configuration instead of the environment's plant."""
+    collects and evaluates on that run configuration instead of the environment's plant;
+    `scheduler` collects and trains on that Dask cluster (learning.workers)."""
     if env not in ENVIRONMENTS:
         raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
     for kind in models:
@@ -133,7 +134,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     if data is None:
         on = f" on {loop.origin}" if loop is not None else ""
         say(f"collecting the {set_name} set (PID only){on} into {out / f'data-{set_name}'}")
-        data = collect(set_name, out / f"data-{set_name}",
+        data = collect(set_name, out / f"data-{set_name}", scheduler=scheduler,
                        config=None if loop is None else with_feedforward(loop))
     extra = {"epochs": epochs} if epochs else {}
     jobs = {job.name: job for kind in models
@@ -141,8 +142,10 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
                                     environment.members(preset, kind), Path(data), out / "runs")}
     training = {name: m for name, job in jobs.items() if (m := _finished(job))}
     if todo := [name for name in jobs if name not in training]:
-        say(f"training {', '.join(todo)} ({preset} preset), one process per core")
-    training.update(train_parallel([jobs[name] for name in todo], progress=progress))
+        where = f"on {scheduler}" if scheduler else "one process per core"
+        say(f"training {', '.join(todo)} ({preset} preset), {where}")
+    training.update(train_parallel([jobs[name] for name in todo], progress=progress,
+                                   scheduler=scheduler))
     onnx_files, model_training = {}, {}
     for kind in models:
         names = [name for name, job in jobs.items() if job.model == kind]

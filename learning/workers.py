@@ -9,6 +9,11 @@ four models took 265 s one after the other on two threads and about 130 s side b
 A worker reports each epoch through a queue; this process draws the bars. Workers die with
 this process (even by SIGKILL), and what they finished is kept: every run folder resumes from
 its last checkpoint (learning.train).
+
+On a Dask cluster (`scheduler`) the runs go to its workers through cosim.executor, the one
+executor of runs and collection; the workers must see the same file system (the dataset and
+run folders). A run's result depends on its settings, data and thread count only, so the same
+jobs on the same number of threads give the same weights here and there.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from flexff.cosim.executor import die_with_parent
+from flexff.cosim.executor import die_with_parent, execute
 from flexff.learning.threads import granted_cores
 
 POLL_S = 0.2  # how often the bars are redrawn while the workers run
@@ -50,16 +55,20 @@ class TrainJob:
 
 
 def train_parallel(jobs: Sequence[TrainJob], workers: int | None = None,
-                   progress: bool = True) -> dict[str, dict[str, Any]]:
+                   progress: bool = True, scheduler: str | None = None,
+                   threads: int | None = None) -> dict[str, dict[str, Any]]:
     """Train every job, `workers` at a time (default: one per core granted, at most one per
-    job), each on cores // workers threads; return the metrics per job name. The first
+    job), each on `threads` threads (default: cores // workers), or on the Dask cluster at
+    `scheduler` (one thread each unless told); return the metrics per job name. The first
     failure is raised once the runs under way have finished (an evaluation run again reuses
     them); the jobs not started are cancelled."""
     if not jobs:
         return {}
-    workers = max(1, min(workers or granted_cores(), len(jobs)))
-    threads = max(1, granted_cores() // workers)
     ordered = sorted(jobs, key=lambda job: -job.cost)
+    if scheduler is not None:
+        return _train_on_cluster(ordered, scheduler, threads or 1, progress)
+    workers = max(1, min(workers or granted_cores(), len(jobs)))
+    threads = threads or max(1, granted_cores() // workers)
     context = multiprocessing.get_context("spawn")
     with context.Manager() as manager, ProcessPoolExecutor(
             max_workers=workers, mp_context=context, initializer=die_with_parent,
@@ -75,6 +84,27 @@ def train_parallel(jobs: Sequence[TrainJob], workers: int | None = None,
             for bar in bars.values():
                 bar.close()
         return {futures[f].name: f.result() for f in futures}
+
+
+def _train_on_cluster(ordered: Sequence[TrainJob], scheduler: str, threads: int,
+                      progress: bool) -> dict[str, dict[str, Any]]:
+    """The jobs on a Dask cluster, one bar counting the runs finished (a worker's epochs do
+    not reach this process)."""
+    results: dict[str, dict[str, Any]] = {}
+    with execute(_train_alone, [(job, threads) for job in ordered], scheduler=scheduler) \
+            as running, tqdm(total=len(ordered), desc=f"training on {scheduler}", unit="run",
+                             disable=not progress, dynamic_ncols=True) as bar:
+        for finished in running:
+            if finished.error is not None:
+                running.cancel()
+                raise finished.error
+            if finished.result is None:  # cancelled after a failure
+                continue
+            job = ordered[finished.index]
+            results[job.name] = finished.result
+            bar.set_postfix_str(job.name, refresh=False)
+            bar.update()
+    return {job.name: results[job.name] for job in ordered}
 
 
 def _follow(futures: dict[Future[dict[str, Any]], TrainJob], epochs: Any,
@@ -113,4 +143,13 @@ def _train_one(job: TrainJob, threads: int, epochs: Any) -> dict[str, Any]:
 
     return train(job.model, job.preset, job.data, job.run, progress=False,
                  on_epoch=lambda report: epochs.put((job.name, report)),
+                 **{**job.overrides, "threads": threads})
+
+
+def _train_alone(task: tuple[TrainJob, int]) -> dict[str, Any]:
+    """Cluster worker: one training run on the given number of threads."""
+    from flexff.learning.train import train
+
+    job, threads = task
+    return train(job.model, job.preset, job.data, job.run, progress=False,
                  **{**job.overrides, "threads": threads})

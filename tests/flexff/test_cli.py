@@ -131,6 +131,20 @@ def test_train_and_export_from_the_command_line(tmp_path):
     result = flexff("export", str(run), "-o", str(tmp_path / "tcn.onnx"))
     assert result.returncode == 0, result.stderr
     assert (tmp_path / "tcn.onnx").is_file()
+    seeds = tmp_path / "seeds"  # two seeds side by side, exported as one ensemble
+    result = flexff("train", "--model", "tcn", "--data", str(data), "-o", str(seeds),
+                    "--epochs", "1", "--seed", "1", "--seed", "2")
+    assert result.returncode == 0, result.stderr
+    assert set(json.loads(result.stdout)) == {"seed1", "seed2"}
+    runs = [json.loads((seeds / f"seed{s}" / "run.json").read_text())["config"]["seed"]
+            for s in (1, 2)]
+    assert runs == [1, 2]
+    result = flexff("export", str(seeds / "seed1"), str(seeds / "seed2"), "-o",
+                    str(tmp_path / "ensemble.onnx"))
+    assert result.returncode == 0, result.stderr
+    result = flexff("train", "--model", "tcn", "--data", str(data), "-o", str(seeds),
+                    "--seed", "1", "--seed", "1")
+    assert result.returncode == 2 and "each seed once" in result.stderr
 
 
 def test_train_refuses_a_folder_that_is_not_a_dataset(tmp_path):

@@ -38,3 +38,27 @@ def test_a_failed_training_run_is_raised_with_its_message(data, tmp_path):
             TrainJob("pgnn", "fast", data, tmp_path / "good", TINY["pgnn"])]
     with pytest.raises(ValueError, match="levels >= 1"):
         train_parallel(jobs, workers=2, progress=False)
+
+
+def test_training_on_a_dask_cluster_equals_training_here(data, tmp_path):
+    """A local cluster of two worker processes stands in for a remote one: the same jobs on
+    one thread each give the same weights and losses as the local pool."""
+    from dask.distributed import LocalCluster
+
+    def jobs(folder):
+        return [TrainJob(kind, "fast", data, tmp_path / folder / kind, sizes, cost=k)
+                for k, (kind, sizes) in enumerate(TINY.items())]
+
+    here = train_parallel(jobs("here"), workers=2, progress=False, threads=1)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster:
+        there = train_parallel(jobs("there"), progress=False,
+                               scheduler=cluster.scheduler_address)
+    assert set(there) == set(TINY)
+    for kind in TINY:
+        assert there[kind]["threads"] == here[kind]["threads"] == 1
+        assert there[kind]["test_mse"] == here[kind]["test_mse"]
+        assert there[kind]["history"]["val"] == here[kind]["history"]["val"]
+        weights = [torch.load(tmp_path / folder / kind / "model.pt", weights_only=True)
+                   for folder in ("here", "there")]
+        assert all(torch.equal(weights[0][name], weights[1][name]) for name in weights[0])
