@@ -22,6 +22,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from flexff.fmu.archive import check_archive
 from flexff.fmu.errors import InputError, MissingPackage, RunError
 
 try:
@@ -48,6 +49,8 @@ class _Execution:
                  step: float, links: Sequence[Link] | None = None) -> None:
         log_output_level(CosimLogLevel.WARNING)  # libcosim traces every FMI call otherwise
         infos = {s.name: s.described() for s in fmus}
+        for s in fmus:  # libcosim unpacks each FMU itself: its sizes are checked first
+            check_archive(s.path)
         self.variables = {name: info.variables for name, info in infos.items()}
         self.ports = [Port(s.name, infos[s.name]) for s in fmus]
         if links is None:

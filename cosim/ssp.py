@@ -76,6 +76,7 @@ from flexff.cosim.schema import (
     whole_steps,
 )
 from flexff.cosim.wiring import SOURCE, Link, carried
+from flexff.fmu.archive import extract_archive
 from flexff.fmu.cache import cache_dir, file_sha256
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
@@ -363,8 +364,7 @@ def _extracted(path: Path) -> Path:
         folder.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=".tmp-"))
         try:
-            with zipfile.ZipFile(path) as archive:
-                archive.extractall(tmp)  # member names are sanitized (no "..", no root)
+            extract_archive(path, tmp)  # within the bound, member names checked
             os.replace(tmp, folder)
         except OSError:  # another process extracted it first
             if not folder.is_dir():

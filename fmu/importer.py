@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import fmpy
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import (
     FMU2Slave,
     fmi2CallbackAllocateMemoryTYPE,
@@ -36,6 +36,7 @@ from fmpy.fmi2 import (
 from fmpy.fmi3 import FMU3Slave
 from fmpy.logging import addLoggerProxy
 
+from flexff.fmu.archive import extract_archive
 from flexff.fmu.errors import InputError
 
 TYPE_KINDS = {
@@ -258,7 +259,7 @@ class FmuInstance:
         self.info, self.name = info, name
         self.messages: list[str] = []
         self.initialized = False
-        self._unzipdir = extract(str(info.path))
+        self._unzipdir = str(extract_archive(info.path))
         cwd = os.getcwd()
         try:
             self.library = self._library_path()
