@@ -22,6 +22,8 @@ from typing import Any, TextIO
 
 from flexff.cosim.timing import OverrunError, Pacing
 from flexff.fmu.errors import InputError, RunError
+from flexff.fmu.validation import TIMEOUT as VALIDATION_TIMEOUT
+from flexff.fmu.validation import validate_fmu
 from flexff.learning.dataset import SETS
 from flexff.plant.model import VARIANTS
 
@@ -96,20 +98,27 @@ def _fmu_build(args: argparse.Namespace) -> int:
 
 
 def _fmu_validate(args: argparse.Namespace) -> int:
-    """Exit 0 when every FMU passes, 1 when one has problems, 2 when a path is not a file."""
-    from flexff.fmu.validation import validate_fmu
-
+    """Exit 0 when no FMU has an error (warnings allowed), 1 when one has, 2 when a path is
+    missing or unreadable."""
+    if not args.timeout > 0:
+        raise InputError(f"--timeout {args.timeout:g}: expected a positive number of seconds")
     status = 0
     for path in args.files:
-        if not Path(path).is_file():
-            print(f"flexff: error: {path}: no such file", file=sys.stderr)
+        unusable = ("no such file" if not Path(path).exists() else
+                    "not a file" if not Path(path).is_file() else
+                    "not readable" if not os.access(path, os.R_OK) else None)
+        if unusable is not None:
+            print(f"flexff: error: {path}: {unusable}", file=sys.stderr)
             status = 2
             continue
-        problems = validate_fmu(path)
-        print(f"{path}: {'OK' if not problems else f'{len(problems)} problem(s)'}")
+        problems = validate_fmu(path, strict=args.strict, timeout=args.timeout)
+        errors = sum(p.severity == "error" for p in problems)
+        counts = f"{errors} error(s), {len(problems) - errors} warning(s)"
+        print(f"{path}: {'OK' if not problems else counts}")
         for problem in problems:
-            print(f"  - {problem}")
-        status = max(status, int(bool(problems)))
+            print(f"  - {problem.severity}: {problem}")
+        if status != 2:
+            status = max(status, int(errors > 0))
     return status
 
 
@@ -373,6 +382,12 @@ def build_parser() -> argparse.ArgumentParser:
     build.set_defaults(handler=_fmu_build)
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")
     validate.add_argument("files", nargs="+", help=".fmu files")
+    validate.add_argument("--strict", action="store_true",
+                          help="a restored FMU state must reproduce the outputs bit for bit "
+                               "(default: within the FMU's tolerance, as a warning)")
+    validate.add_argument("--timeout", type=float, default=VALIDATION_TIMEOUT,
+                          help="seconds the run of one FMU may take before it counts as hung "
+                               f"(default {VALIDATION_TIMEOUT:g})")
     validate.set_defaults(handler=_fmu_validate)
 
     run = commands.add_parser("run", help="run co-simulations from TOML configurations or SSP "

@@ -45,7 +45,8 @@ def test_fmu_build_and_validate(tmp_path):
 
 
 def test_fmu_validate_exit_codes(tmp_path):
-    """0 every FMU passes, 1 one has problems, 2 a path is no file (the others still checked)."""
+    """0 every FMU passes (warnings allowed), 1 one has errors, 2 a path is no file (the others
+    still checked)."""
     junk = tmp_path / "junk.fmu"
     junk.write_text("not a zip")
     good = REFERENCE_FMUS / "fmi2" / "Dahlquist.fmu"
