@@ -20,6 +20,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
+from flexff.cosim.compare import RTOL as COMPARE_RTOL
+from flexff.cosim.compare import compare_fmu
 from flexff.cosim.timing import OverrunError, Pacing
 from flexff.fmu.errors import InputError, RunError
 from flexff.fmu.validation import TIMEOUT as VALIDATION_TIMEOUT
@@ -119,6 +121,25 @@ def _fmu_validate(args: argparse.Namespace) -> int:
             print(f"  - {problem.severity}: {problem}")
         if status != 2:
             status = max(status, int(errors > 0))
+    return status
+
+
+def _fmu_compare(args: argparse.Namespace) -> int:
+    """Exit 0 when every FMU agrees, 1 when one differs or fails to run, 2 when a path is
+    missing or not a usable FMU (the others are still compared)."""
+    if not args.rtol > 0:
+        raise InputError(f"--rtol {args.rtol:g}: expected a positive number")
+    status = 0
+    for path in args.files:
+        try:
+            comparison = compare_fmu(path)
+        except (InputError, RunError) as error:
+            print(f"flexff: error: {error}", file=sys.stderr, flush=True)
+            status = max(status, 2 if isinstance(error, InputError) else 1)
+            continue
+        print(comparison.report(args.rtol), flush=True)
+        if not comparison.agrees(args.rtol) and status == 0:
+            status = 1
     return status
 
 
@@ -363,7 +384,7 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--json", action="store_true", help="print JSON instead of text")
     info.set_defaults(handler=_plant_info)
 
-    fmu = commands.add_parser("fmu", help="build and validate FMUs")
+    fmu = commands.add_parser("fmu", help="build, validate and compare FMUs")
     fmu_commands = fmu.add_subparsers(dest="fmu_command", required=True)
     build = fmu_commands.add_parser("build", help="build an FMU")
     build.add_argument("kind", choices=["plant", "learned-feedforward", "onnx", "feedforward"],
@@ -389,6 +410,15 @@ def build_parser() -> argparse.ArgumentParser:
                           help="seconds the run of one FMU may take before it counts as hung "
                                f"(default {VALIDATION_TIMEOUT:g})")
     validate.set_defaults(handler=_fmu_validate)
+
+    compare = fmu_commands.add_parser(
+        "compare", help="run each FMU alone on its default experiment in flexff and in FMPy; "
+                        "the largest difference per output")
+    compare.add_argument("files", nargs="+", help=".fmu files")
+    compare.add_argument("--rtol", type=float, default=COMPARE_RTOL,
+                         help="relative difference within which an output agrees (default "
+                              f"{COMPARE_RTOL:g})")
+    compare.set_defaults(handler=_fmu_compare)
 
     run = commands.add_parser("run", help="run co-simulations from TOML configurations or SSP "
                                           "files")
