@@ -19,17 +19,17 @@ import math
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import fmpy
 import numpy as np
 from fmpy.util import auto_interval
 
-from flexff.cosim.config import parse_config
-from flexff.cosim.recording import Recording
-from flexff.cosim.run import simulate_config
 from flexff.fmu.archive import extract_archive
 from flexff.fmu.importer import FmuInfo, read_fmu
+
+if TYPE_CHECKING:
+    from flexff.cosim.recording import Recording
 
 RTOL = 1e-9  # relative: outputs that differ by at most this much agree
 MAX_STEPS = 1000  # FMPy doubles a default-experiment step until the run has at most this many
@@ -134,6 +134,9 @@ def outputs(info: FmuInfo) -> list[str]:
 
 def flexff_run(path: Path, run: Experiment) -> Recording:
     """The FMU alone in flexff's master, inputs at their start values, every signal recorded."""
+    from flexff.cosim.config import parse_config  # the run path's imports (plots among them)
+    from flexff.cosim.run import simulate_config  # load only when a comparison runs
+
     steps = math.floor(run.stop / run.step * (1 + 1e-12))
     config = parse_config({"run": {"step": run.step, "stop": steps * run.step},
                            "fmu": {INSTANCE: {"path": str(path.resolve()),

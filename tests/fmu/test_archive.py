@@ -13,6 +13,7 @@ from flexff.cli import main
 from flexff.fmu.archive import UNPACK_LIMIT, UNPACK_LIMIT_ENV, extract_archive, unpack_limit
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuInstance, read_fmu
+from flexff.fmu.validation import validate_fmu
 from tests.helpers import REFERENCE_FMUS
 
 MiB = 1 << 20
@@ -146,3 +147,13 @@ def test_unpacked_folders_are_removed_after_use(temporary):
     with FmuInstance(read_fmu(REFERENCE_FMUS / "fmi3" / "VanDerPol.fmu"), "v"):
         assert len(list(temporary.iterdir())) == 1
     assert list(temporary.iterdir()) == []
+
+
+def test_validation_unpacks_within_the_bound_of_the_moment(tmp_path, monkeypatch):
+    """The checks run in a child forked from a server started earlier: the bound set after
+    that still holds there."""
+    path = bomb(tmp_path / "bomb.fmu")
+    assert validate_fmu(path) == []  # the fork server runs from here on
+    monkeypatch.setenv(UNPACK_LIMIT_ENV, "1M")
+    [problem] = validate_fmu(path)
+    assert "running the FMU failed" in problem and "'resources/zeros.bin'" in problem
