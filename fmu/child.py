@@ -89,8 +89,7 @@ def _child(function: Callable[..., Any], args: tuple[Any, ...], sender: Connecti
     try:
         function(lambda message: sender.send(("emit", message)), *args)
     except Exception as error:  # the function's own failure, sent as text
-        sender.send(("raised", f"{type(error).__name__}: {error}"
-                     if not str(error).strip() else str(error)))
+        sender.send(("raised", str(error) or type(error).__name__))
     else:
         sender.send(("returned", None))
     sender.close()
@@ -98,8 +97,9 @@ def _child(function: Callable[..., Any], args: tuple[Any, ...], sender: Connecti
 
 def run_in_child(function: Callable[..., Any], args: tuple[Any, ...], timeout: float
                  ) -> ChildEnd:
-    """Run `function(emit, *args)` in a spawned child, `emit(message)` sending a picklable
-    message back; kill it after `timeout` seconds. `function` must be importable by name."""
+    """Run `function(emit, *args)` in a child process (module doc), `emit(message)` sending a
+    picklable message back; kill it after `timeout` seconds. `function` must be importable
+    by name."""
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload([__name__, function.__module__])
     receiver, sender = context.Pipe(duplex=False)
