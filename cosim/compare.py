@@ -6,11 +6,12 @@ Both runs take the experiment as FMPy derives it from the model description (`ex
 start and stop time of the default experiment (else 0 and start + 1 s), and as the
 communication step the fixed internal step (FMI 3.0), else the default experiment's step
 (doubled until the run has at most 1000 steps), else FMPy's automatic interval. Inputs keep
-their start values in both. flexff runs the FMU through the path of `flexff run` (a one-FMU
-configuration, the co-simulation master); FMPy through `fmpy.simulate_fmu` with the same
-output interval, on the FMU unpacked by fmu.archive. The outputs are compared at the time
-points both runs have; each output's difference is also given relative to its largest
-magnitude in either run.
+their start values in both. FMPy also passes the default experiment's tolerance to the FMU;
+flexff's run passes none, and starts at 0 s (differences this check shows). flexff runs the
+FMU through the path of `flexff run` (a one-FMU configuration, the co-simulation master);
+FMPy through `fmpy.simulate_fmu` with the same output interval, on the FMU unpacked by
+fmu.archive. The outputs are compared at the time points both runs have; each output's
+difference is also given relative to its largest magnitude in either run.
 """
 
 from __future__ import annotations
@@ -40,8 +41,8 @@ NUMERIC = ("float64", "float32", "int8", "uint8", "int16", "uint16", "int32", "u
 
 @dataclass(frozen=True)
 class Experiment:
-    """What both runs do: [start, stop] in steps of `step`, the solver tolerance (None: the
-    FMU's own); in seconds."""
+    """The default experiment as FMPy runs it: [start, stop] in steps of `step` (seconds),
+    and the tolerance FMPy passes to the FMU (None: none given); flexff's run passes none."""
 
     start: float
     stop: float
@@ -96,7 +97,8 @@ class Comparison:
     def report(self, rtol: float = RTOL) -> str:
         """The comparison as text: the experiment, one line per output, the verdict."""
         run = self.experiment
-        tolerance = "the FMU's own" if run.tolerance is None else f"{run.tolerance:g}"
+        tolerance = ("none given" if run.tolerance is None
+                     else f"{run.tolerance:g} (set by FMPy only)")
         width = max([len("output"), *(len(o.name) for o in self.outputs)])
         lines = [f"{self.path}: {run.start:g} .. {run.stop:g} s, step {run.step:g} s, "
                  f"tolerance {tolerance}; {self.points} common points",

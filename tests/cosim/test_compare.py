@@ -79,7 +79,7 @@ def test_a_difference_is_measured(monkeypatch, capsys):
     assert comparison.verdict(1e-6) == "equal within 3e-07 (relative, x)"
     assert main(["fmu", "compare", str(path)]) == 1
     out = capsys.readouterr().out
-    assert out.startswith(f"{path}: 0 .. 10 s, step 0.1 s, tolerance the FMU's own; 101 "
+    assert out.startswith(f"{path}: 0 .. 10 s, step 0.1 s, tolerance none given; 101 "
                           f"common points\n")
     assert re.search(r"\n  x +3e-07 +3e-07\n  -> DIFFERENT: x differs by 3e-07", out), out
     assert main(["fmu", "compare", "--rtol", "1e-6", str(path)]) == 0
