@@ -81,6 +81,7 @@ def _child(function: Callable[..., Any], args: tuple[Any, ...], sender: Connecti
     are those of its start), trace, run `function(emit, *args)`, say how it ended."""
     global _current
     _current = label
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's: it ends the child
     os.environ.clear()
     os.environ.update(environment)
     os.chdir(cwd)
