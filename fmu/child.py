@@ -10,7 +10,9 @@ one method (`fmpy.fmi1._FMU._call`, which the child wraps), and `under_way` name
 that are not FMI calls (loading the binary). So a child that dies of a signal is reported as
 "fmi2DeSerializeFMUstate ... SIGSEGV". The function sends its findings as they come
 (`emit`), so those made before a crash are kept. The files the child unpacks go into a
-temporary folder the parent removes, whatever the end.
+temporary folder the parent removes, whatever the end. As with multiprocessing's spawn, a
+script that calls this keeps its top level under `if __name__ == "__main__":` (the child
+imports the script's module).
 """
 
 from __future__ import annotations
