@@ -156,8 +156,9 @@ def config_examples() -> dict[str, str]:
 
 def expanded(config: RunConfig) -> dict[str, Any]:
     """The configuration in the general form, as TOML tables (paths absolute)."""
-    run = {"step": config.step, "stop": config.stop, "algorithm": config.algorithm,
-           "order": [f.name for f in config.fmus]}
+    run = {"step": config.step, "start": config.start, "stop": config.stop,
+           **({"tolerance": config.tolerance} if config.tolerance is not None else {}),
+           "algorithm": config.algorithm, "order": [f.name for f in config.fmus]}
     data: dict[str, Any] = {"run": run}
     if config.reference is not None:
         data["reference"] = {"kind": config.reference.kind, **_plain(config.reference.options)}
@@ -170,7 +171,8 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                             **_plain(f.options),
                             **({"parameters": dict(f.parameters)} if f.parameters else {}),
                             **({"unconnected": f.unconnected}
-                               if f.unconnected != "error" else {})}
+                               if f.unconnected != "error" else {}),
+                            **({"tolerance": f.tolerance} if f.tolerance is not None else {})}
                    for f in config.fmus}
     if config.connections:
         data["connection"] = [{"from": c.from_name, "to": c.to_name,
@@ -213,7 +215,7 @@ class _Parser:
         general = "fmu" in data
         short = any(t in data for t in SHORT_FORM) or not general
         run = self.table(data, "run")
-        self.keys(run, "run", ("step", "stop", "algorithm", "order"))
+        self.keys(run, "run", ("step", "start", "stop", "tolerance", "algorithm", "order"))
         step = self.number(run, "run", "step", 1e-3, positive=True)
         if short and "reference" not in data:
             raise self.error("reference", "the [reference] table is required")
@@ -233,10 +235,15 @@ class _Parser:
             fmus.append(self.fmu(fmu_name, table, start))
         if not fmus:
             raise self.error("fmu", "no FMU to run: add an [fmu.NAME] table")
-        stop = self.stop(run, signal, fmus, step)
+        start_time = self.number(run, "run", "start", next(
+            (read_fmu(f.path).default_start or 0.0 for f in fmus if f.path), 0.0))
+        stop = self.stop(run, signal, fmus, step, start_time)
+        tolerance = self.tolerance(run, "run")
+        fmus = [replace(f, tolerance=self.fmu_tolerance(f, tolerance)) for f in fmus]
         sources += self.sources(data.get("source", []))
         config = RunConfig(
-            name=name, step=step, stop=stop, fmus=self.order(run, fmus), reference=reference,
+            name=name, step=step, stop=stop, start=start_time, tolerance=tolerance,
+            fmus=self.order(run, fmus), reference=reference,
             sources=tuple(sources), connections=self.connections(data.get("connection", []),
                                                                  fmus),
             algorithm=self.choice(run, "run", "algorithm", ALGORITHMS, "gauss-seidel"),
@@ -259,16 +266,35 @@ class _Parser:
             raise self.error(", ".join(given) or "reference.kind", str(error)) from None
 
     def stop(self, run: Mapping[str, Any], signal: Reference | None, fmus: Sequence[FmuConfig],
-             step: float) -> float:
-        """run.stop; default the reference's duration, else the first FMU's experiment."""
-        default = signal.duration if signal is not None else None
+             step: float, start: float) -> float:
+        """run.stop, the end time; default the start plus the reference's duration, else the
+        first FMU's experiment."""
+        default = start + signal.duration if signal is not None else None
         if default is None:
             default = next((read_fmu(f.path).default_stop for f in fmus if f.path), None)
-        stop = self.number(run, "run", "stop", default, positive=True)
-        if not whole_steps(stop, step):
-            raise self.error("run.stop", f"{stop!r} s is not a whole number of steps of "
+        stop = self.number(run, "run", "stop", default)
+        if not stop > start:
+            raise self.error("run.stop", f"the end time {stop!r} s must come after the start "
+                                         f"time {start!r} s (run.start)")
+        if not whole_steps(stop - start, step):
+            raise self.error("run.stop", f"the run's length {stop - start!r} s (run.stop - "
+                                         f"run.start) is not a whole number of steps of "
                                          f"{step!r} s (run.step)")
         return stop
+
+    def tolerance(self, t: Mapping[str, Any], where: str) -> float | None:
+        """A relative tolerance for the FMUs' own solvers (None: not given)."""
+        return self.number(t, where, "tolerance", None, positive=True) if "tolerance" in t \
+            else None
+
+    def fmu_tolerance(self, f: FmuConfig, run: float | None) -> float | None:
+        """An FMU's tolerance: its own key, else [run] tolerance, else its default experiment's
+        (a built-in's is read when it is built, cosim.scenario)."""
+        if f.tolerance is not None:
+            return f.tolerance
+        if run is not None or f.path is None:
+            return run
+        return read_fmu(f.path).default_tolerance
 
     def order(self, run: Mapping[str, Any], fmus: list[FmuConfig]) -> tuple[FmuConfig, ...]:
         if "order" not in run:
@@ -331,13 +357,14 @@ class _Parser:
             raise self.error(f"{where}.parameters", f"expected a table {{name = value}}, got "
                                                     f"{parameters!r}")
         if "path" in t:
-            self.keys(t, where, ("path", "parameters", "unconnected"))
+            self.keys(t, where, ("path", "parameters", "unconnected", "tolerance"))
             path = self.path(t, where, "path")
             return FmuConfig(name, path=path, parameters=self.fmu_parameters(path, parameters,
                                                                              where),
-                             unconnected=unconnected)
+                             unconnected=unconnected, tolerance=self.tolerance(t, where))
         builtin = self.choice(t, where, "builtin", tuple(BUILTIN_OPTIONS), None)
-        self.keys(t, where, ("builtin", "parameters", "unconnected", *BUILTIN_OPTIONS[builtin]))
+        self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance",
+                             *BUILTIN_OPTIONS[builtin]))
         options: dict[str, Any] = {}
         if builtin == "plant":
             variant = self.choice(t, where, "variant", tuple(VARIANTS), "nominal")
@@ -354,7 +381,7 @@ class _Parser:
         elif builtin == "learned-feedforward":
             options = self.feedforward_options(t, where)
         return FmuConfig(name, builtin=builtin, options=options, parameters=dict(parameters),
-                         unconnected=unconnected)
+                         unconnected=unconnected, tolerance=self.tolerance(t, where))
 
     def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str
                        ) -> dict[str, Any]:

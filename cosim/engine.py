@@ -81,7 +81,7 @@ class EngineFmuPlan(Structure):
 class EngineRun(Structure):
     """A run's plan, buffers and measurements (struct Run of engine.c)."""
 
-    _fields_ = [("step", c_double), ("steps", c_long), ("n_fmus", c_long),
+    _fields_ = [("step", c_double), ("start_time", c_double), ("steps", c_long), ("n_fmus", c_long),
                 ("fmus", POINTER(EngineFmuPlan)), ("bus", POINTER(c_double)),
                 ("n_bus", c_long), ("n_sources", c_long), ("sources", POINTER(c_double)),
                 ("record", POINTER(c_double)), ("columns", POINTER(c_long)),

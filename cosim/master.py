@@ -10,7 +10,7 @@ Signals of other types (integers, booleans, strings, ...) go through fmpy's type
 small table beside the bus, and so does every connection that is not float64 into float64 (a
 Float32 input, or a Float64 input fed by a Float32 output): its value is converted, with its
 gain and offset, by cosim.wiring's rule (`carried`) in Python. Communication point k
-(t_k = k * step), for k = 0 .. steps:
+(t_k = start + k * step, cosim.schema.point_time), for k = 0 .. steps:
 
   1. the source signals of point k are copied into the bus;
   2. in order, each FMU gets its inputs and, if a later FMU or no FMU reads its outputs, gives
@@ -67,7 +67,7 @@ from flexff.cosim.engine import (
     start_schedule,
 )
 from flexff.cosim.recording import Recording
-from flexff.cosim.schema import ALGORITHMS
+from flexff.cosim.schema import ALGORITHMS, point_time
 from flexff.cosim.timing import Pacing, StepTiming
 from flexff.cosim.wiring import SOURCE, Link, Port, carried, wire
 from flexff.fmu.errors import InputError, RunError
@@ -79,13 +79,15 @@ PROGRESS_CHUNK = 1000  # steps between progress bar updates
 
 @dataclass(frozen=True)
 class ResolvedFmu:
-    """One FMU of a co-simulation: its instance name, its file and start values by name, and
-    its model description once read (a resolved scenario's, whose start values are checked)."""
+    """One FMU of a co-simulation: its instance name, its file and start values by name, its
+    model description once read (a resolved scenario's, whose start values are checked), and
+    the tolerance given to its own solver (None: not defined)."""
 
     name: str
     path: Path
     parameters: Mapping[str, Any] = field(default_factory=dict)
     info: FmuInfo | None = field(default=None, compare=False, repr=False)
+    tolerance: float | None = None
 
     def described(self) -> FmuInfo:
         """The model description: the one carried, else read and the start values checked."""
@@ -109,6 +111,7 @@ class _Plan:
                  read_before: bool, read_after: bool) -> None:
         info = instance.info
         self.instance, self.name, self.parameters = instance, fmu.name, dict(fmu.parameters)
+        self.tolerance = fmu.tolerance
         floats = [k for k in links if k.on_bus]
         self.typed_inputs = [k for k in links if not k.on_bus]  # set by Python (_set_typed)
         self.inputs = tuple(k.input for k in floats)
@@ -162,16 +165,20 @@ class Master:
     """Loaded FMUs wired together, ready for one run; use it as a context manager.
 
     `sources` names the external signals (the reference, constants) given to `run`; `links`
-    is the wiring (cosim.wiring.wire; default: every input by name).
+    is the wiring (cosim.wiring.wire; default: every input by name); `start` the time of
+    point 0.
     """
 
     def __init__(self, fmus: Sequence[ResolvedFmu], sources: Sequence[str], step: float,
-                 links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel") -> None:
+                 links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel",
+                 start: float = 0.0) -> None:
         if not step > 0:
             raise InputError(f"step must be positive, got {step}")
         if algorithm not in ALGORITHMS:
             raise InputError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
-        self.step, self.algorithm = float(step), algorithm
+        if not math.isfinite(start):
+            raise InputError(f"start must be finite, got {start}")
+        self.step, self.algorithm, self.start = float(step), algorithm, float(start)
         self.sources = tuple(sources)
         self.fmus = list(fmus)
         self._plans: list[_Plan] = []
@@ -221,9 +228,11 @@ class Master:
         holds FMI 2.0 FMUs with float inputs and outputs, no gains, Gauss-Seidel)."""
         for p in self._plans:
             if (p.instance.info.fmi_version != "2.0" or p.gain is not None or p.typed_inputs
-                    or p.typed_outputs or self.algorithm != "gauss-seidel"):
+                    or p.typed_outputs or self.algorithm != "gauss-seidel" or self.start
+                    or p.tolerance is not None):
                 raise InputError(f"the C floor runs FMI 2.0 FMUs with Real signals and no gains "
-                                 f"under Gauss-Seidel; {p.name} does not fit")
+                                 f"under Gauss-Seidel, from t = 0 with no tolerance; {p.name} "
+                                 f"does not fit")
         index = {n: i for i, n in enumerate(self.signals)}
         by_target = {(k.consumer, k.input): k.from_name for k in self.links}
         return {
@@ -245,7 +254,8 @@ class Master:
     def run(self, sources: Mapping[str, np.ndarray | float], steps: int,
             record: Sequence[str] | None = None, progress: bool | None = None,
             pacing: Pacing | None = None) -> Recording:
-        """Run `steps` steps from t = 0; return the recorded signals at the steps + 1 points.
+        """Run `steps` steps from the start; return the recorded signals at the steps + 1
+        points.
 
         `sources` gives every source signal as a constant or as steps + 1 samples; `record`
         names the signals to keep (default: all; `fmu.output`, a source, or an output's own
@@ -274,7 +284,8 @@ class Master:
             p.typed_outputs = [n for n in p.typed_outputs if f"{p.name}.{n}" in needed]
         for p in self._plans:
             try:
-                p.instance.initialize(p.parameters, 0.0, steps * self.step)
+                p.instance.initialize(p.parameters, self.start, self.time(steps),
+                                      p.tolerance)
             except FmuError as error:
                 raise CosimError(str(error)) from None
             if p.read_after:
@@ -306,7 +317,7 @@ class Master:
                 gc.enable()
         if status == FAILED:
             raise hook.error or self._plans[run.failed_fmu].fail(
-                f"{CALLS[run.failed_call]} at t = {run.failed_k * self.step:.9g} s")
+                f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
         if status == OVERRUN:
             end = run.failed_k + 1  # points 0 .. failed_k were recorded, the step was made
         signals: dict[str, np.ndarray] = {}
@@ -323,7 +334,11 @@ class Master:
                             run.failed_k if status == OVERRUN else None,
                             network_calls={p.name: times for p in self._plans
                                            if (times := p.instance.network_times())})
-        return Recording(np.arange(end) * self.step, signals, wall, timing)
+        return Recording(self.time(np.arange(end)), signals, wall, timing)
+
+    def time(self, k: Any) -> Any:
+        """The time of point(s) k (cosim.schema.point_time)."""
+        return point_time(self.start, self.step, k)
 
     def _engine_run(self, table: np.ndarray, out: np.ndarray, columns: np.ndarray | None,
                     hook: _TypedHook, steps: int, pacing: Pacing | None) -> EngineRun:
@@ -336,7 +351,8 @@ class Master:
         self._arrays = (table, out, columns)  # what the engine points into lives as long
         self._hook = TYPED_HOOK(hook) if hook.needed else TYPED_HOOK()
         return EngineRun(
-            step=self.step, steps=steps, n_fmus=len(self._plans), fmus=self._plan_structs,
+            step=self.step, start_time=self.start, steps=steps, n_fmus=len(self._plans),
+            fmus=self._plan_structs,
             bus=pointer(self._bus), n_bus=self._bus.size, n_sources=len(self.sources),
             sources=pointer(table), record=pointer(out), columns=pointer(columns, c_long),
             n_columns=out.shape[1], typed=self._hook, typed_record=bool(hook.columns),
@@ -448,7 +464,7 @@ class _TypedHook:
 
     def __call__(self, fmu: int, phase: int, k: int) -> int:
         try:
-            when = f"at t = {k * self.master.step:.9g} s"
+            when = f"at t = {self.master.time(k):.9g} s"
             if phase == 0:
                 self.master._set_typed(self.master._plans[fmu], when)
             elif phase == 1:

@@ -101,6 +101,8 @@ class FmuInfo:
     dependencies: Mapping[str, frozenset[str]]  # output -> the inputs it depends on directly
     default_step: float | None = None
     default_stop: float | None = None
+    default_start: float | None = None  # DefaultExperiment startTime [s]
+    default_tolerance: float | None = None  # DefaultExperiment tolerance (relative)
     model_description: Any = field(default=None, compare=False, repr=False)
 
     @property
@@ -159,10 +161,13 @@ def read_fmu(path: str | Path) -> FmuInfo:
     experiment = md.defaultExperiment
     step = float(experiment.stepSize) if experiment and experiment.stepSize else None
     stop = float(experiment.stopTime) if experiment and experiment.stopTime else None
+    start = float(experiment.startTime) if experiment and experiment.startTime else None
+    tolerance = (float(experiment.tolerance) if experiment and experiment.tolerance
+                 else None)
     token = md.guid if md.fmiVersion == "2.0" else md.instantiationToken
     return FmuInfo(path, md.fmiVersion, md.modelName or path.stem,
                    md.coSimulation.modelIdentifier, token or "", variables, inputs, outputs,
-                   parameters, dependencies, step, stop, md)
+                   parameters, dependencies, step, stop, start, tolerance, md)
 
 
 def typed_value(kind: str, value: Any) -> Any:
@@ -350,16 +355,18 @@ class FmuInstance:
 
     # -- life cycle -----------------------------------------------------------------------
     def initialize(self, values: Mapping[str, Any] | None = None, start_time: float = 0.0,
-                   stop_time: float | None = None) -> None:
-        """Set `values` (parameters, inputs' start values) in initialization mode, leave it."""
+                   stop_time: float | None = None, tolerance: float | None = None) -> None:
+        """Set `values` (parameters, inputs' start values) in initialization mode, leave it.
+        The experiment (start, stop, and the tolerance of an FMU's own solver, None: not
+        defined) goes to fmi2SetupExperiment / fmi3EnterInitializationMode."""
         fmu = self.fmu
         if self.info.fmi_version == "2.0":
-            self.call("fmi2SetupExperiment",
-                      lambda: fmu.setupExperiment(startTime=start_time, stopTime=stop_time))
+            self.call("fmi2SetupExperiment", lambda: fmu.setupExperiment(
+                tolerance=tolerance, startTime=start_time, stopTime=stop_time))
             self.call("fmi2EnterInitializationMode", fmu.enterInitializationMode)
         else:
             self.call("fmi3EnterInitializationMode", lambda: fmu.enterInitializationMode(
-                startTime=start_time, stopTime=stop_time))
+                tolerance=tolerance, startTime=start_time, stopTime=stop_time))
         self.set(values or {})
         self.call(f"fmi{self.info.fmi_version[0]}ExitInitializationMode",
                   fmu.exitInitializationMode)
