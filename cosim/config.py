@@ -117,6 +117,15 @@ def checked(config: RunConfig) -> RunConfig:
     return again
 
 
+def with_isolation(config: RunConfig, isolate: bool, step_timeout: float | None
+                   ) -> RunConfig:
+    """`config` with every FMU in its own process (`isolate`, as `flexff run --isolate`) and
+    its calls bounded by `step_timeout` (s; None: as configured), checked again."""
+    fmus = tuple(replace(f, isolate=f.isolate or isolate) for f in config.fmus)
+    timeout = config.step_timeout if step_timeout is None else step_timeout
+    return checked(replace(config, fmus=fmus, step_timeout=timeout))
+
+
 def read_tables(path: Path) -> dict[str, Any]:
     """The tables of the TOML file at `path`, unchecked; ConfigError naming the file when it
     is missing or not TOML."""
@@ -158,6 +167,7 @@ def expanded(config: RunConfig) -> dict[str, Any]:
     """The configuration in the general form, as TOML tables (paths absolute)."""
     run = {"step": config.step, "start": config.start, "stop": config.stop,
            **({"tolerance": config.tolerance} if config.tolerance is not None else {}),
+           **({"step_timeout": config.step_timeout} if config.step_timeout is not None else {}),
            "algorithm": config.algorithm, "order": [f.name for f in config.fmus]}
     data: dict[str, Any] = {"run": run}
     if config.reference is not None:
@@ -172,7 +182,8 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                             **({"parameters": dict(f.parameters)} if f.parameters else {}),
                             **({"unconnected": f.unconnected}
                                if f.unconnected != "error" else {}),
-                            **({"tolerance": f.tolerance} if f.tolerance is not None else {})}
+                            **({"tolerance": f.tolerance} if f.tolerance is not None else {}),
+                            **({"isolate": True} if f.isolate else {})}
                    for f in config.fmus}
     if config.connections:
         data["connection"] = [{"from": c.from_name, "to": c.to_name,
@@ -215,7 +226,8 @@ class _Parser:
         general = "fmu" in data
         short = any(t in data for t in SHORT_FORM) or not general
         run = self.table(data, "run")
-        self.keys(run, "run", ("step", "start", "stop", "tolerance", "algorithm", "order"))
+        self.keys(run, "run", ("step", "start", "stop", "tolerance", "step_timeout", "algorithm",
+                               "order"))
         step = self.number(run, "run", "step", 1e-3, positive=True)
         if short and "reference" not in data:
             raise self.error("reference", "the [reference] table is required")
@@ -241,8 +253,10 @@ class _Parser:
         tolerance = self.tolerance(run, "run")
         fmus = [replace(f, tolerance=self.fmu_tolerance(f, tolerance)) for f in fmus]
         sources += self.sources(data.get("source", []))
+        step_timeout = self.step_timeout(run, fmus)
         config = RunConfig(
             name=name, step=step, stop=stop, start=start_time, tolerance=tolerance,
+            step_timeout=step_timeout,
             fmus=self.order(run, fmus), reference=reference,
             sources=tuple(sources), connections=self.connections(data.get("connection", []),
                                                                  fmus),
@@ -286,6 +300,22 @@ class _Parser:
         """A relative tolerance for the FMUs' own solvers (None: not given)."""
         return self.number(t, where, "tolerance", None, positive=True) if "tolerance" in t \
             else None
+
+    def step_timeout(self, run: Mapping[str, Any], fmus: Sequence[FmuConfig]) -> float | None:
+        """run.step_timeout, for the FMUs in their own process."""
+        if "step_timeout" not in run:
+            return None
+        if not any(f.isolate for f in fmus):
+            raise self.error("run.step_timeout", "bounds the calls of FMUs in their own "
+                                                 "process: set isolate = true on an [fmu.NAME] "
+                                                 "(or run with --isolate)")
+        return self.number(run, "run", "step_timeout", None, positive=True)
+
+    def isolate(self, t: Mapping[str, Any], where: str) -> bool:
+        value = t.get("isolate", False)
+        if not isinstance(value, bool):
+            raise self.error(f"{where}.isolate", f"expected true or false, got {value!r}")
+        return value
 
     def fmu_tolerance(self, f: FmuConfig, run: float | None) -> float | None:
         """An FMU's tolerance: its own key, else [run] tolerance, else its default experiment's
@@ -357,13 +387,14 @@ class _Parser:
             raise self.error(f"{where}.parameters", f"expected a table {{name = value}}, got "
                                                     f"{parameters!r}")
         if "path" in t:
-            self.keys(t, where, ("path", "parameters", "unconnected", "tolerance"))
+            self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate"))
             path = self.path(t, where, "path")
             return FmuConfig(name, path=path, parameters=self.fmu_parameters(path, parameters,
                                                                              where),
-                             unconnected=unconnected, tolerance=self.tolerance(t, where))
+                             unconnected=unconnected, tolerance=self.tolerance(t, where),
+                             isolate=self.isolate(t, where))
         builtin = self.choice(t, where, "builtin", tuple(BUILTIN_OPTIONS), None)
-        self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance",
+        self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
                              *BUILTIN_OPTIONS[builtin]))
         options: dict[str, Any] = {}
         if builtin == "plant":
@@ -381,7 +412,8 @@ class _Parser:
         elif builtin == "learned-feedforward":
             options = self.feedforward_options(t, where)
         return FmuConfig(name, builtin=builtin, options=options, parameters=dict(parameters),
-                         unconnected=unconnected, tolerance=self.tolerance(t, where))
+                         unconnected=unconnected, tolerance=self.tolerance(t, where),
+                         isolate=self.isolate(t, where))
 
     def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str
                        ) -> dict[str, Any]:

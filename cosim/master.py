@@ -53,6 +53,7 @@ import numpy as np
 from tqdm import tqdm
 
 from flexff.cosim.engine import (
+    AFTER_RECORD,
     CALLS,
     FAILED,
     MAX_LISTED_OVERRUNS,
@@ -66,6 +67,7 @@ from flexff.cosim.engine import (
     pointer,
     start_schedule,
 )
+from flexff.cosim.isolation import IsolatedInstance
 from flexff.cosim.recording import Recording
 from flexff.cosim.schema import ALGORITHMS, point_time
 from flexff.cosim.timing import Pacing, StepTiming
@@ -88,6 +90,7 @@ class ResolvedFmu:
     parameters: Mapping[str, Any] = field(default_factory=dict)
     info: FmuInfo | None = field(default=None, compare=False, repr=False)
     tolerance: float | None = None
+    isolate: bool = False  # run it in its own process (cosim.isolation)
 
     def described(self) -> FmuInfo:
         """The model description: the one carried, else read and the start values checked."""
@@ -99,14 +102,18 @@ class ResolvedFmu:
 
 
 class CosimError(RunError):
-    """An FMI call failed during a co-simulation (the message carries the FMU's log)."""
+    """An FMI call failed during a co-simulation (the message carries the FMU's log);
+    `recording` holds the points recorded before it, where the loop had begun."""
+
+    recording: Recording | None = None
 
 
 class _Plan:
     """How one FMU reads its inputs from and writes its outputs to the bus (numpy arrays the
     engine's EngineFmuPlan points into)."""
 
-    def __init__(self, instance: FmuInstance, fmu: ResolvedFmu, links: Sequence[Link],
+    def __init__(self, instance: FmuInstance | IsolatedInstance, fmu: ResolvedFmu,
+                 links: Sequence[Link],
                  bus_index: Mapping[str, int], bus: np.ndarray, out_offset: int,
                  read_before: bool, read_after: bool) -> None:
         info = instance.info
@@ -144,13 +151,21 @@ class _Plan:
         values = bus[self.gather]
         return values if self.gain is None else values * self.gain + self.offset
 
-    def engine_plan(self) -> EngineFmuPlan:
+    def calls(self) -> tuple[bool, int | None, int, int, int]:
+        """(fmi3, component, set, get, step): the FMU's own functions, or an isolated FMU's
+        proxy (cosim.isolation)."""
+        if isinstance(self.instance, IsolatedInstance):
+            return self.instance.calls()
         dll = self.instance.fmu.dll
         fmi3 = self.instance.info.fmi_version == "3.0"
         names = (("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep") if fmi3 else
                  ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"))
+        set_, get, step = (function_address(dll, n) for n in names)
+        return fmi3, self.instance.component.value, set_, get, step
+
+    def engine_plan(self) -> EngineFmuPlan:
         return EngineFmuPlan(
-            fmi3, self.instance.component.value, *(function_address(dll, n) for n in names),
+            *self.calls(),
             len(self.inputs), pointer(self.in_vr, c_uint), pointer(self.gather, c_long),
             pointer(self.gain), pointer(self.offset), pointer(self.in_values),
             len(self.outputs), pointer(self.out_vr, c_uint), pointer(self.out_values),
@@ -166,12 +181,12 @@ class Master:
 
     `sources` names the external signals (the reference, constants) given to `run`; `links`
     is the wiring (cosim.wiring.wire; default: every input by name); `start` the time of
-    point 0.
+    point 0; `step_timeout` (s) bounds every call of an isolated FMU.
     """
 
     def __init__(self, fmus: Sequence[ResolvedFmu], sources: Sequence[str], step: float,
                  links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel",
-                 start: float = 0.0) -> None:
+                 start: float = 0.0, step_timeout: float | None = None) -> None:
         if not step > 0:
             raise InputError(f"step must be positive, got {step}")
         if algorithm not in ALGORITHMS:
@@ -182,7 +197,7 @@ class Master:
         self.sources = tuple(sources)
         self.fmus = list(fmus)
         self._plans: list[_Plan] = []
-        self._instances: list[FmuInstance] = []
+        self._instances: list[FmuInstance | IsolatedInstance] = []
         infos = [s.described() for s in fmus]
         if links is None:
             links = wire([Port(s.name, i) for s, i in zip(fmus, infos)], self.sources,
@@ -190,7 +205,8 @@ class Master:
         self.links = tuple(links)
         try:
             for fmu, info in zip(fmus, infos):
-                self._instances.append(FmuInstance(info, fmu.name))
+                self._instances.append(IsolatedInstance(info, fmu.name, step_timeout)
+                                       if fmu.isolate else FmuInstance(info, fmu.name))
             self._layout(infos)
         except BaseException:
             self.close()
@@ -229,10 +245,10 @@ class Master:
         for p in self._plans:
             if (p.instance.info.fmi_version != "2.0" or p.gain is not None or p.typed_inputs
                     or p.typed_outputs or self.algorithm != "gauss-seidel" or self.start
-                    or p.tolerance is not None):
+                    or p.tolerance is not None or isinstance(p.instance, IsolatedInstance)):
                 raise InputError(f"the C floor runs FMI 2.0 FMUs with Real signals and no gains "
-                                 f"under Gauss-Seidel, from t = 0 with no tolerance; {p.name} "
-                                 f"does not fit")
+                                 f"under Gauss-Seidel, from t = 0 with no tolerance, in its "
+                                 f"process; {p.name} does not fit")
         index = {n: i for i, n in enumerate(self.signals)}
         by_target = {(k.consumer, k.input): k.from_name for k in self.links}
         return {
@@ -315,11 +331,10 @@ class Master:
         finally:
             if gc_was_enabled:
                 gc.enable()
-        if status == FAILED:
-            raise hook.error or self._plans[run.failed_fmu].fail(
-                f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
         if status == OVERRUN:
             end = run.failed_k + 1  # points 0 .. failed_k were recorded, the step was made
+        elif status == FAILED:  # points before failed_k were recorded, failed_k if its step failed
+            end = run.failed_k + (run.failed_call in AFTER_RECORD)
         signals: dict[str, np.ndarray] = {}
         float_columns = {j: c for c, (j, _) in enumerate(floats)}
         typed_columns = {j: c for c, (j, _) in enumerate(typed)}
@@ -327,14 +342,21 @@ class Master:
             signals[name] = (np.ascontiguousarray(out[:end, float_columns[j]])
                              if j in float_columns
                              else _typed_array(typed_out[typed_columns[j]][:end]))
-        made = end if status == OVERRUN else steps  # the steps the engine made
+        made = steps if status == OK else min(end, steps)  # the steps the engine made
         timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
                             self._fmu_tet[:made], self._lateness[:made], pacing, run.overruns,
                             tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
                             run.failed_k if status == OVERRUN else None,
                             network_calls={p.name: times for p in self._plans
                                            if (times := p.instance.network_times())})
-        return Recording(self.time(np.arange(end)), signals, wall, timing)
+        recording = Recording(self.time(np.arange(end)), signals, wall, timing)
+        if status == FAILED:
+            failure = hook.error or self._plans[run.failed_fmu].fail(
+                f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
+            if isinstance(failure, CosimError):
+                failure.recording = recording
+            raise failure
+        return recording
 
     def time(self, k: Any) -> Any:
         """The time of point(s) k (cosim.schema.point_time)."""
@@ -489,6 +511,8 @@ def _check_parameters(fmu: ResolvedFmu, info: FmuInfo) -> None:
 
 def _typed_array(values: np.ndarray) -> np.ndarray:
     """A recorded column of another type as a plain numpy array (binary as hex strings)."""
+    if not values.size:  # a run that failed at its first point
+        return np.array([])
     first = values[0]
     if isinstance(first, bytes):
         return np.array([v.hex() for v in values])

@@ -53,7 +53,7 @@ class Scenario:
     def master(self) -> Master:
         """The FMUs loaded and wired, ready to run (a context manager)."""
         return Master(self.fmus, list(self.sources), self.step, self.links,
-                      self.config.algorithm, self.config.start)
+                      self.config.algorithm, self.config.start, self.config.step_timeout)
 
     def reference(self) -> dict[str, np.ndarray]:
         """The sampled reference signals (empty without a [reference])."""
@@ -74,7 +74,7 @@ def resolve(config: RunConfig, folder: str | Path) -> Scenario:
         except FmuError as error:
             raise ConfigError(config.origin, f"fmu.{f.name}", str(error)) from None
         tolerance = f.tolerance if f.tolerance is not None else info.default_tolerance
-        fmus.append(ResolvedFmu(f.name, path, _start_values(f), info, tolerance))
+        fmus.append(ResolvedFmu(f.name, path, _start_values(f), info, tolerance, f.isolate))
         ports.append(Port(f.name, info, f.unconnected,
                           frozenset(n for n in f.parameters if n in info.inputs)))
     try:

@@ -24,7 +24,9 @@ General form (SI units):
                    unconnected = "error" (default) | "start" (inputs left unconnected keep
                    their start values); tolerance (relative: given to the FMU's
                    fmi2SetupExperiment / fmi3EnterInitializationMode; default: [run]
-                   tolerance, else the FMU's default experiment, else none)
+                   tolerance, else the FMU's default experiment, else none); isolate = true
+                   runs it in its own process (cosim.isolation): a crash or a hang ends the
+                   run with an error, and [run] step_timeout (s) bounds each of its calls
   [[connection]]   from = "fmu.output" or a source signal, to = "fmu.input", optional gain and
                    offset (SSP's LinearTransformation: to = gain * from + offset)
   [record]         signals = [names] (default: all), csv (bool, default true)
@@ -103,6 +105,7 @@ class FmuConfig:
     parameters: Mapping[str, Any] = field(default_factory=dict)
     unconnected: str = "error"
     tolerance: float | None = None  # None: the FMU's default experiment's, if any
+    isolate: bool = False  # run it in its own process (cosim.isolation)
 
 
 @dataclass(frozen=True)
@@ -140,6 +143,7 @@ class RunConfig:
     origin: str = "<config>"  # where it was read from, for errors
     start: float = 0.0  # the start time [s]
     tolerance: float | None = None  # [run] tolerance as given (None: each FMU's own)
+    step_timeout: float | None = None  # [s] per call of an isolated FMU (None: none)
     checked: bool = field(default=False, init=False, compare=False, repr=False)
 
     @property
