@@ -252,6 +252,7 @@ def main(argv: Sequence[str]) -> int:
     """The child: instantiate the FMU, then serve the engine's calls (proxy_serve) and the
     master's Python requests until told to exit or the master is gone."""
     path, name, cmd, ack, memory, capacity = argv
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle: it closes us
     cmd_fd, ack_fd, capacity_n = int(cmd), int(ack), int(capacity)
     lib = library()
     shared = mmap.mmap(int(memory), lib.proxy_shared_size(capacity_n))
