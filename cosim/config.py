@@ -79,6 +79,7 @@ from flexff.cosim.schema import (
     whole_steps,
 )
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
+from flexff.fmu.model_exchange import SOLVERS
 from flexff.plant.kinematics import check_workspace
 from flexff.plant.model import VARIANTS
 from flexff.plant.parameters import NOMINAL
@@ -183,7 +184,8 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                             **({"unconnected": f.unconnected}
                                if f.unconnected != "error" else {}),
                             **({"tolerance": f.tolerance} if f.tolerance is not None else {}),
-                            **({"isolate": True} if f.isolate else {})}
+                            **({"isolate": True} if f.isolate else {}),
+                            **({"solver": f.solver} if f.solver else {})}
                    for f in config.fmus}
     if config.connections:
         data["connection"] = [{"from": c.from_name, "to": c.to_name,
@@ -311,6 +313,18 @@ class _Parser:
                                                  "(or run with --isolate)")
         return self.number(run, "run", "step_timeout", None, positive=True)
 
+    def solver(self, t: Mapping[str, Any], where: str, path: Path) -> str | None:
+        """fmu.NAME.solver: model exchange with a solver; "cvode" for an FMU that has no
+        co-simulation interface, None (co-simulation) for one that has."""
+        info = read_fmu(path)
+        if "solver" not in t:
+            return None if info.co_simulation else SOLVERS[0]
+        solver = self.choice(t, where, "solver", SOLVERS, None)
+        if info.me_identifier is None:
+            raise self.error(f"{where}.solver", f"{path.name} has no model-exchange interface "
+                                                f"to solve: remove the key to co-simulate it")
+        return solver
+
     def isolate(self, t: Mapping[str, Any], where: str) -> bool:
         value = t.get("isolate", False)
         if not isinstance(value, bool):
@@ -387,12 +401,13 @@ class _Parser:
             raise self.error(f"{where}.parameters", f"expected a table {{name = value}}, got "
                                                     f"{parameters!r}")
         if "path" in t:
-            self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate"))
+            self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate",
+                                 "solver"))
             path = self.path(t, where, "path")
             return FmuConfig(name, path=path, parameters=self.fmu_parameters(path, parameters,
                                                                              where),
                              unconnected=unconnected, tolerance=self.tolerance(t, where),
-                             isolate=self.isolate(t, where))
+                             isolate=self.isolate(t, where), solver=self.solver(t, where, path))
         builtin = self.choice(t, where, "builtin", tuple(BUILTIN_OPTIONS), None)
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
                              *BUILTIN_OPTIONS[builtin]))

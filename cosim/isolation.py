@@ -70,9 +70,18 @@ def library() -> ctypes.CDLL:
     return lib
 
 
-def _calls(info: FmuInfo) -> tuple[str, str, str]:
-    return (("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep") if info.fmi_version == "3.0"
-            else ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"))
+def _functions(instance: FmuInstance) -> list[int]:
+    """The set, get and step functions the child serves: the FMU's own, a model-exchange FMU's
+    solver step (none before it is initialized, when the engine does not run)."""
+    fmi3 = instance.info.fmi_version == "3.0"
+    dll = instance.fmu.dll
+    functions = [engine.function_address(dll, "fmi3SetFloat64" if fmi3 else "fmi2SetReal"),
+                 engine.function_address(dll, "fmi3GetFloat64" if fmi3 else "fmi2GetReal")]
+    if instance.stepper is not None:
+        return [*functions, instance.stepper.address]
+    if instance.model_exchange:
+        return [*functions, 0]
+    return [*functions, engine.function_address(dll, "fmi3DoStep" if fmi3 else "fmi2DoStep")]
 
 
 def _send(fd: int, message: Any) -> None:
@@ -92,7 +101,8 @@ class IsolatedInstance:
     `timeout` (s, None: none) bounds every call the child answers (its start, which includes
     starting Python, at least START_WAIT)."""
 
-    def __init__(self, info: FmuInfo, name: str, timeout: float | None = None) -> None:
+    def __init__(self, info: FmuInfo, name: str, timeout: float | None = None,
+                 solver: str | None = None) -> None:
         self.info, self.name, self.timeout = info, name, timeout
         self.library = info.path
         self.initialized = False
@@ -109,7 +119,8 @@ class IsolatedInstance:
             [root, *filter(None, [os.environ.get("PYTHONPATH")])])}
         self._process = subprocess.Popen(
             [sys.executable, "-m", "flexff.cosim.isolation", str(info.path), name,
-             str(cmd_read), str(ack_write), str(self._memory), str(self._capacity)],
+             str(cmd_read), str(ack_write), str(self._memory), str(self._capacity),
+             solver or ""],
             pass_fds=(cmd_read, ack_write, self._memory), env=env)
         os.close(cmd_read)
         os.close(ack_write)
@@ -251,23 +262,22 @@ def _answer(instance: FmuInstance, what: str, args: tuple[Any, ...]) -> Any:
 def main(argv: Sequence[str]) -> int:
     """The child: instantiate the FMU, then serve the engine's calls (proxy_serve) and the
     master's Python requests until told to exit or the master is gone."""
-    path, name, cmd, ack, memory, capacity = argv
+    path, name, cmd, ack, memory, capacity, solver = argv
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle: it closes us
     cmd_fd, ack_fd, capacity_n = int(cmd), int(ack), int(capacity)
     lib = library()
     shared = mmap.mmap(int(memory), lib.proxy_shared_size(capacity_n))
     address = ctypes.addressof(c_char.from_buffer(shared))
     try:
-        instance = FmuInstance(read_fmu(path), name)
+        instance = FmuInstance(read_fmu(path), name, solver or None)
     except FmuError as error:
         _send(ack_fd, ("error", str(error)))
         return 1
     _send(ack_fd, ("ok", None))
     try:
-        functions = [engine.function_address(instance.fmu.dll, n) for n in _calls(instance.info)]
         while lib.proxy_serve(cmd_fd, ack_fd, address, capacity_n,
                               instance.info.fmi_version == "3.0", instance.component.value,
-                              *functions) == SERVE_PYTHON:
+                              *_functions(instance)) == SERVE_PYTHON:
             what, args = pickle.loads(_read_exactly(
                 cmd_fd, LENGTH.unpack(_read_exactly(cmd_fd, LENGTH.size))[0]))
             try:

@@ -91,6 +91,7 @@ class ResolvedFmu:
     info: FmuInfo | None = field(default=None, compare=False, repr=False)
     tolerance: float | None = None
     isolate: bool = False  # run it in its own process (cosim.isolation)
+    solver: str | None = None  # run it as model exchange with this solver (fmu.model_exchange)
 
     def described(self) -> FmuInfo:
         """The model description: the one carried, else read and the start values checked."""
@@ -160,7 +161,9 @@ class _Plan:
         fmi3 = self.instance.info.fmi_version == "3.0"
         names = (("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep") if fmi3 else
                  ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"))
-        set_, get, step = (function_address(dll, n) for n in names)
+        set_, get = function_address(dll, names[0]), function_address(dll, names[1])
+        stepper = self.instance.stepper  # model exchange: the solver's step
+        step = stepper.address if stepper is not None else function_address(dll, names[2])
         return fmi3, self.instance.component.value, set_, get, step
 
     def engine_plan(self) -> EngineFmuPlan:
@@ -205,8 +208,9 @@ class Master:
         self.links = tuple(links)
         try:
             for fmu, info in zip(fmus, infos):
-                self._instances.append(IsolatedInstance(info, fmu.name, step_timeout)
-                                       if fmu.isolate else FmuInstance(info, fmu.name))
+                self._instances.append(
+                    IsolatedInstance(info, fmu.name, step_timeout, fmu.solver) if fmu.isolate
+                    else FmuInstance(info, fmu.name, fmu.solver))
             self._layout(infos)
         except BaseException:
             self.close()
@@ -245,10 +249,11 @@ class Master:
         for p in self._plans:
             if (p.instance.info.fmi_version != "2.0" or p.gain is not None or p.typed_inputs
                     or p.typed_outputs or self.algorithm != "gauss-seidel" or self.start
-                    or p.tolerance is not None or isinstance(p.instance, IsolatedInstance)):
+                    or p.tolerance is not None or isinstance(p.instance, IsolatedInstance)
+                    or p.instance.model_exchange):
                 raise InputError(f"the C floor runs FMI 2.0 FMUs with Real signals and no gains "
                                  f"under Gauss-Seidel, from t = 0 with no tolerance, in its "
-                                 f"process; {p.name} does not fit")
+                                 f"process, co-simulated; {p.name} does not fit")
         index = {n: i for i, n in enumerate(self.signals)}
         by_target = {(k.consumer, k.input): k.from_name for k in self.links}
         return {

@@ -26,7 +26,10 @@ General form (SI units):
                    fmi2SetupExperiment / fmi3EnterInitializationMode; default: [run]
                    tolerance, else the FMU's default experiment, else none); isolate = true
                    runs it in its own process (cosim.isolation): a crash or a hang ends the
-                   run with an error, and [run] step_timeout (s) bounds each of its calls
+                   run with an error, and [run] step_timeout (s) bounds each of its calls;
+                   solver = "cvode" runs it as model exchange (fmu.model_exchange, with the
+                   FMU's tolerance as CVODE's relative one; the default for an FMU with no
+                   co-simulation interface)
   [[connection]]   from = "fmu.output" or a source signal, to = "fmu.input", optional gain and
                    offset (SSP's LinearTransformation: to = gain * from + offset)
   [record]         signals = [names] (default: all), csv (bool, default true)
@@ -106,6 +109,7 @@ class FmuConfig:
     unconnected: str = "error"
     tolerance: float | None = None  # None: the FMU's default experiment's, if any
     isolate: bool = False  # run it in its own process (cosim.isolation)
+    solver: str | None = None  # model exchange with this solver (None: co-simulation)
 
 
 @dataclass(frozen=True)
