@@ -65,6 +65,20 @@ def test_reference_fmus_as_model_exchange_equal_fmpy(model, outputs, stop, versi
         assert np.max(np.abs(recording["m.x1"] - exact[1])) < 5e-3
 
 
+@pytest.mark.parametrize("version", [2, 3])
+def test_model_exchange_from_a_start_time_equals_fmpy(version):
+    fmu = REFERENCE_FMUS / f"fmi{version}" / "VanDerPol.fmu"
+    recording = simulate_config(parse_config({
+        "run": {"step": STEP, "start": 2.0, "stop": 12.0},
+        "fmu": {"m": {"path": str(fmu), "solver": "cvode"}}}))
+    theirs = fmpy.simulate_fmu(str(fmu), fmi_type="ModelExchange", solver="CVode",
+                               output_interval=STEP, start_time=2.0, stop_time=12.0,
+                               output=["x0", "x1"], record_events=False)
+    assert np.array_equal(recording.time, theirs["time"])
+    for name in ("x0", "x1"):
+        assert np.array_equal(recording[f"m.{name}"], theirs[name]), name
+
+
 @pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolated"])
 def test_the_bouncing_ball_events_equal_fmpy(ball, isolate, tmp_path):
     config = parse_config({"run": {"step": STEP},  # stop: the FMU's default experiment, 3 s
