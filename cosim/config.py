@@ -79,6 +79,7 @@ from flexff.cosim.schema import (
     whole_steps,
 )
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
+from flexff.fmu.model_exchange import SOLVERS
 from flexff.plant.kinematics import check_workspace
 from flexff.plant.model import VARIANTS
 from flexff.plant.parameters import NOMINAL
@@ -115,6 +116,15 @@ def checked(config: RunConfig) -> RunConfig:
     keys = tuple(replace(c, key=old.key) for c, old in zip(again.connections, config.connections))
     object.__setattr__(again, "connections", keys)  # still the parser's own, checked object
     return again
+
+
+def with_isolation(config: RunConfig, isolate: bool, step_timeout: float | None
+                   ) -> RunConfig:
+    """`config` with every FMU in its own process (`isolate`, as `flexff run --isolate`) and
+    its calls bounded by `step_timeout` (s; None: as configured), checked again."""
+    fmus = tuple(replace(f, isolate=f.isolate or isolate) for f in config.fmus)
+    timeout = config.step_timeout if step_timeout is None else step_timeout
+    return checked(replace(config, fmus=fmus, step_timeout=timeout))
 
 
 def read_tables(path: Path) -> dict[str, Any]:
@@ -156,8 +166,10 @@ def config_examples() -> dict[str, str]:
 
 def expanded(config: RunConfig) -> dict[str, Any]:
     """The configuration in the general form, as TOML tables (paths absolute)."""
-    run = {"step": config.step, "stop": config.stop, "algorithm": config.algorithm,
-           "order": [f.name for f in config.fmus]}
+    run = {"step": config.step, "start": config.start, "stop": config.stop,
+           **({"tolerance": config.tolerance} if config.tolerance is not None else {}),
+           **({"step_timeout": config.step_timeout} if config.step_timeout is not None else {}),
+           "algorithm": config.algorithm, "order": [f.name for f in config.fmus]}
     data: dict[str, Any] = {"run": run}
     if config.reference is not None:
         data["reference"] = {"kind": config.reference.kind, **_plain(config.reference.options)}
@@ -170,7 +182,10 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                             **_plain(f.options),
                             **({"parameters": dict(f.parameters)} if f.parameters else {}),
                             **({"unconnected": f.unconnected}
-                               if f.unconnected != "error" else {})}
+                               if f.unconnected != "error" else {}),
+                            **({"tolerance": f.tolerance} if f.tolerance is not None else {}),
+                            **({"isolate": True} if f.isolate else {}),
+                            **({"solver": f.solver} if f.solver else {})}
                    for f in config.fmus}
     if config.connections:
         data["connection"] = [{"from": c.from_name, "to": c.to_name,
@@ -213,7 +228,8 @@ class _Parser:
         general = "fmu" in data
         short = any(t in data for t in SHORT_FORM) or not general
         run = self.table(data, "run")
-        self.keys(run, "run", ("step", "stop", "algorithm", "order"))
+        self.keys(run, "run", ("step", "start", "stop", "tolerance", "step_timeout", "algorithm",
+                               "order"))
         step = self.number(run, "run", "step", 1e-3, positive=True)
         if short and "reference" not in data:
             raise self.error("reference", "the [reference] table is required")
@@ -233,10 +249,17 @@ class _Parser:
             fmus.append(self.fmu(fmu_name, table, start))
         if not fmus:
             raise self.error("fmu", "no FMU to run: add an [fmu.NAME] table")
-        stop = self.stop(run, signal, fmus, step)
+        start_time = self.number(run, "run", "start", next(
+            (read_fmu(f.path).default_start or 0.0 for f in fmus if f.path), 0.0))
+        stop = self.stop(run, signal, fmus, step, start_time)
+        tolerance = self.tolerance(run, "run")
+        fmus = [replace(f, tolerance=self.fmu_tolerance(f, tolerance)) for f in fmus]
         sources += self.sources(data.get("source", []))
+        step_timeout = self.step_timeout(run, fmus)
         config = RunConfig(
-            name=name, step=step, stop=stop, fmus=self.order(run, fmus), reference=reference,
+            name=name, step=step, stop=stop, start=start_time, tolerance=tolerance,
+            step_timeout=step_timeout,
+            fmus=self.order(run, fmus), reference=reference,
             sources=tuple(sources), connections=self.connections(data.get("connection", []),
                                                                  fmus),
             algorithm=self.choice(run, "run", "algorithm", ALGORITHMS, "gauss-seidel"),
@@ -259,16 +282,63 @@ class _Parser:
             raise self.error(", ".join(given) or "reference.kind", str(error)) from None
 
     def stop(self, run: Mapping[str, Any], signal: Reference | None, fmus: Sequence[FmuConfig],
-             step: float) -> float:
-        """run.stop; default the reference's duration, else the first FMU's experiment."""
-        default = signal.duration if signal is not None else None
+             step: float, start: float) -> float:
+        """run.stop, the end time; default the start plus the reference's duration, else the
+        first FMU's experiment."""
+        default = start + signal.duration if signal is not None else None
         if default is None:
             default = next((read_fmu(f.path).default_stop for f in fmus if f.path), None)
-        stop = self.number(run, "run", "stop", default, positive=True)
-        if not whole_steps(stop, step):
-            raise self.error("run.stop", f"{stop!r} s is not a whole number of steps of "
+        stop = self.number(run, "run", "stop", default)
+        if not stop > start:
+            raise self.error("run.stop", f"the end time {stop!r} s must come after the start "
+                                         f"time {start!r} s (run.start)")
+        if not whole_steps(stop - start, step):
+            raise self.error("run.stop", f"the run's length {stop - start!r} s (run.stop - "
+                                         f"run.start) is not a whole number of steps of "
                                          f"{step!r} s (run.step)")
         return stop
+
+    def tolerance(self, t: Mapping[str, Any], where: str) -> float | None:
+        """A relative tolerance for the FMUs' own solvers (None: not given)."""
+        return self.number(t, where, "tolerance", None, positive=True) if "tolerance" in t \
+            else None
+
+    def step_timeout(self, run: Mapping[str, Any], fmus: Sequence[FmuConfig]) -> float | None:
+        """run.step_timeout, for the FMUs in their own process."""
+        if "step_timeout" not in run:
+            return None
+        if not any(f.isolate for f in fmus):
+            raise self.error("run.step_timeout", "bounds the calls of FMUs in their own "
+                                                 "process: set isolate = true on an [fmu.NAME] "
+                                                 "(or run with --isolate)")
+        return self.number(run, "run", "step_timeout", None, positive=True)
+
+    def solver(self, t: Mapping[str, Any], where: str, path: Path) -> str | None:
+        """fmu.NAME.solver: model exchange with a solver; "cvode" for an FMU that has no
+        co-simulation interface, None (co-simulation) for one that has."""
+        info = read_fmu(path)
+        if "solver" not in t:
+            return None if info.co_simulation else SOLVERS[0]
+        solver = self.choice(t, where, "solver", SOLVERS, None)
+        if info.me_identifier is None:
+            raise self.error(f"{where}.solver", f"{path.name} has no model-exchange interface "
+                                                f"to solve: remove the key to co-simulate it")
+        return solver
+
+    def isolate(self, t: Mapping[str, Any], where: str) -> bool:
+        value = t.get("isolate", False)
+        if not isinstance(value, bool):
+            raise self.error(f"{where}.isolate", f"expected true or false, got {value!r}")
+        return value
+
+    def fmu_tolerance(self, f: FmuConfig, run: float | None) -> float | None:
+        """An FMU's tolerance: its own key, else [run] tolerance, else its default experiment's
+        (a built-in's is read when it is built, cosim.scenario)."""
+        if f.tolerance is not None:
+            return f.tolerance
+        if run is not None or f.path is None:
+            return run
+        return read_fmu(f.path).default_tolerance
 
     def order(self, run: Mapping[str, Any], fmus: list[FmuConfig]) -> tuple[FmuConfig, ...]:
         if "order" not in run:
@@ -331,13 +401,16 @@ class _Parser:
             raise self.error(f"{where}.parameters", f"expected a table {{name = value}}, got "
                                                     f"{parameters!r}")
         if "path" in t:
-            self.keys(t, where, ("path", "parameters", "unconnected"))
+            self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate",
+                                 "solver"))
             path = self.path(t, where, "path")
             return FmuConfig(name, path=path, parameters=self.fmu_parameters(path, parameters,
                                                                              where),
-                             unconnected=unconnected)
+                             unconnected=unconnected, tolerance=self.tolerance(t, where),
+                             isolate=self.isolate(t, where), solver=self.solver(t, where, path))
         builtin = self.choice(t, where, "builtin", tuple(BUILTIN_OPTIONS), None)
-        self.keys(t, where, ("builtin", "parameters", "unconnected", *BUILTIN_OPTIONS[builtin]))
+        self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
+                             *BUILTIN_OPTIONS[builtin]))
         options: dict[str, Any] = {}
         if builtin == "plant":
             variant = self.choice(t, where, "variant", tuple(VARIANTS), "nominal")
@@ -354,7 +427,8 @@ class _Parser:
         elif builtin == "learned-feedforward":
             options = self.feedforward_options(t, where)
         return FmuConfig(name, builtin=builtin, options=options, parameters=dict(parameters),
-                         unconnected=unconnected)
+                         unconnected=unconnected, tolerance=self.tolerance(t, where),
+                         isolate=self.isolate(t, where))
 
     def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str
                        ) -> dict[str, Any]:

@@ -47,6 +47,7 @@ HEADER = SOURCE.with_suffix(".h")  # its structures, for the programs compiled w
 TYPED_HOOK = CFUNCTYPE(c_int, c_long, c_int, c_long)  # (fmu, phase, k) -> 0 if ok
 CALLS = {1: "setting its inputs", 2: "getting its outputs", 3: "the step", 4: "getting its "
          "outputs after the step", 5: "exchanging values of other types"}
+AFTER_RECORD = (3, 4)  # calls made after their point was recorded (CALL_STEP, CALL_GET_AFTER)
 OK, FAILED, OVERRUN, BAD_PLAN = 0, 1, 2, 3  # engine_run's results (RUN_* in engine.c)
 MAX_LISTED_OVERRUNS = 16
 ERROR_SIZE = 256  # Run.error
@@ -81,7 +82,7 @@ class EngineFmuPlan(Structure):
 class EngineRun(Structure):
     """A run's plan, buffers and measurements (struct Run of engine.c)."""
 
-    _fields_ = [("step", c_double), ("steps", c_long), ("n_fmus", c_long),
+    _fields_ = [("step", c_double), ("start_time", c_double), ("steps", c_long), ("n_fmus", c_long),
                 ("fmus", POINTER(EngineFmuPlan)), ("bus", POINTER(c_double)),
                 ("n_bus", c_long), ("n_sources", c_long), ("sources", POINTER(c_double)),
                 ("record", POINTER(c_double)), ("columns", POINTER(c_long)),

@@ -10,7 +10,7 @@ Signals of other types (integers, booleans, strings, ...) go through fmpy's type
 small table beside the bus, and so does every connection that is not float64 into float64 (a
 Float32 input, or a Float64 input fed by a Float32 output): its value is converted, with its
 gain and offset, by cosim.wiring's rule (`carried`) in Python. Communication point k
-(t_k = k * step), for k = 0 .. steps:
+(t_k = start + k * step, cosim.schema.point_time), for k = 0 .. steps:
 
   1. the source signals of point k are copied into the bus;
   2. in order, each FMU gets its inputs and, if a later FMU or no FMU reads its outputs, gives
@@ -53,6 +53,7 @@ import numpy as np
 from tqdm import tqdm
 
 from flexff.cosim.engine import (
+    AFTER_RECORD,
     CALLS,
     FAILED,
     MAX_LISTED_OVERRUNS,
@@ -66,8 +67,9 @@ from flexff.cosim.engine import (
     pointer,
     start_schedule,
 )
+from flexff.cosim.isolation import IsolatedInstance
 from flexff.cosim.recording import Recording
-from flexff.cosim.schema import ALGORITHMS
+from flexff.cosim.schema import ALGORITHMS, point_time
 from flexff.cosim.timing import Pacing, StepTiming
 from flexff.cosim.wiring import SOURCE, Link, Port, carried, wire
 from flexff.fmu.errors import InputError, RunError
@@ -79,13 +81,17 @@ PROGRESS_CHUNK = 1000  # steps between progress bar updates
 
 @dataclass(frozen=True)
 class ResolvedFmu:
-    """One FMU of a co-simulation: its instance name, its file and start values by name, and
-    its model description once read (a resolved scenario's, whose start values are checked)."""
+    """One FMU of a co-simulation: its instance name, its file and start values by name, its
+    model description once read (a resolved scenario's, whose start values are checked), and
+    the tolerance given to its own solver (None: not defined)."""
 
     name: str
     path: Path
     parameters: Mapping[str, Any] = field(default_factory=dict)
     info: FmuInfo | None = field(default=None, compare=False, repr=False)
+    tolerance: float | None = None
+    isolate: bool = False  # run it in its own process (cosim.isolation)
+    solver: str | None = None  # run it as model exchange with this solver (fmu.model_exchange)
 
     def described(self) -> FmuInfo:
         """The model description: the one carried, else read and the start values checked."""
@@ -97,18 +103,23 @@ class ResolvedFmu:
 
 
 class CosimError(RunError):
-    """An FMI call failed during a co-simulation (the message carries the FMU's log)."""
+    """An FMI call failed during a co-simulation (the message carries the FMU's log);
+    `recording` holds the points recorded before it, where the loop had begun."""
+
+    recording: Recording | None = None
 
 
 class _Plan:
     """How one FMU reads its inputs from and writes its outputs to the bus (numpy arrays the
     engine's EngineFmuPlan points into)."""
 
-    def __init__(self, instance: FmuInstance, fmu: ResolvedFmu, links: Sequence[Link],
+    def __init__(self, instance: FmuInstance | IsolatedInstance, fmu: ResolvedFmu,
+                 links: Sequence[Link],
                  bus_index: Mapping[str, int], bus: np.ndarray, out_offset: int,
                  read_before: bool, read_after: bool) -> None:
         info = instance.info
         self.instance, self.name, self.parameters = instance, fmu.name, dict(fmu.parameters)
+        self.tolerance = fmu.tolerance
         floats = [k for k in links if k.on_bus]
         self.typed_inputs = [k for k in links if not k.on_bus]  # set by Python (_set_typed)
         self.inputs = tuple(k.input for k in floats)
@@ -141,13 +152,23 @@ class _Plan:
         values = bus[self.gather]
         return values if self.gain is None else values * self.gain + self.offset
 
-    def engine_plan(self) -> EngineFmuPlan:
+    def calls(self) -> tuple[bool, int | None, int, int, int]:
+        """(fmi3, component, set, get, step): the FMU's own functions, or an isolated FMU's
+        proxy (cosim.isolation)."""
+        if isinstance(self.instance, IsolatedInstance):
+            return self.instance.calls()
         dll = self.instance.fmu.dll
         fmi3 = self.instance.info.fmi_version == "3.0"
         names = (("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep") if fmi3 else
                  ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"))
+        set_, get = function_address(dll, names[0]), function_address(dll, names[1])
+        stepper = self.instance.stepper  # model exchange: the solver's step
+        step = stepper.address if stepper is not None else function_address(dll, names[2])
+        return fmi3, self.instance.component.value, set_, get, step
+
+    def engine_plan(self) -> EngineFmuPlan:
         return EngineFmuPlan(
-            fmi3, self.instance.component.value, *(function_address(dll, n) for n in names),
+            *self.calls(),
             len(self.inputs), pointer(self.in_vr, c_uint), pointer(self.gather, c_long),
             pointer(self.gain), pointer(self.offset), pointer(self.in_values),
             len(self.outputs), pointer(self.out_vr, c_uint), pointer(self.out_values),
@@ -162,20 +183,24 @@ class Master:
     """Loaded FMUs wired together, ready for one run; use it as a context manager.
 
     `sources` names the external signals (the reference, constants) given to `run`; `links`
-    is the wiring (cosim.wiring.wire; default: every input by name).
+    is the wiring (cosim.wiring.wire; default: every input by name); `start` the time of
+    point 0; `step_timeout` (s) bounds every call of an isolated FMU.
     """
 
     def __init__(self, fmus: Sequence[ResolvedFmu], sources: Sequence[str], step: float,
-                 links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel") -> None:
+                 links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel",
+                 start: float = 0.0, step_timeout: float | None = None) -> None:
         if not step > 0:
             raise InputError(f"step must be positive, got {step}")
         if algorithm not in ALGORITHMS:
             raise InputError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
-        self.step, self.algorithm = float(step), algorithm
+        if not math.isfinite(start):
+            raise InputError(f"start must be finite, got {start}")
+        self.step, self.algorithm, self.start = float(step), algorithm, float(start)
         self.sources = tuple(sources)
         self.fmus = list(fmus)
         self._plans: list[_Plan] = []
-        self._instances: list[FmuInstance] = []
+        self._instances: list[FmuInstance | IsolatedInstance] = []
         infos = [s.described() for s in fmus]
         if links is None:
             links = wire([Port(s.name, i) for s, i in zip(fmus, infos)], self.sources,
@@ -183,7 +208,9 @@ class Master:
         self.links = tuple(links)
         try:
             for fmu, info in zip(fmus, infos):
-                self._instances.append(FmuInstance(info, fmu.name))
+                self._instances.append(
+                    IsolatedInstance(info, fmu.name, step_timeout, fmu.solver) if fmu.isolate
+                    else FmuInstance(info, fmu.name, fmu.solver))
             self._layout(infos)
         except BaseException:
             self.close()
@@ -221,9 +248,12 @@ class Master:
         holds FMI 2.0 FMUs with float inputs and outputs, no gains, Gauss-Seidel)."""
         for p in self._plans:
             if (p.instance.info.fmi_version != "2.0" or p.gain is not None or p.typed_inputs
-                    or p.typed_outputs or self.algorithm != "gauss-seidel"):
+                    or p.typed_outputs or self.algorithm != "gauss-seidel" or self.start
+                    or p.tolerance is not None or isinstance(p.instance, IsolatedInstance)
+                    or p.instance.model_exchange):
                 raise InputError(f"the C floor runs FMI 2.0 FMUs with Real signals and no gains "
-                                 f"under Gauss-Seidel; {p.name} does not fit")
+                                 f"under Gauss-Seidel, from t = 0 with no tolerance, in its "
+                                 f"process, co-simulated; {p.name} does not fit")
         index = {n: i for i, n in enumerate(self.signals)}
         by_target = {(k.consumer, k.input): k.from_name for k in self.links}
         return {
@@ -245,7 +275,8 @@ class Master:
     def run(self, sources: Mapping[str, np.ndarray | float], steps: int,
             record: Sequence[str] | None = None, progress: bool | None = None,
             pacing: Pacing | None = None) -> Recording:
-        """Run `steps` steps from t = 0; return the recorded signals at the steps + 1 points.
+        """Run `steps` steps from the start; return the recorded signals at the steps + 1
+        points.
 
         `sources` gives every source signal as a constant or as steps + 1 samples; `record`
         names the signals to keep (default: all; `fmu.output`, a source, or an output's own
@@ -274,7 +305,8 @@ class Master:
             p.typed_outputs = [n for n in p.typed_outputs if f"{p.name}.{n}" in needed]
         for p in self._plans:
             try:
-                p.instance.initialize(p.parameters, 0.0, steps * self.step)
+                p.instance.initialize(p.parameters, self.start, self.time(steps),
+                                      p.tolerance)
             except FmuError as error:
                 raise CosimError(str(error)) from None
             if p.read_after:
@@ -304,11 +336,10 @@ class Master:
         finally:
             if gc_was_enabled:
                 gc.enable()
-        if status == FAILED:
-            raise hook.error or self._plans[run.failed_fmu].fail(
-                f"{CALLS[run.failed_call]} at t = {run.failed_k * self.step:.9g} s")
         if status == OVERRUN:
             end = run.failed_k + 1  # points 0 .. failed_k were recorded, the step was made
+        elif status == FAILED:  # points before failed_k were recorded, failed_k if its step failed
+            end = run.failed_k + (run.failed_call in AFTER_RECORD)
         signals: dict[str, np.ndarray] = {}
         float_columns = {j: c for c, (j, _) in enumerate(floats)}
         typed_columns = {j: c for c, (j, _) in enumerate(typed)}
@@ -316,14 +347,25 @@ class Master:
             signals[name] = (np.ascontiguousarray(out[:end, float_columns[j]])
                              if j in float_columns
                              else _typed_array(typed_out[typed_columns[j]][:end]))
-        made = end if status == OVERRUN else steps  # the steps the engine made
+        made = steps if status == OK else min(end, steps)  # the steps the engine made
         timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
                             self._fmu_tet[:made], self._lateness[:made], pacing, run.overruns,
                             tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
                             run.failed_k if status == OVERRUN else None,
                             network_calls={p.name: times for p in self._plans
                                            if (times := p.instance.network_times())})
-        return Recording(np.arange(end) * self.step, signals, wall, timing)
+        recording = Recording(self.time(np.arange(end)), signals, wall, timing)
+        if status == FAILED:
+            failure = hook.error or self._plans[run.failed_fmu].fail(
+                f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
+            if isinstance(failure, CosimError):
+                failure.recording = recording
+            raise failure
+        return recording
+
+    def time(self, k: Any) -> Any:
+        """The time of point(s) k (cosim.schema.point_time)."""
+        return point_time(self.start, self.step, k)
 
     def _engine_run(self, table: np.ndarray, out: np.ndarray, columns: np.ndarray | None,
                     hook: _TypedHook, steps: int, pacing: Pacing | None) -> EngineRun:
@@ -336,7 +378,8 @@ class Master:
         self._arrays = (table, out, columns)  # what the engine points into lives as long
         self._hook = TYPED_HOOK(hook) if hook.needed else TYPED_HOOK()
         return EngineRun(
-            step=self.step, steps=steps, n_fmus=len(self._plans), fmus=self._plan_structs,
+            step=self.step, start_time=self.start, steps=steps, n_fmus=len(self._plans),
+            fmus=self._plan_structs,
             bus=pointer(self._bus), n_bus=self._bus.size, n_sources=len(self.sources),
             sources=pointer(table), record=pointer(out), columns=pointer(columns, c_long),
             n_columns=out.shape[1], typed=self._hook, typed_record=bool(hook.columns),
@@ -448,7 +491,7 @@ class _TypedHook:
 
     def __call__(self, fmu: int, phase: int, k: int) -> int:
         try:
-            when = f"at t = {k * self.master.step:.9g} s"
+            when = f"at t = {self.master.time(k):.9g} s"
             if phase == 0:
                 self.master._set_typed(self.master._plans[fmu], when)
             elif phase == 1:
@@ -473,6 +516,8 @@ def _check_parameters(fmu: ResolvedFmu, info: FmuInfo) -> None:
 
 def _typed_array(values: np.ndarray) -> np.ndarray:
     """A recorded column of another type as a plain numpy array (binary as hex strings)."""
+    if not values.size:  # a run that failed at its first point
+        return np.array([])
     first = values[0]
     if isinstance(first, bytes):
         return np.array([v.hex() for v in values])

@@ -8,6 +8,10 @@ learned feedforward also `feedforward_range`, where the reference leaves the mod
 range); the plots (cosim.plots); and run.json, the checked configuration in the general form.
 The built-in FMUs are built into the fmu/ cache and loaded from a temporary copy.
 
+A run that an FMU's failure stops (an isolated FMU's crash or hang among them) writes the
+record up to its last completed point and run.json, then raises CosimError naming the FMU, the
+call, the time and the folder.
+
 Before anything runs, the output folder must take a file and the recording must fit into the
 available memory, so that neither shows only after the simulation.
 """
@@ -24,7 +28,7 @@ from typing import Any
 
 from flexff.controllers.training_range import MARGIN, training_range_excess
 from flexff.cosim.config import expanded, load_config
-from flexff.cosim.master import Master
+from flexff.cosim.master import CosimError, Master
 from flexff.cosim.memory import MemoryNeeded, check_memory
 from flexff.cosim.metrics import run_metrics
 from flexff.cosim.plots import PLOT_SIGNALS, plot_tet, write_plots
@@ -194,7 +198,15 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
     out = output_folder(output_dir)
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
         scenario = resolve(config, folder)
-        recording = simulate(scenario, progress, pacing, cpu)
+        try:
+            recording = simulate(scenario, progress, pacing, cpu)
+        except CosimError as error:
+            if error.recording is None or not error.recording.time.size:
+                raise
+            save_recording(_kept(error.recording, config), out, csv=config.record.csv)
+            _write_json(out / "run.json", expanded(config))
+            raise CosimError(f"{error}; the record up to t = {error.recording.time[-1]:.9g} s "
+                             f"is in {out}") from None
         metrics = run_metrics(recording)
         if config.learned_feedforward is not None:
             metrics["feedforward_range"] = feedforward_range(scenario)

@@ -24,7 +24,7 @@ from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.references import Reference, build_reference
-from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
+from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig, point_time
 from flexff.cosim.wiring import Link, Port, WiringError, wire
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
@@ -53,7 +53,7 @@ class Scenario:
     def master(self) -> Master:
         """The FMUs loaded and wired, ready to run (a context manager)."""
         return Master(self.fmus, list(self.sources), self.step, self.links,
-                      self.config.algorithm)
+                      self.config.algorithm, self.config.start, self.config.step_timeout)
 
     def reference(self) -> dict[str, np.ndarray]:
         """The sampled reference signals (empty without a [reference])."""
@@ -73,7 +73,9 @@ def resolve(config: RunConfig, folder: str | Path) -> Scenario:
             info = read_fmu(path)
         except FmuError as error:
             raise ConfigError(config.origin, f"fmu.{f.name}", str(error)) from None
-        fmus.append(ResolvedFmu(f.name, path, _start_values(f), info))
+        tolerance = f.tolerance if f.tolerance is not None else info.default_tolerance
+        fmus.append(ResolvedFmu(f.name, path, _start_values(f), info, tolerance, f.isolate,
+                                f.solver))
         ports.append(Port(f.name, info, f.unconnected,
                           frozenset(n for n in f.parameters if n in info.inputs)))
     try:
@@ -98,7 +100,8 @@ def source_signals(config: RunConfig) -> dict[str, np.ndarray | float]:
 
 
 def reference_signals(config: RunConfig) -> dict[str, np.ndarray]:
-    """The run's reference signals at points 0 .. steps (none without a [reference])."""
+    """The run's reference signals at points 0 .. steps (none without a [reference]): the
+    reference plays from the run's start."""
     if config.reference is None:
         return {}
     return reference_samples(build_reference(config.reference.kind, config.reference.options,
@@ -119,8 +122,8 @@ def reference_samples(reference: Reference, steps: int) -> dict[str, np.ndarray]
 
 
 def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, np.ndarray]:
-    """The columns of a CSV source (cosim.csv_text's time table), linearly interpolated onto
-    the run's points and held after the table's end."""
+    """The columns of a CSV source (cosim.csv_text's time table, in the run's time), linearly
+    interpolated onto the run's points and held after the table's end."""
     if source.path is None:
         raise ConfigError(config.origin, key, "a CSV source needs a path")
     try:
@@ -135,7 +138,7 @@ def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, 
             raise ConfigError(config.origin, key, (
                 f"{source.path}: column {name!r}: a source signal's name is plain (no dot); "
                 f"connect it with a [[connection]]"))
-    grid = np.arange(config.steps + 1) * config.step
+    grid = point_time(config.start, config.step, np.arange(config.steps + 1))
     return {name: np.interp(grid, table.time, table.columns[name]) for name in names}
 
 

@@ -164,7 +164,9 @@ def _bench(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from flexff.cosim.batch import run_batch, sweep
-    from flexff.cosim.run import output_folder, run_config
+    from flexff.cosim.config import with_isolation
+    from flexff.cosim.run import load_run_config, output_folder, run_config
+    from flexff.cosim.schema import RunConfig
 
     output_folder(args.output)
     configs = args.configs
@@ -178,9 +180,12 @@ def _run(args: argparse.Namespace) -> int:
                 raise InputError(f"--sweep {key} is given twice: list its values once")
             axes[key] = values
         configs = sweep(configs[0], axes)
-    elif len(configs) == 1 and args.scheduler is None:
+    if args.isolate or args.step_timeout is not None:
+        configs = [with_isolation(c if isinstance(c, RunConfig) else load_run_config(c),
+                                  args.isolate, args.step_timeout) for c in configs]
+    if len(configs) == 1 and not args.sweep and args.scheduler is None:
         metrics = run_config(configs[0], args.output, pacing=_pacing(args), cpu=args.cpu)
-        _print_result(configs[0], metrics, args.output)
+        _print_result(args.configs[0], metrics, args.output)
         return 0
     if args.realtime:
         raise InputError("--realtime runs one configuration, in this process")
@@ -435,6 +440,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help="pace the steps to the wall clock and report task execution times "
                           "(TET) and overruns, as Simulink Real-Time does (tet.png, "
                           "metrics.json 'realtime')")
+    run.add_argument("--isolate", action="store_true",
+                     help="run every FMU in its own process: a crash or a hang of an FMU ends "
+                          "the run with an error (exit code 1) and the record up to there")
+    run.add_argument("--step-timeout", type=float, metavar="S",
+                     help="stop a run whose isolated FMU takes longer than S seconds in one "
+                          "call ([run] step_timeout)")
     run.add_argument("--rt-factor", type=float, metavar="F",
                      help="real-time factor of a paced run: 2 runs twice as fast (default 1)")
     run.add_argument("--max-overruns", type=int, metavar="N",

@@ -43,7 +43,7 @@ static const Layout LAYOUT[] = {
     FIELD(FmuPlan, n_out), FIELD(FmuPlan, out_vr), FIELD(FmuPlan, out_values),
     FIELD(FmuPlan, read_before), FIELD(FmuPlan, read_after), FIELD(FmuPlan, typed_in),
     FIELD(FmuPlan, typed_out),
-    SIZE(Run), FIELD(Run, step), FIELD(Run, steps), FIELD(Run, n_fmus), FIELD(Run, fmus),
+    SIZE(Run), FIELD(Run, step), FIELD(Run, start_time), FIELD(Run, steps), FIELD(Run, n_fmus), FIELD(Run, fmus),
     FIELD(Run, bus), FIELD(Run, n_bus), FIELD(Run, n_sources), FIELD(Run, sources),
     FIELD(Run, record), FIELD(Run, columns), FIELD(Run, n_columns), FIELD(Run, typed),
     FIELD(Run, typed_record), FIELD(Run, tet), FIELD(Run, fmu_tet), FIELD(Run, lateness),
@@ -217,7 +217,7 @@ int engine_run(Run *r, long k0, long k1) {
             for (long j = 0; j < r->n_columns; j++) row[j] = r->bus[r->columns[j]];
         if (r->typed_record && r->typed(-1, 2, k)) return fail(r, -1, CALL_TYPED, k);
         if (k == r->steps) return RUN_OK;
-        const double t = (double)k * h;
+        const double t = r->start_time + (double)k * h;
         for (long i = 0; i < r->n_fmus; i++) {
             FmuPlan *s = &r->fmus[i];
             struct timespec a, b;

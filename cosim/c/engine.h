@@ -43,6 +43,7 @@ typedef struct {
 
 typedef struct {
     double step;              /* communication step [s] */
+    double start_time;        /* the time of point 0 [s]: point k is at start_time + k * step */
     long steps;               /* the run's last point */
     long n_fmus;
     FmuPlan *fmus;

@@ -4,7 +4,7 @@ run when optimizing, which -fsyntax-only skips).
 
 The FMU's generic wrapper is compiled against the config.h of three toy FMUs (continuous,
 discrete without states, with an embedded network), since its code paths depend on the sizes
-there; the engine and the floor as they are built. CasADi's generated model.c (the
+there; the engine, the floor and the proxy as they are built. CasADi's generated model.c (the
 toys' and the plant's) is held to the same flags but -Wunused-parameter: its functions take
 CasADi's fixed calling convention (arg, res, iw, w, mem), used or not.
 """
@@ -27,7 +27,7 @@ from tests.helpers import REPOSITORY
 WARNINGS = ("-Wall", "-Wextra", "-pedantic", "-Werror")
 GENERATED = ("-Wno-unused-parameter",)  # CasADi's calling convention, see above
 FMU_C = REPOSITORY / "fmu" / "c"
-ENGINE_C = REPOSITORY / "cosim" / "c"  # the engine and the floor compiled with it
+ENGINE_C = REPOSITORY / "cosim" / "c"  # the engine, the floor and the proxy (cosim.isolation)
 
 
 def compile_warnings(source: Path, include_dirs: list[Path], extra: tuple[str, ...] = ()) -> str:
@@ -73,11 +73,11 @@ def test_the_plant_model_compiles_without_warnings(tmp_path):
     assert compile_warnings(tmp_path / "model.c", [tmp_path], GENERATED) == ""
 
 
-def test_the_engine_and_the_floor_compile_without_warnings(tmp_path):
+def test_the_engine_floor_and_proxy_compile_without_warnings(tmp_path):
     for name, text in fmi_headers().items():
         (tmp_path / name).write_text(text)
     sources = sorted(ENGINE_C.glob("*.c"))
-    assert [p.name for p in sources] == ["engine.c", "floor.c"]
+    assert [p.name for p in sources] == ["engine.c", "floor.c", "proxy.c"]
     found = {str(p.relative_to(REPOSITORY)): compile_warnings(p, [tmp_path, HOST_HEADER.parent])
              for p in sources}
     assert {f: w for f, w in found.items() if w} == {}
