@@ -6,12 +6,12 @@ Both runs take the experiment as FMPy derives it from the model description (`ex
 start and stop time of the default experiment (else 0 and start + 1 s), and as the
 communication step the fixed internal step (FMI 3.0), else the default experiment's step
 (doubled until the run has at most 1000 steps), else FMPy's automatic interval. Inputs keep
-their start values in both. FMPy also passes the default experiment's tolerance to the FMU;
-flexff's run passes none, and starts at 0 s (differences this check shows). flexff runs the
-FMU through the path of `flexff run` (a one-FMU configuration, the co-simulation master);
-FMPy through `fmpy.simulate_fmu` with the same output interval, on the FMU unpacked by
-fmu.archive. The outputs are compared at the time points both runs have; each output's
-difference is also given relative to its largest magnitude in either run.
+their start values in both, and both pass the default experiment's start time and tolerance
+to the FMU (a flexff run's defaults, cosim.config). flexff runs the FMU through the path of
+`flexff run` (a one-FMU configuration, the co-simulation master); FMPy through
+`fmpy.simulate_fmu` with the same output interval, on the FMU unpacked by fmu.archive. The
+outputs are compared at the time points both runs have; each output's difference is also
+given relative to its largest magnitude in either run.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ NUMERIC = ("float64", "float32", "int8", "uint8", "int16", "uint16", "int32", "u
 @dataclass(frozen=True)
 class Experiment:
     """The default experiment as FMPy runs it: [start, stop] in steps of `step` (seconds),
-    and the tolerance FMPy passes to the FMU (None: none given); flexff's run passes none."""
+    and the tolerance both pass to the FMU (None: none given)."""
 
     start: float
     stop: float
@@ -79,8 +79,7 @@ class Comparison:
         """One line: bit-equal, equal within `rtol`, or different (the worst output)."""
         worst = self.largest
         if self.points == 0:
-            return (f"no common time points: flexff starts at 0 s, the default experiment "
-                    f"at {self.experiment.start:g} s")
+            return "no common time points"
         if worst is None:
             return "no outputs to compare"
         if worst.absolute == 0.0:
@@ -97,8 +96,7 @@ class Comparison:
     def report(self, rtol: float = RTOL) -> str:
         """The comparison as text: the experiment, one line per output, the verdict."""
         run = self.experiment
-        tolerance = ("none given" if run.tolerance is None
-                     else f"{run.tolerance:g} (set by FMPy only)")
+        tolerance = "none given" if run.tolerance is None else f"{run.tolerance:g}"
         width = max([len("output"), *(len(o.name) for o in self.outputs)])
         lines = [f"{self.path}: {run.start:g} .. {run.stop:g} s, step {run.step:g} s, "
                  f"tolerance {tolerance}; {self.points} common points",
@@ -139,8 +137,9 @@ def flexff_run(path: Path, run: Experiment) -> Recording:
     from flexff.cosim.config import parse_config  # the run path's imports (plots among them)
     from flexff.cosim.run import simulate_config  # load only when a comparison runs
 
-    steps = math.floor(run.stop / run.step * (1 + 1e-12))
-    config = parse_config({"run": {"step": run.step, "stop": steps * run.step},
+    steps = math.floor((run.stop - run.start) / run.step * (1 + 1e-12))
+    config = parse_config({"run": {"start": run.start, "step": run.step,
+                                   "stop": run.start + steps * run.step},
                            "fmu": {INSTANCE: {"path": str(path.resolve()),
                                               "unconnected": "start"}}},
                           name=path.stem, origin=str(path))
@@ -181,10 +180,10 @@ def compare_fmu(path: str | Path) -> Comparison:
     names = outputs(info)
     ours = flexff_run(path, run)
     theirs = fmpy_run(path, info, run, names)
-    # common points by step index (both runs are on the grid start + k * step, from 0 in flexff)
-    index_ours = {round(t / run.step): k for k, t in enumerate(ours.time)}
+    # common points by step index (both runs are on the grid start + k * step)
+    index_ours = {round((t - run.start) / run.step): k for k, t in enumerate(ours.time)}
     pairs = [(index_ours[i], k) for k, t in enumerate(theirs["time"])
-             if (i := round(t / run.step)) in index_ours
+             if (i := round((t - run.start) / run.step)) in index_ours
              and math.isclose(t, ours.time[index_ours[i]], rel_tol=1e-9, abs_tol=1e-9 * run.step)]
     mine = np.array([p[0] for p in pairs], dtype=int)
     other = np.array([p[1] for p in pairs], dtype=int)

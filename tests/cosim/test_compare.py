@@ -59,6 +59,15 @@ def test_a_tolerance_is_read(tmp_path):
     assert experiment(read_fmu(path)).tolerance == 1e-5
 
 
+def test_an_experiment_that_starts_later_is_compared_from_its_start(tmp_path):
+    """Dahlquist from t = 20 s (the case of an exporter whose default experiment starts late):
+    both runs start there, every point is shared, and the results are bit-equal."""
+    path = with_experiment(tmp_path, 'startTime="20" stopTime="21" stepSize="0.01"')
+    comparison = compare_fmu(path)
+    assert comparison.experiment.start == 20.0 and comparison.points == 101
+    assert comparison.verdict().startswith("bit-equal")
+
+
 def test_a_difference_is_measured(monkeypatch, capsys):
     """FMPy's x off by 3e-7 at one point: its size, absolute and relative to max |x| = 1."""
     simulate = fmpy.simulate_fmu
