@@ -17,7 +17,9 @@
 Given a run configuration (`loop`, learning.loop), steps 1 and 4 run on that loop instead of
 the environment's plant: the set is collected on it under PID alone, and every scenario is that
 loop on the environment's evaluation reference with its feedforward replaced (PID alone,
-rigid-body, identified rigid-body, or the learned one stepped right before the controller).
+rigid-body, identified rigid-body, or the learned one stepped right before the controller). A loop
+(or a --data set) whose encoders count or are noisy, given the sim environment's preprocessing
+for ideal encoders, is warned of before any work (learning.encoders).
 
 Preprocessing beyond the thesis (Environment.features): the thesis low-passes the measured motion
 and forces at 1.8 Hz and re-quantizes its ideal simulated encoders. The sim evaluation
@@ -45,6 +47,7 @@ from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.errors import InputError
 from flexff.learning.collect import collect
 from flexff.learning.dataset import load_dataset
+from flexff.learning.encoders import effects_of, loop_encoders, warn_ideal_preprocessing
 from flexff.learning.export import export
 from flexff.learning.features import FeatureConfig
 from flexff.learning.identify import REPORT, identified_on, identify, write_identification
@@ -141,6 +144,12 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     out = Path(out)
     environment = ENVIRONMENTS[env]
     set_name = environment.trajectory_set
+    features = preprocessing(env, preset)
+    if loop is not None:
+        warn_ideal_preprocessing(features, loop_encoders(loop), f"the loop {loop.source}")
+    if data is not None:
+        warn_ideal_preprocessing(features, effects_of(load_dataset(data).plant.get(
+            "parameters", {})), f"the dataset {data}")
     if data is None:
         on = f" on {loop.source}" if loop is not None else ""
         say(f"collecting the {set_name} set (PID only){on} into {out / f'data-{set_name}'}")
