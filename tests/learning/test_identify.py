@@ -15,10 +15,12 @@ from flexff.controllers.feedforward import rigid_body_feedforward_system, rigid_
 from flexff.controllers.identified import read_identified
 from flexff.cosim.config import parse_config
 from flexff.cosim.references import thesis_evaluation
+from flexff.cosim.run import run_config
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
+from flexff.learning.collect import collect
 from flexff.learning.dataset import REFERENCE_SIGNALS
-from flexff.learning.evaluate import preprocessing
+from flexff.learning.evaluate import preprocessing, scenario_config
 from flexff.learning.identify import (
     base_parameters,
     identify,
@@ -250,3 +252,32 @@ def test_the_command_line_prints_the_table_and_a_bad_file_exits_2(tmp_path, caps
     assert err.startswith(f"flexff: error: {config}: feedforward.identified: {bad}: ")
     assert err.endswith("j_ee = 0.0 kg*m^2 must be positive")
     assert main(["identify", str(tmp_path), "-o", str(tmp_path / "x")]) == 2
+
+
+@pytest.mark.slow
+def test_on_the_hardware_set(tmp_path):
+    """The hardware set (about a minute to collect, 20 s to identify, a minute to run): the
+    nominal flexure stiffnesses are 9 % off there, its motors have 7 mNm of Coulomb friction
+    and their torque constants are 2 to 4 % low, which the force labels (the commanded force)
+    do not know. Measured: stiffnesses within 20 % (the shoulder's and the wrist's are hard
+    to tell apart over a 5 cm workspace), Coulomb 6.6 to 7.1 mNm, the inertias and dampings
+    kept nominal (under the 2 % residual); the identified feedforward's e2 ratio 158 / 77
+    against the nominal one's 7.0 / 7.9."""
+    data = collect("hardware", tmp_path / "data", progress=False)
+    found = identify(data, preprocessing("hardware"))
+    rows = {row["name"]: row for row in found.rows()}
+    true = dict(zip(HARDWARE.names(), HARDWARE.vector()))
+    for name, row in rows.items():
+        if name.startswith("k_"):
+            assert row["value"] == pytest.approx(true[name], rel=0.25), name
+        elif name.startswith("tau_coulomb"):
+            assert row["value"] == pytest.approx(true[name], rel=0.1), name
+        else:
+            assert not row["estimated"], name
+    assert max(found.residual_rms) < 0.5 * min(found.nominal_rms)
+    path = write_identification(found, tmp_path / "id")
+    ratios = {}
+    for name in ("pid", "rigid-body", "identified"):
+        metrics = run_config(scenario_config("hardware", name, path), tmp_path / name)
+        ratios[name] = np.array([metrics[axis]["e2"] for axis in "xy"])
+    assert np.all(ratios["pid"] / ratios["identified"] > 5 * ratios["pid"] / ratios["rigid-body"])
