@@ -17,7 +17,8 @@ keeps more than RANK_TOLERANCE of the column's norm (measured: 29 independent co
 of the independent ones. Each base parameter is then an independent parameter plus its
 combination of dependent ones, and the dataset's samples determine it by ordinary least
 squares, once per candidate tanh width (learning.friction.WIDTHS), the width with the smallest
-residual kept.
+residual kept; a base parameter whose whole share of the forces lies below the residual keeps
+its nominal value (`_essential`: the data cannot tell it from what the model misses).
 
 The standard uncertainty of each base parameter is the square root of the diagonal of
 s^2 (W1^T W1)^-1, s^2 the residual variance over both axes: it supposes independent residuals,
@@ -27,7 +28,9 @@ identified base parameters nearest to the nominal one (each change relative to i
 value) is fed to the same rigid-body feedforward as the nominal one
 (controllers.feedforward.rigid_body_force): any vector with those base parameters gives the
 same forces, and the nearest keeps the physical ones positive (an upper arm's inertia alone
-would turn negative if it took up the change of its group).
+would turn negative if it took up the change of its group). Where no physical vector has them
+(few, short trajectories: a negative damping), the physical one whose forces on the samples
+come nearest is deployed (bounded least squares), and the report says by how much it differs.
 """
 
 from __future__ import annotations
