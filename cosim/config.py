@@ -32,13 +32,15 @@ short form:
                  x_start, y_start default to the reference's first point
   [controller]   crossover_hz, notch (true / false / Hz), encoders (2 or 3); defaults follow
                  the plant variant (controllers.feedback.DEFAULTS)
-  [feedforward]  kind = "none" | "rigid-body" | "learned" (with model = "file.onnx", an
-                 exported learned model, and mode = "step" (default) | "precomputed")
+  [feedforward]  kind = "none" | "rigid-body" (optionally with identified = "file.json", the
+                 parameters `flexff identify` found in place of the nominal ones) | "learned"
+                 (with model = "file.onnx", an exported learned model, and mode = "step"
+                 (default) | "precomputed")
 
 A configuration without [fmu.*] tables is the manipulator's loop: the short form, with the
-defaults of its tables. The same keys (variant, seed, crossover_hz, notch, encoders, model,
-mode) are the options of the built-in FMUs in the general form, with the plant's physical
-parameters in `parameters`.
+defaults of its tables. The same keys (variant, seed, crossover_hz, notch, encoders,
+identified, model, mode) are the options of the built-in FMUs in the general form, with the
+plant's physical parameters in `parameters`.
 
 Any problem (unknown table or key, wrong type, missing file, an FMU variable that does not
 exist or has another type, a reference outside the workspace, a step that does not divide the
@@ -61,6 +63,7 @@ from typing import Any
 import tomli_w
 
 from flexff.controllers.allocation import ENCODER_CHOICES
+from flexff.controllers.identified import read_identified
 from flexff.controllers.model_card import read_card
 from flexff.cosim.memory import MemoryNeeded
 from flexff.cosim.references import REFERENCE_KINDS, Reference, SegmentError, build_reference
@@ -78,6 +81,7 @@ from flexff.cosim.schema import (
     SourceConfig,
     whole_steps,
 )
+from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
 from flexff.fmu.model_exchange import SOLVERS
 from flexff.plant.kinematics import check_workspace
@@ -368,7 +372,8 @@ class _Parser:
                           FutureWarning, stacklevel=2)
             ff = {**ff, "kind": new}
         kind = self.choice(ff, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
-        self.keys(ff, "feedforward", ("kind", "model", "mode") if kind == "learned" else ("kind",))
+        self.keys(ff, "feedforward", {"learned": ("kind", "model", "mode"),
+                                      "rigid-body": ("kind", "identified")}.get(kind, ("kind",)))
         if kind == "none":
             sources.append(SourceConfig("constant", dict.fromkeys(names(FEEDFORWARD_FORCES), 0.0)))
         else:
@@ -424,7 +429,7 @@ class _Parser:
         elif builtin == "controller":
             options = {"variant": self.choice(t, where, "variant", tuple(VARIANTS), "nominal"),
                        **self.controller_options(t, where)}
-        elif builtin == "learned-feedforward":
+        elif builtin in ("learned-feedforward", "rigid-body-feedforward"):
             options = self.feedforward_options(t, where)
         return FmuConfig(name, builtin=builtin, options=options, parameters=dict(parameters),
                          unconnected=unconnected, tolerance=self.tolerance(t, where),
@@ -497,10 +502,18 @@ class _Parser:
         return options
 
     def feedforward_options(self, t: Mapping[str, Any], where: str) -> dict[str, Any]:
-        """A learned feedforward's model and mode (nothing for the rigid-body one)."""
+        """A learned feedforward's model and mode; the rigid-body one's identified
+        parameters, if any."""
         if "model" not in t and t.get("builtin", t.get("kind")) in ("rigid-body",
                                                                       "rigid-body-feedforward"):
-            return {}
+            if "identified" not in t:
+                return {}
+            identified = self.path(t, where, "identified")
+            try:
+                read_identified(identified)
+            except InputError as exc:
+                raise self.error(f"{where}.identified", str(exc)) from None
+            return {"identified": identified}
         model = self.path(t, where, "model")
         if model.suffix.lower() != ".onnx":
             raise self.error(f"{where}.model", f"{model} is not an .onnx file")

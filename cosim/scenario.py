@@ -19,6 +19,7 @@ import numpy as np
 
 from flexff.controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
 from flexff.controllers.feedforward import rigid_body_feedforward_system
+from flexff.controllers.identified import read_identified
 from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME, read_time_table
@@ -164,7 +165,8 @@ def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any])
     if f.builtin == "controller":
         return controller_for(o, config.step)
     if f.builtin == "rigid-body-feedforward":
-        return rigid_body_feedforward_system(config.step)
+        identified = read_identified(o["identified"]) if "identified" in o else None
+        return rigid_body_feedforward_system(config.step, identified)
     reference = None
     if o["mode"] == "precomputed":
         reference = {n: sources[n] for n in Reference.SIGNALS if n in sources}

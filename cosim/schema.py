@@ -19,8 +19,10 @@ General form (SI units):
   [fmu.NAME]       path = "file.fmu" (any FMI 2.0 or 3.0 co-simulation FMU, relative to the
                    configuration) or builtin = "plant" | "controller" |
                    "rigid-body-feedforward" | "learned-feedforward" with the built-in's options
-                   (BUILTIN_OPTIONS); parameters = {variable = value} (start values of
-                   parameters or inputs, checked against the FMU's variables and types);
+                   (BUILTIN_OPTIONS: the rigid-body one's `identified` names a file of
+                   identified parameters, `flexff identify`); parameters = {variable =
+                   value} (start values of parameters or inputs, checked against the FMU's
+                   variables and types);
                    unconnected = "error" (default) | "start" (inputs left unconnected keep
                    their start values); tolerance (relative: given to the FMU's
                    fmi2SetupExperiment / fmi3EnterInitializationMode; default: [run]
@@ -54,7 +56,7 @@ UNCONNECTED = ("error", "start")
 BUILTIN_OPTIONS = {  # built-in FMU -> its options
     "plant": ("variant", "seed"),
     "controller": ("variant", "crossover_hz", "notch", "encoders"),
-    "rigid-body-feedforward": (),
+    "rigid-body-feedforward": ("identified",),
     "learned-feedforward": ("model", "mode"),
 }
 SOURCE_KINDS = ("constant", "csv")

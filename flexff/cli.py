@@ -352,6 +352,31 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _identify(args: argparse.Namespace) -> int:
+    from flexff.cosim.run import output_folder
+    from flexff.learning.evaluate import preprocessing
+    from flexff.learning.identify import identify, write_identification
+
+    output_folder(args.output)
+    identification = identify(args.data, preprocessing(args.env))
+    path = write_identification(identification, args.output)
+    rows = identification.rows()
+    width = max(len(row["base"]) for row in rows)
+    print(f"{'base parameter':<{width}} {'value':>12} {'std':>10}  unit")
+    for row in rows:
+        std = f"{row['std']:10.3g}" if row["estimated"] else f"{'(nominal)':>10}"
+        print(f"{row['base']:<{width}} {row['value']:12.5g} {std}  {row['unit']}")
+    print(f"motor friction tanh width w_stribeck: {identification.w_stribeck:g} rad/s; "
+          f"{identification.samples} samples")
+    for label, (x, y) in (("residual", identification.residual_rms),
+                          ("nominal model's error", identification.nominal_rms),
+                          ("forces", identification.label_rms)):
+        print(f"{label}: {x:.3g} / {y:.3g} N rms (x / y)")
+    print(f"wrote {path} (use it with [feedforward] kind = \"rigid-body\", identified = "
+          f"\"{path}\")")
+    return 0
+
+
 def _evaluate(args: argparse.Namespace) -> int:
     from flexff.cosim.run import load_run_config, output_folder
     from flexff.learning.evaluate import evaluate
@@ -537,6 +562,18 @@ def build_parser() -> argparse.ArgumentParser:
                         help="graph inputs: the SI features, or the reference signals "
                              "(x_ref .. ay_ref) with the features computed in the graph")
     export.set_defaults(handler=_export)
+
+    identification = commands.add_parser(
+        "identify", help="identify the rigid-body model's parameters on a dataset folder by "
+                         "least squares (for the rigid-body feedforward)")
+    identification.add_argument("data", help="a dataset folder (its training split is used)")
+    identification.add_argument("-o", "--output", required=True,
+                                help="the folder to write identified.json into")
+    identification.add_argument("--env", default="hardware", choices=("sim", "hardware"),
+                                help="preprocess as flexff evaluate's environment does: "
+                                     "hardware (the thesis's: encoders counted, 1.8 Hz; for "
+                                     "measured or noisy encoders) or sim (ideal encoders)")
+    identification.set_defaults(handler=_identify)
 
     bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON")
     bench.add_argument("--steps", type=int, default=20000, help="steps per timed loop")

@@ -4,18 +4,22 @@
 2. train the models side by side, one process per core (learning.workers; a finished run with
    the same settings is reused), and export each to ONNX (an ensemble's members, where the
    environment asks for one, as one graph of their mean);
-3. co-simulate the environment's evaluation reference on its plant: PID alone, with the
-   rigid-body feedforward, and with each learned model as an ONNX feedforward FMU. As in the
-   thesis, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
-   100 s reference of sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz
-   circles) on the hardware plant;
-4. write the report (learning.report): summary.json, table.md (with what each model's training
+3. identify the rigid-body model's parameters on the training set, preprocessed as the
+   networks' data (learning.identify);
+4. co-simulate the environment's evaluation reference on its plant: PID alone, with the
+   rigid-body feedforward (nominal, then identified parameters), and with each learned model
+   as an ONNX feedforward FMU. As in the thesis, "sim" runs the 15 s reference of sec. 5.7 on
+   the nominal plant and "hardware" the 100 s reference of sec. 6.6 (a 0.12 Hz circle, inside
+   the hardware set's 0.01-0.29 Hz circles) on the hardware plant;
+5. write the report (learning.report): summary.json, table.md (with what each model's training
    cost) and the figures.
 
-Given a run configuration (`loop`, learning.loop), steps 1 and 3 run on that loop instead of
+Given a run configuration (`loop`, learning.loop), steps 1 and 4 run on that loop instead of
 the environment's plant: the set is collected on it under PID alone, and every scenario is that
 loop on the environment's evaluation reference with its feedforward replaced (PID alone,
-rigid-body, or the learned one stepped right before the controller).
+rigid-body, identified rigid-body, or the learned one stepped right before the controller). A loop
+(or a --data set) whose encoders count or are noisy, given the sim environment's preprocessing
+for ideal encoders, is warned of before any work (learning.encoders).
 
 Preprocessing beyond the thesis (Environment.features): the thesis low-passes the measured motion
 and forces at 1.8 Hz and re-quantizes its ideal simulated encoders. The sim evaluation
@@ -42,7 +46,11 @@ from flexff.cosim.run import range_warning, run_config
 from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.errors import InputError
 from flexff.learning.collect import collect
+from flexff.learning.dataset import load_dataset
+from flexff.learning.encoders import effects_of, loop_encoders, warn_ideal_preprocessing
 from flexff.learning.export import export
+from flexff.learning.features import FeatureConfig
+from flexff.learning.identify import REPORT, identified_on, identify, write_identification
 from flexff.learning.loop import default_loop, on_reference, with_feedforward
 from flexff.learning.models import NETWORKS, build_network, check_kind, parameter_count
 from flexff.learning.presets import TrainConfig, make_config
@@ -95,16 +103,22 @@ ENVIRONMENTS = {
         "tcn": {"model_rate_hz": 25.0}}, ensembles={"pgnn": 3}),
 }
 MODELS = tuple(NETWORKS)
+IDENTIFIED = "identified"  # the scenario of the rigid-body feedforward with identified parameters
 
 
 def scenario_config(env: str, name: str, model: Path | None = None, mode: str = "step",
                     loop: RunConfig | None = None) -> RunConfig:
     """The environment's evaluation reference on `loop` (default: its plant under PID), with
-    the feedforward of scenario `name`: "pid" (none), "rigid-body", or a learned model (the
-    ONNX file `model`); every signal recorded."""
-    builtin, options = None, {}
+    the feedforward of scenario `name`: "pid" (none), "rigid-body", "identified" (the
+    rigid-body one with the parameters of the file `model`, learning.identify), or a learned
+    model (the ONNX file `model`); every signal recorded."""
+    builtin, options = None, dict[str, Any]()
     if name == "rigid-body":
         builtin = "rigid-body-feedforward"
+    elif name == IDENTIFIED:
+        if model is None:
+            raise InputError(f"scenario {name!r} needs a file of identified parameters")
+        builtin, options = "rigid-body-feedforward", {"identified": Path(model).resolve()}
     elif name != "pid":
         if model is None:
             raise InputError(f"scenario {name!r} needs an ONNX model")
@@ -131,6 +145,12 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     out = Path(out)
     environment = ENVIRONMENTS[env]
     set_name = environment.trajectory_set
+    features = preprocessing(env, preset)
+    if loop is not None:
+        warn_ideal_preprocessing(features, loop_encoders(loop), f"the loop {loop.origin}")
+    if data is not None:
+        warn_ideal_preprocessing(features, effects_of(load_dataset(data).plant.get(
+            "parameters", {})), f"the dataset {data}")
     if data is None:
         on = f" on {loop.origin}" if loop is not None else ""
         say(f"collecting the {set_name} set (PID only){on} into {out / f'data-{set_name}'}")
@@ -153,16 +173,44 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         onnx_files[kind] = export([jobs[n].run for n in names], out / f"{kind}.onnx")
         say(f"{kind}: test MSE {metrics['test_mse']:.3g} ({metrics['parameters']} parameters, "
             f"{metrics['epochs']} epochs in {metrics['seconds']:.0f} s) -> {onnx_files[kind]}")
+    files: dict[str, Path] = {**onnx_files,
+                              IDENTIFIED: _identified(Path(data), preset, env, out, say)}
     recordings: dict[str, Recording] = {}
-    for name in ["pid", "rigid-body", *models]:
+    for name in ["pid", "rigid-body", IDENTIFIED, *models]:
         folder = out / "cosim" / name
-        metrics = run_config(scenario_config(env, name, onnx_files.get(name), loop=loop), folder)
+        metrics = run_config(scenario_config(env, name, files.get(name), loop=loop), folder)
         recordings[name] = load_recording(folder)
         say(f"{name}: e2 = ({metrics['x']['e2']:.3g}, {metrics['y']['e2']:.3g}) m/sqrt(s), "
             f"real-time factor {metrics['real_time_factor']:.0f}")
         if warning := range_warning(metrics):
             say(f"{name}: {warning}")
     return write_report(recordings, env, out, model_training)
+
+
+def preprocessing(env: str, preset: str = "fast") -> FeatureConfig:
+    """The preprocessing the networks of `env` train with under `preset` (the same for
+    every model kind: the environment sets it, the fast preset's per-model settings do not)."""
+    return make_config("pgnn", preset, **ENVIRONMENTS[env].features).features
+
+
+def _identified(data: Path, preset: str, env: str, out: Path,
+                say: Callable[[str], None]) -> Path:
+    """The rigid-body parameters identified on the training set `data`, preprocessed as the
+    networks are, in out/identified/identified.json (an identification of the same data and
+    preprocessing there is reused)."""
+    features = preprocessing(env, preset)
+    path = out / IDENTIFIED / REPORT
+    wanted = identified_on(load_dataset(data), features)
+    try:
+        if json.loads(path.read_text())["data"] == wanted:
+            return path
+    except (OSError, ValueError, KeyError):
+        pass
+    say(f"identifying the rigid-body parameters on {data}")
+    identification = identify(data, features)
+    rms = identification.residual_rms
+    say(f"{IDENTIFIED}: residual ({rms[0]:.3g}, {rms[1]:.3g}) N rms -> {path}")
+    return write_identification(identification, out / IDENTIFIED)
 
 
 def _member_jobs(kind: str, preset: str, overrides: dict[str, Any], members: int, data: Path,

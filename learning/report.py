@@ -44,6 +44,7 @@ from flexff.plant.signals import (
 SCENARIO_LABELS: dict[str, str] = {
     "pid": "PID alone",
     "rigid-body": "rigid-body FF",
+    "identified": "identified rigid-body FF",
     "lstm": "LSTM FF",
     "cnn-lstm": "CNN-LSTM FF",
     "tcn": "TCN FF",

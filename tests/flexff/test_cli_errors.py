@@ -23,6 +23,7 @@ WRITERS = {
     "bench": ["bench", "--steps", "10", "-o", "{out}/bench.json"],
     "export": ["export", "{tmp}/no-run", "-o", "{out}/model.onnx"],
     "ssp export": ["ssp", "export", "{config}", "-o", "{out}/system.ssp"],
+    "identify": ["identify", "{tmp}/no-data", "-o", "{out}"],
 }
 
 

@@ -290,7 +290,7 @@ def test_evaluate_on_a_loop(heavy_loop, tmp_path, monkeypatch):
                              rate_hz=100.0, seed=3)
     summary = evaluate("sim", tmp_path / "eval", models=["pgnn"], data=data, epochs=1,
                        say=lambda _: None, loop=heavy_loop)
-    assert list(summary["scenarios"]) == ["pid", "rigid-body", "pgnn"]
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "pgnn"]
     for name in summary["scenarios"]:
         run = json.loads((tmp_path / "eval" / "cosim" / name / "run.json").read_text())
         assert run["fmu"]["plant"]["parameters"] == {**HEAVY, "x_start": 0.0, "y_start": 0.0}

@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from flexff.controllers.identified import read_identified
 from flexff.controllers.model_card import read_card
 from flexff.cosim.references import build_reference
 from flexff.learning.evaluate import ENVIRONMENTS, evaluate, scenario_config
@@ -26,8 +27,11 @@ def evaluation(tmp_path_factory):
 
 def test_every_scenario_is_reported(evaluation):
     out, summary, lines = evaluation
-    assert list(summary["scenarios"]) == ["pid", "rigid-body", "pgnn"]
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "pgnn"]
     assert json.loads((out / "summary.json").read_text()) == summary
+    assert read_identified(out / "identified" / "identified.json")
+    assert any(line.startswith("identified: residual") for line in lines)
+    assert "| identified rigid-body FF |" in (out / "table.md").read_text()
     for name in ("table.md", "paths.png", "errors.png", "forces.png", "pgnn.onnx"):
         assert (out / name).is_file()
     assert (out / "cosim" / "pgnn" / "signals.npz").is_file()
@@ -45,11 +49,12 @@ def test_rigid_body_feedforward_is_exact_on_the_nominal_plant(evaluation):
         assert rigid[axis]["e2_ratio"] > 300 and rigid[axis]["einf_ratio"] > 100
 
 
-def test_a_finished_training_run_is_reused(evaluation):
+def test_a_finished_training_run_and_identification_are_reused(evaluation):
     out, _, _ = evaluation
-    stamp = (out / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns
+    files = (out / "runs" / "pgnn" / "model.pt", out / "identified" / "identified.json")
+    stamps = [path.stat().st_mtime_ns for path in files]
     evaluate("sim", out, models=["pgnn"], data=out / "data", epochs=1, say=lambda _: None)
-    assert (out / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns == stamp
+    assert [path.stat().st_mtime_ns for path in files] == stamps
 
 
 def test_a_run_with_other_settings_is_trained_again(evaluation, tmp_path):
