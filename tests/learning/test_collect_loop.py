@@ -235,16 +235,17 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
 
     seen = {}
 
-    def fake(env, out, preset, models, data, epochs, loop):
-        seen.update(env=env, loop=loop)
+    def fake(env, out, preset, models, data, epochs, loop, scheduler):
+        seen.update(env=env, loop=loop, scheduler=scheduler)
         (Path(out) / "table.md").write_text("| table |\n")
 
     monkeypatch.setattr("flexff.learning.evaluate.evaluate", fake)
     config = tmp_path / "heavy.toml"
     config.write_text('[reference]\nkind = "thesis-eval"\n[plant]\nm_up1 = 0.13\n')
     assert main(["evaluate", "--config", str(config), "--env", "hardware", "-o",
-                 str(tmp_path / "eval")]) == 0
+                 str(tmp_path / "eval"), "--scheduler", "tcp://cluster:8786"]) == 0
     assert seen["env"] == "hardware" and seen["loop"].builtin("plant").parameters["m_up1"] == 0.13
+    assert seen["scheduler"] == "tcp://cluster:8786"
     assert "| table |" in capsys.readouterr().out
 
 
@@ -301,7 +302,7 @@ def test_evaluate_on_a_loop(heavy_loop, tmp_path, monkeypatch):
     rigid = summary["scenarios"]["rigid-body"]
     assert 1 < rigid["x"]["e2_ratio"] < 300
 
-    def stop(set_name, out, config):
+    def stop(set_name, out, config, scheduler=None):
         raise SystemExit((set_name, config))
 
     monkeypatch.setattr("flexff.learning.evaluate.collect", stop)

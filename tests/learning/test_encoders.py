@@ -22,7 +22,7 @@ from flexff.plant.system import plant_system
 
 def loop(**plant):
     return parse_config({"reference": {"kind": "thesis-eval"}, "plant": plant}, name="loop",
-                        source="loop.toml")
+                        origin="loop.toml")
 
 
 def test_the_plant_says_whether_its_encoders_are_ideal(tmp_path):
@@ -64,7 +64,7 @@ def test_evaluate_warns_before_any_work(tmp_path, monkeypatch):
         with pytest.raises(Stop):
             evaluate("sim", tmp_path, loop=parse_config(
                 {"reference": {"kind": "thesis-eval"}, "plant": {"variant": "hardware"}},
-                source="noisy.toml"))
+                origin="noisy.toml"))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         for env, variant in (("sim", "nominal"), ("hardware", "hardware")):
@@ -93,7 +93,7 @@ def test_collecting_the_sim_set_on_a_noisy_loop_is_warned_of(tmp_path, capsys, m
                                             "encoders.*noisy.toml has encoders"):
         run_collection("sim", tmp_path / "noisy", progress=False, limit=1,
                        config=parse_config({"reference": {"kind": "thesis-eval"},
-                                            "plant": {"noise_std": 1e-3}}, source="noisy.toml"))
+                                            "plant": {"noise_std": 1e-3}}, origin="noisy.toml"))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         run_collection("sim", tmp_path / "nominal", progress=False, limit=1,

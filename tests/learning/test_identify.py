@@ -208,7 +208,7 @@ def test_a_run_configuration_names_the_file(tmp_path, found):
 def test_a_bad_file_is_refused_naming_it(tmp_path, found, change, message):
     path = identified_file(tmp_path, found, **change)
     with pytest.raises(InputError, match=re.escape(message)) as error:
-        parse_config(CONFIG + f'identified = "{path}"\n', source="run.toml")
+        parse_config(CONFIG + f'identified = "{path}"\n', origin="run.toml")
     assert "run.toml: feedforward.identified: " in str(error.value)
     assert str(path) in str(error.value)
 
