@@ -188,13 +188,18 @@ def _seeded(loop: RunConfig, seed: int | None) -> RunConfig:
 
 def _plant_model(loop: RunConfig) -> PlantParameters:
     """The parameters of the loop's plant model: the built-in plant's variant with the loop's
-    values, the nominal ones for a plant FMU by path."""
+    values, its tool (where it has one) counted at the wrist, for below its mount's mode it
+    moves with the wrist; the nominal ones for a plant FMU by path."""
     plant = loop.builtin("plant")
     if plant is None:
         return NOMINAL
     known = set(PlantParameters.names())
-    return VARIANTS[plant.options["variant"]].parameters.with_values(
+    variant = VARIANTS[plant.options["variant"]]
+    parameters = variant.parameters.with_values(
         **{k: float(v) for k, v in plant.parameters.items() if k in known})
+    if not variant.parasitic_mode:
+        return parameters
+    return parameters.with_values(m_ee=parameters.m_ee + parameters.m_tool)
 
 
 def plot_trials(trials: list[dict[str, Any]], path: Path) -> Path:

@@ -6,12 +6,15 @@ L = C + P^-1 the inverse of the loop's process sensitivity J = P / (1 + P C):
 
 - C e_j is the loop's own controller acting on the error: its recorded feedback force F_fb of
   trial j (exactly what it computed, notch, gains and all);
-- P^-1 e_j is the rigid-body model of the loop's plant (its built-in plant's parameters; the
-  nominal ones for a plant FMU by path) linearised along the reference: the 2x2 time-varying
-  operator M(t) e'' + D(t) e' + K(t) e, with dF/dacc, dF/dvel, dF/dpos of the inverse dynamics,
-  so the position-dependent mass and stiffness and the coupling between x and y are in it. Its
-  Coulomb friction is left out (not smooth at rest); friction repeats from trial to trial, and
-  the iteration learns it as any repeating disturbance.
+- P^-1 e_j is the rigid-body model of the loop's plant (its built-in plant's parameters and
+  friction, the tool's mass at the wrist; the nominal model for a plant FMU by path): the
+  force its inverse dynamics F(pos, vel, acc) needs along the reference less the force it
+  needs along the trial's path, F(r, r', r'') - F(r - e, r' - e', r'' - e''). For a small
+  error that is the model linearised along the reference, the 2x2 time-varying operator
+  M(t) e'' + D(t) e' + K(t) e, so the position-dependent mass and stiffness and the coupling
+  between x and y are in it; the difference itself keeps the motor friction right where a
+  linearisation fails: at a reversal the friction's slope is steep, and a trial's speed error
+  of a few mrad/s would turn it into a spike of force that the next trial pays for.
 
 So f_{j+1} = Q (u_j + P^-1 e_j), with u_j = f_j + F_fb the force the plant received: the force
 that would have moved it along the reference, estimated from the one that moved it. In the
@@ -21,10 +24,11 @@ is good or the loop gain high, and the iteration converges monotonically in the 
 
 Q is a zero-phase low-pass: a 4th-order Butterworth filter run forward and backward
 (scipy.signal.filtfilt), |Q| = 1 / (1 + (f / fc)^8) with no phase lag, so it never shifts the
-learned force in time. It keeps the iteration away from what the rigid model misses: the
-hardware plant's tool mode near 40 Hz, where |P / P_model| reaches about 20, is cut to
-|Q| = 0.004 at the default fc = 20 Hz, while the references' content (below a few Hz) passes
-with |1 - Q| < 1e-6, so the converged error is not limited by Q there.
+learned force in time. It keeps the iteration away from what the rigid model misses: at the
+hardware plant's tool mode near 40 Hz, |1 - P / P_model| reaches about 6 (a 50 g tool on a
+2 % damped mount, a fifth of the wrist's effective mass), and the default fc = 20 Hz cuts it
+to |Q| = 0.004, while the references' content (their circles at 2 Hz and below) passes with
+|1 - Q| < 1e-7: the converged error is not limited by Q there.
 """
 
 from __future__ import annotations
@@ -37,34 +41,39 @@ import casadi as ca
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from flexff.controllers.features import nominal_model
+from flexff.controllers.features import evaluate_samples, nominal_model
 from flexff.fmu.errors import InputError
 from flexff.plant.parameters import PlantParameters
 
 CUTOFF_HZ = 20.0  # Q's corner: half the hardware tool mode's frequency
 ORDER = 4  # Q's Butterworth order, run twice: 8th-order roll-off, zero phase
-FRICTION = ("tau_coulomb",)  # left out of the model (see above)
 
 
 @dataclass(frozen=True)
 class LearningFilter:
-    """L and Q along one reference: per sample k the 2x2 derivatives of the model's force
-    with respect to the wrist's position, velocity and acceleration (n, 2, 2)."""
+    """L and Q along one reference: the model's inverse dynamics with its parameters built in,
+    the reference's motion (each (n, 2): position, velocity, acceleration) and the force the
+    model needs along it."""
 
     step: float
-    stiffness: np.ndarray
-    damping: np.ndarray
-    mass: np.ndarray
+    inverse_dynamics: ca.Function  # (pos, vel, acc) -> F [N] of one sample
+    reference: tuple[np.ndarray, np.ndarray, np.ndarray]
     cutoff_hz: float = CUTOFF_HZ
 
+    @functools.cached_property
+    def reference_force(self) -> np.ndarray:
+        return evaluate_samples(self.inverse_dynamics, *self.reference)
+
     def model_force(self, error: np.ndarray) -> np.ndarray:
-        """P^-1 e: the force (n, 2) [N] that moves the model's wrist by `error` (n, 2) [m]
-        along the reference (derivatives by central differences, second order at the ends)."""
+        """P^-1 e: the force (n, 2) [N] the model needs along the reference less the force it
+        needs along the path that misses it by `error` (n, 2) [m] (derivatives by central
+        differences, second order at the ends)."""
         rate = np.gradient(error, self.step, axis=0, edge_order=2)
         acceleration = np.gradient(rate, self.step, axis=0, edge_order=2)
-        return np.asarray(np.einsum("nij,nj->ni", self.stiffness, error)
-                          + np.einsum("nij,nj->ni", self.damping, rate)
-                          + np.einsum("nij,nj->ni", self.mass, acceleration))
+        position, velocity, reference_acceleration = self.reference
+        path = evaluate_samples(self.inverse_dynamics, position - error, velocity - rate,
+                                reference_acceleration - acceleration)
+        return np.asarray(self.reference_force - path)
 
     def q(self, force: np.ndarray) -> np.ndarray:
         """Q: the zero-phase low-pass along time (axis 0), the force held at its first and last
@@ -88,17 +97,14 @@ def learning_filter(reference: Mapping[str, np.ndarray], step: float,
     ay_ref, sampled every `step` seconds); InputError for a cutoff at or above the Nyquist
     frequency or a reference too short to filter."""
     check_cutoff(cutoff_hz, step)
-    columns = [np.vstack([reference[f"{d}x{s}"], reference[f"{d}y{s}"]])
-               for d, s in (("", "_ref"), ("v", "_ref"), ("a", "_ref"))]
-    n = columns[0].shape[1]
+    motion = tuple(np.column_stack([reference[f"{d}x_ref"], reference[f"{d}y_ref"]])
+                   for d in ("", "v", "a"))
+    n = motion[0].shape[0]
     if n <= 3 * (2 * ORDER + 1):
         raise InputError(f"the reference has {n} points: the learning filter needs more than "
                          f"{3 * (2 * ORDER + 1)}; lengthen run.stop")
-    flat = [p for name in FRICTION for p in PlantParameters.names() if p.startswith(name)]
-    values = parameters.with_values(**dict.fromkeys(flat, 0.0)).vector()
-    stiffness, damping, mass = (np.asarray(d).reshape(2, n, 2).transpose(1, 0, 2)
-                                for d in _derivatives().map(n)(*columns, ca.DM(values)))
-    return LearningFilter(step, stiffness, damping, mass, cutoff_hz)
+    return LearningFilter(step, model_inverse_dynamics(parameters), (motion[0], motion[1],
+                                                                     motion[2]), cutoff_hz)
 
 
 def check_cutoff(cutoff_hz: float, step: float) -> None:
@@ -109,13 +115,10 @@ def check_cutoff(cutoff_hz: float, step: float) -> None:
                          f"and the Nyquist frequency {nyquist:g} Hz of the {step:g} s step")
 
 
-@functools.cache
-def _derivatives() -> ca.Function:
-    """(pos, vel, acc, p) -> dF/dpos, dF/dvel, dF/dacc of the rigid-body inverse dynamics."""
+def model_inverse_dynamics(parameters: PlantParameters) -> ca.Function:
+    """(pos, vel, acc) -> F [N]: the rigid-body inverse dynamics, with motor friction, of a
+    plant with `parameters`."""
     function = nominal_model().inverse_dynamics
     pos, vel, acc = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2), ca.SX.sym("acc", 2)
-    p = ca.SX.sym("p", function.size1_in(3))
-    force = function(pos, vel, acc, p)
-    return ca.Function("inverse_dynamics_derivatives", [pos, vel, acc, p],
-                       [ca.jacobian(force, pos), ca.jacobian(force, vel),
-                        ca.jacobian(force, acc)])
+    return ca.Function("model_inverse_dynamics", [pos, vel, acc],
+                       [function(pos, vel, acc, ca.DM(parameters.vector()))])

@@ -4,6 +4,7 @@ plant, the learning filter's parts, the table it writes, and an iteration that c
 import json
 from dataclasses import replace
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -11,12 +12,20 @@ from flexff import cli
 from flexff.cosim.config import parse_config
 from flexff.cosim.csv_text import read_time_table
 from flexff.cosim.metrics import tracking_metrics
+from flexff.cosim.references import build_reference
 from flexff.cosim.run import simulate_config
+from flexff.cosim.scenario import reference_samples
 from flexff.fmu.errors import InputError
 from flexff.learning import ilc as ilc_module
 from flexff.learning.ilc import ilc
-from flexff.learning.ilc_filter import CUTOFF_HZ, LearningFilter
+from flexff.learning.ilc_filter import (
+    CUTOFF_HZ,
+    LearningFilter,
+    learning_filter,
+    model_inverse_dynamics,
+)
 from flexff.learning.loop import with_feedforward_table
+from flexff.plant.parameters import NOMINAL
 
 STEP = 1e-3
 # a 2 s circle on the nominal plant under flexff's PID (the sim environment's loop)
@@ -41,20 +50,33 @@ def e2(trial):
     return np.array([trial["x"]["e2"], trial["y"]["e2"]])
 
 
-def test_ilc_converges_below_one_percent_of_pid_alone_in_two_trials(iteration):
-    """Measured: 230x after one trial, 2e4x after two, 3e5x after three (each axis)."""
+def test_ilc_converges_below_one_percent_of_pid_alone_in_one_trial(iteration):
+    """Measured (x, y): 510x and 900x after one trial, 8e4x and 4e5x after two."""
     _, _, state = iteration
     pid = e2(state["trials"][0])
-    assert np.all(e2(state["trials"][2]) < 0.01 * pid)
+    assert np.all(e2(state["trials"][1]) < 0.01 * pid)
     assert [t["trial"] for t in state["trials"]] == [0, 1, 2, 3]
 
 
 def test_the_error_decreases_monotonically_on_the_nominal_plant(iteration):
-    """The stated case of a stable learning filter: every trial at least 10x better than the
-    one before, on both axes."""
+    """The stated case of a stable learning filter: e2 falls at every trial on both axes,
+    at least 100x in each of the first two learning trials (then y meets the floor that Q
+    sets at the circle's start and end, where its force has a kink: 9e-9 m/sqrt(s))."""
     _, _, state = iteration
     errors = np.array([e2(t) for t in state["trials"]])
-    assert np.all(errors[1:] < 0.1 * errors[:-1])
+    assert np.all(errors[1:] < errors[:-1])
+    assert np.all(errors[1:3] < 0.01 * errors[:2])
+
+
+def test_ilc_falls_monotonically_on_the_hardware_plant_too(tmp_path):
+    """Encoder noise (a new seed each trial), motor friction and the 40 Hz tool mode: e2
+    falls at each of three trials, below 1 % of PID alone's (measured (x, y): 57x and 35x,
+    970x and 490x, 1400x and 720x); beyond that, the noise sets the floor."""
+    loop = parse_config(LOOP.replace('"nominal"', '"hardware"'), name="circle-hardware")
+    state = ilc(loop, tmp_path, iterations=3, progress=False, say=lambda _: None)
+    errors = np.array([e2(t) for t in state["trials"]])
+    assert np.all(errors[1:] < errors[:-1])
+    assert np.all(errors[3] < 0.01 * errors[0])
 
 
 def test_the_table_fed_back_as_a_source_reproduces_the_best_trial(iteration):
@@ -114,29 +136,41 @@ def test_bad_settings_are_refused_before_any_trial(iteration, tmp_path, kwargs, 
     assert not (tmp_path / "out").exists()
 
 
-def test_the_model_force_is_the_linearised_inverse_dynamics():
-    """M e'' + D e' + K e of a constant coupled 2x2 model on a smooth error, to the accuracy
-    of the differences (central inside, one-sided at the ends)."""
-    n, w = 2001, 2 * np.pi * 1.5
+def test_the_model_force_of_a_small_error_is_the_linearised_inverse_dynamics():
+    """On a circle off the centre: M e'' + D e' + K e with the derivatives of the nominal
+    model's inverse dynamics (CasADi's Jacobians), the x-y coupling included (an x error
+    alone asks for a y force), to the accuracy of the differences."""
+    n = 2001
     t = np.arange(n) * STEP
-    mass = np.array([[0.4, 0.1], [0.1, 0.3]])
-    damping = np.array([[0.2, 0.0], [0.05, 0.1]])
-    stiffness = np.array([[5.0, 1.0], [1.0, 4.0]])
-    model = LearningFilter(STEP, *(np.broadcast_to(m, (n, 2, 2)) for m in
-                                   (stiffness, damping, mass)))
-    error = np.column_stack([np.sin(w * t), 0.5 * np.cos(w * t)]) * 1e-3
-    rate = np.column_stack([np.cos(w * t), -0.5 * np.sin(w * t)]) * 1e-3 * w
-    force = error @ (stiffness - w**2 * mass).T + rate @ damping.T
-    miss = np.abs(model.model_force(error) - force)
-    assert np.max(miss[5:-5]) < 1e-4 * np.max(np.abs(force))
-    assert np.max(miss) < 0.02 * np.max(np.abs(force))  # one-sided differences at the ends
+    reference = reference_samples(build_reference("circle", {
+        "centre": (0.01, 0.01), "radius": 0.02, "turns": 1.0, "start_angle": 0.0,
+        "duration": 2.0}, STEP), n - 1)
+    model = learning_filter(reference, STEP, NOMINAL)
+    w = 2 * np.pi * 3.0
+    error = 1e-6 * np.column_stack([np.sin(w * t), np.zeros(n)])
+    rate = 1e-6 * np.column_stack([w * np.cos(w * t), np.zeros(n)])
+    acceleration = -w**2 * error
+    pos, vel, acc = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2), ca.SX.sym("acc", 2)
+    force = model_inverse_dynamics(NOMINAL)(pos, vel, acc)
+    derivatives = ca.Function("d", [pos, vel, acc], [ca.jacobian(force, v)
+                                                      for v in (pos, vel, acc)])
+    motion = [np.column_stack([reference[f"{d}x_ref"], reference[f"{d}y_ref"]])
+              for d in ("", "v", "a")]
+    expected = np.empty((n, 2))
+    for k in range(n):
+        stiffness, damping, mass = (np.asarray(m) for m in derivatives(*(c[k] for c in motion)))
+        expected[k] = stiffness @ error[k] + damping @ rate[k] + mass @ acceleration[k]
+    miss = np.abs(model.model_force(error) - expected)[5:-5]
+    assert np.max(miss) < 1e-3 * np.max(np.abs(expected))
+    assert np.max(np.abs(expected[:, 1])) > 0.05 * np.max(np.abs(expected[:, 0]))
 
 
 def test_q_passes_the_reference_band_without_lag_and_cuts_the_tool_mode():
     """Away from the ends, where Q holds the force at its first and last values."""
     n = 4001
     t = np.arange(n) * STEP
-    model = LearningFilter(STEP, *(np.zeros((n, 2, 2)) for _ in range(3)))
+    still = np.zeros((n, 2))
+    model = LearningFilter(STEP, model_inverse_dynamics(NOMINAL), (still, still, still))
     slow = np.column_stack([np.sin(2 * np.pi * 2.0 * t), np.cos(2 * np.pi * 2.0 * t)])
     fast = np.sin(2 * np.pi * 40.0 * t)[:, None] * np.ones((1, 2))
     inner = slice(500, -500)
