@@ -306,7 +306,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
-          f"forces.png, the .onnx models)")
+          f"forces.png, the .onnx models, ilc/ for the limit)")
     return 0
 
 

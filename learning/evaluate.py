@@ -4,18 +4,21 @@
 2. train the models side by side, one process per core (learning.workers; a finished run with
    the same settings is reused), and export each to ONNX (an ensemble's members, where the
    environment asks for one, as one graph of their mean);
-3. co-simulate the environment's evaluation reference on its plant: PID alone, with the
-   rigid-body feedforward, and with each learned model as an ONNX feedforward FMU. As in the
-   thesis, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
-   100 s reference of sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz
-   circles) on the hardware plant;
-4. write the report (learning.report): summary.json, table.md (with what each model's training
-   cost) and the figures.
+3. run iterative learning control (learning.ilc) on the environment's evaluation reference,
+   into ilc/ (resumes what is there): the best feedforward force for that one reference, which
+   the networks, knowing no reference in advance, can approach but hardly beat;
+4. co-simulate the environment's evaluation reference on its plant: PID alone, with the
+   rigid-body feedforward, with each learned model as an ONNX feedforward FMU, and with the
+   ILC's force table ("limit"). As in the thesis, "sim" runs the 15 s reference of sec. 5.7
+   on the nominal plant and "hardware" the 100 s reference of sec. 6.6 (a 0.12 Hz circle,
+   inside the hardware set's 0.01-0.29 Hz circles) on the hardware plant;
+5. write the report (learning.report): summary.json, table.md (with what each model's training
+   cost, and each scenario's e2 as a multiple of the limit's) and the figures.
 
-Given a run configuration (`loop`, learning.loop), steps 1 and 3 run on that loop instead of
-the environment's plant: the set is collected on it under PID alone, and every scenario is that
-loop on the environment's evaluation reference with its feedforward replaced (PID alone,
-rigid-body, or the learned one stepped right before the controller).
+Given a run configuration (`loop`, learning.loop), steps 1, 3 and 4 run on that loop instead
+of the environment's plant: the set is collected on it under PID alone, and every scenario is
+that loop on the environment's evaluation reference with its feedforward replaced (PID alone,
+rigid-body, the learned one stepped right before the controller, or the ILC's table).
 
 Preprocessing beyond the thesis (Environment.features): the thesis low-passes the measured motion
 and forces at 1.8 Hz and re-quantizes its ideal simulated encoders. The sim evaluation
@@ -43,10 +46,16 @@ from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.errors import InputError
 from flexff.learning.collect import collect
 from flexff.learning.export import export
-from flexff.learning.loop import default_loop, on_reference, with_feedforward
+from flexff.learning.ilc import ITERATIONS, RESULT, ilc
+from flexff.learning.loop import (
+    default_loop,
+    on_reference,
+    with_feedforward,
+    with_feedforward_table,
+)
 from flexff.learning.models import NETWORKS, build_network, check_kind, parameter_count
 from flexff.learning.presets import TrainConfig, make_config
-from flexff.learning.report import write_report
+from flexff.learning.report import LIMIT, write_report
 from flexff.learning.workers import TrainJob, train_parallel
 
 
@@ -98,31 +107,39 @@ MODELS = tuple(NETWORKS)
 
 
 def scenario_config(env: str, name: str, model: Path | None = None, mode: str = "step",
-                    loop: RunConfig | None = None) -> RunConfig:
+                    loop: RunConfig | None = None, table: Path | None = None) -> RunConfig:
     """The environment's evaluation reference on `loop` (default: its plant under PID), with
-    the feedforward of scenario `name`: "pid" (none), "rigid-body", or a learned model (the
-    ONNX file `model`); every signal recorded."""
-    builtin, options = None, {}
-    if name == "rigid-body":
-        builtin = "rigid-body-feedforward"
-    elif name != "pid":
-        if model is None:
-            raise InputError(f"scenario {name!r} needs an ONNX model")
-        builtin, options = "learned-feedforward", {"model": Path(model).resolve(), "mode": mode}
+    the feedforward of scenario `name`: "pid" (none), "rigid-body", LIMIT (the force table
+    `table` that learning.ilc wrote), or a learned model (the ONNX file `model`); every signal
+    recorded."""
     environment = ENVIRONMENTS[env]
-    config = on_reference(with_feedforward(loop or default_loop(environment.plant), builtin,
-                                           options),
-                          {"kind": environment.reference}, f"{env}-{name}", seed=1)
+    base = loop or default_loop(environment.plant)
+    if name == LIMIT:
+        if table is None:
+            raise InputError(f"scenario {name!r} needs the force table of an ILC run")
+        looped = with_feedforward_table(base, table)
+    else:
+        builtin, options = None, {}
+        if name == "rigid-body":
+            builtin = "rigid-body-feedforward"
+        elif name != "pid":
+            if model is None:
+                raise InputError(f"scenario {name!r} needs an ONNX model")
+            builtin, options = "learned-feedforward", {"model": Path(model).resolve(),
+                                                       "mode": mode}
+        looped = with_feedforward(base, builtin, options)
+    config = on_reference(looped, {"kind": environment.reference}, f"{env}-{name}", seed=1)
     return replace(config, record=RecordConfig())
 
 
 def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[str] = MODELS,
              data: str | Path | None = None, epochs: int | None = None,
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
-             progress: bool = True) -> dict[str, Any]:
+             progress: bool = True, ilc_iterations: int = ITERATIONS) -> dict[str, Any]:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
-    collects and evaluates on that run configuration instead of the environment's plant."""
+    collects and evaluates on that run configuration instead of the environment's plant;
+    `ilc_iterations` are the learning trials of the limit (learning.ilc)."""
     if env not in ENVIRONMENTS:
         raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
     for kind in models:
@@ -150,10 +167,14 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         onnx_files[kind] = export([jobs[n].run for n in names], out / f"{kind}.onnx")
         say(f"{kind}: test MSE {metrics['test_mse']:.3g} ({metrics['parameters']} parameters, "
             f"{metrics['epochs']} epochs in {metrics['seconds']:.0f} s) -> {onnx_files[kind]}")
+    say(f"iterative learning control on the evaluation reference into {out / 'ilc'} (the limit)")
+    ilc(scenario_config(env, "pid", loop=loop), out / "ilc", ilc_iterations, progress=progress,
+        say=say)
     recordings: dict[str, Recording] = {}
-    for name in ["pid", "rigid-body", *models]:
+    for name in ["pid", "rigid-body", *models, LIMIT]:
         folder = out / "cosim" / name
-        metrics = run_config(scenario_config(env, name, onnx_files.get(name), loop=loop), folder)
+        metrics = run_config(scenario_config(env, name, onnx_files.get(name), loop=loop,
+                                             table=out / "ilc" / RESULT), folder)
         recordings[name] = load_recording(folder)
         say(f"{name}: e2 = ({metrics['x']['e2']:.3g}, {metrics['y']['e2']:.3g}) m/sqrt(s), "
             f"real-time factor {metrics['real_time_factor']:.0f}")

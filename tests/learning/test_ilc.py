@@ -15,6 +15,7 @@ from flexff.cosim.metrics import tracking_metrics
 from flexff.cosim.references import build_reference
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import reference_samples
+from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
 from flexff.learning import ilc as ilc_module
 from flexff.learning.ilc import ilc
@@ -26,6 +27,7 @@ from flexff.learning.ilc_filter import (
 )
 from flexff.learning.loop import with_feedforward_table
 from flexff.plant.parameters import NOMINAL
+from flexff.plant.system import plant_system
 
 STEP = 1e-3
 # a 2 s circle on the nominal plant under flexff's PID (the sim environment's loop)
@@ -77,6 +79,28 @@ def test_ilc_falls_monotonically_on_the_hardware_plant_too(tmp_path):
     errors = np.array([e2(t) for t in state["trials"]])
     assert np.all(errors[1:] < errors[:-1])
     assert np.all(errors[3] < 0.01 * errors[0])
+
+
+def test_ilc_on_a_plant_fmu_by_path_uses_the_nominal_model(tmp_path):
+    """A loop of flexff's controller and a plant FMU by path (its x, y found by name)."""
+    machine = build_fmu(plant_system("nominal"), tmp_path / "machine.fmu")
+    loop = parse_config(f"""
+[reference]
+kind = "circle"
+radius = 0.02
+duration = 2.0
+[fmu.controller]
+builtin = "controller"
+[fmu.machine]
+path = "{machine}"
+parameters = {{ x_start = 0.02, y_start = 0.0 }}
+[[source]]
+kind = "constant"
+values = {{ Fx_ff = 0.0, Fy_ff = 0.0 }}
+""", name="machine")
+    state = ilc(loop, tmp_path / "out", iterations=1, progress=False, say=lambda _: None)
+    assert state["trials"][1]["seed"] is None
+    assert np.all(e2(state["trials"][1]) < 0.01 * e2(state["trials"][0]))
 
 
 def test_the_table_fed_back_as_a_source_reproduces_the_best_trial(iteration):
