@@ -31,6 +31,7 @@ from flexff.plant.model import VARIANTS
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to keep torch unloaded
 PRESETS = ("fast", "thesis")
+ITERATIONS, CUTOFF_HZ = 10, 20.0  # learning.ilc's defaults, named here to keep scipy unloaded
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
                 PermissionError)  # OSErrors about paths the user gave: exit code 2, as are
 INPUT_ERRNOS = (errno.EROFS, errno.ENAMETOOLONG, errno.ELOOP)  # these (others: 1)
@@ -40,6 +41,7 @@ KEPT = {  # what an interrupted command keeps, by command (and subcommand)
     "data collect": "the trajectories collected so far are kept: run the same command again "
                     "to resume",
     "data import": "the dataset folder was left as it was",
+    "ilc": "the finished trials are kept: run the same command again to continue",
 }
 
 
@@ -387,7 +389,21 @@ def _evaluate(args: argparse.Namespace) -> int:
              scheduler=args.scheduler)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
-          f"forces.png, the .onnx models)")
+          f"forces.png, the .onnx models, ilc/ for the limit)")
+    return 0
+
+
+def _ilc(args: argparse.Namespace) -> int:
+    from flexff.cosim.run import load_run_config
+    from flexff.learning.ilc import RESULT, ilc
+
+    state = ilc(load_run_config(args.config), args.output, args.iterations, args.cutoff)
+    for trial in state["trials"]:
+        x, y = trial["x"], trial["y"]
+        print(f"trial {trial['trial']}: e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), PID "
+              f"alone / trial = ({x['e2_ratio']:.4g}, {y['e2_ratio']:.4g})")
+    print(f"best: trial {state['best']}; its feedforward force -> {args.output}/{RESULT} "
+          f"(ilc.json, e2.png beside it)")
     return 0
 
 
@@ -601,6 +617,20 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--scheduler", help="address of a Dask scheduler to collect and "
                                                 "train on (its workers see this file system)")
     evaluation.set_defaults(handler=_evaluate)
+
+    learning = commands.add_parser(
+        "ilc", help="iterative learning control on a run's one reference: the best feedforward "
+                    "force for it, as a CSV table a run can use (resumes an interrupted one)")
+    learning.add_argument("config", metavar="CONFIG.toml|SYSTEM.ssp",
+                          help="the loop and its reference (flexff's controller, any plant; "
+                               "its own feedforward is replaced)")
+    learning.add_argument("-o", "--output", required=True, help="the output folder")
+    learning.add_argument("--iterations", type=int, default=ITERATIONS, metavar="N",
+                          help=f"learning trials after PID alone (default {ITERATIONS})")
+    learning.add_argument("--cutoff", type=float, default=CUTOFF_HZ, metavar="HZ",
+                          help=f"corner of the zero-phase low-pass Q of the learning filter "
+                               f"(default {CUTOFF_HZ:g})")
+    learning.set_defaults(handler=_ilc)
 
     demo = commands.add_parser("demo", help="the whole pipeline on the embedded defaults")
     demo.add_argument("-o", "--output", default="flexff-demo", help="output folder")

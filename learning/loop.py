@@ -6,7 +6,8 @@ A loop is changed with dataclasses.replace, never by editing its text, and every
 checked again as a file is (cosim.config.checked): `on_reference` sets the reference, run.stop
 and the start values (x_start, y_start of the built-in plant, and of an FMU by path that has
 such parameters) and the built-in plant's noise seed; `with_feedforward` replaces whatever feeds
-the controller's Fx_ff, Fy_ff. `dataset_taps` finds, in a resolved loop, where each signal of
+the controller's Fx_ff, Fy_ff (`with_feedforward_table`: with a CSV time table of them, as
+learning.ilc writes). `dataset_taps` finds, in a resolved loop, where each signal of
 the dataset is read: the encoders and the feedforward force as the controller receives them
 (through the wiring's gain and offset), its feedback force, and the true position `x`, `y` by
 name; a loop that lacks one is refused before anything runs.
@@ -17,6 +18,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -122,6 +124,15 @@ def with_feedforward(loop: RunConfig, builtin: str | None = None,
                     FmuConfig(name, builtin=builtin, options=dict(options or {})))
     return checked(replace(loop, fmus=tuple(fmus), sources=tuple(sources),
                            connections=connections))
+
+
+def with_feedforward_table(loop: RunConfig, table: Path) -> RunConfig:
+    """`loop` with its feedforward forces read from `table`, a CSV time table with columns
+    time, Fx_ff, Fy_ff (a [[source]] of kind "csv"), and no feedforward FMU."""
+    pid = with_feedforward(loop)
+    zero = SourceConfig("constant", dict.fromkeys(names(FEEDFORWARD_FORCES), 0.0))
+    return checked(replace(pid, sources=tuple(SourceConfig("csv", path=Path(table).resolve())
+                                              if s == zero else s for s in pid.sources)))
 
 
 def _controller(loop: RunConfig) -> FmuConfig:

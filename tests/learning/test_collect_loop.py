@@ -290,8 +290,8 @@ def test_evaluate_on_a_loop(heavy_loop, tmp_path, monkeypatch):
     data = synthetic_dataset(tmp_path / "data", n_train=3, n_test=1, duration=3.0,
                              rate_hz=100.0, seed=3)
     summary = evaluate("sim", tmp_path / "eval", models=["pgnn"], data=data, epochs=1,
-                       say=lambda _: None, loop=heavy_loop)
-    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "pgnn"]
+                       say=lambda _: None, loop=heavy_loop, ilc_iterations=1)
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "pgnn", "limit"]
     for name in summary["scenarios"]:
         run = json.loads((tmp_path / "eval" / "cosim" / name / "run.json").read_text())
         assert run["fmu"]["plant"]["parameters"] == {**HEAVY, "x_start": 0.0, "y_start": 0.0}
