@@ -97,8 +97,8 @@ def test_demo_runs(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "physics-guided FF" in result.stdout and "training [s]" in result.stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert list(summary["scenarios"]) == ["pid", "rigid-body", "lstm", "cnn-lstm", "tcn", "pgnn",
-                                          "limit"]
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "lstm", "cnn-lstm",
+                                          "tcn", "pgnn", "limit"]
     for model, e2 in (("lstm", 100), ("tcn", 100), ("cnn-lstm", 40), ("pgnn", 100)):
         for axis in ("x", "y"):
             assert summary["scenarios"][model][axis]["e2_ratio"] >= e2, (model, axis)

@@ -146,7 +146,7 @@ def test_evaluate_for_real(tiny, tmp_path, capsys):
     printed = capsys.readouterr().out
     assert table_text in printed and f"results in {out}/" in printed
     summary = json.loads((out / "summary.json").read_text())
-    assert list(summary["scenarios"]) == ["pid", "rigid-body", "lstm", "limit"]
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "lstm", "limit"]
     rows = _table(table_text)
     columns = {"pid": "PID alone", "rigid-body": "rigid-body FF", "lstm": "LSTM FF"}
     for axis in ("x", "y"):
