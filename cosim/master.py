@@ -51,7 +51,6 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-from tqdm import tqdm
 
 from flexff.cosim.engine import (
     CALLS,
@@ -67,7 +66,7 @@ from flexff.cosim.engine import (
     pointer,
     start_schedule,
 )
-from flexff.cosim.recording import CHUNK_ROWS, Recording
+from flexff.cosim.recording import CHUNK_MIN_ROWS, Recording, chunk_rows
 from flexff.cosim.schema import ALGORITHMS
 from flexff.cosim.timing import Histogram, Pacing, StepTiming, StreamedTiming
 from flexff.cosim.wiring import SOURCE, Link, Port, carried, wire
@@ -75,7 +74,7 @@ from flexff.fmu.errors import InputError, RunError
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 
 PROGRESS_MIN_STEPS = 100_000  # runs this long show a progress bar (on a terminal)
-PROGRESS_CHUNK = 1000  # steps between progress bar updates
+PROGRESS_CHUNK = CHUNK_MIN_ROWS  # steps between progress bar updates (chunks hold whole ones)
 PACED_CHUNK_S = 1.0  # a paced run hands its record over once a second (of its run time)
 
 
@@ -111,6 +110,27 @@ class MemorySink:
         return Recording(np.concatenate(self.times), {
             n: np.concatenate(c) for n, c in self.chunks.items()}, streamed.wall_s,
             streamed.timing)
+
+
+class _NoBar:
+    """The progress bar of a run that shows none (tqdm loads only for one that does)."""
+
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
+    def update(self, n: int) -> None:
+        pass
+
+
+def _progress_bar(steps: int, shown: bool) -> Any:
+    if not shown:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=steps, unit="step", leave=False)
 
 
 def _shifted(array: np.ndarray, rows: int) -> Any:
@@ -306,7 +326,8 @@ class Master:
                record: Sequence[str] | None = None, progress: bool | None = None,
                pacing: Pacing | None = None, keep_timing: bool = True) -> Streamed:
         """Run as `run` does, handing the record to `sink` chunk by chunk while it runs
-        (CHUNK_ROWS points a chunk; a paced run one every PACED_CHUNK_S seconds), so that
+        (cosim.recording.chunk_rows points a chunk; a paced run one every PACED_CHUNK_S
+        seconds), so that
         memory stays flat in the run's length. Without `keep_timing` the steps' execution
         times are counted in histograms (cosim.timing.StreamedTiming), not kept one by one;
         a paced run keeps them always. A run that fails hands over the points before the
@@ -324,8 +345,8 @@ class Master:
         columns = np.array([i for _, i in floats], dtype=np.int64)
         full = len(floats) == len(resolved) and np.array_equal(
             columns, np.arange(len(self.signals)))
-        rows = min(steps + 1, CHUNK_ROWS if pacing is None else PROGRESS_CHUNK * max(
-            1, round(PACED_CHUNK_S / self.step / PROGRESS_CHUNK)))
+        rows = min(steps + 1, chunk_rows(1 + len(record)) if pacing is None else
+                   PROGRESS_CHUNK * max(1, round(PACED_CHUNK_S / self.step / PROGRESS_CHUNK)))
         out = np.empty((rows, len(floats)))
         typed_out = [np.empty(rows, dtype=object) for _ in typed]
         needed = {q for _, q in typed} | {k.from_name for k in self.links if k.kind != "float64"}
@@ -380,7 +401,7 @@ class Master:
         gc_was_enabled = gc.isenabled()
         gc.disable()  # no collection pauses inside the loop
         try:
-            with tqdm(total=steps, unit="step", disable=not progress, leave=False) as bar:
+            with _progress_bar(steps, progress) as bar:
                 if pacing is not None:
                     start_schedule(run)
                 for k0 in range(0, steps + 1, PROGRESS_CHUNK):

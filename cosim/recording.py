@@ -39,7 +39,8 @@ PARQUET_NAME = "signals.parquet"
 PARTS_NAME = "signals.parts"  # the chunks of a run that is running or was killed
 CSV_NAME = "signals.csv"
 NPZ_NAME = "signals.npz"  # the record of earlier versions (read only)
-CHUNK_ROWS = 64_000  # points per chunk of a record written whole (save_recording)
+CHUNK_BYTES = 8 * 2**20  # a chunk's values (at least CHUNK_MIN_ROWS points)
+CHUNK_MIN_ROWS = 1000  # a chunk's points are a multiple of it (the master's progress step)
 # plain encoding, uncompressed: float signals barely compress, and a dictionary per column
 # costs time and memory that grows with the number of chunks
 PARQUET_OPTIONS: dict[str, Any] = {"compression": "none", "use_dictionary": False}
@@ -137,6 +138,9 @@ class RecordWriter:
         import pyarrow.parquet as pq
 
         parts = sorted(self.parts.glob("part-*.parquet"))
+        if len(parts) == 1:  # complete as it is
+            os.replace(parts[0], self.folder / PARQUET_NAME)
+            parts = []
 
         def join(tmp: Path) -> None:
             schema = pq.read_schema(parts[0])
@@ -144,19 +148,28 @@ class RecordWriter:
                 for part in parts:
                     writer.write_table(pq.ParquetFile(part).read(use_threads=False))
 
-        paths = [atomic_write(self.folder / PARQUET_NAME, join)]
+        paths = [atomic_write(self.folder / PARQUET_NAME, join) if parts
+                 else self.folder / PARQUET_NAME]
         shutil.rmtree(self.parts)
         if csv:
             paths.append(export_csv(self.folder))
         return paths
 
 
+def chunk_rows(columns: int) -> int:
+    """Points per chunk of a record of `columns` columns (time included): CHUNK_BYTES of
+    values (a multiple of CHUNK_MIN_ROWS), so that a chunk's memory does not depend on how many
+    signals a run records."""
+    return max(1, CHUNK_BYTES // (8 * max(columns, 1)) // CHUNK_MIN_ROWS) * CHUNK_MIN_ROWS
+
+
 def save_recording(recording: Recording, folder: str | Path, csv: bool = False) -> list[Path]:
     """Write signals.parquet (and signals.csv if `csv`) into `folder`; return the paths."""
     writer = RecordWriter(folder)
-    for k in range(0, max(recording.time.size, 1), CHUNK_ROWS):
-        writer.write(recording.time[k:k + CHUNK_ROWS],
-                     {n: v[k:k + CHUNK_ROWS] for n, v in recording.signals.items()})
+    rows = chunk_rows(1 + len(recording.signals))
+    for k in range(0, max(recording.time.size, 1), rows):
+        writer.write(recording.time[k:k + rows],
+                     {n: v[k:k + rows] for n, v in recording.signals.items()})
     return writer.close(csv)
 
 

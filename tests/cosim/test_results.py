@@ -51,7 +51,7 @@ def test_metrics_by_hand():
 
 
 def test_recording_round_trip_is_bit_exact(tmp_path, rng, monkeypatch):
-    monkeypatch.setattr("flexff.cosim.recording.CHUNK_ROWS", 300)  # four chunks, joined
+    monkeypatch.setattr("flexff.cosim.recording.CHUNK_BYTES", 300 * 8 * 5)  # four chunks
     time = np.arange(1001) * 1e-3
     signals = {name: rng.standard_normal(1001) * 10.0 ** rng.integers(-12, 3)
                for name in ("x_ref", "theta_s1", "i1", "Fx_ff")}

@@ -18,10 +18,10 @@ from flexff.cosim.config import parse_config
 from flexff.cosim.decimate import Envelope, Strided
 from flexff.cosim.plots import RunPlots
 from flexff.cosim.recording import (
-    CHUNK_ROWS,
     CSV_NAME,
     PARQUET_NAME,
     PARTS_NAME,
+    chunk_rows,
     load_recording,
 )
 from flexff.cosim.timing import RESOLUTION, Histogram
@@ -87,8 +87,8 @@ def test_a_killed_run_keeps_its_record_up_to_the_last_chunk(tmp_path):
         process.send_signal(signal.SIGKILL)
         process.wait()
     kept = load_recording(out)
-    points = kept.time.size
-    assert points >= 3 * CHUNK_ROWS and points % CHUNK_ROWS == 0
+    points, rows = kept.time.size, chunk_rows(3)  # time, x0, x1
+    assert points >= 3 * rows and points % rows == 0
     assert not (out / PARQUET_NAME).exists()
     whole = api.simulate(parse_config(vdp_config((points - 1) * 1e-3)))
     for name, values in whole.signals.items():
@@ -96,11 +96,12 @@ def test_a_killed_run_keeps_its_record_up_to_the_last_chunk(tmp_path):
     assert kept.time.tobytes() == whole.time.tobytes()
 
 
-def test_streamed_and_in_memory_records_are_equal_bit_for_bit(tmp_path):
+def test_streamed_and_in_memory_records_are_equal_bit_for_bit(tmp_path, monkeypatch):
+    monkeypatch.setattr("flexff.cosim.recording.CHUNK_BYTES", 64_000 * 8 * 3)
     config = parse_config(vdp_config(150.0, '[record]\ncsv = true\nplot = true\n'))
     metrics = api.run(config, tmp_path)
     streamed, in_memory = load_recording(tmp_path), api.simulate(config)
-    assert streamed.time.size == 150_001 > 2 * CHUNK_ROWS
+    assert streamed.time.size == 150_001 > 2 * chunk_rows(3)
     assert list(streamed.signals) == list(in_memory.signals)
     assert streamed.time.tobytes() == in_memory.time.tobytes()
     for name, values in in_memory.signals.items():
