@@ -39,7 +39,8 @@ PARQUET_NAME = "signals.parquet"
 PARTS_NAME = "signals.parts"  # the chunks of a run that is running or was killed
 CSV_NAME = "signals.csv"
 NPZ_NAME = "signals.npz"  # the record of earlier versions (read only)
-CHUNK_BYTES = 8 * 2**20  # a chunk's values (at least CHUNK_MIN_ROWS points)
+CHUNK_BYTES = 4 * 2**20  # a chunk's values (at least CHUNK_MIN_ROWS points)
+JOIN_ROWS = 2**16  # points per row group of a joined record
 CHUNK_MIN_ROWS = 1000  # a chunk's points are a multiple of it (the master's progress step)
 # plain encoding, uncompressed: float signals barely compress, and a dictionary per column
 # costs time and memory that grows with the number of chunks
@@ -145,8 +146,9 @@ class RecordWriter:
         def join(tmp: Path) -> None:
             schema = pq.read_schema(parts[0])
             with pq.ParquetWriter(tmp, schema, **PARQUET_OPTIONS) as writer:
-                for part in parts:
-                    writer.write_table(pq.ParquetFile(part).read(use_threads=False))
+                for part in parts:  # in slices, so that joining takes little memory
+                    for batch in pq.ParquetFile(part).iter_batches(JOIN_ROWS, use_threads=False):
+                        writer.write_batch(batch, row_group_size=JOIN_ROWS)
 
         paths = [atomic_write(self.folder / PARQUET_NAME, join) if parts
                  else self.folder / PARQUET_NAME]
