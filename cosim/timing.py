@@ -132,7 +132,11 @@ class Histogram:
 
     def add(self, values: np.ndarray) -> None:
         if values.size:
-            self.counts += np.bincount(np.searchsorted(EDGES, values), minlength=EDGES.size + 1)
+            # bin i holds EDGES[i - 1] < v <= EDGES[i]: found by the logarithm, not a search
+            with np.errstate(divide="ignore"):
+                bins = np.ceil(np.log10(values / EDGES[0]) * BINS_PER_DECADE)
+            index = np.clip(np.nan_to_num(bins, nan=0.0, neginf=0.0), 0, EDGES.size)
+            self.counts += np.bincount(index.astype(np.int64), minlength=EDGES.size + 1)
             self.size += values.size
             self.max = max(self.max, float(values.max()))
 
