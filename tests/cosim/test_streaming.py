@@ -24,7 +24,8 @@ from flexff.cosim.recording import (
     chunk_rows,
     load_recording,
 )
-from flexff.cosim.timing import RESOLUTION, Histogram
+from flexff.cosim.run import BackgroundSink
+from flexff.cosim.timing import RESOLUTION, Histogram, Pacing
 from flexff.fmu.errors import InputError
 from tests.helpers import REFERENCE_FMUS, REPOSITORY
 
@@ -170,3 +171,31 @@ def test_results_load_and_export(tmp_path):
     assert main(["results", "export", str(tmp_path)]) == 2
     with pytest.raises(InputError, match="no such folder"):
         results.load(tmp_path / "missing")
+
+
+def test_a_paced_runs_record_is_written_by_a_thread_in_order():
+    """BackgroundSink feeds its sink in the order of the chunks, and raises at finish what
+    the writing thread met."""
+    seen = []
+
+    class Sink:
+        def write(self, k0, time, columns):
+            if k0 == 20:
+                raise OSError("disk full")
+            seen.append(k0)
+
+    background = BackgroundSink(Sink())
+    for k0 in range(0, 30, 10):
+        background.write(k0, np.arange(k0, k0 + 10) * 1e-3, {})
+    with pytest.raises(OSError, match="disk full"):
+        background.finish()
+    assert seen == [0, 10] and not background.thread.is_alive()
+
+
+def test_a_paced_run_streams_its_record(tmp_path):
+    config = parse_config(vdp_config(0.3))
+    api.run(config, tmp_path, pacing=Pacing())
+    streamed, in_memory = load_recording(tmp_path), api.simulate(config)
+    for name, values in in_memory.signals.items():
+        assert streamed[name].tobytes() == values.tobytes(), name
+    assert (tmp_path / "tet.png").is_file()
