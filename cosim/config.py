@@ -51,20 +51,16 @@ when the FMUs are resolved, before anything runs.
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import tomli_w
 
-from flexff.controllers.allocation import ENCODER_CHOICES
-from flexff.controllers.identified import read_identified
-from flexff.controllers.model_card import read_card
+from flexff.cosim.example_configs import config_examples as config_examples  # public API
 from flexff.cosim.memory import MemoryNeeded
 from flexff.cosim.references import REFERENCE_KINDS, Reference, SegmentError, build_reference
 from flexff.cosim.schema import (
@@ -84,11 +80,9 @@ from flexff.cosim.schema import (
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
 from flexff.fmu.model_exchange import SOLVERS
-from flexff.plant.kinematics import check_workspace
-from flexff.plant.model import VARIANTS
 from flexff.plant.parameters import NOMINAL
 from flexff.plant.signals import FEEDFORWARD_FORCES, names
-from flexff.plant.system import plant_parameters
+from flexff.plant.variants import VARIANTS
 
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
                 "circle": ("kind", "centre", "turns", "duration"),
@@ -153,21 +147,6 @@ def parse_config(data: Mapping[str, Any] | str, name: str = "config",
     return _Parser(origin, Path(base)).parse(data, name)
 
 
-EXAMPLE_PATH = re.compile(r'^(\s*path\s*=\s*)"([^"/][^"]*)"', re.MULTILINE)  # a relative path
-
-
-def config_examples() -> dict[str, str]:
-    """Example configurations (TOML text) by name, shipped in cosim/examples/.
-
-    The files they name (third-party FMUs, CSV tables) ship beside them; their relative paths
-    are made absolute, so an example saved anywhere runs from there.
-    """
-    folder = Path(str(resources.files("flexff.cosim") / "examples"))
-    return {path.stem: EXAMPLE_PATH.sub(lambda m: f'{m[1]}"{(folder / m[2]).as_posix()}"',
-                                        path.read_text())
-            for path in sorted(folder.glob("*.toml"))}
-
-
 def expanded(config: RunConfig) -> dict[str, Any]:
     """The configuration in the general form, as TOML tables (paths absolute)."""
     run = {"step": config.step, "start": config.start, "stop": config.stop,
@@ -198,7 +177,9 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                               for c in config.connections]
     data["record"] = {**({"signals": list(config.record.signals)}
                          if config.record.signals is not None else {}),
-                      "csv": config.record.csv}
+                      "csv": config.record.csv,
+                      **({"plot": config.record.plot} if config.record.plot is not None else {}),
+                      **({"every": config.record.every} if config.record.every != 1 else {})}
     return data
 
 
@@ -457,11 +438,16 @@ class _Parser:
         return checked
 
     def plant_parameter_names(self, variant: str) -> tuple[str, ...]:
+        from flexff.plant.system import plant_parameters  # CasADi: manipulator runs only
+
         return (*(p.name for p in plant_parameters(variant)), *PLANT_EXTRA)
 
     def plant_parameters(self, t: Mapping[str, Any], variant: str, where: str,
                          start: tuple[float, float]) -> dict[str, float]:
         """Plant parameter values, checked physically; x_start, y_start default to `start`."""
+        from flexff.plant.kinematics import check_workspace
+        from flexff.plant.system import plant_parameters
+
         known = {p.name: p for p in plant_parameters(variant)}
         values = dict(zip(START_PARAMETERS, start))
         for key in t:
@@ -487,6 +473,8 @@ class _Parser:
         return {"seed": seed}
 
     def controller_options(self, t: Mapping[str, Any], where: str) -> dict[str, Any]:
+        from flexff.controllers.allocation import ENCODER_CHOICES
+
         options: dict[str, Any] = {}
         if "notch" in t:
             notch = t["notch"]
@@ -504,6 +492,9 @@ class _Parser:
     def feedforward_options(self, t: Mapping[str, Any], where: str) -> dict[str, Any]:
         """A learned feedforward's model and mode; the rigid-body one's identified
         parameters, if any."""
+        from flexff.controllers.identified import read_identified  # manipulator runs only
+        from flexff.controllers.model_card import read_card  # onnx: learned runs only
+
         if "model" not in t and t.get("builtin", t.get("kind")) in ("rigid-body",
                                                                       "rigid-body-feedforward"):
             if "identified" not in t:
@@ -586,18 +577,22 @@ class _Parser:
         return out
 
     def record(self, t: Mapping[str, Any]) -> RecordConfig:
-        self.keys(t, "record", ("signals", "csv"))
-        csv = t.get("csv", True)
-        if not isinstance(csv, bool):
-            raise self.error("record.csv", f"expected true or false, got {csv!r}")
+        self.keys(t, "record", ("signals", "csv", "plot", "every"))
+        csv, plot = t.get("csv", False), t.get("plot")
+        for key, value in (("csv", csv), ("plot", plot)):
+            if value is not None and not isinstance(value, bool):
+                raise self.error(f"record.{key}", f"expected true or false, got {value!r}")
+        every = self.integer(t, "record", "every", 1)
+        if every < 1:
+            raise self.error("record.every", f"keeps every N-th point: N >= 1, got {every}")
         if "signals" not in t:
-            return RecordConfig(None, csv)
+            return RecordConfig(None, csv, plot, every)
         names = t["signals"]
         if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
             raise self.error("record.signals", f"expected a list of signal names, got {names!r}")
         if len(set(names)) != len(names):
             raise self.error("record.signals", "a signal is listed twice")
-        return RecordConfig(tuple(names), csv)
+        return RecordConfig(tuple(names), csv, plot, every)
 
     # -- [reference] ----------------------------------------------------------------------
     def reference(self, t: Mapping[str, Any]) -> ReferenceConfig:
@@ -614,6 +609,8 @@ class _Parser:
         if kind == "segments":
             self.keys(t, r, ("kind", "start", "segments"))
             start = self.point(t, r, "start", (0.0, 0.0))
+            from flexff.plant.kinematics import check_workspace
+
             try:
                 check_workspace(NOMINAL, *start, "the start point")
             except ValueError as error:

@@ -39,18 +39,18 @@ the steps may be paced to the wall clock (cosim.timing.Pacing).
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import math
 import sys
 import time
 from collections.abc import Mapping, Sequence
-from ctypes import byref, c_long, c_uint
+from ctypes import POINTER, byref, c_double, c_long, c_uint, c_void_p, cast
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
-from tqdm import tqdm
 
 from flexff.cosim.engine import (
     AFTER_RECORD,
@@ -68,15 +68,78 @@ from flexff.cosim.engine import (
     start_schedule,
 )
 from flexff.cosim.isolation import IsolatedInstance
-from flexff.cosim.recording import Recording
+from flexff.cosim.recording import CHUNK_MIN_ROWS, Recording, chunk_rows
 from flexff.cosim.schema import ALGORITHMS, point_time
-from flexff.cosim.timing import Pacing, StepTiming
+from flexff.cosim.timing import Histogram, Pacing, StepTiming, StreamedTiming
 from flexff.cosim.wiring import SOURCE, Link, Port, carried, wire
 from flexff.fmu.errors import InputError, RunError
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 
 PROGRESS_MIN_STEPS = 100_000  # runs this long show a progress bar (on a terminal)
-PROGRESS_CHUNK = 1000  # steps between progress bar updates
+PROGRESS_CHUNK = CHUNK_MIN_ROWS  # steps between progress bar updates (chunks hold whole ones)
+PACED_CHUNK_S = 1.0  # a paced run hands its record over once a second (of its run time)
+
+
+class Sink(Protocol):
+    """Where a run's record goes, chunk by chunk, while it runs (Master.stream)."""
+
+    def write(self, k0: int, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
+        """Points k0, k0 + 1, ... at times `time` [s], one array per recorded signal."""
+
+
+@dataclass(frozen=True)
+class Streamed:
+    """What a run leaves beside the record it handed to its sink."""
+
+    points: int  # points recorded
+    wall_s: float  # seconds the engine stepped
+    timing: StepTiming | StreamedTiming
+
+
+class MemorySink:
+    """A sink that keeps the record in memory (Master.run)."""
+
+    def __init__(self) -> None:
+        self.chunks: dict[str, list[np.ndarray]] = {}
+        self.times: list[np.ndarray] = []
+
+    def write(self, k0: int, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
+        self.times.append(time)
+        for name, values in columns.items():
+            self.chunks.setdefault(name, []).append(values)
+
+    def recording(self, streamed: Streamed) -> Recording:
+        return Recording(np.concatenate(self.times), {
+            n: np.concatenate(c) for n, c in self.chunks.items()}, streamed.wall_s,
+            streamed.timing)
+
+
+class _NoBar:
+    """The progress bar of a run that shows none (tqdm loads only for one that does)."""
+
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
+    def update(self, n: int) -> None:
+        pass
+
+
+def _progress_bar(steps: int, shown: bool) -> Any:
+    if not shown:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=steps, unit="step", leave=False)
+
+
+def _shifted(array: np.ndarray, rows: int) -> Any:
+    """A pointer `rows` rows before `array`'s first: the engine indexes its buffers by the
+    point k, so a chunk buffer whose first row holds point `rows` is given this way (only
+    rows inside the buffer are ever touched)."""
+    return cast(c_void_p(array.ctypes.data - rows * array.strides[0]), POINTER(c_double))
 
 
 @dataclass(frozen=True)
@@ -103,10 +166,7 @@ class ResolvedFmu:
 
 
 class CosimError(RunError):
-    """An FMI call failed during a co-simulation (the message carries the FMU's log);
-    `recording` holds the points recorded before it, where the loop had begun."""
-
-    recording: Recording | None = None
+    """An FMI call failed during a co-simulation (the message carries the FMU's log)."""
 
 
 class _Plan:
@@ -276,7 +336,7 @@ class Master:
             record: Sequence[str] | None = None, progress: bool | None = None,
             pacing: Pacing | None = None) -> Recording:
         """Run `steps` steps from the start; return the recorded signals at the steps + 1
-        points.
+        points, held in memory (`stream` hands them to a sink instead).
 
         `sources` gives every source signal as a constant or as steps + 1 samples; `record`
         names the signals to keep (default: all; `fmu.output`, a source, or an output's own
@@ -285,6 +345,20 @@ class Master:
         the wall clock. The recording's `timing` holds every step's execution time; a paced
         run stopped by its overruns holds the points up to the last step it made.
         """
+        sink = MemorySink()
+        streamed = self.stream(sources, steps, sink, record, progress, pacing)
+        return sink.recording(streamed)
+
+    def stream(self, sources: Mapping[str, np.ndarray | float], steps: int, sink: Sink,
+               record: Sequence[str] | None = None, progress: bool | None = None,
+               pacing: Pacing | None = None, keep_timing: bool = True) -> Streamed:
+        """Run as `run` does, handing the record to `sink` chunk by chunk while it runs
+        (cosim.recording.chunk_rows points a chunk; a paced run one every PACED_CHUNK_S
+        seconds), so that
+        memory stays flat in the run's length. Without `keep_timing` the steps' execution
+        times are counted in histograms (cosim.timing.StreamedTiming), not kept one by one;
+        a paced run keeps them always. A run that fails hands over the points before the
+        failure first."""
         if self._ran:
             raise RuntimeError("a Master runs once; load the FMUs again for another run")
         self._ran = True
@@ -298,8 +372,10 @@ class Master:
         columns = np.array([i for _, i in floats], dtype=np.int64)
         full = len(floats) == len(resolved) and np.array_equal(
             columns, np.arange(len(self.signals)))
-        out = np.empty((steps + 1, len(floats)))
-        typed_out = [np.empty(steps + 1, dtype=object) for _ in typed]
+        rows = min(steps + 1, chunk_rows(1 + len(record)) if pacing is None else
+                   PROGRESS_CHUNK * max(1, round(PACED_CHUNK_S / self.step / PROGRESS_CHUNK)))
+        out = np.empty((rows, len(floats)))
+        typed_out = [np.empty(rows, dtype=object) for _ in typed]
         needed = {q for _, q in typed} | {k.from_name for k in self.links if k.kind != "float64"}
         for p in self._plans:  # typed outputs cost a call each: read only those in use
             p.typed_outputs = [n for n in p.typed_outputs if f"{p.name}.{n}" in needed]
@@ -314,67 +390,94 @@ class Master:
         if self.algorithm == "jacobi":
             self._propagate_initial_values(table[0])
         hook = _TypedHook(self, [(column, q) for column, (_, q) in zip(typed_out, typed)])
-        run = self._engine_run(table, out, None if full else columns, hook, steps, pacing)
+        keep_timing = keep_timing or pacing is not None
+        timing_rows = steps if keep_timing else rows
+        run = self._engine_run(table, out, None if full else columns, hook, steps, pacing,
+                               timing_rows)
+        streamed_timing = None if keep_timing else StreamedTiming(
+            self.step, tuple(p.name for p in self._plans), Histogram(),
+            tuple(Histogram() for _ in self._plans))
+        float_columns = {j: c for c, (j, _) in enumerate(floats)}
+        typed_columns = {j: c for c, (j, _) in enumerate(typed)}
+
+        def window(base: int) -> None:
+            """Point the engine's buffers so that point k lands in row k - base."""
+            hook.base = base
+            run.record = _shifted(out, base)
+            if not keep_timing:
+                run.tet, run.lateness = _shifted(self._tet, base), _shifted(self._lateness, base)
+                run.fmu_tet = _shifted(self._fmu_tet, base)
+
+        def hand(base: int, end: int) -> None:
+            """Give the sink points base .. end - 1 (and count their steps' times)."""
+            n = end - base
+            if n <= 0:
+                return
+            chunk = {name: out[:n, float_columns[j]].copy() if j in float_columns
+                     else _typed_array(typed_out[typed_columns[j]][:n])
+                     for j, name in enumerate(record)}
+            sink.write(base, self.time(np.arange(base, end)), chunk)
+            if streamed_timing is not None:
+                made = max(0, min(end, steps) - base)
+                streamed_timing.add(self._tet[:made], self._fmu_tet[:made])
+
         if progress is None:
             progress = sys.stderr.isatty() and steps >= PROGRESS_MIN_STEPS
         engine = library()
-        status, end = OK, steps + 1
+        status, end, base, wall = OK, steps + 1, 0, 0.0
+        window(base)
         gc_was_enabled = gc.isenabled()
         gc.disable()  # no collection pauses inside the loop
         try:
-            with tqdm(total=steps, unit="step", disable=not progress, leave=False) as bar:
+            with _progress_bar(steps, progress) as bar:
                 if pacing is not None:
                     start_schedule(run)
-                start = time.perf_counter()
                 for k0 in range(0, steps + 1, PROGRESS_CHUNK):
                     k1 = min(k0 + PROGRESS_CHUNK, steps + 1)
+                    start = time.perf_counter()
                     status = engine.engine_run(byref(run), k0, k1)
+                    wall += time.perf_counter() - start
                     if status != OK:
                         break
                     bar.update(min(k1, steps) - k0)
-            wall = time.perf_counter() - start
+                    if k1 - base == rows or k1 == steps + 1:
+                        hand(base, k1)
+                        base = k1
+                        window(base)
         finally:
             if gc_was_enabled:
                 gc.enable()
+        if status == FAILED:  # points before failed_k were recorded, failed_k if its step failed
+            hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))
+            raise hook.error or self._plans[run.failed_fmu].fail(
+                f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
         if status == OVERRUN:
             end = run.failed_k + 1  # points 0 .. failed_k were recorded, the step was made
-        elif status == FAILED:  # points before failed_k were recorded, failed_k if its step failed
-            end = run.failed_k + (run.failed_call in AFTER_RECORD)
-        signals: dict[str, np.ndarray] = {}
-        float_columns = {j: c for c, (j, _) in enumerate(floats)}
-        typed_columns = {j: c for c, (j, _) in enumerate(typed)}
-        for j, name in enumerate(record):
-            signals[name] = (np.ascontiguousarray(out[:end, float_columns[j]])
-                             if j in float_columns
-                             else _typed_array(typed_out[typed_columns[j]][:end]))
-        made = steps if status == OK else min(end, steps)  # the steps the engine made
+            hand(base, end)
+        network = {p.name: times for p in self._plans if (times := p.instance.network_times())}
+        if streamed_timing is not None:
+            return Streamed(end, wall, dataclasses.replace(streamed_timing,
+                                                           network_calls=network))
+        made = end if status == OVERRUN else steps  # the steps the engine made
         timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
                             self._fmu_tet[:made], self._lateness[:made], pacing, run.overruns,
                             tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
-                            run.failed_k if status == OVERRUN else None,
-                            network_calls={p.name: times for p in self._plans
-                                           if (times := p.instance.network_times())})
-        recording = Recording(self.time(np.arange(end)), signals, wall, timing)
-        if status == FAILED:
-            failure = hook.error or self._plans[run.failed_fmu].fail(
-                f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
-            if isinstance(failure, CosimError):
-                failure.recording = recording
-            raise failure
-        return recording
+                            run.failed_k if status == OVERRUN else None, network_calls=network)
+        return Streamed(end, wall, timing)
 
     def time(self, k: Any) -> Any:
         """The time of point(s) k (cosim.schema.point_time)."""
         return point_time(self.start, self.step, k)
 
     def _engine_run(self, table: np.ndarray, out: np.ndarray, columns: np.ndarray | None,
-                    hook: _TypedHook, steps: int, pacing: Pacing | None) -> EngineRun:
+                    hook: _TypedHook, steps: int, pacing: Pacing | None,
+                    timing_rows: int) -> EngineRun:
         """The engine's plan and buffers, all allocated here, before the loop."""
         self._plan_structs = (EngineFmuPlan * len(self._plans))(
             *(p.engine_plan() for p in self._plans))
-        self._tet = np.zeros(steps)
-        self._fmu_tet = np.zeros((steps, len(self._plans)))
-        self._lateness = np.zeros(steps)
+        self._tet = np.zeros(timing_rows)
+        self._fmu_tet = np.zeros((timing_rows, len(self._plans)))
+        self._lateness = np.zeros(timing_rows)
         self._arrays = (table, out, columns)  # what the engine points into lives as long
         self._hook = TYPED_HOOK(hook) if hook.needed else TYPED_HOOK()
         return EngineRun(
@@ -486,6 +589,7 @@ class _TypedHook:
     def __init__(self, master: Master, columns: list[tuple[np.ndarray, str]]) -> None:
         self.master, self.columns = master, columns
         self.error: Exception | None = None
+        self.base = 0  # the point in the columns' first row
         self.needed = bool(columns) or any(p.typed_inputs or p.typed_outputs
                                            for p in master._plans)
 
@@ -498,7 +602,7 @@ class _TypedHook:
                 self.master._read_typed(self.master._plans[fmu], when)
             else:
                 for column, name in self.columns:
-                    column[k] = self.master._typed[name]
+                    column[k - self.base] = self.master._typed[name]
         except Exception as error:
             self.error = error
             return 1

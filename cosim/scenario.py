@@ -13,25 +13,21 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from flexff.controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
-from flexff.controllers.feedforward import rigid_body_feedforward_system
-from flexff.controllers.identified import read_identified
-from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.references import Reference, build_reference
 from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig, point_time
 from flexff.cosim.wiring import Link, Port, WiringError, wire
-from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, read_fmu
-from flexff.fmu.system import System
-from flexff.plant.system import plant_system
+
+if TYPE_CHECKING:
+    from flexff.fmu.system import System
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,10 +151,17 @@ def _fmu_file(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any], folde
     """The FMU file of `f`: its path, or the built-in built through the cache."""
     if f.path is not None:
         return f.path
+    from flexff.fmu.build import build_fmu  # the builder and CasADi: built-in FMUs only
+
     return build_fmu(_builtin_system(f, config, sources), folder / f"{f.name}.fmu")
 
 
 def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any]) -> System:
+    from flexff.controllers.feedforward import rigid_body_feedforward_system
+    from flexff.controllers.identified import read_identified
+    from flexff.controllers.learned_feedforward import learned_feedforward_system
+    from flexff.plant.system import plant_system
+
     o = f.options
     if f.builtin == "plant":
         return plant_system(o["variant"])
@@ -178,6 +181,8 @@ def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any])
 
 def controller_for(options: Mapping[str, Any], step: float) -> System:
     """The feedback controller of a built-in controller's options, sampled at `step`."""
+    from flexff.controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
+
     variant, crossover = options["variant"], options.get("crossover_hz")
     notch, encoders = options.get("notch"), options.get("encoders", 2)
     if notch is False and DEFAULTS[variant].notch:

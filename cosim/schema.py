@@ -34,7 +34,8 @@ General form (SI units):
                    co-simulation interface)
   [[connection]]   from = "fmu.output" or a source signal, to = "fmu.input", optional gain and
                    offset (SSP's LinearTransformation: to = gain * from + offset)
-  [record]         signals = [names] (default: all), csv (bool, default true)
+  [record]         signals = [names] (default: all), csv (bool, default false),
+                   plot (bool, default: in a manipulator run), every (int, default 1)
 
 Inputs without a [[connection]] take, by name, the output of the same name of another FMU or
 the source signal of that name (cosim.wiring). The manipulator's short form ([plant],
@@ -128,7 +129,9 @@ class ConnectionConfig:
 @dataclass(frozen=True)
 class RecordConfig:
     signals: tuple[str, ...] | None = None  # None: every signal
-    csv: bool = True
+    csv: bool = False
+    plot: bool | None = None  # None: in a manipulator run (cosim.run)
+    every: int = 1  # keep every N-th point in the record (metrics and plots see them all)
 
 
 @dataclass(frozen=True)

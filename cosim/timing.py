@@ -6,6 +6,10 @@ TET of step k: from the first FMI call of communication point k to the end of th
 t_{k+1} (cosim/c/engine.c). Lateness: the step's start after its due time on the absolute
 schedule start + k * period (period = step / real-time factor). An overrun: a step whose TET
 plus lateness passes its period, so that it ends after the next step was due.
+
+A run that streams its record (cosim.run) keeps no per-step array either: its TET goes into
+a Histogram per chunk (StreamedTiming), whose percentiles are within RESOLUTION of the exact
+ones (the maximum is exact), so that memory stays flat in the run's length.
 """
 
 from __future__ import annotations
@@ -112,3 +116,82 @@ def _stats(values: np.ndarray) -> dict[str, float]:
     out = {name: _percentile(values, q) for name, q in PERCENTILES.items()}
     out["max"] = float(values.max() * US) if values.size else 0.0
     return out
+
+
+BINS_PER_DECADE = 400
+EDGES = np.geomspace(1e-9, 1e3, 12 * BINS_PER_DECADE + 1)  # [s], 1 ns .. 1000 s
+RESOLUTION = float(EDGES[1] / EDGES[0] - 1)  # a bin's relative width (0.58 %)
+
+
+class Histogram:
+    """Durations [s] counted in logarithmic bins (EDGES): percentiles in constant memory."""
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(EDGES.size + 1, dtype=np.int64)
+        self.size, self.max = 0, 0.0
+
+    def add(self, values: np.ndarray) -> None:
+        if values.size:
+            # bin i holds EDGES[i - 1] < v <= EDGES[i]: found by the logarithm, not a search
+            with np.errstate(divide="ignore"):
+                bins = np.ceil(np.log10(values / EDGES[0]) * BINS_PER_DECADE)
+            index = np.clip(np.nan_to_num(bins, nan=0.0, neginf=0.0), 0, EDGES.size)
+            self.counts += np.bincount(index.astype(np.int64), minlength=EDGES.size + 1)
+            self.size += values.size
+            self.max = max(self.max, float(values.max()))
+
+    def percentile(self, q: float) -> float:
+        """The q-th percentile [s] (numpy's rank q/100 * (size - 1)): the geometric centre of
+        the bin that holds it, at most the maximum."""
+        if not self.size:
+            return 0.0
+        rank = q / 100.0 * (self.size - 1)
+        i = int(np.searchsorted(np.cumsum(self.counts), rank, side="right"))
+        low, high = (EDGES[i - 1] if i > 0 else 0.0), (EDGES[i] if i < EDGES.size else self.max)
+        return min(float(np.sqrt(low * high)) if low > 0 else float(high), self.max)
+
+
+def _histogram_stats(h: Histogram) -> dict[str, float]:
+    out = {name: h.percentile(q) * US for name, q in PERCENTILES.items()}
+    out["max"] = h.max * US
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class StreamedTiming:
+    """What the engine measured in an unpaced run whose record was streamed: each step's TET
+    and each FMU's share, counted in histograms (the `realtime` table of StepTiming, with
+    percentiles within RESOLUTION)."""
+
+    step: float
+    names: tuple[str, ...]
+    tet: Histogram
+    fmu_tet: tuple[Histogram, ...]
+    network_calls: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
+    pacing: None = None
+    stopped_at: None = None
+
+    @property
+    def period(self) -> float:
+        return self.step
+
+    def add(self, tet: np.ndarray, fmu_tet: np.ndarray) -> None:
+        """Count the TET of some steps (and the FMUs' shares, steps x FMUs)."""
+        self.tet.add(tet)
+        for i, h in enumerate(self.fmu_tet):
+            h.add(fmu_tet[:, i])
+
+    def table(self, wall_s: float) -> dict[str, Any]:
+        """The `realtime` table of metrics.json, as StepTiming.table gives it unpaced."""
+        return {
+            "period_us": self.period * US, "target_real_time_factor": None,
+            "achieved_real_time_factor": self.tet.size * self.step / wall_s
+            if wall_s > 0 else None,
+            "steps": self.tet.size,
+            "tet_us": _histogram_stats(self.tet),
+            "tet_us_per_fmu": {n: _histogram_stats(h) for n, h in zip(self.names, self.fmu_tet)},
+            "tet_over_period_p99": self.tet.percentile(99.0) / self.period
+            if self.tet.size else None,
+            "network_call_us": self.network_calls,
+            "percentile_resolution": RESOLUTION,
+        }

@@ -18,16 +18,13 @@ import traceback
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-from flexff.cosim.compare import RTOL as COMPARE_RTOL
-from flexff.cosim.compare import compare_fmu
-from flexff.cosim.timing import OverrunError, Pacing
 from flexff.fmu.errors import InputError, RunError
-from flexff.fmu.validation import TIMEOUT as VALIDATION_TIMEOUT
-from flexff.fmu.validation import validate_fmu
-from flexff.learning.dataset import SETS
-from flexff.plant.model import VARIANTS
+from flexff.plant.variants import VARIANTS
+
+if TYPE_CHECKING:  # the command line loads numpy and the rest only in the command that runs
+    from flexff.cosim.timing import Pacing
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to keep torch unloaded
 PRESETS = ("fast", "thesis")
@@ -37,7 +34,8 @@ INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirec
 INPUT_ERRNOS = (errno.EROFS, errno.ENAMETOOLONG, errno.ELOOP)  # these (others: 1)
 BUG_HINT = " (rerun with flexff --debug for the traceback)"  # an error that is not documented
 KEPT = {  # what an interrupted command keeps, by command (and subcommand)
-    "run": "the runs that finished keep their folders; no file is left half-written",
+    "run": "the runs that finished keep their folders, an interrupted run its record up to "
+           "its last chunk (signals.parts/); no file is left half-written",
     "data collect": "the trajectories collected so far are kept: run the same command again "
                     "to resume",
     "data import": "the dataset folder was left as it was",
@@ -104,6 +102,10 @@ def _fmu_build(args: argparse.Namespace) -> int:
 def _fmu_validate(args: argparse.Namespace) -> int:
     """Exit 0 when no FMU has an error (warnings allowed), 1 when one has, 2 when a path is
     missing or unreadable."""
+    from flexff.fmu.validation import TIMEOUT, validate_fmu
+
+    if args.timeout is None:
+        args.timeout = TIMEOUT
     if not args.timeout > 0:
         raise InputError(f"--timeout {args.timeout:g}: expected a positive number of seconds")
     status = 0
@@ -129,6 +131,10 @@ def _fmu_validate(args: argparse.Namespace) -> int:
 def _fmu_compare(args: argparse.Namespace) -> int:
     """Exit 0 when every FMU agrees, 1 when one differs or fails to run, 2 when a path is
     missing or not a usable FMU (the others are still compared)."""
+    from flexff.cosim.compare import RTOL, compare_fmu
+
+    if args.rtol is None:
+        args.rtol = RTOL
     if not args.rtol > 0:
         raise InputError(f"--rtol {args.rtol:g}: expected a positive number")
     status = 0
@@ -146,6 +152,21 @@ def _fmu_compare(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.output:
+        _output_file(args.output)
+    if args.processes:
+        from flexff.process_bench import process_benchmark
+
+        if not Path(args.processes).is_file():
+            raise InputError(f"{args.processes}: no such FMU file (bench --processes FILE.fmu)")
+        try:
+            steps = [int(n) for n in args.process_steps.split(",")]
+        except ValueError:
+            raise InputError(f"--process-steps takes whole numbers separated by commas, got "
+                             f"{args.process_steps!r}") from None
+        return _print_json(process_benchmark(Path(args.processes).resolve(), steps,
+                                             repeats=args.process_repeats,
+                                             ecos_python=args.ecos_python), args.output)
     from flexff.bench import run_benchmarks
 
     models = None
@@ -153,13 +174,16 @@ def _bench(args: argparse.Namespace) -> int:
         models = {p.stem: p for p in sorted(Path(args.models).glob("*.onnx"))}
         if not models:
             raise InputError(f"no .onnx files in {args.models}")
-    if args.output:
-        _output_file(args.output)
-    text = json.dumps(run_benchmarks(steps=args.steps, models=models,
-                                     realtime_seconds=args.realtime_seconds), indent=2)
+    return _print_json(run_benchmarks(steps=args.steps, models=models,
+                                      realtime_seconds=args.realtime_seconds), args.output)
+
+
+def _print_json(data: dict[str, Any], output: str | None) -> int:
+    """Print `data` as JSON, and write it to `output` too where given."""
+    text = json.dumps(data, indent=2)
     print(text)
-    if args.output:
-        with open(args.output, "w") as f:
+    if output:
+        with open(output, "w") as f:
             f.write(text + "\n")
     return 0
 
@@ -211,6 +235,8 @@ def _pacing(args: argparse.Namespace) -> Pacing | None:
         if given:
             raise InputError(f"{', '.join(given)} apply to paced runs: add --realtime")
         return None
+    from flexff.cosim.timing import Pacing
+
     return Pacing(rt_factor=1.0 if args.rt_factor is None else args.rt_factor,
                   max_overruns=args.max_overruns or 0, grace=args.grace or 0.0)
 
@@ -253,7 +279,7 @@ def _print_result(name: object, metrics: dict[str, Any], output: object) -> None
 
 
 def _config_example(args: argparse.Namespace) -> int:
-    from flexff.cosim.config import config_examples
+    from flexff.cosim.example_configs import config_examples
 
     examples = config_examples()
     if args.name is None:
@@ -262,6 +288,13 @@ def _config_example(args: argparse.Namespace) -> int:
     if args.name not in examples:
         raise InputError(f"no example {args.name!r}; examples: {', '.join(examples)}")
     print(examples[args.name], end="")
+    return 0
+
+
+def _results_export(args: argparse.Namespace) -> int:
+    from flexff.results import export_csv
+
+    print(f"wrote {export_csv(args.folder)}")
     return 0
 
 
@@ -452,18 +485,18 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--strict", action="store_true",
                           help="a restored FMU state must reproduce the outputs bit for bit "
                                "(default: within the FMU's tolerance, as a warning)")
-    validate.add_argument("--timeout", type=float, default=VALIDATION_TIMEOUT,
+    validate.add_argument("--timeout", type=float,
                           help="seconds the run of one FMU may take before it counts as hung "
-                               f"(default {VALIDATION_TIMEOUT:g})")
+                               "(default: a minute, fmu.validation.TIMEOUT)")
     validate.set_defaults(handler=_fmu_validate)
 
     compare = fmu_commands.add_parser(
         "compare", help="run each FMU alone on its default experiment in flexff and in FMPy; "
                         "the largest difference per output")
     compare.add_argument("files", nargs="+", help=".fmu files")
-    compare.add_argument("--rtol", type=float, default=COMPARE_RTOL,
-                         help="relative difference within which an output agrees (default "
-                              f"{COMPARE_RTOL:g})")
+    compare.add_argument("--rtol", type=float,
+                         help="relative difference within which an output agrees (default: "
+                              "cosim.compare.RTOL, 1e-9)")
     compare.set_defaults(handler=_fmu_compare)
 
     run = commands.add_parser("run", help="run co-simulations from TOML configurations or SSP "
@@ -507,6 +540,13 @@ def build_parser() -> argparse.ArgumentParser:
     expand.add_argument("config", help="a run configuration (TOML) or SSP file")
     expand.set_defaults(handler=_config_expand)
 
+    results = commands.add_parser("results", help="a run folder's results")
+    results_commands = results.add_subparsers(dest="results_command", required=True)
+    results_export = results_commands.add_parser(
+        "export", help="write signals.csv beside a run's record (flexff.results.export_csv)")
+    results_export.add_argument("folder", help="the run's folder (flexff run -o)")
+    results_export.set_defaults(handler=_results_export)
+
     ssp = commands.add_parser("ssp", help="SSP 1.0 (System Structure and Parameterization)")
     ssp_commands = ssp.add_subparsers(dest="ssp_command", required=True)
     ssp_export = ssp_commands.add_parser(
@@ -521,7 +561,8 @@ def build_parser() -> argparse.ArgumentParser:
     collect = data_commands.add_parser(
         "collect", help="co-simulate a trajectory set under PID into a dataset folder "
                         "(resumes an interrupted collection)")
-    collect.add_argument("--set", required=True, choices=SETS, help="the trajectory set")
+    collect.add_argument("--set", required=True,
+                         help="the trajectory set (an unknown name lists them)")
     collect.add_argument("--config", metavar="CONFIG.toml|SYSTEM.ssp",
                          help="the loop to collect on (flexff's controller and any plant); "
                               "default: the set's built-in plant under PID")
@@ -594,6 +635,16 @@ def build_parser() -> argparse.ArgumentParser:
     bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON")
     bench.add_argument("--steps", type=int, default=20000, help="steps per timed loop")
     bench.add_argument("-o", "--output", help="also write the JSON to this file")
+    bench.add_argument("--processes", metavar="FILE.fmu",
+                       help="instead: whole processes side by side on this FMU (flexff run, "
+                            "fmpy.simulate_fmu, Ecos where installed), each writing its "
+                            "default record")
+    bench.add_argument("--process-steps", default="200000,2000000", metavar="N,N",
+                       help="with --processes: the run lengths in steps (of 1 ms)")
+    bench.add_argument("--process-repeats", type=int, default=3, metavar="R",
+                       help="with --processes: runs of each tool, alternated")
+    bench.add_argument("--ecos-python", metavar="PYTHON",
+                       help="with --processes: an interpreter with ecospy (default: this one)")
     bench.add_argument("--realtime-seconds", type=float, metavar="S",
                        help="pace only the first S seconds of the 100 s hardware evaluation "
                             "in the real-time figures (default: all of it)")
@@ -642,6 +693,8 @@ def _failure(error: BaseException, command: str, debug: bool = False) -> tuple[i
     """The exit code and the line on stderr for an error that stopped `command`: bad input
     (InputError, an OSError about a path) 2, a run that failed (RunError, an OSError such as a
     full disk, MemoryError) 1, anything else, a bug, 1 and how to see its traceback."""
+    from flexff.cosim.timing import OverrunError
+
     if isinstance(error, KeyboardInterrupt):
         kept = KEPT.get(command)
         return 130, "flexff: interrupted" + (f"; {kept}" if kept else "")

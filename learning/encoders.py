@@ -23,7 +23,7 @@ from typing import Any
 from flexff.cosim.schema import RunConfig
 from flexff.fmu.importer import read_fmu
 from flexff.learning.features import FeatureConfig
-from flexff.plant.model import VARIANTS
+from flexff.plant.variants import VARIANTS
 
 EFFECTS = ("encoder_quantization", "noise_std")  # plant parameters: 0 switches each off
 

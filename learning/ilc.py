@@ -52,9 +52,9 @@ from flexff.learning.ilc_filter import (
     learning_filter,
 )
 from flexff.learning.loop import dataset_taps, with_feedforward, with_feedforward_table
-from flexff.plant.model import VARIANTS
 from flexff.plant.parameters import NOMINAL, PlantParameters
 from flexff.plant.signals import FEEDBACK_FORCES, FEEDFORWARD_FORCES, TRUE_POSITION, names
+from flexff.plant.variants import VARIANTS
 
 ITERATIONS = 10  # learning trials after PID alone
 RESULT = "feedforward.csv"

@@ -35,9 +35,9 @@ from flexff.learning.dataset import (
     POSITION_SIGNALS,
     REFERENCE_SIGNALS,
 )
-from flexff.plant.model import VARIANTS
 from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
 from flexff.plant.system import plant_parameters
+from flexff.plant.variants import VARIANTS
 
 START_VALUES = ("x_start", "y_start")
 FEEDFORWARDS = ("rigid-body-feedforward", "learned-feedforward")

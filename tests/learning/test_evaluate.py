@@ -35,7 +35,7 @@ def test_every_scenario_is_reported(evaluation):
     assert "| identified rigid-body FF |" in (out / "table.md").read_text()
     for name in ("table.md", "paths.png", "errors.png", "forces.png", "pgnn.onnx"):
         assert (out / name).is_file()
-    assert (out / "cosim" / "pgnn" / "signals.npz").is_file()
+    assert (out / "cosim" / "pgnn" / "signals.parquet").is_file()
     assert any(line.startswith("pgnn: test MSE") for line in lines)
     training = summary["training"]["pgnn"]
     assert training["epochs"] == 1 and training["seconds"] > 0 and training["test_mse"] > 0
