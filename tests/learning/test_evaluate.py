@@ -66,7 +66,7 @@ def test_the_ilc_limit_is_a_column_and_every_scenario_a_multiple_of_it(evaluatio
     scenarios = summary["scenarios"]
     state = json.loads((out / "ilc" / "ilc.json").read_text())
     assert [t["trial"] for t in state["trials"]] == [0, 1, 2]
-    assert (out / "cosim" / "limit" / "signals.npz").is_file()
+    assert (out / "cosim" / "limit" / "signals.parquet").is_file()
     for axis in ("x", "y"):
         assert scenarios["limit"][axis]["e2_ratio"] > 1e4
         assert scenarios["limit"][axis]["e2_per_limit"] == 1.0
