@@ -146,13 +146,16 @@ class _Plan:
         fmi3 = self.instance.info.fmi_version == "3.0"
         names = (("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep") if fmi3 else
                  ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"))
+        task = self.instance.network_task()  # its overruns count as the engine's own
+        counter = task[1] if task else 0
         return EngineFmuPlan(
             fmi3, self.instance.component.value, *(function_address(dll, n) for n in names),
             len(self.inputs), pointer(self.in_vr, c_uint), pointer(self.gather, c_long),
             pointer(self.gain), pointer(self.offset), pointer(self.in_values),
             len(self.outputs), pointer(self.out_vr, c_uint), pointer(self.out_values),
             self.read_before, self.read_after, bool(self.typed_inputs),
-            bool(self.typed_outputs))
+            bool(self.typed_outputs), counter or None,
+            c_long.from_address(counter).value if counter else 0)
 
     def fail(self, what: str) -> CosimError:
         return CosimError(str(self.instance.fail(what)))
@@ -319,6 +322,7 @@ class Master:
         made = end if status == OVERRUN else steps  # the steps the engine made
         timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
                             self._fmu_tet[:made], self._lateness[:made], pacing, run.overruns,
+                            run.task_overruns,
                             tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
                             run.failed_k if status == OVERRUN else None,
                             network_calls={p.name: times for p in self._plans

@@ -176,6 +176,34 @@ def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
             "network_call_us": table["network_call_us"]["graph"]}
 
 
+def slow_graph(path: Path, size: int = 256, layers: int = 3) -> Path:
+    """A graph made deliberately slow (a network longer than the 1 kHz period): forces = inputs
+    (2 columns, exactly, whatever the weights), after `layers` products of a `size` x `size`
+    matrix scaled by the inputs' sum, each through tanh (onnxruntime cannot fold them away).
+    At 256 and 3, a call takes about 3 ms on one core of the development machine."""
+    rng = np.random.default_rng(0)
+    weights = onnx.helper.make_tensor("w", onnx.TensorProto.DOUBLE, [size, size],
+                                      (rng.standard_normal((size, size)) / size).ravel())
+    make = onnx.helper.make_node
+    nodes = [make("Constant", [], ["weights"], value=weights),
+             make("ReduceSum", ["inputs"], ["scale"], keepdims=1),
+             make("Mul", ["weights", "scale"], ["a0"])]
+    for i in range(layers):
+        nodes += [make("MatMul", [f"a{i}", "weights"], [f"m{i}"]),
+                  make("Tanh", [f"m{i}"], [f"a{i + 1}"])]
+    nodes += [make("ReduceSum", [f"a{layers}"], ["total"], keepdims=1),
+              make("IsNaN", ["total"], ["nan"]),  # 0 for any finite input: forces = inputs
+              make("Cast", ["nan"], ["zero"], to=onnx.TensorProto.DOUBLE),
+              make("Add", ["inputs", "zero"], ["forces"])]
+    graph = onnx.helper.make_graph(
+        nodes, "slow",
+        [onnx.helper.make_tensor_value_info("inputs", onnx.TensorProto.DOUBLE, [1, 2])],
+        [onnx.helper.make_tensor_value_info("forces", onnx.TensorProto.DOUBLE, [1, 2])])
+    onnx.save(onnx.helper.make_model(graph, opset_imports=[onnx.helper.make_opsetid("", 17)],
+                                     ir_version=9), path)
+    return path
+
+
 def run_benchmarks(steps: int = 20000, repeats: int = 5,
                    models: dict[str, Path] | None = None,
                    realtime_seconds: float | None = None) -> dict[str, Any]:
