@@ -472,8 +472,7 @@ static int data_problem(const Instance *c, const Data *d, char *why, size_t size
         PROBLEM("network result at this point");
     if (first_nonfinite(d->net_last, N_R) >= 0 || first_nonfinite(d->net_before, N_R) >= 0)
         PROBLEM("last network results");
-    if ((d->net_job != 0 && d->net_job != 1) || (d->net_job && (!NET_TASK ||
-                                                                d->net_step <= NET_PERIOD)))
+    if ((d->net_job != 0 && d->net_job != 1) || (d->net_job && (!NET_TASK || d->net_step < 1)))
         PROBLEM("network task flag %d at step %ld", d->net_job, d->net_step);
     if (d->net_job && first_nonfinite(d->net_job_r, N_R) >= 0)
         PROBLEM("network task result");

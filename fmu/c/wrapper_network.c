@@ -7,8 +7,8 @@
  *
  * With NET_TASK the graph runs in its own task (wrapper_task.c): the call started at call point
  * k on the inputs of step k gives its result at k + NET_PERIOD, and the results are extrapolated
- * one period further to make up for that delay. The call at the first point runs in the step,
- * at initialization, so that a result is there from the start.
+ * one period further to make up for that delay. Until the first result, r is zero (the initial
+ * output of a rate transition, as in Simulink): the step never runs the network itself.
  */
 
 #include "wrapper.h"
@@ -283,17 +283,18 @@ static fmi2Status net_call(Instance *c) {
 }
 
 #if NET_TASK
-/* NET_TASK past the first call point: at a call point the result of the last one becomes the
- * latest (waiting for it if the task is not done) and the inputs of this one's call are
- * evaluated into c->features (net_commit starts it); c->r extrapolates the last two results to
- * the current point, one to two periods after the later one started. */
+/* NET_TASK: at a call point the result of the last one becomes the latest (waiting for it if
+ * the task is not done) and the inputs of this one's call are evaluated into c->features
+ * (net_commit starts it); c->r extrapolates the last two results to the current point, one to
+ * two periods after the later one started (zero before the first result). */
 static fmi2Status task_prepare(Instance *c, long phase) {
     if (phase == 0) {
         if (c->d.net_job) {
             if (task_settle(c, 1) != fmi2OK ||
                 check_finite_result(c, c->d.net_job_r, c->d.time) != fmi2OK)
                 return fmi2Error;
-            memcpy(c->d.net_before, c->d.net_last, sizeof c->d.net_before);
+            memcpy(c->d.net_before, c->d.net_step == NET_PERIOD ? c->d.net_job_r : c->d.net_last,
+                   sizeof c->d.net_before);
             memcpy(c->d.net_last, c->d.net_job_r, sizeof c->d.net_last);
             memcpy(c->d.net_state, c->d.net_job_state, sizeof c->d.net_state);
             c->d.net_job = 0;
@@ -301,6 +302,10 @@ static fmi2Status task_prepare(Instance *c, long phase) {
         if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
             return fail(c, "Evaluating the network's inputs failed.");
         if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
+    }
+    if (c->d.net_step < NET_PERIOD) {
+        memset(c->r, 0, sizeof c->r);
+        return fmi2OK;
     }
     const double s = (double)(phase + NET_PERIOD) / NET_PERIOD;
     for (int i = 0; i < N_R; i++)
@@ -314,7 +319,7 @@ static fmi2Status task_prepare(Instance *c, long phase) {
 fmi2Status net_prepare(Instance *c) {
     const long phase = c->d.net_step % NET_PERIOD;
 #if NET_TASK
-    if (c->d.net_step >= NET_PERIOD) return task_prepare(c, phase);
+    return task_prepare(c, phase);
 #endif
     if (phase == 0) {
         if (!c->d.net_pending || memcmp(c->d.net_u, c->d.u, sizeof c->d.u) != 0) {
@@ -333,14 +338,13 @@ fmi2Status net_prepare(Instance *c) {
 }
 
 /* A successful step: a call point's result and state become the committed ones (with
- * NET_TASK, past the first call point, the point's call starts instead). */
+ * NET_TASK, the point's call starts instead). */
 void net_commit(Instance *c) {
 #if NET_TASK
-    if (c->d.net_step >= NET_PERIOD && c->d.net_step % NET_PERIOD == 0) {
+    if (c->d.net_step % NET_PERIOD == 0)
         task_post(c, c->features, c->d.net_state); /* the inputs task_prepare evaluated */
-        c->d.net_step++;
-        return;
-    }
+    c->d.net_step++;
+    return;
 #endif
     if (c->d.net_step % NET_PERIOD == 0) {
         memcpy(c->d.net_before, c->d.net_step == 0 ? c->d.net_new : c->d.net_last,

@@ -7,6 +7,12 @@
  * overrun, counted here. The result is always used at k + NET_PERIOD, so the outputs are the
  * same whatever the timing, and any importer runs the FMU unchanged.
  *
+ * The worker runs at the priority of a slower task, as rate-monotonic scheduling gives it: when
+ * the thread that steps the instance runs under SCHED_FIFO or SCHED_RR (a paced run where the
+ * system permits), the worker gets the same policy one priority below, so that it is neither
+ * preempted by ordinary processes nor able to preempt the step; otherwise it is an ordinary
+ * thread like its caller.
+ *
  * One mutex guards the hand-over; the worker touches only the job buffers below and the network
  * (whose call times it records), never the instance's Data, which the calling thread alone
  * reads and writes.
@@ -24,6 +30,7 @@ struct Task {
     Network *net;
     int posted, finished, quit;
     int busy;            /* a job is out for the current Data (calling thread only) */
+    int policy, priority; /* the caller's scheduling the worker's was last set from */
     long overruns;       /* results not ready when due (calling thread only) */
     fmi2Real in[NET_N_IN];
     float state_in[DIM(NET_STATE_SIZE)];
@@ -60,6 +67,7 @@ int task_start(Instance *c, char *error, size_t size) {
         return -1;
     }
     t->net = c->net;
+    t->policy = SCHED_OTHER; /* as a thread is created */
     pthread_mutex_init(&t->lock, NULL);
     pthread_cond_init(&t->wake, NULL);
     pthread_cond_init(&t->done, NULL);
@@ -92,10 +100,32 @@ void task_stop(Instance *c) {
     c->task = NULL;
 }
 
+/* The worker one priority below the calling thread under a real-time policy, or ordinary
+ * under an ordinary one; only when the caller's scheduling changed since the last call. What
+ * the system refuses leaves the worker as it was (it still runs, only less promptly). */
+static void follow_caller(Task *t) {
+    struct sched_param caller, worker;
+    int policy;
+    if (pthread_getschedparam(pthread_self(), &policy, &caller) != 0 ||
+        (policy == t->policy && caller.sched_priority == t->priority))
+        return;
+    t->policy = policy;
+    t->priority = caller.sched_priority;
+    memset(&worker, 0, sizeof worker);
+    if (policy == SCHED_FIFO || policy == SCHED_RR) {
+        const int lowest = sched_get_priority_min(policy);
+        worker.sched_priority = caller.sched_priority > lowest ? caller.sched_priority - 1 : lowest;
+    } else {
+        policy = SCHED_OTHER;
+    }
+    pthread_setschedparam(t->thread, policy, &worker);
+}
+
 /* Start a call on `features` from the recurrent state `state` (the worker is idle: every job
  * is settled before the next is posted). */
 void task_post(Instance *c, const fmi2Real *features, const float *state) {
     Task *t = c->task;
+    follow_caller(t);
     pthread_mutex_lock(&t->lock);
     memcpy(t->in, features, sizeof t->in);
     memcpy(t->state_in, state, sizeof t->state_in);

@@ -20,12 +20,12 @@ from tests.runners import run_fmu, run_fmu_libcosim
 
 
 def task_scheme(calls: np.ndarray, steps: int) -> np.ndarray:
-    """The task scheme by hand, from the results of the calls at 0, PERIOD, 2 PERIOD, ...: the
-    call at 0 runs in the step and serves [0, 2 PERIOD); from then on the call of point
-    (j - 1) PERIOD is the latest result at [j PERIOD, (j + 1) PERIOD), extrapolated from it and
-    the one before by (phase + PERIOD) / PERIOD."""
-    out = np.empty((steps, calls.shape[1]))
-    for k in range(steps):
+    """The task scheme by hand, from the results of the calls at 0, PERIOD, 2 PERIOD, ...: zero
+    until the first result; then the call of point (j - 1) PERIOD is the latest result at
+    [j PERIOD, (j + 1) PERIOD), extrapolated from it and the one before by
+    (phase + PERIOD) / PERIOD."""
+    out = np.zeros((steps, calls.shape[1]))
+    for k in range(PERIOD, steps):
         j, phase = divmod(k, PERIOD)
         last, before = calls[max(j - 1, 0)], calls[max(j - 2, 0)]
         out[k] = last + (phase + PERIOD) / PERIOD * (last - before)
@@ -92,13 +92,13 @@ def test_a_network_that_misses_its_deadline_is_counted(slow_fmu):
     task = recording.timing.table(recording.wall_s)["tasks"]["slow.network"]
     assert task["overruns"] >= 15  # each call takes ~3 ms, its result is due 1 step later
     assert task["calls"] >= 20 and task["period_us"] == pytest.approx(1e3)
-    assert np.array_equal(recording["slow.forces[1]"], np.full(21, 2.0))  # never wrong, late
+    assert np.array_equal(recording["slow.forces[1]"], [0.0] + [2.0] * 20)  # late, never wrong
     with Master([ResolvedFmu("slow", slow_fmu)], list(inputs), H) as master:
         paced = master.run(inputs, 200, progress=False, pacing=Pacing(max_overruns=10))
     timing = paced.timing  # the steps that wait overrun too: both kinds reach the 10
     assert timing.stopped_at is not None and timing.stopped_at < 100
     assert timing.task_overruns >= 1 and timing.overruns < 10
-    assert timing.overruns + timing.task_overruns == 10
+    assert timing.overruns + timing.task_overruns in (10, 11)  # a step may add one of each
     assert "overruns" in timing.stop_message()
 
 
