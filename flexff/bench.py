@@ -221,11 +221,11 @@ def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
             "network_call_us": table["network_call_us"]["graph"]}
 
 
-def slow_graph(path: Path, size: int = 256, layers: int = 3) -> Path:
+def slow_graph(path: Path, size: int = 256, layers: int = 6) -> Path:
     """A graph made deliberately slow (a network longer than the 1 kHz period): forces = inputs
     (2 columns, exactly, whatever the weights), after `layers` products of a `size` x `size`
     matrix scaled by the inputs' sum, each through tanh (onnxruntime cannot fold them away).
-    At 256 and 3, a call takes about 3 ms on one core of the development machine."""
+    At 256 and 6, a call takes about 3 ms on one core of the development machine."""
     rng = np.random.default_rng(0)
     weights = onnx.helper.make_tensor("w", onnx.TensorProto.DOUBLE, [size, size],
                                       (rng.standard_normal((size, size)) / size).ravel())

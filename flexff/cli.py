@@ -382,7 +382,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--rt-factor", type=float, metavar="F",
                      help="real-time factor of a paced run: 2 runs twice as fast (default 1)")
     run.add_argument("--max-overruns", type=int, metavar="N",
-                     help="stop a paced run after N overruns (exit code 3, record kept)")
+                     help="stop a paced run after N overruns, a network task's late results "
+                          "included (exit code 3, record kept)")
     run.add_argument("--grace", type=float, metavar="S",
                      help="overruns in the first S seconds do not count for --max-overruns")
     run.add_argument("--cpu", type=int, metavar="K", help="pin a paced run to CPU K")

@@ -18,7 +18,8 @@ from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.controllers.training_range import MARGIN, RangeExcess
 from flexff.cosim.config import config_examples, parse_config
 from flexff.cosim.references import thesis_evaluation
-from flexff.cosim.run import range_warning, run_config
+from flexff.cosim.run import range_warning, run_config, simulate
+from flexff.cosim.scenario import resolve
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
 from flexff.learning.dataset import REFERENCE_SIGNALS
@@ -117,6 +118,18 @@ def test_task_mode_uses_each_call_one_period_later(models, reference, tmp_path):
     expected = independent_forces(models / "lstm.onnx", reference, task=True)[:STEPS]
     got = fmu_forces(fmu, reference)[:STEPS]
     assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
+
+
+def test_a_run_configuration_puts_the_network_in_its_own_task(models, tmp_path):
+    config = parse_config({"run": {"stop": 0.1}, "reference": {"kind": "thesis-eval"},
+                           "feedforward": {"kind": "learned", "model": str(models / "lstm.onnx"),
+                                           "mode": "task"}}, name="task")
+    recording = simulate(resolve(config, tmp_path), progress=False)
+    tasks = recording.timing.table(recording.wall_s)["tasks"]
+    assert set(tasks) == {"base", "feedforward.network"}
+    assert tasks["feedforward.network"]["period_us"] == pytest.approx(10e3)  # the model's 100 Hz
+    forces = recording["Fx_ff"]  # the LSTM has no prior: zero until the first result
+    assert np.all(forces[:10] == 0.0) and forces[10] != 0.0
 
 
 @pytest.mark.parametrize("kind", list(TINY))
