@@ -271,12 +271,16 @@ fmi2Status fmi2Terminate(fmi2Component comp) {
 
 #if HAS_NETWORK
 /* flexff's own entry, not part of FMI: the network's call times so far (calls, p50, p99 and
- * max in seconds), which flexff's master puts in its real-time report. 0, or -1 for a
- * component that is not a live instance with a network. */
+ * max in seconds), which flexff's master puts in its real-time report after a run. 0, or -1
+ * for a component that is not a live instance with a network. */
 __attribute__((visibility("default"))) int flexff_network_times(fmi2Component comp,
                                                                 double times[4]) {
     Instance *c = (Instance *)comp;
     if (registry_find(comp) < 0 || c->magic != INSTANCE_MAGIC || c->net == NULL) return -1;
+#if NET_TASK
+    task_settle(c, 0); /* a call still running is waited for: the worker idle while its
+                        * times are read (masters read them after a run) */
+#endif
     net_call_times(c->net, times);
     return 0;
 }
