@@ -89,7 +89,7 @@ SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration")
                 "spline": ("kind", "points", "duration")}
 FEEDFORWARD_KINDS = ("none", "rigid-body", "learned")  # kind K is the built-in "K-feedforward"
 RENAMED_KINDS = {"model": "rigid-body", "onnx": "learned"}  # old [feedforward] kind -> now
-FEEDFORWARD_MODES = ("step", "precomputed")
+FEEDFORWARD_MODES = ("step", "task", "precomputed")
 SHORT_FORM = ("plant", "controller", "feedforward")
 TABLES = ("run", "reference", "source", "fmu", "connection", "record", *SHORT_FORM)
 PLANT_EXTRA = ("max_substep",)  # plant FMU parameters beyond the System's own

@@ -76,7 +76,7 @@ class EngineFmuPlan(Structure):
                 ("in_values", POINTER(c_double)), ("n_out", c_long),
                 ("out_vr", POINTER(c_uint)), ("out_values", POINTER(c_double)),
                 ("read_before", c_int), ("read_after", c_int), ("typed_in", c_int),
-                ("typed_out", c_int)]
+                ("typed_out", c_int), ("task_overruns", c_void_p), ("task_seen", c_long)]
 
 
 class EngineRun(Structure):
@@ -92,7 +92,8 @@ class EngineRun(Structure):
                 ("start", _Timespec), ("max_overruns", c_long), ("grace_steps", c_long),
                 ("overruns", c_long), ("counted", c_long),
                 ("first_overruns", c_long * MAX_LISTED_OVERRUNS), ("failed_fmu", c_long),
-                ("failed_k", c_long), ("failed_call", c_int), ("error", c_char * ERROR_SIZE)]
+                ("failed_k", c_long), ("failed_call", c_int), ("error", c_char * ERROR_SIZE),
+                ("task_overruns", c_long)]
 
 
 MIRRORS: dict[str, type[Structure]] = {"struct timespec": _Timespec, "FmuPlan": EngineFmuPlan,
@@ -209,4 +210,4 @@ def idle_timing(seconds: float, period: float = 1e-3) -> StepTiming:
     library().engine_run(ctypes.byref(run), 0, steps + 1)
     listed = tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)])
     return StepTiming(period, (), tet[:steps], np.zeros((steps, 0)), lateness[:steps],
-                      Pacing(), run.overruns, listed, None)
+                      Pacing(), run.overruns, run.task_overruns, listed, None)

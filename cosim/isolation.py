@@ -161,6 +161,11 @@ class IsolatedInstance:
         times: dict[str, float] | None = self._request("network_times")
         return times
 
+    def network_task(self) -> tuple[int, int] | None:
+        """None: a network task's overrun counter lives in the child's memory, which the
+        engine cannot read (the child's network_times still report its calls)."""
+        return None
+
     def fail(self, what: str) -> FmuError:
         """The error for a failed call: the child's signal, the timeout, or the FMU's
         messages."""

@@ -227,13 +227,16 @@ class _Plan:
         return fmi3, self.instance.component.value, set_, get, step
 
     def engine_plan(self) -> EngineFmuPlan:
+        task = self.instance.network_task()  # its overruns count as the engine's own
+        counter = task[1] if task else 0
         return EngineFmuPlan(
             *self.calls(),
             len(self.inputs), pointer(self.in_vr, c_uint), pointer(self.gather, c_long),
             pointer(self.gain), pointer(self.offset), pointer(self.in_values),
             len(self.outputs), pointer(self.out_vr, c_uint), pointer(self.out_values),
             self.read_before, self.read_after, bool(self.typed_inputs),
-            bool(self.typed_outputs))
+            bool(self.typed_outputs), counter or None,
+            c_long.from_address(counter).value if counter else 0)
 
     def fail(self, what: str) -> CosimError:
         return CosimError(str(self.instance.fail(what)))
@@ -461,6 +464,7 @@ class Master:
         made = end if status == OVERRUN else steps  # the steps the engine made
         timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
                             self._fmu_tet[:made], self._lateness[:made], pacing, run.overruns,
+                            run.task_overruns,
                             tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
                             run.failed_k if status == OVERRUN else None, network_calls=network)
         return Streamed(end, wall, timing)

@@ -176,7 +176,7 @@ def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any])
         if len(reference) != len(Reference.SIGNALS):
             raise ConfigError(config.origin, f"fmu.{f.name}.mode", "the precomputed mode needs "
                               "a [reference] to precompute the feedforward over")
-    return learned_feedforward_system(o["model"], config.step, reference)
+    return learned_feedforward_system(o["model"], config.step, reference, o["mode"] == "task")
 
 
 def controller_for(options: Mapping[str, Any], step: float) -> System:

@@ -10,6 +10,10 @@ plus lateness passes its period, so that it ends after the next step was due.
 A run that streams its record (cosim.run) keeps no per-step array either: its TET goes into
 a Histogram per chunk (StreamedTiming), whose percentiles are within RESOLUTION of the exact
 ones (the maximum is exact), so that memory stays flat in the run's length.
+
+Slower tasks, as Simulink Real-Time's multitasking runs them: a flexff network in its own task
+(fmu/c/wrapper_task.c) reports its call times and its rate-transition overruns (a result not
+ready at the step it is due), which --max-overruns counts with the steps' own.
 """
 
 from __future__ import annotations
@@ -57,10 +61,12 @@ class StepTiming:
     lateness: np.ndarray  # [s], zero when not paced
     pacing: Pacing | None
     overruns: int
+    task_overruns: int  # slower tasks' results not ready when due (counted when paced)
     first_overruns: tuple[int, ...]  # step indices of the first overruns
     stopped_at: int | None  # the step at which max_overruns stopped the run
     process: Any = None  # cosim.realtime.ProcessReport of a paced run
-    # FMU -> its network's call times (calls; p50, p99, max in us), for FMUs that embed one
+    # FMU -> its network's call times (calls; p50, p99, max in us; period_steps; overruns of
+    # its own task), for FMUs that embed one
     network_calls: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
 
     @property
@@ -81,6 +87,7 @@ class StepTiming:
             "tet_over_period_p99": float(np.percentile(self.tet, 99) / self.period)
             if self.tet.size else None,
             "network_call_us": self.network_calls,
+            "tasks": self.tasks(),
         }
         if self.pacing is not None:
             table.update({
@@ -88,6 +95,7 @@ class StepTiming:
                                 "max": float(self.lateness.max() * US)
                                 if self.lateness.size else 0.0},
                 "overruns": self.overruns,
+                "rate_transition_overruns": self.task_overruns,
                 "first_overruns_s": [k * self.step for k in self.first_overruns],
                 "max_overruns": self.pacing.max_overruns, "grace_s": self.pacing.grace,
                 "stopped_at_s": None if self.stopped_at is None
@@ -95,12 +103,35 @@ class StepTiming:
                 "process": dataclasses.asdict(self.process) if self.process else None})
         return table
 
+    def tasks(self) -> dict[str, dict[str, Any]]:
+        """Per task, as Simulink Real-Time lists them: the base task (every step: its TET and
+        overruns) and each network in its own task (`FMU.network`: its period, the time per
+        call and its rate-transition overruns, which its FMU counts paced or not; the base task's
+        overruns only mean something when paced)."""
+        tasks: dict[str, dict[str, Any]] = {"base": {
+            "period_us": self.period * US, "tet_us": _stats(self.tet),
+            "overruns": self.overruns if self.pacing else None}}
+        for name, calls in self.network_calls.items():
+            if "overruns" not in calls:
+                continue  # the network runs inside the base task's step
+            tasks[f"{name}.network"] = {
+                "period_us": calls["period_steps"] * self.period * US,
+                "calls": calls["calls"],
+                "tet_us": {k: calls[k] for k in ("p50", "p99", "max")},
+                "overruns": int(calls["overruns"])}
+        return tasks
+
     def stop_message(self) -> str:
         """Why max_overruns stopped the run: when, and how late its last step ended."""
         k, pacing = self.stopped_at, self.pacing
         if k is None or pacing is None:
             raise ValueError("the run was not stopped by max_overruns")
         over = (self.tet[k] + self.lateness[k] - self.period) * US
+        if over <= 0:  # the step kept its period: a slower task's result was late
+            return (f"stopped after {self.overruns} overruns and {self.task_overruns} "
+                    f"rate-transition overruns (--max-overruns {pacing.max_overruns}): at "
+                    f"t = {k * self.step:.6g} s a network's task had not finished when its "
+                    f"result was due")
         return (f"stopped after {self.overruns} overruns (--max-overruns "
                 f"{pacing.max_overruns}): the step from t = {k * self.step:.6g} s took "
                 f"{self.tet[k] * US:.1f} us and started {self.lateness[k] * US:.1f} us late, "

@@ -69,6 +69,8 @@ def _output_file(path: str) -> None:
 def _fmu_build(args: argparse.Namespace) -> int:
     from flexff.fmu.build import build_fmu
 
+    if args.kind == "plant" and args.task:
+        raise InputError("--task runs an embedded network in its own task: the plant has none")
     if args.kind != "onnx" and (args.graph is not None or args.every is not None):
         raise InputError("only fmu build onnx takes a graph file and --every (a learned "
                          "feedforward takes --model M.onnx and runs at the model's rate)")
@@ -78,7 +80,8 @@ def _fmu_build(args: argparse.Namespace) -> int:
         if args.graph is None:
             raise InputError("fmu build onnx needs the graph: flexff fmu build onnx MODEL.onnx "
                              "-o M.fmu")
-        system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every)
+        system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every,
+                             args.task)
     elif args.kind in ("learned-feedforward", "feedforward"):
         from flexff.controllers.learned_feedforward import learned_feedforward_system
 
@@ -89,7 +92,7 @@ def _fmu_build(args: argparse.Namespace) -> int:
         if args.model is None:
             raise InputError("fmu build learned-feedforward needs --model M.onnx (flexff "
                              "export)")
-        system = learned_feedforward_system(args.model, args.step)
+        system = learned_feedforward_system(args.model, args.step, task=args.task)
     else:
         from flexff.plant.system import plant_system
 
@@ -478,6 +481,10 @@ def build_parser() -> argparse.ArgumentParser:
     build.add_argument("--every", type=int,
                        help="onnx: communication steps between calls of the graph, its results "
                             "extrapolated linearly in between (default 1)")
+    build.add_argument("--task", action="store_true",
+                       help="learned-feedforward, onnx: run the network in its own task (a "
+                            "thread of the FMU), its result used one call period later, as "
+                            "Simulink Real-Time's multitasking does")
     build.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     build.set_defaults(handler=_fmu_build)
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")
@@ -523,7 +530,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--rt-factor", type=float, metavar="F",
                      help="real-time factor of a paced run: 2 runs twice as fast (default 1)")
     run.add_argument("--max-overruns", type=int, metavar="N",
-                     help="stop a paced run after N overruns (exit code 3, record kept)")
+                     help="stop a paced run after N overruns, a network task's late results "
+                          "included (exit code 3, record kept)")
     run.add_argument("--grace", type=float, metavar="S",
                      help="overruns in the first S seconds do not count for --max-overruns")
     run.add_argument("--cpu", type=int, metavar="K", help="pin a paced run to CPU K")

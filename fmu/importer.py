@@ -20,7 +20,7 @@ import os
 import shutil
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
-from ctypes import byref, c_double, c_void_p
+from ctypes import byref, c_double, c_long, c_void_p
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -412,13 +412,31 @@ class FmuInstance:
 
     def network_times(self) -> dict[str, float] | None:
         """The call times of a flexff FMU's embedded network so far (calls; p50, p99, max in
-        microseconds), or None for an FMU without one."""
+        microseconds), its call period in steps and, where it runs in its own task, that
+        task's rate-transition overruns; None for an FMU without one."""
         function = getattr(self.fmu.dll, "flexff_network_times", None)
         times = (c_double * 4)()
         if function is None or function(self.component, times) != 0:
             return None
-        return {"calls": int(times[0]), "p50": times[1] * 1e6, "p99": times[2] * 1e6,
-                "max": times[3] * 1e6}
+        figures: dict[str, float] = {"calls": int(times[0]), "p50": times[1] * 1e6,
+                                     "p99": times[2] * 1e6, "max": times[3] * 1e6}
+        task = self.network_task()
+        if task is not None:
+            period, counter = task
+            figures["period_steps"] = period
+            if counter:
+                figures["overruns"] = c_long.from_address(counter).value
+        return figures
+
+    def network_task(self) -> tuple[int, int] | None:
+        """A flexff FMU's embedded network: its call period in steps and the address of its
+        task's rate-transition overrun counter (a C long; 0 where it runs in the step), or
+        None for an FMU without one (or built before networks ran in tasks)."""
+        function = getattr(self.fmu.dll, "flexff_network_task", None)
+        period, counter = c_long(), c_void_p()
+        if function is None or function(self.component, byref(period), byref(counter)) != 0:
+            return None
+        return period.value, counter.value or 0
 
     def close(self) -> None:
         """Terminate (if initialized), free the instance, delete the extracted files."""

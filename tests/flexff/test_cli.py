@@ -81,10 +81,15 @@ def test_bench_prints_json(tmp_path):
         paced = figures["realtime"][kind]
         assert paced["period_us"] == 1000.0 and paced["overruns"] >= 0
         assert set(paced["tet_us_per_fmu"]) == {"feedforward", "controller", "plant"}
+        assert set(paced["tasks"]) == {"base", "feedforward.network"}  # the network's own
+        assert paced["tasks"]["feedforward.network"]["overruns"] >= 0
+        assert set(paced["tracking_e2"]["task_over_single_rate"]) == {"x", "y"}
     idle = figures["realtime"]["idle"]  # the machine's floor, as long as one paced run
     assert idle["steps"] == 500 and idle["overruns"] >= 0 and idle["lateness_us"]["max"] > 0
     floor = figures["realtime"]["one_node_graph"]  # at initialization, then every 40th step
     assert floor["network_call_us"]["calls"] == 1 + 13 and floor["network_call_us"]["p50"] > 0
+    slow = figures["realtime"]["slow_network"]  # about 3 ms a call at 25 Hz, in its own task
+    assert slow["tasks"]["slow.network"]["calls"] == 13 and slow["overruns"] >= 0
 
 
 @pytest.mark.slow

@@ -12,11 +12,12 @@ CasADi's fixed calling convention (arg, res, iw, w, mem), used or not.
 import os
 import subprocess
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
-from flexff.fmu.build import NETWORK_C_FILES, WRAPPER_C_FILES
+from flexff.fmu.build import NETWORK_C_FILES, TASK_C_FILES, WRAPPER_C_FILES
 from flexff.fmu.codegen import generate_model_c
 from flexff.fmu.compile import CFLAGS, HOST_HEADER, compiler, fmi_headers
 from flexff.plant.system import plant_system
@@ -43,7 +44,9 @@ def toy_sources(tmp_path_factory) -> dict[str, Path]:
     """The sources/ folder of each toy FMU, by toy."""
     graph = running_sum_graph(tmp_path_factory.mktemp("graph") / "sum.onnx")
     folders = {}
-    for system in (duffing(), discrete_pi(), network_system(graph)):
+    net = network_system(graph)
+    task = replace(net, name="toy_task", network=replace(net.network, task=True))
+    for system in (duffing(), discrete_pi(), net, task):
         folder = tmp_path_factory.mktemp(system.name)
         with zipfile.ZipFile(build_toy(system, tmp_path_factory)) as zf:
             zf.extractall(folder)
@@ -53,7 +56,8 @@ def toy_sources(tmp_path_factory) -> dict[str, Path]:
 
 def test_every_fmu_source_is_shipped():
     """The toys below compile what an FMU ships: every C file of fmu/c is one of those."""
-    assert sorted(p.name for p in FMU_C.glob("*.c")) == sorted(WRAPPER_C_FILES + NETWORK_C_FILES)
+    shipped = WRAPPER_C_FILES + NETWORK_C_FILES + TASK_C_FILES
+    assert sorted(p.name for p in FMU_C.glob("*.c")) == sorted(shipped)
 
 
 def test_the_fmu_sources_compile_without_warnings(toy_sources):
