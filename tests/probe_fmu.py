@@ -15,6 +15,7 @@ from flexff.fmu.compile import compiler, fmi_headers
 
 SOURCE = Path(__file__).with_suffix(".c")
 BALL_SOURCE = Path(__file__).with_name("bouncing_ball.c")
+UNSUPPORTED = Path(__file__).with_name("fmi2_unsupported.c")  # what neither FMU supports
 BALL_DESCRIPTION = """<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="ball" guid="{ball}" numberOfEventIndicators="1">
 <ModelExchange modelIdentifier="ball"/>
@@ -51,7 +52,8 @@ def _library(folder: Path, source: Path = SOURCE, name: str = "probe") -> Path:
         (folder / header).write_text(text)
     library = folder / f"{name}{fmpy.sharedLibraryExtension}"
     subprocess.run([compiler(), "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-shared",
-                    "-fPIC", f"-I{folder}", str(source), "-o", str(library)], check=True)
+                    "-fPIC", f"-I{folder}", str(source), str(UNSUPPORTED), "-o", str(library)],
+                   check=True)
     return library
 
 

@@ -1,0 +1,63 @@
+/*
+ * fmi2_unsupported.c -- the FMI 2.0 functions the tests' tiny FMUs (tests/probe_fmu.c,
+ * tests/bouncing_ball.c) do not support: no Integer, Boolean or String variables, no FMU
+ * state, no directional derivatives. Compiled beside each of them by tests/probe_fmu.py.
+ */
+
+#include <stddef.h>
+
+#include "fmi2Functions.h"
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                          fmi2Integer value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                          fmi2Boolean value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                         fmi2String value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                          const fmi2Integer value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                          const fmi2Boolean value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                         const fmi2String value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) { (void)c; (void)s; return fmi2Error; }
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) { (void)c; (void)s; return fmi2Error; }
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) { (void)c; (void)s; return fmi2Error; }
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *n) {
+    (void)c; (void)s; (void)n;
+    return fmi2Error;
+}
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t n) {
+    (void)c; (void)s; (void)b; (void)n;
+    return fmi2Error;
+}
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t n,
+                                   fmi2FMUstate *s) {
+    (void)c; (void)b; (void)n; (void)s;
+    return fmi2Error;
+}
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
+                                        const fmi2ValueReference z[], size_t nz,
+                                        const fmi2Real du[], fmi2Real dz[]) {
+    (void)c; (void)u; (void)nu; (void)z; (void)nz; (void)du; (void)dz;
+    return fmi2Error;
+}
