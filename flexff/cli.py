@@ -285,7 +285,7 @@ def _data_import(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     """One run into OUTPUT, or with several --seed or a --scheduler one run per seed into
     OUTPUT/seedN, side by side (learning.workers); prints the metrics as JSON."""
-    overrides = {"epochs": args.epochs} if args.epochs is not None else {}
+    overrides = {"labels": args.labels, **({"epochs": args.epochs} if args.epochs else {})}
     seeds = args.seed or [0]
     if len(seeds) == 1 and args.scheduler is None:
         from flexff.learning.train import train
@@ -455,6 +455,10 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--data", required=True, help="a dataset folder (flexff data collect)")
     train.add_argument("-o", "--output", required=True, help="the run folder to write")
     train.add_argument("--epochs", type=int, help="override the preset's number of epochs")
+    train.add_argument("--labels", default="forces", choices=("forces", "currents"),
+                       help="what the model learns and feeds forward: the wrist force Fx, Fy "
+                            "(default), or the motor currents i1..i3, added after the control "
+                            "allocation")
     existing = train.add_mutually_exclusive_group()
     existing.add_argument("--resume", action="store_true",
                           help="continue the unfinished run in the run folder from its last "

@@ -20,6 +20,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from flexff.controllers.allocation import motor_currents
 from flexff.controllers.features import evaluate_samples, motion_columns, nominal_model
 from flexff.learning.casadi_torch import TorchFunction, frozen
 
@@ -44,6 +45,22 @@ def rigid_forces(features: np.ndarray, feature_set: str,
     pos, vel, acc = motion_columns(feature_set)
     return evaluate_samples(rigid_function(parameters), features[:, pos], features[:, vel],
                             features[:, acc])
+
+
+def rigid_currents(features: np.ndarray, feature_set: str) -> np.ndarray:
+    """The nominal rigid-body force as motor currents (n, 3) [A]: allocated at the features'
+    position as the controller allocates (controllers.allocation), the baseline of a
+    current-level model."""
+    pos, vel, acc = motion_columns(feature_set)
+    return evaluate_samples(_allocated(), features[:, pos], features[:, vel], features[:, acc])
+
+
+@functools.cache
+def _allocated() -> ca.Function:
+    position, velocity, acceleration = (ca.SX.sym(n, 2) for n in ("pos", "vel", "acc"))
+    force = rigid_function()(position, velocity, acceleration)
+    return ca.Function("rigid_currents", [position, velocity, acceleration],
+                       [motor_currents(force, position)])
 
 
 class RigidBodyForce(nn.Module):

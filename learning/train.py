@@ -39,7 +39,7 @@ from flexff.learning.batches import (
     window_roles,
 )
 from flexff.learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
-from flexff.learning.features import decimation, prepare_trajectory
+from flexff.learning.features import LABELS, decimation, prepare_trajectory
 from flexff.learning.friction import identify_friction
 from flexff.learning.models import (
     RECURRENT,
@@ -50,7 +50,7 @@ from flexff.learning.models import (
     uses_prior,
 )
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
-from flexff.learning.rigid import rigid_forces
+from flexff.learning.rigid import rigid_currents, rigid_forces
 from flexff.learning.run_folder import (
     CHECKPOINT_FILE,
     RunFolderError,
@@ -63,7 +63,8 @@ from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.threads import torch_threads
 
 EpochReport = Callable[[dict[str, Any]], None]
-MSE_UNITS = "MSE of min-max scaled labels Fx, Fy (the thesis's normalized units)"
+MSE_UNITS = ("MSE of min-max scaled labels, Fx, Fy or i1..i3 (run.json label_names; the "
+             "thesis's normalized units)")
 
 
 def train(model: str, preset: str, data: str | Path, out: str | Path, progress: bool = True,
@@ -116,7 +117,8 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
     roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge)
     device = pick_device(config.device)
     with reproducible(config.seed, config.threads):
-        network = build_network(config.model, train_x[0].shape[1], **config.architecture)
+        network = build_network(config.model, train_x[0].shape[1],
+                                n_outputs=train_f[0].shape[1], **config.architecture)
         network.to(device)
         train_data = SequenceSet.build([feature_scaler.transform(x) for x in train_x],
                                        targets(train_x, train_f), roles, device)
@@ -136,7 +138,8 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
             "test_mse_per_trajectory": {
                 t.name: role_mse(network, test_data, TRAIN, only=[i])
                 for i, t in enumerate(test_set)},
-            "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge),
+            "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge,
+                                              currents=config.features.labels == "currents"),
             **({} if prior is None else {
                 "prior_parameters": prior,
                 "prior_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge,
@@ -151,7 +154,7 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
         }
     network.cpu()
     save_run(out, config, network, feature_scaler, label_scaler,
-             feature_names(feature_set), model_rate,
+             feature_names(feature_set), list(LABELS[config.features.labels]), model_rate,
              {"data": {"path": str(Path(dataset.path).resolve()), "set": dataset.set,
                        "sha256": dataset.digest, "sample_rate_hz": rate,
                        "plant": dict(dataset.plant), "train": [t.name for t in train_set],
@@ -199,12 +202,17 @@ def _prior_parameters(config: TrainConfig, trajectories: list[Trajectory], rate:
 
 
 def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,
-               feature_set: str, edge: int, parameters: dict[str, float] | None = None) -> float:
-    """The test MSE of the nominal rigid-body model (with `parameters` in place: the prior) in
-    the same units and on the same samples (the `edge` samples at each end left out): the
-    baseline to beat."""
-    errors = [((f - rigid_forces(x, feature_set, parameters)) / scaler.span)[
-        interior(len(x), edge) == TRAIN] for x, f in zip(xs, fs)]
+               feature_set: str, edge: int, parameters: dict[str, float] | None = None,
+               currents: bool = False) -> float:
+    """The test MSE of the nominal rigid-body model (with `parameters` in place: the prior;
+    `currents`: its force allocated to motor currents) in the same units and on the same
+    samples (the `edge` samples at each end left out): the baseline to beat."""
+    def rigid(x: np.ndarray) -> np.ndarray:
+        return (rigid_currents(x, feature_set) if currents
+                else rigid_forces(x, feature_set, parameters))
+
+    errors = [((f - rigid(x)) / scaler.span)[interior(len(x), edge) == TRAIN]
+              for x, f in zip(xs, fs)]
     return float(np.mean(np.concatenate(errors) ** 2))
 
 

@@ -74,7 +74,7 @@ def independent_forces(model, reference) -> np.ndarray:
         calls.append(result[0][0])
         state = {n[:-len("_out")]: v for n, v in zip(names[1:], result[1:])}
     calls = np.array(calls)
-    forces = np.empty((len(features), 2))
+    forces = np.empty((len(features), calls.shape[1]))  # 2 forces or 3 currents
     for k in range(len(features)):
         j, phase = divmod(k, period)
         forces[k] = calls[j] + phase / period * (calls[j] - calls[max(j - 1, 0)])
