@@ -324,7 +324,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     loop = None if args.config is None else load_run_config(args.config)
     output_folder(args.output)
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
-             scheduler=args.scheduler)
+             scheduler=args.scheduler, currents=args.currents)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
           f"forces.png, the .onnx models)")
@@ -507,6 +507,10 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("-o", "--output", required=True, help="the output folder")
     evaluation.add_argument("--preset", default="fast", choices=PRESETS)
     evaluation.add_argument("--models", nargs="+", default=list(MODELS), choices=MODELS)
+    evaluation.add_argument("--currents", nargs="+", default=[], metavar="KIND",
+                            choices=[m for m in MODELS if m != "pgnn"],
+                            help="also the current-level model of these kinds (lstm, cnn-lstm, "
+                                 "tcn): labels i1..i3, fed forward after the control allocation")
     evaluation.add_argument("--data", help="a collected dataset folder to use")
     evaluation.add_argument("--epochs", type=int, help="override the preset's number of epochs")
     evaluation.add_argument("--scheduler", help="address of a Dask scheduler to collect and "

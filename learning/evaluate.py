@@ -119,14 +119,17 @@ def scenario_config(env: str, name: str, model: Path | None = None, mode: str = 
 def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[str] = MODELS,
              data: str | Path | None = None, epochs: int | None = None,
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
-             progress: bool = True, scheduler: str | None = None) -> dict[str, Any]:
+             progress: bool = True, scheduler: str | None = None,
+             currents: Sequence[str] = ()) -> dict[str, Any]:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
     collects and evaluates on that run configuration instead of the environment's plant;
-    `scheduler` collects and trains on that Dask cluster (learning.workers)."""
+    `scheduler` collects and trains on that Dask cluster (learning.workers); `currents` adds
+    the current-level model of each kind named (scenario KIND-currents, the same settings with
+    labels = "currents", learning.features)."""
     if env not in ENVIRONMENTS:
         raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
-    for kind in models:
+    for kind in (*models, *currents):
         check_kind(kind)
     out = Path(out)
     environment = ENVIRONMENTS[env]
@@ -137,9 +140,13 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         data = collect(set_name, out / f"data-{set_name}", scheduler=scheduler,
                        config=None if loop is None else with_feedforward(loop))
     extra = {"epochs": epochs} if epochs else {}
-    jobs = {job.name: job for kind in models
-            for job in _member_jobs(kind, preset, {**environment.overrides(preset, kind), **extra},
-                                    environment.members(preset, kind), Path(data), out / "runs")}
+    levels: list[tuple[str, str, dict[str, Any]]] = [(kind, kind, {}) for kind in models] + [
+        (f"{kind}-currents", kind, {"labels": "currents"}) for kind in currents]
+    groups = {name: _member_jobs(kind, preset, {**environment.overrides(preset, kind), **extra,
+                                                **labels},
+                                 environment.members(preset, kind), Path(data), out / "runs", name)
+              for name, kind, labels in levels}  # scenario -> its training runs
+    jobs = {job.name: job for group in groups.values() for job in group}
     training = {name: m for name, job in jobs.items() if (m := _finished(job))}
     if todo := [name for name in jobs if name not in training]:
         where = f"on {scheduler}" if scheduler else "one process per core"
@@ -147,14 +154,13 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     training.update(train_parallel([jobs[name] for name in todo], progress=progress,
                                    scheduler=scheduler))
     onnx_files, model_training = {}, {}
-    for kind in models:
-        names = [name for name, job in jobs.items() if job.model == kind]
-        metrics = model_training[kind] = _ensemble_metrics([training[n] for n in names])
-        onnx_files[kind] = export([jobs[n].run for n in names], out / f"{kind}.onnx")
+    for kind, group in groups.items():
+        metrics = model_training[kind] = _ensemble_metrics([training[j.name] for j in group])
+        onnx_files[kind] = export([j.run for j in group], out / f"{kind}.onnx")
         say(f"{kind}: test MSE {metrics['test_mse']:.3g} ({metrics['parameters']} parameters, "
             f"{metrics['epochs']} epochs in {metrics['seconds']:.0f} s) -> {onnx_files[kind]}")
     recordings: dict[str, Recording] = {}
-    for name in ["pid", "rigid-body", *models]:
+    for name in ["pid", "rigid-body", *groups]:
         folder = out / "cosim" / name
         metrics = run_config(scenario_config(env, name, onnx_files.get(name), loop=loop), folder)
         recordings[name] = load_recording(folder)
@@ -166,14 +172,14 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
 
 
 def _member_jobs(kind: str, preset: str, overrides: dict[str, Any], members: int, data: Path,
-                 runs: Path) -> list[TrainJob]:
-    """The training runs of model `kind`: one in runs/KIND, or an ensemble's members, seeds
-    0, 1, ..., in runs/KIND/seedN."""
+                 runs: Path, name: str) -> list[TrainJob]:
+    """The training runs of model `kind` for scenario `name`: one in runs/NAME, or an
+    ensemble's members, seeds 0, 1, ..., in runs/NAME/seedN."""
     cost = _cost(make_config(kind, preset, **overrides))
     if members == 1:
-        return [TrainJob(kind, preset, data, runs / kind, overrides, cost)]
-    return [TrainJob(kind, preset, data, runs / kind / f"seed{seed}", {**overrides, "seed": seed},
-                     cost, f"{kind}-seed{seed}") for seed in range(members)]
+        return [TrainJob(kind, preset, data, runs / name, overrides, cost, name)]
+    return [TrainJob(kind, preset, data, runs / name / f"seed{seed}", {**overrides, "seed": seed},
+                     cost, f"{name}-seed{seed}") for seed in range(members)]
 
 
 def _ensemble_metrics(members: list[dict[str, Any]]) -> dict[str, Any]:

@@ -114,9 +114,7 @@ def with_feedforward(loop: RunConfig, builtin: str | None = None,
     whatever feedforward input of the controller the new feedforward does not feed gets zero."""
     controller = _controller(loop)
     fed = names(FEEDFORWARD_FORCES, CURRENT_FEEDFORWARD)  # the controller's feedforward inputs
-    produced = names(FEEDFORWARD_FORCES) if builtin is not None else ()
-    if builtin == "learned-feedforward":
-        produced = names(OUTPUTS[read_card((options or {})["model"]).labels])
+    produced = _produced(builtin, options or {})
     if produced == names(CURRENT_FEEDFORWARD):
         controller = replace(controller, options={**controller.options,
                                                   "current_feedforward": True})
@@ -143,6 +141,16 @@ def with_feedforward(loop: RunConfig, builtin: str | None = None,
                     FmuConfig(name, builtin=builtin, options=dict(options or {})))
     return checked(replace(loop, fmus=tuple(fmus), sources=tuple(sources),
                            connections=connections))
+
+
+def _produced(builtin: str | None, options: Mapping[str, Any]) -> tuple[str, ...]:
+    """The controller inputs the feedforward `builtin` feeds (a learned model's card says)."""
+    if builtin != "learned-feedforward":
+        return names(FEEDFORWARD_FORCES) if builtin is not None else ()
+    try:
+        return names(OUTPUTS[read_card(options["model"]).labels])
+    except (InputError, KeyError):  # no model: the parser's check (checked) names what to do
+        return names(FEEDFORWARD_FORCES)
 
 
 def _controller(loop: RunConfig) -> FmuConfig:

@@ -4,11 +4,13 @@ against onnxruntime, the wiring of the short form and of the evaluation's loop, 
 of such a model."""
 
 import dataclasses
+import json
 import tempfile
 
 import numpy as np
 import pytest
 
+from flexff.cli import main
 from flexff.controllers.feedback import HOME_ANGLES, INPUTS, controller_system
 from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.controllers.model_card import ModelCard, read_card
@@ -168,3 +170,14 @@ def test_what_has_no_current_level_is_refused(data, tmp_path):
     with pytest.raises(InputError, match="has no i1: current-level labels need"):
         train("tcn", "fast", folder, tmp_path / "run", progress=False, epochs=1,
               labels="currents")
+
+
+def test_flexff_train_labels_currents(tmp_path, capsys):
+    data = synthetic_dataset(tmp_path / "data", n_train=4, n_test=1, duration=6.0,
+                             rate_hz=100.0, seed=2)
+    assert main(["train", "--model", "tcn", "--data", str(data), "-o", str(tmp_path / "run"),
+                 "--labels", "currents", "--epochs", "1"]) == 0
+    info = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert info["label_names"] == list(CURRENT_SIGNALS)
+    assert info["config"]["features"]["labels"] == "currents"
+    assert np.isfinite(json.loads(capsys.readouterr().out)["rigid_body_test_mse"])

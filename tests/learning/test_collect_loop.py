@@ -235,7 +235,7 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
 
     seen = {}
 
-    def fake(env, out, preset, models, data, epochs, loop):
+    def fake(env, out, preset, models, data, epochs, loop, **options):
         seen.update(env=env, loop=loop)
         (Path(out) / "table.md").write_text("| table |\n")
 
@@ -301,7 +301,7 @@ def test_evaluate_on_a_loop(heavy_loop, tmp_path, monkeypatch):
     rigid = summary["scenarios"]["rigid-body"]
     assert 1 < rigid["x"]["e2_ratio"] < 300
 
-    def stop(set_name, out, config):
+    def stop(set_name, out, config, **options):
         raise SystemExit((set_name, config))
 
     monkeypatch.setattr("flexff.learning.evaluate.collect", stop)
