@@ -48,6 +48,11 @@ SCENARIO_LABELS: dict[str, str] = {
     "cnn-lstm": "CNN-LSTM FF",
     "tcn": "TCN FF",
     "pgnn": "physics-guided FF",
+    # current-level models (learning.evaluate's KIND-currents): their feedforward acts after
+    # the control allocation, so the forces figure shows no F_ff for them
+    "lstm-currents": "LSTM current FF",
+    "cnn-lstm-currents": "CNN-LSTM current FF",
+    "tcn-currents": "TCN current FF",
 }
 
 

@@ -133,3 +133,4 @@ def test_a_current_level_model_is_its_own_scenario(evaluation, tmp_path):
     signals = np.load(tmp_path / "cosim" / "tcn-currents" / "signals.npz")
     assert not np.any(signals["Fx_ff"]) and np.abs(signals["feedforward.i1_ff"]).max() > 0.01
     assert any(line.startswith("tcn-currents: e2 = ") for line in lines)
+    assert "| TCN current FF |" in (tmp_path / "table.md").read_text()
