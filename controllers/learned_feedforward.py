@@ -28,13 +28,14 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from flexff.controllers.allocation import motor_currents
 from flexff.controllers.features import feature_names, reference_feature_function
 from flexff.controllers.feedforward import feedforward_system, rigid_body_force
 from flexff.controllers.model_card import OUTPUTS, ModelCard, read_card
 from flexff.fmu.errors import InputError
 from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System
-from flexff.plant.signals import REFERENCE, names
+from flexff.plant.signals import REFERENCE, names, reference_motion
 
 REFERENCE_NAMES = list(names(REFERENCE))
 
@@ -64,7 +65,7 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
                          f"feedforward needs {len(outputs)} ({', '.join(names(outputs))})")
     r = ca.SX.sym("r", network.n_outputs)
     with_prior = card.prior == "rigid-body"
-    force = r + rigid_body_force(u, card.prior_parameters) if with_prior else r
+    force = r + _prior(u, card) if with_prior else r
     mode = "step" if reference is None else "precomputed"
     added = ""
     if with_prior:
@@ -83,6 +84,15 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
                             "sample_rate_hz", "labels")}},
         network=network,
     )
+
+
+def _prior(reference: ca.SX, card: ModelCard) -> ca.SX:
+    """The rigid-body prior of a physics-guided model along the reference; for a current-level
+    one as the motor currents the controller would allocate for it at the reference position."""
+    force = rigid_body_force(reference, card.prior_parameters)
+    if card.labels == "forces":
+        return force
+    return motor_currents(force, reference_motion(reference)[0])
 
 
 def model_period(card: ModelCard, step: float, model: str | Path) -> int:

@@ -33,7 +33,8 @@ OUTPUTS = {"forces": FEEDFORWARD_FORCES, "currents": CURRENT_FEEDFORWARD}
 REQUIRED = ("input_kind", "feature_set", "input_signals", "sample_rate_hz")
 USAGE = ("inputs (T, n_inputs) float64 in SI units -> outputs (T, n_outputs) float64, the "
          "output_signals in output_units: forces [N] or motor currents [A] (plus the "
-         "nominal inverse dynamics, prior_parameters in place, when prior = rigid-body); state "
+         "nominal inverse dynamics, prior_parameters in place, when prior = rigid-body; for "
+         "currents allocated at x_ref, y_ref as the controller allocates); state "
          "tensors float32. Whole sequence: T samples, state inputs zero. Step by step: T = 1 "
          "every 1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
          "extrapolate the outputs from the last two calls when the host runs faster.")
@@ -116,9 +117,6 @@ class ModelCard:
             raise InputError(f"{where}: output signals {self.output_signals} are neither "
                              + " nor ".join(f"the {k} {v}" for k, v in known.items())
                              + "; export the model again with `flexff export`")
-        if self.labels == "currents" and self.prior != "none":
-            raise InputError(f"{where}: a current-level model has no rigid-body prior (its "
-                             f"prior is {self.prior!r}); export it again with `flexff export`")
         if self.input_kind not in INPUT_KINDS:
             raise InputError(f"{where}: unknown input kind {self.input_kind!r} (known: "
                              f"{', '.join(INPUT_KINDS)})")

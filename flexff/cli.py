@@ -508,9 +508,9 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--preset", default="fast", choices=PRESETS)
     evaluation.add_argument("--models", nargs="+", default=list(MODELS), choices=MODELS)
     evaluation.add_argument("--currents", nargs="+", default=[], metavar="KIND",
-                            choices=[m for m in MODELS if m != "pgnn"],
-                            help="also the current-level model of these kinds (lstm, cnn-lstm, "
-                                 "tcn): labels i1..i3, fed forward after the control allocation")
+                            choices=MODELS,
+                            help="also the current-level model of these kinds: labels i1..i3, "
+                                 "fed forward after the control allocation")
     evaluation.add_argument("--data", help="a collected dataset folder to use")
     evaluation.add_argument("--epochs", type=int, help="override the preset's number of epochs")
     evaluation.add_argument("--scheduler", help="address of a Dask scheduler to collect and "

@@ -59,7 +59,7 @@ class SIModel(nn.Module):
         self.residual = uses_prior(run.config.model)
         self.labels = run.config.features.labels  # what it outputs: forces or currents
         self.prior_parameters = run.prior_parameters
-        self.prior = (RigidBodyForce(feature_set, self.prior_parameters)
+        self.prior = (RigidBodyForce(feature_set, self.prior_parameters, self.labels)
                       if self.residual and prior else None)
         for name, value in (("feature_low", run.feature_scaler.low),
                             ("feature_span", run.feature_scaler.span),

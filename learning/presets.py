@@ -48,7 +48,7 @@ from typing import Any
 
 from flexff.fmu.errors import InputError
 from flexff.learning.features import FeatureConfig
-from flexff.learning.models import check_kind, uses_prior
+from flexff.learning.models import check_kind
 
 SCHEDULES = ("constant", "onecycle", "cosine")
 
@@ -74,10 +74,6 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         check_kind(self.model)
-        if uses_prior(self.model) and self.features.labels != "forces":
-            raise InputError(f"the {self.model} learns a residual over the rigid-body force: "
-                             f"train it on labels = \"forces\" (current-level labels: lstm, "
-                             f"cnn-lstm, tcn)")
         if self.schedule not in SCHEDULES:
             raise InputError(f"unknown schedule {self.schedule!r}: choose one of "
                              f"{', '.join(SCHEDULES)}")

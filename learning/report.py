@@ -53,6 +53,7 @@ SCENARIO_LABELS: dict[str, str] = {
     "lstm-currents": "LSTM current FF",
     "cnn-lstm-currents": "CNN-LSTM current FF",
     "tcn-currents": "TCN current FF",
+    "pgnn-currents": "physics-guided current FF",
 }
 
 

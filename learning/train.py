@@ -20,6 +20,7 @@ import math
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +51,7 @@ from flexff.learning.models import (
     uses_prior,
 )
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
-from flexff.learning.rigid import rigid_currents, rigid_forces
+from flexff.learning.rigid import rigid_forces
 from flexff.learning.run_folder import (
     CHECKPOINT_FILE,
     RunFolderError,
@@ -107,10 +108,11 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
     feature_set = config.features.feature_set
     edge = config.features.edge_samples(model_rate)
     prior = _prior_parameters(config, train_set, rate, edge)
+    labels = config.features.labels
 
     def targets(xs: list[np.ndarray], fs: list[np.ndarray]) -> list[np.ndarray]:
         if prior is not None:  # the residual over the prior, in label spans
-            return [(f - rigid_forces(x, feature_set, prior)) / label_scaler.span
+            return [(f - rigid_forces(x, feature_set, prior, labels)) / label_scaler.span
                     for x, f in zip(xs, fs)]
         return [label_scaler.transform(f) for f in fs]
 
@@ -139,11 +141,11 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
                 t.name: role_mse(network, test_data, TRAIN, only=[i])
                 for i, t in enumerate(test_set)},
             "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge,
-                                              currents=config.features.labels == "currents"),
+                                              labels=labels),
             **({} if prior is None else {
                 "prior_parameters": prior,
                 "prior_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge,
-                                             prior)}),
+                                             prior, labels)}),
             "parameters": parameter_count(network),
             "seconds_per_epoch": float(np.mean(history["seconds"])),
             "seconds": time.perf_counter() - start,  # this call's wall time, data preparation in
@@ -197,22 +199,19 @@ def _prior_parameters(config: TrainConfig, trajectories: list[Trajectory], rate:
     (learning.friction); None for a model without a prior."""
     if not uses_prior(config.model):
         return None
-    return identify_friction(*_prepare(trajectories, rate, config, None),
+    forces = replace(config, features=replace(config.features, labels="forces"))
+    return identify_friction(*_prepare(trajectories, rate, forces, None),
                              config.features.feature_set, edge)
 
 
 def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,
                feature_set: str, edge: int, parameters: dict[str, float] | None = None,
-               currents: bool = False) -> float:
+               labels: str = "forces") -> float:
     """The test MSE of the nominal rigid-body model (with `parameters` in place: the prior;
-    `currents`: its force allocated to motor currents) in the same units and on the same
-    samples (the `edge` samples at each end left out): the baseline to beat."""
-    def rigid(x: np.ndarray) -> np.ndarray:
-        return (rigid_currents(x, feature_set) if currents
-                else rigid_forces(x, feature_set, parameters))
-
-    errors = [((f - rigid(x)) / scaler.span)[interior(len(x), edge) == TRAIN]
-              for x, f in zip(xs, fs)]
+    as motor currents for current `labels`) in the same units and on the same samples (the
+    `edge` samples at each end left out): the baseline to beat."""
+    errors = [((f - rigid_forces(x, feature_set, parameters, labels)) / scaler.span)[
+        interior(len(x), edge) == TRAIN] for x, f in zip(xs, fs)]
     return float(np.mean(np.concatenate(errors) ** 2))
 
 

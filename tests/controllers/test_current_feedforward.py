@@ -30,7 +30,6 @@ from flexff.learning.dataset import (
 from flexff.learning.export import export
 from flexff.learning.features import FeatureConfig, prepare_trajectory
 from flexff.learning.loop import default_loop, with_feedforward
-from flexff.learning.presets import make_config
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.threads import torch_threads
 from flexff.learning.train import train
@@ -49,13 +48,21 @@ def data(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def model(data, tmp_path_factory):
-    """A tiny LSTM trained on the currents, exported."""
+def models(data, tmp_path_factory):
+    """A tiny LSTM and a tiny physics-guided network trained on the currents, exported."""
     folder = tmp_path_factory.mktemp("currents")
+    sizes = {"lstm": {"hidden": 12}, "pgnn": {"channels": 8, "levels": 3}}
     with torch_threads():
-        train("lstm", "fast", data, folder / "run", progress=False, epochs=1, val_fraction=0.2,
-              hidden=12, labels="currents")
-        return export(folder / "run", folder / "lstm-currents.onnx")
+        for kind, size in sizes.items():
+            train(kind, "fast", data, folder / kind, progress=False, epochs=1,
+                  val_fraction=0.2, labels="currents", **size)
+            export(folder / kind, folder / f"{kind}-currents.onnx")
+    return {kind: folder / f"{kind}-currents.onnx" for kind in sizes}
+
+
+@pytest.fixture(scope="module")
+def model(models):
+    return models["lstm"]
 
 
 def sampled(system, inputs):
@@ -100,8 +107,13 @@ def test_a_closed_loop_with_zero_current_feedforward_is_bit_for_bit_todays():
         assert np.array_equal(a[name], b[name]), name
 
 
-def test_a_current_level_model_as_an_fmu_equals_onnxruntime(model, tmp_path):
+@pytest.mark.parametrize("kind", ["lstm", "pgnn"])
+def test_a_current_level_model_as_an_fmu_equals_onnxruntime(models, kind, tmp_path):
+    """The pgnn's prior (the rigid-body force allocated at the reference position, in
+    generated C) is added by the independent runner with learning.rigid."""
+    model = models[kind]
     card = read_card(model)
+    assert card.prior == ("rigid-body" if kind == "pgnn" else "none")
     assert card.labels == "currents" and card.output_signals == list(I_FF)
     assert card.output_units == ["A"] * 3
     fmu = build_fmu(learned_feedforward_system(model, 1e-3), tmp_path / "ff.fmu")
@@ -151,13 +163,8 @@ def test_current_labels_are_the_currents(data):
 
 
 def test_what_has_no_current_level_is_refused(data, tmp_path):
-    with pytest.raises(InputError, match="pgnn learns a residual"):
-        make_config("pgnn", "fast", labels="currents")
     with pytest.raises(InputError, match="unknown labels 'torques'"):
         FeatureConfig(labels="torques")
-    card = ModelCard("full", "features", [], 100.0, output_signals=list(I_FF), prior="rigid-body")
-    with pytest.raises(InputError, match="a current-level model has no rigid-body prior"):
-        ModelCard.from_metadata(card.metadata(), "m.onnx")
     odd = ModelCard("full", "features", [], 100.0, output_signals=["i1_ff"])
     with pytest.raises(InputError, match=r"output signals .* are neither the forces"):
         ModelCard.from_metadata(odd.metadata(), "m.onnx")

@@ -79,8 +79,9 @@ def independent_forces(model, reference) -> np.ndarray:
         j, phase = divmod(k, period)
         forces[k] = calls[j] + phase / period * (calls[j] - calls[max(j - 1, 0)])
     if meta["prior"] == "rigid-body":
+        labels = "currents" if json.loads(meta["output_signals"])[0] == "i1_ff" else "forces"
         forces += rigid_forces(features, meta["feature_set"],
-                               json.loads(meta["prior_parameters"]))
+                               json.loads(meta["prior_parameters"]), labels)
     return forces
 
 
