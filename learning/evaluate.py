@@ -3,7 +3,8 @@
 1. collect the environment's trajectory set under PID (resumes what is there);
 2. train the models side by side, one process per core (learning.workers; a finished run with
    the same settings is reused), and export each to ONNX (an ensemble's members, where the
-   environment asks for one, as one graph of their mean);
+   environment asks for one, as one graph of their mean); `currents` adds, per kind named,
+   the same model trained on the motor currents (scenario KIND-currents);
 3. co-simulate the environment's evaluation reference on its plant: PID alone, with the
    rigid-body feedforward, and with each learned model as an ONNX feedforward FMU. As in the
    thesis, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
