@@ -53,11 +53,15 @@ def feedforward_system(name: str, description: str, reference: ca.SX, force: ca.
     )
 
 
-def rigid_body_feedforward_system(step: float = 1e-3) -> System:
-    """Discrete, stateless System: reference (position, velocity, acceleration) -> F_ff."""
+def rigid_body_feedforward_system(step: float = 1e-3,
+                                  parameters: Mapping[str, float] | None = None) -> System:
+    """Discrete, stateless System: reference (position, velocity, acceleration) -> F_ff;
+    `parameters` (flat plant parameter names: identified ones, controllers.identified)
+    replace nominal values."""
     if not step > 0:
         raise InputError(f"step must be positive, got {step}")
     reference = ca.SX.sym("u", len(REFERENCE))
+    which = "identified" if parameters else "nominal"
     return feedforward_system(
-        "rigid_body_feedforward", "rigid-body feedforward, eq. (2.4) on the nominal plant model",
-        reference, rigid_body_force(reference), step)
+        "rigid_body_feedforward", f"rigid-body feedforward, eq. (2.4) on the {which} plant model",
+        reference, rigid_body_force(reference, parameters), step)

@@ -12,7 +12,10 @@ every step, so friction's steps at each reversal come at 1 kHz, not extrapolated
 
 Two modes with equal results: step by step (the graph's recurrent state carried in the FMU
 state) and precomputed (the whole reference given at build time, run through the graph in
-one call at initialization, as the thesis's offline feedforward).
+one call at initialization, as the thesis's offline feedforward). A third, `task`, runs the
+graph in its own task as Simulink Real-Time's multitasking does (fmu.network.Network): the
+1 kHz step never waits for it, and the added delay of one model period is made up by
+extrapolating the forces one period further.
 
 The network part is the one of any ONNX graph as an FMU (fmu.onnx_graph, `flexff fmu build
 onnx`), the graph's first dimension being time; only the features and the prior are this
@@ -41,9 +44,11 @@ REFERENCE_NAMES = list(names(REFERENCE))
 
 
 def learned_feedforward_system(model: str | Path, step: float = 1e-3,
-                               reference: Mapping[str, np.ndarray] | None = None) -> System:
+                               reference: Mapping[str, np.ndarray] | None = None,
+                               task: bool = False) -> System:
     """The System of the feedforward FMU running `model`; with `reference` (x_ref ... ay_ref
-    at every step from t = 0) it is built in the precomputed mode for that reference."""
+    at every step from t = 0) it is built in the precomputed mode for that reference, with
+    `task` its network runs in its own task."""
     card = read_card(model)
     period = model_period(card, step, model)
     u = ca.SX.sym("u", len(REFERENCE_NAMES))
@@ -58,7 +63,7 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     x, p = ca.SX.sym("x", 0), ca.SX.sym("p", 0)
     network = graph_network(read_graph(model, time_axis=True),
                             ca.Function("network_input", [x, u, p], [inputs]), period,
-                            None if reference is None else _table(reference, step))
+                            None if reference is None else _table(reference, step), task)
     outputs = OUTPUTS[card.labels]
     if network.n_outputs != len(outputs):
         raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
@@ -66,7 +71,7 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     r = ca.SX.sym("r", network.n_outputs)
     with_prior = card.prior == "rigid-body"
     force = r + _prior(u, card) if with_prior else r
-    mode = "step" if reference is None else "precomputed"
+    mode = "precomputed" if reference is not None else "task" if task else "step"
     added = ""
     if with_prior:
         added = " plus the rigid-body feedforward" + (

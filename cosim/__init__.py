@@ -5,6 +5,7 @@ batches, and the same runs under libcosim and through the engine alone in C (the
 Public API: `config.load_config` / `parse_config` / `config_examples` / `expanded`,
 `schema.RunConfig` (the configuration as data), `scenario.resolve`, `run.run_config`,
 `ssp.export_ssp` / `load_ssp`, `batch.run_batch` / `sweep`, `master.Master` / `ResolvedFmu`,
+`compare.compare_fmu` (one FMU in flexff and in FMPy),
 `wiring.wire`, `recording.load_recording`, `metrics.run_metrics`, `report.write_report`,
 `references` (reference trajectories).
 """

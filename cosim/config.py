@@ -32,16 +32,17 @@ short form:
                  x_start, y_start default to the reference's first point
   [controller]   crossover_hz, notch (true / false / Hz), encoders (2 or 3); defaults follow
                  the plant variant (controllers.feedback.DEFAULTS)
-  [feedforward]  kind = "none" | "rigid-body" | "learned" (with model = "file.onnx", an
-                 exported learned model, and mode = "step" (default) | "precomputed"); a
-                 current-level model (its card's outputs i1_ff..i3_ff) feeds the controller's
-                 current feedforward (controller option current_feedforward = true), and its
-                 force feedforward Fx_ff, Fy_ff gets zero
+  [feedforward]  kind = "none" | "rigid-body" (optionally with identified = "file.json", the
+                 parameters `flexff identify` found in place of the nominal ones) | "learned"
+                 (with model = "file.onnx", an exported learned model, and mode = "step"
+                 (default) | "precomputed"); a current-level model (its card's outputs
+                 i1_ff..i3_ff) feeds the controller's current feedforward (controller option
+                 current_feedforward = true), and its force feedforward Fx_ff, Fy_ff gets zero
 
 A configuration without [fmu.*] tables is the manipulator's loop: the short form, with the
-defaults of its tables. The same keys (variant, seed, crossover_hz, notch, encoders, model,
-mode, and the controller's current_feedforward) are the options of the built-in FMUs in the
-general form, with the plant's physical parameters in `parameters`.
+defaults of its tables. The same keys (variant, seed, crossover_hz, notch, encoders,
+identified, model, mode, and the controller's current_feedforward) are the options of the
+built-in FMUs in the general form, with the plant's physical parameters in `parameters`.
 
 Any problem (unknown table or key, wrong type, missing file, an FMU variable that does not
 exist or has another type, a reference outside the workspace, a step that does not divide the
@@ -52,19 +53,16 @@ when the FMUs are resolved, before anything runs.
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import tomli_w
 
-from flexff.controllers.allocation import ENCODER_CHOICES
-from flexff.controllers.model_card import read_card
+from flexff.cosim.example_configs import config_examples as config_examples  # public API
 from flexff.cosim.memory import MemoryNeeded
 from flexff.cosim.references import REFERENCE_KINDS, Reference, SegmentError, build_reference
 from flexff.cosim.schema import (
@@ -81,19 +79,19 @@ from flexff.cosim.schema import (
     SourceConfig,
     whole_steps,
 )
+from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
-from flexff.plant.kinematics import check_workspace
-from flexff.plant.model import VARIANTS
+from flexff.fmu.model_exchange import SOLVERS
 from flexff.plant.parameters import NOMINAL
 from flexff.plant.signals import CURRENT_FEEDFORWARD, FEEDFORWARD_FORCES, names
-from flexff.plant.system import plant_parameters
+from flexff.plant.variants import VARIANTS
 
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
                 "circle": ("kind", "centre", "turns", "duration"),
                 "spline": ("kind", "points", "duration")}
 FEEDFORWARD_KINDS = ("none", "rigid-body", "learned")  # kind K is the built-in "K-feedforward"
 RENAMED_KINDS = {"model": "rigid-body", "onnx": "learned"}  # old [feedforward] kind -> now
-FEEDFORWARD_MODES = ("step", "precomputed")
+FEEDFORWARD_MODES = ("step", "task", "precomputed")
 SHORT_FORM = ("plant", "controller", "feedforward")
 TABLES = ("run", "reference", "source", "fmu", "connection", "record", *SHORT_FORM)
 PLANT_EXTRA = ("max_substep",)  # plant FMU parameters beyond the System's own
@@ -120,6 +118,15 @@ def checked(config: RunConfig) -> RunConfig:
     return again
 
 
+def with_isolation(config: RunConfig, isolate: bool, step_timeout: float | None
+                   ) -> RunConfig:
+    """`config` with every FMU in its own process (`isolate`, as `flexff run --isolate`) and
+    its calls bounded by `step_timeout` (s; None: as configured), checked again."""
+    fmus = tuple(replace(f, isolate=f.isolate or isolate) for f in config.fmus)
+    timeout = config.step_timeout if step_timeout is None else step_timeout
+    return checked(replace(config, fmus=fmus, step_timeout=timeout))
+
+
 def read_tables(path: Path) -> dict[str, Any]:
     """The tables of the TOML file at `path`, unchecked; ConfigError naming the file when it
     is missing or not TOML."""
@@ -142,25 +149,12 @@ def parse_config(data: Mapping[str, Any] | str, name: str = "config",
     return _Parser(origin, Path(base)).parse(data, name)
 
 
-EXAMPLE_PATH = re.compile(r'^(\s*path\s*=\s*)"([^"/][^"]*)"', re.MULTILINE)  # a relative path
-
-
-def config_examples() -> dict[str, str]:
-    """Example configurations (TOML text) by name, shipped in cosim/examples/.
-
-    The files they name (third-party FMUs, CSV tables) ship beside them; their relative paths
-    are made absolute, so an example saved anywhere runs from there.
-    """
-    folder = Path(str(resources.files("flexff.cosim") / "examples"))
-    return {path.stem: EXAMPLE_PATH.sub(lambda m: f'{m[1]}"{(folder / m[2]).as_posix()}"',
-                                        path.read_text())
-            for path in sorted(folder.glob("*.toml"))}
-
-
 def expanded(config: RunConfig) -> dict[str, Any]:
     """The configuration in the general form, as TOML tables (paths absolute)."""
-    run = {"step": config.step, "stop": config.stop, "algorithm": config.algorithm,
-           "order": [f.name for f in config.fmus]}
+    run = {"step": config.step, "start": config.start, "stop": config.stop,
+           **({"tolerance": config.tolerance} if config.tolerance is not None else {}),
+           **({"step_timeout": config.step_timeout} if config.step_timeout is not None else {}),
+           "algorithm": config.algorithm, "order": [f.name for f in config.fmus]}
     data: dict[str, Any] = {"run": run}
     if config.reference is not None:
         data["reference"] = {"kind": config.reference.kind, **_plain(config.reference.options)}
@@ -173,7 +167,10 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                             **_plain(f.options),
                             **({"parameters": dict(f.parameters)} if f.parameters else {}),
                             **({"unconnected": f.unconnected}
-                               if f.unconnected != "error" else {})}
+                               if f.unconnected != "error" else {}),
+                            **({"tolerance": f.tolerance} if f.tolerance is not None else {}),
+                            **({"isolate": True} if f.isolate else {}),
+                            **({"solver": f.solver} if f.solver else {})}
                    for f in config.fmus}
     if config.connections:
         data["connection"] = [{"from": c.from_name, "to": c.to_name,
@@ -182,7 +179,9 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                               for c in config.connections]
     data["record"] = {**({"signals": list(config.record.signals)}
                          if config.record.signals is not None else {}),
-                      "csv": config.record.csv}
+                      "csv": config.record.csv,
+                      **({"plot": config.record.plot} if config.record.plot is not None else {}),
+                      **({"every": config.record.every} if config.record.every != 1 else {})}
     return data
 
 
@@ -216,7 +215,8 @@ class _Parser:
         general = "fmu" in data
         short = any(t in data for t in SHORT_FORM) or not general
         run = self.table(data, "run")
-        self.keys(run, "run", ("step", "stop", "algorithm", "order"))
+        self.keys(run, "run", ("step", "start", "stop", "tolerance", "step_timeout", "algorithm",
+                               "order"))
         step = self.number(run, "run", "step", 1e-3, positive=True)
         if short and "reference" not in data:
             raise self.error("reference", "the [reference] table is required")
@@ -236,10 +236,17 @@ class _Parser:
             fmus.append(self.fmu(fmu_name, table, start))
         if not fmus:
             raise self.error("fmu", "no FMU to run: add an [fmu.NAME] table")
-        stop = self.stop(run, signal, fmus, step)
+        start_time = self.number(run, "run", "start", next(
+            (read_fmu(f.path).default_start or 0.0 for f in fmus if f.path), 0.0))
+        stop = self.stop(run, signal, fmus, step, start_time)
+        tolerance = self.tolerance(run, "run")
+        fmus = [replace(f, tolerance=self.fmu_tolerance(f, tolerance)) for f in fmus]
         sources += self.sources(data.get("source", []))
+        step_timeout = self.step_timeout(run, fmus)
         config = RunConfig(
-            name=name, step=step, stop=stop, fmus=self.order(run, fmus), reference=reference,
+            name=name, step=step, stop=stop, start=start_time, tolerance=tolerance,
+            step_timeout=step_timeout,
+            fmus=self.order(run, fmus), reference=reference,
             sources=tuple(sources), connections=self.connections(data.get("connection", []),
                                                                  fmus),
             algorithm=self.choice(run, "run", "algorithm", ALGORITHMS, "gauss-seidel"),
@@ -262,16 +269,63 @@ class _Parser:
             raise self.error(", ".join(given) or "reference.kind", str(error)) from None
 
     def stop(self, run: Mapping[str, Any], signal: Reference | None, fmus: Sequence[FmuConfig],
-             step: float) -> float:
-        """run.stop; default the reference's duration, else the first FMU's experiment."""
-        default = signal.duration if signal is not None else None
+             step: float, start: float) -> float:
+        """run.stop, the end time; default the start plus the reference's duration, else the
+        first FMU's experiment."""
+        default = start + signal.duration if signal is not None else None
         if default is None:
             default = next((read_fmu(f.path).default_stop for f in fmus if f.path), None)
-        stop = self.number(run, "run", "stop", default, positive=True)
-        if not whole_steps(stop, step):
-            raise self.error("run.stop", f"{stop!r} s is not a whole number of steps of "
+        stop = self.number(run, "run", "stop", default)
+        if not stop > start:
+            raise self.error("run.stop", f"the end time {stop!r} s must come after the start "
+                                         f"time {start!r} s (run.start)")
+        if not whole_steps(stop - start, step):
+            raise self.error("run.stop", f"the run's length {stop - start!r} s (run.stop - "
+                                         f"run.start) is not a whole number of steps of "
                                          f"{step!r} s (run.step)")
         return stop
+
+    def tolerance(self, t: Mapping[str, Any], where: str) -> float | None:
+        """A relative tolerance for the FMUs' own solvers (None: not given)."""
+        return self.number(t, where, "tolerance", None, positive=True) if "tolerance" in t \
+            else None
+
+    def step_timeout(self, run: Mapping[str, Any], fmus: Sequence[FmuConfig]) -> float | None:
+        """run.step_timeout, for the FMUs in their own process."""
+        if "step_timeout" not in run:
+            return None
+        if not any(f.isolate for f in fmus):
+            raise self.error("run.step_timeout", "bounds the calls of FMUs in their own "
+                                                 "process: set isolate = true on an [fmu.NAME] "
+                                                 "(or run with --isolate)")
+        return self.number(run, "run", "step_timeout", None, positive=True)
+
+    def solver(self, t: Mapping[str, Any], where: str, path: Path) -> str | None:
+        """fmu.NAME.solver: model exchange with a solver; "cvode" for an FMU that has no
+        co-simulation interface, None (co-simulation) for one that has."""
+        info = read_fmu(path)
+        if "solver" not in t:
+            return None if info.co_simulation else SOLVERS[0]
+        solver = self.choice(t, where, "solver", SOLVERS, None)
+        if info.me_identifier is None:
+            raise self.error(f"{where}.solver", f"{path.name} has no model-exchange interface "
+                                                f"to solve: remove the key to co-simulate it")
+        return solver
+
+    def isolate(self, t: Mapping[str, Any], where: str) -> bool:
+        value = t.get("isolate", False)
+        if not isinstance(value, bool):
+            raise self.error(f"{where}.isolate", f"expected true or false, got {value!r}")
+        return value
+
+    def fmu_tolerance(self, f: FmuConfig, run: float | None) -> float | None:
+        """An FMU's tolerance: its own key, else [run] tolerance, else its default experiment's
+        (a built-in's is read when it is built, cosim.scenario)."""
+        if f.tolerance is not None:
+            return f.tolerance
+        if run is not None or f.path is None:
+            return run
+        return read_fmu(f.path).default_tolerance
 
     def order(self, run: Mapping[str, Any], fmus: list[FmuConfig]) -> tuple[FmuConfig, ...]:
         if "order" not in run:
@@ -301,13 +355,17 @@ class _Parser:
                           FutureWarning, stacklevel=2)
             ff = {**ff, "kind": new}
         kind = self.choice(ff, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
-        self.keys(ff, "feedforward", ("kind", "model", "mode") if kind == "learned" else ("kind",))
+        self.keys(ff, "feedforward", {"learned": ("kind", "model", "mode"),
+                                      "rigid-body": ("kind", "identified")}.get(kind, ("kind",)))
         given: tuple[str, ...] = ()  # the controller's feedforward inputs a feedforward FMU feeds
         if kind != "none":
             options = self.feedforward_options(ff, "feedforward")
             fmus.append(FmuConfig("feedforward", builtin=f"{kind}-feedforward", options=options))
-            given = (tuple(read_card(options["model"]).output_signals) if "model" in options
-                     else names(FEEDFORWARD_FORCES))
+            given = names(FEEDFORWARD_FORCES)
+            if "model" in options:  # a learned model's card says what it feeds
+                from flexff.controllers.model_card import read_card  # onnx: learned runs only
+
+                given = tuple(read_card(options["model"]).output_signals)
         currents = given == names(CURRENT_FEEDFORWARD)  # a current-level model (model_card)
         zeros = [n for n in names(FEEDFORWARD_FORCES, CURRENT_FEEDFORWARD if currents else ())
                  if n not in given]
@@ -341,13 +399,16 @@ class _Parser:
             raise self.error(f"{where}.parameters", f"expected a table {{name = value}}, got "
                                                     f"{parameters!r}")
         if "path" in t:
-            self.keys(t, where, ("path", "parameters", "unconnected"))
+            self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate",
+                                 "solver"))
             path = self.path(t, where, "path")
             return FmuConfig(name, path=path, parameters=self.fmu_parameters(path, parameters,
                                                                              where),
-                             unconnected=unconnected)
+                             unconnected=unconnected, tolerance=self.tolerance(t, where),
+                             isolate=self.isolate(t, where), solver=self.solver(t, where, path))
         builtin = self.choice(t, where, "builtin", tuple(BUILTIN_OPTIONS), None)
-        self.keys(t, where, ("builtin", "parameters", "unconnected", *BUILTIN_OPTIONS[builtin]))
+        self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
+                             *BUILTIN_OPTIONS[builtin]))
         options: dict[str, Any] = {}
         if builtin == "plant":
             variant = self.choice(t, where, "variant", tuple(VARIANTS), "nominal")
@@ -361,10 +422,11 @@ class _Parser:
         elif builtin == "controller":
             options = {"variant": self.choice(t, where, "variant", tuple(VARIANTS), "nominal"),
                        **self.controller_options(t, where)}
-        elif builtin == "learned-feedforward":
+        elif builtin in ("learned-feedforward", "rigid-body-feedforward"):
             options = self.feedforward_options(t, where)
         return FmuConfig(name, builtin=builtin, options=options, parameters=dict(parameters),
-                         unconnected=unconnected)
+                         unconnected=unconnected, tolerance=self.tolerance(t, where),
+                         isolate=self.isolate(t, where))
 
     def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str
                        ) -> dict[str, Any]:
@@ -388,11 +450,16 @@ class _Parser:
         return checked
 
     def plant_parameter_names(self, variant: str) -> tuple[str, ...]:
+        from flexff.plant.system import plant_parameters  # CasADi: manipulator runs only
+
         return (*(p.name for p in plant_parameters(variant)), *PLANT_EXTRA)
 
     def plant_parameters(self, t: Mapping[str, Any], variant: str, where: str,
                          start: tuple[float, float]) -> dict[str, float]:
         """Plant parameter values, checked physically; x_start, y_start default to `start`."""
+        from flexff.plant.kinematics import check_workspace
+        from flexff.plant.system import plant_parameters
+
         known = {p.name: p for p in plant_parameters(variant)}
         values = dict(zip(START_PARAMETERS, start))
         for key in t:
@@ -418,6 +485,8 @@ class _Parser:
         return {"seed": seed}
 
     def controller_options(self, t: Mapping[str, Any], where: str) -> dict[str, Any]:
+        from flexff.controllers.allocation import ENCODER_CHOICES
+
         options: dict[str, Any] = {}
         if "notch" in t:
             notch = t["notch"]
@@ -438,10 +507,21 @@ class _Parser:
         return options
 
     def feedforward_options(self, t: Mapping[str, Any], where: str) -> dict[str, Any]:
-        """A learned feedforward's model and mode (nothing for the rigid-body one)."""
+        """A learned feedforward's model and mode; the rigid-body one's identified
+        parameters, if any."""
+        from flexff.controllers.identified import read_identified  # manipulator runs only
+        from flexff.controllers.model_card import read_card  # onnx: learned runs only
+
         if "model" not in t and t.get("builtin", t.get("kind")) in ("rigid-body",
                                                                       "rigid-body-feedforward"):
-            return {}
+            if "identified" not in t:
+                return {}
+            identified = self.path(t, where, "identified")
+            try:
+                read_identified(identified)
+            except InputError as exc:
+                raise self.error(f"{where}.identified", str(exc)) from None
+            return {"identified": identified}
         model = self.path(t, where, "model")
         if model.suffix.lower() != ".onnx":
             raise self.error(f"{where}.model", f"{model} is not an .onnx file")
@@ -514,18 +594,22 @@ class _Parser:
         return out
 
     def record(self, t: Mapping[str, Any]) -> RecordConfig:
-        self.keys(t, "record", ("signals", "csv"))
-        csv = t.get("csv", True)
-        if not isinstance(csv, bool):
-            raise self.error("record.csv", f"expected true or false, got {csv!r}")
+        self.keys(t, "record", ("signals", "csv", "plot", "every"))
+        csv, plot = t.get("csv", False), t.get("plot")
+        for key, value in (("csv", csv), ("plot", plot)):
+            if value is not None and not isinstance(value, bool):
+                raise self.error(f"record.{key}", f"expected true or false, got {value!r}")
+        every = self.integer(t, "record", "every", 1)
+        if every < 1:
+            raise self.error("record.every", f"keeps every N-th point: N >= 1, got {every}")
         if "signals" not in t:
-            return RecordConfig(None, csv)
+            return RecordConfig(None, csv, plot, every)
         names = t["signals"]
         if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
             raise self.error("record.signals", f"expected a list of signal names, got {names!r}")
         if len(set(names)) != len(names):
             raise self.error("record.signals", "a signal is listed twice")
-        return RecordConfig(tuple(names), csv)
+        return RecordConfig(tuple(names), csv, plot, every)
 
     # -- [reference] ----------------------------------------------------------------------
     def reference(self, t: Mapping[str, Any]) -> ReferenceConfig:
@@ -542,6 +626,8 @@ class _Parser:
         if kind == "segments":
             self.keys(t, r, ("kind", "start", "segments"))
             start = self.point(t, r, "start", (0.0, 0.0))
+            from flexff.plant.kinematics import check_workspace
+
             try:
                 check_workspace(NOMINAL, *start, "the start point")
             except ValueError as error:

@@ -47,6 +47,7 @@ HEADER = SOURCE.with_suffix(".h")  # its structures, for the programs compiled w
 TYPED_HOOK = CFUNCTYPE(c_int, c_long, c_int, c_long)  # (fmu, phase, k) -> 0 if ok
 CALLS = {1: "setting its inputs", 2: "getting its outputs", 3: "the step", 4: "getting its "
          "outputs after the step", 5: "exchanging values of other types"}
+AFTER_RECORD = (3, 4)  # calls made after their point was recorded (CALL_STEP, CALL_GET_AFTER)
 OK, FAILED, OVERRUN, BAD_PLAN = 0, 1, 2, 3  # engine_run's results (RUN_* in engine.c)
 MAX_LISTED_OVERRUNS = 16
 ERROR_SIZE = 256  # Run.error
@@ -75,13 +76,13 @@ class EngineFmuPlan(Structure):
                 ("in_values", POINTER(c_double)), ("n_out", c_long),
                 ("out_vr", POINTER(c_uint)), ("out_values", POINTER(c_double)),
                 ("read_before", c_int), ("read_after", c_int), ("typed_in", c_int),
-                ("typed_out", c_int)]
+                ("typed_out", c_int), ("task_overruns", c_void_p), ("task_seen", c_long)]
 
 
 class EngineRun(Structure):
     """A run's plan, buffers and measurements (struct Run of engine.c)."""
 
-    _fields_ = [("step", c_double), ("steps", c_long), ("n_fmus", c_long),
+    _fields_ = [("step", c_double), ("start_time", c_double), ("steps", c_long), ("n_fmus", c_long),
                 ("fmus", POINTER(EngineFmuPlan)), ("bus", POINTER(c_double)),
                 ("n_bus", c_long), ("n_sources", c_long), ("sources", POINTER(c_double)),
                 ("record", POINTER(c_double)), ("columns", POINTER(c_long)),
@@ -91,7 +92,8 @@ class EngineRun(Structure):
                 ("start", _Timespec), ("max_overruns", c_long), ("grace_steps", c_long),
                 ("overruns", c_long), ("counted", c_long),
                 ("first_overruns", c_long * MAX_LISTED_OVERRUNS), ("failed_fmu", c_long),
-                ("failed_k", c_long), ("failed_call", c_int), ("error", c_char * ERROR_SIZE)]
+                ("failed_k", c_long), ("failed_call", c_int), ("error", c_char * ERROR_SIZE),
+                ("task_overruns", c_long)]
 
 
 MIRRORS: dict[str, type[Structure]] = {"struct timespec": _Timespec, "FmuPlan": EngineFmuPlan,
@@ -208,4 +210,4 @@ def idle_timing(seconds: float, period: float = 1e-3) -> StepTiming:
     library().engine_run(ctypes.byref(run), 0, steps + 1)
     listed = tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)])
     return StepTiming(period, (), tet[:steps], np.zeros((steps, 0)), lateness[:steps],
-                      Pacing(), run.overruns, listed, None)
+                      Pacing(), run.overruns, run.task_overruns, listed, None)

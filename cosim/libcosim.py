@@ -12,19 +12,24 @@ inputs of that previous step. For outputs with direct feedthrough (the controlle
 the feedforward's forces) that is one step behind cosim.master, which evaluates them at t_k
 with the inputs of t_k: the closed loop is then not the same discrete system, and the two
 masters differ by more than round-off. (libcosim's clock counts integer nanoseconds, so its
-step lengths in seconds differ from `step` by round-off.)
+step lengths in seconds differ from `step` by round-off, and its start time too.) libcosimpy
+creates every execution at t = 0; one that starts elsewhere is created through libcosim's own C
+call with its start time (`_execution`). libcosim gives the FMUs no tolerance.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
+from ctypes import POINTER, c_int64
 
 import numpy as np
 
+from flexff.fmu.archive import check_archive
 from flexff.fmu.errors import InputError, MissingPackage, RunError
 
 try:
+    from libcosimpy._internal import libcosimc, wrap_function
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimManipulator import CosimManipulator
@@ -36,6 +41,7 @@ except ImportError:  # an optional dependency: the extra "libcosim"
 
 from flexff.cosim.master import ResolvedFmu
 from flexff.cosim.recording import Recording
+from flexff.cosim.schema import point_time
 from flexff.cosim.wiring import SOURCE, Link, Port, wire
 
 
@@ -45,14 +51,16 @@ class _Execution:
     from time-varying sources."""
 
     def __init__(self, fmus: Sequence[ResolvedFmu], sources: Mapping[str, np.ndarray | float],
-                 step: float, links: Sequence[Link] | None = None) -> None:
+                 step: float, links: Sequence[Link] | None = None, start: float = 0.0) -> None:
         log_output_level(CosimLogLevel.WARNING)  # libcosim traces every FMI call otherwise
         infos = {s.name: s.described() for s in fmus}
+        for s in fmus:  # libcosim unpacks each FMU itself: its sizes are checked first
+            check_archive(s.path)
         self.variables = {name: info.variables for name, info in infos.items()}
         self.ports = [Port(s.name, infos[s.name]) for s in fmus]
         if links is None:
             links = wire(self.ports, list(sources), algorithm="jacobi")
-        self.execution = execution = CosimExecution.from_step_size(round(step * 1e9))
+        self.execution = execution = _execution(start, step)
         self.index = {s.name: execution.add_local_slave(
             CosimLocalSlave(fmu_path=str(s.path), instance_name=s.name)) for s in fmus}
         for s in fmus:
@@ -88,16 +96,29 @@ class _Execution:
             raise RunError(f"libcosim rejected {fmu}.{name} = {value!r}")
 
 
+def _execution(start: float, step: float) -> CosimExecution:
+    """An empty execution with libcosim's fixed-step algorithm from `start` (s)."""
+    if start == 0.0:
+        return CosimExecution.from_step_size(round(step * 1e9))
+    create = wrap_function(lib=libcosimc(), funcname="cosim_execution_create",
+                           argtypes=[c_int64, c_int64], restype=POINTER(CosimExecution))
+    pointer = create(round(start * 1e9), round(step * 1e9))
+    if not pointer:
+        raise RunError(f"libcosim cannot create an execution from t = {start!r} s")
+    key = CosimExecution._CosimExecution__create_key  # libcosimpy guards its constructor
+    return CosimExecution(key, pointer)
+
+
 def run_libcosim(fmus: Sequence[ResolvedFmu], sources: Mapping[str, np.ndarray | float],
                  step: float, steps: int, record: Sequence[str] | None = None,
-                 links: Sequence[Link] | None = None) -> Recording:
-    """Run `steps` steps; the recording holds the FMU outputs (all, or `record`) at
-    t_1 .. t_steps, read after each step, and the source signals at those points.
+                 links: Sequence[Link] | None = None, start: float = 0.0) -> Recording:
+    """Run `steps` steps from `start`; the recording holds the FMU outputs (all, or `record`)
+    at t_1 .. t_steps, read after each step, and the source signals at those points.
 
     Its wall time includes libcosimpy's per-step calls (manipulator and observer), which
     build their ctypes prototypes on every call: see `time_libcosim_engine` for the rest.
     """
-    ex = _Execution(fmus, sources, step, links)
+    ex = _Execution(fmus, sources, step, links, start)
     manipulator, observer = CosimManipulator.create_override(), CosimObserver.create_last_value()
     ex.execution.add_manipulator(manipulator)
     ex.execution.add_observer(observer)
@@ -108,23 +129,24 @@ def run_libcosim(fmus: Sequence[ResolvedFmu], sources: Mapping[str, np.ndarray |
     out = {s: np.empty((steps, len(names))) for s, names in by_fmu.items()}
     table = {n: np.broadcast_to(np.asarray(v, dtype=float), (steps + 1,))
              for n, v in sources.items()}
-    start = time.perf_counter()
+    began = time.perf_counter()
     for k in range(steps):
         for fmu, inputs in ex.varying.items():
             if not manipulator.slave_real_values(ex.index[fmu], [r for r, _ in inputs],
                                                  [float(table[n][k]) for _, n in inputs]):
                 raise RunError(f"libcosim rejected the inputs of {fmu} at step {k}")
         if not ex.execution.step(1):
-            raise RunError(f"libcosim failed in the step from t = {k * step:.9g} s")
+            raise RunError(f"libcosim failed in the step from t = "
+                           f"{point_time(start, step, k):.9g} s")
         for fmu, values in out.items():
             values[k] = observer.last_real_values(ex.index[fmu], refs[fmu])
-    wall = time.perf_counter() - start
+    wall = time.perf_counter() - began
     signals = {n: np.ascontiguousarray(table[n][1:]) for n in sources
                if record is None or n in record}
     for fmu, names in by_fmu.items():
         signals.update({f"{fmu}.{n}": np.ascontiguousarray(out[fmu][:, j])
                         for j, n in enumerate(names)})
-    return Recording((np.arange(steps) + 1) * step, signals, wall)
+    return Recording(point_time(start, step, np.arange(steps) + 1), signals, wall)
 
 
 def time_libcosim_engine(fmus: Sequence[ResolvedFmu], sources: Mapping[str, np.ndarray | float],

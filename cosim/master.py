@@ -10,7 +10,7 @@ Signals of other types (integers, booleans, strings, ...) go through fmpy's type
 small table beside the bus, and so does every connection that is not float64 into float64 (a
 Float32 input, or a Float64 input fed by a Float32 output): its value is converted, with its
 gain and offset, by cosim.wiring's rule (`carried`) in Python. Communication point k
-(t_k = k * step), for k = 0 .. steps:
+(t_k = start + k * step, cosim.schema.point_time), for k = 0 .. steps:
 
   1. the source signals of point k are copied into the bus;
   2. in order, each FMU gets its inputs and, if a later FMU or no FMU reads its outputs, gives
@@ -39,20 +39,21 @@ the steps may be paced to the wall clock (cosim.timing.Pacing).
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import math
 import sys
 import time
 from collections.abc import Mapping, Sequence
-from ctypes import byref, c_long, c_uint
+from ctypes import POINTER, byref, c_double, c_long, c_uint, c_void_p, cast
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
-from tqdm import tqdm
 
 from flexff.cosim.engine import (
+    AFTER_RECORD,
     CALLS,
     FAILED,
     MAX_LISTED_OVERRUNS,
@@ -66,26 +67,94 @@ from flexff.cosim.engine import (
     pointer,
     start_schedule,
 )
-from flexff.cosim.recording import Recording
-from flexff.cosim.schema import ALGORITHMS
-from flexff.cosim.timing import Pacing, StepTiming
+from flexff.cosim.isolation import IsolatedInstance
+from flexff.cosim.recording import CHUNK_MIN_ROWS, Recording, chunk_rows
+from flexff.cosim.schema import ALGORITHMS, point_time
+from flexff.cosim.timing import Histogram, Pacing, StepTiming, StreamedTiming
 from flexff.cosim.wiring import SOURCE, Link, Port, carried, wire
 from flexff.fmu.errors import InputError, RunError
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 
 PROGRESS_MIN_STEPS = 100_000  # runs this long show a progress bar (on a terminal)
-PROGRESS_CHUNK = 1000  # steps between progress bar updates
+PROGRESS_CHUNK = CHUNK_MIN_ROWS  # steps between progress bar updates (chunks hold whole ones)
+PACED_CHUNK_S = 1.0  # a paced run hands its record over once a second (of its run time)
+
+
+class Sink(Protocol):
+    """Where a run's record goes, chunk by chunk, while it runs (Master.stream)."""
+
+    def write(self, k0: int, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
+        """Points k0, k0 + 1, ... at times `time` [s], one array per recorded signal."""
+
+
+@dataclass(frozen=True)
+class Streamed:
+    """What a run leaves beside the record it handed to its sink."""
+
+    points: int  # points recorded
+    wall_s: float  # seconds the engine stepped
+    timing: StepTiming | StreamedTiming
+
+
+class MemorySink:
+    """A sink that keeps the record in memory (Master.run)."""
+
+    def __init__(self) -> None:
+        self.chunks: dict[str, list[np.ndarray]] = {}
+        self.times: list[np.ndarray] = []
+
+    def write(self, k0: int, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
+        self.times.append(time)
+        for name, values in columns.items():
+            self.chunks.setdefault(name, []).append(values)
+
+    def recording(self, streamed: Streamed) -> Recording:
+        return Recording(np.concatenate(self.times), {
+            n: np.concatenate(c) for n, c in self.chunks.items()}, streamed.wall_s,
+            streamed.timing)
+
+
+class _NoBar:
+    """The progress bar of a run that shows none (tqdm loads only for one that does)."""
+
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
+    def update(self, n: int) -> None:
+        pass
+
+
+def _progress_bar(steps: int, shown: bool) -> Any:
+    if not shown:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=steps, unit="step", leave=False)
+
+
+def _shifted(array: np.ndarray, rows: int) -> Any:
+    """A pointer `rows` rows before `array`'s first: the engine indexes its buffers by the
+    point k, so a chunk buffer whose first row holds point `rows` is given this way (only
+    rows inside the buffer are ever touched)."""
+    return cast(c_void_p(array.ctypes.data - rows * array.strides[0]), POINTER(c_double))
 
 
 @dataclass(frozen=True)
 class ResolvedFmu:
-    """One FMU of a co-simulation: its instance name, its file and start values by name, and
-    its model description once read (a resolved scenario's, whose start values are checked)."""
+    """One FMU of a co-simulation: its instance name, its file and start values by name, its
+    model description once read (a resolved scenario's, whose start values are checked), and
+    the tolerance given to its own solver (None: not defined)."""
 
     name: str
     path: Path
     parameters: Mapping[str, Any] = field(default_factory=dict)
     info: FmuInfo | None = field(default=None, compare=False, repr=False)
+    tolerance: float | None = None
+    isolate: bool = False  # run it in its own process (cosim.isolation)
+    solver: str | None = None  # run it as model exchange with this solver (fmu.model_exchange)
 
     def described(self) -> FmuInfo:
         """The model description: the one carried, else read and the start values checked."""
@@ -104,11 +173,13 @@ class _Plan:
     """How one FMU reads its inputs from and writes its outputs to the bus (numpy arrays the
     engine's EngineFmuPlan points into)."""
 
-    def __init__(self, instance: FmuInstance, fmu: ResolvedFmu, links: Sequence[Link],
+    def __init__(self, instance: FmuInstance | IsolatedInstance, fmu: ResolvedFmu,
+                 links: Sequence[Link],
                  bus_index: Mapping[str, int], bus: np.ndarray, out_offset: int,
                  read_before: bool, read_after: bool) -> None:
         info = instance.info
         self.instance, self.name, self.parameters = instance, fmu.name, dict(fmu.parameters)
+        self.tolerance = fmu.tolerance
         floats = [k for k in links if k.on_bus]
         self.typed_inputs = [k for k in links if not k.on_bus]  # set by Python (_set_typed)
         self.inputs = tuple(k.input for k in floats)
@@ -141,18 +212,31 @@ class _Plan:
         values = bus[self.gather]
         return values if self.gain is None else values * self.gain + self.offset
 
-    def engine_plan(self) -> EngineFmuPlan:
+    def calls(self) -> tuple[bool, int | None, int, int, int]:
+        """(fmi3, component, set, get, step): the FMU's own functions, or an isolated FMU's
+        proxy (cosim.isolation)."""
+        if isinstance(self.instance, IsolatedInstance):
+            return self.instance.calls()
         dll = self.instance.fmu.dll
         fmi3 = self.instance.info.fmi_version == "3.0"
         names = (("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep") if fmi3 else
                  ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"))
+        set_, get = function_address(dll, names[0]), function_address(dll, names[1])
+        stepper = self.instance.stepper  # model exchange: the solver's step
+        step = stepper.address if stepper is not None else function_address(dll, names[2])
+        return fmi3, self.instance.component.value, set_, get, step
+
+    def engine_plan(self) -> EngineFmuPlan:
+        task = self.instance.network_task()  # its overruns count as the engine's own
+        counter = task[1] if task else 0
         return EngineFmuPlan(
-            fmi3, self.instance.component.value, *(function_address(dll, n) for n in names),
+            *self.calls(),
             len(self.inputs), pointer(self.in_vr, c_uint), pointer(self.gather, c_long),
             pointer(self.gain), pointer(self.offset), pointer(self.in_values),
             len(self.outputs), pointer(self.out_vr, c_uint), pointer(self.out_values),
             self.read_before, self.read_after, bool(self.typed_inputs),
-            bool(self.typed_outputs))
+            bool(self.typed_outputs), counter or None,
+            c_long.from_address(counter).value if counter else 0)
 
     def fail(self, what: str) -> CosimError:
         return CosimError(str(self.instance.fail(what)))
@@ -162,20 +246,24 @@ class Master:
     """Loaded FMUs wired together, ready for one run; use it as a context manager.
 
     `sources` names the external signals (the reference, constants) given to `run`; `links`
-    is the wiring (cosim.wiring.wire; default: every input by name).
+    is the wiring (cosim.wiring.wire; default: every input by name); `start` the time of
+    point 0; `step_timeout` (s) bounds every call of an isolated FMU.
     """
 
     def __init__(self, fmus: Sequence[ResolvedFmu], sources: Sequence[str], step: float,
-                 links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel") -> None:
+                 links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel",
+                 start: float = 0.0, step_timeout: float | None = None) -> None:
         if not step > 0:
             raise InputError(f"step must be positive, got {step}")
         if algorithm not in ALGORITHMS:
             raise InputError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
-        self.step, self.algorithm = float(step), algorithm
+        if not math.isfinite(start):
+            raise InputError(f"start must be finite, got {start}")
+        self.step, self.algorithm, self.start = float(step), algorithm, float(start)
         self.sources = tuple(sources)
         self.fmus = list(fmus)
         self._plans: list[_Plan] = []
-        self._instances: list[FmuInstance] = []
+        self._instances: list[FmuInstance | IsolatedInstance] = []
         infos = [s.described() for s in fmus]
         if links is None:
             links = wire([Port(s.name, i) for s, i in zip(fmus, infos)], self.sources,
@@ -183,7 +271,9 @@ class Master:
         self.links = tuple(links)
         try:
             for fmu, info in zip(fmus, infos):
-                self._instances.append(FmuInstance(info, fmu.name))
+                self._instances.append(
+                    IsolatedInstance(info, fmu.name, step_timeout, fmu.solver) if fmu.isolate
+                    else FmuInstance(info, fmu.name, fmu.solver))
             self._layout(infos)
         except BaseException:
             self.close()
@@ -221,9 +311,12 @@ class Master:
         holds FMI 2.0 FMUs with float inputs and outputs, no gains, Gauss-Seidel)."""
         for p in self._plans:
             if (p.instance.info.fmi_version != "2.0" or p.gain is not None or p.typed_inputs
-                    or p.typed_outputs or self.algorithm != "gauss-seidel"):
+                    or p.typed_outputs or self.algorithm != "gauss-seidel" or self.start
+                    or p.tolerance is not None or isinstance(p.instance, IsolatedInstance)
+                    or p.instance.model_exchange):
                 raise InputError(f"the C floor runs FMI 2.0 FMUs with Real signals and no gains "
-                                 f"under Gauss-Seidel; {p.name} does not fit")
+                                 f"under Gauss-Seidel, from t = 0 with no tolerance, in its "
+                                 f"process, co-simulated; {p.name} does not fit")
         index = {n: i for i, n in enumerate(self.signals)}
         by_target = {(k.consumer, k.input): k.from_name for k in self.links}
         return {
@@ -245,7 +338,8 @@ class Master:
     def run(self, sources: Mapping[str, np.ndarray | float], steps: int,
             record: Sequence[str] | None = None, progress: bool | None = None,
             pacing: Pacing | None = None) -> Recording:
-        """Run `steps` steps from t = 0; return the recorded signals at the steps + 1 points.
+        """Run `steps` steps from the start; return the recorded signals at the steps + 1
+        points, held in memory (`stream` hands them to a sink instead).
 
         `sources` gives every source signal as a constant or as steps + 1 samples; `record`
         names the signals to keep (default: all; `fmu.output`, a source, or an output's own
@@ -254,6 +348,20 @@ class Master:
         the wall clock. The recording's `timing` holds every step's execution time; a paced
         run stopped by its overruns holds the points up to the last step it made.
         """
+        sink = MemorySink()
+        streamed = self.stream(sources, steps, sink, record, progress, pacing)
+        return sink.recording(streamed)
+
+    def stream(self, sources: Mapping[str, np.ndarray | float], steps: int, sink: Sink,
+               record: Sequence[str] | None = None, progress: bool | None = None,
+               pacing: Pacing | None = None, keep_timing: bool = True) -> Streamed:
+        """Run as `run` does, handing the record to `sink` chunk by chunk while it runs
+        (cosim.recording.chunk_rows points a chunk; a paced run one every PACED_CHUNK_S
+        seconds), so that
+        memory stays flat in the run's length. Without `keep_timing` the steps' execution
+        times are counted in histograms (cosim.timing.StreamedTiming), not kept one by one;
+        a paced run keeps them always. A run that fails hands over the points before the
+        failure first."""
         if self._ran:
             raise RuntimeError("a Master runs once; load the FMUs again for another run")
         self._ran = True
@@ -267,14 +375,17 @@ class Master:
         columns = np.array([i for _, i in floats], dtype=np.int64)
         full = len(floats) == len(resolved) and np.array_equal(
             columns, np.arange(len(self.signals)))
-        out = np.empty((steps + 1, len(floats)))
-        typed_out = [np.empty(steps + 1, dtype=object) for _ in typed]
+        rows = min(steps + 1, chunk_rows(1 + len(record)) if pacing is None else
+                   PROGRESS_CHUNK * max(1, round(PACED_CHUNK_S / self.step / PROGRESS_CHUNK)))
+        out = np.empty((rows, len(floats)))
+        typed_out = [np.empty(rows, dtype=object) for _ in typed]
         needed = {q for _, q in typed} | {k.from_name for k in self.links if k.kind != "float64"}
         for p in self._plans:  # typed outputs cost a call each: read only those in use
             p.typed_outputs = [n for n in p.typed_outputs if f"{p.name}.{n}" in needed]
         for p in self._plans:
             try:
-                p.instance.initialize(p.parameters, 0.0, steps * self.step)
+                p.instance.initialize(p.parameters, self.start, self.time(steps),
+                                      p.tolerance)
             except FmuError as error:
                 raise CosimError(str(error)) from None
             if p.read_after:
@@ -282,61 +393,100 @@ class Master:
         if self.algorithm == "jacobi":
             self._propagate_initial_values(table[0])
         hook = _TypedHook(self, [(column, q) for column, (_, q) in zip(typed_out, typed)])
-        run = self._engine_run(table, out, None if full else columns, hook, steps, pacing)
+        keep_timing = keep_timing or pacing is not None
+        timing_rows = steps if keep_timing else rows
+        run = self._engine_run(table, out, None if full else columns, hook, steps, pacing,
+                               timing_rows)
+        streamed_timing = None if keep_timing else StreamedTiming(
+            self.step, tuple(p.name for p in self._plans), Histogram(),
+            tuple(Histogram() for _ in self._plans))
+        float_columns = {j: c for c, (j, _) in enumerate(floats)}
+        typed_columns = {j: c for c, (j, _) in enumerate(typed)}
+
+        def window(base: int) -> None:
+            """Point the engine's buffers so that point k lands in row k - base."""
+            hook.base = base
+            run.record = _shifted(out, base)
+            if not keep_timing:
+                run.tet, run.lateness = _shifted(self._tet, base), _shifted(self._lateness, base)
+                run.fmu_tet = _shifted(self._fmu_tet, base)
+
+        def hand(base: int, end: int) -> None:
+            """Give the sink points base .. end - 1 (and count their steps' times)."""
+            n = end - base
+            if n <= 0:
+                return
+            chunk = {name: out[:n, float_columns[j]].copy() if j in float_columns
+                     else _typed_array(typed_out[typed_columns[j]][:n])
+                     for j, name in enumerate(record)}
+            sink.write(base, self.time(np.arange(base, end)), chunk)
+            if streamed_timing is not None:
+                made = max(0, min(end, steps) - base)
+                streamed_timing.add(self._tet[:made], self._fmu_tet[:made])
+
         if progress is None:
             progress = sys.stderr.isatty() and steps >= PROGRESS_MIN_STEPS
         engine = library()
-        status, end = OK, steps + 1
+        status, end, base, wall = OK, steps + 1, 0, 0.0
+        window(base)
         gc_was_enabled = gc.isenabled()
         gc.disable()  # no collection pauses inside the loop
         try:
-            with tqdm(total=steps, unit="step", disable=not progress, leave=False) as bar:
+            with _progress_bar(steps, progress) as bar:
                 if pacing is not None:
                     start_schedule(run)
-                start = time.perf_counter()
                 for k0 in range(0, steps + 1, PROGRESS_CHUNK):
                     k1 = min(k0 + PROGRESS_CHUNK, steps + 1)
+                    start = time.perf_counter()
                     status = engine.engine_run(byref(run), k0, k1)
+                    wall += time.perf_counter() - start
                     if status != OK:
                         break
                     bar.update(min(k1, steps) - k0)
-            wall = time.perf_counter() - start
+                    if k1 - base == rows or k1 == steps + 1:
+                        hand(base, k1)
+                        base = k1
+                        window(base)
         finally:
             if gc_was_enabled:
                 gc.enable()
-        if status == FAILED:
+        if status == FAILED:  # points before failed_k were recorded, failed_k if its step failed
+            hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))
             raise hook.error or self._plans[run.failed_fmu].fail(
-                f"{CALLS[run.failed_call]} at t = {run.failed_k * self.step:.9g} s")
+                f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
         if status == OVERRUN:
             end = run.failed_k + 1  # points 0 .. failed_k were recorded, the step was made
-        signals: dict[str, np.ndarray] = {}
-        float_columns = {j: c for c, (j, _) in enumerate(floats)}
-        typed_columns = {j: c for c, (j, _) in enumerate(typed)}
-        for j, name in enumerate(record):
-            signals[name] = (np.ascontiguousarray(out[:end, float_columns[j]])
-                             if j in float_columns
-                             else _typed_array(typed_out[typed_columns[j]][:end]))
+            hand(base, end)
+        network = {p.name: times for p in self._plans if (times := p.instance.network_times())}
+        if streamed_timing is not None:
+            return Streamed(end, wall, dataclasses.replace(streamed_timing,
+                                                           network_calls=network))
         made = end if status == OVERRUN else steps  # the steps the engine made
         timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
                             self._fmu_tet[:made], self._lateness[:made], pacing, run.overruns,
+                            run.task_overruns,
                             tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
-                            run.failed_k if status == OVERRUN else None,
-                            network_calls={p.name: times for p in self._plans
-                                           if (times := p.instance.network_times())})
-        return Recording(np.arange(end) * self.step, signals, wall, timing)
+                            run.failed_k if status == OVERRUN else None, network_calls=network)
+        return Streamed(end, wall, timing)
+
+    def time(self, k: Any) -> Any:
+        """The time of point(s) k (cosim.schema.point_time)."""
+        return point_time(self.start, self.step, k)
 
     def _engine_run(self, table: np.ndarray, out: np.ndarray, columns: np.ndarray | None,
-                    hook: _TypedHook, steps: int, pacing: Pacing | None) -> EngineRun:
+                    hook: _TypedHook, steps: int, pacing: Pacing | None,
+                    timing_rows: int) -> EngineRun:
         """The engine's plan and buffers, all allocated here, before the loop."""
         self._plan_structs = (EngineFmuPlan * len(self._plans))(
             *(p.engine_plan() for p in self._plans))
-        self._tet = np.zeros(steps)
-        self._fmu_tet = np.zeros((steps, len(self._plans)))
-        self._lateness = np.zeros(steps)
+        self._tet = np.zeros(timing_rows)
+        self._fmu_tet = np.zeros((timing_rows, len(self._plans)))
+        self._lateness = np.zeros(timing_rows)
         self._arrays = (table, out, columns)  # what the engine points into lives as long
         self._hook = TYPED_HOOK(hook) if hook.needed else TYPED_HOOK()
         return EngineRun(
-            step=self.step, steps=steps, n_fmus=len(self._plans), fmus=self._plan_structs,
+            step=self.step, start_time=self.start, steps=steps, n_fmus=len(self._plans),
+            fmus=self._plan_structs,
             bus=pointer(self._bus), n_bus=self._bus.size, n_sources=len(self.sources),
             sources=pointer(table), record=pointer(out), columns=pointer(columns, c_long),
             n_columns=out.shape[1], typed=self._hook, typed_record=bool(hook.columns),
@@ -443,19 +593,20 @@ class _TypedHook:
     def __init__(self, master: Master, columns: list[tuple[np.ndarray, str]]) -> None:
         self.master, self.columns = master, columns
         self.error: Exception | None = None
+        self.base = 0  # the point in the columns' first row
         self.needed = bool(columns) or any(p.typed_inputs or p.typed_outputs
                                            for p in master._plans)
 
     def __call__(self, fmu: int, phase: int, k: int) -> int:
         try:
-            when = f"at t = {k * self.master.step:.9g} s"
+            when = f"at t = {self.master.time(k):.9g} s"
             if phase == 0:
                 self.master._set_typed(self.master._plans[fmu], when)
             elif phase == 1:
                 self.master._read_typed(self.master._plans[fmu], when)
             else:
                 for column, name in self.columns:
-                    column[k] = self.master._typed[name]
+                    column[k - self.base] = self.master._typed[name]
         except Exception as error:
             self.error = error
             return 1
@@ -473,6 +624,8 @@ def _check_parameters(fmu: ResolvedFmu, info: FmuInfo) -> None:
 
 def _typed_array(values: np.ndarray) -> np.ndarray:
     """A recorded column of another type as a plain numpy array (binary as hex strings)."""
+    if not values.size:  # a run that failed at its first point
+        return np.array([])
     first = values[0]
     if isinstance(first, bytes):
         return np.array([v.hex() for v in values])

@@ -5,17 +5,19 @@
   rms  = sqrt(mean_k e_k^2)           [m]
 
 over every communication point k = 0 .. N of a run of length T = N dt. The true position is
-the plant's `x`, `y` outputs, which only evaluation ever sees.
+the plant's `x`, `y` outputs, which only evaluation ever sees. A streamed run sums the squares
+and keeps the largest error chunk by chunk (Tracking), so it never holds the whole record.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from flexff.cosim.recording import Recording
+from flexff.cosim.recording import Recording, signal_name
 
 AXES = ("x", "y")
 
@@ -37,15 +39,61 @@ def tracking_metrics(recording: Recording) -> dict[str, dict[str, float]]:
             for axis in AXES}
 
 
+class Tracking:
+    """The tracking metrics of a run fed chunk by chunk (`add`): per axis the sum of e^2, the
+    largest |e| and the count, over the recorded columns `names` (reference and true position
+    found by their short names)."""
+
+    def __init__(self, names: Sequence[str], step: float) -> None:
+        self.step = step
+        self.columns = {a: (signal_name(names, f"{a}_ref"), signal_name(names, a)) for a in AXES}
+        self.squares = dict.fromkeys(AXES, 0.0)
+        self.largest = dict.fromkeys(AXES, 0.0)
+        self.count = 0
+
+    @staticmethod
+    def tracks(names: Sequence[str]) -> bool:
+        """Whether `names` holds a reference and a true position for both axes."""
+        try:
+            for a in AXES:
+                signal_name(names, a), signal_name(names, f"{a}_ref")
+        except KeyError:
+            return False
+        return True
+
+    def add(self, columns: Mapping[str, np.ndarray]) -> None:
+        for axis, (ref, true) in self.columns.items():
+            error = columns[ref] - columns[true]
+            self.squares[axis] += float(np.sum(error**2))
+            self.largest[axis] = max(self.largest[axis], float(np.max(np.abs(error)))
+                                     if error.size else 0.0)
+        self.count += len(next(iter(columns.values()))) if columns else 0
+
+    def metrics(self) -> dict[str, dict[str, float]]:
+        """{"x": {e2, einf, rms}, "y": {...}} (error_norms' definitions)."""
+        if self.count < 2:
+            raise ValueError("the error needs at least two samples")
+        duration = (self.count - 1) * self.step
+        return {a: {"e2": math.sqrt(self.squares[a] * self.step) / duration,
+                    "einf": self.largest[a], "rms": math.sqrt(self.squares[a] / self.count)}
+                for a in AXES}
+
+
 def run_metrics(recording: Recording) -> dict[str, Any]:
+    """The content of metrics.json of a recording held in memory (summary_metrics)."""
+    tracked = all(n in recording for axis in AXES for n in (axis, f"{axis}_ref"))
+    return summary_metrics(tracking_metrics(recording) if tracked else {},
+                           float(recording.time[-1] - recording.time[0]), recording.wall_s,
+                           recording.timing)
+
+
+def summary_metrics(tracking: Mapping[str, Any], duration: float, wall_s: float,
+                    timing: Any) -> dict[str, Any]:
     """The content of metrics.json: tracking metrics (where the run records a reference and a
     true position), wall time of the loop, its real-time factor (simulated seconds per
     wall-clock second) and the step timing (cosim.timing: the `realtime` table)."""
-    duration = float(recording.time[-1] - recording.time[0])
-    tracked = all(n in recording for axis in AXES for n in (axis, f"{axis}_ref"))
-    metrics = {**(tracking_metrics(recording) if tracked else {}), "wall_s": recording.wall_s,
-               "real_time_factor": duration / recording.wall_s if recording.wall_s > 0
-               else None}
-    if recording.timing is not None:
-        metrics["realtime"] = recording.timing.table(recording.wall_s)
+    metrics = {**tracking, "wall_s": wall_s,
+               "real_time_factor": duration / wall_s if wall_s > 0 else None}
+    if timing is not None:
+        metrics["realtime"] = timing.table(wall_s)
     return metrics

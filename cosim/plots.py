@@ -7,16 +7,23 @@
               signals (at most MAX_PANELS of them)
   tet.png     a paced run's task execution time per step, each FMU's share, the period and
               the overruns
+
+A run feeds RunPlots chunk by chunk while it runs; long series are drawn decimated
+(cosim.decimate: min and max per pixel column, so a one-sample spike stays visible), so a plot
+takes bounded time and memory whatever the run's length. matplotlib loads only when a plot is
+drawn.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.figure import Figure
 
-from flexff.cosim.recording import Recording, atomic_write
+from flexff.cosim.decimate import Envelope, Strided
+from flexff.cosim.recording import Recording, atomic_write, signal_name
 from flexff.cosim.timing import US, StepTiming
 from flexff.plant.signals import (
     FEEDBACK_FORCES,
@@ -26,9 +33,19 @@ from flexff.plant.signals import (
     names,
 )
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 PLOT_SIGNALS = names(POSITION_REFERENCE, TRUE_POSITION, FEEDBACK_FORCES, FEEDFORWARD_FORCES)
 MAX_PANELS = 8
 MM = 1e3
+AXES = ("x", "y")
+
+
+def _figure(**options: Any) -> Figure:
+    from matplotlib.figure import Figure
+
+    return Figure(**options)
 
 
 def save_figure(figure: Figure, path: Path) -> Path:
@@ -38,65 +55,123 @@ def save_figure(figure: Figure, path: Path) -> Path:
     return path
 
 
-def plot_path(rec: Recording, path: Path) -> Path:
-    figure = Figure(figsize=(5.5, 5.5))
-    ax = figure.subplots()
-    ax.plot(rec["x_ref"] * MM, rec["y_ref"] * MM, "k--", lw=1, label="reference")
-    ax.plot(rec["x"] * MM, rec["y"] * MM, lw=1, label="end effector")
-    ax.set(xlabel="x [mm]", ylabel="y [mm]", aspect="equal", title="x-y path")
-    ax.legend(loc="best")
-    return save_figure(figure, path)
+class RunPlots:
+    """The plots of one run of `points` points `step` apart, fed chunk by chunk (`add`) with
+    the recorded columns by name: the manipulator's (path, error, forces) where `recorded` has
+    PLOT_SIGNALS, else one panel per float signal."""
+
+    def __init__(self, recorded: Sequence[str], points: int, step: float) -> None:
+        self.points, self.step = points, step
+        try:
+            self.columns = {s: signal_name(recorded, s) for s in PLOT_SIGNALS}
+        except KeyError:
+            self.columns = {}
+        self.path = {s: Strided(points) for s in names(POSITION_REFERENCE, TRUE_POSITION)
+                     } if self.columns else {}
+        self.series: dict[str, Envelope] = {}
+        self.panels: list[str] | None = None if not self.columns else []
+
+    def _envelope(self, name: str, k0: int, values: np.ndarray) -> None:
+        if name not in self.series:
+            self.series[name] = Envelope(self.points)
+        self.series[name].add(k0, values)
+
+    def add(self, k0: int, columns: Mapping[str, np.ndarray]) -> None:
+        """The values of points k0, k0 + 1, ... of every recorded signal."""
+        if not self.columns:
+            if self.panels is None:
+                self.panels = [n for n, v in columns.items() if v.dtype.kind == "f"][:MAX_PANELS]
+            for name in self.panels:
+                self._envelope(name, k0, columns[name])
+            return
+        c = {s: columns[n] for s, n in self.columns.items()}
+        for name, strided in self.path.items():
+            strided.add(k0, c[name])
+        for axis in AXES:
+            fb, ff = c[f"F{axis}_fb"], c[f"F{axis}_ff"]
+            self._envelope(f"e_{axis}", k0, c[f"{axis}_ref"] - c[axis])
+            self._envelope(f"F{axis}_fb", k0, fb)
+            self._envelope(f"F{axis}_ff", k0, ff)
+            self._envelope(f"F{axis}", k0, fb + ff)
+
+    def write(self, folder: str | Path) -> list[Path]:
+        """Write path.png, error.png and forces.png into `folder` (signals.png for a run
+        without the manipulator's signals); return their paths."""
+        folder = Path(folder)
+        if not self.columns:
+            return [self._signals(folder / "signals.png")]
+        return [self._path(folder / "path.png"), self._error(folder / "error.png"),
+                self._forces(folder / "forces.png")]
+
+    def _line(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        return self.series[name].line(self.step) if name in self.series else (
+            np.zeros(0), np.zeros(0))
+
+    def _path(self, path: Path) -> Path:
+        figure = _figure(figsize=(5.5, 5.5))
+        ax = figure.subplots()
+        p = {name: strided.values() * MM for name, strided in self.path.items()}
+        ax.plot(p["x_ref"], p["y_ref"], "k--", lw=1, label="reference")
+        ax.plot(p["x"], p["y"], lw=1, label="end effector")
+        ax.set(xlabel="x [mm]", ylabel="y [mm]", aspect="equal", title="x-y path")
+        ax.legend(loc="best")
+        return save_figure(figure, path)
+
+    def _error(self, path: Path) -> Path:
+        figure = _figure(figsize=(8, 5))
+        axes = figure.subplots(2, 1, sharex=True)
+        for ax, axis in zip(axes, AXES):
+            t, e = self._line(f"e_{axis}")
+            ax.plot(t, e * MM, lw=0.8)
+            ax.set(ylabel=f"e_{axis} [mm]")
+            ax.grid(True, alpha=0.3)
+        axes[0].set_title("tracking error (reference - true position)")
+        axes[-1].set_xlabel("time [s]")
+        return save_figure(figure, path)
+
+    def _forces(self, path: Path) -> Path:
+        figure = _figure(figsize=(8, 5))
+        axes = figure.subplots(2, 1, sharex=True)
+        for ax, axis in zip(axes, AXES):
+            for name, style, label in ((f"F{axis}_fb", {"lw": 0.8}, "feedback"),
+                                       (f"F{axis}_ff", {"lw": 0.8}, "feedforward"),
+                                       (f"F{axis}", {"color": "k", "lw": 0.6}, "total")):
+                ax.plot(*self._line(name), label=label, **style)
+            ax.set(ylabel=f"F_{axis} [N]")
+            ax.grid(True, alpha=0.3)
+        axes[0].legend(loc="upper right", ncol=3, fontsize="small")
+        axes[0].set_title("end-effector force")
+        axes[-1].set_xlabel("time [s]")
+        return save_figure(figure, path)
+
+    def _signals(self, path: Path) -> Path:
+        """The first MAX_PANELS float signals, one panel each."""
+        panels = self.panels or []
+        figure = _figure(figsize=(8, 1.2 + 1.4 * max(len(panels), 1)))
+        axes = figure.subplots(max(len(panels), 1), 1, sharex=True, squeeze=False)
+        for ax, name in zip(axes[:, 0], panels):
+            ax.plot(*self._line(name), lw=0.8)
+            ax.set_ylabel(name, fontsize="small")
+            ax.grid(True, alpha=0.3)
+        axes[-1, 0].set_xlabel("time [s]")
+        return save_figure(figure, path)
 
 
-def plot_error(rec: Recording, path: Path) -> Path:
-    figure = Figure(figsize=(8, 5))
-    axes = figure.subplots(2, 1, sharex=True)
-    for ax, axis in zip(axes, ("x", "y")):
-        ax.plot(rec.time, (rec[f"{axis}_ref"] - rec[axis]) * MM, lw=0.8)
-        ax.set(ylabel=f"e_{axis} [mm]")
-        ax.grid(True, alpha=0.3)
-    axes[0].set_title("tracking error (reference - true position)")
-    axes[-1].set_xlabel("time [s]")
-    return save_figure(figure, path)
-
-
-def plot_forces(rec: Recording, path: Path) -> Path:
-    figure = Figure(figsize=(8, 5))
-    axes = figure.subplots(2, 1, sharex=True)
-    for ax, axis in zip(axes, ("x", "y")):
-        fb, ff = rec[f"F{axis}_fb"], rec[f"F{axis}_ff"]
-        ax.plot(rec.time, fb, lw=0.8, label="feedback")
-        ax.plot(rec.time, ff, lw=0.8, label="feedforward")
-        ax.plot(rec.time, fb + ff, "k", lw=0.6, label="total")
-        ax.set(ylabel=f"F_{axis} [N]")
-        ax.grid(True, alpha=0.3)
-    axes[0].legend(loc="upper right", ncol=3, fontsize="small")
-    axes[0].set_title("end-effector force")
-    axes[-1].set_xlabel("time [s]")
-    return save_figure(figure, path)
-
-
-def plot_signals(rec: Recording, path: Path) -> Path:
-    """The first MAX_PANELS float signals, one panel each."""
-    names = [n for n, v in rec.signals.items() if v.dtype.kind == "f"][:MAX_PANELS]
-    figure = Figure(figsize=(8, 1.2 + 1.4 * max(len(names), 1)))
-    axes = figure.subplots(max(len(names), 1), 1, sharex=True, squeeze=False)
-    for ax, name in zip(axes[:, 0], names):
-        ax.plot(rec.time, rec.signals[name], lw=0.8)
-        ax.set_ylabel(name, fontsize="small")
-        ax.grid(True, alpha=0.3)
-    axes[-1, 0].set_xlabel("time [s]")
-    return save_figure(figure, path)
+def _decimated(values: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    envelope = Envelope(values.size)
+    envelope.add(0, values)
+    return envelope.line(step)
 
 
 def plot_tet(timing: StepTiming, path: Path) -> Path:
     """TET over time (total and per FMU, in microseconds) against the period."""
-    figure = Figure(figsize=(9, 4))
+    figure = _figure(figsize=(9, 4))
     ax = figure.subplots()
     t = np.arange(timing.tet.size) * timing.step
     for i, name in enumerate(timing.names):
-        ax.plot(t, timing.fmu_tet[:, i] * US, lw=0.5, alpha=0.7, label=name)
-    ax.plot(t, timing.tet * US, "k", lw=0.6, label="TET (step)")
+        ax.plot(*_decimated(timing.fmu_tet[:, i] * US, timing.step), lw=0.5, alpha=0.7,
+                label=name)
+    ax.plot(*_decimated(timing.tet * US, timing.step), "k", lw=0.6, label="TET (step)")
     ax.axhline(timing.period * US, color="r", ls="--", lw=1, label="period")
     late = timing.tet + timing.lateness > timing.period
     if late.any():
@@ -110,10 +185,7 @@ def plot_tet(timing: StepTiming, path: Path) -> Path:
 
 
 def write_plots(rec: Recording, folder: str | Path) -> list[Path]:
-    """Write path.png, error.png and forces.png into `folder` (signals.png for a run
-    without the manipulator's signals); return their paths."""
-    folder = Path(folder)
-    if not all(name in rec for name in PLOT_SIGNALS):
-        return [plot_signals(rec, folder / "signals.png")]
-    return [plot_path(rec, folder / "path.png"), plot_error(rec, folder / "error.png"),
-            plot_forces(rec, folder / "forces.png")]
+    """The plots of a recording held in memory (RunPlots, fed at once) into `folder`."""
+    plots = RunPlots(list(rec.signals), rec.time.size, rec.step)
+    plots.add(0, rec.signals)
+    return plots.write(folder)

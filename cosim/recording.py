@@ -1,30 +1,50 @@
 """Recorded signals of a run and their files.
 
-Format: `signals.npz` (numpy's uncompressed zip of .npy arrays) holds `time` [s] and one float64
-array per recorded signal, by its name (plant.signals for the manipulator's); it is the exact
-record (a reload is bit-equal).
-`signals.csv` is a copy for people and spreadsheets: a header `time,<signal>,...` and one row
-per communication point, numbers written with 17 significant digits (also exact). Both files
-are written to a temporary name in the same folder and then renamed, so an interrupted run
-never leaves a half-written file behind.
+Format: `signals.parquet` (Apache Parquet, through pyarrow) holds `time` [s] and one column per
+recorded signal, by its name (plant.signals for the manipulator's), float64 values exactly as
+the run had them (a reload is bit-equal). Parquet because it is columnar, typed and compact and
+because pandas (`read_parquet`), polars, MATLAB (`parquetread`), R, DuckDB and Spark all read
+it; HDF5 (h5py) would serve MATLAB too, but pandas needs PyTables for it and polars does not read
+it at all.
+
+A run writes its record while it runs, chunk by chunk (RecordWriter): a Parquet file can be read
+only once its footer is written, so each chunk goes into its own complete file
+`signals.parts/part-NNNNNN.parquet` (written to a temporary name, then renamed). At any moment
+the folder holds every chunk up to the last one, a killed run keeps them (load_recording,
+`pandas.read_parquet("signals.parts")` and polars read the folder), and memory stays flat in
+the run's length. When the run ends, the parts are joined into signals.parquet (one row group
+each) and the folder goes.
+
+`signals.csv`, on request only (`[record] csv = true`, `flexff results export`): a header
+`time,<signal>,...` and one row per communication point, numbers with 17 significant digits
+(exact). Records of earlier versions, `signals.npz`, still load.
 """
 
 from __future__ import annotations
 
 import csv as csv_module
 import os
+import shutil
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 
 from flexff.fmu.errors import InputError
 
-NPZ_NAME = "signals.npz"
+PARQUET_NAME = "signals.parquet"
+PARTS_NAME = "signals.parts"  # the chunks of a run that is running or was killed
 CSV_NAME = "signals.csv"
+NPZ_NAME = "signals.npz"  # the record of earlier versions (read only)
+CHUNK_BYTES = 4 * 2**20  # a chunk's values (at least CHUNK_MIN_ROWS points)
+JOIN_ROWS = 2**16  # points per row group of a joined record
+CHUNK_MIN_ROWS = 1000  # a chunk's points are a multiple of it (the master's progress step)
+# plain encoding, uncompressed: float signals barely compress, and a dictionary per column
+# costs time and memory that grows with the number of chunks
+PARQUET_OPTIONS: dict[str, Any] = {"compression": "none", "use_dictionary": False}
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,12 +69,7 @@ class Recording:
         (`x` for `plant.x`)."""
         if name == "time":
             return self.time
-        if name in self.signals:
-            return self.signals[name]
-        matches = [n for n in self.signals if n.partition(".")[2] == name]
-        if len(matches) != 1:
-            raise KeyError(name if not matches else f"{name!r} is ambiguous: {matches}")
-        return self.signals[matches[0]]
+        return self.signals[signal_name(self.signals, name)]
 
     def __contains__(self, name: str) -> bool:
         try:
@@ -86,41 +101,165 @@ def atomic_write(path: str | Path, write: Callable[[Path], object]) -> Path:
     return path
 
 
-def save_recording(recording: Recording, folder: str | Path, csv: bool = True) -> list[Path]:
-    """Write signals.npz (and signals.csv unless `csv` is false) into `folder`; return paths."""
+def signal_name(names: Collection[str], name: str) -> str:
+    """The one of `names` that is `name`, or that is `fmu.name` for a single FMU (KeyError)."""
+    if name in names:
+        return name
+    matches = [n for n in names if n.partition(".")[2] == name]
+    if len(matches) != 1:
+        raise KeyError(name if not matches else f"{name!r} is ambiguous: {matches}")
+    return matches[0]
+
+
+class RecordWriter:
+    """Writes a record into `folder` chunk by chunk (the module's doc: signals.parts/, joined
+    into signals.parquet by `close`)."""
+
+    def __init__(self, folder: str | Path) -> None:
+        self.folder = Path(folder)
+        self.parts = self.folder / PARTS_NAME
+        shutil.rmtree(self.parts, ignore_errors=True)  # a killed earlier run's chunks
+        (self.folder / PARQUET_NAME).unlink(missing_ok=True)
+        self.parts.mkdir(parents=True)
+        self.count = 0
+
+    def write(self, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
+        """Append the points `time` with their values, one array per signal."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        table = pa.table({"time": time, **columns})
+        atomic_write(self.parts / f"part-{self.count:06d}.parquet",
+                     lambda tmp: pq.write_table(table, tmp, **PARQUET_OPTIONS))
+        self.count += 1
+
+    def close(self, csv: bool = False) -> list[Path]:
+        """Join the chunks into signals.parquet (and write signals.csv if `csv`); return the
+        files written."""
+        import pyarrow.parquet as pq
+
+        parts = sorted(self.parts.glob("part-*.parquet"))
+        if len(parts) == 1:  # complete as it is
+            os.replace(parts[0], self.folder / PARQUET_NAME)
+            parts = []
+
+        def join(tmp: Path) -> None:
+            schema = pq.read_schema(parts[0])
+            with pq.ParquetWriter(tmp, schema, **PARQUET_OPTIONS) as writer:
+                for part in parts:  # in slices, so that joining takes little memory
+                    for batch in pq.ParquetFile(part).iter_batches(JOIN_ROWS, use_threads=False):
+                        writer.write_batch(batch, row_group_size=JOIN_ROWS)
+
+        paths = [atomic_write(self.folder / PARQUET_NAME, join) if parts
+                 else self.folder / PARQUET_NAME]
+        shutil.rmtree(self.parts)
+        if csv:
+            paths.append(export_csv(self.folder))
+        return paths
+
+
+def chunk_rows(columns: int) -> int:
+    """Points per chunk of a record of `columns` columns (time included): CHUNK_BYTES of
+    values (a multiple of CHUNK_MIN_ROWS), so that a chunk's memory does not depend on how many
+    signals a run records."""
+    return max(1, CHUNK_BYTES // (8 * max(columns, 1)) // CHUNK_MIN_ROWS) * CHUNK_MIN_ROWS
+
+
+def save_recording(recording: Recording, folder: str | Path, csv: bool = False) -> list[Path]:
+    """Write signals.parquet (and signals.csv if `csv`) into `folder`; return the paths."""
+    writer = RecordWriter(folder)
+    rows = chunk_rows(1 + len(recording.signals))
+    for k in range(0, max(recording.time.size, 1), rows):
+        writer.write(recording.time[k:k + rows],
+                     {n: v[k:k + rows] for n, v in recording.signals.items()})
+    return writer.close(csv)
+
+
+def _record_files(folder: Path) -> list[Path]:
+    """The Parquet files of the record in `folder`: signals.parquet, else a killed run's
+    chunks in order."""
+    if (folder / PARQUET_NAME).is_file():
+        return [folder / PARQUET_NAME]
+    return sorted((folder / PARTS_NAME).glob("part-*.parquet"))
+
+
+def export_csv(folder: str | Path) -> Path:
+    """Write signals.csv beside the record in `folder` (module doc), one row group at a time
+    (memory flat in the record's length); return its path."""
+    import pyarrow.parquet as pq
+
     folder = Path(folder)
-    arrays = {"time": recording.time, **recording.signals}
+    if not folder.is_dir():
+        raise InputError(f"{folder}: no such folder (give the -o folder of flexff run)")
+    files = _record_files(folder)
+    if not files:
+        raise InputError(f"{folder}: no {PARQUET_NAME} (nor {PARTS_NAME}/): not a flexff run "
+                         f"folder, or one of an earlier version (flexff.results.load reads it)")
 
-    def write_npz(tmp: Path) -> None:
-        with open(tmp, "wb") as handle:  # a file object keeps numpy from appending ".npz"
-            # numpy's stub types savez's **kwds and its allow_pickle: bool alike
-            np.savez(handle, **arrays)  # type: ignore[arg-type]
-
-    def write_csv(tmp: Path) -> None:
-        if all(a.dtype == np.float64 for a in arrays.values()):
-            np.savetxt(tmp, np.column_stack(list(arrays.values())), fmt="%.17g", delimiter=",",
-                       header=",".join(arrays), comments="")
-            return
-        columns = [[f"{v:.17g}" if a.dtype.kind == "f" else str(v) for v in a]
-                   for a in arrays.values()]
+    def write(tmp: Path) -> None:
         with open(tmp, "w", newline="") as handle:
-            writer = csv_module.writer(handle)
-            writer.writerow(arrays)
-            writer.writerows(zip(*columns))
+            header = True
+            for path in files:
+                parquet = pq.ParquetFile(path)
+                for group in range(parquet.num_row_groups):
+                    arrays = _numpy_columns(parquet.read_row_group(group))
+                    if header:
+                        handle.write(",".join(arrays) + "\n")
+                        header = False
+                    _write_rows(handle, arrays)
 
-    paths = [atomic_write(folder / NPZ_NAME, write_npz)]
-    if csv:
-        paths.append(atomic_write(folder / CSV_NAME, write_csv))
-    return paths
+    return atomic_write(folder / CSV_NAME, write)
+
+
+def _write_rows(handle: TextIO, arrays: Mapping[str, np.ndarray]) -> None:
+    if all(a.dtype == np.float64 for a in arrays.values()):
+        np.savetxt(handle, np.column_stack(list(arrays.values())), fmt="%.17g", delimiter=",")
+        return
+    columns = [[f"{v:.17g}" if a.dtype.kind == "f" else str(v) for v in a]
+               for a in arrays.values()]
+    csv_module.writer(handle).writerows(zip(*columns))
+
+
+def _numpy_columns(table: Any) -> dict[str, np.ndarray]:
+    """A pyarrow Table's columns as numpy arrays (strings as numpy's str type)."""
+    import pyarrow as pa
+
+    return {name: (np.array(column.to_pylist(), dtype=str) if pa.types.is_string(column.type)
+                   else column.to_numpy())
+            for name, column in zip(table.column_names, table.columns)}
 
 
 def load_recording(path: str | Path) -> Recording:
-    """Read a signals.npz written by save_recording (or the folder that holds it)."""
+    """Read a run's record: a folder (its signals.parquet, a killed run's signals.parts/, or
+    an earlier version's signals.npz), or one such file."""
     path = Path(path)
-    if path.is_dir():
-        path = path / NPZ_NAME
+    if path.is_dir() and path.name != PARTS_NAME:
+        files = _record_files(path)
+        if not files:
+            return _load_npz(path / NPZ_NAME)
+    elif path.suffix == ".npz":
+        return _load_npz(path)
+    else:
+        files = sorted(path.glob("part-*.parquet")) if path.is_dir() else [path]
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        arrays = _numpy_columns(pa.concat_tables([pq.read_table(f) for f in files]))
+    except (pa.ArrowInvalid, OSError) as error:
+        raise InputError(f"{path}: not a readable record: {error}") from None
+    return _recording(path, arrays)
+
+
+def _load_npz(path: Path) -> Recording:
+    if not path.is_file():
+        raise InputError(f"{path.parent}: no record ({PARQUET_NAME}, {PARTS_NAME}/ or "
+                         f"{NPZ_NAME}) in this folder")
     with np.load(path) as data:
-        arrays = {name: data[name] for name in data.files}
+        return _recording(path, {name: data[name] for name in data.files})
+
+
+def _recording(path: Path, arrays: dict[str, np.ndarray]) -> Recording:
     if "time" not in arrays:
         raise InputError(f"{path}: no 'time' array, not a flexff recording")
     time = arrays.pop("time")

@@ -23,15 +23,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.signal import savgol_filter
 
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.memory import check_memory
 from flexff.fmu.errors import InputError
-from flexff.plant.kinematics import check_workspace
 from flexff.plant.parameters import NOMINAL
 from flexff.plant.signals import REFERENCE, names
+
+if TYPE_CHECKING:  # SciPy and CasADi load with the references that use them
+    from scipy.interpolate import CubicSpline
 
 # evaluation reference of the thesis (section 5.7)
 THESIS_LINE_END = (0.0098, -0.0098)
@@ -110,6 +110,8 @@ class Segment:
 
     def _validate(self) -> None:
         """Positive finite duration and, on a dense grid, the whole path in the workspace."""
+        from flexff.plant.kinematics import check_workspace
+
         _positive("duration", self.duration, "s")
         dense = self.evaluate(np.linspace(0.0, self.duration, max(2001, int(self.duration * 2000))))
         check_workspace(NOMINAL, dense[0], dense[1], f"{type(self).__name__} point")
@@ -207,6 +209,8 @@ class Spline(Segment):
             raise InputError(f"consecutive spline points {k} and {(k + 1) % len(pts)} coincide "
                              f"at ({pts[k][0]:g}, {pts[k][1]:g}) m")
         _positive("duration", self.duration, "s")
+        from scipy.interpolate import CubicSpline
+
         knots = np.concatenate([[0.0], np.cumsum(chords)]) / chords.sum() * self.duration
         object.__setattr__(self, "_spline", CubicSpline(knots, closed, bc_type="periodic"))
         self._validate()
@@ -305,6 +309,11 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
     Missing velocities and accelerations come from a cubic Savitzky-Golay filter over
     `smoothing_window` seconds of the resampled positions, which also smooths measured data.
     """
+    from scipy.interpolate import CubicSpline
+    from scipy.signal import savgol_filter
+
+    from flexff.plant.kinematics import check_workspace
+
     _positive("step", step, "s")
     _positive("smoothing_window", smoothing_window, "s")
     table = read_time_table(Path(path), ("x_ref", "y_ref"), Reference.SIGNALS[2:])

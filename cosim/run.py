@@ -1,15 +1,21 @@
 """run_config: one configured run, from TOML (or SSP) to a folder of results.
 
-The folder gets signals.npz (and signals.csv, see cosim.recording) with every recorded signal
-named `fmu.output` (sources by their own names), and in a manipulator run the manipulator's
-signals under their short names as well; metrics.json (cosim.metrics: wall time and real-time
+The folder gets signals.parquet (and signals.csv on request, see cosim.recording), written
+while the run runs, with every recorded signal named `fmu.output` (sources by their own
+names), and in a manipulator run the manipulator's signals under their short names as well;
+metrics.json (cosim.metrics: wall time and real-time
 factor, and the tracking errors where the run has a reference and a true position; with a
 learned feedforward also `feedforward_range`, where the reference leaves the model's training
-range); the plots (cosim.plots); and run.json, the checked configuration in the general form.
-The built-in FMUs are built into the fmu/ cache and loaded from a temporary copy.
+range); the plots (cosim.plots; by default in a manipulator run only, `[record] plot` says
+otherwise); and run.json, the checked configuration in the general form. The built-in FMUs are
+built into the fmu/ cache and loaded from a temporary copy.
 
-Before anything runs, the output folder must take a file and the recording must fit into the
-available memory, so that neither shows only after the simulation.
+The record, the metrics and the plots are fed chunk by chunk while the run runs (RunSink), so
+the memory a run takes does not grow with its length (its sampled sources aside). A run that an
+FMU's failure stops (an isolated FMU's crash or hang among them) keeps the record up to its last
+recorded point and writes run.json, then raises CosimError naming the FMU, the call, the time
+and the folder. Before anything runs, the output folder must take a file and what is held in
+memory must fit, so that neither shows only after the simulation.
 """
 
 from __future__ import annotations
@@ -17,23 +23,26 @@ from __future__ import annotations
 import dataclasses
 import errno
 import json
+import queue
 import tempfile
-from collections.abc import Sequence
+import threading
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from flexff.controllers.training_range import MARGIN, training_range_excess
+import numpy as np
+
 from flexff.cosim.config import expanded, load_config
-from flexff.cosim.master import Master
+from flexff.cosim.master import CosimError, Master, Streamed
 from flexff.cosim.memory import MemoryNeeded, check_memory
-from flexff.cosim.metrics import run_metrics
-from flexff.cosim.plots import PLOT_SIGNALS, plot_tet, write_plots
+from flexff.cosim.metrics import Tracking, summary_metrics
+from flexff.cosim.plots import PLOT_SIGNALS, RunPlots, plot_tet
 from flexff.cosim.realtime import realtime_process
-from flexff.cosim.recording import Recording, atomic_write, save_recording
+from flexff.cosim.recording import Recording, RecordWriter, atomic_write, signal_name
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ConfigError, RunConfig
-from flexff.cosim.timing import OverrunError, Pacing
+from flexff.cosim.timing import OverrunError, Pacing, StepTiming
 from flexff.plant.signals import (
     CURRENTS,
     ENCODERS,
@@ -89,38 +98,80 @@ def check_recording_memory(config: RunConfig, signals: int) -> None:
                           f"run.stop or enlarge run.step") from None
 
 
+def _check_source_memory(config: RunConfig) -> None:
+    """A streamed run holds its sampled reference whole: refuse one that does not fit."""
+    if config.reference is None:
+        return
+    signals = len(Reference.SIGNALS)
+    try:
+        check_memory((config.steps + 1) * signals, f"sampling the reference's {signals} "
+                                                   f"signals at {config.steps + 1} points")
+    except MemoryNeeded as error:
+        raise ConfigError(config.origin, "run.stop, run.step",
+                          f"{error}: shorten run.stop or enlarge run.step") from None
+
+
 def _least_signals(config: RunConfig) -> int:
     """The columns any run of `config` holds: time, the reference, the recorded signals."""
     return (1 + len(Reference.SIGNALS) * (config.reference is not None)
             + len(config.record.signals or ()))
 
 
+def _wanted(scenario: Scenario, master: Master) -> list[str]:
+    """The signals a run records: its [record] signals (all by default) plus those the
+    metrics and plots need."""
+    wanted = scenario.config.record.signals
+    if wanted is None:
+        return [*master.signals, *master.typed_signals]
+    for name in wanted:
+        try:
+            master.resolve(name)
+        except ValueError as error:
+            raise ConfigError(scenario.config.origin, "record.signals", str(error)) from None
+    return [*wanted, *(n for n in PLOT_SIGNALS if n not in wanted and _known(master, n))]
+
+
 def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | None = None,
              cpu: int | None = None) -> Recording:
-    """Run a resolved scenario; the recording holds its [record] signals (all by default)
-    plus those the metrics and plots need. With `pacing` the steps follow the wall clock, in a
+    """Run a resolved scenario, its record held in memory (all of it: run_config streams it
+    into a folder instead); the recording holds its [record] signals (all by default) plus
+    those the metrics and plots need. With `pacing` the steps follow the wall clock, in a
     process set up for real time (cosim.realtime: pinned to `cpu`, SCHED_FIFO, locked memory
     where permitted); the recording's timing then carries that setup's report."""
-    wanted: Sequence[str] | None = scenario.config.record.signals
     with scenario.master() as master:
-        if wanted is not None:
-            for name in wanted:
-                try:
-                    master.resolve(name)
-                except ValueError as error:
-                    raise ConfigError(scenario.config.origin, "record.signals",
-                                      str(error)) from None
-            extra = [n for n in PLOT_SIGNALS if n not in wanted and _known(master, n)]
-            wanted = list(wanted) + extra
-        recorded = len(master.signals) + len(master.typed_signals) if wanted is None else \
-            len(wanted)
-        check_recording_memory(scenario.config, 1 + len(master.sources) + recorded)
+        wanted = _wanted(scenario, master)
+        check_recording_memory(scenario.config, 1 + len(master.sources) + len(wanted))
         if pacing is None:
             return master.run(scenario.sources, scenario.steps, wanted, progress)
         with realtime_process(cpu) as process:
             recording = master.run(scenario.sources, scenario.steps, wanted, progress, pacing)
         return dataclasses.replace(recording, timing=dataclasses.replace(
             recording.timing, process=process))
+
+
+class RunSink:
+    """Where run_config's run hands its record, chunk by chunk: the record's file
+    (RecordWriter) under the names `kept` gives (file name -> recorded name), every `every`-th
+    point (k = 0, every, 2 every, ...), the tracking
+    metrics where the run has a reference and a true position, and the plots if `plot`."""
+
+    def __init__(self, folder: Path, recorded: Sequence[str], kept: dict[str, str],
+                 points: int, step: float, plot: bool, every: int = 1) -> None:
+        self.writer, self.kept, self.every = RecordWriter(folder), kept, every
+        self.tracking = Tracking(recorded, step) if Tracking.tracks(recorded) else None
+        self.plots = RunPlots(recorded, points, step) if plot else None
+        self.last_time: float | None = None  # of the last point handed over
+
+    def write(self, k0: int, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
+        if time.size:
+            self.last_time = float(time[-1])
+        kept = slice((-k0) % self.every, None, self.every)
+        self.writer.write(time[kept], {name: columns[source][kept]
+                                       for name, source in self.kept.items()})
+        if self.tracking is not None:
+            self.tracking.add(columns)
+        if self.plots is not None:
+            self.plots.add(k0, columns)
 
 
 def _known(master: Master, name: str) -> bool:
@@ -142,6 +193,8 @@ def feedforward_range(scenario: Scenario) -> dict[str, Any] | None:
     """Where the reference of a learned-feedforward run leaves the model's training range
     (controllers.training_range): {"margin", "outside": [features, farthest first]}, or None
     for a model exported without its range."""
+    from flexff.controllers.training_range import MARGIN, training_range_excess  # onnx, SciPy
+
     learned = scenario.config.learned_feedforward
     if learned is None:
         raise ValueError("the run has no learned feedforward")
@@ -168,43 +221,118 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
     atomic_write(path, lambda tmp: tmp.write_text(text))
 
 
-def _kept(recording: Recording, config: RunConfig) -> Recording:
-    """The recorded signals the configuration asked for, and in a manipulator run (one with a
-    reference or one of flexff's built-in FMUs) the manipulator's short names beside their
-    full ones."""
+class BackgroundSink:
+    """Hands each chunk to a thread that feeds `sink`, so that a paced run's loop never waits
+    for the file: the engine releases the GIL while it steps, and the thread writes then.
+    `finish` waits for what is queued (and raises what the thread met)."""
+
+    def __init__(self, sink: RunSink) -> None:
+        self.sink = sink
+        self.error: Exception | None = None
+        self.queue: queue.SimpleQueue[tuple[int, np.ndarray, Mapping[str, np.ndarray]] | None] \
+            = queue.SimpleQueue()
+        self.thread = threading.Thread(target=self._work, name="flexff-record", daemon=True)
+        self.thread.start()
+
+    def write(self, k0: int, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
+        self.queue.put((k0, time, columns))
+
+    def _work(self) -> None:
+        while (chunk := self.queue.get()) is not None:
+            if self.error is None:
+                try:
+                    self.sink.write(*chunk)
+                except Exception as error:  # raised in the run's thread by finish()
+                    self.error = error
+
+    def finish(self) -> None:
+        self.queue.put(None)
+        self.thread.join()
+        if self.error is not None:
+            raise self.error
+
+
+def _kept(recorded: Sequence[str], config: RunConfig) -> dict[str, str]:
+    """The record's columns, file name -> recorded name: the signals the configuration asked
+    for, and in a manipulator run (one with a reference or one of flexff's built-in FMUs) the
+    manipulator's short names beside their full ones."""
     names = config.record.signals
-    signals = dict(recording.signals) if names is None else {n: recording[n] for n in names}
-    manipulator = config.reference is not None or any(f.builtin for f in config.fmus)
-    for short in MANIPULATOR_SIGNALS if manipulator else ():
-        if short not in signals and short in recording and (names is None or any(
+    kept = {n: n for n in (recorded if names is None else names)}
+    for short in MANIPULATOR_SIGNALS if _manipulator(config) else ():
+        if short in kept or (names is not None and not any(
                 n.partition(".")[2] == short for n in names)):
-            signals[short] = recording[short]
-    return Recording(recording.time, signals)
+            continue
+        try:
+            kept[short] = signal_name(recorded, short)
+        except KeyError:
+            pass
+    return kept
+
+
+def _manipulator(config: RunConfig) -> bool:
+    return config.reference is not None or any(f.builtin for f in config.fmus)
 
 
 def run_config(config: RunConfig | str | Path, output_dir: str | Path,
                progress: bool | None = None, pacing: Pacing | None = None,
                cpu: int | None = None) -> dict[str, Any]:
-    """Run one configuration (or the TOML / SSP file at that path) into `output_dir`; return
-    the metrics written to metrics.json. A paced run (`pacing`) also writes tet.png, and one
-    that its overruns stopped raises OverrunError after writing what it recorded."""
+    """Run one configuration (or the TOML / SSP file at that path) into `output_dir`, its
+    record written while it runs; return the metrics written to metrics.json. A paced run
+    (`pacing`) also writes tet.png, and one that its overruns stopped raises OverrunError
+    after writing what it recorded. A run that fails or is interrupted leaves the record up
+    to its last chunk (cosim.recording's signals.parts/)."""
     if not isinstance(config, RunConfig):
         config = load_run_config(config)
-    check_recording_memory(config, _least_signals(config))
+    _check_source_memory(config)
     out = output_folder(output_dir)
+    plot = _manipulator(config) if config.record.plot is None else config.record.plot
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
         scenario = resolve(config, folder)
-        recording = simulate(scenario, progress, pacing, cpu)
-        metrics = run_metrics(recording)
+        with scenario.master() as master:
+            recorded = _wanted(scenario, master)
+            sink = RunSink(out, recorded, _kept(recorded, config), config.steps + 1,
+                           config.step, plot, config.record.every)
+            try:
+                streamed = _stream(master, scenario, sink, recorded, progress, pacing, cpu)
+            except CosimError as error:
+                if sink.last_time is None:
+                    raise
+                sink.writer.close(csv=config.record.csv)
+                _write_json(out / "run.json", expanded(config))
+                raise CosimError(f"{error}; the record up to t = {sink.last_time:.9g} s is in "
+                                 f"{out}") from None
+        duration = (streamed.points - 1) * config.step
+        metrics = summary_metrics(sink.tracking.metrics() if sink.tracking else {}, duration,
+                                  streamed.wall_s, streamed.timing)
         if config.learned_feedforward is not None:
             metrics["feedforward_range"] = feedforward_range(scenario)
-    save_recording(_kept(recording, config), out, csv=config.record.csv)
-    write_plots(recording, out)
-    if pacing is not None:
-        plot_tet(recording.timing, out / "tet.png")
+    sink.writer.close(csv=config.record.csv)
+    if sink.plots is not None:
+        sink.plots.write(out)
+    if isinstance(streamed.timing, StepTiming) and pacing is not None:
+        plot_tet(streamed.timing, out / "tet.png")
     _write_json(out / "run.json", expanded(config))
     _write_json(out / "metrics.json", metrics)
-    if recording.timing.stopped_at is not None:
-        raise OverrunError(f"{recording.timing.stop_message()}; the record up to there is in "
+    if streamed.timing.stopped_at is not None:
+        raise OverrunError(f"{streamed.timing.stop_message()}; the record up to there is in "
                            f"{out}")
     return metrics
+
+
+def _stream(master: Master, scenario: Scenario, sink: RunSink, recorded: Sequence[str],
+            progress: bool | None, pacing: Pacing | None, cpu: int | None) -> Streamed:
+    """master.stream, paced in a process set up for real time where `pacing` is given (the
+    record then written by a thread of its own, BackgroundSink)."""
+    if pacing is None:
+        return master.stream(scenario.sources, scenario.steps, sink, recorded, progress,
+                             keep_timing=False)
+    background = BackgroundSink(sink)
+    try:
+        with realtime_process(cpu) as process:
+            streamed = master.stream(scenario.sources, scenario.steps, background, recorded,
+                                     progress, pacing)
+    finally:
+        background.finish()
+    timing = streamed.timing
+    assert isinstance(timing, StepTiming)  # a paced run keeps every step's timing
+    return dataclasses.replace(streamed, timing=dataclasses.replace(timing, process=process))

@@ -13,24 +13,21 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from flexff.controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
-from flexff.controllers.feedforward import rigid_body_feedforward_system
-from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.references import Reference, build_reference
-from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
+from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig, point_time
 from flexff.cosim.wiring import Link, Port, WiringError, wire
-from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, read_fmu
-from flexff.fmu.system import System
-from flexff.plant.system import plant_system
+
+if TYPE_CHECKING:
+    from flexff.fmu.system import System
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,7 +50,7 @@ class Scenario:
     def master(self) -> Master:
         """The FMUs loaded and wired, ready to run (a context manager)."""
         return Master(self.fmus, list(self.sources), self.step, self.links,
-                      self.config.algorithm)
+                      self.config.algorithm, self.config.start, self.config.step_timeout)
 
     def reference(self) -> dict[str, np.ndarray]:
         """The sampled reference signals (empty without a [reference])."""
@@ -73,7 +70,9 @@ def resolve(config: RunConfig, folder: str | Path) -> Scenario:
             info = read_fmu(path)
         except FmuError as error:
             raise ConfigError(config.origin, f"fmu.{f.name}", str(error)) from None
-        fmus.append(ResolvedFmu(f.name, path, _start_values(f), info))
+        tolerance = f.tolerance if f.tolerance is not None else info.default_tolerance
+        fmus.append(ResolvedFmu(f.name, path, _start_values(f), info, tolerance, f.isolate,
+                                f.solver))
         ports.append(Port(f.name, info, f.unconnected,
                           frozenset(n for n in f.parameters if n in info.inputs)))
     try:
@@ -98,7 +97,8 @@ def source_signals(config: RunConfig) -> dict[str, np.ndarray | float]:
 
 
 def reference_signals(config: RunConfig) -> dict[str, np.ndarray]:
-    """The run's reference signals at points 0 .. steps (none without a [reference])."""
+    """The run's reference signals at points 0 .. steps (none without a [reference]): the
+    reference plays from the run's start."""
     if config.reference is None:
         return {}
     return reference_samples(build_reference(config.reference.kind, config.reference.options,
@@ -119,8 +119,8 @@ def reference_samples(reference: Reference, steps: int) -> dict[str, np.ndarray]
 
 
 def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, np.ndarray]:
-    """The columns of a CSV source (cosim.csv_text's time table), linearly interpolated onto
-    the run's points and held after the table's end."""
+    """The columns of a CSV source (cosim.csv_text's time table, in the run's time), linearly
+    interpolated onto the run's points and held after the table's end."""
     if source.path is None:
         raise ConfigError(config.origin, key, "a CSV source needs a path")
     try:
@@ -135,7 +135,7 @@ def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, 
             raise ConfigError(config.origin, key, (
                 f"{source.path}: column {name!r}: a source signal's name is plain (no dot); "
                 f"connect it with a [[connection]]"))
-    grid = np.arange(config.steps + 1) * config.step
+    grid = point_time(config.start, config.step, np.arange(config.steps + 1))
     return {name: np.interp(grid, table.time, table.columns[name]) for name in names}
 
 
@@ -151,28 +151,38 @@ def _fmu_file(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any], folde
     """The FMU file of `f`: its path, or the built-in built through the cache."""
     if f.path is not None:
         return f.path
+    from flexff.fmu.build import build_fmu  # the builder and CasADi: built-in FMUs only
+
     return build_fmu(_builtin_system(f, config, sources), folder / f"{f.name}.fmu")
 
 
 def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any]) -> System:
+    from flexff.controllers.feedforward import rigid_body_feedforward_system
+    from flexff.controllers.identified import read_identified
+    from flexff.controllers.learned_feedforward import learned_feedforward_system
+    from flexff.plant.system import plant_system
+
     o = f.options
     if f.builtin == "plant":
         return plant_system(o["variant"])
     if f.builtin == "controller":
         return controller_for(o, config.step)
     if f.builtin == "rigid-body-feedforward":
-        return rigid_body_feedforward_system(config.step)
+        identified = read_identified(o["identified"]) if "identified" in o else None
+        return rigid_body_feedforward_system(config.step, identified)
     reference = None
     if o["mode"] == "precomputed":
         reference = {n: sources[n] for n in Reference.SIGNALS if n in sources}
         if len(reference) != len(Reference.SIGNALS):
             raise ConfigError(config.origin, f"fmu.{f.name}.mode", "the precomputed mode needs "
                               "a [reference] to precompute the feedforward over")
-    return learned_feedforward_system(o["model"], config.step, reference)
+    return learned_feedforward_system(o["model"], config.step, reference, o["mode"] == "task")
 
 
 def controller_for(options: Mapping[str, Any], step: float) -> System:
     """The feedback controller of a built-in controller's options, sampled at `step`."""
+    from flexff.controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
+
     variant, crossover = options["variant"], options.get("crossover_hz")
     notch, encoders = options.get("notch"), options.get("encoders", 2)
     if notch is False and DEFAULTS[variant].notch:

@@ -3,9 +3,14 @@ file) into, before anything is built or run.
 
 General form (SI units):
 
-  [run]            step (s, default 0.001), stop (s; default: the reference's duration, else
-                   the first FMU's default experiment), algorithm = "gauss-seidel" (default) |
-                   "jacobi", order = [FMU names] (default: the order of the [fmu.*] tables)
+  [run]            step (s, default 0.001), start (s; default: the first FMU's default
+                   experiment, else 0), stop (s, the end time as in FMI: the run lasts
+                   stop - start; default: start plus the reference's duration, else the first
+                   FMU's default experiment), tolerance (relative, of each FMU's own solver;
+                   default: each FMU's default experiment), algorithm = "gauss-seidel"
+                   (default) | "jacobi", order = [FMU names] (default: the order of the
+                   [fmu.*] tables). Point k is at t = start + k * step; the reference plays
+                   from the run's start, CSV series are read at the run's times.
   [reference]      a reference trajectory, a source of x_ref .. ay_ref (cosim.references;
                    the kinds are listed in cosim.config)
   [[source]]       kind = "constant", values = {name = number, ...}: constant source signals
@@ -14,13 +19,23 @@ General form (SI units):
   [fmu.NAME]       path = "file.fmu" (any FMI 2.0 or 3.0 co-simulation FMU, relative to the
                    configuration) or builtin = "plant" | "controller" |
                    "rigid-body-feedforward" | "learned-feedforward" with the built-in's options
-                   (BUILTIN_OPTIONS); parameters = {variable = value} (start values of
-                   parameters or inputs, checked against the FMU's variables and types);
+                   (BUILTIN_OPTIONS: the rigid-body one's `identified` names a file of
+                   identified parameters, `flexff identify`); parameters = {variable =
+                   value} (start values of parameters or inputs, checked against the FMU's
+                   variables and types);
                    unconnected = "error" (default) | "start" (inputs left unconnected keep
-                   their start values)
+                   their start values); tolerance (relative: given to the FMU's
+                   fmi2SetupExperiment / fmi3EnterInitializationMode; default: [run]
+                   tolerance, else the FMU's default experiment, else none); isolate = true
+                   runs it in its own process (cosim.isolation): a crash or a hang ends the
+                   run with an error, and [run] step_timeout (s) bounds each of its calls;
+                   solver = "cvode" runs it as model exchange (fmu.model_exchange, with the
+                   FMU's tolerance as CVODE's relative one; the default for an FMU with no
+                   co-simulation interface)
   [[connection]]   from = "fmu.output" or a source signal, to = "fmu.input", optional gain and
                    offset (SSP's LinearTransformation: to = gain * from + offset)
-  [record]         signals = [names] (default: all), csv (bool, default true)
+  [record]         signals = [names] (default: all), csv (bool, default false),
+                   plot (bool, default: in a manipulator run), every (int, default 1)
 
 Inputs without a [[connection]] take, by name, the output of the same name of another FMU or
 the source signal of that name (cosim.wiring). The manipulator's short form ([plant],
@@ -42,16 +57,22 @@ UNCONNECTED = ("error", "start")
 BUILTIN_OPTIONS = {  # built-in FMU -> its options
     "plant": ("variant", "seed"),
     "controller": ("variant", "crossover_hz", "notch", "encoders", "current_feedforward"),
-    "rigid-body-feedforward": (),
+    "rigid-body-feedforward": ("identified",),
     "learned-feedforward": ("model", "mode"),
 }
 SOURCE_KINDS = ("constant", "csv")
 
 
-def whole_steps(stop: float, step: float) -> bool:
-    """Whether `stop` is a whole number of steps of `step` (within STEP_TOLERANCE): the one
-    rule for a run's length, in TOML and SSP alike."""
-    return abs(stop / step - round(stop / step)) <= STEP_TOLERANCE * max(1.0, stop / step)
+def whole_steps(length: float, step: float) -> bool:
+    """Whether a run's `length` (stop - start) is a whole number of steps of `step` (within
+    STEP_TOLERANCE): the one rule for a run's length, in TOML and SSP alike."""
+    return abs(length / step - round(length / step)) <= STEP_TOLERANCE * max(1.0, length / step)
+
+
+def point_time(start: float, step: float, k: Any) -> Any:
+    """The time of communication point(s) k [s]: start + k * step, the one rule for every
+    point (master, engine, recording, sources, libcosim)."""
+    return start + k * step
 
 
 class ConfigError(InputError):
@@ -89,6 +110,9 @@ class FmuConfig:
     options: Mapping[str, Any] = field(default_factory=dict)
     parameters: Mapping[str, Any] = field(default_factory=dict)
     unconnected: str = "error"
+    tolerance: float | None = None  # None: the FMU's default experiment's, if any
+    isolate: bool = False  # run it in its own process (cosim.isolation)
+    solver: str | None = None  # model exchange with this solver (None: co-simulation)
 
 
 @dataclass(frozen=True)
@@ -105,7 +129,9 @@ class ConnectionConfig:
 @dataclass(frozen=True)
 class RecordConfig:
     signals: tuple[str, ...] | None = None  # None: every signal
-    csv: bool = True
+    csv: bool = False
+    plot: bool | None = None  # None: in a manipulator run (cosim.run)
+    every: int = 1  # keep every N-th point in the record (metrics and plots see them all)
 
 
 @dataclass(frozen=True)
@@ -116,7 +142,7 @@ class RunConfig:
 
     name: str
     step: float
-    stop: float
+    stop: float  # the end time [s]
     fmus: tuple[FmuConfig, ...]  # in stepping order
     reference: ReferenceConfig | None = None
     sources: tuple[SourceConfig, ...] = ()
@@ -124,11 +150,14 @@ class RunConfig:
     algorithm: str = "gauss-seidel"
     record: RecordConfig = RecordConfig()
     origin: str = "<config>"  # where it was read from, for errors
+    start: float = 0.0  # the start time [s]
+    tolerance: float | None = None  # [run] tolerance as given (None: each FMU's own)
+    step_timeout: float | None = None  # [s] per call of an isolated FMU (None: none)
     checked: bool = field(default=False, init=False, compare=False, repr=False)
 
     @property
     def steps(self) -> int:
-        return round(self.stop / self.step)
+        return round((self.stop - self.start) / self.step)
 
     def builtin(self, kind: str) -> FmuConfig | None:
         """The first FMU that is the built-in `kind`, or None."""

@@ -76,6 +76,7 @@ from flexff.cosim.schema import (
     whole_steps,
 )
 from flexff.cosim.wiring import SOURCE, Link, carried
+from flexff.fmu.archive import extract_archive
 from flexff.fmu.cache import cache_dir, file_sha256
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
@@ -169,7 +170,7 @@ def _ssd(scenario: Scenario) -> etree._Element:
                      offset=repr(float(k.offset)))
     if enumerations:
         _sub(root, "ssd:Enumerations").extend(enumerations.values())
-    experiment = _sub(root, "ssd:DefaultExperiment", startTime="0.0",
+    experiment = _sub(root, "ssd:DefaultExperiment", startTime=repr(float(config.start)),
                       stopTime=repr(float(config.stop)))
     annotations = _sub(experiment, "ssd:Annotations")
     osp = _sub(_sub(annotations, "ssc:Annotation", type=OSP), "osp:Algorithm")
@@ -181,7 +182,7 @@ def _ssd(scenario: Scenario) -> etree._Element:
 
 
 def _at_start(link: Link, scenario: Scenario) -> Any:
-    """The value a source's link gives its input at t = 0 (cosim.wiring.carried)."""
+    """The value a source's link gives its input at point 0 (cosim.wiring.carried)."""
     try:
         return carried(link, np.ravel(scenario.sources[link.signal])[0])
     except OverflowError as error:
@@ -304,8 +305,8 @@ def load_ssp(path: str | Path) -> RunConfig:
                               parameters=_bindings(element, info, folder, key, error)))
     if not fmus:
         raise error("ssd:System/ssd:Elements", "the system has no FMU component")
-    step, stop, algorithm = _experiment(root, fmus, error)
-    plain = RunConfig(name=path.stem, step=step, stop=stop, fmus=tuple(fmus),
+    step, start, stop, algorithm = _experiment(root, fmus, error)
+    plain = RunConfig(name=path.stem, step=step, stop=stop, start=start, fmus=tuple(fmus),
                       connections=_connections(system, {f.name for f in fmus}, error),
                       algorithm=algorithm, origin=origin)
     return _annotated(root, folder, plain) or checked(plain)
@@ -363,8 +364,7 @@ def _extracted(path: Path) -> Path:
         folder.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=".tmp-"))
         try:
-            with zipfile.ZipFile(path) as archive:
-                archive.extractall(tmp)  # member names are sanitized (no "..", no root)
+            extract_archive(path, tmp)  # within the bound, member names checked
             os.replace(tmp, folder)
         except OSError:  # another process extracted it first
             if not folder.is_dir():
@@ -416,8 +416,9 @@ def _bindings(element: etree._Element, info: FmuInfo, folder: Path, key: str, er
 
 
 def _experiment(root: etree._Element, fmus: list[FmuConfig], error: Fail
-                ) -> tuple[float, float, str]:
-    """Step, stop and algorithm: our annotation, else libcosim's, else the defaults."""
+                ) -> tuple[float, float, float, str]:
+    """Step, start, stop and algorithm: our annotation, else libcosim's, else the defaults
+    (the times: the first FMU's default experiment, a start time of 0 without one)."""
     key = "ssd:DefaultExperiment"
     experiment = root.find(key, NS)
     attrib = dict(experiment.attrib) if experiment is not None else {}
@@ -427,23 +428,26 @@ def _experiment(root: etree._Element, fmus: list[FmuConfig], error: Fail
     step = (ours.get("step") if ours is not None else
             osp.get("baseStepSize") if osp is not None else DEFAULT_STEP)
     algorithm = ours.get("algorithm", "jacobi") if ours is not None else "jacobi"
-    first = fmus[0].path
-    stop = attrib.get("stopTime") or (read_fmu(first).default_stop if first is not None else None)
+    first = read_fmu(fmus[0].path) if fmus[0].path is not None else None
+    stop = attrib.get("stopTime") or (first.default_stop if first is not None else None)
+    start = attrib.get("startTime") or (first.default_start if first is not None else None)
     try:
-        step, stop = _float(step), _float(stop)
+        step, start, stop = _float(step), _float(start or 0.0), _float(stop)
     except (TypeError, ValueError):
         raise error(key, f"no stop time (stopTime, or the first FMU's default experiment), "
-                         f"or a step that is not a number ({step!r})") from None
-    if float(attrib.get("startTime", 0.0)) != 0.0:
-        raise error(f"{key}/@startTime", "flexff runs from t = 0")
-    if not (math.isfinite(step) and step > 0 and math.isfinite(stop) and stop > 0):
-        raise error(key, f"step {step!r} and stop time {stop!r} must be positive and finite")
-    if not whole_steps(stop, step):
-        raise error(key, f"the stop time {stop!r} s is not a whole number of steps of {step!r} s")
+                         f"or a step or start time that is not a number ({step!r}, "
+                         f"{start!r})") from None
+    if not (math.isfinite(step) and step > 0 and math.isfinite(start) and math.isfinite(stop)
+            and stop > start):
+        raise error(key, f"step {step!r} must be positive, start {start!r} and stop time "
+                         f"{stop!r} finite, the stop after the start")
+    if not whole_steps(stop - start, step):
+        raise error(key, f"the run's length {stop - start!r} s (stopTime - startTime) is not a "
+                         f"whole number of steps of {step!r} s")
     if algorithm not in ALGORITHMS:
         raise error(f"{key}/ssd:Annotations", f"unknown algorithm {algorithm!r} "
                                               f"(known: {', '.join(ALGORITHMS)})")
-    return step, stop, algorithm
+    return step, start, stop, algorithm
 
 
 def _float(value: str | float | None) -> float:

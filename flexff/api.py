@@ -8,7 +8,7 @@ command line (`flexff run`), as functions.
     metrics = api.run(config, "out")             # into a folder, as `flexff run ... -o out`
     configs = api.sweep("run.toml", {"fmu.vdp.parameters.mu": [0.5, 1.5]})
     results = api.run_many(configs, "sweep")     # in parallel, one subfolder each
-    result = api.read("out")                     # recording, metrics and configuration
+    result = api.read("out")                     # flexff.results.load: recording, metrics, run.json
 
 A configuration is a frozen cosim.schema.RunConfig; change one through `api.sweep` (or
 dataclasses.replace and `api.check`), so that every change passes the checks a file passes.
@@ -16,38 +16,16 @@ dataclasses.replace and `api.check`), so that every change passes the checks a f
 
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
-
 from flexff.cosim.batch import BatchResult, sweep
 from flexff.cosim.batch import run_batch as run_many
 from flexff.cosim.config import checked as check
-from flexff.cosim.recording import Recording, load_recording
+from flexff.cosim.recording import Recording
 from flexff.cosim.run import load_run_config as load
 from flexff.cosim.run import run_config as run
 from flexff.cosim.run import simulate_config as simulate
 from flexff.cosim.schema import RunConfig
+from flexff.results import RunResult
+from flexff.results import load as read
 
 __all__ = ["BatchResult", "Recording", "RunConfig", "RunResult", "check", "load", "read",
            "run", "run_many", "simulate", "sweep"]
-
-
-@dataclass(frozen=True)
-class RunResult:
-    """What `flexff run` wrote into a folder: the recording, metrics.json and run.json (the
-    checked configuration in the general form)."""
-
-    folder: Path
-    recording: Recording
-    metrics: dict[str, Any]
-    configuration: dict[str, Any]
-
-
-def read(folder: str | Path) -> RunResult:
-    """The results of a run in `folder` (written by `flexff run` or `api.run`)."""
-    folder = Path(folder)
-    return RunResult(folder, load_recording(folder),
-                     json.loads((folder / "metrics.json").read_text()),
-                     json.loads((folder / "run.json").read_text()))

@@ -15,6 +15,8 @@ from flexff.cosim.engine import idle_timing
 from flexff.cosim.floor import run_c_loop
 from flexff.cosim.libcosim import run_libcosim, time_libcosim_engine
 from flexff.cosim.master import Master, ResolvedFmu
+from flexff.cosim.metrics import tracking_metrics
+from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import Recording
 from flexff.cosim.run import simulate
 from flexff.cosim.scenario import Scenario, resolve
@@ -122,35 +124,78 @@ def learned_feedforward_benchmark(folder: Path, models: dict[str, Path],
     return results
 
 
+def _hardware_loop(folder: Path, model: Path, mode: str, seconds: float | None) -> Scenario:
+    """The closed loop of the hardware evaluation with the learned feedforward `model` in
+    `mode`, for its 100 s or its first `seconds`."""
+    config = parse_config({
+        "run": {"stop": seconds} if seconds else {},
+        "reference": {"kind": "thesis-hardware-eval"},
+        "plant": {"variant": "hardware", "seed": 1},
+        "feedforward": {"kind": "learned", "model": str(model), "mode": mode}},
+        name=f"realtime-{model.stem}-{mode}")
+    return resolve(config, folder)
+
+
+def _e2(recording: Recording) -> dict[str, float]:
+    """The thesis's average 2-norm of the tracking error per axis [m/sqrt(s)]."""
+    return {axis: m["e2"] for axis, m in tracking_metrics(recording).items()}
+
+
 def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | None = None,
                        kinds: tuple[str, ...] = REALTIME_MODELS) -> dict[str, Any]:
     """The closed loop of the hardware evaluation (hardware plant, PID with notch, thesis
-    hardware reference: 100 s, or its first `seconds`) with the TCN and the LSTM feedforward
-    in step mode, paced at 1 kHz: TET p50 / p99 / max, each FMU's share, overruns; and, as
-    their floors, the same paced loop with no FMU for as long (`idle`: the lateness and
-    overruns the machine alone causes) and with a one-node graph FMU (`one_node_graph`)."""
+    hardware reference: 100 s, or its first `seconds`) with the TCN and the LSTM feedforward,
+    its network in its own task (mode "task"), paced at 1 kHz: per task (the 1 kHz base task,
+    the network's), TET p50 / p99 / max and overruns, each FMU's share; the tracking (e2)
+    against the single-rate feedforward (mode "step", the network inside the 1 kHz step, run
+    unpaced: the same run as paced, bit for bit, and its TET for comparison). As floors, the
+    same paced loop with no FMU for as long (`idle`: the lateness and overruns the machine
+    alone causes), a one-node graph FMU (`one_node_graph`) and a network made deliberately
+    slower than the period in its own task at 25 Hz (`slow_network`), each run as --realtime
+    runs (cosim.realtime: SCHED_FIFO and locked memory where permitted)."""
     results: dict[str, Any] = {"reference": "thesis-hardware-eval"}
     paced_s = 0.0
     for kind in kinds:
-        config = parse_config({
-            "run": {"stop": seconds} if seconds else {},
-            "reference": {"kind": "thesis-hardware-eval"},
-            "plant": {"variant": "hardware", "seed": 1},
-            "feedforward": {"kind": "learned", "model": str(models[kind]), "mode": "step"}},
-            name=f"realtime-{kind}")
-        scenario = resolve(config, folder)
-        recording = simulate(scenario, progress=False, pacing=Pacing(rt_factor=1.0))
+        recording = simulate(_hardware_loop(folder, models[kind], "task", seconds),
+                             progress=False, pacing=Pacing(rt_factor=1.0))
         table = recording.timing.table(recording.wall_s)
-        results[kind] = {key: table[key] for key in (
-            "period_us", "achieved_real_time_factor", "tet_us", "tet_us_per_fmu",
-            "tet_over_period_p99", "lateness_us", "overruns", "network_call_us", "process")}
+        single = simulate(_hardware_loop(folder, models[kind], "step", seconds), progress=False)
+        e2_task, e2_step = _e2(recording), _e2(single)
+        results[kind] = {
+            **{key: table[key] for key in (
+                "period_us", "achieved_real_time_factor", "tasks", "tet_us_per_fmu",
+                "tet_over_period_p99", "lateness_us", "overruns", "rate_transition_overruns",
+                "network_call_us", "process")},
+            "single_rate_unpaced_tet_us": single.timing.table(single.wall_s)["tet_us"],
+            "tracking_e2": {"task": e2_task, "single_rate": e2_step,
+                            "task_over_single_rate": {a: e2_task[a] / e2_step[a]
+                                                      for a in e2_task}}}
         paced_s = recording.timing.tet.size * recording.timing.period
-    idle = idle_timing(paced_s)
+    with realtime_process():  # every paced loop here runs as --realtime runs it
+        idle = idle_timing(paced_s)
     table = idle.table(idle.tet.size * idle.period)
     results["idle"] = {key: table[key] for key in ("period_us", "steps", "tet_us", "lateness_us",
                                                    "overruns")}
     results["one_node_graph"] = one_node_graph_benchmark(folder, paced_s)
+    results["slow_network"] = slow_network_benchmark(folder, paced_s)
     return results
+
+
+def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
+                           step: float = 1e-3) -> dict[str, Any]:
+    """A network slower than the period (slow_graph, about 3 ms a call) in its own task every
+    `every` steps of `step` seconds (25 Hz at 1 kHz), paced alone for `seconds`: the base
+    task's TET and overruns (which the network must not cause) and the network task's."""
+    fmu = build_fmu(onnx_system(slow_graph(folder / "slow.onnx"), step, every, task=True),
+                    folder / "slow.fmu")
+    steps = max(1, round(seconds / step))
+    inputs = {"inputs[0]": 1.0, "inputs[1]": 2.0}
+    with Master([ResolvedFmu("slow", fmu)], list(inputs), step) as master, realtime_process():
+        recording = master.run(inputs, steps, pacing=Pacing(rt_factor=1.0))
+    table = recording.timing.table(recording.wall_s)
+    return {"every_steps": every, "tasks": table["tasks"], "lateness_us": table["lateness_us"],
+            "overruns": table["overruns"],
+            "rate_transition_overruns": table["rate_transition_overruns"]}
 
 
 def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
@@ -169,11 +214,39 @@ def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
     fmu = build_fmu(onnx_system(folder / "one_node.onnx", step, every), folder / "one_node.fmu")
     steps = max(1, round(seconds / step))
     inputs = {"u[0]": 1.0, "u[1]": 2.0}
-    with Master([ResolvedFmu("graph", fmu)], list(inputs), step) as master:
+    with Master([ResolvedFmu("graph", fmu)], list(inputs), step) as master, realtime_process():
         recording = master.run(inputs, steps, pacing=Pacing(rt_factor=1.0))
     table = recording.timing.table(recording.wall_s)
     return {"every_steps": every, "tet_us": table["tet_us"],
             "network_call_us": table["network_call_us"]["graph"]}
+
+
+def slow_graph(path: Path, size: int = 256, layers: int = 6) -> Path:
+    """A graph made deliberately slow (a network longer than the 1 kHz period): forces = inputs
+    (2 columns, exactly, whatever the weights), after `layers` products of a `size` x `size`
+    matrix scaled by the inputs' sum, each through tanh (onnxruntime cannot fold them away).
+    At 256 and 6, a call takes about 3 ms on one core of the development machine."""
+    rng = np.random.default_rng(0)
+    weights = onnx.helper.make_tensor("w", onnx.TensorProto.DOUBLE, [size, size],
+                                      (rng.standard_normal((size, size)) / size).ravel())
+    make = onnx.helper.make_node
+    nodes = [make("Constant", [], ["weights"], value=weights),
+             make("ReduceSum", ["inputs"], ["scale"], keepdims=1),
+             make("Mul", ["weights", "scale"], ["a0"])]
+    for i in range(layers):
+        nodes += [make("MatMul", [f"a{i}", "weights"], [f"m{i}"]),
+                  make("Tanh", [f"m{i}"], [f"a{i + 1}"])]
+    nodes += [make("ReduceSum", [f"a{layers}"], ["total"], keepdims=1),
+              make("IsNaN", ["total"], ["nan"]),  # 0 for any finite input: forces = inputs
+              make("Cast", ["nan"], ["zero"], to=onnx.TensorProto.DOUBLE),
+              make("Add", ["inputs", "zero"], ["forces"])]
+    graph = onnx.helper.make_graph(
+        nodes, "slow",
+        [onnx.helper.make_tensor_value_info("inputs", onnx.TensorProto.DOUBLE, [1, 2])],
+        [onnx.helper.make_tensor_value_info("forces", onnx.TensorProto.DOUBLE, [1, 2])])
+    onnx.save(onnx.helper.make_model(graph, opset_imports=[onnx.helper.make_opsetid("", 17)],
+                                     ir_version=9), path)
+    return path
 
 
 def run_benchmarks(steps: int = 20000, repeats: int = 5,
@@ -183,7 +256,7 @@ def run_benchmarks(steps: int = 20000, repeats: int = 5,
     the closed loop through our master, libcosim and C, of the closed loop with each learned
     feedforward FMU (`models`: kind -> .onnx; default: untrained exports), and the paced
     hardware evaluation loop with the TCN and LSTM feedforward (`realtime_seconds` of its
-    100 s; default all) with its two floors."""
+    100 s; default all) with its floors."""
     for name, value in (("steps", steps), ("repeats", repeats)):
         if not isinstance(value, int) or value < 1:
             raise InputError(f"bench {name} must be a whole number of at least 1, got {value!r}")

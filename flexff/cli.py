@@ -18,24 +18,28 @@ import traceback
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-from flexff.cosim.timing import OverrunError, Pacing
 from flexff.fmu.errors import InputError, RunError
-from flexff.learning.dataset import SETS
-from flexff.plant.model import VARIANTS
+from flexff.plant.variants import VARIANTS
+
+if TYPE_CHECKING:  # the command line loads numpy and the rest only in the command that runs
+    from flexff.cosim.timing import Pacing
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to keep torch unloaded
 PRESETS = ("fast", "thesis")
+ITERATIONS, CUTOFF_HZ = 10, 20.0  # learning.ilc's defaults, named here to keep scipy unloaded
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
                 PermissionError)  # OSErrors about paths the user gave: exit code 2, as are
 INPUT_ERRNOS = (errno.EROFS, errno.ENAMETOOLONG, errno.ELOOP)  # these (others: 1)
 BUG_HINT = " (rerun with flexff --debug for the traceback)"  # an error that is not documented
 KEPT = {  # what an interrupted command keeps, by command (and subcommand)
-    "run": "the runs that finished keep their folders; no file is left half-written",
+    "run": "the runs that finished keep their folders, an interrupted run its record up to "
+           "its last chunk (signals.parts/); no file is left half-written",
     "data collect": "the trajectories collected so far are kept: run the same command again "
                     "to resume",
     "data import": "the dataset folder was left as it was",
+    "ilc": "the finished trials are kept: run the same command again to continue",
 }
 
 
@@ -65,6 +69,8 @@ def _output_file(path: str) -> None:
 def _fmu_build(args: argparse.Namespace) -> int:
     from flexff.fmu.build import build_fmu
 
+    if args.kind == "plant" and args.task:
+        raise InputError("--task runs an embedded network in its own task: the plant has none")
     if args.kind != "onnx" and (args.graph is not None or args.every is not None):
         raise InputError("only fmu build onnx takes a graph file and --every (a learned "
                          "feedforward takes --model M.onnx and runs at the model's rate)")
@@ -74,7 +80,8 @@ def _fmu_build(args: argparse.Namespace) -> int:
         if args.graph is None:
             raise InputError("fmu build onnx needs the graph: flexff fmu build onnx MODEL.onnx "
                              "-o M.fmu")
-        system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every)
+        system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every,
+                             args.task)
     elif args.kind in ("learned-feedforward", "feedforward"):
         from flexff.controllers.learned_feedforward import learned_feedforward_system
 
@@ -85,7 +92,7 @@ def _fmu_build(args: argparse.Namespace) -> int:
         if args.model is None:
             raise InputError("fmu build learned-feedforward needs --model M.onnx (flexff "
                              "export)")
-        system = learned_feedforward_system(args.model, args.step)
+        system = learned_feedforward_system(args.model, args.step, task=args.task)
     else:
         from flexff.plant.system import plant_system
 
@@ -96,24 +103,73 @@ def _fmu_build(args: argparse.Namespace) -> int:
 
 
 def _fmu_validate(args: argparse.Namespace) -> int:
-    """Exit 0 when every FMU passes, 1 when one has problems, 2 when a path is not a file."""
-    from flexff.fmu.validation import validate_fmu
+    """Exit 0 when no FMU has an error (warnings allowed), 1 when one has, 2 when a path is
+    missing or unreadable."""
+    from flexff.fmu.validation import TIMEOUT, validate_fmu
 
+    if args.timeout is None:
+        args.timeout = TIMEOUT
+    if not args.timeout > 0:
+        raise InputError(f"--timeout {args.timeout:g}: expected a positive number of seconds")
     status = 0
     for path in args.files:
-        if not Path(path).is_file():
-            print(f"flexff: error: {path}: no such file", file=sys.stderr)
+        unusable = ("no such file" if not Path(path).exists() else
+                    "not a file" if not Path(path).is_file() else
+                    "not readable" if not os.access(path, os.R_OK) else None)
+        if unusable is not None:
+            print(f"flexff: error: {path}: {unusable}", file=sys.stderr)
             status = 2
             continue
-        problems = validate_fmu(path)
-        print(f"{path}: {'OK' if not problems else f'{len(problems)} problem(s)'}")
+        problems = validate_fmu(path, strict=args.strict, timeout=args.timeout)
+        errors = sum(p.severity == "error" for p in problems)
+        counts = f"{errors} error(s), {len(problems) - errors} warning(s)"
+        print(f"{path}: {'OK' if not problems else counts}")
         for problem in problems:
-            print(f"  - {problem}")
-        status = max(status, int(bool(problems)))
+            print(f"  - {problem.severity}: {problem}")
+        if status != 2:
+            status = max(status, int(errors > 0))
+    return status
+
+
+def _fmu_compare(args: argparse.Namespace) -> int:
+    """Exit 0 when every FMU agrees, 1 when one differs or fails to run, 2 when a path is
+    missing or not a usable FMU (the others are still compared)."""
+    from flexff.cosim.compare import RTOL, compare_fmu
+
+    if args.rtol is None:
+        args.rtol = RTOL
+    if not args.rtol > 0:
+        raise InputError(f"--rtol {args.rtol:g}: expected a positive number")
+    status = 0
+    for path in args.files:
+        try:
+            comparison = compare_fmu(path)
+        except (InputError, RunError) as error:
+            print(f"flexff: error: {error}", file=sys.stderr, flush=True)
+            status = max(status, 2 if isinstance(error, InputError) else 1)
+            continue
+        print(comparison.report(args.rtol), flush=True)
+        if not comparison.agrees(args.rtol) and status == 0:
+            status = 1
     return status
 
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.output:
+        _output_file(args.output)
+    if args.processes:
+        from flexff.process_bench import process_benchmark
+
+        if not Path(args.processes).is_file():
+            raise InputError(f"{args.processes}: no such FMU file (bench --processes FILE.fmu)")
+        try:
+            steps = [int(n) for n in args.process_steps.split(",")]
+        except ValueError:
+            raise InputError(f"--process-steps takes whole numbers separated by commas, got "
+                             f"{args.process_steps!r}") from None
+        return _print_json(process_benchmark(Path(args.processes).resolve(), steps,
+                                             repeats=args.process_repeats,
+                                             ecos_python=args.ecos_python), args.output)
     from flexff.bench import run_benchmarks
 
     models = None
@@ -121,20 +177,25 @@ def _bench(args: argparse.Namespace) -> int:
         models = {p.stem: p for p in sorted(Path(args.models).glob("*.onnx"))}
         if not models:
             raise InputError(f"no .onnx files in {args.models}")
-    if args.output:
-        _output_file(args.output)
-    text = json.dumps(run_benchmarks(steps=args.steps, models=models,
-                                     realtime_seconds=args.realtime_seconds), indent=2)
+    return _print_json(run_benchmarks(steps=args.steps, models=models,
+                                      realtime_seconds=args.realtime_seconds), args.output)
+
+
+def _print_json(data: dict[str, Any], output: str | None) -> int:
+    """Print `data` as JSON, and write it to `output` too where given."""
+    text = json.dumps(data, indent=2)
     print(text)
-    if args.output:
-        with open(args.output, "w") as f:
+    if output:
+        with open(output, "w") as f:
             f.write(text + "\n")
     return 0
 
 
 def _run(args: argparse.Namespace) -> int:
     from flexff.cosim.batch import run_batch, sweep
-    from flexff.cosim.run import output_folder, run_config
+    from flexff.cosim.config import with_isolation
+    from flexff.cosim.run import load_run_config, output_folder, run_config
+    from flexff.cosim.schema import RunConfig
 
     output_folder(args.output)
     configs = args.configs
@@ -148,9 +209,12 @@ def _run(args: argparse.Namespace) -> int:
                 raise InputError(f"--sweep {key} is given twice: list its values once")
             axes[key] = values
         configs = sweep(configs[0], axes)
-    elif len(configs) == 1 and args.scheduler is None:
+    if args.isolate or args.step_timeout is not None:
+        configs = [with_isolation(c if isinstance(c, RunConfig) else load_run_config(c),
+                                  args.isolate, args.step_timeout) for c in configs]
+    if len(configs) == 1 and not args.sweep and args.scheduler is None:
         metrics = run_config(configs[0], args.output, pacing=_pacing(args), cpu=args.cpu)
-        _print_result(configs[0], metrics, args.output)
+        _print_result(args.configs[0], metrics, args.output)
         return 0
     if args.realtime:
         raise InputError("--realtime runs one configuration, in this process")
@@ -174,6 +238,8 @@ def _pacing(args: argparse.Namespace) -> Pacing | None:
         if given:
             raise InputError(f"{', '.join(given)} apply to paced runs: add --realtime")
         return None
+    from flexff.cosim.timing import Pacing
+
     return Pacing(rt_factor=1.0 if args.rt_factor is None else args.rt_factor,
                   max_overruns=args.max_overruns or 0, grace=args.grace or 0.0)
 
@@ -216,7 +282,7 @@ def _print_result(name: object, metrics: dict[str, Any], output: object) -> None
 
 
 def _config_example(args: argparse.Namespace) -> int:
-    from flexff.cosim.config import config_examples
+    from flexff.cosim.example_configs import config_examples
 
     examples = config_examples()
     if args.name is None:
@@ -225,6 +291,13 @@ def _config_example(args: argparse.Namespace) -> int:
     if args.name not in examples:
         raise InputError(f"no example {args.name!r}; examples: {', '.join(examples)}")
     print(examples[args.name], end="")
+    return 0
+
+
+def _results_export(args: argparse.Namespace) -> int:
+    from flexff.results import export_csv
+
+    print(f"wrote {export_csv(args.folder)}")
     return 0
 
 
@@ -317,6 +390,31 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _identify(args: argparse.Namespace) -> int:
+    from flexff.cosim.run import output_folder
+    from flexff.learning.evaluate import preprocessing
+    from flexff.learning.identify import identify, write_identification
+
+    output_folder(args.output)
+    identification = identify(args.data, preprocessing(args.env))
+    path = write_identification(identification, args.output)
+    rows = identification.rows()
+    width = max(len(row["base"]) for row in rows)
+    print(f"{'base parameter':<{width}} {'value':>12} {'std':>10}  unit")
+    for row in rows:
+        std = f"{row['std']:10.3g}" if row["estimated"] else f"{'(nominal)':>10}"
+        print(f"{row['base']:<{width}} {row['value']:12.5g} {std}  {row['unit']}")
+    print(f"motor friction tanh width w_stribeck: {identification.w_stribeck:g} rad/s; "
+          f"{identification.samples} samples")
+    for label, (x, y) in (("residual", identification.residual_rms),
+                          ("nominal model's error", identification.nominal_rms),
+                          ("forces", identification.label_rms)):
+        print(f"{label}: {x:.3g} / {y:.3g} N rms (x / y)")
+    print(f"wrote {path} (use it with [feedforward] kind = \"rigid-body\", identified = "
+          f"\"{path}\")")
+    return 0
+
+
 def _evaluate(args: argparse.Namespace) -> int:
     from flexff.cosim.run import load_run_config, output_folder
     from flexff.learning.evaluate import evaluate
@@ -327,7 +425,21 @@ def _evaluate(args: argparse.Namespace) -> int:
              scheduler=args.scheduler, currents=args.currents)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
-          f"forces.png, the .onnx models)")
+          f"forces.png, the .onnx models, ilc/ for the limit)")
+    return 0
+
+
+def _ilc(args: argparse.Namespace) -> int:
+    from flexff.cosim.run import load_run_config
+    from flexff.learning.ilc import RESULT, ilc
+
+    state = ilc(load_run_config(args.config), args.output, args.iterations, args.cutoff)
+    for trial in state["trials"]:
+        x, y = trial["x"], trial["y"]
+        print(f"trial {trial['trial']}: e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), PID "
+              f"alone / trial = ({x['e2_ratio']:.4g}, {y['e2_ratio']:.4g})")
+    print(f"best: trial {state['best']}; its feedforward force -> {args.output}/{RESULT} "
+          f"(ilc.json, e2.png beside it)")
     return 0
 
 
@@ -354,7 +466,7 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--json", action="store_true", help="print JSON instead of text")
     info.set_defaults(handler=_plant_info)
 
-    fmu = commands.add_parser("fmu", help="build and validate FMUs")
+    fmu = commands.add_parser("fmu", help="build, validate and compare FMUs")
     fmu_commands = fmu.add_subparsers(dest="fmu_command", required=True)
     build = fmu_commands.add_parser("build", help="build an FMU")
     build.add_argument("kind", choices=["plant", "learned-feedforward", "onnx", "feedforward"],
@@ -369,11 +481,30 @@ def build_parser() -> argparse.ArgumentParser:
     build.add_argument("--every", type=int,
                        help="onnx: communication steps between calls of the graph, its results "
                             "extrapolated linearly in between (default 1)")
+    build.add_argument("--task", action="store_true",
+                       help="learned-feedforward, onnx: run the network in its own task (a "
+                            "thread of the FMU), its result used one call period later, as "
+                            "Simulink Real-Time's multitasking does")
     build.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     build.set_defaults(handler=_fmu_build)
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")
     validate.add_argument("files", nargs="+", help=".fmu files")
+    validate.add_argument("--strict", action="store_true",
+                          help="a restored FMU state must reproduce the outputs bit for bit "
+                               "(default: within the FMU's tolerance, as a warning)")
+    validate.add_argument("--timeout", type=float,
+                          help="seconds the run of one FMU may take before it counts as hung "
+                               "(default: a minute, fmu.validation.TIMEOUT)")
     validate.set_defaults(handler=_fmu_validate)
+
+    compare = fmu_commands.add_parser(
+        "compare", help="run each FMU alone on its default experiment in flexff and in FMPy; "
+                        "the largest difference per output")
+    compare.add_argument("files", nargs="+", help=".fmu files")
+    compare.add_argument("--rtol", type=float,
+                         help="relative difference within which an output agrees (default: "
+                              "cosim.compare.RTOL, 1e-9)")
+    compare.set_defaults(handler=_fmu_compare)
 
     run = commands.add_parser("run", help="run co-simulations from TOML configurations or SSP "
                                           "files")
@@ -390,10 +521,17 @@ def build_parser() -> argparse.ArgumentParser:
                      help="pace the steps to the wall clock and report task execution times "
                           "(TET) and overruns, as Simulink Real-Time does (tet.png, "
                           "metrics.json 'realtime')")
+    run.add_argument("--isolate", action="store_true",
+                     help="run every FMU in its own process: a crash or a hang of an FMU ends "
+                          "the run with an error (exit code 1) and the record up to there")
+    run.add_argument("--step-timeout", type=float, metavar="S",
+                     help="stop a run whose isolated FMU takes longer than S seconds in one "
+                          "call ([run] step_timeout)")
     run.add_argument("--rt-factor", type=float, metavar="F",
                      help="real-time factor of a paced run: 2 runs twice as fast (default 1)")
     run.add_argument("--max-overruns", type=int, metavar="N",
-                     help="stop a paced run after N overruns (exit code 3, record kept)")
+                     help="stop a paced run after N overruns, a network task's late results "
+                          "included (exit code 3, record kept)")
     run.add_argument("--grace", type=float, metavar="S",
                      help="overruns in the first S seconds do not count for --max-overruns")
     run.add_argument("--cpu", type=int, metavar="K", help="pin a paced run to CPU K")
@@ -410,6 +548,13 @@ def build_parser() -> argparse.ArgumentParser:
     expand.add_argument("config", help="a run configuration (TOML) or SSP file")
     expand.set_defaults(handler=_config_expand)
 
+    results = commands.add_parser("results", help="a run folder's results")
+    results_commands = results.add_subparsers(dest="results_command", required=True)
+    results_export = results_commands.add_parser(
+        "export", help="write signals.csv beside a run's record (flexff.results.export_csv)")
+    results_export.add_argument("folder", help="the run's folder (flexff run -o)")
+    results_export.set_defaults(handler=_results_export)
+
     ssp = commands.add_parser("ssp", help="SSP 1.0 (System Structure and Parameterization)")
     ssp_commands = ssp.add_subparsers(dest="ssp_command", required=True)
     ssp_export = ssp_commands.add_parser(
@@ -424,7 +569,8 @@ def build_parser() -> argparse.ArgumentParser:
     collect = data_commands.add_parser(
         "collect", help="co-simulate a trajectory set under PID into a dataset folder "
                         "(resumes an interrupted collection)")
-    collect.add_argument("--set", required=True, choices=SETS, help="the trajectory set")
+    collect.add_argument("--set", required=True,
+                         help="the trajectory set (an unknown name lists them)")
     collect.add_argument("--config", metavar="CONFIG.toml|SYSTEM.ssp",
                          help="the loop to collect on (flexff's controller and any plant); "
                               "default: the set's built-in plant under PID")
@@ -486,9 +632,31 @@ def build_parser() -> argparse.ArgumentParser:
                              "(x_ref .. ay_ref) with the features computed in the graph")
     export.set_defaults(handler=_export)
 
+    identification = commands.add_parser(
+        "identify", help="identify the rigid-body model's parameters on a dataset folder by "
+                         "least squares (for the rigid-body feedforward)")
+    identification.add_argument("data", help="a dataset folder (its training split is used)")
+    identification.add_argument("-o", "--output", required=True,
+                                help="the folder to write identified.json into")
+    identification.add_argument("--env", default="hardware", choices=("sim", "hardware"),
+                                help="preprocess as flexff evaluate's environment does: "
+                                     "hardware (the thesis's: encoders counted, 1.8 Hz; for "
+                                     "measured or noisy encoders) or sim (ideal encoders)")
+    identification.set_defaults(handler=_identify)
+
     bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON")
     bench.add_argument("--steps", type=int, default=20000, help="steps per timed loop")
     bench.add_argument("-o", "--output", help="also write the JSON to this file")
+    bench.add_argument("--processes", metavar="FILE.fmu",
+                       help="instead: whole processes side by side on this FMU (flexff run, "
+                            "fmpy.simulate_fmu, Ecos where installed), each writing its "
+                            "default record")
+    bench.add_argument("--process-steps", default="200000,2000000", metavar="N,N",
+                       help="with --processes: the run lengths in steps (of 1 ms)")
+    bench.add_argument("--process-repeats", type=int, default=3, metavar="R",
+                       help="with --processes: runs of each tool, alternated")
+    bench.add_argument("--ecos-python", metavar="PYTHON",
+                       help="with --processes: an interpreter with ecospy (default: this one)")
     bench.add_argument("--realtime-seconds", type=float, metavar="S",
                        help="pace only the first S seconds of the 100 s hardware evaluation "
                             "in the real-time figures (default: all of it)")
@@ -517,6 +685,20 @@ def build_parser() -> argparse.ArgumentParser:
                                                 "train on (its workers see this file system)")
     evaluation.set_defaults(handler=_evaluate)
 
+    learning = commands.add_parser(
+        "ilc", help="iterative learning control on a run's one reference: the best feedforward "
+                    "force for it, as a CSV table a run can use (resumes an interrupted one)")
+    learning.add_argument("config", metavar="CONFIG.toml|SYSTEM.ssp",
+                          help="the loop and its reference (flexff's controller, any plant; "
+                               "its own feedforward is replaced)")
+    learning.add_argument("-o", "--output", required=True, help="the output folder")
+    learning.add_argument("--iterations", type=int, default=ITERATIONS, metavar="N",
+                          help=f"learning trials after PID alone (default {ITERATIONS})")
+    learning.add_argument("--cutoff", type=float, default=CUTOFF_HZ, metavar="HZ",
+                          help=f"corner of the zero-phase low-pass Q of the learning filter "
+                               f"(default {CUTOFF_HZ:g})")
+    learning.set_defaults(handler=_ilc)
+
     demo = commands.add_parser("demo", help="the whole pipeline on the embedded defaults")
     demo.add_argument("-o", "--output", default="flexff-demo", help="output folder")
     demo.set_defaults(handler=_demo)
@@ -527,6 +709,8 @@ def _failure(error: BaseException, command: str, debug: bool = False) -> tuple[i
     """The exit code and the line on stderr for an error that stopped `command`: bad input
     (InputError, an OSError about a path) 2, a run that failed (RunError, an OSError such as a
     full disk, MemoryError) 1, anything else, a bug, 1 and how to see its traceback."""
+    from flexff.cosim.timing import OverrunError
+
     if isinstance(error, KeyboardInterrupt):
         kept = KEPT.get(command)
         return 130, "flexff: interrupted" + (f"; {kept}" if kept else "")

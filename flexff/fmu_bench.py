@@ -5,7 +5,10 @@ fmi2DoStep, fmi2GetReal of every output) on a fresh instance with default parame
 through fmpy, and C through the C floor (cosim.floor), the co-simulation engine's own loop on a
 plan of this one FMU with its inputs fed from sources. The ratio shows how much of a Python
 master's step time is interpreter overhead. Both record every output, and the records must be
-equal, which checks that they really ran the same steps.
+equal, which checks that they really ran the same steps. The co-simulation master itself
+(cosim.master, its engine in compiled code) runs the FMU in-process and in its own process
+(cosim.isolation): the difference is what isolating an FMU costs per step, and the two
+records must be equal too.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import numpy as np
 
 from flexff.cosim.floor import run_c_loop
 from flexff.cosim.master import Master, ResolvedFmu
+from flexff.cosim.recording import Recording
 from flexff.fmu.fmpy_instance import FmpyInstance, bare_calls
 
 
@@ -67,6 +71,18 @@ def _python_loop(s: FmpyInstance, steps: int, step: float, repeats: int
     return {name: seconds / steps for name, seconds in best.items()}, record[:steps]
 
 
+def _master_loop(path: Path, starts: dict[str, float], steps: int, step: float, repeats: int,
+                 isolate: bool) -> tuple[float, Recording]:
+    """Best microseconds per step of the master's engine loop on this FMU alone (in-process or
+    isolated), and the record of the last run."""
+    best = float("inf")
+    for _ in range(repeats):
+        with Master([ResolvedFmu("fmu", path, isolate=isolate)], list(starts), step) as master:
+            recording = master.run(starts, steps)
+        best = min(best, recording.wall_s)
+    return 1e6 * best / steps, recording
+
+
 def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
               repeats: int = 5) -> dict[str, Any]:
     """Microseconds per co-simulation step through fmpy and in C, their ratio, and a cross-check.
@@ -77,6 +93,8 @@ def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
     `c_us_per_step` is the C floor's step on this FMU alone (the engine's: its inputs set from
     the bus, its outputs read into it, the bus recorded, the step timed; the outputs are read
     before the next step rather than after this one, which gives the same values).
+    `master_us_per_step` and `isolated_us_per_step` are the master's step with the FMU in its
+    process and in its own (`isolated_same_outputs`: their records are equal).
     """
     with FmpyInstance(path) as s:
         s.initialize()
@@ -85,6 +103,8 @@ def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
         names = s.names("output")
     with Master([ResolvedFmu("fmu", Path(path))], list(starts), step) as master:
         floor, c_us = run_c_loop(master, starts, steps, repeats)
+    master_us, inside = _master_loop(Path(path), starts, steps, step, repeats, False)
+    isolated_us, alone = _master_loop(Path(path), starts, steps, step, repeats, True)
     python_us = 1e6 * python["cycle"]
     return {
         "steps": steps,
@@ -95,6 +115,10 @@ def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
         "python_us_per_do_step": 1e6 * python["do_step"],
         "c_us_per_step": c_us,
         "ratio": python_us / c_us,
+        "master_us_per_step": master_us,
+        "isolated_us_per_step": isolated_us,
+        "isolated_same_outputs": all(np.array_equal(inside[n], alone[n])
+                                     for n in inside.signals),
         "same_outputs": all(np.array_equal(floor[f"fmu.{n}"][1:], outputs[:, j])
                             for j, n in enumerate(names)),
     }

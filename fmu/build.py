@@ -2,9 +2,9 @@
 
 The FMU holds modelDescription.xml, binaries/<platform>/<id>.so and sources/ (wrapper, generated
 code, config.h and the FMI headers, listed in the XML's SourceFiles) so it can be rebuilt
-elsewhere with `cc -shared -fPIC -Isources sources/*.c -lm -ldl`. A System with an embedded
-network also gets its graph (and precomputation table) in resources/ and onnxruntime's library
-beside its own in binaries/<platform>/. Builds are cached by a hash of all their inputs; the
+elsewhere with `cc -shared -fPIC -Isources sources/*.c -lm -ldl -lpthread`. A System with an
+embedded network also gets its graph (and precomputation table) in resources/ and onnxruntime's
+library beside its own in binaries/<platform>/. Builds are cached by a hash of all their inputs; the
 GUID is derived from the same hash, so equal inputs give a bit-equal FMU. `$FLEXFF_SANITIZE`
 builds the binaries with sanitizers (fmu.compile.sanitizer_flags), under their own key.
 """
@@ -32,6 +32,7 @@ C_DIR = Path(__file__).parent / "c"
 WRAPPER_C_FILES = ("fmi2Functions.c", "wrapper.c", "rng.c")
 WRAPPER_HEADERS = ("wrapper.h", "rng.h")
 NETWORK_C_FILES = ("wrapper_network.c", "onnx_network.c")
+TASK_C_FILES = ("wrapper_task.c",)  # a network in its own task
 NETWORK_HEADERS = ("onnx_network.h", "onnxruntime_c_api.h", "onnxruntime_c_api.LICENSE.txt")
 GUID_PLACEHOLDER = "{00000000-0000-0000-0000-000000000000}"
 GUID_FILES = ("modelDescription.xml", "sources/config.h")
@@ -40,7 +41,9 @@ ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps keep the archive reproducib
 
 def _source_files(system: System) -> list[str]:
     """The C files compiled into the FMU's library."""
-    return [*WRAPPER_C_FILES, "model.c", *(NETWORK_C_FILES if system.network else ())]
+    net = system.network
+    return [*WRAPPER_C_FILES, "model.c", *(NETWORK_C_FILES if net else ()),
+            *(TASK_C_FILES if net and net.task else ())]
 
 
 def _files(system: System, guid: str) -> dict[str, str | bytes]:
@@ -48,7 +51,8 @@ def _files(system: System, guid: str) -> dict[str, str | bytes]:
     identifier = model_identifier(system)
     layout = make_layout(system)
     generic = (*WRAPPER_C_FILES, *WRAPPER_HEADERS,
-               *((*NETWORK_C_FILES, *NETWORK_HEADERS) if system.network else ()))
+               *((*NETWORK_C_FILES, *NETWORK_HEADERS) if system.network else ()),
+               *(TASK_C_FILES if system.network and system.network.task else ()))
     sources = {
         **{name: (C_DIR / name).read_text() for name in generic},
         "config.h": generate_config_h(system, layout, identifier, guid),
@@ -114,7 +118,8 @@ def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: st
                     target_file.write_bytes(text)
         library = Path(tmp) / f"{identifier}{fmpy.sharedLibraryExtension}"
         run_compiler([src / name for name in sources], library, [src],
-                     extra_flags=("-shared", *sanitizer_flags()), libraries=("-lm", "-ldl"))
+                     extra_flags=("-shared", *sanitizer_flags()),
+                     libraries=("-lm", "-ldl", "-lpthread"))
         files = {**files, f"binaries/{fmpy.platform}/{library.name}": library.read_bytes()}
         with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as zf:
             for name in sorted(files):

@@ -189,6 +189,7 @@ def _network_config(net: Network) -> list[str]:
         f"#define NET_STATE_SIZE {offsets[-1]}",
         f"#define NET_PERIOD {net.period}",
         f"#define NET_PRECOMPUTED {int(net.table is not None)}",
+        f"#define NET_TASK {int(net.task)}",
         f"#define NET_RUNTIME_FILE {_c_string(runtime_library().name)}",
         f"#define NET_MODEL_FILE {_c_string(NET_MODEL_FILE)}",
         f"#define NET_TABLE_FILE {_c_string(NET_TABLE_FILE)}",

@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import os
 import re
+import shutil
 import subprocess
 import tempfile
 from collections.abc import Sequence
@@ -50,9 +51,26 @@ def compiler() -> str:
 
 @functools.cache
 def compiler_version() -> str:
-    """First line of `$CC --version`, part of every cache key."""
+    """First line of `$CC --version`, part of every cache key; remembered in the cache per
+    compiler binary (its path, size and time), so that a run of cached FMUs starts no
+    compiler."""
+    binary = shutil.which(compiler())
+    remembered = None
+    if binary is not None:
+        stat = os.stat(binary)
+        remembered = cache.cached_path(cache.digest({
+            "binary": binary, "size": str(stat.st_size), "mtime": str(stat.st_mtime_ns)}),
+            ".compiler-version")
+        if remembered.is_file():
+            return remembered.read_text()
     out = subprocess.run([compiler(), "--version"], capture_output=True, text=True, check=True)
-    return out.stdout.splitlines()[0]
+    version = out.stdout.splitlines()[0]
+    if remembered is not None:
+        with tempfile.TemporaryDirectory() as tmp:
+            (Path(tmp) / "version").write_text(version)
+            cache.store(remembered.name.removesuffix(".compiler-version"), ".compiler-version",
+                        Path(tmp) / "version")
+    return version
 
 
 def fmi_headers() -> dict[str, str]:

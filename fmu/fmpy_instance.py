@@ -14,8 +14,10 @@ from pathlib import Path
 from typing import Any
 
 import fmpy
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
+
+from flexff.fmu.archive import extract_archive
 
 
 @dataclass(frozen=True)
@@ -55,7 +57,7 @@ class FmpyInstance:
                  **instantiate_kw: Any) -> None:
         self.model_description = read_model_description(str(path))
         self.variables = {v.name: v for v in self.model_description.modelVariables}
-        self._unzipdir = extract(str(path))
+        self._unzipdir = str(extract_archive(path))
         self.fmu = FMU2Slave(guid=self.model_description.guid, unzipDirectory=self._unzipdir,
                              modelIdentifier=self.model_description.coSimulation.modelIdentifier,
                              instanceName=instance_name)

@@ -1,5 +1,6 @@
-"""The FMU importer: any FMI 2.0 or 3.0 co-simulation FMU read into its ports and typed start
-values, and instantiated with a log of its own.
+"""The FMU importer: any FMI 2.0 or 3.0 FMU read into its ports and typed start values, and
+instantiated with a log of its own: as a co-simulation FMU, or through its model-exchange
+interface with a solver (fmu.model_exchange), which an FMU without co-simulation needs.
 
 One layer for everything that loads FMUs (the co-simulation master, the libcosim runner,
 validation, the bench), in FMPy's way: each FMI call is declared once (by fmpy), values of every
@@ -19,24 +20,27 @@ import os
 import shutil
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
-from ctypes import byref, c_double, c_void_p
+from ctypes import byref, c_double, c_long, c_void_p
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import fmpy
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import (
+    FMU2Model,
     FMU2Slave,
     fmi2CallbackAllocateMemoryTYPE,
     fmi2CallbackFreeMemoryTYPE,
     fmi2CallbackFunctions,
     fmi2CallbackLoggerTYPE,
 )
-from fmpy.fmi3 import FMU3Slave
+from fmpy.fmi3 import FMU3Model, FMU3Slave
 from fmpy.logging import addLoggerProxy
 
+from flexff.fmu.archive import extract_archive
 from flexff.fmu.errors import InputError
+from flexff.fmu.model_exchange import ModelExchangeStepper
 
 TYPE_KINDS = {
     "Real": "float64", "Float64": "float64", "Float32": "float32",
@@ -92,7 +96,7 @@ class FmuInfo:
     path: Path
     fmi_version: str  # "2.0" or "3.0"
     model_name: str
-    identifier: str  # the co-simulation model identifier (name of the binary)
+    identifier: str  # the model identifier (name of the binary): co-simulation's, if it has it
     token: str  # FMI 2.0 guid or FMI 3.0 instantiationToken
     variables: Mapping[str, Variable]
     inputs: tuple[str, ...]
@@ -101,6 +105,10 @@ class FmuInfo:
     dependencies: Mapping[str, frozenset[str]]  # output -> the inputs it depends on directly
     default_step: float | None = None
     default_stop: float | None = None
+    default_start: float | None = None  # DefaultExperiment startTime [s]
+    default_tolerance: float | None = None  # DefaultExperiment tolerance (relative)
+    co_simulation: bool = True  # whether it has the co-simulation interface
+    me_identifier: str | None = None  # the model-exchange interface's identifier, if it has one
     model_description: Any = field(default=None, compare=False, repr=False)
 
     @property
@@ -135,8 +143,10 @@ def read_fmu(path: str | Path) -> FmuInfo:
         raise FmuError(f"{path}: cannot read modelDescription.xml: {error}") from None
     if md.fmiVersion not in ("2.0", "3.0"):
         raise FmuError(f"{path}: FMI {md.fmiVersion} is not supported (FMI 2.0 and 3.0 are)")
-    if md.coSimulation is None:
-        raise FmuError(f"{path}: the FMU has no co-simulation interface (only model exchange)")
+    if md.coSimulation is None and md.modelExchange is None:
+        raise FmuError(f"{path}: the FMU has neither a co-simulation nor a model-exchange "
+                       f"interface")
+    interface = md.coSimulation or md.modelExchange
     variables = {}
     for v in md.modelVariables:
         if v.type not in TYPE_KINDS:
@@ -159,10 +169,15 @@ def read_fmu(path: str | Path) -> FmuInfo:
     experiment = md.defaultExperiment
     step = float(experiment.stepSize) if experiment and experiment.stepSize else None
     stop = float(experiment.stopTime) if experiment and experiment.stopTime else None
+    start = float(experiment.startTime) if experiment and experiment.startTime else None
+    tolerance = (float(experiment.tolerance) if experiment and experiment.tolerance
+                 else None)
     token = md.guid if md.fmiVersion == "2.0" else md.instantiationToken
     return FmuInfo(path, md.fmiVersion, md.modelName or path.stem,
-                   md.coSimulation.modelIdentifier, token or "", variables, inputs, outputs,
-                   parameters, dependencies, step, stop, md)
+                   interface.modelIdentifier, token or "", variables, inputs, outputs,
+                   parameters, dependencies, step, stop, start, tolerance,
+                   md.coSimulation is not None,
+                   md.modelExchange.modelIdentifier if md.modelExchange else None, md)
 
 
 def typed_value(kind: str, value: Any) -> Any:
@@ -252,24 +267,32 @@ def _message(status: int, message: bytes | None) -> str:
 
 
 class FmuInstance:
-    """One instantiated co-simulation FMU (FMI 2.0 or 3.0) with its own message log."""
+    """One instantiated FMU (FMI 2.0 or 3.0) with its own message log: a co-simulation one, or
+    a model-exchange one (`solver`, fmu.model_exchange.SOLVERS; an FMU without co-simulation
+    needs one), stepped by `stepper` once initialized."""
 
-    def __init__(self, info: FmuInfo, name: str) -> None:
+    def __init__(self, info: FmuInfo, name: str, solver: str | None = None) -> None:
         self.info, self.name = info, name
         self.messages: list[str] = []
         self.initialized = False
-        self._unzipdir = extract(str(info.path))
+        self.model_exchange = solver is not None or not info.co_simulation
+        self.stepper: ModelExchangeStepper | None = None
+        if self.model_exchange and info.me_identifier is None:
+            raise FmuError(f"{info.path}: {name}: the FMU has no model-exchange interface for "
+                           f"a solver")
+        identifier = info.me_identifier if self.model_exchange else info.identifier
+        self._unzipdir = str(extract_archive(info.path))
         cwd = os.getcwd()
         try:
             self.library = self._library_path()
             kwargs = {"guid": info.token, "unzipDirectory": self._unzipdir,
-                          "modelIdentifier": info.identifier, "instanceName": name}
+                      "modelIdentifier": identifier, "instanceName": name}
             if info.fmi_version == "2.0":
-                self.fmu = FMU2Slave(**kwargs)
+                self.fmu = (FMU2Model if self.model_exchange else FMU2Slave)(**kwargs)
                 self._callbacks, self._log_key = _FMI2_LOG.callbacks(self.messages)
                 self.fmu.instantiate(callbacks=self._callbacks)
             else:
-                self.fmu = FMU3Slave(**kwargs)
+                self.fmu = (FMU3Model if self.model_exchange else FMU3Slave)(**kwargs)
                 self.fmu.instantiate(logMessage=self._log3)
         except FmuError:
             self._remove()
@@ -283,8 +306,9 @@ class FmuInstance:
 
     def _library_path(self) -> Path:
         folder = fmpy.platform if self.info.fmi_version == "2.0" else fmpy.platform_tuple
+        identifier = self.info.me_identifier if self.model_exchange else self.info.identifier
         path = Path(self._unzipdir, "binaries", folder,
-                    f"{self.info.identifier}{fmpy.sharedLibraryExtension}")
+                    f"{identifier}{fmpy.sharedLibraryExtension}")
         if not path.is_file():
             raise FmuError(f"{self.info.path}: no binary for this platform "
                            f"(binaries/{folder}/{path.name} is missing)")
@@ -300,6 +324,8 @@ class FmuInstance:
     def fail(self, what: str) -> FmuError:
         """The error for a failed call, with the FMU's last messages."""
         log = "; ".join(self.messages[-5:]) or "no message from the FMU"
+        if self.stepper is not None and self.stepper.error is not None:
+            log = f"{self.stepper.error}; {log}"
         return FmuError(f"{self.name}: {what} failed: {log}")
 
     def call(self, what: str, function: Callable[..., Any]) -> Any:
@@ -350,36 +376,67 @@ class FmuInstance:
 
     # -- life cycle -----------------------------------------------------------------------
     def initialize(self, values: Mapping[str, Any] | None = None, start_time: float = 0.0,
-                   stop_time: float | None = None) -> None:
-        """Set `values` (parameters, inputs' start values) in initialization mode, leave it."""
+                   stop_time: float | None = None, tolerance: float | None = None) -> None:
+        """Set `values` (parameters, inputs' start values) in initialization mode, leave it.
+        The experiment (start, stop, and the tolerance of an FMU's own solver, None: not
+        defined) goes to fmi2SetupExperiment / fmi3EnterInitializationMode."""
         fmu = self.fmu
         if self.info.fmi_version == "2.0":
-            self.call("fmi2SetupExperiment",
-                      lambda: fmu.setupExperiment(startTime=start_time, stopTime=stop_time))
+            self.call("fmi2SetupExperiment", lambda: fmu.setupExperiment(
+                tolerance=tolerance, startTime=start_time, stopTime=stop_time))
             self.call("fmi2EnterInitializationMode", fmu.enterInitializationMode)
         else:
             self.call("fmi3EnterInitializationMode", lambda: fmu.enterInitializationMode(
-                startTime=start_time, stopTime=stop_time))
+                tolerance=tolerance, startTime=start_time, stopTime=stop_time))
         self.set(values or {})
         self.call(f"fmi{self.info.fmi_version[0]}ExitInitializationMode",
                   fmu.exitInitializationMode)
         self.initialized = True
+        if self.model_exchange:
+            md = self.info.model_description
+            self.stepper = self.call("the initial event iteration", lambda: ModelExchangeStepper(
+                fmu, self.info.fmi_version == "3.0", start_time, stop_time, tolerance,
+                md.numberOfContinuousStates, md.numberOfEventIndicators,
+                bool(md.modelExchange.needsCompletedIntegratorStep)))
 
     def do_step(self, time: float, step: float) -> None:
-        """One communication step through fmpy (FastCalls for the hot loop)."""
+        """One communication step through fmpy (FastCalls for the hot loop); a model-exchange
+        FMU's through its solver."""
+        if self.stepper is not None:
+            if self.stepper.step(step) > 1:
+                raise self.fail(f"the solver's step from t = {time:.9g} s")
+            return
         self.call(f"fmi{self.info.fmi_version[0]}DoStep from t = {time:.9g} s",
                   lambda: self.fmu.doStep(currentCommunicationPoint=time,
                                           communicationStepSize=step))
 
     def network_times(self) -> dict[str, float] | None:
         """The call times of a flexff FMU's embedded network so far (calls; p50, p99, max in
-        microseconds), or None for an FMU without one."""
+        microseconds), its call period in steps and, where it runs in its own task, that
+        task's rate-transition overruns; None for an FMU without one."""
         function = getattr(self.fmu.dll, "flexff_network_times", None)
         times = (c_double * 4)()
         if function is None or function(self.component, times) != 0:
             return None
-        return {"calls": int(times[0]), "p50": times[1] * 1e6, "p99": times[2] * 1e6,
-                "max": times[3] * 1e6}
+        figures: dict[str, float] = {"calls": int(times[0]), "p50": times[1] * 1e6,
+                                     "p99": times[2] * 1e6, "max": times[3] * 1e6}
+        task = self.network_task()
+        if task is not None:
+            period, counter = task
+            figures["period_steps"] = period
+            if counter:
+                figures["overruns"] = c_long.from_address(counter).value
+        return figures
+
+    def network_task(self) -> tuple[int, int] | None:
+        """A flexff FMU's embedded network: its call period in steps and the address of its
+        task's rate-transition overrun counter (a C long; 0 where it runs in the step), or
+        None for an FMU without one (or built before networks ran in tasks)."""
+        function = getattr(self.fmu.dll, "flexff_network_task", None)
+        period, counter = c_long(), c_void_p()
+        if function is None or function(self.component, byref(period), byref(counter)) != 0:
+            return None
+        return period.value, counter.value or 0
 
     def close(self) -> None:
         """Terminate (if initialized), free the instance, delete the extracted files."""

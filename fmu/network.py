@@ -6,9 +6,10 @@ NAME_out of the same shape (where the graph leaves a dimension symbolic, the run
 (the recurrent state or input buffer of a sequence model, zero at the
 start). The FMU runs it every `period` communication steps on `input_function(x, u, p)` and
 hands the result to the System's output function (see System); `table` switches it to the
-precomputed mode. The FMU bundles the graph (resources/) and the libonnxruntime of the
-installed onnxruntime wheel (binaries/<platform>/). fmu.onnx_graph brings any graph of
-fixed-size float tensors to this convention.
+precomputed mode, `task` runs it in its own task (a worker thread of the FMU, its result used
+one period after the call started, c/wrapper_task.c). The FMU bundles the graph (resources/)
+and the libonnxruntime of the installed onnxruntime wheel (binaries/<platform>/).
+fmu.onnx_graph brings any graph of fixed-size float tensors to this convention.
 """
 
 from __future__ import annotations
@@ -58,10 +59,14 @@ class Network:
     input_function: ca.Function  # network_input(x, u, p) -> (n_inputs,)
     period: int = 1  # communication steps between calls
     table: np.ndarray | None = None  # precomputed mode: rows (time, inputs...) at every step
+    task: bool = False  # in its own task: the result of the call at step k used from k + period
 
     def __post_init__(self) -> None:
         if self.period < 1:
             raise InputError(f"the network's period must be at least one step, got {self.period}")
+        if self.task and self.table is not None:
+            raise InputError("a precomputed network makes no calls while stepping: it cannot "
+                             "run in its own task")
         if self.table is not None and (self.table.ndim != 2 or self.table.shape[0] < 1
                                        or not np.all(np.isfinite(self.table))):
             raise ValueError("the precomputation table must be a finite 2-D array with rows "

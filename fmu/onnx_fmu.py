@@ -5,7 +5,9 @@ outputs the elements of its output tensors, as fmu.onnx_graph names them; the ne
 are the FMU's inputs and its result is the FMU's outputs. The graph runs in onnxruntime (the
 library of the installed wheel, bundled) every `every` communication steps of `step` seconds,
 its results extrapolated linearly from the last two calls in between (fmu.system); its
-recurrent state tensors are carried from call to call and in the FMU state.
+recurrent state tensors are carried from call to call and in the FMU state. With `task` the
+graph runs in its own task, a worker thread of the FMU (fmu.network.Network): the step never
+waits for it, its result comes one call period later and is extrapolated one period further.
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ from flexff.fmu.onnx_graph import Port, graph_network, read_graph
 from flexff.fmu.system import System, Variable
 
 
-def onnx_system(model: str | Path, step: float = 1e-3, every: int = 1) -> System:
+def onnx_system(model: str | Path, step: float = 1e-3, every: int = 1,
+                task: bool = False) -> System:
     """The System of the FMU running the ONNX graph in the file `model`; InputError (what is
     wrong, what to do) if the graph cannot be one (see fmu.onnx_graph.read_graph)."""
     if not step > 0:
@@ -29,8 +32,11 @@ def onnx_system(model: str | Path, step: float = 1e-3, every: int = 1) -> System
     x, p, w = ca.SX.sym("x", 0), ca.SX.sym("p", 0), ca.SX.sym("w", 0)
     u = ca.SX.sym("u", len(graph.input_names))
     r = ca.SX.sym("r", len(graph.output_names))
-    network = graph_network(graph, ca.Function("network_input", [x, u, p], [u]), every)
+    network = graph_network(graph, ca.Function("network_input", [x, u, p], [u]), every,
+                            task=task)
     calls = "every step" if every == 1 else f"every {every} steps, extrapolated in between"
+    if task:
+        calls += ", in its own task (its result one call later)"
     return System(
         name=graph.path.stem,
         description=f"ONNX graph {graph.path.name} in onnxruntime, called {calls}",
@@ -44,6 +50,7 @@ def onnx_system(model: str | Path, step: float = 1e-3, every: int = 1) -> System
         output=ca.Function("output", [x, u, p, w, r], [r]),
         sample_time=step,
         extra={"flexff.onnx.model": graph.path.name, "flexff.onnx.every": str(every),
+               "flexff.onnx.task": str(task).lower(),
                "flexff.onnx.state": json.dumps([list(pair) for pair in graph.states])},
         network=network,
     )

@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import math
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import casadi as ca
@@ -98,12 +98,12 @@ def read_graph(model: str | Path, time_axis: bool = False) -> Graph:
 
 
 def graph_network(graph: Graph, input_function: ca.Function, period: int = 1,
-                  table: np.ndarray | None = None) -> Network:
+                  table: np.ndarray | None = None, task: bool = False) -> Network:
     """The Network running `graph` on `input_function(x, u, p)` (a column of the graph's input
     elements, in the order of `graph.input_names`) every `period` steps, see fmu.network: the
     graph's own file if it follows the wrapper's convention, else its adapter graph, written
     to the build cache. The precomputed mode (`table`) runs all calls in one: it needs the
-    time axis."""
+    time axis; `task` runs the calls in their own task (fmu.network.Network)."""
     if table is not None and not graph.time_axis:
         raise InputError(f"{graph.path}: the precomputed mode needs a graph with a time axis")
     if _follows_convention(graph):
@@ -123,7 +123,7 @@ def graph_network(graph: Graph, input_function: ca.Function, period: int = 1,
     except Exception as exc:  # onnxruntime raises its own Fail, InvalidGraph, ...
         raise InputError(f"{graph.path}: onnxruntime {ort.__version__}, which the FMU bundles, "
                          f"cannot load the graph: {exc}") from exc
-    return read_network(file, input_function, period, table)
+    return replace(read_network(file, input_function, period, table), task=task)
 
 
 def _states(path: Path, meta: dict[str, str], inputs: dict[str, onnx.ValueInfoProto],

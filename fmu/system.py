@@ -8,11 +8,12 @@ machine: the plant and the controllers fill these objects in.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
-import casadi as ca
+if TYPE_CHECKING:  # annotations only: describing signals needs neither CasADi nor onnx
+    import casadi as ca
 
-from flexff.fmu.network import Network
+    from flexff.fmu.network import Network
 
 
 @dataclass(frozen=True)

@@ -1,12 +1,22 @@
-"""validate_fmu: fmpy's static checks of an FMU plus a short run of our own.
+"""validate_fmu: fmpy's static checks of an FMU plus a short run of our own, graded.
 
 Our checks, on any FMI 2.0 or 3.0 co-simulation FMU read through fmu.importer: the binary
 loads, instantiates and exports every co-simulation function of its FMI version; with default
 values the FMU initializes, steps and gives finite float outputs; restoring a saved FMU state
-(directly, and through serialization) reproduces the outputs of the uninterrupted run exactly,
-where the model description says the FMU can do so. An FMU built for one input table (a
-network in the precomputed mode) runs on the inputs of that table. Every problem is returned
-as a sentence, never raised: `flexff fmu validate` prints them.
+(directly, and through serialization) reproduces the outputs of the uninterrupted run, where
+the model description says the FMU can do so. An FMU built for one input table (a network in
+the precomputed mode) runs on the inputs of that table.
+
+Every check that calls into the FMU runs in a child process (fmu.child): an FMU that crashes
+or hangs becomes a problem naming the call ("fmi2DeSerializeFMUstate: the FMU crashed
+(SIGSEGV)"), never the end of the validator. Each problem is a sentence (a `Problem`, a str as
+fmpy's are) with a severity: an error, or a warning where the FMU works as its model
+description promises within a tolerance. A state restore whose outputs differ from the
+uninterrupted run's by at most the FMU's default-experiment tolerance (TOLERANCE where it
+gives none), relative to each output's magnitude, is a warning carrying that size: FMUs that
+integrate with a variable step and a tolerance do not repeat bit for bit. Beyond it, or with
+`strict`, it is an error. Problems are returned, never raised: `flexff fmu validate` prints
+them.
 """
 
 from __future__ import annotations
@@ -15,13 +25,19 @@ import csv
 import io
 import math
 import zipfile
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import fmpy.validation
 
+from flexff.fmu.child import run_in_child, under_way
 from flexff.fmu.codegen import NET_TABLE_FILE
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
+
+TOLERANCE = 1e-6  # relative: for a state restore, where the FMU's default experiment gives none
+TIMEOUT = 60.0  # seconds the checks of one FMU may take before it counts as hung
+SEVERITIES = ("error", "warning")
 
 FMI2_CS_FUNCTIONS = (
     "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",
@@ -90,13 +106,82 @@ def _experiment(info: FmuInfo) -> tuple[float, float]:
     return float(start or 0.0), step
 
 
-def _run_problems(instance: FmuInstance, steps: int = 20) -> list[str]:
-    """Initialize with defaults, step, check finite outputs and the FMU-state round trips."""
+Emit = Callable[[tuple[str, str, float | None]], None]  # sends one finding to the parent
+
+
+class Problem(str):
+    """One finding: the sentence, its severity ("error" or "warning") and, where the finding
+    is a number (a difference), its size."""
+
+    severity: str
+    size: float | None
+
+    def __new__(cls, text: str, severity: str = "error", size: float | None = None
+                ) -> Problem:
+        if severity not in SEVERITIES:
+            raise ValueError(f"severity {severity!r}: expected one of {SEVERITIES}")
+        problem = super().__new__(cls, text)
+        problem.severity, problem.size = severity, size
+        return problem
+
+
+def _tolerance(info: FmuInfo) -> float:
+    """The FMU's default-experiment tolerance, else TOLERANCE."""
+    experiment = info.model_description.defaultExperiment
+    given = experiment.tolerance if experiment is not None else None
+    return float(given) if given else TOLERANCE
+
+
+def relative_difference(run: Sequence[Sequence[Any]], reference: Sequence[Sequence[Any]],
+                        floats: Sequence[int]) -> float:
+    """The largest difference between two runs' rows of outputs, each output's relative to
+    its largest finite magnitude in either run; inf where an output that is no float differs,
+    or where a value is NaN or infinite in one run only."""
+    worst = 0.0
+    for i in range(len(reference[0]) if reference else 0):
+        pairs = [(row[i], ref[i]) for row, ref in zip(run, reference)
+                 if repr(row[i]) != repr(ref[i])]
+        if not pairs:
+            continue
+        if i not in floats or any(not (math.isfinite(a) and math.isfinite(b))
+                                  for a, b in pairs):
+            return math.inf
+        scale = max(abs(v) for row, ref in zip(run, reference) for v in (row[i], ref[i])
+                    if math.isfinite(v))
+        worst = max(worst, max(abs(a - b) for a, b in pairs) / scale)
+    return worst
+
+
+def restore_finding(label: str, size: float, tolerance: float, strict: bool
+                    ) -> tuple[str, str, float | None] | None:
+    """The finding for a restore of `label` whose outputs differ by `size` (relative_difference)
+    from the uninterrupted run's: none at 0, a warning within `tolerance` (not `strict`), else an
+    error."""
+    if size == 0.0:
+        return None
+    text = f"restoring {label} does not reproduce the outputs of the uninterrupted run"
+    if math.isinf(size):
+        return (f"{text} (an output differs in kind: NaN, infinite, or not a float)", "error",
+                size)
+    if strict:
+        return f"{text} bit for bit (largest relative difference {size:.2g})", "error", size
+    if size <= tolerance:
+        return (f"{text} exactly: they differ by {size:.2g} (relative), within the FMU's "
+                f"tolerance {tolerance:g} (bit for bit with --strict)", "warning", size)
+    return (f"{text}: they differ by {size:.2g} (relative), beyond the FMU's tolerance "
+            f"{tolerance:g}", "error", size)
+
+
+def _run_checks(instance: FmuInstance, emit: Emit, strict: bool, steps: int = 20) -> None:
+    """Initialize with defaults, step, check finite outputs and the FMU-state round trips:
+    the state saved halfway, restored directly and then through serialization, must give
+    the outputs of the uninterrupted second half. Each finding is emitted when made."""
     info, cs = instance.info, instance.info.model_description.coSimulation
     start, step = _experiment(info)
     table = _table_inputs(info.path)
     outputs = [n for n in info.outputs
                if info.variables[n].scalar and info.variables[n].kind != "clock"]
+    floats = [i for i, n in enumerate(outputs) if info.variables[n].kind.startswith("float")]
     get_state, set_state, free_state, serialize, deserialize = (
         getattr(instance.fmu, name) for name in _STATE_METHODS[info.fmi_version])
 
@@ -111,48 +196,68 @@ def _run_problems(instance: FmuInstance, steps: int = 20) -> list[str]:
     if table:
         instance.set(table[0])
     rows = [instance.get(outputs)] + [advance(k) for k in range(steps // 2)]
-    states: dict[str | None, Any] = {}  # by label; None labels the uninterrupted run
-    if cs.canGetAndSetFMUstate:
-        saved = states["a saved FMU state"] = instance.call("getting the FMU state", get_state)
-        if cs.canSerializeFMUstate:
-            states["a serialized FMU state"] = instance.call(
-                "serializing and restoring the FMU state", lambda: deserialize(serialize(saved)))
-    runs: dict[str | None, list[list[Any]]] = {}
-    for label, state in {None: None, **states}.items():
-        if state is not None:
-            instance.call(f"restoring {label}", lambda state=state: set_state(state))
-        runs[label] = [advance(k) for k in range(steps // 2, steps)]
-    for label, state in states.items():
-        instance.call(f"freeing {label}", lambda state=state: free_state(state))
-
-    problems = []
-    floats = [i for i, n in enumerate(outputs) if info.variables[n].kind.startswith("float")]
+    saved = (instance.call("getting the FMU state", get_state) if cs.canGetAndSetFMUstate
+             else None)
+    uninterrupted = [advance(k) for k in range(steps // 2, steps)]
     bad = [outputs[i] for i in floats
-           if not all(math.isfinite(row[i]) for row in rows + runs[None])]
+           if not all(math.isfinite(row[i]) for row in rows + uninterrupted)]
     if bad:
-        problems.append(f"outputs not finite within {steps} steps of {step:g} s with default "
-                        f"values: {', '.join(bad)}")
-    problems += [f"restoring {label} does not reproduce the outputs of the uninterrupted run"
-                 for label in states if repr(runs[label]) != repr(runs[None])]  # nan == nan
-    return problems
+        emit((f"outputs not finite within {steps} steps of {step:g} s with default values: "
+              f"{', '.join(bad)}", "error", None))
+    if saved is None:
+        return
+    restores: dict[str, Callable[[], Any]] = {"a saved FMU state": lambda: saved}
+    if cs.canSerializeFMUstate:
+        restores["a serialized FMU state"] = lambda: instance.call(
+            "serializing and restoring the FMU state", lambda: deserialize(serialize(saved)))
+    for label, state_of in restores.items():
+        state = state_of()
+        instance.call(f"restoring {label}", lambda state=state: set_state(state))
+        run = [advance(k) for k in range(steps // 2, steps)]
+        finding = restore_finding(label, relative_difference(run, uninterrupted, floats),
+                                  _tolerance(info), strict)
+        if finding is not None:
+            emit(finding)
+        if state is not saved:
+            instance.call(f"freeing {label}", lambda state=state: free_state(state))
+    instance.call("freeing the FMU state", lambda: free_state(saved))
 
 
-def validate_fmu(path: str | Path) -> list[str]:
-    """Problems found in the FMU at `path`; an empty list means it passed every check."""
+def _checks(emit: Emit, path: str, strict: bool) -> None:
+    """Every check that calls into the FMU at `path`: run in a child process (validate_fmu)."""
+    try:
+        info = read_fmu(path)
+        under_way("loading the FMU's binary")
+        with FmuInstance(info, "validation") as instance:
+            missing = _missing_exports(instance)
+            for problem in missing:
+                emit((problem, "error", None))
+            if not missing:
+                _run_checks(instance, emit, strict)
+    except Exception as error:  # a load failure or an FMI error status is a finding
+        emit((f"running the FMU failed: {error}", "error", None))
+
+
+def validate_fmu(path: str | Path, strict: bool = False, timeout: float = TIMEOUT
+                 ) -> list[Problem]:
+    """Problems found in the FMU at `path` (module doc); an empty list means it passed every
+    check. `strict`: a state restore must reproduce the outputs bit for bit. `timeout`: seconds
+    the checks that run the FMU may take."""
     path = Path(path)
     if not path.is_file():
-        return [f"{path} does not exist or is not a file"]
+        return [Problem(f"{path} does not exist or is not a file")]
     if not zipfile.is_zipfile(path):
-        return [f"{path} is not an FMU: an FMU is a zip archive, this file is not one"]
+        return [Problem(f"{path} is not an FMU: an FMU is a zip archive, this file is not one")]
     try:  # an unreadable description or one without co-simulation: nothing more to check
         info = read_fmu(path)
     except FmuError as error:
-        return [str(error)]
-    problems: list[str] = fmpy.validation.validate_fmu(str(path))
+        return [Problem(str(error))]
+    problems = [Problem(p) for p in fmpy.validation.validate_fmu(str(info.path))]
     if problems:
         return problems
-    try:
-        with FmuInstance(info, "validation") as instance:
-            return _missing_exports(instance) or _run_problems(instance)
-    except Exception as error:  # a load failure or an FMI error status is a finding, not a crash
-        return [f"running the FMU failed: {error}"]
+    end = run_in_child(_checks, (str(path), strict), timeout)
+    problems = [Problem(*finding) for finding in end.messages]
+    failure = end.failure(timeout)
+    if failure is not None:
+        problems.append(Problem(failure))
+    return problems

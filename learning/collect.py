@@ -6,7 +6,8 @@ flexff's controller (learning.loop): the built-in plant with other parameters, o
 by path wired by name or by [[connection]] tables. Each trajectory replaces the loop's
 reference, run.stop, start values and plant seed; the dataset's signals are read where the
 loop's controller sees them (learning.loop.dataset_taps), and a loop that lacks one is refused
-before anything runs.
+before anything runs. The sim set collected on a loop whose encoders count or are noisy is
+warned of (learning.encoders): flexff evaluate --env sim preprocesses it for ideal ones.
 
 The folder gets one NAME.npz per trajectory (float64 arrays of equal length: `time`, the six
 reference signals, the encoders `theta_s1..3`, the true position `x, y`, and the force the
@@ -69,6 +70,7 @@ from flexff.learning.dataset import (
     save_signals,
     write_manifest,
 )
+from flexff.learning.encoders import warn_set_on_loop
 from flexff.learning.loop import (
     OWN_TAPS,
     Tap,
@@ -201,6 +203,7 @@ def run_collection(set_name: str, out: str | Path, workers: int | None = None,
     out = Path(out)
     folder = _check_folder(out, trajectories)
     loop = config or default_loop(trajectories.variant)
+    warn_set_on_loop(set_name, trajectories.variant, loop)
     decimation = _decimation(loop, trajectories)
     configs = [trajectory_config(spec, trajectories, loop) for spec in specs]
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as fmus:

@@ -5,18 +5,27 @@
    the same settings is reused), and export each to ONNX (an ensemble's members, where the
    environment asks for one, as one graph of their mean); `currents` adds, per kind named,
    the same model trained on the motor currents (scenario KIND-currents);
-3. co-simulate the environment's evaluation reference on its plant: PID alone, with the
-   rigid-body feedforward, and with each learned model as an ONNX feedforward FMU. As in the
-   thesis, "sim" runs the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the
-   100 s reference of sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz
-   circles) on the hardware plant;
-4. write the report (learning.report): summary.json, table.md (with what each model's training
-   cost) and the figures.
+3. identify the rigid-body model's parameters on the training set, preprocessed as the
+   networks' data (learning.identify);
+4. run iterative learning control (learning.ilc) on the environment's evaluation reference,
+   into ilc/ (resumes what is there): the best feedforward force for that one reference, which
+   the networks, knowing no reference in advance, can approach but hardly beat;
+5. co-simulate the environment's evaluation reference on its plant: PID alone, with the
+   rigid-body feedforward (nominal, then identified parameters), with each learned model as an
+   ONNX feedforward FMU, and with the ILC's force table ("limit"). As in the thesis, "sim" runs
+   the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the 100 s reference of
+   sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz circles) on the hardware
+   plant;
+6. write the report (learning.report): summary.json, table.md (with what each model's training
+   cost, and each scenario's e2 as a multiple of the limit's) and the figures.
 
-Given a run configuration (`loop`, learning.loop), steps 1 and 3 run on that loop instead of
-the environment's plant: the set is collected on it under PID alone, and every scenario is that
-loop on the environment's evaluation reference with its feedforward replaced (PID alone,
-rigid-body, or the learned one stepped right before the controller).
+Given a run configuration (`loop`, learning.loop), steps 1, 4 and 5 run on that loop instead
+of the environment's plant: the set is collected on it under PID alone, and every scenario is
+that loop on the environment's evaluation reference with its feedforward replaced (PID alone,
+rigid-body, identified rigid-body, the learned one stepped right before the controller, or the
+ILC's table). A loop (or a --data set) whose encoders count or are noisy, given the sim
+environment's preprocessing for ideal encoders, is warned of before any work
+(learning.encoders).
 
 Preprocessing beyond the thesis (Environment.features): the thesis low-passes the measured motion
 and forces at 1.8 Hz and re-quantizes its ideal simulated encoders. The sim evaluation
@@ -43,11 +52,21 @@ from flexff.cosim.run import range_warning, run_config
 from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.errors import InputError
 from flexff.learning.collect import collect
+from flexff.learning.dataset import load_dataset
+from flexff.learning.encoders import effects_of, loop_encoders, warn_ideal_preprocessing
 from flexff.learning.export import export
-from flexff.learning.loop import default_loop, on_reference, with_feedforward
+from flexff.learning.features import FeatureConfig
+from flexff.learning.identify import REPORT, identified_on, identify, write_identification
+from flexff.learning.ilc import ITERATIONS, RESULT, ilc
+from flexff.learning.loop import (
+    default_loop,
+    on_reference,
+    with_feedforward,
+    with_feedforward_table,
+)
 from flexff.learning.models import NETWORKS, build_network, check_kind, parameter_count
 from flexff.learning.presets import TrainConfig, make_config
-from flexff.learning.report import write_report
+from flexff.learning.report import LIMIT, write_report
 from flexff.learning.workers import TrainJob, train_parallel
 
 
@@ -96,24 +115,37 @@ ENVIRONMENTS = {
         "tcn": {"model_rate_hz": 25.0}}, ensembles={"pgnn": 3}),
 }
 MODELS = tuple(NETWORKS)
+IDENTIFIED = "identified"  # the scenario of the rigid-body feedforward with identified parameters
 
 
 def scenario_config(env: str, name: str, model: Path | None = None, mode: str = "step",
-                    loop: RunConfig | None = None) -> RunConfig:
+                    loop: RunConfig | None = None, table: Path | None = None) -> RunConfig:
     """The environment's evaluation reference on `loop` (default: its plant under PID), with
-    the feedforward of scenario `name`: "pid" (none), "rigid-body", or a learned model (the
-    ONNX file `model`); every signal recorded."""
-    builtin, options = None, {}
-    if name == "rigid-body":
-        builtin = "rigid-body-feedforward"
-    elif name != "pid":
-        if model is None:
-            raise InputError(f"scenario {name!r} needs an ONNX model")
-        builtin, options = "learned-feedforward", {"model": Path(model).resolve(), "mode": mode}
+    the feedforward of scenario `name`: "pid" (none), "rigid-body", "identified" (the
+    rigid-body one with the parameters of the file `model`, learning.identify), LIMIT (the
+    force table `table` that learning.ilc wrote), or a learned model (the ONNX file `model`);
+    every signal recorded."""
     environment = ENVIRONMENTS[env]
-    config = on_reference(with_feedforward(loop or default_loop(environment.plant), builtin,
-                                           options),
-                          {"kind": environment.reference}, f"{env}-{name}", seed=1)
+    base = loop or default_loop(environment.plant)
+    if name == LIMIT:
+        if table is None:
+            raise InputError(f"scenario {name!r} needs the force table of an ILC run")
+        looped = with_feedforward_table(base, table)
+    else:
+        builtin, options = None, dict[str, Any]()
+        if name == "rigid-body":
+            builtin = "rigid-body-feedforward"
+        elif name == IDENTIFIED:
+            if model is None:
+                raise InputError(f"scenario {name!r} needs a file of identified parameters")
+            builtin, options = "rigid-body-feedforward", {"identified": Path(model).resolve()}
+        elif name != "pid":
+            if model is None:
+                raise InputError(f"scenario {name!r} needs an ONNX model")
+            builtin, options = "learned-feedforward", {"model": Path(model).resolve(),
+                                                       "mode": mode}
+        looped = with_feedforward(base, builtin, options)
+    config = on_reference(looped, {"kind": environment.reference}, f"{env}-{name}", seed=1)
     return replace(config, record=RecordConfig())
 
 
@@ -121,13 +153,15 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
              data: str | Path | None = None, epochs: int | None = None,
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
              progress: bool = True, scheduler: str | None = None,
-             currents: Sequence[str] = ()) -> dict[str, Any]:
+             ilc_iterations: int = ITERATIONS, currents: Sequence[str] = ()
+             ) -> dict[str, Any]:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
     collects and evaluates on that run configuration instead of the environment's plant;
-    `scheduler` collects and trains on that Dask cluster (learning.workers); `currents` adds
-    the current-level model of each kind named (scenario KIND-currents, the same settings with
-    labels = "currents", learning.features)."""
+    `scheduler` collects and trains on that Dask cluster (learning.workers); `ilc_iterations`
+    are the learning trials of the limit (learning.ilc); `currents` adds the current-level
+    model of each kind named (scenario KIND-currents, the same settings with labels =
+    "currents", learning.features)."""
     if env not in ENVIRONMENTS:
         raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
     for kind in (*models, *currents):
@@ -135,6 +169,12 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     out = Path(out)
     environment = ENVIRONMENTS[env]
     set_name = environment.trajectory_set
+    features = preprocessing(env, preset)
+    if loop is not None:
+        warn_ideal_preprocessing(features, loop_encoders(loop), f"the loop {loop.origin}")
+    if data is not None:
+        warn_ideal_preprocessing(features, effects_of(load_dataset(data).plant.get(
+            "parameters", {})), f"the dataset {data}")
     if data is None:
         on = f" on {loop.origin}" if loop is not None else ""
         say(f"collecting the {set_name} set (PID only){on} into {out / f'data-{set_name}'}")
@@ -160,16 +200,48 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         onnx_files[kind] = export([j.run for j in group], out / f"{kind}.onnx")
         say(f"{kind}: test MSE {metrics['test_mse']:.3g} ({metrics['parameters']} parameters, "
             f"{metrics['epochs']} epochs in {metrics['seconds']:.0f} s) -> {onnx_files[kind]}")
+    files: dict[str, Path] = {**onnx_files,
+                              IDENTIFIED: _identified(Path(data), preset, env, out, say)}
+    say(f"iterative learning control on the evaluation reference into {out / 'ilc'} (the limit)")
+    ilc(scenario_config(env, "pid", loop=loop), out / "ilc", ilc_iterations, progress=progress,
+        say=say)
     recordings: dict[str, Recording] = {}
-    for name in ["pid", "rigid-body", *groups]:
+    for name in ["pid", "rigid-body", IDENTIFIED, *groups, LIMIT]:
         folder = out / "cosim" / name
-        metrics = run_config(scenario_config(env, name, onnx_files.get(name), loop=loop), folder)
+        metrics = run_config(scenario_config(env, name, files.get(name), loop=loop,
+                                             table=out / "ilc" / RESULT), folder)
         recordings[name] = load_recording(folder)
         say(f"{name}: e2 = ({metrics['x']['e2']:.3g}, {metrics['y']['e2']:.3g}) m/sqrt(s), "
             f"real-time factor {metrics['real_time_factor']:.0f}")
         if warning := range_warning(metrics):
             say(f"{name}: {warning}")
     return write_report(recordings, env, out, model_training)
+
+
+def preprocessing(env: str, preset: str = "fast") -> FeatureConfig:
+    """The preprocessing the networks of `env` train with under `preset` (the same for
+    every model kind: the environment sets it, the fast preset's per-model settings do not)."""
+    return make_config("pgnn", preset, **ENVIRONMENTS[env].features).features
+
+
+def _identified(data: Path, preset: str, env: str, out: Path,
+                say: Callable[[str], None]) -> Path:
+    """The rigid-body parameters identified on the training set `data`, preprocessed as the
+    networks are, in out/identified/identified.json (an identification of the same data and
+    preprocessing there is reused)."""
+    features = preprocessing(env, preset)
+    path = out / IDENTIFIED / REPORT
+    wanted = identified_on(load_dataset(data), features)
+    try:
+        if json.loads(path.read_text())["data"] == wanted:
+            return path
+    except (OSError, ValueError, KeyError):
+        pass
+    say(f"identifying the rigid-body parameters on {data}")
+    identification = identify(data, features)
+    rms = identification.residual_rms
+    say(f"{IDENTIFIED}: residual ({rms[0]:.3g}, {rms[1]:.3g}) N rms -> {path}")
+    return write_identification(identification, out / IDENTIFIED)
 
 
 def _member_jobs(kind: str, preset: str, overrides: dict[str, Any], members: int, data: Path,

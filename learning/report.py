@@ -5,7 +5,8 @@ reference; this module compares their tracking errors with each other and with t
 published numbers. Into the output folder go
 
   summary.json  rms, e2, einf and the improvement ratios (PID alone / scenario) per scenario
-                and axis, with the thesis's table for the same environment, in SI units
+                and axis (with an ILC limit, also e2 as a multiple of it), with the thesis's
+                table for the same environment, in SI units
   table.md      the same as a Markdown table, in the thesis's scale (1e-4 or 1e-3)
   paths.png     reference and each scenario's x-y path, with a zoom on where the feedforwards err
                 most
@@ -44,10 +45,12 @@ from flexff.plant.signals import (
 SCENARIO_LABELS: dict[str, str] = {
     "pid": "PID alone",
     "rigid-body": "rigid-body FF",
+    "identified": "identified rigid-body FF",
     "lstm": "LSTM FF",
     "cnn-lstm": "CNN-LSTM FF",
     "tcn": "TCN FF",
     "pgnn": "physics-guided FF",
+    "limit": "ILC limit",
     # current-level models (learning.evaluate's KIND-currents): their feedforward acts after
     # the control allocation, so the forces figure shows no F_ff for them
     "lstm-currents": "LSTM current FF",
@@ -55,6 +58,8 @@ SCENARIO_LABELS: dict[str, str] = {
     "tcn-currents": "TCN current FF",
     "pgnn-currents": "physics-guided current FF",
 }
+LIMIT = "limit"  # the scenario of iterative learning control's force (learning.ilc)
+PER_LIMIT = "e2_per_limit"  # a scenario's e2 / the limit's
 
 
 def _thesis(exponent: int, rows: Mapping[str, tuple[float, float, float, float]]
@@ -94,7 +99,8 @@ _ROWS = (("rms", "x", "‖E_x‖₂ (rms, as the thesis)"),
          ("e2", "x", "e2 x (rms/√T)"), ("e2", "y", "e2 y (rms/√T)"),
          ("einf", "x", "‖E_x‖∞"), ("einf", "y", "‖E_y‖∞"))
 UNITS = {"rms": "m", "e2": "m/sqrt(s)", "einf": "m",
-         **{f"{norm}_ratio": "PID alone / scenario" for norm in NORMS}}
+         **{f"{norm}_ratio": "PID alone / scenario" for norm in NORMS},
+         PER_LIMIT: "scenario / ILC limit"}
 TRACKING = names(POSITION_REFERENCE, TRUE_POSITION)
 FORCES = names(FEEDBACK_FORCES, FEEDFORWARD_FORCES)
 
@@ -128,6 +134,9 @@ def summarize(metrics: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
     e2_ratio on one reference), e2_ratio, einf_ratio (PID alone / scenario, so the PID's are
     1.0 and higher is better), PID alone first.
 
+    With a LIMIT scenario (iterative learning control's force), every scenario's axis also
+    has e2_per_limit: its e2 as a multiple of the limit's (None where the limit's is zero).
+
     `metrics` maps a scenario name to a cosim.metrics.tracking_metrics dict
     {"x": {"e2", "einf", "rms"}, "y": {...}}; it must hold "pid", the base of every ratio.
     """
@@ -138,6 +147,9 @@ def summarize(metrics: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
         for axis in AXES:
             norms = {key: float(metrics[name][axis][key]) for key in NORMS}
             summary[name][axis] = {**norms, **_ratios(norms, metrics["pid"][axis])}
+            if LIMIT in metrics:
+                limit = float(metrics[LIMIT][axis]["e2"])
+                summary[name][axis][PER_LIMIT] = norms["e2"] / limit if limit > 0 else None
     return summary
 
 
@@ -161,6 +173,11 @@ def _cell(norms: Mapping[str, float | None], norm: str, scale: float, with_ratio
     if ratio is None:
         return f"{text} (n/a)"
     return f"{text} ({ratio:.0f}x)" if ratio >= 10 else f"{text} ({ratio:.2g}x)"
+
+
+def _multiple(value: float | None) -> str:
+    """A multiple of the limit's e2: "12x", "1.4x"; "–" where there is none."""
+    return "–" if value is None else f"{value:.3g}x"
 
 
 def markdown_table(summary: dict[str, dict[str, Any]], env: str) -> str:
@@ -187,8 +204,16 @@ def markdown_table(summary: dict[str, dict[str, Any]], env: str) -> str:
     for norm, axis, row in _ROWS:
         cells = [_cell(table[axis], norm, scale, with_ratio) for _, table, with_ratio in columns]
         lines.append(f"| {row} | " + " | ".join(cells) + " |")
+    if LIMIT in summary:
+        for axis in AXES:
+            cells = [_multiple(table[axis].get(PER_LIMIT)) for _, table, _ in columns]
+            lines.append(f"| e2 {axis} / ILC limit | " + " | ".join(cells) + " |")
     lines += ["", "Ratios in parentheses: PID alone / scenario on the same reference (higher "
                   "is better; the thesis's from its own PID-alone column)."]
+    if LIMIT in summary:
+        lines += ["", "ILC limit: the feedforward force that iterative learning control (flexff "
+                      "ilc) learned on this one reference; e2 / ILC limit: each scenario's e2 "
+                      "as a multiple of the limit's (1x reaches it)."]
     return "\n".join(lines) + "\n"
 
 

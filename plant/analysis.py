@@ -7,7 +7,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from flexff.plant.model import PlantModel, Variant, get_variant
+from flexff.plant.model import PlantModel
+from flexff.plant.variants import Variant, get_variant
 
 FRICTION_FREE = {f"tau_coulomb{i}": 0.0 for i in (1, 2, 3)}
 

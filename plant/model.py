@@ -10,13 +10,11 @@ is a parameter: zero friction or noise switches it off; the coupling is structur
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from functools import cached_property
 
 import casadi as ca
 import numpy as np
 
-from flexff.fmu.errors import InputError
 from flexff.plant.actuator import encoder_reading, friction_torque, motor_torque
 from flexff.plant.dynamics import reduced_dynamics
 from flexff.plant.kinematics import (
@@ -26,32 +24,9 @@ from flexff.plant.kinematics import (
     generalized_coordinates,
     shoulder_angles,
 )
-from flexff.plant.parameters import HARDWARE, NOMINAL, PlantParameters
+from flexff.plant.parameters import PlantParameters
 from flexff.plant.signals import CURRENTS, ENCODERS, TORQUES, TRUE_POSITION, TRUE_VELOCITY
-
-
-@dataclass(frozen=True)
-class Variant:
-    """A named plant: its true parameter values and whether the parasitic mode is modelled."""
-
-    name: str
-    parameters: PlantParameters
-    parasitic_mode: bool
-
-
-VARIANTS = {
-    "nominal": Variant("nominal", NOMINAL, parasitic_mode=False),
-    "hardware": Variant("hardware", HARDWARE, parasitic_mode=True),
-}
-
-
-def get_variant(name: str) -> Variant:
-    """The variant called `name`, or an InputError listing the known ones."""
-    try:
-        return VARIANTS[name]
-    except KeyError:
-        raise InputError(
-            f"unknown plant variant {name!r}: choose one of {', '.join(VARIANTS)}") from None
+from flexff.plant.variants import Variant, get_variant
 
 
 class PlantModel:

@@ -9,10 +9,12 @@ the lowest that knows the manipulator, so that every package above can import th
 from __future__ import annotations
 
 from collections.abc import Sequence
-
-import casadi as ca
+from typing import TYPE_CHECKING
 
 from flexff.fmu.system import Variable
+
+if TYPE_CHECKING:  # CasADi loads where a System is built, not where signals are named
+    import casadi as ca
 
 Signals = tuple[Variable, ...]
 
@@ -55,6 +57,8 @@ def units(*groups: Sequence[Variable]) -> tuple[str, ...]:
 def pick(vector: ca.SX, layout: Sequence[Variable], wanted: Sequence[Variable]) -> ca.SX:
     """The elements of `vector`, whose elements carry the signals of `layout` in that order,
     that carry the signals `wanted` (by name), in the order of `wanted`."""
+    import casadi as ca
+
     index = {v.name: k for k, v in enumerate(layout)}
     missing = [v.name for v in wanted if v.name not in index]
     if missing:

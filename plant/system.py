@@ -7,7 +7,8 @@ from functools import cache
 import casadi as ca
 
 from flexff.fmu.system import Parameter, System, Variable
-from flexff.plant.model import PlantModel, Variant
+from flexff.plant.model import PlantModel
+from flexff.plant.variants import Variant
 
 _STATE_INFO = {
     "q_x": ("m", "end-effector x position"), "q_y": ("m", "end-effector y position"),

@@ -5,16 +5,21 @@
 - `rk4_reference()`: the FMU's integration scheme re-done in Python on the CasADi functions;
 - `normals()`: the FMU's noise generator (xoshiro256** + Box-Muller) re-done in Python;
 - `LoggedSlave`: an fmpy FMU2Slave whose log messages are collected in a list;
-- `build_toy()`, `status_of()`: building into pytest's temporary folder, FMI status of a call.
+- `build_toy()`, `status_of()`: building into pytest's temporary folder, FMI status of a call;
+- `misbehaving()`: a built FMU rebuilt from its sources with FMI functions of its own, for the
+  faults of FMUs from elsewhere (a crash in one call, a state restore that is slightly off).
 """
 
 from __future__ import annotations
 
 import math
+import re
 import shutil
+import zipfile
 from pathlib import Path
 
 import casadi as ca
+import fmpy
 import numpy as np
 import pytest
 from fmpy import calloc, extract, free, read_model_description
@@ -28,6 +33,7 @@ from fmpy.fmi2 import (
 )
 
 from flexff.fmu import build_fmu
+from flexff.fmu.compile import run_compiler
 from flexff.fmu.system import Parameter, System, Variable
 
 DUFFING_PARAMS = {"m": 0.5, "k": 200.0, "c": 0.4, "alpha": 5e4, "q0": 0.05, "v0": 0.0,
@@ -224,3 +230,30 @@ def status_of(call, *args, **kwargs) -> int:
         return call(*args, **kwargs)
     except FMICallException as exc:
         return exc.status
+
+
+def misbehaving(fmu: Path, target: Path, wrappers: str) -> Path:
+    """A copy of the flexff FMU `fmu` at `target` whose binary is rebuilt from its sources/
+    with the C code `wrappers` appended to fmi2Functions.c. Every FMI function `wrappers`
+    defines replaces the FMU's own, which stays callable as `real_<name>` (fmi2DoStep ->
+    real_fmi2DoStep)."""
+    folder = target.with_suffix(".unpacked")
+    with zipfile.ZipFile(fmu) as zf:
+        zf.extractall(folder)
+    source = folder / "sources" / "fmi2Functions.c"
+    text = source.read_text()
+    for name in set(re.findall(r"^\w+ (fmi2\w+)\(", wrappers, flags=re.M)):
+        text, count = re.subn(rf"^(\w+) {name}\(", rf"\1 real_{name}(", text, flags=re.M)
+        assert count == 1, f"{name} is not defined once in {source}"
+    source.write_text(text + "\n" + wrappers)
+    md = read_model_description(str(fmu))
+    sources = [folder / "sources" / f for f in
+               md.buildConfigurations[0].sourceFileSets[0].sourceFiles]
+    library = folder / "binaries" / fmpy.platform / f"{md.coSimulation.modelIdentifier}.so"
+    run_compiler(sources, library, [folder / "sources"], libraries=("-lm", "-ldl"))
+    with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as zf:
+        for path in sorted(folder.rglob("*")):
+            if path.is_file():
+                zf.write(path, path.relative_to(folder).as_posix())
+    shutil.rmtree(folder)
+    return target

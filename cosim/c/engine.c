@@ -42,15 +42,16 @@ static const Layout LAYOUT[] = {
     FIELD(FmuPlan, gather), FIELD(FmuPlan, gain), FIELD(FmuPlan, offset), FIELD(FmuPlan, in_values),
     FIELD(FmuPlan, n_out), FIELD(FmuPlan, out_vr), FIELD(FmuPlan, out_values),
     FIELD(FmuPlan, read_before), FIELD(FmuPlan, read_after), FIELD(FmuPlan, typed_in),
-    FIELD(FmuPlan, typed_out),
-    SIZE(Run), FIELD(Run, step), FIELD(Run, steps), FIELD(Run, n_fmus), FIELD(Run, fmus),
+    FIELD(FmuPlan, typed_out), FIELD(FmuPlan, task_overruns), FIELD(FmuPlan, task_seen),
+    SIZE(Run), FIELD(Run, step), FIELD(Run, start_time), FIELD(Run, steps), FIELD(Run, n_fmus),
+    FIELD(Run, fmus),
     FIELD(Run, bus), FIELD(Run, n_bus), FIELD(Run, n_sources), FIELD(Run, sources),
     FIELD(Run, record), FIELD(Run, columns), FIELD(Run, n_columns), FIELD(Run, typed),
     FIELD(Run, typed_record), FIELD(Run, tet), FIELD(Run, fmu_tet), FIELD(Run, lateness),
     FIELD(Run, paced), FIELD(Run, period), FIELD(Run, start), FIELD(Run, max_overruns),
     FIELD(Run, grace_steps), FIELD(Run, overruns), FIELD(Run, counted),
     FIELD(Run, first_overruns), FIELD(Run, failed_fmu), FIELD(Run, failed_k),
-    FIELD(Run, failed_call), FIELD(Run, error),
+    FIELD(Run, failed_call), FIELD(Run, error), FIELD(Run, task_overruns),
 };
 
 int engine_layout(long i, const char **structure, const char **field, size_t *offset,
@@ -178,6 +179,18 @@ static int advance(FmuPlan *s, double t, double h) {
     return terminate ? 3 : status;
 }
 
+/* The slower tasks' rate-transition overruns since the last call (in the step just made). */
+static long new_task_overruns(Run *r) {
+    long missed = 0;
+    for (long i = 0; i < r->n_fmus; i++) {
+        FmuPlan *s = &r->fmus[i];
+        if (s->task_overruns == NULL) continue;
+        missed += *s->task_overruns - s->task_seen;
+        s->task_seen = *s->task_overruns;
+    }
+    return missed;
+}
+
 int engine_run(Run *r, long k0, long k1) {
     const double h = r->step;
     if (check_plan(r, k0, k1) != RUN_OK) return RUN_BAD_PLAN;
@@ -217,7 +230,7 @@ int engine_run(Run *r, long k0, long k1) {
             for (long j = 0; j < r->n_columns; j++) row[j] = r->bus[r->columns[j]];
         if (r->typed_record && r->typed(-1, 2, k)) return fail(r, -1, CALL_TYPED, k);
         if (k == r->steps) return RUN_OK;
-        const double t = (double)k * h;
+        const double t = r->start_time + (double)k * h;
         for (long i = 0; i < r->n_fmus; i++) {
             FmuPlan *s = &r->fmus[i];
             struct timespec a, b;
@@ -233,10 +246,15 @@ int engine_run(Run *r, long k0, long k1) {
         clock_gettime(CLOCK_MONOTONIC, &t1);
         r->tet[k] = seconds(&t0, &t1);
         r->lateness[k] = late;
-        if (r->paced && r->tet[k] + late > r->period) {
+        const long missed = new_task_overruns(r);
+        const int overran = r->paced && r->tet[k] + late > r->period;
+        r->task_overruns += missed;
+        if (overran) {
             if (r->overruns < 16) r->first_overruns[r->overruns] = k;
             r->overruns++;
-            if (k >= r->grace_steps) r->counted++;
+        }
+        if (r->paced && (overran || missed > 0)) {
+            if (k >= r->grace_steps) r->counted += overran + missed;
             if (r->max_overruns > 0 && r->counted >= r->max_overruns) {
                 r->failed_k = k;
                 return RUN_OVERRUN;

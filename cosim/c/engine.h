@@ -39,10 +39,15 @@ typedef struct {
     const unsigned *out_vr;
     double *out_values;       /* the FMU's block of the bus */
     int read_before, read_after, typed_in, typed_out;
+    /* a slower task of the FMU (a flexff network in its own task): its count of results not
+     * ready when due (NULL: none), and the count seen so far */
+    const long *task_overruns;
+    long task_seen;
 } FmuPlan;
 
 typedef struct {
     double step;              /* communication step [s] */
+    double start_time;        /* the time of point 0 [s]: point k is at start_time + k * step */
     long steps;               /* the run's last point */
     long n_fmus;
     FmuPlan *fmus;
@@ -65,12 +70,14 @@ typedef struct {
     long max_overruns;        /* 0: never stop */
     long grace_steps;         /* overruns before this step are counted but never stop the run */
     long overruns;            /* every step whose TET plus lateness passed its period */
-    long counted;             /* those after the grace steps, which max_overruns limits */
+    long counted;             /* those and task_overruns after the grace steps, which
+                               * max_overruns limits */
     long first_overruns[16];
     /* where it stopped: failed FMU, call and point (or the step of the last overrun) */
     long failed_fmu, failed_k;
     int failed_call;
     char error[256];          /* RUN_BAD_PLAN: what does not fit */
+    long task_overruns;       /* slower tasks' results not ready when due (rate transitions) */
 } Run;
 
 /* Entry i of the layout table (field NULL: the structure's size); 0, or -1 past its end. */

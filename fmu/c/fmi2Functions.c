@@ -251,11 +251,19 @@ fmi2Status fmi2Terminate(fmi2Component comp) {
     if (!c) return fmi2Error;
     c->d.mode = MODE_TERMINATED;
 #if HAS_NETWORK
+#if NET_TASK
+    if (task_settle(c, 0) != fmi2OK) return fmi2Error; /* its call time counts too */
+#endif
     if (c->net != NULL) {
         double t[4];
         net_call_times(c->net, t);
         log_msg(c, fmi2OK, LOG_NETWORK, "network calls: %.0f, p50 %.1f us, p99 %.1f us, "
-                "max %.1f us", t[0], 1e6 * t[1], 1e6 * t[2], 1e6 * t[3]);
+                "max %.1f us%s", t[0], 1e6 * t[1], 1e6 * t[2], 1e6 * t[3],
+                NET_TASK ? ", in its own task" : "");
+#if NET_TASK
+        log_msg(c, fmi2OK, LOG_NETWORK, "network task every %d steps: %ld rate-transition "
+                "overruns (results not ready when due)", NET_PERIOD, task_overruns(c));
+#endif
     }
 #endif
     return fmi2OK;
@@ -263,13 +271,36 @@ fmi2Status fmi2Terminate(fmi2Component comp) {
 
 #if HAS_NETWORK
 /* flexff's own entry, not part of FMI: the network's call times so far (calls, p50, p99 and
- * max in seconds), which flexff's master puts in its real-time report. 0, or -1 for a
- * component that is not a live instance with a network. */
+ * max in seconds), which flexff's master puts in its real-time report after a run. 0, or -1
+ * for a component that is not a live instance with a network. */
 __attribute__((visibility("default"))) int flexff_network_times(fmi2Component comp,
                                                                 double times[4]) {
     Instance *c = (Instance *)comp;
     if (registry_find(comp) < 0 || c->magic != INSTANCE_MAGIC || c->net == NULL) return -1;
+#if NET_TASK
+    task_settle(c, 0); /* a call still running is waited for: the worker idle while its
+                        * times are read (masters read them after a run) */
+#endif
     net_call_times(c->net, times);
+    return 0;
+}
+
+/* flexff's own entry, not part of FMI: where the network runs. *period: its call period in
+ * communication steps; *overruns: NULL if it runs in the step, else the instance's count of
+ * rate-transition overruns (valid until fmi2FreeInstance; written by the thread that steps the
+ * instance, which a master watches after each step). 0, or -1 as flexff_network_times. */
+__attribute__((visibility("default"))) int flexff_network_task(fmi2Component comp, long *period,
+                                                               const long **overruns) {
+    Instance *c = (Instance *)comp;
+    if (registry_find(comp) < 0 || c->magic != INSTANCE_MAGIC || c->net == NULL ||
+        period == NULL || overruns == NULL)
+        return -1;
+    *period = NET_PERIOD;
+#if NET_TASK
+    *overruns = task_overruns_counter(c);
+#else
+    *overruns = NULL;
+#endif
     return 0;
 }
 #endif
@@ -277,6 +308,11 @@ __attribute__((visibility("default"))) int flexff_network_times(fmi2Component co
 fmi2Status fmi2Reset(fmi2Component comp) {
     Instance *c = ENTER(fmi2Reset);
     if (!c) return fmi2Error;
+#if HAS_NETWORK
+#if NET_TASK
+    task_settle(c, 0); /* the worker idle before its Data is reset; a failed call is dropped */
+#endif
+#endif
     set_defaults(c);
     return fmi2OK;
 }
@@ -440,6 +476,10 @@ static int data_problem(const Instance *c, const Data *d, char *why, size_t size
         PROBLEM("network result at this point");
     if (first_nonfinite(d->net_last, N_R) >= 0 || first_nonfinite(d->net_before, N_R) >= 0)
         PROBLEM("last network results");
+    if ((d->net_job != 0 && d->net_job != 1) || (d->net_job && (!NET_TASK || d->net_step < 1)))
+        PROBLEM("network task flag %d at step %ld", d->net_job, d->net_step);
+    if (d->net_job && first_nonfinite(d->net_job_r, N_R) >= 0)
+        PROBLEM("network task result");
     if (NET_PRECOMPUTED && initialized) {
         /* Row net_step of the table is the current communication point. */
         if (d->net_step >= c->table_rows)
@@ -490,6 +530,11 @@ fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     if (!c) return fmi2Error;
     State *st = state_for_writing(c, FMUstate, "fmi2GetFMUstate");
     if (!st) return fmi2Error;
+#if HAS_NETWORK
+#if NET_TASK
+    if (task_settle(c, 0) != fmi2OK) return fmi2Error; /* a pending call's result goes along */
+#endif
+#endif
     memcpy(&st->d, &c->d, sizeof c->d);
     return fmi2OK;
 }
@@ -499,6 +544,11 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
     if (!c) return fmi2Error;
     State *st = as_state(c, FMUstate, "fmi2SetFMUstate");
     if (!st) return fmi2Error;
+#if HAS_NETWORK
+#if NET_TASK
+    task_settle(c, 0); /* the worker idle; the call it made for the state left is dropped */
+#endif
+#endif
     memcpy(&c->d, &st->d, sizeof c->d);
     return fmi2OK;
 }

@@ -4,6 +4,7 @@
  *   - wrapper.c: instance data, logging, live instances, model evaluation, RK4, variables;
  *   - wrapper_network.c (models with an embedded network, HAS_NETWORK): the network and the
  *     precomputation table;
+ *   - wrapper_task.c (NET_TASK): the network's own task, a worker thread per instance;
  *   - rng.c: the noise generator.
  * Per model, config.h holds identity, sizes, value references, names and start values, and
  * model.c/h the CasADi-generated functions (the layout of the Modelica Reference-FMUs).
@@ -36,6 +37,9 @@
 #include <dlfcn.h>
 #include <stdlib.h>
 #include "onnx_network.h"
+#if NET_TASK
+#include <pthread.h>
+#endif
 #endif
 
 /* C99 has no zero-length arrays: size buffers of empty blocks as one element. */
@@ -66,6 +70,12 @@ typedef char assert_sz_arg[SZ_ARG >= 5 ? 1 : -1];
 #define NET_STEP_MAX (1L << 53)    /* communication points of a run (285,000 years at 1 kHz): a
                                     * serialized step counter beyond is corrupt, and counting on
                                     * from near LONG_MAX would overflow */
+
+#if HAS_NETWORK
+#if NET_TASK
+typedef struct Task Task; /* wrapper_task.c */
+#endif
+#endif
 
 typedef int (*CasadiFn)(const casadi_real **arg, casadi_real **res, casadi_int *iw,
                         casadi_real *w, int mem);
@@ -113,6 +123,10 @@ typedef struct {
     fmi2Real net_before[N_R];
     float net_state[DIM(NET_STATE_SIZE)];     /* recurrent state after the last committed call */
     float net_state_new[DIM(NET_STATE_SIZE)]; /* ... and after the call at this point */
+    int net_job;                  /* NET_TASK: a call started at the last call point, its result
+                                   * due at this one (in net_job_r once the task has settled) */
+    fmi2Real net_job_r[N_R];
+    float net_job_state[DIM(NET_STATE_SIZE)];
 #endif
 } Data;
 
@@ -147,6 +161,9 @@ typedef struct {
     double *precomputed; /* NET_PRECOMPUTED: the result of every call point of the table, or
                           * NULL until needed (ExitInitializationMode, or the first call point
                           * after a state was restored into an instance never initialized) */
+#if NET_TASK
+    Task *task;          /* the network's own task (wrapper_task.c) */
+#endif
 #endif
 } Instance;
 
@@ -205,6 +222,21 @@ fmi2Status check_table_inputs(Instance *c);
 fmi2Status net_prepare(Instance *c);
 void net_commit(Instance *c);
 void net_restart(Instance *c);
+fmi2Status check_network_inputs(Instance *c, const fmi2Real *features, const fmi2Real *u,
+                                fmi2Real t);
+fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t);
+
+#if NET_TASK
+/* ---------------------------------------------------------------------------------------- */
+/* wrapper_task.c                                                                              */
+
+int task_start(Instance *c, char *error, size_t size);
+void task_stop(Instance *c);
+void task_post(Instance *c, const fmi2Real *features, const float *state);
+fmi2Status task_settle(Instance *c, int due);
+long task_overruns(const Instance *c);
+const long *task_overruns_counter(const Instance *c);
+#endif
 #endif
 
 #endif

@@ -4,6 +4,11 @@
  * its result r enters output(), extrapolated linearly from the last two results between
  * calls. With NET_PRECOMPUTED the graph runs once at initialization over a table of the inputs
  * in resources/ (each step's inputs are checked against it), with equal results.
+ *
+ * With NET_TASK the graph runs in its own task (wrapper_task.c): the call started at call point
+ * k on the inputs of step k gives its result at k + NET_PERIOD, and the results are extrapolated
+ * one period further to make up for that delay. Until the first result, r is zero (the initial
+ * output of a rate transition, as in Simulink): the step never runs the network itself.
  */
 
 #include "wrapper.h"
@@ -120,6 +125,9 @@ int net_load(Instance *c, fmi2String resources, char *error, size_t size) {
     }
     c->net = net_open(library, model, &NET_SPEC, error, size);
     if (c->net == NULL) return -1;
+#if NET_TASK
+    if (task_start(c, error, size) != 0) return -1;
+#endif
     if (NET_PRECOMPUTED) {
         char table[4096];
         if (resource_path(resources, NET_TABLE_FILE, table, sizeof table) != 0) {
@@ -133,6 +141,9 @@ int net_load(Instance *c, fmi2String resources, char *error, size_t size) {
 }
 
 void net_unload(Instance *c) {
+#if NET_TASK
+    task_stop(c); /* before the network it runs is closed */
+#endif
     net_close(c->net);
     free(c->table);
     free(c->precomputed);
@@ -140,7 +151,7 @@ void net_unload(Instance *c) {
     c->table = c->precomputed = NULL;
 }
 
-static fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t) {
+fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t) {
     int bad = first_nonfinite(r, N_R);
     if (bad >= 0)
         return fail(c, "The network returned %g (result %d of %d) at t = %.17g: not finite.",
@@ -151,8 +162,8 @@ static fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t
 /* The network's inputs computed from the FMU's inputs u must be finite: a non-finite one
  * (inverse kinematics of a reference outside the workspace, say) would only come back as
  * "the network returned nan", which names neither the cause nor the culprit. */
-static fmi2Status check_network_inputs(Instance *c, const fmi2Real *features, const fmi2Real *u,
-                                       fmi2Real t) {
+fmi2Status check_network_inputs(Instance *c, const fmi2Real *features, const fmi2Real *u,
+                                fmi2Real t) {
     const int bad = first_nonfinite(features, NET_N_IN);
     char inputs[1024];
     if (bad < 0) return fmi2OK;
@@ -271,10 +282,45 @@ static fmi2Status net_call(Instance *c) {
     return check_finite_result(c, c->d.net_new, c->d.time);
 }
 
+#if NET_TASK
+/* NET_TASK: at a call point the result of the last one becomes the latest (waiting for it if
+ * the task is not done) and the inputs of this one's call are evaluated into c->features
+ * (net_commit starts it); c->r extrapolates the last two results to the current point, one to
+ * two periods after the later one started (zero before the first result). */
+static fmi2Status task_prepare(Instance *c, long phase) {
+    if (phase == 0) {
+        if (c->d.net_job) {
+            if (task_settle(c, 1) != fmi2OK ||
+                check_finite_result(c, c->d.net_job_r, c->d.time) != fmi2OK)
+                return fmi2Error;
+            memcpy(c->d.net_before, c->d.net_step == NET_PERIOD ? c->d.net_job_r : c->d.net_last,
+                   sizeof c->d.net_before);
+            memcpy(c->d.net_last, c->d.net_job_r, sizeof c->d.net_last);
+            memcpy(c->d.net_state, c->d.net_job_state, sizeof c->d.net_state);
+            c->d.net_job = 0;
+        }
+        if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
+            return fail(c, "Evaluating the network's inputs failed.");
+        if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
+    }
+    if (c->d.net_step < NET_PERIOD) {
+        memset(c->r, 0, sizeof c->r);
+        return fmi2OK;
+    }
+    const double s = (double)(phase + NET_PERIOD) / NET_PERIOD;
+    for (int i = 0; i < N_R; i++)
+        c->r[i] = c->d.net_last[i] + s * (c->d.net_last[i] - c->d.net_before[i]);
+    return fmi2OK;
+}
+#endif
+
 /* c->r at the current point: at a call point the network runs on the current inputs (again
  * only if they changed since), in between its last two results are extrapolated. */
 fmi2Status net_prepare(Instance *c) {
     const long phase = c->d.net_step % NET_PERIOD;
+#if NET_TASK
+    return task_prepare(c, phase);
+#endif
     if (phase == 0) {
         if (!c->d.net_pending || memcmp(c->d.net_u, c->d.u, sizeof c->d.u) != 0) {
             c->d.net_pending = 0; /* a failed call leaves no result to reuse for any inputs */
@@ -291,8 +337,15 @@ fmi2Status net_prepare(Instance *c) {
     return fmi2OK;
 }
 
-/* A successful step: a call point's result and state become the committed ones. */
+/* A successful step: a call point's result and state become the committed ones (with
+ * NET_TASK, the point's call starts instead). */
 void net_commit(Instance *c) {
+#if NET_TASK
+    if (c->d.net_step % NET_PERIOD == 0)
+        task_post(c, c->features, c->d.net_state); /* the inputs task_prepare evaluated */
+    c->d.net_step++;
+    return;
+#endif
     if (c->d.net_step % NET_PERIOD == 0) {
         memcpy(c->d.net_before, c->d.net_step == 0 ? c->d.net_new : c->d.net_last,
                sizeof c->d.net_before);
@@ -305,6 +358,10 @@ void net_commit(Instance *c) {
 
 /* Back to the first call point with the zero state (the other fields are zero already). */
 void net_restart(Instance *c) {
+#if NET_TASK
+    task_settle(c, 0); /* the worker idle; its result, of the run left, is dropped */
+    c->d.net_job = 0;
+#endif
     c->d.net_step = 0;
     c->d.net_pending = 0;
     memset(c->d.net_state, 0, sizeof c->d.net_state);

@@ -18,7 +18,8 @@ from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.controllers.training_range import MARGIN, RangeExcess
 from flexff.cosim.config import config_examples, parse_config
 from flexff.cosim.references import thesis_evaluation
-from flexff.cosim.run import range_warning, run_config
+from flexff.cosim.run import range_warning, run_config, simulate
+from flexff.cosim.scenario import resolve
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
 from flexff.learning.dataset import REFERENCE_SIGNALS
@@ -59,8 +60,10 @@ def metadata(model) -> dict[str, str]:
     return {p.key: p.value for p in onnx.load(str(model)).metadata_props}
 
 
-def independent_forces(model, reference) -> np.ndarray:
-    """The documented scheme with onnxruntime's Python API, step by step at the model rate."""
+def independent_forces(model, reference, task: bool = False) -> np.ndarray:
+    """The documented scheme with onnxruntime's Python API, step by step at the model rate;
+    `task`: the network in its own task, each call's result used one model period later and
+    extrapolated one period further (zero before the first)."""
     meta = metadata(model)
     period = round(1e3 / float(meta["sample_rate_hz"]))
     features = reference_features(reference, meta["feature_set"])
@@ -74,9 +77,11 @@ def independent_forces(model, reference) -> np.ndarray:
         calls.append(result[0][0])
         state = {n[:-len("_out")]: v for n, v in zip(names[1:], result[1:])}
     calls = np.array(calls)
-    forces = np.empty((len(features), calls.shape[1]))  # 2 forces or 3 currents
-    for k in range(len(features)):
+    forces = np.zeros((len(features), calls.shape[1]))  # 2 forces or 3 currents
+    for k in range(period if task else 0, len(features)):
         j, phase = divmod(k, period)
+        if task:
+            j, phase = j - 1, phase + period
         forces[k] = calls[j] + phase / period * (calls[j] - calls[max(j - 1, 0)])
     if meta["prior"] == "rigid-body":
         labels = "currents" if json.loads(meta["output_signals"])[0] == "i1_ff" else "forces"
@@ -106,6 +111,26 @@ def test_fmu_forces_equal_an_independent_runner(models, fmus, reference, kind):
     got = fmu_forces(fmus[kind, "step"], reference)[:STEPS]
     scale = np.abs(expected).max()
     assert np.abs(got - expected).max() <= 1e-9 * scale
+
+
+def test_task_mode_uses_each_call_one_period_later(models, reference, tmp_path):
+    fmu = build_fmu(learned_feedforward_system(models / "lstm.onnx", 1e-3, task=True),
+                    tmp_path / "lstm-task.fmu")
+    expected = independent_forces(models / "lstm.onnx", reference, task=True)[:STEPS]
+    got = fmu_forces(fmu, reference)[:STEPS]
+    assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
+
+
+def test_a_run_configuration_puts_the_network_in_its_own_task(models, tmp_path):
+    config = parse_config({"run": {"stop": 0.1}, "reference": {"kind": "thesis-eval"},
+                           "feedforward": {"kind": "learned", "model": str(models / "lstm.onnx"),
+                                           "mode": "task"}}, name="task")
+    recording = simulate(resolve(config, tmp_path), progress=False)
+    tasks = recording.timing.table(recording.wall_s)["tasks"]
+    assert set(tasks) == {"base", "feedforward.network"}
+    assert tasks["feedforward.network"]["period_us"] == pytest.approx(10e3)  # the model's 100 Hz
+    forces = recording["Fx_ff"]  # the LSTM has no prior: zero until the first result
+    assert np.all(forces[:10] == 0.0) and forces[10] != 0.0
 
 
 @pytest.mark.parametrize("kind", list(TINY))

@@ -145,7 +145,7 @@ def test_cli_run_one_and_several(tmp_path):
     result = flexff("run", str(one), "-o", str(tmp_path / "single"))
     assert result.returncode == 0, result.stderr
     assert "e2 = (" in result.stdout
-    for name in ("signals.npz", "signals.csv", "metrics.json", "run.json", "path.png",
+    for name in ("signals.parquet", "metrics.json", "run.json", "path.png",
                  "error.png", "forces.png"):
         assert (tmp_path / "single" / name).is_file(), name
     bad = tmp_path / "bad.toml"

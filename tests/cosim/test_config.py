@@ -135,7 +135,7 @@ def test_unknown_record_signal_fails_before_the_run(tmp_path):
     path = write(tmp_path, GOOD + '[record]\nsignals = ["x", "z"]\n')
     with pytest.raises(ConfigError, match=r"record.signals: cannot record unknown signal 'z'"):
         run_config(path, tmp_path / "out")
-    assert not (tmp_path / "out" / "signals.npz").exists()
+    assert not (tmp_path / "out" / "signals.parquet").exists()
 
 
 def test_not_toml(tmp_path):

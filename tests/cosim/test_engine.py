@@ -65,8 +65,8 @@ def _short_array():
     (_without_gain, "FmuPlan", "field 'gain' is at offset 64, 8 bytes in C, absent in ctypes"),
     (_long_flag, "FmuPlan", "field 'fmi3' is at offset 0, 4 bytes in C, at offset 0, 8 bytes"),
     (_extra_field, "FmuPlan", "field 'spare' is absent in C"),
-    (_short_array, "Run", "field 'first_overruns' is at offset 192, 128 bytes in C, at offset "
-                          "192, 120 bytes in ctypes"),
+    (_short_array, "Run", "field 'first_overruns' is at offset 200, 128 bytes in C, at offset "
+                          "200, 120 bytes in ctypes"),
 ], ids=["missing", "type", "extra", "array"])
 def test_a_wrong_mirror_is_caught(layouts, make, c_name, message):
     with pytest.raises(EngineLayoutError, match="does not match the C structure") as caught:

@@ -33,7 +33,7 @@ import tomli_w
 
 from flexff.cli import main
 from flexff.cosim.config import config_examples, expanded, expanded_text, load_config, parse_config
-from flexff.cosim.recording import NPZ_NAME, load_recording
+from flexff.cosim.recording import PARQUET_NAME, PARTS_NAME, load_recording
 from flexff.cosim.run import run_config, simulate_config
 from flexff.cosim.scenario import resolve
 from flexff.cosim.schema import ConfigError
@@ -126,7 +126,7 @@ def assert_config_error(path: Path, out: Path, key: str, fragment: str, capsys) 
     with pytest.raises(ConfigError) as error:
         run_config(load_config(path), out)
     assert error.value.key == key and fragment in str(error.value), str(error.value)
-    assert not (out / NPZ_NAME).exists()
+    assert not (out / PARQUET_NAME).exists() and not (out / PARTS_NAME).exists()
     assert_cli_error(path, out, key, fragment, capsys)
 
 
@@ -299,8 +299,7 @@ def test_recording_names_are_qualified(ref_fmu, tmp_path, capsys):
     path = write_config(tmp_path, merged(vdp_ft(ref_fmu), {"run": {"stop": 1.0}}))
     code, out, err = run_cli(["run", path, "-o", tmp_path / "out"], capsys)
     assert code == 0 and "real-time factor" in out, err
-    with np.load(tmp_path / "out" / NPZ_NAME) as data:
-        names = set(data.files)
+    names = {"time", *load_recording(tmp_path / "out").signals}
     assert {"time", "vdp.x0", "vdp.x1", FT_OUT, "ft.Int32_output", "ft2.Int32_output"} <= names
     assert all("." in n for n in names - {"time"})  # no short names outside the manipulator
     recording = load_recording(tmp_path / "out")
@@ -310,10 +309,10 @@ def test_recording_names_are_qualified(ref_fmu, tmp_path, capsys):
 def test_manipulator_recording_has_short_names(tmp_path):
     config = merged(SHORT_FORM, {"run": {"stop": 0.2}, "reference": {"duration": 0.2}})
     run_config(load_config(write_config(tmp_path, config)), tmp_path / "out")
-    with np.load(tmp_path / "out" / NPZ_NAME) as data:
-        assert {"plant.x", "x", "controller.Fx_fb", "Fx_fb"} <= set(data.files)
-        assert np.array_equal(data["plant.x"], data["x"])
-        assert np.array_equal(data["controller.Fx_fb"], data["Fx_fb"])
+    data = load_recording(tmp_path / "out").signals
+    assert {"plant.x", "x", "controller.Fx_fb", "Fx_fb"} <= set(data)
+    assert np.array_equal(data["plant.x"], data["x"])
+    assert np.array_equal(data["controller.Fx_fb"], data["Fx_fb"])
 
 
 
@@ -340,7 +339,8 @@ def test_csv_source_feeds_an_input_by_connection(ref_fmu, tmp_path):
 def test_short_names_only_in_manipulator_runs(ref_fmu, tmp_path, capsys):
     """Dahlquist's output is called x: a run of it alone records dq.x, not a manipulator x."""
     config = tmp_path / "dq.toml"
-    config.write_text(f'[run]\nstep = 0.1\nstop = 1.0\n[fmu.dq]\npath = "{ref_fmu("Dahlquist")}"\n')
+    config.write_text(f'[run]\nstep = 0.1\nstop = 1.0\n[fmu.dq]\npath = "{ref_fmu("Dahlquist")}"\n'
+                      '[record]\ncsv = true\n')
     code, _, err = run_cli(["run", config, "-o", tmp_path / "out"], capsys)
     assert code == 0, err
     assert sorted(load_recording(tmp_path / "out").signals) == ["dq.x"]

@@ -13,11 +13,14 @@ from flexff.cosim.plots import write_plots
 from flexff.cosim.recording import (
     CSV_NAME,
     NPZ_NAME,
+    PARQUET_NAME,
+    PARTS_NAME,
     Recording,
     atomic_write,
     load_recording,
     save_recording,
 )
+from flexff.fmu.errors import InputError
 
 
 def synthetic():
@@ -47,13 +50,15 @@ def test_metrics_by_hand():
         error_norms(np.zeros(1), 1e-3)
 
 
-def test_recording_round_trip_is_bit_exact(tmp_path, rng):
+def test_recording_round_trip_is_bit_exact(tmp_path, rng, monkeypatch):
+    monkeypatch.setattr("flexff.cosim.recording.CHUNK_BYTES", 300 * 8 * 5)  # four chunks
     time = np.arange(1001) * 1e-3
     signals = {name: rng.standard_normal(1001) * 10.0 ** rng.integers(-12, 3)
                for name in ("x_ref", "theta_s1", "i1", "Fx_ff")}
     signals["i1"][5] = np.nextafter(0.0, 1.0)  # a subnormal survives too
-    paths = save_recording(Recording(time, signals), tmp_path)
-    assert [p.name for p in paths] == [NPZ_NAME, CSV_NAME]
+    paths = save_recording(Recording(time, signals), tmp_path, csv=True)
+    assert [p.name for p in paths] == [PARQUET_NAME, CSV_NAME]
+    assert not (tmp_path / PARTS_NAME).exists()
     back = load_recording(tmp_path)
     assert list(back.signals) == list(signals)
     assert back.time.tobytes() == time.tobytes()
@@ -63,6 +68,29 @@ def test_recording_round_trip_is_bit_exact(tmp_path, rng):
     header = (tmp_path / CSV_NAME).read_text().splitlines()[0]
     assert header == "time,x_ref,theta_s1,i1,Fx_ff"
     assert np.array_equal(table, np.column_stack([time, *signals.values()]))
+
+
+def test_records_of_earlier_versions_still_load(tmp_path):
+    time = np.arange(5) * 0.1
+    with open(tmp_path / NPZ_NAME, "wb") as handle:
+        np.savez(handle, time=time, x=time**2)
+    back = load_recording(tmp_path)
+    assert back.time.tobytes() == time.tobytes() and back["x"].tobytes() == (time**2).tobytes()
+
+
+def test_typed_columns_round_trip(tmp_path):
+    time = np.arange(3) * 1.0
+    signals = {"n": np.array([1, -2, 3], dtype=np.int32), "b": np.array([True, False, True]),
+               "s": np.array(["a", "", "ccc"])}
+    save_recording(Recording(time, signals), tmp_path)
+    back = load_recording(tmp_path)
+    for name, values in signals.items():
+        assert back[name].dtype == values.dtype and np.array_equal(back[name], values)
+
+
+def test_a_folder_without_a_record_is_an_input_error(tmp_path):
+    with pytest.raises(InputError, match="no record"):
+        load_recording(tmp_path)
 
 
 def test_an_interrupted_write_leaves_no_file(tmp_path):

@@ -17,6 +17,7 @@ import tomli_w
 from lxml import etree
 
 from flexff.cosim.config import expanded, load_config
+from flexff.cosim.recording import load_recording
 from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.run import run_config, simulate_config
 from flexff.cosim.schema import ConfigError
@@ -115,10 +116,11 @@ def test_round_trip_runs_bit_equal_in_flexff(tmp_path, ssp):
     run_config(write_config(tmp_path), tmp_path / "toml")
     for name, path in (("ssp", ssp), ("plain", tmp_path / "plain.ssp")):
         run_config(path, tmp_path / name)
-        original = np.load(tmp_path / "toml/signals.npz")
-        loaded = np.load(tmp_path / name / "signals.npz")
-        assert sorted(original.files) == sorted(loaded.files)
-        for signal in original.files:
+        original = load_recording(tmp_path / "toml")
+        loaded = load_recording(tmp_path / name)
+        assert sorted(original.signals) == sorted(loaded.signals)
+        assert np.array_equal(original.time, loaded.time)
+        for signal in original.signals:
             assert np.array_equal(original[signal], loaded[signal]), (name, signal)
 
 

@@ -23,7 +23,7 @@ import tomli_w
 
 from flexff.cli import main
 from flexff.cosim.config import load_config
-from flexff.cosim.recording import NPZ_NAME, load_recording
+from flexff.cosim.recording import PARQUET_NAME, load_recording
 from flexff.cosim.run import simulate_config
 from flexff.cosim.schema import ConfigError, RunConfig
 from flexff.cosim.ssp import NS, export_ssp, load_ssp
@@ -111,7 +111,7 @@ def test_float32_gain_and_offset_apply(tmp_path, capsys, algorithm):
                        record={"signals": ["b.Float32_continuous_output"]})
     code, err = run_cli(["run", path, "-o", tmp_path / "out"], capsys)
     assert code == 0, err
-    recorded = load_recording(tmp_path / "out" / NPZ_NAME)["b.Float32_continuous_output"]
+    recorded = load_recording(tmp_path / "out")["b.Float32_continuous_output"]
     expected = affine(np.full(recorded.size, 1.25, np.float32), GAIN, OFFSET, np.float32)
     assert_exact(recorded, expected, "TOML, flexff run")
     ssp = export_ssp(load_config(path), tmp_path / "system.ssp")
@@ -248,7 +248,7 @@ def assert_refused(path: Path, folder: Path, key: str, fragment: str, capsys) ->
     assert code == 2, err
     assert err.count("\n") == 1 and err.startswith("flexff: error:"), err
     assert f"{key}: " in err and fragment in err, err
-    assert not (folder / "out" / NPZ_NAME).exists()
+    assert not (folder / "out" / PARQUET_NAME).exists()
 
 
 # -- everything else: refused, naming the connection ---------------------------------------

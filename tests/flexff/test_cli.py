@@ -45,7 +45,8 @@ def test_fmu_build_and_validate(tmp_path):
 
 
 def test_fmu_validate_exit_codes(tmp_path):
-    """0 every FMU passes, 1 one has problems, 2 a path is no file (the others still checked)."""
+    """0 every FMU passes (warnings allowed), 1 one has errors, 2 a path is no file (the others
+    still checked)."""
     junk = tmp_path / "junk.fmu"
     junk.write_text("not a zip")
     good = REFERENCE_FMUS / "fmi2" / "Dahlquist.fmu"
@@ -80,10 +81,15 @@ def test_bench_prints_json(tmp_path):
         paced = figures["realtime"][kind]
         assert paced["period_us"] == 1000.0 and paced["overruns"] >= 0
         assert set(paced["tet_us_per_fmu"]) == {"feedforward", "controller", "plant"}
+        assert set(paced["tasks"]) == {"base", "feedforward.network"}  # the network's own
+        assert paced["tasks"]["feedforward.network"]["overruns"] >= 0
+        assert set(paced["tracking_e2"]["task_over_single_rate"]) == {"x", "y"}
     idle = figures["realtime"]["idle"]  # the machine's floor, as long as one paced run
     assert idle["steps"] == 500 and idle["overruns"] >= 0 and idle["lateness_us"]["max"] > 0
     floor = figures["realtime"]["one_node_graph"]  # at initialization, then every 40th step
     assert floor["network_call_us"]["calls"] == 1 + 13 and floor["network_call_us"]["p50"] > 0
+    slow = figures["realtime"]["slow_network"]  # about 3 ms a call at 25 Hz, in its own task
+    assert slow["tasks"]["slow.network"]["calls"] == 13 and slow["overruns"] >= 0
 
 
 @pytest.mark.slow
@@ -96,7 +102,8 @@ def test_demo_runs(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "physics-guided FF" in result.stdout and "training [s]" in result.stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert list(summary["scenarios"]) == ["pid", "rigid-body", "lstm", "cnn-lstm", "tcn", "pgnn"]
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "lstm", "cnn-lstm",
+                                          "tcn", "pgnn", "limit"]
     for model, e2 in (("lstm", 100), ("tcn", 100), ("cnn-lstm", 40), ("pgnn", 100)):
         for axis in ("x", "y"):
             assert summary["scenarios"][model][axis]["e2_ratio"] >= e2, (model, axis)

@@ -23,6 +23,7 @@ WRITERS = {
     "bench": ["bench", "--steps", "10", "-o", "{out}/bench.json"],
     "export": ["export", "{tmp}/no-run", "-o", "{out}/model.onnx"],
     "ssp export": ["ssp", "export", "{config}", "-o", "{out}/system.ssp"],
+    "identify": ["identify", "{tmp}/no-data", "-o", "{out}"],
 }
 
 
@@ -96,8 +97,8 @@ def test_an_output_on_a_read_only_file_system(capsys, tmp_path, config, read_onl
 @pytest.mark.parametrize("args, text, message", [
     (["bench", "--steps", "0"], None, "bench steps must be a whole number of at least 1, got 0"),
     (["run", "{config}", "-o", "{tmp}/out"], SHORT.replace("stop = 1.0", "stop = 1e7"),
-     r"short.toml: run.stop, run.step: recording 7 signals at 10000000001 points needs "
-     r"560,000 MB, more than the 16,000 MB of memory available: record fewer signals"),
+     r"short.toml: run.stop, run.step: sampling the reference's 6 signals at 10000000001 "
+     r"points needs 480,000 MB, more than the 16,000 MB of memory available: shorten run.stop"),
     (["run", "{config}", "-o", "{tmp}/out"], SHORT.replace("stop = 1.0", "step = 1e-9"),
      r"short.toml: run.step: sampling the 1 s reference every 1e-09 s needs 56,000 MB, more "
      r"than the 16,000 MB of memory available: a larger run.step"),
@@ -111,7 +112,7 @@ def test_bad_input(capsys, monkeypatch, tmp_path, config, args, text, message):
     code, line = fails(capsys, args, config=config, tmp=tmp_path)
     assert code == 2 and line.startswith("flexff: error: ")
     assert message in line, line
-    assert not (tmp_path / "out" / "signals.npz").exists()
+    assert not (tmp_path / "out" / "signals.parquet").exists()
 
 
 @pytest.mark.parametrize("error, message", [
@@ -145,8 +146,9 @@ def test_an_interrupted_run(capsys, monkeypatch, tmp_path, config):
 
     monkeypatch.setattr("flexff.cosim.run.run_config", run_config)
     assert main(["run", str(config), "-o", str(tmp_path / "out")]) == 130
-    assert capsys.readouterr().err == ("flexff: interrupted; the runs that finished keep their "
-                                       "folders; no file is left half-written\n")
+    assert capsys.readouterr().err == (
+        "flexff: interrupted; the runs that finished keep their folders, an interrupted run "
+        "its record up to its last chunk (signals.parts/); no file is left half-written\n")
 
 
 @pytest.mark.parametrize("debug", [False, True])
@@ -207,6 +209,7 @@ def test_an_interrupted_batch(tmp_path):
     os.killpg(process.pid, signal.SIGINT)
     _, err = process.communicate(timeout=60)
     assert process.returncode == 130, err
-    assert err.splitlines()[-1] == ("flexff: interrupted; the runs that finished keep their "
-                                    "folders; no file is left half-written")
+    assert err.splitlines()[-1] == (
+        "flexff: interrupted; the runs that finished keep their folders, an interrupted run "
+        "its record up to its last chunk (signals.parts/); no file is left half-written")
     assert not (out / "c").exists()

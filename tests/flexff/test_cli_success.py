@@ -19,6 +19,7 @@ from fmpy import read_model_description
 import flexff
 from flexff.cli import main
 from flexff.cosim.config import config_examples
+from flexff.cosim.recording import load_recording
 from flexff.cosim.references import thesis_evaluation
 from flexff.fmu.importer import read_fmu
 from flexff.fmu.validation import validate_fmu
@@ -31,7 +32,7 @@ from tests.controllers.test_learned_feedforward import independent_forces
 from tests.cosim.test_ssp import write_config
 from tests.runners import run_fmu
 
-RUN_FILES = ("signals.npz", "signals.csv", "metrics.json", "run.json", "signals.png")
+RUN_FILES = ("signals.parquet", "metrics.json", "run.json")  # a plain run: no CSV, no plot
 TRAIN_FILES = ("run.json", "model.pt", "metrics.json", "loss.png")
 
 
@@ -51,8 +52,8 @@ def model(tiny, tmp_path_factory) -> Path:
 
 
 def _signals(folder: Path) -> dict[str, np.ndarray]:
-    with np.load(folder / "signals.npz") as data:
-        return {name: data[name] for name in data.files}
+    recording = load_recording(folder)
+    return {"time": recording.time, **recording.signals}
 
 
 def test_ssp_export_and_run(tmp_path, monkeypatch, capsys):
@@ -146,7 +147,7 @@ def test_evaluate_for_real(tiny, tmp_path, capsys):
     printed = capsys.readouterr().out
     assert table_text in printed and f"results in {out}/" in printed
     summary = json.loads((out / "summary.json").read_text())
-    assert list(summary["scenarios"]) == ["pid", "rigid-body", "lstm"]
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "lstm", "limit"]
     rows = _table(table_text)
     columns = {"pid": "PID alone", "rigid-body": "rigid-body FF", "lstm": "LSTM FF"}
     for axis in ("x", "y"):
@@ -270,7 +271,7 @@ def test_paced_run_pinned_to_cpu_0(tmp_path):
                             env=env, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert "paced at 1x real time" in result.stdout
-    for name in ("signals.npz", "signals.csv", "metrics.json", "run.json", "path.png",
+    for name in ("signals.parquet", "metrics.json", "run.json", "path.png",
                  "error.png", "forces.png", "tet.png"):
         assert (out / name).is_file(), name
     metrics = json.loads((out / "metrics.json").read_text())

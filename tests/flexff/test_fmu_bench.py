@@ -21,8 +21,10 @@ def test_bench_loops_agree(tmp_path_factory, make):
     start = time.perf_counter()
     result = bench_fmu(fmu, steps=200, repeats=2)
     elapsed_us = 1e6 * (time.perf_counter() - start)
-    assert result["same_outputs"]
+    assert result["same_outputs"] and result["isolated_same_outputs"]
     assert result["python_us_per_step"] > 0 and result["c_us_per_step"] > 0
+    # a round trip to another process per call cannot be cheaper than the call in-process
+    assert result["isolated_us_per_step"] > result["master_us_per_step"] > 0
     # the figures against a clock of the test's own: every loop ran `repeats` times in the
     # call, each at least as long as its best, one after the other
     loops = ("python_us_per_step", "python_bare_us_per_step", "python_us_per_do_step",

@@ -4,7 +4,7 @@ run when optimizing, which -fsyntax-only skips).
 
 The FMU's generic wrapper is compiled against the config.h of three toy FMUs (continuous,
 discrete without states, with an embedded network), since its code paths depend on the sizes
-there; the engine and the floor as they are built. CasADi's generated model.c (the
+there; the engine, the floor and the proxy as they are built. CasADi's generated model.c (the
 toys' and the plant's) is held to the same flags but -Wunused-parameter: its functions take
 CasADi's fixed calling convention (arg, res, iw, w, mem), used or not.
 """
@@ -12,11 +12,12 @@ CasADi's fixed calling convention (arg, res, iw, w, mem), used or not.
 import os
 import subprocess
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
-from flexff.fmu.build import NETWORK_C_FILES, WRAPPER_C_FILES
+from flexff.fmu.build import NETWORK_C_FILES, TASK_C_FILES, WRAPPER_C_FILES
 from flexff.fmu.codegen import generate_model_c
 from flexff.fmu.compile import CFLAGS, HOST_HEADER, compiler, fmi_headers
 from flexff.plant.system import plant_system
@@ -27,7 +28,7 @@ from tests.helpers import REPOSITORY
 WARNINGS = ("-Wall", "-Wextra", "-pedantic", "-Werror")
 GENERATED = ("-Wno-unused-parameter",)  # CasADi's calling convention, see above
 FMU_C = REPOSITORY / "fmu" / "c"
-ENGINE_C = REPOSITORY / "cosim" / "c"  # the engine and the floor compiled with it
+ENGINE_C = REPOSITORY / "cosim" / "c"  # the engine, the floor and the proxy (cosim.isolation)
 
 
 def compile_warnings(source: Path, include_dirs: list[Path], extra: tuple[str, ...] = ()) -> str:
@@ -43,7 +44,9 @@ def toy_sources(tmp_path_factory) -> dict[str, Path]:
     """The sources/ folder of each toy FMU, by toy."""
     graph = running_sum_graph(tmp_path_factory.mktemp("graph") / "sum.onnx")
     folders = {}
-    for system in (duffing(), discrete_pi(), network_system(graph)):
+    net = network_system(graph)
+    task = replace(net, name="toy_task", network=replace(net.network, task=True))
+    for system in (duffing(), discrete_pi(), net, task):
         folder = tmp_path_factory.mktemp(system.name)
         with zipfile.ZipFile(build_toy(system, tmp_path_factory)) as zf:
             zf.extractall(folder)
@@ -53,7 +56,8 @@ def toy_sources(tmp_path_factory) -> dict[str, Path]:
 
 def test_every_fmu_source_is_shipped():
     """The toys below compile what an FMU ships: every C file of fmu/c is one of those."""
-    assert sorted(p.name for p in FMU_C.glob("*.c")) == sorted(WRAPPER_C_FILES + NETWORK_C_FILES)
+    shipped = WRAPPER_C_FILES + NETWORK_C_FILES + TASK_C_FILES
+    assert sorted(p.name for p in FMU_C.glob("*.c")) == sorted(shipped)
 
 
 def test_the_fmu_sources_compile_without_warnings(toy_sources):
@@ -73,11 +77,11 @@ def test_the_plant_model_compiles_without_warnings(tmp_path):
     assert compile_warnings(tmp_path / "model.c", [tmp_path], GENERATED) == ""
 
 
-def test_the_engine_and_the_floor_compile_without_warnings(tmp_path):
+def test_the_engine_floor_and_proxy_compile_without_warnings(tmp_path):
     for name, text in fmi_headers().items():
         (tmp_path / name).write_text(text)
     sources = sorted(ENGINE_C.glob("*.c"))
-    assert [p.name for p in sources] == ["engine.c", "floor.c"]
+    assert [p.name for p in sources] == ["engine.c", "floor.c", "proxy.c"]
     found = {str(p.relative_to(REPOSITORY)): compile_warnings(p, [tmp_path, HOST_HEADER.parent])
              for p in sources}
     assert {f: w for f, w in found.items() if w} == {}

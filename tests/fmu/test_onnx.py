@@ -6,6 +6,7 @@ documented; both validators pass; libcosim agrees; bad graphs give a ValueError 
 
 import json
 import warnings
+import zipfile
 
 import casadi as ca
 import numpy as np
@@ -255,6 +256,12 @@ def test_the_command_line_builds_and_refuses(graphs, tmp_path, capsys):
     target = tmp_path / "lstm.fmu"
     assert main(["fmu", "build", "onnx", graphs["lstm"], "-o", str(target), "--every", "2"]) == 0
     assert target.is_file() and validate_fmu(target) == []
+    task = tmp_path / "lstm-task.fmu"
+    assert main(["fmu", "build", "onnx", graphs["lstm"], "-o", str(task), "--every", "2",
+                 "--task"]) == 0
+    assert validate_fmu(task) == [] and "sources/wrapper_task.c" in zipfile.ZipFile(task).namelist()
+    assert main(["fmu", "build", "plant", "-o", str(tmp_path / "p.fmu"), "--task"]) == 2
+    assert "the plant has none" in capsys.readouterr().err
     assert main(["fmu", "build", "onnx", str(tmp_path / "none.onnx"), "-o",
                  str(tmp_path / "none.fmu")]) == 2
     assert "none.onnx does not exist" in capsys.readouterr().err

@@ -235,16 +235,17 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
 
     seen = {}
 
-    def fake(env, out, preset, models, data, epochs, loop, **options):
-        seen.update(env=env, loop=loop)
+    def fake(env, out, preset, models, data, epochs, loop, scheduler, currents=()):
+        seen.update(env=env, loop=loop, scheduler=scheduler)
         (Path(out) / "table.md").write_text("| table |\n")
 
     monkeypatch.setattr("flexff.learning.evaluate.evaluate", fake)
     config = tmp_path / "heavy.toml"
     config.write_text('[reference]\nkind = "thesis-eval"\n[plant]\nm_up1 = 0.13\n')
     assert main(["evaluate", "--config", str(config), "--env", "hardware", "-o",
-                 str(tmp_path / "eval")]) == 0
+                 str(tmp_path / "eval"), "--scheduler", "tcp://cluster:8786"]) == 0
     assert seen["env"] == "hardware" and seen["loop"].builtin("plant").parameters["m_up1"] == 0.13
+    assert seen["scheduler"] == "tcp://cluster:8786"
     assert "| table |" in capsys.readouterr().out
 
 
@@ -289,8 +290,8 @@ def test_evaluate_on_a_loop(heavy_loop, tmp_path, monkeypatch):
     data = synthetic_dataset(tmp_path / "data", n_train=3, n_test=1, duration=3.0,
                              rate_hz=100.0, seed=3)
     summary = evaluate("sim", tmp_path / "eval", models=["pgnn"], data=data, epochs=1,
-                       say=lambda _: None, loop=heavy_loop)
-    assert list(summary["scenarios"]) == ["pid", "rigid-body", "pgnn"]
+                       say=lambda _: None, loop=heavy_loop, ilc_iterations=1)
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "pgnn", "limit"]
     for name in summary["scenarios"]:
         run = json.loads((tmp_path / "eval" / "cosim" / name / "run.json").read_text())
         assert run["fmu"]["plant"]["parameters"] == {**HEAVY, "x_start": 0.0, "y_start": 0.0}
@@ -301,7 +302,7 @@ def test_evaluate_on_a_loop(heavy_loop, tmp_path, monkeypatch):
     rigid = summary["scenarios"]["rigid-body"]
     assert 1 < rigid["x"]["e2_ratio"] < 300
 
-    def stop(set_name, out, config, **options):
+    def stop(set_name, out, config, scheduler=None):
         raise SystemExit((set_name, config))
 
     monkeypatch.setattr("flexff.learning.evaluate.collect", stop)

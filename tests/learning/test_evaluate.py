@@ -8,7 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from flexff.controllers.identified import read_identified
 from flexff.controllers.model_card import read_card
+from flexff.cosim.recording import load_recording
 from flexff.cosim.references import build_reference
 from flexff.learning.evaluate import ENVIRONMENTS, evaluate, scenario_config
 from flexff.learning.synthetic import synthetic_dataset
@@ -20,17 +22,21 @@ def evaluation(tmp_path_factory):
     data = synthetic_dataset(out / "data", n_train=3, n_test=1, duration=3.0, rate_hz=100.0,
                              seed=3)
     lines = []
-    summary = evaluate("sim", out, models=["pgnn"], data=data, epochs=1, say=lines.append)
+    summary = evaluate("sim", out, models=["pgnn"], data=data, epochs=1, say=lines.append,
+                       ilc_iterations=2)
     return out, summary, lines
 
 
 def test_every_scenario_is_reported(evaluation):
     out, summary, lines = evaluation
-    assert list(summary["scenarios"]) == ["pid", "rigid-body", "pgnn"]
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "pgnn", "limit"]
     assert json.loads((out / "summary.json").read_text()) == summary
+    assert read_identified(out / "identified" / "identified.json")
+    assert any(line.startswith("identified: residual") for line in lines)
+    assert "| identified rigid-body FF |" in (out / "table.md").read_text()
     for name in ("table.md", "paths.png", "errors.png", "forces.png", "pgnn.onnx"):
         assert (out / name).is_file()
-    assert (out / "cosim" / "pgnn" / "signals.npz").is_file()
+    assert (out / "cosim" / "pgnn" / "signals.parquet").is_file()
     assert any(line.startswith("pgnn: test MSE") for line in lines)
     training = summary["training"]["pgnn"]
     assert training["epochs"] == 1 and training["seconds"] > 0 and training["test_mse"] > 0
@@ -45,11 +51,32 @@ def test_rigid_body_feedforward_is_exact_on_the_nominal_plant(evaluation):
         assert rigid[axis]["e2_ratio"] > 300 and rigid[axis]["einf_ratio"] > 100
 
 
-def test_a_finished_training_run_is_reused(evaluation):
+def test_a_finished_training_run_and_identification_are_reused(evaluation):
     out, _, _ = evaluation
-    stamp = (out / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns
-    evaluate("sim", out, models=["pgnn"], data=out / "data", epochs=1, say=lambda _: None)
-    assert (out / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns == stamp
+    files = (out / "runs" / "pgnn" / "model.pt", out / "identified" / "identified.json")
+    stamps = [path.stat().st_mtime_ns for path in files]
+    evaluate("sim", out, models=["pgnn"], data=out / "data", epochs=1, say=lambda _: None,
+             ilc_iterations=2)
+    assert [path.stat().st_mtime_ns for path in files] == stamps
+
+
+def test_the_ilc_limit_is_a_column_and_every_scenario_a_multiple_of_it(evaluation):
+    """ILC on the nominal plant, two learning trials: measured 2.5e5x PID alone in e2 (each
+    axis), where the exact rigid-body model stops at 420x."""
+    out, summary, lines = evaluation
+    scenarios = summary["scenarios"]
+    state = json.loads((out / "ilc" / "ilc.json").read_text())
+    assert [t["trial"] for t in state["trials"]] == [0, 1, 2]
+    assert (out / "cosim" / "limit" / "signals.parquet").is_file()
+    for axis in ("x", "y"):
+        assert scenarios["limit"][axis]["e2_ratio"] > 1e4
+        assert scenarios["limit"][axis]["e2_per_limit"] == 1.0
+        for name in ("pid", "rigid-body", "pgnn"):
+            assert scenarios[name][axis]["e2_per_limit"] == pytest.approx(
+                scenarios[name][axis]["e2"] / scenarios["limit"][axis]["e2"], rel=1e-12)
+            assert scenarios[name][axis]["e2_per_limit"] > 10
+    assert "| e2 x / ILC limit |" in (out / "table.md").read_text()
+    assert any(line.startswith("limit: e2 = ") for line in lines)
 
 
 def test_a_run_with_other_settings_is_trained_again(evaluation, tmp_path):
@@ -57,7 +84,8 @@ def test_a_run_with_other_settings_is_trained_again(evaluation, tmp_path):
     copy = tmp_path / "copy"
     shutil.copytree(out / "runs", copy / "runs")
     stamp = (copy / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns
-    evaluate("sim", copy, models=["pgnn"], data=out / "data", epochs=2, say=lambda _: None)
+    evaluate("sim", copy, models=["pgnn"], data=out / "data", epochs=2, say=lambda _: None,
+             ilc_iterations=1)
     assert (copy / "runs" / "pgnn" / "model.pt").stat().st_mtime_ns != stamp
     assert json.loads((copy / "runs" / "pgnn" / "run.json").read_text())["config"]["epochs"] == 2
 
@@ -68,7 +96,7 @@ def test_an_ensemble_trains_its_members_and_runs_their_mean(evaluation, tmp_path
     assert environment.members("fast", "pgnn") == 2 and environment.members("thesis", "pgnn") == 1
     monkeypatch.setitem(ENVIRONMENTS, "sim", environment)
     summary = evaluate("sim", tmp_path, models=["pgnn"], data=out / "data", epochs=1,
-                       say=lambda _: None, progress=False)
+                       say=lambda _: None, progress=False, ilc_iterations=1)
     members = [json.loads((tmp_path / "runs" / "pgnn" / f"seed{k}" / "metrics.json").read_text())
                for k in range(2)]
     assert [json.loads((tmp_path / "runs" / "pgnn" / f"seed{k}" / "run.json").read_text())
@@ -126,11 +154,12 @@ def test_a_current_level_model_is_its_own_scenario(evaluation, tmp_path):
     lines = []
     summary = evaluate("sim", tmp_path, models=[], currents=["tcn"], data=out / "data",
                        epochs=1, say=lines.append, progress=False)
-    assert list(summary["scenarios"]) == ["pid", "rigid-body", "tcn-currents"]
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "tcn-currents",
+                                          "limit"]
     assert read_card(tmp_path / "tcn-currents.onnx").labels == "currents"
     run = json.loads((tmp_path / "runs" / "tcn-currents" / "run.json").read_text())
     assert run["label_names"] == ["i1", "i2", "i3"]
-    signals = np.load(tmp_path / "cosim" / "tcn-currents" / "signals.npz")
+    signals = load_recording(tmp_path / "cosim" / "tcn-currents")
     assert not np.any(signals["Fx_ff"]) and np.abs(signals["feedforward.i1_ff"]).max() > 0.01
     assert any(line.startswith("tcn-currents: e2 = ") for line in lines)
     assert "| TCN current FF |" in (tmp_path / "table.md").read_text()

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from flexff.cosim.config import config_examples, parse_config
+from flexff.cosim.recording import load_recording
 from flexff.cosim.run import run_config
 from flexff.learning.export import export
 from flexff.learning.synthetic import synthetic_dataset
@@ -44,9 +45,9 @@ def test_the_learned_feedforward_beats_pid_alone(model, tmp_path):
     pid = _run(tmp_path, "pid", 'kind = "none"')
     learned = _run(tmp_path, "lstm", f'kind = "learned"\nmodel = "{model}"')
     for name in ("pid", "lstm"):
-        time = np.load(tmp_path / name / "signals.npz")["time"]
+        time = load_recording(tmp_path / name).time
         assert len(time) == round(STOP / 1e-3) + 1 and time[-1] == pytest.approx(STOP)
-    forces = np.load(tmp_path / "lstm" / "signals.npz")["feedforward.Fx_ff"]
+    forces = load_recording(tmp_path / "lstm")["feedforward.Fx_ff"]
     assert np.abs(forces).max() > 0  # the network's forces reached the loop
     assert learned["feedforward_range"]["outside"] == []  # inside what it was trained on
     for axis in ("x", "y"):

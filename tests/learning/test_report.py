@@ -203,3 +203,21 @@ def test_summarize_and_table_checks():
         summarize({"lstm": norms})
     with pytest.raises(ValueError, match="unknown environment 'nominal': use 'sim'"):
         markdown_table(summarize({"pid": norms}), "nominal")
+
+
+def test_every_scenario_as_a_multiple_of_the_ilc_limit():
+    """With a "limit" scenario (1/200 of PID alone's error), each scenario's e2 is also given
+    as a multiple of the limit's: 200x for PID alone, 4x for the LSTM (1/50), 1x for itself."""
+    recordings = {**scenarios(), "limit": sines(1 / 200)}
+    summary = summarize({name: tracking_metrics(rec) for name, rec in recordings.items()})
+    for axis in ("x", "y"):
+        assert summary["pid"][axis]["e2_per_limit"] == pytest.approx(200, rel=1e-9)
+        assert summary["lstm"][axis]["e2_per_limit"] == pytest.approx(4, rel=1e-9)
+        assert summary["limit"][axis]["e2_per_limit"] == 1.0
+    table = markdown_table(summary, "sim")
+    assert "| e2 x / ILC limit | 200x | 4x | 25x | " in table
+    assert "| e2 y / ILC limit | 200x | 4x | 25x | " in table
+    assert "ILC limit" in table.splitlines()[2] and "1x | – | – | – | – |" in table
+    without = summarize({name: tracking_metrics(rec) for name, rec in scenarios().items()})
+    assert "e2_per_limit" not in without["lstm"]["x"]
+    assert "ILC limit" not in markdown_table(without, "sim")

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from flexff.plant.analysis import modes, plant_info
-from flexff.plant.model import PlantModel, get_variant
+from flexff.plant.model import PlantModel
 from flexff.plant.parameters import HARDWARE, NOMINAL, PlantParameters
+from flexff.plant.variants import get_variant
 
 
 def test_seed_figures_are_kept():

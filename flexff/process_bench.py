@@ -1,0 +1,120 @@
+"""`flexff bench --processes`: a run's whole cost, as a user times it: whole processes side by
+side on one third-party FMU and step, each tool writing its default record.
+
+  flexff   `python -m flexff run` (signals.parquet, metrics.json, run.json)
+  fmpy     `fmpy.simulate_fmu` then `fmpy.util.write_csv`
+  ecos     Ecos (PyPI `ecospy`, a C++ co-simulation engine) with its CSV writer, where an
+           interpreter with ecospy is at hand (`ecos_python`; its `tbb` package's libtbb is
+           loaded from that interpreter's lib/ folder, where pip puts it)
+
+The tools run in turn (flexff, fmpy, ecos, flexff, ...) `repeats` times; each figure is the
+median over its runs of the process's wall time and its peak resident memory (the kernel's
+accounting of that one child, os.wait4). Beside them: `flexff --help`, a bare `python -c pass`,
+and the import of a plain run (`import flexff.cosim.run`), as whole processes too.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from flexff.fmu.errors import InputError
+
+FMPY = """import sys
+from fmpy import simulate_fmu
+from fmpy.util import write_csv
+fmu, stop, step, out = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
+write_csv(out + "/result.csv", simulate_fmu(fmu, stop_time=stop, output_interval=step))
+"""
+ECOS = """import ctypes, os, sys
+tbb = os.path.join(sys.prefix, "lib", "libtbb.so.12")
+if os.path.exists(tbb):
+    ctypes.CDLL(tbb, ctypes.RTLD_GLOBAL)
+from ecospy import EcosSimulation, EcosSimulationStructure
+fmu, stop, step, out = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
+structure = EcosSimulationStructure()
+structure.add_model("fmu", fmu)
+with EcosSimulation(structure=structure, step_size=step) as simulation:
+    simulation.add_csv_writer(out + "/result.csv")
+    simulation.init()
+    simulation.step_until(stop)
+"""
+CONFIG = '[fmu.fmu]\npath = "{fmu}"\n\n[run]\nstep = {step!r}\nstop = {stop!r}\n'
+
+
+def _measure(command: Sequence[str], env: dict[str, str] | None = None) -> tuple[float, float]:
+    """(wall seconds, peak resident MiB) of one process running `command`."""
+    start = time.perf_counter()
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                               env=env)
+    _, status, usage = os.wait4(process.pid, 0)
+    wall = time.perf_counter() - start
+    process.returncode = os.waitstatus_to_exitcode(status)
+    error = process.stderr.read().decode() if process.stderr else ""
+    if process.returncode != 0:
+        raise RuntimeError(f"{command[:3]} failed ({process.returncode}): {error[-500:]}")
+    return wall, usage.ru_maxrss / 1024
+
+
+def _has_ecospy(python: str) -> bool:
+    probe = subprocess.run([python, "-c", "import importlib.util as u; "
+                            "print(u.find_spec('ecospy') is not None)"],
+                           capture_output=True, text=True)
+    return probe.stdout.strip() == "True"
+
+
+def _median(runs: list[tuple[float, float]]) -> dict[str, float]:
+    return {"wall_s": statistics.median(r[0] for r in runs),
+            "peak_mib": statistics.median(r[1] for r in runs)}
+
+
+def process_benchmark(fmu: Path, steps: Sequence[int] = (200_000, 2_000_000),
+                      step: float = 1e-3, repeats: int = 3,
+                      ecos_python: str | None = None) -> dict[str, Any]:
+    """The module doc's figures for `fmu` at each number of `steps`, with each peer's time
+    over flexff's (`speedup_vs_*`: how many times faster flexff's whole process is)."""
+    if repeats < 1 or any(n < 1 for n in steps):
+        raise InputError("bench --processes needs at least one repeat and one step")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        filter(None, (str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH"))))}
+    python = ecos_python or sys.executable
+    ecos = _has_ecospy(python)
+    results: dict[str, Any] = {"fmu": fmu.name, "step_s": step, "repeats": repeats,
+                               "ecos": ecos or f"ecospy is not installed for {python}"}
+    startup: dict[str, list[tuple[float, float]]] = {"python_bare": [], "flexff_help": [],
+                                                     "import_plain_run": []}
+    commands = {"python_bare": [sys.executable, "-c", "pass"],
+                "flexff_help": [sys.executable, "-m", "flexff", "--help"],
+                "import_plain_run": [sys.executable, "-c", "import flexff.cosim.run"]}
+    for _ in range(repeats):
+        for name, command in commands.items():
+            startup[name].append(_measure(command, env))
+    results["startup"] = {n: _median(r) for n, r in startup.items()}
+    with tempfile.TemporaryDirectory(prefix="flexff-bench-") as tmp:
+        for n in steps:
+            stop = n * step
+            config = Path(tmp) / "run.toml"
+            config.write_text(CONFIG.format(fmu=fmu.as_posix(), step=step, stop=stop))
+            tools = {"flexff": [sys.executable, "-m", "flexff", "run", str(config), "-o",
+                                f"{tmp}/flexff"],
+                     "fmpy": [sys.executable, "-c", FMPY, str(fmu), str(stop), str(step), tmp]}
+            if ecos:
+                tools["ecos"] = [python, "-c", ECOS, str(fmu), str(stop), str(step), tmp]
+            runs: dict[str, list[tuple[float, float]]] = {t: [] for t in tools}
+            for _ in range(repeats):
+                for tool, command in tools.items():
+                    runs[tool].append(_measure(command, env))
+            figures: dict[str, Any] = {t: _median(r) for t, r in runs.items()}
+            for tool in tools:
+                if tool != "flexff":
+                    figures[f"speedup_vs_{tool}"] = statistics.median(
+                        p[0] / f[0] for p, f in zip(runs[tool], runs["flexff"]))
+            results[f"{n}_steps"] = figures
+    return results

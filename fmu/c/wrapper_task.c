@@ -1,0 +1,165 @@
+/*
+ * wrapper_task.c -- the embedded network in its own task (NET_TASK), as Simulink Real-Time's
+ * multitasking runs a slow block: one worker thread per instance, started at fmi2Instantiate and
+ * joined at fmi2FreeInstance. At a call point k the wrapper hands the network's inputs of step k
+ * to the worker and returns at once; at the call point k + NET_PERIOD it takes the result
+ * (wrapper_network.c), waiting for it if the worker is not done: that wait is a rate-transition
+ * overrun, counted here. The result is always used at k + NET_PERIOD, so the outputs are the
+ * same whatever the timing, and any importer runs the FMU unchanged.
+ *
+ * The worker runs at the priority of a slower task, as rate-monotonic scheduling gives it: when
+ * the thread that steps the instance runs under SCHED_FIFO or SCHED_RR (a paced run where the
+ * system permits), the worker gets the same policy one priority below, so that it is neither
+ * preempted by ordinary processes nor able to preempt the step; otherwise it is an ordinary
+ * thread like its caller.
+ *
+ * One mutex guards the hand-over; the worker touches only the job buffers below and the network
+ * (whose call times it records), never the instance's Data, which the calling thread alone
+ * reads and writes.
+ */
+
+#include "wrapper.h"
+
+#if HAS_NETWORK
+#if NET_TASK
+struct Task {
+    pthread_t thread;
+    pthread_mutex_t lock;
+    pthread_cond_t wake; /* a job was posted, or quit */
+    pthread_cond_t done; /* the posted job finished */
+    Network *net;
+    int posted, finished, quit;
+    int busy;            /* a job is out for the current Data (calling thread only) */
+    int policy, priority; /* the caller's scheduling the worker's was last set from */
+    long overruns;       /* results not ready when due (calling thread only) */
+    fmi2Real in[NET_N_IN];
+    float state_in[DIM(NET_STATE_SIZE)];
+    fmi2Real r[N_R];
+    float state_out[DIM(NET_STATE_SIZE)];
+    int failed;
+    char error[512];
+};
+
+static void *work(void *arg) {
+    Task *t = (Task *)arg;
+    pthread_mutex_lock(&t->lock);
+    for (;;) {
+        while (!t->posted && !t->quit) pthread_cond_wait(&t->wake, &t->lock);
+        if (!t->posted) break; /* quit, with nothing left to run */
+        t->posted = 0;
+        pthread_mutex_unlock(&t->lock);
+        const int failed = net_run(t->net, t->in, 1, t->state_in, t->r, t->state_out, t->error,
+                                   sizeof t->error) != 0;
+        pthread_mutex_lock(&t->lock);
+        t->failed = failed;
+        t->finished = 1;
+        pthread_cond_signal(&t->done);
+    }
+    pthread_mutex_unlock(&t->lock);
+    return NULL;
+}
+
+/* The worker of instance c (its network loaded): 0, or -1 with the reason in error. */
+int task_start(Instance *c, char *error, size_t size) {
+    Task *t = (Task *)calloc(1, sizeof(Task));
+    if (t == NULL) {
+        snprintf(error, size, "out of memory for the network's task");
+        return -1;
+    }
+    t->net = c->net;
+    t->policy = SCHED_OTHER; /* as a thread is created */
+    pthread_mutex_init(&t->lock, NULL);
+    pthread_cond_init(&t->wake, NULL);
+    pthread_cond_init(&t->done, NULL);
+    const int err = pthread_create(&t->thread, NULL, work, t);
+    if (err != 0) {
+        snprintf(error, size, "cannot start the network's task thread (%s)", strerror(err));
+        pthread_cond_destroy(&t->done);
+        pthread_cond_destroy(&t->wake);
+        pthread_mutex_destroy(&t->lock);
+        free(t);
+        return -1;
+    }
+    c->task = t;
+    return 0;
+}
+
+/* Wait for the job in progress, then end and join the worker. */
+void task_stop(Instance *c) {
+    Task *t = c->task;
+    if (t == NULL) return;
+    pthread_mutex_lock(&t->lock);
+    t->quit = 1;
+    pthread_cond_signal(&t->wake);
+    pthread_mutex_unlock(&t->lock);
+    pthread_join(t->thread, NULL);
+    pthread_cond_destroy(&t->done);
+    pthread_cond_destroy(&t->wake);
+    pthread_mutex_destroy(&t->lock);
+    free(t);
+    c->task = NULL;
+}
+
+/* The worker one priority below the calling thread under a real-time policy, or ordinary
+ * under an ordinary one; only when the caller's scheduling changed since the last call. What
+ * the system refuses leaves the worker as it was (it still runs, only less promptly). */
+static void follow_caller(Task *t) {
+    struct sched_param caller, worker;
+    int policy;
+    if (pthread_getschedparam(pthread_self(), &policy, &caller) != 0 ||
+        (policy == t->policy && caller.sched_priority == t->priority))
+        return;
+    t->policy = policy;
+    t->priority = caller.sched_priority;
+    memset(&worker, 0, sizeof worker);
+    if (policy == SCHED_FIFO || policy == SCHED_RR) {
+        const int lowest = sched_get_priority_min(policy);
+        worker.sched_priority = caller.sched_priority > lowest ? caller.sched_priority - 1 : lowest;
+    } else {
+        policy = SCHED_OTHER;
+    }
+    pthread_setschedparam(t->thread, policy, &worker);
+}
+
+/* Start a call on `features` from the recurrent state `state` (the worker is idle: every job
+ * is settled before the next is posted). */
+void task_post(Instance *c, const fmi2Real *features, const float *state) {
+    Task *t = c->task;
+    follow_caller(t);
+    pthread_mutex_lock(&t->lock);
+    memcpy(t->in, features, sizeof t->in);
+    memcpy(t->state_in, state, sizeof t->state_in);
+    t->posted = 1;
+    t->finished = 0;
+    pthread_cond_signal(&t->wake);
+    pthread_mutex_unlock(&t->lock);
+    t->busy = 1;
+    c->d.net_job = 1;
+}
+
+/* Bring the job out for the current Data into it (net_job_r, net_job_state), waiting for the
+ * worker if it is still running; `due`: the result is needed now, so a wait is an overrun. */
+fmi2Status task_settle(Instance *c, int due) {
+    Task *t = c->task;
+    if (t == NULL || !t->busy) return fmi2OK;
+    pthread_mutex_lock(&t->lock);
+    if (!t->finished && due) t->overruns++;
+    while (!t->finished) pthread_cond_wait(&t->done, &t->lock);
+    pthread_mutex_unlock(&t->lock);
+    t->busy = 0;
+    if (t->failed) {
+        c->d.net_job = 0; /* no result to use */
+        return fail(c, "%s", t->error);
+    }
+    memcpy(c->d.net_job_r, t->r, sizeof c->d.net_job_r);
+    memcpy(c->d.net_job_state, t->state_out, sizeof c->d.net_job_state);
+    return fmi2OK;
+}
+
+long task_overruns(const Instance *c) { return c->task ? c->task->overruns : 0; }
+
+const long *task_overruns_counter(const Instance *c) {
+    return c->task ? &c->task->overruns : NULL;
+}
+#endif
+#endif

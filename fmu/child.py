@@ -1,0 +1,147 @@
+"""run_in_child: a function that calls into an FMU, run in a child process of its own, so that
+an FMU that crashes (a segmentation fault in its own code) or hangs cannot take the caller
+with it.
+
+The child is forked from multiprocessing's fork server, a clean process started once that has
+imported this module and the function's: a child starts in milliseconds, yet inherits nothing
+of the caller's loaded FMUs or threads. While it runs, the name of the FMI function under way
+is kept in memory shared with the parent: every call fmpy makes into an FMU passes through
+one method (`fmpy.fmi1._FMU._call`, which the child wraps), and `under_way` names the steps
+that are not FMI calls (loading the binary). So a child that dies of a signal is reported as
+"fmi2DeSerializeFMUstate ... SIGSEGV". The function sends its findings as they come
+(`emit`), so those made before a crash are kept. The files the child unpacks go into a
+temporary folder the parent removes, whatever the end. As with multiprocessing's spawn, a
+script that calls this keeps its top level under `if __name__ == "__main__":` (the child
+imports the script's module).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import shutil
+import signal
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from typing import Any
+
+_LABEL_BYTES = 256  # room for the name of the call under way
+_current: Any = None  # the shared label, set in a child process only
+
+
+@dataclass(frozen=True)
+class ChildEnd:
+    """How a child ended: what it sent, and, unless it returned, why not."""
+
+    messages: list[Any] = field(default_factory=list)  # what it emitted, in order
+    returned: bool = False  # the function returned (an exception it raised is in `error`)
+    error: str | None = None  # the exception the function raised, as text
+    signal: str | None = None  # the signal that ended it ("SIGSEGV"), if one did
+    exit_code: int | None = None  # its exit status, when it exited without returning
+    timed_out: bool = False  # still running at the deadline: killed
+    call: str = ""  # the FMI call (or step) under way when it ended, "" if none
+
+    def failure(self, timeout: float) -> str | None:
+        """The end as a sentence naming the call under way, None if the function returned."""
+        where = f"{self.call}: " if self.call else ""
+        if self.timed_out:
+            return f"{where}the FMU did not return within {timeout:g} s (timeout)"
+        if self.signal is not None:
+            return f"{where}the FMU crashed ({self.signal})"
+        if not self.returned:
+            return f"{where}the FMU ended the process (exit code {self.exit_code})"
+        if self.error is not None:
+            return f"{where}{self.error}"
+        return None
+
+
+def under_way(what: str) -> None:
+    """Name the step now under way in a child (no effect in any other process)."""
+    if _current is not None:
+        _current.value = what.encode("utf-8", "replace")[:_LABEL_BYTES - 1]
+
+
+def _trace_fmi_calls() -> None:
+    """Make every FMI call through fmpy name itself as the call under way."""
+    from fmpy.fmi1 import _FMU
+
+    call = _FMU._call
+
+    def traced(self: Any, fname: str, *args: Any) -> Any:
+        under_way(fname)
+        return call(self, fname, *args)
+
+    _FMU._call = traced
+
+
+def _child(function: Callable[..., Any], args: tuple[Any, ...], sender: Connection,
+           label: Any, folder: str, environment: dict[str, str], cwd: str) -> None:
+    """The child's whole life: take the caller's environment and folder (the fork server's
+    are those of its start), trace, run `function(emit, *args)`, say how it ended."""
+    global _current
+    _current = label
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's: it ends the child
+    os.environ.clear()
+    os.environ.update(environment)
+    os.chdir(cwd)
+    tempfile.tempdir = folder
+    _trace_fmi_calls()
+    try:
+        function(lambda message: sender.send(("emit", message)), *args)
+    except Exception as error:  # the function's own failure, sent as text
+        sender.send(("raised", str(error) or type(error).__name__))
+    else:
+        sender.send(("returned", None))
+    sender.close()
+
+
+def run_in_child(function: Callable[..., Any], args: tuple[Any, ...], timeout: float
+                 ) -> ChildEnd:
+    """Run `function(emit, *args)` in a child process (module doc), `emit(message)` sending a
+    picklable message back; kill it after `timeout` seconds. `function` must be importable
+    by name."""
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload([__name__, function.__module__])
+    receiver, sender = context.Pipe(duplex=False)
+    label = context.RawArray("c", _LABEL_BYTES)
+    folder = tempfile.mkdtemp(prefix="flexff-child-")
+    process = context.Process(target=_child, daemon=True, args=(
+        function, args, sender, label, folder, dict(os.environ), os.getcwd()))
+    messages: list[Any] = []
+    end: tuple[str, str | None] | None = None
+    timed_out = False
+    try:
+        process.start()
+        sender.close()
+        deadline = time.monotonic() + timeout
+        while end is None:
+            left = deadline - time.monotonic()
+            if left <= 0 or not receiver.poll(left):  # poll is True at an end of file too
+                timed_out = True
+                break
+            try:
+                kind, message = receiver.recv()
+            except EOFError:  # the child is gone without saying how it ended
+                break
+            if kind == "emit":
+                messages.append(message)
+            else:
+                end = (kind, message)
+        if timed_out:
+            process.kill()
+        process.join()
+    finally:
+        if process.is_alive():
+            process.kill()
+            process.join()
+        receiver.close()
+        shutil.rmtree(folder, ignore_errors=True)
+    code = process.exitcode
+    return ChildEnd(
+        messages, returned=end is not None, error=end[1] if end and end[0] == "raised" else None,
+        signal=signal.Signals(-code).name if code is not None and code < 0 and not timed_out
+        else None, exit_code=code, timed_out=timed_out,
+        call=label.value.decode("utf-8", "replace") if end is None else "")

@@ -1,0 +1,373 @@
+"""The rigid-body model identified from a dataset: what an engineer would deploy instead of
+a learned feedforward.
+
+The inverse dynamics of eq. (2.4) with the motors' friction (plant.model.inverse_dynamics) are
+linear in the inertias, the flexures' stiffness and damping and the friction torques
+(controllers.identified.RIGID_BODY_FIELDS and FRICTION_FIELDS, 41 flat parameters) for given
+geometry, centres of mass and tanh width of the Coulomb friction: F = W(pos, vel, acc) theta,
+the regressor W the CasADi Jacobian of the force with respect to theta (which does not depend
+on theta). Not all 41 are identifiable: an upper arm's mass, inertia and the rotor inertia
+only act together, as one inertia about the shoulder; a motor's viscous friction and its
+shoulder flexure's damping are one torque on the shoulder's speed. The base parameters are
+found once, from the regressor at random samples of the workspace (STRUCTURE_SAMPLES,
+columns scaled to unit norm), by QR without pivoting of its columns in a fixed order of
+preference (the order of the fields above): a column is independent where the diagonal of R
+keeps more than RANK_TOLERANCE of the column's norm (measured: 29 independent columns above
+7e-3, the 12 others below 1e-15), and each dependent column is the least-squares combination
+of the independent ones. Each base parameter is then an independent parameter plus its
+combination of dependent ones, and the dataset's samples determine it by ordinary least
+squares, once per candidate tanh width (learning.friction.WIDTHS), the width with the smallest
+residual kept; a base parameter whose whole share of the forces lies below the residual keeps
+its nominal value (`_essential`: the data cannot tell it from what the model misses).
+
+The standard uncertainty of each base parameter is the square root of the diagonal of
+s^2 (W1^T W1)^-1, s^2 the residual variance over both axes: it supposes independent residuals,
+which filtered samples are not, so it is a lower bound (samples are thinned to MAX_SAMPLES,
+evenly spaced, which helps a little). To deploy, the parameter vector with exactly the
+identified base parameters nearest to the nominal one (each change relative to its nominal
+value) is fed to the same rigid-body feedforward as the nominal one
+(controllers.feedforward.rigid_body_force): any vector with those base parameters gives the
+same forces, and the nearest keeps the physical ones positive (an upper arm's inertia alone
+would turn negative if it took up the change of its group). Where no physical vector has them
+(few, short trajectories: a negative damping), the physical one whose forces on the samples
+come nearest is deployed (bounded least squares), and the report says by how much it differs.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from flexff.controllers.features import evaluate_samples, motion_columns, nominal_model
+from flexff.controllers.identified import (
+    FRICTION_FIELDS,
+    RIGID_BODY_FIELDS,
+    write_identified,
+)
+from flexff.fmu.errors import InputError
+from flexff.learning.batches import TRAIN, interior
+from flexff.learning.dataset import Dataset, load_dataset
+from flexff.learning.features import FeatureConfig, decimation, prepare_trajectory
+from flexff.learning.friction import MAX_SAMPLES, WIDTHS
+from flexff.plant.parameters import NOMINAL
+
+STRUCTURE_SAMPLES = 500  # random workspace samples that reveal the base parameters
+RANK_TOLERANCE = 1e-8  # |R_kk| below this (columns of unit norm): a dependent column
+REPORT = "identified.json"
+
+
+def linear_names() -> tuple[str, ...]:
+    """The flat parameters the force is linear in, in the order of preference."""
+    return tuple(name for field in (*RIGID_BODY_FIELDS, *FRICTION_FIELDS)
+                 for name in NOMINAL.flat_values(field))
+
+
+@functools.cache
+def _regressor_function() -> ca.Function:
+    """(pos, vel, acc, w_stribeck) -> vec(dF/dtheta) (2 x n, flattened), the other
+    parameters nominal; the force is linear in theta, so this is its whole theta part."""
+    model = nominal_model()
+    names = NOMINAL.names()
+    theta = ca.vertcat(*[model.p[names.index(n)] for n in linear_names()])
+    width = model.p[names.index("w_stribeck")]
+    pos, vel, acc = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2), ca.SX.sym("acc", 2)
+    jacobian = ca.jacobian(model.inverse_dynamics(pos, vel, acc, model.p), theta)
+    fixed = [n for n in names if n not in (*linear_names(), "w_stribeck")]
+    values = dict(zip(names, model.parameter_values()))
+    jacobian = ca.substitute(jacobian, ca.vertcat(*[model.p[names.index(n)] for n in fixed]),
+                             ca.DM([values[n] for n in fixed]))
+    return ca.Function("rigid_body_regressor", [pos, vel, acc, width], [ca.vec(jacobian)],
+                       ["pos", "vel", "acc", "w_stribeck"], ["W"])
+
+
+def regressor(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray, width: float) -> np.ndarray:
+    """The regressor (2n, 41) of n samples (rows x then y of each sample): F = W theta."""
+    n, k = len(pos), len(linear_names())
+    widths = np.full((n, 1), width)
+    columns = evaluate_samples(_regressor_function(), pos, vel, acc, widths)
+    return columns.reshape(n, k, 2).transpose(0, 2, 1).reshape(2 * n, k)
+
+
+@dataclass(frozen=True)
+class BaseParameters:
+    """beta = theta[independent] + combination @ theta[dependent] (indices into linear_names)."""
+
+    independent: tuple[int, ...]
+    dependent: tuple[int, ...]
+    combination: np.ndarray  # (len(independent), len(dependent))
+
+    def of(self, theta: np.ndarray) -> np.ndarray:
+        """The base parameters of a full parameter vector theta (in linear_names' order)."""
+        theta = np.asarray(theta, dtype=float)
+        beta: np.ndarray = theta[list(self.independent)] + self.combination @ theta[
+            list(self.dependent)]
+        return beta
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """B with beta = B theta (base parameters x linear_names)."""
+        groups = np.zeros((len(self.independent), len(self.independent) + len(self.dependent)))
+        groups[:, list(self.independent)] = np.eye(len(self.independent))
+        groups[:, list(self.dependent)] = self.combination
+        return groups
+
+    def nearest(self, beta: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """The full parameter vector with base parameters `beta` nearest to `theta`, each
+        change relative to its entry of `theta` (SI units where that is zero): a group's
+        change spread over its members, so that none of them turns negative for a change of
+        the group that the others take up."""
+        scale = _scale(theta)
+        change = np.linalg.pinv(self.matrix * scale) @ (beta - self.matrix @ theta)
+        nearest: np.ndarray = theta + scale * change
+        return nearest
+
+    def physical(self, beta: np.ndarray, theta: np.ndarray, metric: np.ndarray) -> np.ndarray:
+        """The physical parameter vector (positive masses, inertias and stiffnesses, no
+        negative damping or friction) whose base parameters come nearest to `beta` in the
+        norm of `metric` (R of the base regressor's QR: the rms force difference on the
+        data), the one nearest `theta` among equals: `nearest` where that is physical."""
+        nearest = self.nearest(beta, theta)
+        lower = _lower_bounds(theta)
+        if np.all(nearest >= lower):
+            return nearest
+        scale = _scale(theta)
+        weight = 1e-6 * np.linalg.norm(metric @ self.matrix) / np.sqrt(len(theta))
+        system = np.vstack([metric @ self.matrix * scale, weight * np.eye(len(theta))])
+        target = np.concatenate([metric @ (beta - self.matrix @ theta), np.zeros(len(theta))])
+        change = lsq_linear(system, target, bounds=((lower - theta) / scale, np.inf)).x
+        physical: np.ndarray = theta + scale * change
+        return physical
+
+    def labels(self) -> list[str]:
+        """Each base parameter as its formula, e.g. `j_up1 + 0.0238*m_up1 + j_rotor1`."""
+        names = linear_names()
+        out = []
+        for row, lead in zip(self.combination, self.independent):
+            terms = [names[lead]]
+            for c, j in zip(row, self.dependent):
+                if abs(c) > 1e-12:
+                    terms.append(names[j] if abs(c - 1) < 1e-9 else f"{c:.6g}*{names[j]}")
+            out.append(" + ".join(terms).replace("+ -", "- "))
+        return out
+
+
+def _scale(theta: np.ndarray) -> np.ndarray:
+    """Each parameter's scale for relative changes: its value, 1 (SI) where that is 0."""
+    scale: np.ndarray = np.where(theta != 0, np.abs(theta), 1.0)
+    return scale
+
+
+def _lower_bounds(theta: np.ndarray) -> np.ndarray:
+    """The smallest physical value of each linear parameter: a millionth of `theta` for
+    those that must be positive (PlantParameters' metadata), zero for the others."""
+    positive = {name: must for name, *_, must in NOMINAL.describe()}
+    must = np.array([positive[n] for n in linear_names()])
+    lower: np.ndarray = np.where(must, 1e-6 * np.abs(theta), 0.0)
+    return lower
+
+
+@functools.cache
+def base_parameters() -> BaseParameters:
+    """The structurally identifiable combinations, from the regressor at random samples of
+    the workspace (fixed seed: the same every time)."""
+    rng = np.random.default_rng(0)
+    radius = NOMINAL.workspace_radius * np.sqrt(rng.uniform(size=STRUCTURE_SAMPLES))
+    angle = rng.uniform(0.0, 2 * np.pi, STRUCTURE_SAMPLES)
+    pos = np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
+    vel, acc = rng.normal(0.0, 0.1, pos.shape), rng.normal(0.0, 1.0, pos.shape)
+    raw = regressor(pos, vel, acc, WIDTHS[len(WIDTHS) // 2])
+    scale = np.linalg.norm(raw, axis=0)
+    w = raw / scale
+    r = np.linalg.qr(w, mode="r")
+    keep = np.abs(np.diag(r)) > RANK_TOLERANCE
+    independent = tuple(int(k) for k in np.flatnonzero(keep))
+    dependent = tuple(int(k) for k in np.flatnonzero(~keep))
+    coefficients = np.linalg.lstsq(w[:, independent], w[:, dependent], rcond=None)[0]
+    combination = coefficients * scale[list(dependent)] / scale[list(independent)][:, None]
+    return BaseParameters(independent, dependent, combination)
+
+
+@dataclass(frozen=True)
+class Identification:
+    """The identified base parameters, their standard uncertainties and the fit."""
+
+    values: np.ndarray  # base parameters (BaseParameters order)
+    std: np.ndarray  # their standard uncertainties (0 where not estimated)
+    estimated: tuple[bool, ...]  # False: the data cannot tell it; its nominal value is kept
+    w_stribeck: float  # the tanh width of the Coulomb friction kept [rad/s]
+    residual_rms: tuple[float, float]  # rms of F - W1 beta, x and y [N]
+    label_rms: tuple[float, float]  # rms of the forces themselves [N]
+    nominal_rms: tuple[float, float]  # rms of F - F_nominal (the nominal model's error) [N]
+    samples: int
+    metric: np.ndarray  # R of the QR of the base regressor / sqrt(rows): |metric @ d_beta|
+    # is the rms force (both axes) that a change d_beta of the base parameters makes
+    data: Mapping[str, Any] = field(default_factory=dict)  # what it was identified on
+
+    def parameters(self) -> dict[str, float]:
+        """The flat plant parameters to deploy: those nearest the nominal ones with the
+        identified base parameters, or, where those are not physical, the physical ones
+        nearest to them (BaseParameters.physical)."""
+        theta = base_parameters().physical(self.values, _nominal_theta(), self.metric)
+        return {**dict(zip(linear_names(), theta.tolist())), "w_stribeck": self.w_stribeck}
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One row per base parameter: its formula, unit, value, standard uncertainty."""
+        base = base_parameters()
+        units = {row[0]: row[2] for row in NOMINAL.describe()}
+        names = linear_names()
+        return [{"name": names[lead], "base": label, "unit": units[names[lead]],
+                 "value": float(v), "std": float(s) if estimated else None,
+                 "estimated": estimated}
+                for lead, label, v, s, estimated in zip(base.independent, base.labels(),
+                                                        self.values, self.std, self.estimated)]
+
+    def deployed_misfit(self) -> float:
+        """The rms force [N] by which the deployed parameters' model differs from the
+        identified one on the samples: 0 unless the identified base parameters have no
+        physical parameter vector."""
+        theta = np.array([self.parameters()[n] for n in linear_names()])
+        change = base_parameters().matrix @ theta - self.values
+        return float(np.linalg.norm(self.metric @ change))
+
+    def report(self) -> dict[str, Any]:
+        """The identification as plain data (what identified.json holds beside the
+        deployable parameters)."""
+        return {"data": dict(self.data), "base_parameters": self.rows(),
+                "w_stribeck": self.w_stribeck,
+                "samples": self.samples,
+                "residual_rms_n": dict(zip("xy", self.residual_rms)),
+                "label_rms_n": dict(zip("xy", self.label_rms)),
+                "nominal_model_rms_n": dict(zip("xy", self.nominal_rms)),
+                "deployed_misfit_rms_n": self.deployed_misfit(),
+                "method": "ordinary least squares on the base parameters (QR of the "
+                          "regressor at random workspace samples, fixed order); std: "
+                          "sqrt(diag(s^2 (W1^T W1)^-1)), independent residuals assumed"}
+
+
+def identify_motion(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,
+                    forces: np.ndarray) -> Identification:
+    """Least squares of the base parameters from n samples of motion (n, 2 each) and the
+    end-effector force that produced it (n, 2) [SI]: the tanh width of the smallest residual
+    among the candidates, then the base parameters at that width, those the data cannot tell
+    at their nominal values (`_essential`)."""
+    if len(pos) < len(linear_names()):
+        raise InputError(f"{len(pos)} samples cannot determine {len(linear_names())} "
+                         f"parameters: give more data")
+    base = base_parameters()
+    labels = np.asarray(forces, dtype=float).reshape(-1)
+    independent = list(base.independent)
+
+    def fit(width: float) -> tuple[float, float, np.ndarray]:
+        w = regressor(pos, vel, acc, width)
+        return _residual_norm(w[:, independent], labels), width, w
+
+    # min over a generator holds two regressors (2n x 41) at most, not one per width
+    _, width, full = min((fit(width) for width in WIDTHS), key=lambda f: f[0])
+    beta, free, residual, covariance = _essential(full[:, independent], labels,
+                                                  base.of(_nominal_theta()))
+    std = np.zeros(len(beta))
+    std[free] = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    return Identification(
+        values=beta, std=std, estimated=tuple(bool(k) for k in free), w_stribeck=width,
+        residual_rms=_axis_rms(residual), label_rms=_axis_rms(labels),
+        nominal_rms=_axis_rms(labels - full @ _nominal_theta()), samples=len(pos),
+        metric=np.linalg.qr(full[:, independent], mode="r") / np.sqrt(len(labels)))
+
+
+def _residual_norm(w: np.ndarray, labels: np.ndarray) -> float:
+    """The norm of the least-squares residual of labels = w beta."""
+    beta, *_ = np.linalg.lstsq(w, labels, rcond=None)
+    return float(np.linalg.norm(labels - w @ beta))
+
+
+def _essential(w: np.ndarray, labels: np.ndarray, nominal: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Least squares of the base parameters (regressor `w`), dropping one at a time the one
+    whose share of the forces (the norm of its column times its value) is smallest, while
+    that share is below the norm of the residual: such a parameter cannot be told from what
+    the model leaves unexplained (measured on the hardware stand-in: the inertias, 0.2 % of
+    the forces of its slow motion, and the dampings, 0.03 %, under a 2 % residual, took up
+    its noise and unmodelled tool mode as a wrist inertia of 12 kg m^2 and negative
+    dampings), and keeps its nominal value. Returns the base parameters, which were
+    estimated (a mask), the residual and the covariance of the estimated ones."""
+    free = np.ones(len(nominal), dtype=bool)
+    while True:
+        known = w[:, ~free] @ nominal[~free]
+        estimate, *_ = np.linalg.lstsq(w[:, free], labels - known, rcond=None)
+        beta = nominal.copy()
+        beta[free] = estimate
+        residual = labels - w @ beta
+        share = np.where(free, np.linalg.norm(w, axis=0) * np.abs(beta), np.inf)
+        weakest = int(np.argmin(share))
+        if share[weakest] >= np.linalg.norm(residual):
+            break
+        free[weakest] = False
+    dof = max(len(labels) - int(free.sum()), 1)
+    variance = float(residual @ residual) / dof
+    covariance = variance * np.linalg.pinv(w[:, free].T @ w[:, free])
+    return beta, free, residual, covariance
+
+
+def _nominal_theta() -> np.ndarray:
+    """The nominal values of linear_names()."""
+    values = dict(zip(NOMINAL.names(), NOMINAL.vector()))
+    return np.array([values[n] for n in linear_names()])
+
+
+def _axis_rms(rows: np.ndarray) -> tuple[float, float]:
+    pairs = rows.reshape(-1, 2)
+    x, y = np.sqrt(np.mean(pairs**2, axis=0))
+    return float(x), float(y)
+
+
+def identify(data: str | Path, features: FeatureConfig | None = None) -> Identification:
+    """Identify the base parameters on the training split of the dataset folder `data`,
+    preprocessed as `features` says (default: the thesis's preprocessing), without the
+    training noise, the filter's edges left out, at most MAX_SAMPLES samples evenly spaced."""
+    features = features or FeatureConfig()
+    dataset = load_dataset(data)
+    trajectories = dataset.split("train")
+    if not trajectories:
+        raise InputError(f"{dataset.path}: the 'train' split is empty: mark some trajectories "
+                         f"'train' in manifest.json or collect more data")
+    rate = dataset.sample_rate_hz
+    model_rate = rate / decimation(rate, features.model_rate_hz)
+    edge = features.edge_samples(model_rate)
+    compact = replace(features, feature_set="compact")
+    motion, forces = [], []
+    for trajectory in trajectories:
+        x, f = prepare_trajectory(trajectory, rate, compact)
+        keep = interior(len(x), edge) == TRAIN
+        motion.append(x[keep])
+        forces.append(f[keep])
+    x, f = np.concatenate(motion), np.concatenate(forces)
+    stride = -(-len(x) // MAX_SAMPLES)
+    x, f = x[::stride], f[::stride]
+    pos, vel, acc = motion_columns("compact")
+    return replace(identify_motion(x[:, pos], x[:, vel], x[:, acc], f),
+                   data=identified_on(dataset, features))
+
+
+def identified_on(dataset: Dataset, features: FeatureConfig) -> dict[str, Any]:
+    """What an identification on `dataset` with `features` records of its data: a file
+    with the same record need not be identified again."""
+    plain: dict[str, Any] = json.loads(json.dumps({
+        "path": str(Path(dataset.path).resolve()), "set": dataset.set,
+        "sha256": dataset.digest, "features": asdict(replace(features,
+                                                             feature_set="compact"))}))
+    return plain
+
+
+def write_identification(identification: Identification, out: str | Path) -> Path:
+    """Write identified.json into the folder `out`: the deployable parameters, the base
+    parameters with their uncertainties, the fit and what it was identified on."""
+    return write_identified(Path(out) / REPORT, identification.parameters(),
+                            identification.report())

@@ -1,0 +1,216 @@
+"""`flexff ilc`: iterative learning control on a loop's one reference, the best feedforward
+force for that reference and so the limit a learned feedforward can be measured against.
+
+Trial 0 runs the loop under PID alone; after each trial the learning filter (learning.
+ilc_filter) turns the force the plant received and the tracking error into the next trial's
+feedforward force Fx_ff, Fy_ff, which the next trial reads as a CSV time table (a [[source]]
+of kind "csv" feeding the controller's Fx_ff, Fy_ff; the loop's own feedforward, if any, is
+replaced). Every trial runs the one run path (cosim.scenario, cosim.run) in this process.
+
+A built-in plant with encoder noise gets a fresh noise seed in every trial (the loop's seed
++ 1 + trial), so that the iteration learns what repeats, not one noise sequence; a run of the
+result with the loop's own seed is one the iteration never saw.
+
+The output folder holds
+  tables/trial-NNN.csv  the feedforward force trial NNN ran with (trial-000: zero)
+  feedforward.csv       the force of the best trial (lowest e2 over both axes): a table any
+                        run can use (learning.loop.with_feedforward_table)
+  ilc.json              the loop, the filter's cutoff, and each trial's seed, e2, einf, rms
+                        and ratio PID alone / trial per axis, and the best trial
+  e2.png                e2 per axis against trial
+Each is written as its trial ends: an interrupted iteration keeps every finished trial, and
+the same command again continues after the last one.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+from tqdm import tqdm
+
+from flexff.cosim.config import expanded
+from flexff.cosim.csv_text import TIME
+from flexff.cosim.metrics import AXES, tracking_metrics
+from flexff.cosim.plots import save_figure
+from flexff.cosim.recording import Recording, atomic_write
+from flexff.cosim.run import output_folder, simulate
+from flexff.cosim.scenario import resolve
+from flexff.cosim.schema import RecordConfig, RunConfig
+from flexff.fmu.errors import InputError
+from flexff.learning.ilc_filter import (
+    CUTOFF_HZ,
+    LearningFilter,
+    check_cutoff,
+    learning_filter,
+)
+from flexff.learning.loop import dataset_taps, with_feedforward, with_feedforward_table
+from flexff.plant.parameters import NOMINAL, PlantParameters
+from flexff.plant.signals import FEEDBACK_FORCES, FEEDFORWARD_FORCES, TRUE_POSITION, names
+from flexff.plant.variants import VARIANTS
+
+ITERATIONS = 10  # learning trials after PID alone
+RESULT = "feedforward.csv"
+STATE = "ilc.json"
+
+
+def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
+        cutoff_hz: float = CUTOFF_HZ, progress: bool = True,
+        say: Callable[[str], None] = print) -> dict[str, Any]:
+    """Run PID alone and `iterations` learning trials of `config` (continuing the iteration in
+    `out` where one with the same loop and cutoff is there); return the content of ilc.json."""
+    if iterations < 1:
+        raise InputError(f"--iterations must be at least 1, got {iterations}")
+    if config.reference is None:
+        raise InputError(f"{config.origin}: the loop has no [reference]: iterative learning "
+                         f"repeats one reference; add a [reference] table")
+    check_cutoff(cutoff_hz, config.step)
+    out = output_folder(out)
+    (out / "tables").mkdir(exist_ok=True)
+    loop = replace(config, record=RecordConfig(csv=False))
+    identity = {"loop": json.loads(json.dumps(expanded(with_feedforward(loop)), default=str)),
+                "cutoff_hz": cutoff_hz}
+    state = _resumed(out, identity)
+    if not state["trials"]:
+        _write_table(out / "tables" / "trial-000.csv", loop.step,
+                     np.zeros((loop.steps + 1, len(FEEDFORWARD_FORCES))))
+    done = len(state["trials"])
+    if done:
+        say(f"{out}: {done} trial(s) there" + (", continuing" if done <= iterations else ""))
+    filter_: LearningFilter | None = None
+    with tqdm(total=iterations + 1, initial=min(done, iterations + 1), unit="trial",
+              disable=not progress, desc="ILC") as bar:
+        for trial in range(done, iterations + 1):
+            seed = _seed(loop, trial)
+            table = out / "tables" / f"trial-{trial:03d}.csv"
+            recording, applied, error = _trial(with_feedforward_table(_seeded(loop, seed),
+                                                                      table))
+            if filter_ is None:
+                filter_ = learning_filter(recording.signals, loop.step, _plant_model(loop),
+                                          cutoff_hz)
+            _write_table(out / "tables" / f"trial-{trial + 1:03d}.csv", loop.step,
+                         filter_.update(applied, error))
+            state["trials"].append(_trial_record(trial, seed, recording, state["trials"]))
+            _finish(out, state)
+            bar.update()
+            bar.set_postfix_str(", ".join(f"e2 {a} {state['trials'][-1][a]['e2']:.3g}"
+                                          for a in AXES))
+    return state
+
+
+def _trial(config: RunConfig) -> tuple[Recording, np.ndarray, np.ndarray]:
+    """Run one trial; its recording, the force the plant received (feedforward as the
+    controller read it plus feedback, (n, 2) [N]) and the tracking error (n, 2) [m]."""
+    with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
+        scenario = resolve(config, folder)
+        taps = dataset_taps(scenario)
+        recording = simulate(scenario, progress=False)
+    applied = np.column_stack([taps[ff].read(recording) + taps[fb].read(recording) for ff, fb
+                               in zip(names(FEEDFORWARD_FORCES), names(FEEDBACK_FORCES))])
+    error = np.column_stack([recording[f"{a}_ref"] - taps[a].read(recording)
+                             for a in names(TRUE_POSITION)])
+    return recording, applied, error
+
+
+def _trial_record(trial: int, seed: int | None, recording: Recording,
+                  before: list[dict[str, Any]]) -> dict[str, Any]:
+    """One trial's line in ilc.json: its norms per axis and their ratio PID alone / trial."""
+    metrics = tracking_metrics(recording)
+    pid = before[0] if before else metrics
+    return {"trial": trial, "seed": seed, **{a: {**metrics[a], "e2_ratio": (
+        pid[a]["e2"] / metrics[a]["e2"] if metrics[a]["e2"] > 0 else None)} for a in AXES}}
+
+
+def _finish(out: Path, state: dict[str, Any]) -> None:
+    """After a trial: the best trial's table as the result, ilc.json, e2.png."""
+    trials = state["trials"]
+    best = min(trials, key=lambda t: float(np.hypot(t["x"]["e2"], t["y"]["e2"])))["trial"]
+    state["best"] = best
+    atomic_write(out / RESULT, lambda tmp: shutil.copyfile(
+        out / "tables" / f"trial-{best:03d}.csv", tmp))
+    text = json.dumps(state, indent=2) + "\n"
+    atomic_write(out / STATE, lambda tmp: tmp.write_text(text, "utf-8"))
+    plot_trials(trials, out / "e2.png")
+
+
+def _resumed(out: Path, identity: dict[str, Any]) -> dict[str, Any]:
+    """ilc.json of an earlier iteration of the same loop and cutoff in `out` (its trials
+    whose next table is there), a fresh state in an empty folder; InputError for another
+    iteration's folder."""
+    path = out / STATE
+    if not path.is_file():
+        return {**identity, "trials": []}
+    try:
+        state = json.loads(path.read_text("utf-8"))
+        same = all(state[k] == v for k, v in identity.items())
+        trials = state["trials"]
+    except (ValueError, KeyError, TypeError):
+        raise InputError(f"{path}: not the record of an ILC run: choose another output "
+                         f"folder") from None
+    if not same:
+        raise InputError(f"{out} holds an ILC run of another loop or cutoff: choose another "
+                         f"output folder, or delete it to start again")
+    kept = 0  # the trials, in order, whose next table is there
+    while kept < len(trials) and trials[kept]["trial"] == kept and (
+            out / "tables" / f"trial-{kept + 1:03d}.csv").is_file():
+        kept += 1
+    return {**state, "trials": trials[:kept]}
+
+
+def _write_table(path: Path, step: float, force: np.ndarray) -> None:
+    """The feedforward force (n, 2) [N] at t = 0, step, ... as a CSV time table."""
+    time = np.arange(force.shape[0]) * step
+    header = ",".join([TIME, *names(FEEDFORWARD_FORCES)])
+    atomic_write(path, lambda tmp: np.savetxt(tmp, np.column_stack([time, force]),
+                                              fmt="%.17g", delimiter=",", header=header,
+                                              comments=""))
+
+
+def _seed(loop: RunConfig, trial: int) -> int | None:
+    """Trial `trial`'s noise seed of the built-in plant (None without one)."""
+    plant = loop.builtin("plant")
+    return None if plant is None else int(plant.options.get("seed", 0)) + 1 + trial
+
+
+def _seeded(loop: RunConfig, seed: int | None) -> RunConfig:
+    if seed is None:
+        return loop
+    return replace(loop, fmus=tuple(replace(f, options={**f.options, "seed": seed})
+                                    if f.builtin == "plant" else f for f in loop.fmus))
+
+
+def _plant_model(loop: RunConfig) -> PlantParameters:
+    """The parameters of the loop's plant model: the built-in plant's variant with the loop's
+    values, its tool (where it has one) counted at the wrist, for below its mount's mode it
+    moves with the wrist; the nominal ones for a plant FMU by path."""
+    plant = loop.builtin("plant")
+    if plant is None:
+        return NOMINAL
+    known = set(PlantParameters.names())
+    variant = VARIANTS[plant.options["variant"]]
+    parameters = variant.parameters.with_values(
+        **{k: float(v) for k, v in plant.parameters.items() if k in known})
+    if not variant.parasitic_mode:
+        return parameters
+    return parameters.with_values(m_ee=parameters.m_ee + parameters.m_tool)
+
+
+def plot_trials(trials: list[dict[str, Any]], path: Path) -> Path:
+    """e2 per axis against trial (log scale), trial 0 being PID alone."""
+    figure = Figure(figsize=(6.5, 4))
+    ax = figure.subplots()
+    numbers = [t["trial"] for t in trials]
+    for axis in AXES:
+        ax.semilogy(numbers, [t[axis]["e2"] for t in trials], "o-", ms=4, label=f"e2 {axis}")
+    ax.set(xlabel="trial (0: PID alone)", ylabel="e2 [m/√s]",
+           title="iterative learning control: tracking error per trial")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="upper right")
+    return save_figure(figure, path)

@@ -1,0 +1,137 @@
+"""A network in its own task (c/wrapper_task.c): the call started at call point k is used from
+k + PERIOD, extrapolated one period further, whatever the timing: paced and unpaced runs, fmpy
+and libcosim give the same outputs bit for bit; a network slower than its deadline is counted
+(and stops a paced run at --max-overruns); a state saved while a call is pending continues
+exactly."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from flexff.bench import slow_graph
+from flexff.cosim.master import Master, ResolvedFmu
+from flexff.cosim.timing import Pacing
+from flexff.fmu.onnx_fmu import onnx_system
+from flexff.fmu.validation import validate_fmu
+from tests.fmu.test_network import INPUTS, PERIOD, STEPS, H, network_system, running_sum_graph
+from tests.fmu_toys import LoggedSlave, build_toy
+from tests.runners import run_fmu, run_fmu_libcosim
+
+
+def task_scheme(calls: np.ndarray, steps: int) -> np.ndarray:
+    """The task scheme by hand, from the results of the calls at 0, PERIOD, 2 PERIOD, ...: zero
+    until the first result; then the call of point (j - 1) PERIOD is the latest result at
+    [j PERIOD, (j + 1) PERIOD), extrapolated from it and the one before by
+    (phase + PERIOD) / PERIOD."""
+    out = np.zeros((steps, calls.shape[1]))
+    for k in range(PERIOD, steps):
+        j, phase = divmod(k, PERIOD)
+        last, before = calls[max(j - 1, 0)], calls[max(j - 2, 0)]
+        out[k] = last + (phase + PERIOD) / PERIOD * (last - before)
+    return out
+
+
+def task_outputs(u: np.ndarray) -> np.ndarray:
+    """The running-sum toy (y = r + u, the network fed 2 u) under the task scheme."""
+    return task_scheme(np.cumsum(2 * u[::PERIOD], axis=0), len(u)) + u
+
+
+@pytest.fixture(scope="module")
+def task_fmu(tmp_path_factory):
+    graph = running_sum_graph(tmp_path_factory.mktemp("graph") / "running_sum.onnx")
+    system = network_system(graph, name="toy_task")
+    return build_toy(replace(system, network=replace(system.network, task=True)),
+                     tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def slow_fmu(tmp_path_factory):
+    """A network of about 3 ms (longer than the 1 ms step) called every step, in a task."""
+    graph = slow_graph(tmp_path_factory.mktemp("slow") / "slow.onnx")
+    return build_toy(onnx_system(graph, H, 1, task=True), tmp_path_factory)
+
+
+def _run(fmu, runner=run_fmu):
+    out = runner(fmu, STEPS, H, {"u1": INPUTS[:, 0], "u2": INPUTS[:, 1]})
+    return np.column_stack([out["y1"], out["y2"]])
+
+
+def _master_run(fmu, pacing=None):
+    sources = {"u1": np.append(INPUTS[:, 0], INPUTS[-1, 0]),
+               "u2": np.append(INPUTS[:, 1], INPUTS[-1, 1])}
+    with Master([ResolvedFmu("net", fmu)], list(sources), H) as master:
+        return master.run(sources, STEPS, progress=False, pacing=pacing)
+
+
+def test_the_result_is_used_exactly_one_period_later(task_fmu):
+    assert np.array_equal(_run(task_fmu)[:STEPS], task_outputs(INPUTS))
+
+
+def test_paced_unpaced_and_libcosim_runs_are_equal_bit_for_bit(task_fmu):
+    unpaced, paced = _master_run(task_fmu), _master_run(task_fmu, Pacing())
+    for name in ("net.y1", "net.y2"):
+        assert np.array_equal(paced[name], unpaced[name])
+    assert np.array_equal(unpaced["net.y1"][:STEPS], task_outputs(INPUTS)[:, 0])
+    ours = []  # libcosim's order: set the inputs, step, read
+    s = LoggedSlave(task_fmu)
+    s.initialize()
+    for k in range(STEPS):
+        s.set(u1=INPUTS[k, 0], u2=INPUTS[k, 1])
+        s.slave.doStep(k * H, H)
+        ours.append(s.get("y1", "y2"))
+    s.free()
+    assert np.array_equal(_run(task_fmu, run_fmu_libcosim), ours)
+    assert validate_fmu(task_fmu) == []
+
+
+def test_a_network_that_misses_its_deadline_is_counted(slow_fmu):
+    inputs = {"inputs[0]": 1.0, "inputs[1]": 2.0}
+    with Master([ResolvedFmu("slow", slow_fmu)], list(inputs), H) as master:
+        recording = master.run(inputs, 20, progress=False)
+    task = recording.timing.table(recording.wall_s)["tasks"]["slow.network"]
+    assert task["overruns"] >= 15  # each call takes ~3 ms, its result is due 1 step later
+    assert task["calls"] >= 20 and task["period_us"] == pytest.approx(1e3)
+    assert np.array_equal(recording["slow.forces[1]"], [0.0] + [2.0] * 20)  # late, never wrong
+    with Master([ResolvedFmu("slow", slow_fmu)], list(inputs), H) as master:
+        paced = master.run(inputs, 200, progress=False, pacing=Pacing(max_overruns=10))
+    timing = paced.timing  # the steps that wait overrun too: both kinds reach the 10
+    assert timing.stopped_at is not None and timing.stopped_at < 100
+    assert timing.task_overruns >= 1 and timing.overruns < 10
+    assert timing.overruns + timing.task_overruns in (10, 11)  # a step may add one of each
+    assert "overruns" in timing.stop_message()
+
+
+@pytest.mark.parametrize("split", [PERIOD * 4 + 1, PERIOD * 4 + 2, PERIOD * 5])
+def test_a_state_saved_with_a_call_pending_continues_exactly(tmp_path_factory, split):
+    """The slow network every PERIOD steps: right after a call point's step its call is still
+    running when the state is saved."""
+    graph = slow_graph(tmp_path_factory.mktemp("slow") / "slow.onnx")
+    fmu = build_toy(onnx_system(graph, H, PERIOD, task=True), tmp_path_factory)
+    names = ("inputs[0]", "inputs[1]")
+
+    def steps(s, ks):
+        out = []
+        for k in ks:
+            s.set(**dict(zip(names, INPUTS[k])))
+            out.append(s.get("forces[0]", "forces[1]"))
+            s.slave.doStep(k * H, H)
+        return out
+
+    s = LoggedSlave(fmu)
+    s.initialize()
+    steps(s, range(split))
+    saved = s.slave.getFMUstate()
+    blob = s.slave.serializeFMUstate(saved)
+    straight = steps(s, range(split, STEPS))
+    s.slave.setFMUstate(saved)
+    assert steps(s, range(split, STEPS)) == straight
+    s.slave.setFMUstate(saved)
+    steps(s, range(split, split + PERIOD + 1))  # a call pending again when restored
+    s.slave.setFMUstate(s.slave.deSerializeFMUstate(blob))
+    assert steps(s, range(split, STEPS)) == straight
+    s.slave.freeFMUstate(saved)
+    s.slave.reset()  # with a call pending: the worker is waited for, then the instance reset
+    s.free()
+    expected = task_scheme(INPUTS[::PERIOD], STEPS)  # forces = inputs
+    assert np.array_equal(np.array(straight), expected[split:STEPS])

@@ -1,0 +1,179 @@
+/*
+ * probe_fmu.c -- a tiny FMI 2.0 co-simulation FMU for the tests (built by tests/probe_fmu.py).
+ *
+ * It records what the importer gave it and misbehaves on request:
+ *   start_seen      the start time fmi2SetupExperiment gave (output)
+ *   tolerance_seen  the tolerance it gave, -1 where none was defined (output)
+ *   clock           the time of the current communication point (output)
+ *   u -> y          y = 2 u, direct feedthrough (input, output)
+ *   crash_at        fmi2DoStep from t >= crash_at raises SIGSEGV (parameter, -1: never)
+ *   hang_at         fmi2DoStep from t >= hang_at never returns (parameter, -1: never)
+ */
+
+#include <signal.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "fmi2Functions.h"
+
+enum { START, TOLERANCE, CLOCK, U, Y, CRASH_AT, HANG_AT, N };
+
+typedef struct {
+    fmi2Real v[N];
+} Probe;
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n,
+                               const fmi2String categories[]) {
+    (void)c; (void)on; (void)n; (void)categories;
+    return fmi2OK;
+}
+
+fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
+                              fmi2String location, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean logging) {
+    (void)name; (void)type; (void)guid; (void)location; (void)functions; (void)visible;
+    (void)logging;
+    Probe *p = calloc(1, sizeof *p);
+    if (p == NULL) return NULL;
+    p->v[TOLERANCE] = -1.0;
+    p->v[CRASH_AT] = -1.0;
+    p->v[HANG_AT] = -1.0;
+    return p;
+}
+
+void fmi2FreeInstance(fmi2Component c) { free(c); }
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolerance_defined,
+                               fmi2Real tolerance, fmi2Real start, fmi2Boolean stop_defined,
+                               fmi2Real stop) {
+    Probe *p = c;
+    (void)stop_defined; (void)stop;
+    p->v[TOLERANCE] = tolerance_defined ? tolerance : -1.0;
+    p->v[START] = start;
+    p->v[CLOCK] = start;
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) { (void)c; return fmi2OK; }
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) { (void)c; return fmi2OK; }
+fmi2Status fmi2Terminate(fmi2Component c) { (void)c; return fmi2OK; }
+fmi2Status fmi2Reset(fmi2Component c) { (void)c; return fmi2OK; }
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                       fmi2Real value[]) {
+    Probe *p = c;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= N) return fmi2Error;
+        value[i] = vr[i] == Y ? 2.0 * p->v[U] : p->v[vr[i]];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                       const fmi2Real value[]) {
+    Probe *p = c;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != U && vr[i] != CRASH_AT && vr[i] != HANG_AT) return fmi2Error;
+        p->v[vr[i]] = value[i];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                          fmi2Integer value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                          fmi2Boolean value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                         fmi2String value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                          const fmi2Integer value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                          const fmi2Boolean value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                         const fmi2String value[]) {
+    (void)c; (void)vr; (void)value;
+    return n == 0 ? fmi2OK : fmi2Error;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) { (void)c; (void)s; return fmi2Error; }
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) { (void)c; (void)s; return fmi2Error; }
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) { (void)c; (void)s; return fmi2Error; }
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *n) {
+    (void)c; (void)s; (void)n;
+    return fmi2Error;
+}
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t n) {
+    (void)c; (void)s; (void)b; (void)n;
+    return fmi2Error;
+}
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t n,
+                                   fmi2FMUstate *s) {
+    (void)c; (void)b; (void)n; (void)s;
+    return fmi2Error;
+}
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
+                                        const fmi2ValueReference z[], size_t nz,
+                                        const fmi2Real du[], fmi2Real dz[]) {
+    (void)c; (void)u; (void)nu; (void)z; (void)nz; (void)du; (void)dz;
+    return fmi2Error;
+}
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                       const fmi2Integer order[], const fmi2Real value[]) {
+    (void)c; (void)vr; (void)n; (void)order; (void)value;
+    return fmi2Error;
+}
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[],
+                                        size_t n, const fmi2Integer order[], fmi2Real value[]) {
+    (void)c; (void)vr; (void)n; (void)order; (void)value;
+    return fmi2Error;
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior) {
+    Probe *p = c;
+    (void)no_prior;
+    if (p->v[CRASH_AT] >= 0.0 && t >= p->v[CRASH_AT]) raise(SIGSEGV);
+    while (p->v[HANG_AT] >= 0.0 && t >= p->v[HANG_AT]) pause();
+    p->v[CLOCK] = t + h;
+    return fmi2OK;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c) { (void)c; return fmi2Error; }
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Error;
+}
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Error;
+}
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Error;
+}
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Error;
+}
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Error;
+}
