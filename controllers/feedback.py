@@ -1,5 +1,7 @@
 """The feedback controller as a discrete System: encoders -> position error -> PID (+ notch) per
-axis -> end-effector force (+ feedforward) -> control allocation -> motor currents.
+axis -> end-effector force (+ feedforward) -> control allocation -> motor currents (+ current
+feedforward, with `current_feedforward`: a current-level learned model's i1_ff..i3_ff, added
+after the allocation; without it the controller has no such inputs).
 
 Outputs depend directly on the inputs: the master sets the inputs of step k, reads the currents
 and then steps, which advances the PID states with the same error. The filter shapes are fixed
@@ -25,6 +27,7 @@ from flexff.plant.analysis import plant_info
 from flexff.plant.kinematics import shoulder_angles
 from flexff.plant.parameters import NOMINAL
 from flexff.plant.signals import (
+    CURRENT_FEEDFORWARD,
     CURRENTS,
     ENCODERS,
     FEEDBACK_FORCES,
@@ -82,33 +85,39 @@ def controller_design(variant: str = "nominal", crossover_hz: float | None = Non
 
 def controller_system(variant: str = "nominal", crossover_hz: float | None = None,
                       notch_hz: float | None = None, encoders: int = 2,
-                      step: float = 1e-3) -> System:
-    """Discrete feedback controller (sample time `step`) with the signals of plant.signals."""
+                      step: float = 1e-3, current_feedforward: bool = False) -> System:
+    """Discrete feedback controller (sample time `step`) with the signals of plant.signals;
+    `current_feedforward` adds the inputs i1_ff..i3_ff [A] to the allocated currents."""
     design = controller_design(variant, crossover_hz, notch_hz, step)
     ss = design.discrete
     n = ss.A.shape[0]
-    x, u = ca.SX.sym("x", 2 * n), ca.SX.sym("u", len(INPUTS))
+    inputs = (*INPUTS, *CURRENT_FEEDFORWARD) if current_feedforward else INPUTS
+    x, u = ca.SX.sym("x", 2 * n), ca.SX.sym("u", len(inputs))
     p, w = ca.SX.sym("p", len(AXES)), ca.SX.sym("w", 0)
-    theta, force_ff = pick(u, INPUTS, ENCODERS), pick(u, INPUTS, FEEDFORWARD_FORCES)
+    theta, force_ff = pick(u, inputs, ENCODERS), pick(u, inputs, FEEDFORWARD_FORCES)
     pos = measured_position(theta, encoders)
-    error = pick(u, INPUTS, POSITION_REFERENCE) - pos
+    error = pick(u, inputs, POSITION_REFERENCE) - pos
     states = [x[k * n:(k + 1) * n] for k in range(len(AXES))]
     force_fb = ca.vertcat(*[p[k] / design.kp * _output(ss, states[k], error[k])
                             for k in range(len(AXES))])
     currents = motor_currents(force_fb + force_ff, pos)
+    if current_feedforward:
+        currents = currents + pick(u, inputs, CURRENT_FEEDFORWARD)
     x_next = ca.vertcat(*[_update(ss, states[k], error[k]) for k in range(len(AXES))])
     # strict JSON for the modelDescription annotation: a margin without a limit becomes null
     numbers = {k: v if math.isfinite(v) else None for k, v in design.summary().items()}
-    design_numbers = {"variant": variant, "encoders": encoders, "step": step, **numbers}
+    design_numbers = {"variant": variant, "encoders": encoders, "step": step,
+                      **({"current_feedforward": True} if current_feedforward else {}), **numbers}
     return System(
         name=f"controller_{variant}",
         description=f"PID{' + notch' if design.notch_hz else ''} per axis with control "
-                    f"allocation ({encoders}-encoder forward kinematics), designed for a "
-                    f"{design.crossover_hz:g} Hz crossover",
+                    f"allocation ({encoders}-encoder forward kinematics)"
+                    f"{' and current feedforward' if current_feedforward else ''}, designed "
+                    f"for a {design.crossover_hz:g} Hz crossover",
         kind="discrete",
         states=tuple(Variable(f"c{axis}{k + 1}", "", f"controller state {k + 1}, {axis} axis "
                               f"(PID first, then notch)") for axis in AXES for k in range(n)),
-        inputs=INPUTS,
+        inputs=inputs,
         outputs=OUTPUTS,
         parameters=tuple(Parameter(f"kp_{axis}", "N/m", f"proportional gain, {axis} axis",
                                    start=design.kp, positive=True) for axis in AXES),

@@ -7,14 +7,14 @@ mismatch, friction or the parasitic mode of the real machine.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import casadi as ca
 
 from flexff.controllers.features import nominal_model
 from flexff.fmu.errors import InputError
-from flexff.fmu.system import System
+from flexff.fmu.system import System, Variable
 from flexff.plant.signals import FEEDFORWARD_FORCES, REFERENCE, reference_motion
 
 
@@ -29,10 +29,12 @@ def rigid_body_force(reference: ca.SX, parameters: Mapping[str, float] | None = 
 
 
 def feedforward_system(name: str, description: str, reference: ca.SX, force: ca.SX,
-                       step: float, result: ca.SX | None = None, **options: Any) -> System:
-    """A discrete, stateless System from the reference signals to F_ff: `force` is an
-    expression of the symbol `reference` (the six REFERENCE signals) and, for a System with an
-    embedded network (`options["network"]`), of the network's `result`."""
+                       step: float, result: ca.SX | None = None,
+                       outputs: Sequence[Variable] = FEEDFORWARD_FORCES, **options: Any) -> System:
+    """A discrete, stateless System from the reference signals to F_ff (or to other
+    `outputs`: a current-level model's i1_ff..i3_ff): `force` is an expression of the symbol
+    `reference` (the six REFERENCE signals) and, for a System with an embedded network
+    (`options["network"]`), of the network's `result`."""
     x, p, w = ca.SX.sym("x", 0), ca.SX.sym("p", 0), ca.SX.sym("w", 0)
     arguments = [x, reference, p, w, *([] if result is None else [result])]
     return System(
@@ -41,7 +43,7 @@ def feedforward_system(name: str, description: str, reference: ca.SX, force: ca.
         kind="discrete",
         states=(),
         inputs=REFERENCE,
-        outputs=FEEDFORWARD_FORCES,
+        outputs=tuple(outputs),
         parameters=(),
         initial_state=ca.Function("initial_state", [p], [ca.SX(0, 1)]),
         dynamics=ca.Function("dynamics", [x, reference, p], [ca.SX(0, 1)]),

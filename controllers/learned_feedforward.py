@@ -1,4 +1,6 @@
-"""The learned feedforward as a System: reference in, an exported ONNX model inside, F_ff out.
+"""The learned feedforward as a System: reference in, an exported ONNX model inside, F_ff out
+(or, for a current-level model, the motor currents i1_ff..i3_ff the controller adds after its
+control allocation).
 
 The FMU takes the reference signals (x_ref ... ay_ref) every 1 ms step, computes the model's
 inputs from them in generated C (the 63 features of eq. 2.1 and their derivatives by the
@@ -29,13 +31,14 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from flexff.controllers.allocation import motor_currents
 from flexff.controllers.features import feature_names, reference_feature_function
 from flexff.controllers.feedforward import feedforward_system, rigid_body_force
-from flexff.controllers.model_card import ModelCard, read_card
+from flexff.controllers.model_card import OUTPUTS, ModelCard, read_card
 from flexff.fmu.errors import InputError
 from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System
-from flexff.plant.signals import FEEDFORWARD_FORCES, REFERENCE, names
+from flexff.plant.signals import REFERENCE, names, reference_motion
 
 REFERENCE_NAMES = list(names(REFERENCE))
 
@@ -61,13 +64,13 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     network = graph_network(read_graph(model, time_axis=True),
                             ca.Function("network_input", [x, u, p], [inputs]), period,
                             None if reference is None else _table(reference, step), task)
-    if network.n_outputs != len(FEEDFORWARD_FORCES):
+    outputs = OUTPUTS[card.labels]
+    if network.n_outputs != len(outputs):
         raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
-                         f"feedforward needs {len(FEEDFORWARD_FORCES)} "
-                         f"({', '.join(names(FEEDFORWARD_FORCES))})")
+                         f"feedforward needs {len(outputs)} ({', '.join(names(outputs))})")
     r = ca.SX.sym("r", network.n_outputs)
     with_prior = card.prior == "rigid-body"
-    force = r + rigid_body_force(u, card.prior_parameters) if with_prior else r
+    force = r + _prior(u, card) if with_prior else r
     mode = "precomputed" if reference is not None else "task" if task else "step"
     added = ""
     if with_prior:
@@ -78,14 +81,23 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
         "learned_feedforward",
         (f"learned feedforward: {card.model_kind} model at {card.sample_rate_hz:g} Hz in "
          f"onnxruntime{added}, {mode} mode"),
-        u, force, step, r,
+        u, force, step, r, outputs,
         extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": card.prior,
                "flexff.feedforward.prior_parameters": json.dumps(card.prior_parameters),
                **{f"flexff.model.{k}": str(getattr(card, k))
                   for k in ("model_kind", "preset", "feature_set", "input_kind",
-                            "sample_rate_hz")}},
+                            "sample_rate_hz", "labels")}},
         network=network,
     )
+
+
+def _prior(reference: ca.SX, card: ModelCard) -> ca.SX:
+    """The rigid-body prior of a physics-guided model along the reference; for a current-level
+    one as the motor currents the controller would allocate for it at the reference position."""
+    force = rigid_body_force(reference, card.prior_parameters)
+    if card.labels == "forces":
+        return force
+    return motor_currents(force, reference_motion(reference)[0])
 
 
 def model_period(card: ModelCard, step: float, model: str | Path) -> int:

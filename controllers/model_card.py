@@ -21,18 +21,23 @@ import onnx
 
 from flexff.fmu.errors import InputError
 from flexff.plant.parameters import NOMINAL
-from flexff.plant.signals import FEEDFORWARD_FORCES, names, units
+from flexff.plant.signals import CURRENT_FEEDFORWARD, FEEDFORWARD_FORCES, names, units
 
 FORMAT = "flexff-feedforward"
 VERSION = 1
 INPUT_KINDS = ("features", "reference")
 PRIORS = ("none", "rigid-body")
+# what a model outputs (learning.features' label levels): forces before the control allocation,
+# or the motor currents after it (the controller's current feedforward)
+OUTPUTS = {"forces": FEEDFORWARD_FORCES, "currents": CURRENT_FEEDFORWARD}
 REQUIRED = ("input_kind", "feature_set", "input_signals", "sample_rate_hz")
-USAGE = ("inputs (T, n_inputs) float64 in SI units -> forces (T, 2) float64 [N] (plus the "
-         "nominal inverse dynamics, prior_parameters in place, when prior = rigid-body); state "
+USAGE = ("inputs (T, n_inputs) float64 in SI units -> outputs (T, n_outputs) float64, the "
+         "output_signals in output_units: forces [N] or motor currents [A] (plus the "
+         "nominal inverse dynamics, prior_parameters in place, when prior = rigid-body; for "
+         "currents allocated at x_ref, y_ref as the controller allocates); state "
          "tensors float32. Whole sequence: T samples, state inputs zero. Step by step: T = 1 "
          "every 1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
-         "extrapolate the forces from the last two calls when the host runs faster.")
+         "extrapolate the outputs from the last two calls when the host runs faster.")
 _JSON = ("input_signals", "input_units", "output_signals", "output_units", "state",
          "prior_parameters", "feature_range")
 _NUMBERS = {"sample_rate_hz": float, "history_samples": int, "ensemble_members": int}
@@ -101,7 +106,17 @@ class ModelCard:
         card._check(where)
         return card
 
+    @property
+    def labels(self) -> str:
+        """What the model outputs: "forces" (Fx_ff, Fy_ff) or "currents" (i1_ff..i3_ff)."""
+        return next(k for k, v in OUTPUTS.items() if list(names(v)) == self.output_signals)
+
     def _check(self, where: str | Path) -> None:
+        known = {k: list(names(v)) for k, v in OUTPUTS.items()}
+        if self.output_signals not in known.values():
+            raise InputError(f"{where}: output signals {self.output_signals} are neither "
+                             + " nor ".join(f"the {k} {v}" for k, v in known.items())
+                             + "; export the model again with `flexff export`")
         if self.input_kind not in INPUT_KINDS:
             raise InputError(f"{where}: unknown input kind {self.input_kind!r} (known: "
                              f"{', '.join(INPUT_KINDS)})")

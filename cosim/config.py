@@ -35,12 +35,14 @@ short form:
   [feedforward]  kind = "none" | "rigid-body" (optionally with identified = "file.json", the
                  parameters `flexff identify` found in place of the nominal ones) | "learned"
                  (with model = "file.onnx", an exported learned model, and mode = "step"
-                 (default) | "precomputed")
+                 (default) | "precomputed"); a current-level model (its card's outputs
+                 i1_ff..i3_ff) feeds the controller's current feedforward (controller option
+                 current_feedforward = true), and its force feedforward Fx_ff, Fy_ff gets zero
 
 A configuration without [fmu.*] tables is the manipulator's loop: the short form, with the
 defaults of its tables. The same keys (variant, seed, crossover_hz, notch, encoders,
-identified, model, mode) are the options of the built-in FMUs in the general form, with the
-plant's physical parameters in `parameters`.
+identified, model, mode, and the controller's current_feedforward) are the options of the
+built-in FMUs in the general form, with the plant's physical parameters in `parameters`.
 
 Any problem (unknown table or key, wrong type, missing file, an FMU variable that does not
 exist or has another type, a reference outside the workspace, a step that does not divide the
@@ -81,7 +83,7 @@ from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
 from flexff.fmu.model_exchange import SOLVERS
 from flexff.plant.parameters import NOMINAL
-from flexff.plant.signals import FEEDFORWARD_FORCES, names
+from flexff.plant.signals import CURRENT_FEEDFORWARD, FEEDFORWARD_FORCES, names
 from flexff.plant.variants import VARIANTS
 
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
@@ -355,15 +357,25 @@ class _Parser:
         kind = self.choice(ff, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
         self.keys(ff, "feedforward", {"learned": ("kind", "model", "mode"),
                                       "rigid-body": ("kind", "identified")}.get(kind, ("kind",)))
-        if kind == "none":
-            sources.append(SourceConfig("constant", dict.fromkeys(names(FEEDFORWARD_FORCES), 0.0)))
-        else:
-            fmus.append(FmuConfig("feedforward", builtin=f"{kind}-feedforward",
-                                  options=self.feedforward_options(ff, "feedforward")))
+        given: tuple[str, ...] = ()  # the controller's feedforward inputs a feedforward FMU feeds
+        if kind != "none":
+            options = self.feedforward_options(ff, "feedforward")
+            fmus.append(FmuConfig("feedforward", builtin=f"{kind}-feedforward", options=options))
+            given = names(FEEDFORWARD_FORCES)
+            if "model" in options:  # a learned model's card says what it feeds
+                from flexff.controllers.model_card import read_card  # onnx: learned runs only
+
+                given = tuple(read_card(options["model"]).output_signals)
+        currents = given == names(CURRENT_FEEDFORWARD)  # a current-level model (model_card)
+        zeros = [n for n in names(FEEDFORWARD_FORCES, CURRENT_FEEDFORWARD if currents else ())
+                 if n not in given]
+        if zeros:
+            sources.append(SourceConfig("constant", dict.fromkeys(zeros, 0.0)))
         controller = self.table(data, "controller")
         self.keys(controller, "controller", ("crossover_hz", "notch", "encoders"))
         fmus.append(FmuConfig("controller", builtin="controller", options={
-            "variant": variant, **self.controller_options(controller, "controller")}))
+            "variant": variant, **self.controller_options(controller, "controller"),
+            **({"current_feedforward": True} if currents else {})}))
         self.keys(plant, "plant", ("variant", "seed", *self.plant_parameter_names(variant)))
         values = {k: v for k, v in plant.items() if k not in ("variant", "seed")}
         fmus.append(FmuConfig("plant", builtin="plant", options={
@@ -485,6 +497,11 @@ class _Parser:
             raise self.error(f"{where}.encoders", f"must be one of {ENCODER_CHOICES}, got "
                                                   f"{encoders}")
         options["encoders"] = encoders
+        if t.get("current_feedforward", False) is not False:  # only an added input is written
+            if t["current_feedforward"] is not True:
+                raise self.error(f"{where}.current_feedforward", f"expected true or false, got "
+                                 f"{t['current_feedforward']!r}")
+            options["current_feedforward"] = True
         if "crossover_hz" in t:
             options["crossover_hz"] = self.number(t, where, "crossover_hz", None, positive=True)
         return options

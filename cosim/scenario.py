@@ -188,6 +188,7 @@ def controller_for(options: Mapping[str, Any], step: float) -> System:
     if notch is False and DEFAULTS[variant].notch:
         # the variant's defaults would add the notch: design without it at its crossover
         return controller_system("nominal", crossover or DEFAULTS[variant].crossover_hz, None,
-                                 encoders, step)
+                                 encoders, step, options.get("current_feedforward", False))
     notch_hz = parasitic_mode_hz() if notch is True else (notch or None)
-    return controller_system(variant, crossover, notch_hz, encoders, step)
+    return controller_system(variant, crossover, notch_hz, encoders, step,
+                             options.get("current_feedforward", False))

@@ -56,7 +56,7 @@ STEP_TOLERANCE = 1e-9  # relative: stop / step must be this close to a whole num
 UNCONNECTED = ("error", "start")
 BUILTIN_OPTIONS = {  # built-in FMU -> its options
     "plant": ("variant", "seed"),
-    "controller": ("variant", "crossover_hz", "notch", "encoders"),
+    "controller": ("variant", "crossover_hz", "notch", "encoders", "current_feedforward"),
     "rigid-body-feedforward": ("identified",),
     "learned-feedforward": ("model", "mode"),
 }

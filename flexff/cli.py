@@ -358,7 +358,7 @@ def _data_import(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     """One run into OUTPUT, or with several --seed or a --scheduler one run per seed into
     OUTPUT/seedN, side by side (learning.workers); prints the metrics as JSON."""
-    overrides = {"epochs": args.epochs} if args.epochs is not None else {}
+    overrides = {"labels": args.labels, **({"epochs": args.epochs} if args.epochs else {})}
     seeds = args.seed or [0]
     if len(seeds) == 1 and args.scheduler is None:
         from flexff.learning.train import train
@@ -422,7 +422,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     loop = None if args.config is None else load_run_config(args.config)
     output_folder(args.output)
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
-             scheduler=args.scheduler)
+             scheduler=args.scheduler, currents=args.currents)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
           f"forces.png, the .onnx models, ilc/ for the limit)")
@@ -601,6 +601,10 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--data", required=True, help="a dataset folder (flexff data collect)")
     train.add_argument("-o", "--output", required=True, help="the run folder to write")
     train.add_argument("--epochs", type=int, help="override the preset's number of epochs")
+    train.add_argument("--labels", default="forces", choices=("forces", "currents"),
+                       help="what the model learns and feeds forward: the wrist force Fx, Fy "
+                            "(default), or the motor currents i1..i3, added after the control "
+                            "allocation")
     existing = train.add_mutually_exclusive_group()
     existing.add_argument("--resume", action="store_true",
                           help="continue the unfinished run in the run folder from its last "
@@ -671,6 +675,10 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("-o", "--output", required=True, help="the output folder")
     evaluation.add_argument("--preset", default="fast", choices=PRESETS)
     evaluation.add_argument("--models", nargs="+", default=list(MODELS), choices=MODELS)
+    evaluation.add_argument("--currents", nargs="+", default=[], metavar="KIND",
+                            choices=MODELS,
+                            help="also the current-level model of these kinds: labels i1..i3, "
+                                 "fed forward after the control allocation")
     evaluation.add_argument("--data", help="a collected dataset folder to use")
     evaluation.add_argument("--epochs", type=int, help="override the preset's number of epochs")
     evaluation.add_argument("--scheduler", help="address of a Dask scheduler to collect and "

@@ -11,7 +11,8 @@ warned of (learning.encoders): flexff evaluate --env sim preprocesses it for ide
 
 The folder gets one NAME.npz per trajectory (float64 arrays of equal length: `time`, the six
 reference signals, the encoders `theta_s1..3`, the true position `x, y`, and the force the
-controller applied to the wrist, Fx = Fx_fb + Fx_ff, likewise Fy) and, last, `manifest.json`
+controller applied to the wrist, Fx = Fx_fb + Fx_ff, likewise Fy, and the motor currents
+`i1..3` it commanded, the plant's inputs) and, last, `manifest.json`
 (set, sample rate, plant variant and parameters, the loop: its configuration in the general
 form and the sha256 of every FMU, every trajectory's reference table and seed). A set saved at
 a lower rate than the run (hardware: 100 Hz) keeps every n-th sample of the run: plain
@@ -57,6 +58,7 @@ from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError, RunError
 from flexff.learning.dataset import (
     COLLECTED,
+    CURRENT_SIGNALS,
     ENCODER_SIGNALS,
     FORMAT,
     LABEL_SIGNALS,
@@ -244,14 +246,17 @@ def trajectory_config(spec: TrajectorySpec, trajectories: TrajectorySet,
 
 def dataset_signals(recording: Recording, decimation: int = 1,
                     taps: Mapping[str, Tap] = OWN_TAPS) -> dict[str, np.ndarray]:
-    """A recording as the dataset's signals (every `decimation`-th sample), in SIGNALS order,
-    each read at its tap (learning.loop.dataset_taps; default: flexff's own loop)."""
+    """A recording as the dataset's signals (every `decimation`-th sample), in SIGNALS order
+    and then the currents the controller commanded (CURRENT_SIGNALS), each read at its tap
+    (learning.loop.dataset_taps; default: flexff's own loop)."""
     values = {"time": recording.time, **{n: taps[n].read(recording) for n in
-                                         REFERENCE_SIGNALS + ENCODER_SIGNALS + POSITION_SIGNALS},
+                                         REFERENCE_SIGNALS + ENCODER_SIGNALS + POSITION_SIGNALS
+                                         + CURRENT_SIGNALS},
               **{label: taps[fb].read(recording) + taps[ff].read(recording)  # feedback + ff
                  for label, fb, ff in zip(LABEL_SIGNALS, names(FEEDBACK_FORCES),
                                           names(FEEDFORWARD_FORCES))}}
-    return {n: np.ascontiguousarray(values[n][::decimation], dtype=np.float64) for n in SIGNALS}
+    return {n: np.ascontiguousarray(values[n][::decimation], dtype=np.float64)
+            for n in (*SIGNALS, *CURRENT_SIGNALS)}
 
 
 def _decimation(loop: RunConfig, trajectories: TrajectorySet) -> int:
@@ -332,7 +337,7 @@ def _present(job: _Job, listed: str | None) -> bool:
     """
     try:
         with np.load(job.path) as data:
-            signals = {n: data[n] for n in SIGNALS}
+            signals = {n: data[n] for n in (*SIGNALS, *CURRENT_SIGNALS)}
     except Exception:
         return False
     if listed is not None and file_sha256(job.path) != listed:

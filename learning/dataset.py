@@ -9,6 +9,11 @@ its file, and the manifest holds a sha256 of itself (all but the trajectories' s
 may be edited by hand), so a truncated or swapped file, or an edited `set` or `plant`, is
 refused instead of trained on.
 
+Version 3 adds the motor currents i1..i3 [A] the plant was given (CURRENT_SIGNALS), the labels
+of a current-level model: a collected set holds them, imported logs and version 2 folders need
+not (all three or none). Version 2 folders are still read; only current-level training refuses
+them.
+
 A trajectory entry's optional `derived` maps a signal to how it was computed, where its source
 did not hold it (imported logs: the true position from the encoders). Training reads the
 encoders and the forces (TRAINED), which must be measured: an entry marking one of them derived
@@ -31,10 +36,11 @@ import numpy as np
 from flexff.cosim.recording import atomic_write
 from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
-from flexff.plant.signals import ENCODERS, FORCES, REFERENCE, TRUE_POSITION, names
+from flexff.plant.signals import CURRENTS, ENCODERS, FORCES, REFERENCE, TRUE_POSITION, names
 
 FORMAT = "flexff-dataset"
-VERSION = 2
+VERSION = 3
+READS = (2, VERSION)  # the versions load_dataset reads (module doc)
 MANIFEST = "manifest.json"
 COLLECTED = "flexff data collect"  # the manifest's `source` for a collected set
 IMPORTED = "flexff data import"  # ... and for imported logs
@@ -47,6 +53,7 @@ ENCODER_SIGNALS = names(ENCODERS)
 POSITION_SIGNALS = names(TRUE_POSITION)
 LABEL_SIGNALS = names(FORCES)
 SIGNALS = ("time", *REFERENCE_SIGNALS, *ENCODER_SIGNALS, *POSITION_SIGNALS, *LABEL_SIGNALS)
+CURRENT_SIGNALS = names(CURRENTS)  # optional columns (module doc): a current-level model's labels
 TRAINED = ("time", *ENCODER_SIGNALS, *LABEL_SIGNALS)  # what training reads (learning.features)
 RECOLLECT = "collect the data again with this flexff version: flexff data collect ..."
 
@@ -139,8 +146,10 @@ def write_dataset(path: str | Path, set_name: str, sample_rate_hz: float, plant:
 
 
 def save_signals(path: Path, signals: Mapping[str, np.ndarray]) -> None:
-    """Write one trajectory's SIGNALS as float64 arrays to the .npz `path`, atomically."""
+    """Write one trajectory's SIGNALS (and CURRENT_SIGNALS, where `signals` holds them) as
+    float64 arrays to the .npz `path`, atomically."""
     arrays = {s: np.asarray(signals[s], dtype=np.float64) for s in SIGNALS}
+    arrays.update(_currents(signals, str(path)))
 
     def write(tmp: Path) -> None:
         with open(tmp, "wb") as handle:  # a file object keeps numpy from adding ".npz"
@@ -179,9 +188,9 @@ def _check_manifest(manifest: Any, where: Path) -> None:
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         found = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
         raise DatasetError(f"{where}: format is {found!r}, expected {FORMAT!r}; {RECOLLECT}")
-    if manifest.get("version") != VERSION:
+    if manifest.get("version") not in READS:
         raise DatasetError(f"{where}: dataset version {manifest.get('version')!r}, this flexff "
-                           f"reads version {VERSION}; {RECOLLECT}")
+                           f"reads versions {', '.join(map(str, READS))}; {RECOLLECT}")
     if not _is_sha256(manifest.get("sha256")):
         raise DatasetError(f"{where}: 'sha256' is missing or not a sha256; {RECOLLECT}")
     if manifest.get("set") not in SETS:
@@ -238,7 +247,8 @@ def _load_trajectory(folder: Path, entry: Mapping[str, Any], rate: float,
     try:
         with np.load(io.BytesIO(content)) as npz:
             missing = [s for s in SIGNALS if s not in npz.files]
-            signals = {s: np.asarray(npz[s], dtype=np.float64) for s in SIGNALS if s in npz.files}
+            signals = {s: np.asarray(npz[s], dtype=np.float64)
+                       for s in (*SIGNALS, *CURRENT_SIGNALS) if s in npz.files}
     except (zipfile.BadZipFile, EOFError, ValueError, OSError):
         raise DatasetError(f"{file} is truncated or not a .npz file; {fix}") from None
     if hashlib.sha256(content).hexdigest() != entry["sha256"]:
@@ -247,6 +257,10 @@ def _load_trajectory(folder: Path, entry: Mapping[str, Any], rate: float,
                            f"another trajectory's); {fix}")
     if missing:
         raise DatasetError(f"{file} lacks signals {missing}; {fix}")
+    try:
+        _currents(signals, str(file))
+    except ValueError as error:
+        raise DatasetError(f"{error}; {fix}") from None
     lengths = {s: a.shape for s, a in signals.items()}
     if any(a.ndim != 1 for a in signals.values()) or len(set(lengths.values())) != 1:
         raise DatasetError(f"{file}: signals must be 1-D arrays of equal length, got {lengths}; "
@@ -263,3 +277,12 @@ def _load_trajectory(folder: Path, entry: Mapping[str, Any], rate: float,
     return Trajectory(name=entry["name"], split=entry["split"], signals=signals,
                       reference=entry.get("reference", {}), seed=int(entry.get("seed", 0)),
                       derived=entry.get("derived", {}))
+
+
+def _currents(signals: Mapping[str, Any], where: str) -> dict[str, np.ndarray]:
+    """The CURRENT_SIGNALS of `signals` as float64 arrays: all three, or none."""
+    present = [s for s in CURRENT_SIGNALS if s in signals]
+    if present and len(present) != len(CURRENT_SIGNALS):
+        raise ValueError(f"{where} holds {', '.join(present)} but not all of "
+                         f"{', '.join(CURRENT_SIGNALS)}")
+    return {s: np.asarray(signals[s], dtype=np.float64) for s in present}

@@ -29,7 +29,8 @@ from flexff.plant.signals import REFERENCE, names, units
 
 
 class SIModel(nn.Module):
-    """(inputs (T, n_inputs), *state) -> (forces (T, 2) [N], *new state).
+    """(inputs (T, n_inputs), *state) -> (forces (T, 2) [N], or currents (T, 3) [A] for a
+    current-level run, *new state).
 
     Inputs and forces are float64, and so is everything outside the network (features from the
     reference, scaling, the rigid-body prior): some features sit far from zero with a tiny
@@ -56,8 +57,9 @@ class SIModel(nn.Module):
         self.reference = (TorchFunction(reference_feature_function(feature_set))
                           if by_reference else None)
         self.residual = uses_prior(run.config.model)
+        self.labels = run.config.features.labels  # what it outputs: forces or currents
         self.prior_parameters = run.prior_parameters
-        self.prior = (RigidBodyForce(feature_set, self.prior_parameters)
+        self.prior = (RigidBodyForce(feature_set, self.prior_parameters, self.labels)
                       if self.residual and prior else None)
         for name, value in (("feature_low", run.feature_scaler.low),
                             ("feature_span", run.feature_scaler.span),
@@ -101,6 +103,7 @@ class EnsembleSIModel(nn.Module):
         self.members = nn.ModuleList(members)
         self.input_names, self.input_units = first.input_names, first.input_units
         self.residual, self.prior_parameters = first.residual, first.prior_parameters
+        self.labels = first.labels
         self.counts = [len(member.initial_state()) for member in members]
 
     def forward(self, inputs: torch.Tensor, *state: torch.Tensor) -> tuple[torch.Tensor, ...]:

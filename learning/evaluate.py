@@ -3,7 +3,8 @@
 1. collect the environment's trajectory set under PID (resumes what is there);
 2. train the models side by side, one process per core (learning.workers; a finished run with
    the same settings is reused), and export each to ONNX (an ensemble's members, where the
-   environment asks for one, as one graph of their mean);
+   environment asks for one, as one graph of their mean); `currents` adds, per kind named,
+   the same model trained on the motor currents (scenario KIND-currents);
 3. identify the rigid-body model's parameters on the training set, preprocessed as the
    networks' data (learning.identify);
 4. run iterative learning control (learning.ilc) on the environment's evaluation reference,
@@ -152,15 +153,18 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
              data: str | Path | None = None, epochs: int | None = None,
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
              progress: bool = True, scheduler: str | None = None,
-             ilc_iterations: int = ITERATIONS) -> dict[str, Any]:
+             ilc_iterations: int = ITERATIONS, currents: Sequence[str] = ()
+             ) -> dict[str, Any]:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
     collects and evaluates on that run configuration instead of the environment's plant;
     `scheduler` collects and trains on that Dask cluster (learning.workers); `ilc_iterations`
-    are the learning trials of the limit (learning.ilc)."""
+    are the learning trials of the limit (learning.ilc); `currents` adds the current-level
+    model of each kind named (scenario KIND-currents, the same settings with labels =
+    "currents", learning.features)."""
     if env not in ENVIRONMENTS:
         raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
-    for kind in models:
+    for kind in (*models, *currents):
         check_kind(kind)
     out = Path(out)
     environment = ENVIRONMENTS[env]
@@ -177,9 +181,13 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         data = collect(set_name, out / f"data-{set_name}", scheduler=scheduler,
                        config=None if loop is None else with_feedforward(loop))
     extra = {"epochs": epochs} if epochs else {}
-    jobs = {job.name: job for kind in models
-            for job in _member_jobs(kind, preset, {**environment.overrides(preset, kind), **extra},
-                                    environment.members(preset, kind), Path(data), out / "runs")}
+    levels: list[tuple[str, str, dict[str, Any]]] = [(kind, kind, {}) for kind in models] + [
+        (f"{kind}-currents", kind, {"labels": "currents"}) for kind in currents]
+    groups = {name: _member_jobs(kind, preset, {**environment.overrides(preset, kind), **extra,
+                                                **labels},
+                                 environment.members(preset, kind), Path(data), out / "runs", name)
+              for name, kind, labels in levels}  # scenario -> its training runs
+    jobs = {job.name: job for group in groups.values() for job in group}
     training = {name: m for name, job in jobs.items() if (m := _finished(job))}
     if todo := [name for name in jobs if name not in training]:
         where = f"on {scheduler}" if scheduler else "one process per core"
@@ -187,10 +195,9 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     training.update(train_parallel([jobs[name] for name in todo], progress=progress,
                                    scheduler=scheduler))
     onnx_files, model_training = {}, {}
-    for kind in models:
-        names = [name for name, job in jobs.items() if job.model == kind]
-        metrics = model_training[kind] = _ensemble_metrics([training[n] for n in names])
-        onnx_files[kind] = export([jobs[n].run for n in names], out / f"{kind}.onnx")
+    for kind, group in groups.items():
+        metrics = model_training[kind] = _ensemble_metrics([training[j.name] for j in group])
+        onnx_files[kind] = export([j.run for j in group], out / f"{kind}.onnx")
         say(f"{kind}: test MSE {metrics['test_mse']:.3g} ({metrics['parameters']} parameters, "
             f"{metrics['epochs']} epochs in {metrics['seconds']:.0f} s) -> {onnx_files[kind]}")
     files: dict[str, Path] = {**onnx_files,
@@ -199,7 +206,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     ilc(scenario_config(env, "pid", loop=loop), out / "ilc", ilc_iterations, progress=progress,
         say=say)
     recordings: dict[str, Recording] = {}
-    for name in ["pid", "rigid-body", IDENTIFIED, *models, LIMIT]:
+    for name in ["pid", "rigid-body", IDENTIFIED, *groups, LIMIT]:
         folder = out / "cosim" / name
         metrics = run_config(scenario_config(env, name, files.get(name), loop=loop,
                                              table=out / "ilc" / RESULT), folder)
@@ -238,14 +245,14 @@ def _identified(data: Path, preset: str, env: str, out: Path,
 
 
 def _member_jobs(kind: str, preset: str, overrides: dict[str, Any], members: int, data: Path,
-                 runs: Path) -> list[TrainJob]:
-    """The training runs of model `kind`: one in runs/KIND, or an ensemble's members, seeds
-    0, 1, ..., in runs/KIND/seedN."""
+                 runs: Path, name: str) -> list[TrainJob]:
+    """The training runs of model `kind` for scenario `name`: one in runs/NAME, or an
+    ensemble's members, seeds 0, 1, ..., in runs/NAME/seedN."""
     cost = _cost(make_config(kind, preset, **overrides))
     if members == 1:
-        return [TrainJob(kind, preset, data, runs / kind, overrides, cost)]
-    return [TrainJob(kind, preset, data, runs / kind / f"seed{seed}", {**overrides, "seed": seed},
-                     cost, f"{kind}-seed{seed}") for seed in range(members)]
+        return [TrainJob(kind, preset, data, runs / name, overrides, cost, name)]
+    return [TrainJob(kind, preset, data, runs / name / f"seed{seed}", {**overrides, "seed": seed},
+                     cost, f"{name}-seed{seed}") for seed in range(members)]
 
 
 def _ensemble_metrics(members: list[dict[str, Any]]) -> dict[str, Any]:

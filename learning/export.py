@@ -1,4 +1,6 @@
-"""ONNX export of a training run: SI signals in, forces in newtons out, state explicit.
+"""ONNX export of a training run: SI signals in, forces in newtons out (a current-level run:
+motor currents in amperes, the output `currents` instead of `forces`, the card's output signals
+i1_ff..i3_ff), state explicit.
 
 One graph serves both ways of running the model (`inputs` and `forces` are float64, the state
 tensors float32):
@@ -47,12 +49,13 @@ import onnx
 import onnxruntime as ort
 import torch
 
-from flexff.controllers.model_card import ModelCard
+from flexff.controllers.model_card import OUTPUTS, ModelCard
 from flexff.cosim.recording import atomic_write
 from flexff.fmu.errors import InputError, RunError
 from flexff.learning.deploy import EnsembleSIModel, SIModel
 from flexff.learning.run_folder import Run, flexff_version, load_run
 from flexff.learning.threads import torch_threads
+from flexff.plant.signals import names, units
 
 OPSET = 17
 TOLERANCE = 1e-5  # largest |onnxruntime - torch| relative to the largest |force|
@@ -95,13 +98,13 @@ def _si_model(runs: list[Run], inputs: str) -> SIModel | EnsembleSIModel:
 
 def _check_members(runs: list[Run]) -> None:
     """Ensemble members must run alike: same model kind, features, rate and prior."""
-    def key(r: Run) -> tuple[str, str, float, str]:
+    def key(r: Run) -> tuple[str, str, float, str, str]:
         return (r.config.model, r.config.features.feature_set, r.model_rate_hz,
-                json.dumps(r.prior_parameters, sort_keys=True))
+                json.dumps(r.prior_parameters, sort_keys=True), r.config.features.labels)
 
     if len({key(r) for r in runs}) > 1:
         raise InputError("the runs of one export must share model kind, feature set, model "
-                         "rate and prior (the same training data): "
+                         "rate, prior and labels (the same training data): "
                          + ", ".join(f"{r.path} {key(r)}" for r in runs))
 
 
@@ -117,8 +120,8 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
         torch.onnx.export(
             model, (example, *state), str(path), dynamo=False, opset_version=OPSET,
             input_names=["inputs", *state_names],
-            output_names=["forces", *[f"{n}_out" for n in state_names]],
-            dynamic_axes={"inputs": {0: "time"}, "forces": {0: "time"}})
+            output_names=[model.labels, *[f"{n}_out" for n in state_names]],
+            dynamic_axes={"inputs": {0: "time"}, model.labels: {0: "time"}})
     graph = onnx.load(str(path))
     low = np.min([r.feature_scaler.low for r in runs], axis=0)
     high = np.max([r.feature_scaler.high for r in runs], axis=0)
@@ -128,6 +131,8 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
         input_kind=inputs, prior="rigid-body" if model.residual else "none",
         prior_parameters=model.prior_parameters, input_signals=model.input_names,
         input_units=model.input_units,
+        output_signals=list(names(OUTPUTS[model.labels])),
+        output_units=list(units(OUTPUTS[model.labels])),
         feature_range={"signals": loaded.feature_names, "low": low.tolist(),
                        "high": high.tolist()},
         sample_rate_hz=float(loaded.model_rate_hz),
@@ -149,14 +154,15 @@ def session(path: str | Path) -> ort.InferenceSession:
 
 
 def run_sequence(session: ort.InferenceSession, inputs: np.ndarray) -> np.ndarray:
-    """Forces (T, 2) for a whole sequence, from the zero state."""
+    """Forces (T, 2) (or currents (T, 3)) for a whole sequence, from the zero state."""
     feed = {"inputs": inputs.astype(np.float64), **_zero_state(session)}
-    forces: np.ndarray = session.run(["forces"], feed)[0]
+    forces: np.ndarray = session.run([session.get_outputs()[0].name], feed)[0]
     return forces
 
 
 def run_steps(session: ort.InferenceSession, inputs: np.ndarray) -> np.ndarray:
-    """Forces (T, 2) computed one sample per call, the state passed from call to call."""
+    """Forces (T, 2) (or currents (T, 3)) computed one sample per call, the state passed
+    from call to call."""
     state = _zero_state(session)
     names = [o.name for o in session.get_outputs()]
     forces = []

@@ -6,11 +6,11 @@ A loop is changed with dataclasses.replace, never by editing its text, and every
 checked again as a file is (cosim.config.checked): `on_reference` sets the reference, run.stop
 and the start values (x_start, y_start of the built-in plant, and of an FMU by path that has
 such parameters) and the built-in plant's noise seed; `with_feedforward` replaces whatever feeds
-the controller's Fx_ff, Fy_ff (`with_feedforward_table`: with a CSV time table of them, as
-learning.ilc writes). `dataset_taps` finds, in a resolved loop, where each signal of
-the dataset is read: the encoders and the feedforward force as the controller receives them
-(through the wiring's gain and offset), its feedback force, and the true position `x`, `y` by
-name; a loop that lacks one is refused before anything runs.
+the controller's Fx_ff, Fy_ff and i1_ff..i3_ff (`with_feedforward_table`: the forces from a
+CSV time table, as learning.ilc writes). `dataset_taps` finds, in a resolved loop, where each
+signal of the dataset is read: the encoders and the feedforward force as the controller
+receives them (through the wiring's gain and offset), its feedback force and currents, and the
+true position `x`, `y` by name; a loop that lacks one is refused before anything runs.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from flexff.controllers.model_card import OUTPUTS, read_card
 from flexff.cosim.config import checked, expanded, parse_config
 from flexff.cosim.recording import Recording
 from flexff.cosim.scenario import Scenario
@@ -35,7 +36,13 @@ from flexff.learning.dataset import (
     POSITION_SIGNALS,
     REFERENCE_SIGNALS,
 )
-from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
+from flexff.plant.signals import (
+    CURRENT_FEEDFORWARD,
+    CURRENTS,
+    FEEDBACK_FORCES,
+    FEEDFORWARD_FORCES,
+    names,
+)
 from flexff.plant.system import plant_parameters
 from flexff.plant.variants import VARIANTS
 
@@ -102,21 +109,32 @@ def with_feedforward(loop: RunConfig, builtin: str | None = None,
     """`loop` with its feedforward replaced: the built-in `builtin` ("rigid-body-feedforward"
     or "learned-feedforward" with its `options`) stepped right before the controller, or, for
     None, PID alone (zero Fx_ff, Fy_ff). The loop's own built-in feedforward, its constant
-    Fx_ff, Fy_ff and the connections to the controller's Fx_ff, Fy_ff go."""
+    Fx_ff, Fy_ff (and i1_ff..i3_ff) and the connections to the controller's feedforward inputs
+    go. A current-level learned model (its card's outputs i1_ff..i3_ff) feeds the controller's
+    current feedforward (controller option current_feedforward), and Fx_ff, Fy_ff get zero;
+    whatever feedforward input of the controller the new feedforward does not feed gets zero."""
     controller = _controller(loop)
+    fed = names(FEEDFORWARD_FORCES, CURRENT_FEEDFORWARD)  # the controller's feedforward inputs
+    produced = _produced(builtin, options or {})
+    if produced == names(CURRENT_FEEDFORWARD):
+        controller = replace(controller, options={**controller.options,
+                                                  "current_feedforward": True})
+    inputs = names(FEEDFORWARD_FORCES, CURRENT_FEEDFORWARD
+                   if controller.options.get("current_feedforward") else ())
     gone = {f.name for f in loop.fmus if f.builtin in FEEDFORWARDS}
-    targets = {f"{controller.name}.{n}" for n in names(FEEDFORWARD_FORCES)}
+    targets = {f"{controller.name}.{n}" for n in fed}
     connections = tuple(c for c in loop.connections if c.to_name not in targets and not
                         {c.from_name.partition(".")[0], c.to_name.partition(".")[0]} & gone)
     sources = []
     for s in loop.sources:
-        values = {k: v for k, v in s.values.items() if k not in names(FEEDFORWARD_FORCES)}
+        values = {k: v for k, v in s.values.items() if k not in fed}
         if s.kind != "constant" or values:
             sources.append(replace(s, values=values))
-    fmus = [f for f in loop.fmus if f.name not in gone]
-    if builtin is None:
-        sources.insert(0, SourceConfig("constant", dict.fromkeys(names(FEEDFORWARD_FORCES), 0.0)))
-    else:
+    fmus = [controller if f.name == controller.name else f
+            for f in loop.fmus if f.name not in gone]
+    if zeros := [n for n in inputs if n not in produced]:
+        sources.insert(0, SourceConfig("constant", dict.fromkeys(zeros, 0.0)))
+    if builtin is not None:
         name = "feedforward"
         while any(f.name == name for f in fmus):
             name += "_"
@@ -124,6 +142,16 @@ def with_feedforward(loop: RunConfig, builtin: str | None = None,
                     FmuConfig(name, builtin=builtin, options=dict(options or {})))
     return checked(replace(loop, fmus=tuple(fmus), sources=tuple(sources),
                            connections=connections))
+
+
+def _produced(builtin: str | None, options: Mapping[str, Any]) -> tuple[str, ...]:
+    """The controller inputs the feedforward `builtin` feeds (a learned model's card says)."""
+    if builtin != "learned-feedforward":
+        return names(FEEDFORWARD_FORCES) if builtin is not None else ()
+    try:
+        return names(OUTPUTS[read_card(options["model"]).labels])
+    except (InputError, KeyError):  # no model: the parser's check (checked) names what to do
+        return names(FEEDFORWARD_FORCES)
 
 
 def with_feedforward_table(loop: RunConfig, table: Path) -> RunConfig:

@@ -1,10 +1,10 @@
 """The networks: LSTM, CNN-LSTM and TCN as in the thesis, and the residual net of the pgnn.
 
 Every network maps scaled features (batch, time, n_features) to scaled outputs
-(batch, time, 2) and is causal. Each one takes and returns an explicit state, a tuple of
-tensors, so that the same forward serves training (truncated backpropagation through time
-carries the state from one chunk to the next), whole sequences (zero initial state) and the
-step-by-step form exported to ONNX (one sample per call):
+(batch, time, n_outputs: 2 forces, or 3 currents) and is causal. Each one takes and returns
+an explicit state, a tuple of tensors, so that the same forward serves training (truncated
+backpropagation through time carries the state from one chunk to the next), whole sequences
+(zero initial state) and the step-by-step form exported to ONNX (one sample per call):
 
 - LSTM: (h, c), each (layers, batch, hidden);
 - TCN: a buffer of the last `history` = receptive field - 1 inputs, (batch, features, history);
@@ -36,7 +36,7 @@ from torch import nn
 from flexff.fmu.errors import InputError
 
 State = tuple[torch.Tensor, ...]
-N_OUTPUTS = 2
+N_OUTPUTS = 2  # the forces Fx, Fy; a current-level model has 3
 
 
 class SequenceNetwork(nn.Module):
@@ -108,7 +108,7 @@ class TemporalConvNet(SequenceNetwork):
     `channels` filters each, then a linear head per time step."""
 
     def __init__(self, n_features: int, channels: int = 200, levels: int = 6, kernel: int = 3,
-                 dropout: float = 0.05) -> None:
+                 dropout: float = 0.05, n_outputs: int = N_OUTPUTS) -> None:
         super().__init__()
         if levels < 1 or kernel < 2:
             raise InputError(f"a TCN needs levels >= 1 and kernel >= 2, got {levels}, {kernel}")
@@ -120,7 +120,7 @@ class TemporalConvNet(SequenceNetwork):
         self.blocks = nn.Sequential(*[
             TemporalBlock(n_features if i == 0 else channels, channels, kernel, d, dropout)
             for i, d in enumerate(dilations)])
-        self.head = nn.Linear(channels, N_OUTPUTS)
+        self.head = nn.Linear(channels, n_outputs)
         glorot_init(self)
 
     def state_shapes(self, batch: int) -> list[tuple[int, ...]]:
@@ -188,13 +188,13 @@ class LSTMNet(SequenceNetwork):
     """Stacked LSTM, dropout, linear head (the thesis's 2 x 100 network)."""
 
     def __init__(self, n_features: int, hidden: int = 100, layers: int = 2,
-                 dropout: float = 0.05) -> None:
+                 dropout: float = 0.05, n_outputs: int = N_OUTPUTS) -> None:
         super().__init__()
         self.hidden, self.layers = hidden, layers
         self.lstm = nn.LSTM(n_features, hidden, layers, batch_first=True,
                             dropout=dropout if layers > 1 else 0.0)
         self.dropout = nn.Dropout(dropout)
-        self.head = nn.Linear(hidden, N_OUTPUTS)
+        self.head = nn.Linear(hidden, n_outputs)
         glorot_init(self)
 
     def state_shapes(self, batch: int) -> list[tuple[int, ...]]:
@@ -214,7 +214,7 @@ class CNNLSTM(SequenceNetwork):
 
     def __init__(self, n_features: int, conv_channels: Sequence[int] = (40, 16, 4),
                  conv_kernels: Sequence[int] = (10, 4, 2), hidden: int = 100, layers: int = 2,
-                 dropout: float = 0.05) -> None:
+                 dropout: float = 0.05, n_outputs: int = N_OUTPUTS) -> None:
         super().__init__()
         if len(conv_channels) != len(conv_kernels) or not conv_channels or min(conv_kernels) < 1:
             raise InputError("conv_channels and conv_kernels must be non-empty and of equal length")
@@ -229,7 +229,7 @@ class CNNLSTM(SequenceNetwork):
                 convs.append(nn.ReLU())
             convs.append(nn.Conv1d(n_features if i == 0 else conv_channels[i - 1], n_out, k))
         self.convs = nn.Sequential(*convs)
-        self.lstm = LSTMNet(conv_channels[-1], hidden, layers, dropout)
+        self.lstm = LSTMNet(conv_channels[-1], hidden, layers, dropout, n_outputs)
         glorot_init(self)
 
     @property
@@ -267,7 +267,7 @@ class LinearSkip(SequenceNetwork):
         self.history = network.history
         # float64: the least-squares weights of nearly collinear features are large and
         # cancel; in float32 the sum lost 4e-5 of the force
-        self.linear = nn.Linear(n_features, N_OUTPUTS, dtype=torch.float64)
+        self.linear = nn.Linear(n_features, _head(network).out_features, dtype=torch.float64)
 
     def state_shapes(self, batch: int) -> list[tuple[int, ...]]:
         return self.network.state_shapes(batch)
@@ -290,7 +290,7 @@ class LinearSkip(SequenceNetwork):
 
 def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor) -> None:
     """Set the skip of a LinearSkip network to the least-squares fit y ~ x W + b over the
-    samples (n, n_features), (n, 2), and zero the inner network's head, so that training
+    samples (n, n_features), (n, n_outputs), and zero the inner network's head, so that training
     starts from the linear fit."""
     if not isinstance(network, LinearSkip):
         return
@@ -321,12 +321,12 @@ def check_kind(kind: str) -> None:
 
 
 def build_network(kind: str, n_features: int, linear_skip: bool = False,
-                  **architecture: Any) -> SequenceNetwork:
-    """A fresh network of `kind` ('lstm', 'cnn-lstm', 'tcn', 'pgnn') for n_features inputs,
-    wrapped in a LinearSkip when `linear_skip`."""
+                  n_outputs: int = N_OUTPUTS, **architecture: Any) -> SequenceNetwork:
+    """A fresh network of `kind` ('lstm', 'cnn-lstm', 'tcn', 'pgnn') for n_features inputs
+    and n_outputs outputs, wrapped in a LinearSkip when `linear_skip`."""
     check_kind(kind)
     cls, prior = NETWORKS[kind]
-    network = cls(n_features, **architecture)
+    network = cls(n_features, n_outputs=n_outputs, **architecture)
     if prior:  # a zero head: training starts from the rigid-body model itself
         nn.init.zeros_(_head(network).weight)
     return LinearSkip(network, n_features) if linear_skip else network

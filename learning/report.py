@@ -51,6 +51,12 @@ SCENARIO_LABELS: dict[str, str] = {
     "tcn": "TCN FF",
     "pgnn": "physics-guided FF",
     "limit": "ILC limit",
+    # current-level models (learning.evaluate's KIND-currents): their feedforward acts after
+    # the control allocation, so the forces figure shows no F_ff for them
+    "lstm-currents": "LSTM current FF",
+    "cnn-lstm-currents": "CNN-LSTM current FF",
+    "tcn-currents": "TCN current FF",
+    "pgnn-currents": "physics-guided current FF",
 }
 LIMIT = "limit"  # the scenario of iterative learning control's force (learning.ilc)
 PER_LIMIT = "e2_per_limit"  # a scenario's e2 / the limit's

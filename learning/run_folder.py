@@ -81,7 +81,7 @@ class Run:
 
 def save_run(out: Path, config: TrainConfig, network: SequenceNetwork,
              feature_scaler: MinMaxScaler, label_scaler: MinMaxScaler, feature_names: list[str],
-             model_rate_hz: float, extra: dict[str, Any],
+             label_names: list[str], model_rate_hz: float, extra: dict[str, Any],
              files: Mapping[str, Callable[[Path], object]]) -> None:
     """Write model.pt, run.json and `files` (name -> writer of that file) into `out`, then
     delete the checkpoints; a finished run's files there change only once all new ones are
@@ -93,7 +93,7 @@ def save_run(out: Path, config: TrainConfig, network: SequenceNetwork,
                    staging / WEIGHTS_FILE)
         info = {"format": FORMAT, "version": VERSION, "flexff_version": flexff_version(),
                 "config": config.to_dict(), "feature_names": feature_names,
-                "label_names": ["Fx", "Fy"], "model_rate_hz": model_rate_hz,
+                "label_names": label_names, "model_rate_hz": model_rate_hz,
                 "scalers": {"features": feature_scaler.to_dict(),
                             "labels": label_scaler.to_dict()},
                 "history": network.history,
@@ -134,7 +134,9 @@ def load_run(path: str | Path) -> Run:
                              f"{FORMAT!r} version {VERSION}: {again}")
     try:
         config = TrainConfig.from_dict(info["config"])
-        network = build_network(config.model, len(info["feature_names"]), **config.architecture)
+        network = build_network(config.model, len(info["feature_names"]),
+                                n_outputs=len(info.get("label_names", ["Fx", "Fy"])),
+                                **config.architecture)
         scalers = [MinMaxScaler.from_dict(info["scalers"][k]) for k in ("features", "labels")]
         rate = float(info["model_rate_hz"])
     except (KeyError, TypeError, ValueError, AttributeError) as error:

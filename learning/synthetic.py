@@ -7,7 +7,9 @@ spline through random workspace points) or the reference of a trajectory of the 
 sets (`learning.trajectories`). The force labels are the exact rigid-body inverse dynamics of
 the nominal model (eq. 2.4) along the motion plus what the motors' Coulomb and viscous
 friction (the hardware variant's values) take, mapped to the wrist by A^T, and white noise
-standing in for the feedback's reaction to the encoders. The encoder angles are the exact
+standing in for the feedback's reaction to the encoders; the current labels i1..i3 are that
+force as the controller allocates it (controllers.allocation, at the true position). The
+encoder angles are the exact
 shoulder coordinates of eq. (2.1), as the nominal plant reports them (preprocessing counts
 them in encoder steps, as the thesis does).
 """
@@ -22,8 +24,15 @@ import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from flexff.controllers.allocation import motor_currents
 from flexff.controllers.features import nominal_model
-from flexff.learning.dataset import ENCODER_SIGNALS, REFERENCE_SIGNALS, Trajectory, write_dataset
+from flexff.learning.dataset import (
+    CURRENT_SIGNALS,
+    ENCODER_SIGNALS,
+    REFERENCE_SIGNALS,
+    Trajectory,
+    write_dataset,
+)
 from flexff.plant.kinematics import SHOULDER_INDEX
 from flexff.plant.parameters import HARDWARE, MOTOR_FRICTION
 
@@ -89,6 +98,13 @@ def _label_function(friction: bool) -> ca.Function:
                                                   shoulders])
 
 
+@functools.cache
+def _current_function() -> ca.Function:
+    """(force, pos) -> the motor currents the controller allocates for that force there."""
+    force, pos = ca.SX.sym("force", 2), ca.SX.sym("pos", 2)
+    return ca.Function("currents", [force, pos], [motor_currents(force, pos)])
+
+
 def motion_trajectory(name: str, split: str, seed: int, t: np.ndarray, motion: np.ndarray,
                       reference: dict[str, Any], friction: bool = True,
                       force_noise: float = 0.02) -> Trajectory:
@@ -97,7 +113,9 @@ def motion_trajectory(name: str, split: str, seed: int, t: np.ndarray, motion: n
         motion[0:2], motion[2:4], motion[4:6])
     rng = np.random.default_rng([seed, 1])
     force = np.asarray(force).T + force_noise * rng.standard_normal((len(t), 2))
-    signals = {"time": t, "x": motion[0], "y": motion[1], "Fx": force[:, 0], "Fy": force[:, 1]}
+    currents = np.asarray(_current_function().map(len(t))(force.T, motion[0:2]))
+    signals = {"time": t, "x": motion[0], "y": motion[1], "Fx": force[:, 0], "Fy": force[:, 1],
+               **dict(zip(CURRENT_SIGNALS, currents))}
     signals.update(zip(REFERENCE_SIGNALS, motion))
     signals.update(zip(ENCODER_SIGNALS, np.asarray(theta)))
     return Trajectory(name=name, split=split, signals=signals, reference=reference, seed=seed)

@@ -20,6 +20,7 @@ import math
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +40,7 @@ from flexff.learning.batches import (
     window_roles,
 )
 from flexff.learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
-from flexff.learning.features import decimation, prepare_trajectory
+from flexff.learning.features import LABELS, decimation, prepare_trajectory
 from flexff.learning.friction import identify_friction
 from flexff.learning.models import (
     RECURRENT,
@@ -63,7 +64,8 @@ from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.threads import torch_threads
 
 EpochReport = Callable[[dict[str, Any]], None]
-MSE_UNITS = "MSE of min-max scaled labels Fx, Fy (the thesis's normalized units)"
+MSE_UNITS = ("MSE of min-max scaled labels, Fx, Fy or i1..i3 (run.json label_names; the "
+             "thesis's normalized units)")
 
 
 def train(model: str, preset: str, data: str | Path, out: str | Path, progress: bool = True,
@@ -106,17 +108,19 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
     feature_set = config.features.feature_set
     edge = config.features.edge_samples(model_rate)
     prior = _prior_parameters(config, train_set, rate, edge)
+    labels = config.features.labels
 
     def targets(xs: list[np.ndarray], fs: list[np.ndarray]) -> list[np.ndarray]:
         if prior is not None:  # the residual over the prior, in label spans
-            return [(f - rigid_forces(x, feature_set, prior)) / label_scaler.span
+            return [(f - rigid_forces(x, feature_set, prior, labels)) / label_scaler.span
                     for x, f in zip(xs, fs)]
         return [label_scaler.transform(f) for f in fs]
 
     roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge)
     device = pick_device(config.device)
     with reproducible(config.seed, config.threads):
-        network = build_network(config.model, train_x[0].shape[1], **config.architecture)
+        network = build_network(config.model, train_x[0].shape[1],
+                                n_outputs=train_f[0].shape[1], **config.architecture)
         network.to(device)
         train_data = SequenceSet.build([feature_scaler.transform(x) for x in train_x],
                                        targets(train_x, train_f), roles, device)
@@ -136,11 +140,12 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
             "test_mse_per_trajectory": {
                 t.name: role_mse(network, test_data, TRAIN, only=[i])
                 for i, t in enumerate(test_set)},
-            "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge),
+            "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge,
+                                              labels=labels),
             **({} if prior is None else {
                 "prior_parameters": prior,
                 "prior_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge,
-                                             prior)}),
+                                             prior, labels)}),
             "parameters": parameter_count(network),
             "seconds_per_epoch": float(np.mean(history["seconds"])),
             "seconds": time.perf_counter() - start,  # this call's wall time, data preparation in
@@ -151,7 +156,7 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
         }
     network.cpu()
     save_run(out, config, network, feature_scaler, label_scaler,
-             feature_names(feature_set), model_rate,
+             feature_names(feature_set), list(LABELS[config.features.labels]), model_rate,
              {"data": {"path": str(Path(dataset.path).resolve()), "set": dataset.set,
                        "sha256": dataset.digest, "sample_rate_hz": rate,
                        "plant": dict(dataset.plant), "train": [t.name for t in train_set],
@@ -194,16 +199,18 @@ def _prior_parameters(config: TrainConfig, trajectories: list[Trajectory], rate:
     (learning.friction); None for a model without a prior."""
     if not uses_prior(config.model):
         return None
-    return identify_friction(*_prepare(trajectories, rate, config, None),
+    forces = replace(config, features=replace(config.features, labels="forces"))
+    return identify_friction(*_prepare(trajectories, rate, forces, None),
                              config.features.feature_set, edge)
 
 
 def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,
-               feature_set: str, edge: int, parameters: dict[str, float] | None = None) -> float:
-    """The test MSE of the nominal rigid-body model (with `parameters` in place: the prior) in
-    the same units and on the same samples (the `edge` samples at each end left out): the
-    baseline to beat."""
-    errors = [((f - rigid_forces(x, feature_set, parameters)) / scaler.span)[
+               feature_set: str, edge: int, parameters: dict[str, float] | None = None,
+               labels: str = "forces") -> float:
+    """The test MSE of the nominal rigid-body model (with `parameters` in place: the prior;
+    as motor currents for current `labels`) in the same units and on the same samples (the
+    `edge` samples at each end left out): the baseline to beat."""
+    errors = [((f - rigid_forces(x, feature_set, parameters, labels)) / scaler.span)[
         interior(len(x), edge) == TRAIN] for x, f in zip(xs, fs)]
     return float(np.mean(np.concatenate(errors) ** 2))
 

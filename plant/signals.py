@@ -24,8 +24,8 @@ def _xy(stem: str, unit: str, what: str) -> Signals:
     return tuple(Variable(stem.format(axis), unit, f"{what}, {axis}") for axis in "xy")
 
 
-def _motors(stem: str, unit: str, what: str) -> Signals:
-    return tuple(Variable(f"{stem}{k}", unit, f"{what}, motor {k}") for k in (1, 2, 3))
+def _motors(stem: str, unit: str, what: str, suffix: str = "") -> Signals:
+    return tuple(Variable(f"{stem}{k}{suffix}", unit, f"{what}, motor {k}") for k in (1, 2, 3))
 
 
 POSITION_REFERENCE = _xy("{}_ref", "m", "reference position")
@@ -38,6 +38,8 @@ TORQUES = _motors("tau", "N*m", "motor torque after current saturation")
 TRUE_POSITION = _xy("{}", "m", "true end-effector position (evaluation only)")
 TRUE_VELOCITY = _xy("v{}", "m/s", "true end-effector velocity (evaluation only)")
 FEEDFORWARD_FORCES = _xy("F{}_ff", "N", "feedforward end-effector force")
+CURRENT_FEEDFORWARD = _motors("i", "A", "feedforward current, added after the control "
+                              "allocation", "_ff")
 FEEDBACK_FORCES = _xy("F{}_fb", "N", "feedback end-effector force")
 FORCES = _xy("F{}", "N", "end-effector force the motors exert, feedback plus feedforward")
 

@@ -77,15 +77,16 @@ def independent_forces(model, reference, task: bool = False) -> np.ndarray:
         calls.append(result[0][0])
         state = {n[:-len("_out")]: v for n, v in zip(names[1:], result[1:])}
     calls = np.array(calls)
-    forces = np.zeros((len(features), 2))
+    forces = np.zeros((len(features), calls.shape[1]))  # 2 forces or 3 currents
     for k in range(period if task else 0, len(features)):
         j, phase = divmod(k, period)
         if task:
             j, phase = j - 1, phase + period
         forces[k] = calls[j] + phase / period * (calls[j] - calls[max(j - 1, 0)])
     if meta["prior"] == "rigid-body":
+        labels = "currents" if json.loads(meta["output_signals"])[0] == "i1_ff" else "forces"
         forces += rigid_forces(features, meta["feature_set"],
-                               json.loads(meta["prior_parameters"]))
+                               json.loads(meta["prior_parameters"]), labels)
     return forces
 
 

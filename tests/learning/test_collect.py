@@ -31,8 +31,15 @@ from flexff.learning.collect import (
     run_collection,
     trajectory_config,
 )
-from flexff.learning.dataset import MANIFEST, SIGNALS, DatasetError, load_dataset
+from flexff.learning.dataset import (
+    CURRENT_SIGNALS,
+    MANIFEST,
+    SIGNALS,
+    DatasetError,
+    load_dataset,
+)
 from flexff.learning.trajectories import trajectory_set
+from flexff.plant.parameters import NOMINAL
 
 FIRST = 3  # trajectories of the small collections
 
@@ -63,14 +70,28 @@ def test_files_reload_bit_for_bit(collected):
     for spec in trajectories.trajectories[:FIRST]:
         recorded = dataset_signals(simulate_config(trajectory_config(spec, trajectories)))
         saved = arrays(collected / f"{spec.name}.npz")
-        assert list(saved) == list(SIGNALS)
-        for name in SIGNALS:
+        assert list(saved) == [*SIGNALS, *CURRENT_SIGNALS]
+        for name in saved:
             assert saved[name].dtype == np.float64 and saved[name].shape == (15001,)
             assert np.array_equal(saved[name], recorded[name]), (spec.name, name)
         # PID only: the applied force is the feedback force; ideal encoders in the nominal plant
         assert np.abs(saved["Fx"]).max() > 0.1 and np.ptp(saved["x"]) > 0.005
     assert sorted(p.name for p in collected.iterdir()) == sorted(
         [MANIFEST] + [f"{n}.npz" for n in names()])
+
+
+def test_current_labels_are_what_the_plant_was_given(collected):
+    """The dataset's i1..i3 are the plant's inputs: the motor torque the plant reports after
+    each step is k_t times the current it was given for that step (no current reaches the
+    limit on these trajectories)."""
+    trajectories = trajectory_set("sim")
+    spec = trajectories.trajectories[0]
+    recording = simulate_config(trajectory_config(spec, trajectories))
+    saved = arrays(collected / f"{spec.name}.npz")
+    for k, name in enumerate(CURRENT_SIGNALS):
+        assert np.abs(saved[name]).max() > 0.05
+        assert np.allclose(recording[f"tau{k + 1}"][1:], NOMINAL.k_t[k] * saved[name][:-1],
+                           rtol=1e-12, atol=1e-15)
 
 
 def test_manifest(collected):
@@ -88,7 +109,7 @@ def test_manifest(collected):
                                                                   "plant": "plant"}
     assert all(re.fullmatch("[0-9a-f]{64}", f["sha256"]) for f in loop["fmus"].values())
     assert (manifest["format"], manifest["version"], manifest["set"], manifest["source"],
-            manifest["sample_rate_hz"]) == ("flexff-dataset", 2, "sim", "flexff data collect",
+            manifest["sample_rate_hz"]) == ("flexff-dataset", 3, "sim", "flexff data collect",
                                             1000)
     plant = manifest["plant"]
     assert plant["variant"] == "nominal"
@@ -152,7 +173,7 @@ def test_a_killed_collection_resumes(collected, tmp_path):
     left = list(out.glob("*.npz"))
     assert left and not (out / MANIFEST).exists()
     for path in left:
-        assert list(arrays(path)) == list(SIGNALS)
+        assert list(arrays(path)) == [*SIGNALS, *CURRENT_SIGNALS]
     report = run_collection("sim", out, progress=False, limit=FIRST)
     assert len(report.skipped) == len(left) and report.ok
     same_files(out, collected, names())
@@ -160,7 +181,7 @@ def test_a_killed_collection_resumes(collected, tmp_path):
 
 
 @pytest.mark.parametrize("case, message", [
-    ("other set", "holds set 'sim' in dataset version 2; this collects set 'hardware'"),
+    ("other set", "holds set 'sim' in dataset version 3; this collects set 'hardware'"),
     ("other version", "holds set 'hardware' in dataset version 7"),
     ("not a dataset", "not a 'flexff-dataset' manifest"),
     ("foreign file", "no trajectories of set 'hardware' (notes.npz)"),

@@ -235,7 +235,7 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
 
     seen = {}
 
-    def fake(env, out, preset, models, data, epochs, loop, scheduler):
+    def fake(env, out, preset, models, data, epochs, loop, scheduler, currents=()):
         seen.update(env=env, loop=loop, scheduler=scheduler)
         (Path(out) / "table.md").write_text("| table |\n")
 

@@ -7,13 +7,43 @@ import shutil
 import numpy as np
 import pytest
 
-from flexff.learning.dataset import COLLECTED, SIGNALS, DatasetError, load_dataset, write_manifest
+from flexff.learning.dataset import (
+    COLLECTED,
+    CURRENT_SIGNALS,
+    SIGNALS,
+    DatasetError,
+    _digest,
+    load_dataset,
+    write_manifest,
+)
 from flexff.learning.synthetic import synthetic_dataset
 
 
 @pytest.fixture
 def folder(tmp_path):
     return synthetic_dataset(tmp_path / "data", n_train=2, n_test=1, duration=1.0, rate_hz=100.0)
+
+
+def test_a_version_2_folder_without_currents_is_read(folder):
+    for path in folder.glob("*.npz"):
+        with np.load(path) as npz:
+            arrays = {k: npz[k] for k in npz.files if k not in CURRENT_SIGNALS}
+        np.savez(path, **arrays)
+    _rewrite_manifest(folder)
+    manifest = {**json.loads((folder / "manifest.json").read_text()), "version": 2}
+    manifest["sha256"] = _digest(manifest, splits=False)  # as version 2 wrote it
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    assert set(load_dataset(folder).trajectories[0].signals) == set(SIGNALS)
+
+
+def test_some_currents_without_the_others_are_refused(folder):
+    path = folder / "train_000.npz"
+    with np.load(path) as npz:
+        arrays = {k: npz[k] for k in npz.files if k != "i3"}
+    np.savez(path, **arrays)
+    _rewrite_manifest(folder)
+    with pytest.raises(DatasetError, match="holds i1, i2 but not all of i1, i2, i3"):
+        load_dataset(folder)
 
 
 def _edit_manifest(folder, **changes):
@@ -45,14 +75,14 @@ def test_round_trip(folder):
     assert [t.name for t in data.split("train")] == ["train_000", "train_001"]
     assert [t.name for t in data.split("test")] == ["test_002"]
     traj = data.trajectories[0]
-    assert set(traj.signals) == set(SIGNALS) and len(traj) == 100
+    assert set(traj.signals) == {*SIGNALS, *CURRENT_SIGNALS} and len(traj) == 100
     assert traj.reference["kind"] in ("circle", "spline") and traj.seed == 0
     assert data.plant["variant"] == "nominal"
 
 
 @pytest.mark.parametrize("changes,message", [
     ({"format": "something-else"}, "format is 'something-else'.*flexff data collect"),
-    ({"version": 1}, "version 1.*reads version 2.*collect the data again"),
+    ({"version": 1}, "version 1.*reads versions 2, 3.*collect the data again"),
     ({"set": "lab"}, "'set' is 'lab'"),
     ({"sample_rate_hz": -5}, "sample_rate_hz"),
     ({"trajectories": []}, "no trajectories"),

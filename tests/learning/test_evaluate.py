@@ -10,6 +10,7 @@ import pytest
 
 from flexff.controllers.identified import read_identified
 from flexff.controllers.model_card import read_card
+from flexff.cosim.recording import load_recording
 from flexff.cosim.references import build_reference
 from flexff.learning.evaluate import ENVIRONMENTS, evaluate, scenario_config
 from flexff.learning.synthetic import synthetic_dataset
@@ -146,3 +147,19 @@ def test_hardware_physics_guided_feedforward_beats_the_rigid_body_one(tmp_path):
     for axis in ("x", "y"):
         assert pgnn[axis]["e2_ratio"] > max(50.0, 5 * rigid[axis]["e2_ratio"])
         assert pgnn[axis]["einf_ratio"] > 3 * rigid[axis]["einf_ratio"]
+
+
+def test_a_current_level_model_is_its_own_scenario(evaluation, tmp_path):
+    out, _, _ = evaluation
+    lines = []
+    summary = evaluate("sim", tmp_path, models=[], currents=["tcn"], data=out / "data",
+                       epochs=1, say=lines.append, progress=False)
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "tcn-currents",
+                                          "limit"]
+    assert read_card(tmp_path / "tcn-currents.onnx").labels == "currents"
+    run = json.loads((tmp_path / "runs" / "tcn-currents" / "run.json").read_text())
+    assert run["label_names"] == ["i1", "i2", "i3"]
+    signals = load_recording(tmp_path / "cosim" / "tcn-currents")
+    assert not np.any(signals["Fx_ff"]) and np.abs(signals["feedforward.i1_ff"]).max() > 0.01
+    assert any(line.startswith("tcn-currents: e2 = ") for line in lines)
+    assert "| TCN current FF |" in (tmp_path / "table.md").read_text()
