@@ -3,7 +3,7 @@
 F_prior = M a + C v + Q + D - A^T tau_friction from the wrist position, velocity and
 acceleration held in the features, the nominal model's inverse dynamics with some of its
 parameters replaced (`parameters`: flat plant parameter names, the motor friction identified
-from the training data by learning.friction; none: the nominal model, which has no friction).
+from the training data by learning.identify; none: the nominal model, which has no friction).
 Nothing in it is trained by gradient descent: the network beside it learns only the remainder
 F - F_prior, the epsilon of eq. (2.5). Evaluated in numpy (CasADi, float64) when preparing
 training data and as a torch module (the same CasADi expression replayed op by op) inside
