@@ -2,7 +2,7 @@
 
 Scaling and unscaling live inside the module, so it takes features in SI units and returns
 forces in newtons; for the pgnn it adds the network's residual to its prior, the rigid-body
-force with the identified motor friction (or, with `prior=False`, returns the residual alone:
+force of the identified rigid-body model (or, with `prior=False`, returns the residual alone:
 the feedforward FMU adds the prior from generated C). With
 `inputs="reference"` it also computes the features from the six reference signals
 x_ref ... ay_ref in the graph (the nominal kinematics replayed in torch), so a runner only

@@ -24,7 +24,7 @@ from the last two calls in between (holding them instead would lag by half a mod
 
 The physics-guided model is exported as its residual: the graph's forces plus the rigid-body
 feedforward of the nominal model (eq. 2.4, controllers.feedforward) on the same reference,
-with the motor friction identified in training, are the model's forces; the metadata says so
+with the parameters identified in training, are the model's forces; the metadata says so
 (`prior` = "rigid-body", else "none"; `prior_parameters`: the nominal-model parameters
 replaced, as flat plant parameter names and SI values).
 

@@ -16,7 +16,7 @@ keeps more than RANK_TOLERANCE of the column's norm (measured: 29 independent co
 7e-3, the 12 others below 1e-15), and each dependent column is the least-squares combination
 of the independent ones. Each base parameter is then an independent parameter plus its
 combination of dependent ones, and the dataset's samples determine it by ordinary least
-squares, once per candidate tanh width (learning.friction.WIDTHS), the width with the smallest
+squares, once per candidate tanh width (WIDTHS), the width with the smallest
 residual kept; a base parameter whose whole share of the forces lies below the residual keeps
 its nominal value (`_essential`: the data cannot tell it from what the model misses).
 
@@ -56,11 +56,12 @@ from flexff.fmu.errors import InputError
 from flexff.learning.batches import TRAIN, interior
 from flexff.learning.dataset import Dataset, load_dataset
 from flexff.learning.features import FeatureConfig, decimation, prepare_trajectory
-from flexff.learning.friction import MAX_SAMPLES, WIDTHS
 from flexff.plant.parameters import NOMINAL
 
 STRUCTURE_SAMPLES = 500  # random workspace samples that reveal the base parameters
 RANK_TOLERANCE = 1e-8  # |R_kk| below this (columns of unit norm): a dependent column
+WIDTHS = (1e-3, 3e-3, 1e-2, 3e-2, 1e-1)  # candidate tanh widths w_stribeck [rad/s]
+MAX_SAMPLES = 100_000  # more are taken evenly spaced: 29 base parameters need no more
 REPORT = "identified.json"
 
 
@@ -342,18 +343,23 @@ def identify(data: str | Path, features: FeatureConfig | None = None) -> Identif
     model_rate = rate / decimation(rate, features.model_rate_hz)
     edge = features.edge_samples(model_rate)
     compact = replace(features, feature_set="compact")
-    motion, forces = [], []
-    for trajectory in trajectories:
-        x, f = prepare_trajectory(trajectory, rate, compact)
-        keep = interior(len(x), edge) == TRAIN
-        motion.append(x[keep])
-        forces.append(f[keep])
-    x, f = np.concatenate(motion), np.concatenate(forces)
+    pairs = [prepare_trajectory(t, rate, compact) for t in trajectories]
+    return replace(identify_samples([x for x, _ in pairs], [f for _, f in pairs], "compact",
+                                    edge), data=identified_on(dataset, features))
+
+
+def identify_samples(features: list[np.ndarray], forces: list[np.ndarray], feature_set: str,
+                     edge: int = 0) -> Identification:
+    """Identify on prepared trajectories: features (n, n_features) of `feature_set` and
+    forces (n, 2) in SI units, the first and last `edge` samples of each left out, at most
+    MAX_SAMPLES of them, evenly spaced (what `identify` and the physics-guided model's prior
+    in learning.train share)."""
+    keep = [interior(len(x), edge) == TRAIN for x in features]
+    x, f = (np.concatenate([a[k] for a, k in zip(arrays, keep)]) for arrays in (features, forces))
     stride = -(-len(x) // MAX_SAMPLES)
     x, f = x[::stride], f[::stride]
-    pos, vel, acc = motion_columns("compact")
-    return replace(identify_motion(x[:, pos], x[:, vel], x[:, acc], f),
-                   data=identified_on(dataset, features))
+    pos, vel, acc = motion_columns(feature_set)
+    return identify_motion(x[:, pos], x[:, vel], x[:, acc], f)
 
 
 def identified_on(dataset: Dataset, features: FeatureConfig) -> dict[str, Any]:

@@ -1,9 +1,9 @@
-"""The prior of the physics-guided model: eq. (2.4) on the nominal plant, with motor friction.
+"""The prior of the physics-guided model: eq. (2.4) with identified parameters.
 
 F_prior = M a + C v + Q + D - A^T tau_friction from the wrist position, velocity and
 acceleration held in the features, the nominal model's inverse dynamics with some of its
-parameters replaced (`parameters`: flat plant parameter names, the motor friction identified
-from the training data by learning.friction; none: the nominal model, which has no friction).
+parameters replaced (`parameters`: flat plant parameter names, the rigid-body model identified
+from the training data by learning.identify; none: the nominal model, which has no friction).
 Nothing in it is trained by gradient descent: the network beside it learns only the remainder
 F - F_prior, the epsilon of eq. (2.5). Evaluated in numpy (CasADi, float64) when preparing
 training data and as a torch module (the same CasADi expression replayed op by op) inside

@@ -75,7 +75,7 @@ class Run:
     @property
     def prior_parameters(self) -> dict[str, float]:
         """The nominal-model parameters a physics-guided model's prior replaces (its identified
-        motor friction, learning.friction); empty for other models and runs from before."""
+        rigid-body model, learning.identify); empty for other models and runs from before."""
         return dict(self.info.get("prior_parameters", {}))
 
 

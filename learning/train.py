@@ -41,7 +41,7 @@ from flexff.learning.batches import (
 )
 from flexff.learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
 from flexff.learning.features import LABELS, decimation, prepare_trajectory
-from flexff.learning.friction import identify_friction
+from flexff.learning.identify import identify_samples
 from flexff.learning.models import (
     RECURRENT,
     SequenceNetwork,
@@ -194,14 +194,15 @@ def _prepare(trajectories: list[Trajectory], rate: float, config: TrainConfig,
 
 def _prior_parameters(config: TrainConfig, trajectories: list[Trajectory], rate: float,
                       edge: int) -> dict[str, float] | None:
-    """The physics-guided model's prior: the motor friction identified from the training
-    trajectories, without the added training noise, so that runs of other seeds share it
-    (learning.friction); None for a model without a prior."""
+    """The physics-guided model's prior: the deployable parameters of the rigid-body model
+    identified from the training trajectories (learning.identify: inertias, flexures and
+    motor friction), without the added training noise, so that runs of other seeds share
+    it; None for a model without a prior."""
     if not uses_prior(config.model):
         return None
     forces = replace(config, features=replace(config.features, labels="forces"))
-    return identify_friction(*_prepare(trajectories, rate, forces, None),
-                             config.features.feature_set, edge)
+    return identify_samples(*_prepare(trajectories, rate, forces, None),
+                            config.features.feature_set, edge).parameters()
 
 
 def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,

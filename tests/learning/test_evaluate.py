@@ -137,7 +137,7 @@ def test_each_environment_runs_the_seeds_own_evaluation_reference(env, variant, 
 def test_hardware_physics_guided_feedforward_beats_the_rigid_body_one(tmp_path):
     """Table 6.2 for flexff (about 7 minutes): on the hardware plant, where the nominal model
     is wrong (mismatch, friction, the tool mode), the physics-guided model trained on the
-    hardware set (the mean of three seeds, its prior with the identified motor friction)
+    hardware set (the mean of three seeds, its prior the identified rigid-body model)
     tracks the thesis's hardware evaluation reference far better than the rigid-body
     feedforward of the nominal model, and reaches issue 16's 50x. Measured: pgnn 105x / 88x
     in e2 and 40x / 40x in einf, rigid-body 7.0x / 7.9x and 5.8x / 7.6x; the thesis's LSTM

@@ -9,15 +9,18 @@ import pytest
 import torch
 
 import flexff.learning.train as training
+from flexff.learning import synthetic
 from flexff.learning.batches import PAD, TRAIN, VALIDATION, window_roles
 from flexff.learning.dataset import DatasetError, load_dataset
 from flexff.learning.deploy import predict
-from flexff.learning.features import FeatureConfig, prepare_trajectory
+from flexff.learning.features import FeatureConfig, decimation, prepare_trajectory
+from flexff.learning.identify import identify_samples
 from flexff.learning.presets import make_config
 from flexff.learning.run_folder import load_run
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.threads import cpu_threads, torch_threads
 from flexff.learning.train import learning_rate, train
+from flexff.plant.parameters import HARDWARE, MOTOR_FRICTION
 
 TINY = {"lstm": {"hidden": 16, "layers": 2, "linear_skip": False},
         "pgnn": {"channels": 8, "levels": 3}, "tcn": {"channels": 8}}
@@ -87,6 +90,37 @@ def test_reported_test_mse_is_that_of_the_si_model(data, tmp_path, kind):
     assert edge > 0
     scaled = ((predicted - forces) / run.label_scaler.span)[edge:-edge]
     assert np.mean(scaled**2) == pytest.approx(metrics["test_mse"], rel=1e-4)
+
+
+def test_the_prior_is_the_rigid_body_model_identified_on_the_training_set(tmp_path, monkeypatch):
+    """Labels from a plant unlike the nominal one (heavier lower arms and wrist inertia, stiffer
+    and softer wrist flexures, twice the hardware variant's friction): the pgnn's prior holds
+    exactly the parameters learning.identify finds on the same (noise-free) training samples,
+    and explains the test forces far better than the nominal model."""
+    true = HARDWARE.scaled(tau_coulomb=2.0, b_viscous=2.0, m_low=(1.1, 0.9, 1.2), j_ee=3.0,
+                           k_w=(1.2, 0.8, 1.1))
+    monkeypatch.setattr(synthetic, "HARDWARE", true)
+    monkeypatch.setattr(synthetic, "MOTOR_FRICTION", (*MOTOR_FRICTION, "m_low", "j_ee", "k_w"))
+    synthetic._label_function.cache_clear()
+    try:
+        data = synthetic_dataset(tmp_path / "data", n_train=4, n_test=1, duration=4.0,
+                                 rate_hz=200.0, seed=7)
+    finally:
+        synthetic._label_function.cache_clear()  # labels of the patched plant: forget them
+    metrics = train("pgnn", "fast", data, tmp_path / "run", progress=False, epochs=1,
+                    **TINY["pgnn"])
+    run = load_run(tmp_path / "run")
+    features = run.config.features
+    dataset = load_dataset(data)
+    rate = dataset.sample_rate_hz
+    model_rate = rate / decimation(rate, features.model_rate_hz)
+    pairs = [prepare_trajectory(t, rate, features) for t in dataset.split("train")]
+    expected = identify_samples([x for x, _ in pairs], [f for _, f in pairs],
+                                features.feature_set, features.edge_samples(model_rate))
+    assert run.prior_parameters == pytest.approx(expected.parameters(), rel=1e-9)
+    assert metrics["prior_parameters"] == run.prior_parameters
+    assert run.prior_parameters["tau_coulomb1"] == pytest.approx(2 * 7e-3, rel=0.2)
+    assert metrics["prior_test_mse"] < 0.1 * metrics["rigid_body_test_mse"]
 
 
 def test_validation_windows_are_a_seeded_shuffle():
