@@ -44,9 +44,7 @@ def loop_encoders(loop: RunConfig) -> dict[str, float]:
     loop's); {} for ideal encoders, or for a plant that does not say."""
     plant = loop.builtin("plant")
     if plant is not None:
-        variant = VARIANTS[plant.options["variant"]].parameters
-        defaults = {name: getattr(variant, name) for name in EFFECTS}
-        return effects_of({**defaults, **plant.parameters})
+        return effects_of({**_variant_values(plant.options["variant"]), **plant.parameters})
     found: dict[str, float] = {}
     for f in loop.fmus:
         if f.path is None:
@@ -59,8 +57,13 @@ def loop_encoders(loop: RunConfig) -> dict[str, float]:
 
 def variant_encoders(variant: str) -> dict[str, float]:
     """The encoder effects of the built-in plant `variant` with its own values."""
+    return effects_of(_variant_values(variant))
+
+
+def _variant_values(variant: str) -> dict[str, float]:
+    """The built-in plant `variant`'s own values of the EFFECTS parameters."""
     parameters = VARIANTS[variant].parameters
-    return effects_of({name: getattr(parameters, name) for name in EFFECTS})
+    return {name: getattr(parameters, name) for name in EFFECTS}
 
 
 def describe(effects: Mapping[str, float]) -> str:
