@@ -19,15 +19,6 @@ typedef struct {
     int kicked;
 } Ball;
 
-const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
-const char *fmi2GetVersion(void) { return fmi2Version; }
-
-fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n,
-                               const fmi2String categories[]) {
-    (void)c; (void)on; (void)n; (void)categories;
-    return fmi2OK;
-}
-
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
                               fmi2String location, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean logging) {
@@ -83,7 +74,8 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     return fmi2OK;
 }
 
-/* the Integer, Boolean, String, state and derivative calls: tests/fmi2_unsupported.c */
+/* the version, logging, Integer, Boolean, String, state and derivative calls:
+   tests/fmi2_unsupported.c */
 
 /* model exchange */
 fmi2Status fmi2EnterEventMode(fmi2Component c) { (void)c; return fmi2OK; }

@@ -1,12 +1,22 @@
 /*
  * fmi2_unsupported.c -- the FMI 2.0 functions the tests' tiny FMUs (tests/probe_fmu.c,
- * tests/bouncing_ball.c) do not support: no Integer, Boolean or String variables, no FMU
- * state, no directional derivatives. Compiled beside each of them by tests/probe_fmu.py.
+ * tests/bouncing_ball.c) share: the version calls, debug logging (accepted, ignored), and what
+ * neither supports: no Integer, Boolean or String variables, no FMU state, no directional
+ * derivatives. Compiled beside each of them by tests/probe_fmu.py.
  */
 
 #include <stddef.h>
 
 #include "fmi2Functions.h"
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n,
+                               const fmi2String categories[]) {
+    (void)c; (void)on; (void)n; (void)categories;
+    return fmi2OK;
+}
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                           fmi2Integer value[]) {

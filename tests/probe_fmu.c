@@ -23,15 +23,6 @@ typedef struct {
     fmi2Real v[N];
 } Probe;
 
-const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
-const char *fmi2GetVersion(void) { return fmi2Version; }
-
-fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n,
-                               const fmi2String categories[]) {
-    (void)c; (void)on; (void)n; (void)categories;
-    return fmi2OK;
-}
-
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
                               fmi2String location, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean logging) {
@@ -83,7 +74,8 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     return fmi2OK;
 }
 
-/* the Integer, Boolean, String, state and derivative calls: tests/fmi2_unsupported.c */
+/* the version, logging, Integer, Boolean, String, state and derivative calls:
+   tests/fmi2_unsupported.c */
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                                        const fmi2Integer order[], const fmi2Real value[]) {
     (void)c; (void)vr; (void)n; (void)order; (void)value;

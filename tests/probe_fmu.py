@@ -15,7 +15,7 @@ from flexff.fmu.compile import compiler, fmi_headers
 
 SOURCE = Path(__file__).with_suffix(".c")
 BALL_SOURCE = Path(__file__).with_name("bouncing_ball.c")
-UNSUPPORTED = Path(__file__).with_name("fmi2_unsupported.c")  # what neither FMU supports
+UNSUPPORTED = Path(__file__).with_name("fmi2_unsupported.c")  # the calls both FMUs share
 BALL_DESCRIPTION = """<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="ball" guid="{ball}" numberOfEventIndicators="1">
 <ModelExchange modelIdentifier="ball"/>
