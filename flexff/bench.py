@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import platform
 import tempfile
 from pathlib import Path
@@ -152,12 +153,15 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
     same paced loop with no FMU for as long (`idle`: the lateness and overruns the machine
     alone causes), a one-node graph FMU (`one_node_graph`) and a network made deliberately
     slower than the period in its own task at 25 Hz (`slow_network`), each run as --realtime
-    runs (cosim.realtime: SCHED_FIFO and locked memory where permitted)."""
-    results: dict[str, Any] = {"reference": "thesis-hardware-eval"}
+    runs (cosim.realtime: SCHED_FIFO and locked memory where permitted), pinned to one CPU
+    (`paced_cpu`) as `flexff run --realtime --cpu K` runs: the network's task then runs on
+    that core in the base task's idle time."""
+    cpu = paced_cpu()
+    results: dict[str, Any] = {"reference": "thesis-hardware-eval", "cpu": cpu}
     paced_s = 0.0
     for kind in kinds:
         recording = simulate(_hardware_loop(folder, models[kind], "task", seconds),
-                             progress=False, pacing=Pacing(rt_factor=1.0))
+                             progress=False, pacing=Pacing(rt_factor=1.0), cpu=cpu)
         table = recording.timing.table(recording.wall_s)
         single = simulate(_hardware_loop(folder, models[kind], "step", seconds), progress=False)
         e2_task, e2_step = _e2(recording), _e2(single)
@@ -171,7 +175,7 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
                             "task_over_single_rate": {a: e2_task[a] / e2_step[a]
                                                       for a in e2_task}}}
         paced_s = recording.timing.tet.size * recording.timing.period
-    with realtime_process():  # every paced loop here runs as --realtime runs it
+    with realtime_process(cpu):  # every paced loop here runs as --realtime --cpu runs it
         idle = idle_timing(paced_s)
     table = idle.table(idle.tet.size * idle.period)
     results["idle"] = {key: table[key] for key in ("period_us", "steps", "tet_us", "lateness_us",
@@ -179,6 +183,12 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
     results["one_node_graph"] = one_node_graph_benchmark(folder, paced_s)
     results["slow_network"] = slow_network_benchmark(folder, paced_s)
     return results
+
+
+def paced_cpu() -> int:
+    """The CPU the bench's paced loops are pinned to: the last this process may run on (the
+    first is where an idle machine's interrupts and housekeeping land most)."""
+    return max(os.sched_getaffinity(0))
 
 
 def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
@@ -190,7 +200,8 @@ def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
                     folder / "slow.fmu")
     steps = max(1, round(seconds / step))
     inputs = {"inputs[0]": 1.0, "inputs[1]": 2.0}
-    with Master([ResolvedFmu("slow", fmu)], list(inputs), step) as master, realtime_process():
+    with Master([ResolvedFmu("slow", fmu)], list(inputs), step) as master, \
+            realtime_process(paced_cpu()):
         recording = master.run(inputs, steps, pacing=Pacing(rt_factor=1.0))
     table = recording.timing.table(recording.wall_s)
     return {"every_steps": every, "tasks": table["tasks"], "lateness_us": table["lateness_us"],
@@ -214,7 +225,8 @@ def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
     fmu = build_fmu(onnx_system(folder / "one_node.onnx", step, every), folder / "one_node.fmu")
     steps = max(1, round(seconds / step))
     inputs = {"u[0]": 1.0, "u[1]": 2.0}
-    with Master([ResolvedFmu("graph", fmu)], list(inputs), step) as master, realtime_process():
+    with Master([ResolvedFmu("graph", fmu)], list(inputs), step) as master, \
+            realtime_process(paced_cpu()):
         recording = master.run(inputs, steps, pacing=Pacing(rt_factor=1.0))
     table = recording.timing.table(recording.wall_s)
     return {"every_steps": every, "tet_us": table["tet_us"],

@@ -84,6 +84,7 @@ def test_bench_prints_json(tmp_path):
         assert set(paced["tasks"]) == {"base", "feedforward.network"}  # the network's own
         assert paced["tasks"]["feedforward.network"]["overruns"] >= 0
         assert set(paced["tracking_e2"]["task_over_single_rate"]) == {"x", "y"}
+        assert paced["process"]["cpu"] == figures["realtime"]["cpu"]  # one core, both tasks
     idle = figures["realtime"]["idle"]  # the machine's floor, as long as one paced run
     assert idle["steps"] == 500 and idle["overruns"] >= 0 and idle["lateness_us"]["max"] > 0
     floor = figures["realtime"]["one_node_graph"]  # at initialization, then every 40th step

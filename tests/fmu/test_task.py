@@ -4,7 +4,9 @@ and libcosim give the same outputs bit for bit; a network slower than its deadli
 (and stops a paced run at --max-overruns); a state saved while a call is pending continues
 exactly."""
 
+import os
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -83,6 +85,34 @@ def test_paced_unpaced_and_libcosim_runs_are_equal_bit_for_bit(task_fmu):
     s.free()
     assert np.array_equal(_run(task_fmu, run_fmu_libcosim), ours)
     assert validate_fmu(task_fmu) == []
+
+
+def _worker_threads() -> list[int]:
+    """The thread ids of this process's network workers (named by c/wrapper_task.c)."""
+    return [int(task.name) for task in Path("/proc/self/task").iterdir()
+            if (task / "comm").read_text().strip() == "flexff-network"]
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs two CPUs to pin to one")
+def test_the_worker_runs_on_its_callers_cpus(task_fmu):
+    everywhere = os.sched_getaffinity(0)
+    one = {max(everywhere)}
+    s = LoggedSlave(task_fmu)
+    try:
+        s.initialize()
+        [worker] = _worker_threads()
+        assert os.sched_getaffinity(worker) == everywhere  # created as its caller
+        os.sched_setaffinity(0, one)  # this thread only, as --cpu pins a paced run
+        s.slave.doStep(0.0, H)  # point 0 posts a call
+        assert os.sched_getaffinity(worker) == one
+        os.sched_setaffinity(0, everywhere)
+        for k in range(1, PERIOD + 1):  # up to the next call, which follows the caller again
+            s.slave.doStep(k * H, H)
+        assert os.sched_getaffinity(worker) == everywhere
+    finally:
+        os.sched_setaffinity(0, everywhere)
+        s.free()
+    assert _worker_threads() == []
 
 
 def test_a_network_that_misses_its_deadline_is_counted(slow_fmu):
