@@ -7,10 +7,14 @@ side on one third-party FMU and step, each tool writing its default record.
            interpreter with ecospy is at hand (`ecos_python`; its `tbb` package's libtbb is
            loaded from that interpreter's lib/ folder, where pip puts it)
 
-The tools run in turn (flexff, fmpy, ecos, flexff, ...) `repeats` times; each figure is the
-median over its runs of the process's wall time and its peak resident memory (the kernel's
-accounting of that one child, os.wait4). Beside them: `flexff --help`, a bare `python -c pass`,
-and the import of a plain run (`import flexff.cosim.run`), as whole processes too.
+The tools run in turn (flexff, fmpy, ecos, flexff, ...) `repeats` times, after one run of each
+that is not counted; each figure is the median over its runs of the process's wall time and
+its peak resident memory (the kernel's accounting of that one child, os.wait4). Beside them:
+`flexff --help`, a bare `python -c pass`, and the import of a plain run (`import
+flexff.cosim.run`), as whole processes too. Every process runs as on a user's machine, with
+Python's bytecode cache (pip compiles an installed package's modules, and Python caches an
+editable one's at first import): PYTHONDONTWRITEBYTECODE, where this process has it, is not
+passed on, since it makes every run compile flexff's modules anew (about 50 ms of a 0.35 s run).
 """
 
 from __future__ import annotations
@@ -84,6 +88,7 @@ def process_benchmark(fmu: Path, steps: Sequence[int] = (200_000, 2_000_000),
         raise InputError("bench --processes needs at least one repeat and one step")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         filter(None, (str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH"))))}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     python = ecos_python or sys.executable
     ecos = _has_ecospy(python)
     results: dict[str, Any] = {"fmu": fmu.name, "step_s": step, "repeats": repeats,
@@ -93,12 +98,14 @@ def process_benchmark(fmu: Path, steps: Sequence[int] = (200_000, 2_000_000),
     commands = {"python_bare": [sys.executable, "-c", "pass"],
                 "flexff_help": [sys.executable, "-m", "flexff", "--help"],
                 "import_plain_run": [sys.executable, "-c", "import flexff.cosim.run"]}
-    for _ in range(repeats):
+    for run in range(repeats + 1):  # the first writes the bytecode caches, and is not counted
         for name, command in commands.items():
-            startup[name].append(_measure(command, env))
+            measured = _measure(command, env)
+            if run:
+                startup[name].append(measured)
     results["startup"] = {n: _median(r) for n, r in startup.items()}
     with tempfile.TemporaryDirectory(prefix="flexff-bench-") as tmp:
-        for n in steps:
+        for size, n in enumerate(steps):
             stop = n * step
             config = Path(tmp) / "run.toml"
             config.write_text(CONFIG.format(fmu=fmu.as_posix(), step=step, stop=stop))
@@ -108,9 +115,11 @@ def process_benchmark(fmu: Path, steps: Sequence[int] = (200_000, 2_000_000),
             if ecos:
                 tools["ecos"] = [python, "-c", ECOS, str(fmu), str(stop), str(step), tmp]
             runs: dict[str, list[tuple[float, float]]] = {t: [] for t in tools}
-            for _ in range(repeats):
+            for run in range(0 if size == 0 else 1, repeats + 1):  # run 0 is not counted
                 for tool, command in tools.items():
-                    runs[tool].append(_measure(command, env))
+                    measured = _measure(command, env)
+                    if run:
+                        runs[tool].append(measured)
             figures: dict[str, Any] = {t: _median(r) for t, r in runs.items()}
             for tool in tools:
                 if tool != "flexff":

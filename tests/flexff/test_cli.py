@@ -93,6 +93,22 @@ def test_bench_prints_json(tmp_path):
     assert slow["tasks"]["slow.network"]["calls"] == 13 and slow["overruns"] >= 0
 
 
+def test_bench_processes_times_whole_runs(tmp_path):
+    fmu = REFERENCE_FMUS / "fmi2" / "VanDerPol.fmu"
+    result = flexff("bench", "--processes", str(fmu), "--process-steps", "500,1000",
+                    "--process-repeats", "1", "--ecos-python", sys.executable,
+                    "-o", str(tmp_path / "processes.json"))
+    assert result.returncode == 0, result.stderr
+    figures = json.loads((tmp_path / "processes.json").read_text())
+    assert figures["fmu"] == "VanDerPol.fmu" and figures["repeats"] == 1
+    assert set(figures["startup"]) == {"python_bare", "flexff_help", "import_plain_run"}
+    for steps in ("500_steps", "1000_steps"):
+        for tool in ("flexff", "fmpy"):
+            assert figures[steps][tool]["wall_s"] > 0 and figures[steps][tool]["peak_mib"] > 0
+        assert figures[steps]["speedup_vs_fmpy"] > 0
+    assert "not installed" in figures["ecos"] or "speedup_vs_ecos" in figures["500_steps"]
+
+
 @pytest.mark.slow
 def test_demo_runs(tmp_path):
     """The whole demo (about four minutes on 2 cores): FMUs, data, training of the four models
