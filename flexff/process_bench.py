@@ -24,7 +24,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -53,18 +52,26 @@ with EcosSimulation(structure=structure, step_size=step) as simulation:
 CONFIG = '[fmu.fmu]\npath = "{fmu}"\n\n[run]\nstep = {step!r}\nstop = {stop!r}\n'
 
 
+# Times one command and reads its peak memory, as a small process of its own: Linux's peak
+# resident memory of a process starts at that of the process it was forked from (exec keeps the
+# higher of the two), so the bench's own (numpy, pyarrow: about 40 MiB) would be every small
+# tool's floor; this launcher's is Python's bare 10 MiB.
+LAUNCHER = """import os, subprocess, sys, time
+start = time.perf_counter()
+child = subprocess.Popen(sys.argv[1:], stdout=subprocess.DEVNULL)
+_, status, usage = os.wait4(child.pid, 0)
+print(time.perf_counter() - start, usage.ru_maxrss, os.waitstatus_to_exitcode(status))
+"""
+
+
 def _measure(command: Sequence[str], env: dict[str, str] | None = None) -> tuple[float, float]:
     """(wall seconds, peak resident MiB) of one process running `command`."""
-    start = time.perf_counter()
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                               env=env)
-    _, status, usage = os.wait4(process.pid, 0)
-    wall = time.perf_counter() - start
-    process.returncode = os.waitstatus_to_exitcode(status)
-    error = process.stderr.read().decode() if process.stderr else ""
-    if process.returncode != 0:
-        raise RuntimeError(f"{command[:3]} failed ({process.returncode}): {error[-500:]}")
-    return wall, usage.ru_maxrss / 1024
+    launched = subprocess.run([sys.executable, "-c", LAUNCHER, *command], capture_output=True,
+                              text=True, env=env)
+    wall, peak_kib, code = launched.stdout.split()
+    if launched.returncode != 0 or int(code) != 0:
+        raise RuntimeError(f"{command[:3]} failed ({code}): {launched.stderr[-500:]}")
+    return float(wall), int(peak_kib) / 1024
 
 
 def _has_ecospy(python: str) -> bool:
