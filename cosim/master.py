@@ -70,7 +70,7 @@ from flexff.cosim.engine import (
 from flexff.cosim.isolation import IsolatedInstance
 from flexff.cosim.recording import CHUNK_MIN_ROWS, Recording, chunk_rows
 from flexff.cosim.schema import ALGORITHMS, point_time
-from flexff.cosim.timing import Histogram, Pacing, StepTiming, StreamedTiming
+from flexff.cosim.timing import Pacing, StepTiming, StreamedTiming
 from flexff.cosim.wiring import SOURCE, Link, Port, carried, wire
 from flexff.fmu.errors import InputError, RunError
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
@@ -359,9 +359,9 @@ class Master:
         (cosim.recording.chunk_rows points a chunk; a paced run one every PACED_CHUNK_S
         seconds), so that
         memory stays flat in the run's length. Without `keep_timing` the steps' execution
-        times are counted in histograms (cosim.timing.StreamedTiming), not kept one by one;
-        a paced run keeps them always. A run that fails hands over the points before the
-        failure first."""
+        times (and, paced, their lateness) are counted in histograms and a bounded trace
+        (cosim.timing.StreamedTiming), not kept one by one. A run that fails hands over the
+        points before the failure first."""
         if self._ran:
             raise RuntimeError("a Master runs once; load the FMUs again for another run")
         self._ran = True
@@ -393,13 +393,11 @@ class Master:
         if self.algorithm == "jacobi":
             self._propagate_initial_values(table[0])
         hook = _TypedHook(self, [(column, q) for column, (_, q) in zip(typed_out, typed)])
-        keep_timing = keep_timing or pacing is not None
         timing_rows = steps if keep_timing else rows
         run = self._engine_run(table, out, None if full else columns, hook, steps, pacing,
                                timing_rows)
-        streamed_timing = None if keep_timing else StreamedTiming(
-            self.step, tuple(p.name for p in self._plans), Histogram(),
-            tuple(Histogram() for _ in self._plans))
+        streamed_timing = None if keep_timing else StreamedTiming.counting(
+            self.step, tuple(p.name for p in self._plans), steps, pacing)
         float_columns = {j: c for c, (j, _) in enumerate(floats)}
         typed_columns = {j: c for c, (j, _) in enumerate(typed)}
 
@@ -422,7 +420,8 @@ class Master:
             sink.write(base, self.time(np.arange(base, end)), chunk)
             if streamed_timing is not None:
                 made = max(0, min(end, steps) - base)
-                streamed_timing.add(self._tet[:made], self._fmu_tet[:made])
+                streamed_timing.add(base, self._tet[:made], self._fmu_tet[:made],
+                                    self._lateness[:made])
 
         if progress is None:
             progress = sys.stderr.isatty() and steps >= PROGRESS_MIN_STEPS
@@ -454,19 +453,23 @@ class Master:
             hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))
             raise hook.error or self._plans[run.failed_fmu].fail(
                 f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
-        if status == OVERRUN:
-            end = run.failed_k + 1  # points 0 .. failed_k were recorded, the step was made
+        stopped_at = run.failed_k if status == OVERRUN else None
+        if stopped_at is not None:
+            end = stopped_at + 1  # points 0 .. stopped_at were recorded, the step was made
             hand(base, end)
         network = {p.name: times for p in self._plans if (times := p.instance.network_times())}
+        listed = tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)])
         if streamed_timing is not None:
-            return Streamed(end, wall, dataclasses.replace(streamed_timing,
-                                                           network_calls=network))
-        made = end if status == OVERRUN else steps  # the steps the engine made
+            row = (stopped_at or 0) - base  # the stopped step's row in the chunk buffers
+            return Streamed(end, wall, dataclasses.replace(
+                streamed_timing, overruns=run.overruns, task_overruns=run.task_overruns,
+                first_overruns=listed, stopped_at=stopped_at, network_calls=network,
+                stopped_step=(float(self._tet[row]), float(self._lateness[row]))
+                if stopped_at is not None else (0.0, 0.0)))
+        made = end if stopped_at is not None else steps  # the steps the engine made
         timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
                             self._fmu_tet[:made], self._lateness[:made], pacing, run.overruns,
-                            run.task_overruns,
-                            tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
-                            run.failed_k if status == OVERRUN else None, network_calls=network)
+                            run.task_overruns, listed, stopped_at, network_calls=network)
         return Streamed(end, wall, timing)
 
     def time(self, k: Any) -> Any:

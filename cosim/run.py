@@ -42,7 +42,7 @@ from flexff.cosim.recording import Recording, RecordWriter, atomic_write, signal
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ConfigError, RunConfig
-from flexff.cosim.timing import OverrunError, Pacing, StepTiming
+from flexff.cosim.timing import OverrunError, Pacing
 from flexff.plant.signals import (
     CURRENTS,
     ENCODERS,
@@ -309,7 +309,7 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
     sink.writer.close(csv=config.record.csv)
     if sink.plots is not None:
         sink.plots.write(out)
-    if isinstance(streamed.timing, StepTiming) and pacing is not None:
+    if pacing is not None:
         plot_tet(streamed.timing, out / "tet.png")
     _write_json(out / "run.json", expanded(config))
     _write_json(out / "metrics.json", metrics)
@@ -330,9 +330,8 @@ def _stream(master: Master, scenario: Scenario, sink: RunSink, recorded: Sequenc
     try:
         with realtime_process(cpu) as process:
             streamed = master.stream(scenario.sources, scenario.steps, background, recorded,
-                                     progress, pacing)
+                                     progress, pacing, keep_timing=False)
     finally:
         background.finish()
-    timing = streamed.timing
-    assert isinstance(timing, StepTiming)  # a paced run keeps every step's timing
-    return dataclasses.replace(streamed, timing=dataclasses.replace(timing, process=process))
+    return dataclasses.replace(streamed, timing=dataclasses.replace(streamed.timing,
+                                                                    process=process))
