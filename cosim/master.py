@@ -32,9 +32,11 @@ carries the initial values through every connection (libcosim's initialization).
 The loop runs in compiled code (cosim/engine.py, cosim/c/engine.c), in-process, with each FMU's
 own function pointers: each float64 block costs one set, one get and one step call per FMU and
 step, every status is checked, and every step is timed (cosim.timing). Values of other types
-go through a hook into Python where an FMU has them. Python only sets up, feeds the sources,
-collects the record and shows progress; the garbage collector is kept out of the loop, and
-the steps may be paced to the wall clock (cosim.timing.Pacing).
+go through a hook into Python where an FMU has them. Python only sets up, feeds the sources
+and collects the record a chunk at a time (the engine's source rows, record rows and timing
+rows are one chunk long, so the master's memory does not grow with the run's length), and
+shows progress; the garbage collector is kept out of the loop, and the steps may be paced to
+the wall clock (cosim.timing.Pacing).
 """
 
 from __future__ import annotations
@@ -365,7 +367,7 @@ class Master:
         if self._ran:
             raise RuntimeError("a Master runs once; load the FMUs again for another run")
         self._ran = True
-        table = self._source_table(sources, steps)
+        source_columns = self._source_columns(sources, steps)
         everything = (*self.signals, *self.typed_signals)
         record = list(everything if record is None else record)
         resolved = [self.resolve(n) for n in record]
@@ -378,6 +380,7 @@ class Master:
         rows = min(steps + 1, chunk_rows(1 + len(record)) if pacing is None else
                    PROGRESS_CHUNK * max(1, round(PACED_CHUNK_S / self.step / PROGRESS_CHUNK)))
         out = np.empty((rows, len(floats)))
+        source_rows = np.empty((rows, len(self.sources)))
         typed_out = [np.empty(rows, dtype=object) for _ in typed]
         needed = {q for _, q in typed} | {k.from_name for k in self.links if k.kind != "float64"}
         for p in self._plans:  # typed outputs cost a call each: read only those in use
@@ -391,19 +394,23 @@ class Master:
             if p.read_after:
                 self._read(p, "after initialization")
         if self.algorithm == "jacobi":
-            self._propagate_initial_values(table[0])
+            _fill_source_rows(source_rows, source_columns, 0)
+            self._propagate_initial_values(source_rows[0])
         hook = _TypedHook(self, [(column, q) for column, (_, q) in zip(typed_out, typed)])
         timing_rows = steps if keep_timing else rows
-        run = self._engine_run(table, out, None if full else columns, hook, steps, pacing,
-                               timing_rows)
+        run = self._engine_run(source_rows, out, None if full else columns, hook, steps,
+                               pacing, timing_rows)
         streamed_timing = None if keep_timing else StreamedTiming.counting(
             self.step, tuple(p.name for p in self._plans), steps, pacing)
         float_columns = {j: c for c, (j, _) in enumerate(floats)}
         typed_columns = {j: c for c, (j, _) in enumerate(typed)}
 
         def window(base: int) -> None:
-            """Point the engine's buffers so that point k lands in row k - base."""
+            """Point the engine's buffers so that point k lands in (and its sources come
+            from) row k - base."""
             hook.base = base
+            _fill_source_rows(source_rows, source_columns, base)
+            run.sources = _shifted(source_rows, base)
             run.record = _shifted(out, base)
             if not keep_timing:
                 run.tet, run.lateness = _shifted(self._tet, base), _shifted(self._lateness, base)
@@ -476,22 +483,22 @@ class Master:
         """The time of point(s) k (cosim.schema.point_time)."""
         return point_time(self.start, self.step, k)
 
-    def _engine_run(self, table: np.ndarray, out: np.ndarray, columns: np.ndarray | None,
-                    hook: _TypedHook, steps: int, pacing: Pacing | None,
-                    timing_rows: int) -> EngineRun:
+    def _engine_run(self, source_rows: np.ndarray, out: np.ndarray,
+                    columns: np.ndarray | None, hook: _TypedHook, steps: int,
+                    pacing: Pacing | None, timing_rows: int) -> EngineRun:
         """The engine's plan and buffers, all allocated here, before the loop."""
         self._plan_structs = (EngineFmuPlan * len(self._plans))(
             *(p.engine_plan() for p in self._plans))
         self._tet = np.zeros(timing_rows)
         self._fmu_tet = np.zeros((timing_rows, len(self._plans)))
         self._lateness = np.zeros(timing_rows)
-        self._arrays = (table, out, columns)  # what the engine points into lives as long
+        self._arrays = (source_rows, out, columns)  # the engine's buffers live as long
         self._hook = TYPED_HOOK(hook) if hook.needed else TYPED_HOOK()
         return EngineRun(
             step=self.step, start_time=self.start, steps=steps, n_fmus=len(self._plans),
             fmus=self._plan_structs,
             bus=pointer(self._bus), n_bus=self._bus.size, n_sources=len(self.sources),
-            sources=pointer(table), record=pointer(out), columns=pointer(columns, c_long),
+            sources=pointer(source_rows), record=pointer(out), columns=pointer(columns, c_long),
             n_columns=out.shape[1], typed=self._hook, typed_record=bool(hook.columns),
             tet=pointer(self._tet), fmu_tet=pointer(self._fmu_tet),
             lateness=pointer(self._lateness), paced=pacing is not None,
@@ -512,21 +519,25 @@ class Master:
         raise InputError(f"cannot record unknown signal {name!r}; known: "
                          f"{', '.join(everything)}")
 
-    def _source_table(self, values: Mapping[str, np.ndarray | float], steps: int) -> np.ndarray:
+    def _source_columns(self, values: Mapping[str, np.ndarray | float], steps: int
+                        ) -> list[np.ndarray]:
+        """Every source's values in the bus's order, checked before the run (steps + 1 finite
+        samples, or a finite constant) and not copied (a float64 array is used as given): the
+        engine's rows are filled from them chunk by chunk (_fill_source_rows)."""
         missing = [n for n in self.sources if n not in values]
         extra = [n for n in values if n not in self.sources]
         if missing or extra:
             raise ValueError(f"source values: missing {missing}, unexpected {extra}")
-        table = np.empty((steps + 1, len(self.sources)))
-        for j, name in enumerate(self.sources):
+        columns = []
+        for name in self.sources:
             column = np.asarray(values[name], dtype=float)
             if column.ndim and column.shape != (steps + 1,):
                 raise ValueError(f"source {name!r} has {column.shape} samples, the run needs "
                                  f"({steps + 1},) (or a constant)")
             if not np.all(np.isfinite(column)):
                 raise ValueError(f"source {name!r} has non-finite values")
-            table[:, j] = column
-        return table
+            columns.append(column)
+        return columns
 
     def _propagate_initial_values(self, sources: np.ndarray) -> None:
         """Jacobi: carry the initial values through every connection before the first step
@@ -623,6 +634,14 @@ def _check_parameters(fmu: ResolvedFmu, info: FmuInfo) -> None:
         if name not in settable:
             raise InputError(f"{fmu.name}: unknown parameter {name!r} (known: "
                              f"{', '.join(settable)})")
+
+
+def _fill_source_rows(rows: np.ndarray, columns: Sequence[np.ndarray], base: int) -> None:
+    """The sources of points base, base + 1, ... into the engine's rows (as many as the rows
+    hold and the run has; a constant fills its column)."""
+    for j, column in enumerate(columns):
+        values = column if column.ndim == 0 else column[base:base + rows.shape[0]]
+        rows[:values.size if column.ndim else rows.shape[0], j] = values
 
 
 def _typed_array(values: np.ndarray) -> np.ndarray:
