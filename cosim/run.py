@@ -10,8 +10,9 @@ range); the plots (cosim.plots; by default in a manipulator run only, `[record] 
 otherwise); and run.json, the checked configuration in the general form. The built-in FMUs are
 built into the fmu/ cache and loaded from a temporary copy.
 
-The record, the metrics and the plots are fed chunk by chunk while the run runs (RunSink), so
-the memory a run takes does not grow with its length (its sampled sources aside). A run that an
+The record, the metrics, the plots and the step timing are fed chunk by chunk while the run
+runs (RunSink, cosim.timing.StreamedTiming), paced or not, so the memory a run takes does not
+grow with its length (its sampled sources aside, which the master reads in place). A run that an
 FMU's failure stops (an isolated FMU's crash or hang among them) keeps the record up to its last
 recorded point and writes run.json, then raises CosimError naming the FMU, the call, the time
 and the folder. Before anything runs, the output folder must take a file and what is held in
@@ -140,7 +141,7 @@ def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | 
     where permitted); the recording's timing then carries that setup's report."""
     with scenario.master() as master:
         wanted = _wanted(scenario, master)
-        check_recording_memory(scenario.config, 1 + len(master.sources) + len(wanted))
+        check_recording_memory(scenario.config, 1 + len(wanted))
         if pacing is None:
             return master.run(scenario.sources, scenario.steps, wanted, progress)
         with realtime_process(cpu) as process:
