@@ -49,6 +49,10 @@ class Envelope:
             return t, low
         return np.repeat(t, 2), np.column_stack([low, high]).ravel()
 
+    def peaks(self, step: float) -> tuple[np.ndarray, np.ndarray]:
+        """(t, value) of each bucket's maximum, at the bucket's start time."""
+        return np.arange(self.filled) * self.size * step, self.high[:self.filled]
+
 
 class Strided:
     """Every n-th of `points` values (n so that at most `most` are kept)."""

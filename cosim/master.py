@@ -32,9 +32,11 @@ carries the initial values through every connection (libcosim's initialization).
 The loop runs in compiled code (cosim/engine.py, cosim/c/engine.c), in-process, with each FMU's
 own function pointers: each float64 block costs one set, one get and one step call per FMU and
 step, every status is checked, and every step is timed (cosim.timing). Values of other types
-go through a hook into Python where an FMU has them. Python only sets up, feeds the sources,
-collects the record and shows progress; the garbage collector is kept out of the loop, and
-the steps may be paced to the wall clock (cosim.timing.Pacing).
+go through a hook into Python where an FMU has them. Python only sets up, feeds the sources
+and collects the record a chunk at a time (the engine's source rows, record rows and timing
+rows are one chunk long, so the master's memory does not grow with the run's length), and
+shows progress; the garbage collector is kept out of the loop, and the steps may be paced to
+the wall clock (cosim.timing.Pacing).
 """
 
 from __future__ import annotations
@@ -70,7 +72,7 @@ from flexff.cosim.engine import (
 from flexff.cosim.isolation import IsolatedInstance
 from flexff.cosim.recording import CHUNK_MIN_ROWS, Recording, chunk_rows
 from flexff.cosim.schema import ALGORITHMS, point_time
-from flexff.cosim.timing import Histogram, Pacing, StepTiming, StreamedTiming
+from flexff.cosim.timing import Pacing, StepTiming, StreamedTiming
 from flexff.cosim.wiring import SOURCE, Link, Port, carried, wire
 from flexff.fmu.errors import InputError, RunError
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
@@ -359,13 +361,13 @@ class Master:
         (cosim.recording.chunk_rows points a chunk; a paced run one every PACED_CHUNK_S
         seconds), so that
         memory stays flat in the run's length. Without `keep_timing` the steps' execution
-        times are counted in histograms (cosim.timing.StreamedTiming), not kept one by one;
-        a paced run keeps them always. A run that fails hands over the points before the
-        failure first."""
+        times (and, paced, their lateness) are counted in histograms and a bounded trace
+        (cosim.timing.StreamedTiming), not kept one by one. A run that fails hands over the
+        points before the failure first."""
         if self._ran:
             raise RuntimeError("a Master runs once; load the FMUs again for another run")
         self._ran = True
-        table = self._source_table(sources, steps)
+        source_columns = self._source_columns(sources, steps)
         everything = (*self.signals, *self.typed_signals)
         record = list(everything if record is None else record)
         resolved = [self.resolve(n) for n in record]
@@ -378,6 +380,7 @@ class Master:
         rows = min(steps + 1, chunk_rows(1 + len(record)) if pacing is None else
                    PROGRESS_CHUNK * max(1, round(PACED_CHUNK_S / self.step / PROGRESS_CHUNK)))
         out = np.empty((rows, len(floats)))
+        source_rows = np.empty((rows, len(self.sources)))
         typed_out = [np.empty(rows, dtype=object) for _ in typed]
         needed = {q for _, q in typed} | {k.from_name for k in self.links if k.kind != "float64"}
         for p in self._plans:  # typed outputs cost a call each: read only those in use
@@ -391,21 +394,23 @@ class Master:
             if p.read_after:
                 self._read(p, "after initialization")
         if self.algorithm == "jacobi":
-            self._propagate_initial_values(table[0])
+            _fill_source_rows(source_rows, source_columns, 0)
+            self._propagate_initial_values(source_rows[0])
         hook = _TypedHook(self, [(column, q) for column, (_, q) in zip(typed_out, typed)])
-        keep_timing = keep_timing or pacing is not None
         timing_rows = steps if keep_timing else rows
-        run = self._engine_run(table, out, None if full else columns, hook, steps, pacing,
-                               timing_rows)
-        streamed_timing = None if keep_timing else StreamedTiming(
-            self.step, tuple(p.name for p in self._plans), Histogram(),
-            tuple(Histogram() for _ in self._plans))
+        run = self._engine_run(source_rows, out, None if full else columns, hook, steps,
+                               pacing, timing_rows)
+        streamed_timing = None if keep_timing else StreamedTiming.counting(
+            self.step, tuple(p.name for p in self._plans), steps, pacing)
         float_columns = {j: c for c, (j, _) in enumerate(floats)}
         typed_columns = {j: c for c, (j, _) in enumerate(typed)}
 
         def window(base: int) -> None:
-            """Point the engine's buffers so that point k lands in row k - base."""
+            """Point the engine's buffers so that point k lands in (and its sources come
+            from) row k - base."""
             hook.base = base
+            _fill_source_rows(source_rows, source_columns, base)
+            run.sources = _shifted(source_rows, base)
             run.record = _shifted(out, base)
             if not keep_timing:
                 run.tet, run.lateness = _shifted(self._tet, base), _shifted(self._lateness, base)
@@ -422,7 +427,8 @@ class Master:
             sink.write(base, self.time(np.arange(base, end)), chunk)
             if streamed_timing is not None:
                 made = max(0, min(end, steps) - base)
-                streamed_timing.add(self._tet[:made], self._fmu_tet[:made])
+                streamed_timing.add(base, self._tet[:made], self._fmu_tet[:made],
+                                    self._lateness[:made])
 
         if progress is None:
             progress = sys.stderr.isatty() and steps >= PROGRESS_MIN_STEPS
@@ -454,41 +460,45 @@ class Master:
             hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))
             raise hook.error or self._plans[run.failed_fmu].fail(
                 f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
-        if status == OVERRUN:
-            end = run.failed_k + 1  # points 0 .. failed_k were recorded, the step was made
+        stopped_at = run.failed_k if status == OVERRUN else None
+        if stopped_at is not None:
+            end = stopped_at + 1  # points 0 .. stopped_at were recorded, the step was made
             hand(base, end)
         network = {p.name: times for p in self._plans if (times := p.instance.network_times())}
+        listed = tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)])
         if streamed_timing is not None:
-            return Streamed(end, wall, dataclasses.replace(streamed_timing,
-                                                           network_calls=network))
-        made = end if status == OVERRUN else steps  # the steps the engine made
+            row = (stopped_at or 0) - base  # the stopped step's row in the chunk buffers
+            return Streamed(end, wall, dataclasses.replace(
+                streamed_timing, overruns=run.overruns, task_overruns=run.task_overruns,
+                first_overruns=listed, stopped_at=stopped_at, network_calls=network,
+                stopped_step=(float(self._tet[row]), float(self._lateness[row]))
+                if stopped_at is not None else (0.0, 0.0)))
+        made = end if stopped_at is not None else steps  # the steps the engine made
         timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
                             self._fmu_tet[:made], self._lateness[:made], pacing, run.overruns,
-                            run.task_overruns,
-                            tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)]),
-                            run.failed_k if status == OVERRUN else None, network_calls=network)
+                            run.task_overruns, listed, stopped_at, network_calls=network)
         return Streamed(end, wall, timing)
 
     def time(self, k: Any) -> Any:
         """The time of point(s) k (cosim.schema.point_time)."""
         return point_time(self.start, self.step, k)
 
-    def _engine_run(self, table: np.ndarray, out: np.ndarray, columns: np.ndarray | None,
-                    hook: _TypedHook, steps: int, pacing: Pacing | None,
-                    timing_rows: int) -> EngineRun:
+    def _engine_run(self, source_rows: np.ndarray, out: np.ndarray,
+                    columns: np.ndarray | None, hook: _TypedHook, steps: int,
+                    pacing: Pacing | None, timing_rows: int) -> EngineRun:
         """The engine's plan and buffers, all allocated here, before the loop."""
         self._plan_structs = (EngineFmuPlan * len(self._plans))(
             *(p.engine_plan() for p in self._plans))
         self._tet = np.zeros(timing_rows)
         self._fmu_tet = np.zeros((timing_rows, len(self._plans)))
         self._lateness = np.zeros(timing_rows)
-        self._arrays = (table, out, columns)  # what the engine points into lives as long
+        self._arrays = (source_rows, out, columns)  # the engine's buffers live as long
         self._hook = TYPED_HOOK(hook) if hook.needed else TYPED_HOOK()
         return EngineRun(
             step=self.step, start_time=self.start, steps=steps, n_fmus=len(self._plans),
             fmus=self._plan_structs,
             bus=pointer(self._bus), n_bus=self._bus.size, n_sources=len(self.sources),
-            sources=pointer(table), record=pointer(out), columns=pointer(columns, c_long),
+            sources=pointer(source_rows), record=pointer(out), columns=pointer(columns, c_long),
             n_columns=out.shape[1], typed=self._hook, typed_record=bool(hook.columns),
             tet=pointer(self._tet), fmu_tet=pointer(self._fmu_tet),
             lateness=pointer(self._lateness), paced=pacing is not None,
@@ -509,21 +519,25 @@ class Master:
         raise InputError(f"cannot record unknown signal {name!r}; known: "
                          f"{', '.join(everything)}")
 
-    def _source_table(self, values: Mapping[str, np.ndarray | float], steps: int) -> np.ndarray:
+    def _source_columns(self, values: Mapping[str, np.ndarray | float], steps: int
+                        ) -> list[np.ndarray]:
+        """Every source's values in the bus's order, checked before the run (steps + 1 finite
+        samples, or a finite constant) and not copied (a float64 array is used as given): the
+        engine's rows are filled from them chunk by chunk (_fill_source_rows)."""
         missing = [n for n in self.sources if n not in values]
         extra = [n for n in values if n not in self.sources]
         if missing or extra:
             raise ValueError(f"source values: missing {missing}, unexpected {extra}")
-        table = np.empty((steps + 1, len(self.sources)))
-        for j, name in enumerate(self.sources):
+        columns = []
+        for name in self.sources:
             column = np.asarray(values[name], dtype=float)
             if column.ndim and column.shape != (steps + 1,):
                 raise ValueError(f"source {name!r} has {column.shape} samples, the run needs "
                                  f"({steps + 1},) (or a constant)")
             if not np.all(np.isfinite(column)):
                 raise ValueError(f"source {name!r} has non-finite values")
-            table[:, j] = column
-        return table
+            columns.append(column)
+        return columns
 
     def _propagate_initial_values(self, sources: np.ndarray) -> None:
         """Jacobi: carry the initial values through every connection before the first step
@@ -620,6 +634,14 @@ def _check_parameters(fmu: ResolvedFmu, info: FmuInfo) -> None:
         if name not in settable:
             raise InputError(f"{fmu.name}: unknown parameter {name!r} (known: "
                              f"{', '.join(settable)})")
+
+
+def _fill_source_rows(rows: np.ndarray, columns: Sequence[np.ndarray], base: int) -> None:
+    """The sources of points base, base + 1, ... into the engine's rows (as many as the rows
+    hold and the run has; a constant fills its column)."""
+    for j, column in enumerate(columns):
+        values = column if column.ndim == 0 else column[base:base + rows.shape[0]]
+        rows[:values.size if column.ndim else rows.shape[0], j] = values
 
 
 def _typed_array(values: np.ndarray) -> np.ndarray:

@@ -6,7 +6,7 @@
   signals.png every recorded float signal over time, for a run without the manipulator's
               signals (at most MAX_PANELS of them)
   tet.png     a paced run's task execution time per step, each FMU's share, the period and
-              the overruns
+              the overruns (drawn from a bounded trace, cosim.timing.TetTrace)
 
 A run feeds RunPlots chunk by chunk while it runs; long series are drawn decimated
 (cosim.decimate: min and max per pixel column, so a one-sample spike stays visible), so a plot
@@ -24,7 +24,7 @@ import numpy as np
 
 from flexff.cosim.decimate import Envelope, Strided
 from flexff.cosim.recording import Recording, atomic_write, signal_name
-from flexff.cosim.timing import US, StepTiming
+from flexff.cosim.timing import US, StepTiming, StreamedTiming
 from flexff.plant.signals import (
     FEEDBACK_FORCES,
     FEEDFORWARD_FORCES,
@@ -157,26 +157,29 @@ class RunPlots:
         return save_figure(figure, path)
 
 
-def _decimated(values: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
-    envelope = Envelope(values.size)
-    envelope.add(0, values)
-    return envelope.line(step)
-
-
-def plot_tet(timing: StepTiming, path: Path) -> Path:
-    """TET over time (total and per FMU, in microseconds) against the period."""
+def plot_tet(timing: StepTiming | StreamedTiming, path: Path) -> Path:
+    """TET over time (total and per FMU, in microseconds) against the period, from the
+    timing's bounded trace (cosim.timing.TetTrace: the least and largest value per block of
+    steps); overruns marked where a block's largest TET plus lateness passed the period, and
+    at the exact steps of the engine's first listed overruns."""
+    trace, step, period = timing.trace(), timing.step, timing.period
     figure = _figure(figsize=(9, 4))
     ax = figure.subplots()
-    t = np.arange(timing.tet.size) * timing.step
-    for i, name in enumerate(timing.names):
-        ax.plot(*_decimated(timing.fmu_tet[:, i] * US, timing.step), lw=0.5, alpha=0.7,
-                label=name)
-    ax.plot(*_decimated(timing.tet * US, timing.step), "k", lw=0.6, label="TET (step)")
-    ax.axhline(timing.period * US, color="r", ls="--", lw=1, label="period")
-    late = timing.tet + timing.lateness > timing.period
-    if late.any():
-        ax.plot(t[late], (timing.tet + timing.lateness)[late] * US, "rx", ms=4,
-                label=f"overrun ({timing.overruns})")
+    for name, envelope in zip(timing.names, trace.fmu_tet):
+        t, values = envelope.line(step)
+        ax.plot(t, values * US, lw=0.5, alpha=0.7, label=name)
+    t, values = trace.tet.line(step)
+    ax.plot(t, values * US, "k", lw=0.6, label="TET (step)")
+    ax.axhline(period * US, color="r", ls="--", lw=1, label="period")
+    t, late = trace.late.peaks(step)
+    over = late > period
+    if over.any():
+        ax.plot(t[over], late[over] * US, "rx", ms=4, label=f"overrun ({timing.overruns})")
+    first = np.array(timing.first_overruns, dtype=np.int64)
+    if first.size:
+        blocks = np.minimum(first // trace.late.size, late.size - 1)
+        ax.plot(first * step, late[blocks] * US, "r|", ms=8,
+                label=f"first {first.size} overruns")
     ax.set(xlabel="time [s]", ylabel="[us]", yscale="log",
            title="task execution time per step")
     ax.grid(True, alpha=0.3, which="both")

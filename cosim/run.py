@@ -10,8 +10,9 @@ range); the plots (cosim.plots; by default in a manipulator run only, `[record] 
 otherwise); and run.json, the checked configuration in the general form. The built-in FMUs are
 built into the fmu/ cache and loaded from a temporary copy.
 
-The record, the metrics and the plots are fed chunk by chunk while the run runs (RunSink), so
-the memory a run takes does not grow with its length (its sampled sources aside). A run that an
+The record, the metrics, the plots and the step timing are fed chunk by chunk while the run
+runs (RunSink, cosim.timing.StreamedTiming), paced or not, so the memory a run takes does not
+grow with its length (its sampled sources aside, which the master reads in place). A run that an
 FMU's failure stops (an isolated FMU's crash or hang among them) keeps the record up to its last
 recorded point and writes run.json, then raises CosimError naming the FMU, the call, the time
 and the folder. Before anything runs, the output folder must take a file and what is held in
@@ -42,7 +43,7 @@ from flexff.cosim.recording import Recording, RecordWriter, atomic_write, signal
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ConfigError, RunConfig
-from flexff.cosim.timing import OverrunError, Pacing, StepTiming
+from flexff.cosim.timing import OverrunError, Pacing
 from flexff.plant.signals import (
     CURRENTS,
     ENCODERS,
@@ -140,7 +141,7 @@ def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | 
     where permitted); the recording's timing then carries that setup's report."""
     with scenario.master() as master:
         wanted = _wanted(scenario, master)
-        check_recording_memory(scenario.config, 1 + len(master.sources) + len(wanted))
+        check_recording_memory(scenario.config, 1 + len(wanted))
         if pacing is None:
             return master.run(scenario.sources, scenario.steps, wanted, progress)
         with realtime_process(cpu) as process:
@@ -309,7 +310,7 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
     sink.writer.close(csv=config.record.csv)
     if sink.plots is not None:
         sink.plots.write(out)
-    if isinstance(streamed.timing, StepTiming) and pacing is not None:
+    if pacing is not None:
         plot_tet(streamed.timing, out / "tet.png")
     _write_json(out / "run.json", expanded(config))
     _write_json(out / "metrics.json", metrics)
@@ -330,9 +331,8 @@ def _stream(master: Master, scenario: Scenario, sink: RunSink, recorded: Sequenc
     try:
         with realtime_process(cpu) as process:
             streamed = master.stream(scenario.sources, scenario.steps, background, recorded,
-                                     progress, pacing)
+                                     progress, pacing, keep_timing=False)
     finally:
         background.finish()
-    timing = streamed.timing
-    assert isinstance(timing, StepTiming)  # a paced run keeps every step's timing
-    return dataclasses.replace(streamed, timing=dataclasses.replace(timing, process=process))
+    return dataclasses.replace(streamed, timing=dataclasses.replace(streamed.timing,
+                                                                    process=process))

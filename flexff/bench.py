@@ -19,7 +19,7 @@ from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.metrics import tracking_metrics
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import Recording
-from flexff.cosim.run import simulate
+from flexff.cosim.run import run_config, simulate
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.timing import Pacing
 from flexff.fmu.build import build_fmu
@@ -191,6 +191,50 @@ def paced_cpu() -> int:
     return max(os.sched_getaffinity(0))
 
 
+RECORDING_PAIRS = 2  # runs with the record on, then off, alternated this many times
+# the least a run's record can be: no signal beside time, no plot (the metrics still see the
+# reference and the true position, which the master then records alone)
+LEAST_RECORD = {"signals": [], "plot": False}
+
+
+def recording_benchmark(folder: Path, seconds: float | None = None,
+                        pairs: int = RECORDING_PAIRS) -> dict[str, Any]:
+    """What writing the record costs a paced run: the hardware evaluation loop (hardware
+    plant, PID with notch, thesis hardware reference: 100 s or its first `seconds`, no
+    feedforward) paced at 1 kHz through cosim.run.run_config, as `flexff run --realtime --cpu
+    K` runs it (the record written by a thread of its own), with every signal recorded and plotted
+    (the default [record], `on`) and with the least record (LEAST_RECORD, `off`), alternated
+    `pairs` times: per run the base task's TET p50 / p99 / max, the lateness p99 and the
+    overruns; per mode the median over its runs, and on over off of TET p50 and p99."""
+    runs: dict[str, list[dict[str, Any]]] = {"on": [], "off": []}
+    for i in range(pairs):
+        for mode, record in (("on", {}), ("off", LEAST_RECORD)):
+            config = parse_config({
+                "run": {"stop": seconds} if seconds else {},
+                "reference": {"kind": "thesis-hardware-eval"},
+                "plant": {"variant": "hardware", "seed": 1},
+                "record": record}, name=f"recording-{mode}")
+            table = run_config(config, folder / f"recording-{mode}-{i}", progress=False,
+                               pacing=Pacing(rt_factor=1.0), cpu=paced_cpu())["realtime"]
+            tet = table["tasks"]["base"]["tet_us"]
+            runs[mode].append({"tet_us": {k: tet[k] for k in ("p50", "p99", "max")},
+                               "lateness_p99_us": table["lateness_us"]["p99"],
+                               "overruns": table["overruns"], "steps": table["steps"]})
+    median = {mode: _median_run(done) for mode, done in runs.items()}
+    return {"reference": "thesis-hardware-eval", "period_us": 1e3, "off_record": LEAST_RECORD,
+            "runs": runs, "median": median,
+            "ratio_on_over_off": {k: median["on"]["tet_us"][k] / median["off"]["tet_us"][k]
+                                  for k in ("p50", "p99")}}
+
+
+def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The median of each figure of recording_benchmark's runs of one mode."""
+    return {"tet_us": {k: float(np.median([r["tet_us"][k] for r in runs]))
+                       for k in ("p50", "p99", "max")},
+            "lateness_p99_us": float(np.median([r["lateness_p99_us"] for r in runs])),
+            "overruns": float(np.median([r["overruns"] for r in runs]))}
+
+
 def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
                            step: float = 1e-3) -> dict[str, Any]:
     """A network slower than the period (slow_graph, about 3 ms a call) in its own task every
@@ -266,9 +310,10 @@ def run_benchmarks(steps: int = 20000, repeats: int = 5,
                    realtime_seconds: float | None = None) -> dict[str, Any]:
     """Cost of a 1 ms plant step through fmpy's low-level API and in plain C, per variant, of
     the closed loop through our master, libcosim and C, of the closed loop with each learned
-    feedforward FMU (`models`: kind -> .onnx; default: untrained exports), and the paced
+    feedforward FMU (`models`: kind -> .onnx; default: untrained exports), the paced
     hardware evaluation loop with the TCN and LSTM feedforward (`realtime_seconds` of its
-    100 s; default all) with its floors."""
+    100 s; default all) with its floors, and that loop without feedforward paced with its
+    record written and with the least record (recording_benchmark)."""
     for name, value in (("steps", steps), ("repeats", repeats)):
         if not isinstance(value, int) or value < 1:
             raise InputError(f"bench {name} must be a whole number of at least 1, got {value!r}")
@@ -284,4 +329,5 @@ def run_benchmarks(steps: int = 20000, repeats: int = 5,
         models = models or untrained_models(Path(tmp))
         results["learned_feedforward"] = learned_feedforward_benchmark(Path(tmp), models)
         results["realtime"] = realtime_benchmark(Path(tmp), models, realtime_seconds)
+        results["realtime"]["recording"] = recording_benchmark(Path(tmp), realtime_seconds)
     return results

@@ -659,7 +659,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="with --processes: an interpreter with ecospy (default: this one)")
     bench.add_argument("--realtime-seconds", type=float, metavar="S",
                        help="pace only the first S seconds of the 100 s hardware evaluation "
-                            "in the real-time figures (default: all of it)")
+                            "in the real-time figures, the record on and off among them "
+                            "(default: all of it)")
     bench.add_argument("--models", help="a folder of exported .onnx models (e.g. flexff "
                                         "evaluate's) for the feedforward figures; default: "
                                         "untrained exports of each model kind")

@@ -5,6 +5,7 @@ The FMUs are the Modelica Reference-FMUs (VanDerPol, FMI 2.0 and 3.0), which cos
 microsecond a step, so the pacing (not the FMUs) sets the wall time.
 """
 
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -17,7 +18,14 @@ from flexff.cosim.engine import idle_timing
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import load_recording
-from flexff.cosim.timing import Pacing
+from flexff.cosim.timing import (
+    PERCENTILES,
+    RESOLUTION,
+    US,
+    Pacing,
+    StepTiming,
+    StreamedTiming,
+)
 from tests.helpers import REFERENCE_FMUS
 
 
@@ -131,3 +139,90 @@ def test_cli_paced_run_reports_its_timing(tmp_path, capsys):
     assert set(realtime["tet_us"]) == {"p50", "p99", "p99.9", "max"}
     assert main(["run", str(config), "-o", str(tmp_path / "x"), "--max-overruns", "3"]) == 2
     assert "add --realtime" in capsys.readouterr().err
+
+
+class _Discard:
+    def write(self, k0, time, columns):
+        pass
+
+
+def stream(steps: int, pacing: Pacing):
+    """A paced run of VanDerPol at 1 ms whose timing is counted, not kept (as run_config's)."""
+    with Master(van_der_pol(), [], 1e-3) as master:
+        streamed = master.stream({}, steps, _Discard(), pacing=pacing, keep_timing=False)
+        return streamed, master._tet.size
+
+
+def _timing_values(timing: StreamedTiming) -> int:
+    """How many values a streamed timing holds: histograms and trace."""
+    trace = timing.trace()
+    envelopes = (trace.tet, trace.late, *trace.fmu_tet)
+    return (sum(h.counts.size for h in (timing.tet, timing.lateness, *timing.fmu_tet))
+            + sum(e.low.size + e.high.size for e in envelopes))
+
+
+def test_a_paced_streamed_runs_timing_takes_memory_flat_in_its_length():
+    """3000 and 30000 steps (paced at 100x): the same values held for their timing, the
+    engine's timing buffers a chunk (a second of the run) long, and every step counted."""
+    held = []
+    for steps in (3000, 30_000):
+        streamed, buffer_rows = stream(steps, Pacing(rt_factor=100.0))
+        timing = streamed.timing
+        assert isinstance(timing, StreamedTiming) and buffer_rows == 1000
+        assert timing.tet.size == timing.lateness.size == steps
+        assert timing.trace().tet.filled <= 1000
+        held.append(_timing_values(timing))
+    assert held[0] == held[1]
+
+
+def test_a_streamed_timing_table_agrees_with_the_exact_one(rng):
+    """The same steps fed to a StreamedTiming in chunks and held in a StepTiming: the same
+    table, percentiles within the histograms' resolution, maxima and counts exact; the same
+    trace for tet.png, its one-step spike and overrun kept."""
+    steps, pacing, period = 25_001, Pacing(), 1e-3
+    tet = rng.lognormal(-11, 0.4, steps)
+    tet[12_345] = 3e-3  # one overrun
+    fmu_tet = tet[:, None] * rng.uniform(0.2, 0.5, (steps, 2))
+    lateness = rng.lognormal(-13, 1.0, steps)
+    names = ("a", "b")
+    exact = StepTiming(period, names, tet, fmu_tet, lateness, pacing, 1, 0, (12_345,), None)
+    streamed = StreamedTiming.counting(period, names, steps, pacing)
+    for k0 in range(0, steps, 777):
+        streamed.add(k0, tet[k0:k0 + 777], fmu_tet[k0:k0 + 777], lateness[k0:k0 + 777])
+    streamed = dataclasses.replace(streamed, overruns=1, first_overruns=(12_345,))
+    want, got = exact.table(25.0), streamed.table(25.0)
+    assert got.pop("percentile_resolution") == RESOLUTION and "percentile_resolution" not in want
+
+    def close(a, b, path=("",)):
+        if isinstance(a, dict):
+            assert a.keys() == b.keys(), path
+            for key in a:
+                close(a[key], b[key], (*path, key))
+        elif path[-1] in (*PERCENTILES, "tet_over_period_p99"):
+            assert b == pytest.approx(a, rel=RESOLUTION), path
+        else:
+            assert b == a, path
+
+    close(want, got)
+    assert got["tet_us"]["max"] == 3e-3 * US and got["lateness_us"]["max"] == lateness.max() * US
+    for a, b in ((exact.trace().tet, streamed.trace().tet), (exact.trace().late,
+                                                              streamed.trace().late)):
+        assert np.array_equal(a.low, b.low) and np.array_equal(a.high, b.high)
+    t, late = streamed.trace().late.peaks(period)
+    assert t[late > period] == pytest.approx([12_345 // 26 * 26 * period])
+
+
+def test_a_paced_streamed_run_stopped_by_its_overruns_reports_the_stopped_step():
+    """Every step overruns a 0.1 us period; after 1.5 s of grace the run stops at step 1504,
+    in its second chunk: the stop message gives that step's own TET and lateness (its TET
+    plus lateness lies within its block of the trace)."""
+    streamed, _ = stream(3000, Pacing(rt_factor=1e4, max_overruns=5, grace=1.5))
+    timing = streamed.timing
+    assert timing.stopped_at == 1504 and streamed.points == 1505
+    tet, late = timing.stopped_step
+    envelope = timing.trace().late
+    block = 1504 // envelope.size
+    assert envelope.low[block] <= tet + late <= envelope.high[block]
+    assert f"took {tet * US:.1f} us and started {late * US:.1f} us late" in \
+        timing.stop_message()
+    assert timing.table(streamed.wall_s)["stopped_at_s"] == pytest.approx(1.504)

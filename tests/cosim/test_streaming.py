@@ -194,8 +194,11 @@ def test_a_paced_runs_record_is_written_by_a_thread_in_order():
 
 def test_a_paced_run_streams_its_record(tmp_path):
     config = parse_config(vdp_config(0.3))
-    api.run(config, tmp_path, pacing=Pacing())
+    realtime = api.run(config, tmp_path, pacing=Pacing())["realtime"]
     streamed, in_memory = load_recording(tmp_path), api.simulate(config)
     for name, values in in_memory.signals.items():
         assert streamed[name].tobytes() == values.tobytes(), name
     assert (tmp_path / "tet.png").is_file()
+    # its timing counted in histograms, as an unpaced streamed run's, the lateness too
+    assert realtime["percentile_resolution"] == RESOLUTION and realtime["steps"] == 300
+    assert 0 <= realtime["lateness_us"]["p99"] <= realtime["lateness_us"]["max"]

@@ -91,6 +91,10 @@ def test_bench_prints_json(tmp_path):
     assert floor["network_call_us"]["calls"] == 1 + 13 and floor["network_call_us"]["p50"] > 0
     slow = figures["realtime"]["slow_network"]  # about 3 ms a call at 25 Hz, in its own task
     assert slow["tasks"]["slow.network"]["calls"] == 13 and slow["overruns"] >= 0
+    recording = figures["realtime"]["recording"]  # the loop's record on and off, twice each
+    assert [len(recording["runs"][mode]) for mode in ("on", "off")] == [2, 2]
+    assert recording["runs"]["on"][0]["steps"] == 500
+    assert recording["ratio_on_over_off"]["p50"] > 0
 
 
 def test_bench_processes_times_whole_runs(tmp_path):
