@@ -492,6 +492,9 @@ class Master:
         self._tet = np.zeros(timing_rows)
         self._fmu_tet = np.zeros((timing_rows, len(self._plans)))
         self._lateness = np.zeros(timing_rows)
+        if pacing is not None:  # touched now, so the paced loop takes no page fault in them
+            for array in (source_rows, out, self._tet, self._fmu_tet, self._lateness):
+                array.fill(0.0)  # (cosim.realtime locks pages as they are touched)
         self._arrays = (source_rows, out, columns)  # the engine's buffers live as long
         self._hook = TYPED_HOOK(hook) if hook.needed else TYPED_HOOK()
         return EngineRun(
