@@ -106,9 +106,12 @@ def reference_signals(config: RunConfig) -> dict[str, np.ndarray]:
 
 
 def reference_samples(reference: Reference, steps: int) -> dict[str, np.ndarray]:
-    """The reference signals at points 0 .. steps: cut, or held at rest after its end."""
+    """The reference signals at points 0 .. steps: cut (views of the sampled reference, no
+    copy), or held at rest after its end."""
     signals = reference.signals()
     n = min(steps + 1, reference.t.size)
+    if n == steps + 1:
+        return {name: _read_only(values[:n]) for name, values in signals.items()}
     out = {}
     for name, values in signals.items():
         column = np.empty(steps + 1)
@@ -116,6 +119,12 @@ def reference_samples(reference: Reference, steps: int) -> dict[str, np.ndarray]
         column[n:] = values[n - 1] if name in ("x_ref", "y_ref") else 0.0
         out[name] = column
     return out
+
+
+def _read_only(view: np.ndarray) -> np.ndarray:
+    """A view that no consumer may change (it is the cached sampled reference's)."""
+    view.flags.writeable = False
+    return view
 
 
 def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, np.ndarray]:
