@@ -68,8 +68,9 @@ class FeatureConfig:
     model_rate_hz: float | None = None  # down-sample to this rate; None keeps the data rate
     edge_periods: float = 0.0  # filter corner periods at each end of a trajectory left out
     # of every loss (`edge_samples`); 0 as in the thesis
-    # the pgnn's residual labels subtract the prior passed through the labels' filter
-    # (`filter_labels`), not the prior as it is: see learning.train
+    # the rigid-body model's forces pass the labels' filter (`filter_labels`) before they are
+    # compared with the labels: the pgnn's prior in its residual labels (learning.train), the
+    # regressor in the identification (learning.identify)
     filtered_prior: bool = True
 
     def edge_samples(self, rate_hz: float) -> int:

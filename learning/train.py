@@ -1,7 +1,8 @@
 """Training: a dataset folder in, a run folder out (weights, run.json, metrics.json, loss.png).
 
 Adam on the MSE of min-max-scaled labels (the thesis's normalized units; for the pgnn the
-residual F - F_rigid divided by the same label span, which gives the same MSE), truncated
+residual F - F_rigid divided by the same label span, which gives the same MSE, F_rigid through
+the labels' filter: `prior_labels`), truncated
 backpropagation through time for the recurrent networks, random windows for the convolutional
 ones (`learning.batches`), the epoch with the lowest validation loss kept. Seeded: the same
 configuration, data, device and thread count give the same weights.
@@ -113,7 +114,7 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
     feature_scaler, label_scaler = MinMaxScaler.fit(train_x), MinMaxScaler.fit(train_f)
     feature_set = config.features.feature_set
     edge = config.features.edge_samples(model_rate)
-    prior = _prior_parameters(config, train_set, rate, edge)
+    prior = _prior_parameters(config, train_set, rate, model_rate)
     labels = config.features.labels
 
     def targets(xs: list[np.ndarray], fs: list[np.ndarray]) -> list[np.ndarray]:
@@ -199,7 +200,7 @@ def _prepare(trajectories: list[Trajectory], rate: float, config: TrainConfig,
 
 
 def _prior_parameters(config: TrainConfig, trajectories: list[Trajectory], rate: float,
-                      edge: int) -> dict[str, float] | None:
+                      model_rate: float) -> dict[str, float] | None:
     """The physics-guided model's prior: the deployable parameters of the rigid-body model
     identified from the training trajectories (learning.identify: inertias, flexures and
     motor friction), without the added training noise, so that runs of other seeds share
@@ -207,8 +208,8 @@ def _prior_parameters(config: TrainConfig, trajectories: list[Trajectory], rate:
     if not uses_prior(config.model):
         return None
     forces = replace(config, features=replace(config.features, labels="forces"))
-    return identify_samples(*_prepare(trajectories, rate, forces, None),
-                            config.features.feature_set, edge).parameters()
+    return identify_samples(*_prepare(trajectories, rate, forces, None), forces.features,
+                            model_rate).parameters()
 
 
 def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,

@@ -17,6 +17,7 @@ from flexff.learning.deploy import predict
 from flexff.learning.features import FeatureConfig, decimation, prepare_trajectory
 from flexff.learning.identify import identify_samples
 from flexff.learning.presets import make_config
+from flexff.learning.rigid import rigid_forces
 from flexff.learning.run_folder import load_run
 from flexff.learning.synthetic import motion_trajectory, skew_sine_circle, synthetic_dataset
 from flexff.learning.threads import cpu_threads, torch_threads
@@ -79,14 +80,19 @@ def test_training_is_reproducible(data, tmp_path):
 
 @pytest.mark.parametrize("kind", ["lstm", "pgnn"])
 def test_reported_test_mse_is_that_of_the_si_model(data, tmp_path, kind):
-    """The metric's units, end to end: min-max-scaled labels, from the deployed forces, the
-    filter's edges left out."""
+    """The metric's units, end to end: min-max-scaled labels, from the deployed forces (the
+    pgnn's with its prior through the labels' filter, as its labels were made), the filter's
+    edges left out."""
     metrics = train(kind, "fast", data, tmp_path / "run", progress=False, epochs=2, **TINY[kind])
     run = load_run(tmp_path / "run")
     dataset = load_dataset(data)
     features, forces = prepare_trajectory(dataset.split("test")[0], dataset.sample_rate_hz,
                                           run.config.features)
     predicted = predict(run, features)
+    if kind == "pgnn":
+        prior = run.prior_parameters
+        predicted += (prior_labels(features, prior, run.config.features, run.model_rate_hz)
+                      - rigid_forces(features, run.config.features.feature_set, prior))
     edge = run.config.features.edge_samples(run.model_rate_hz)
     assert edge > 0
     scaled = ((predicted - forces) / run.label_scaler.span)[edge:-edge]
@@ -116,8 +122,8 @@ def test_the_prior_is_the_rigid_body_model_identified_on_the_training_set(tmp_pa
     rate = dataset.sample_rate_hz
     model_rate = rate / decimation(rate, features.model_rate_hz)
     pairs = [prepare_trajectory(t, rate, features) for t in dataset.split("train")]
-    expected = identify_samples([x for x, _ in pairs], [f for _, f in pairs],
-                                features.feature_set, features.edge_samples(model_rate))
+    expected = identify_samples([x for x, _ in pairs], [f for _, f in pairs], features,
+                                model_rate)
     assert run.prior_parameters == pytest.approx(expected.parameters(), rel=1e-9)
     assert metrics["prior_parameters"] == run.prior_parameters
     assert run.prior_parameters["tau_coulomb1"] == pytest.approx(2 * 7e-3, rel=0.2)
