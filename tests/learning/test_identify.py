@@ -289,10 +289,10 @@ def test_on_the_hardware_set(tmp_path):
     """The hardware set (about a minute to collect, 20 s to identify, a minute to run): the
     nominal flexure stiffnesses are 9 % off there, its motors have 7 mNm of Coulomb friction
     and their torque constants are 2 to 4 % low, which the force labels (the commanded force)
-    do not know. Measured: stiffnesses within 20 % (the shoulder's and the wrist's are hard
-    to tell apart over a 5 cm workspace), Coulomb 6.6 to 7.1 mNm, the inertias and dampings
-    kept nominal (under the 2 % residual); the identified feedforward's e2 ratio 158 / 77
-    against the nominal one's 7.0 / 7.9."""
+    do not know. Measured (the environment's 1 Hz corner): stiffnesses within 20 % (the
+    shoulder's and the wrist's are hard to tell apart over a 5 cm workspace), Coulomb 7.2 to
+    7.3 mNm, the inertias and dampings kept nominal (under the 1 % residual); the identified
+    feedforward's e2 ratio 218 / 163 against the nominal one's 7.0 / 7.9."""
     data = collect("hardware", tmp_path / "data", progress=False)
     found = identify(data, preprocessing("hardware"))
     rows = {row["name"]: row for row in found.rows()}
