@@ -151,11 +151,11 @@ def test_the_identified_model_is_preprocessed_as_the_physics_guided_prior():
 def test_hardware_physics_guided_feedforward_beats_the_rigid_body_one(tmp_path):
     """Table 6.2 for flexff (about 7 minutes): on the hardware plant, where the nominal model
     is wrong (mismatch, friction, the tool mode), the physics-guided model trained on the
-    hardware set (the mean of three seeds, its prior the identified rigid-body model)
+    hardware set (the mean of five seeds, its prior the identified rigid-body model)
     tracks the thesis's hardware evaluation reference far better than the rigid-body
-    feedforward of the nominal model, and reaches issue 16's 50x. Measured: pgnn 105x / 88x
-    in e2 and 40x / 40x in einf, rigid-body 7.0x / 7.9x and 5.8x / 7.6x; the thesis's LSTM
-    reached 1.8x / 1.3x."""
+    feedforward of the nominal model, and reaches issue 16's 50x. Measured: pgnn 397x / 189x
+    in e2 (five seeds, 1 Hz corner; 105x / 88x before issue 25's changes), rigid-body 7.0x /
+    7.9x and 5.8x / 7.6x in einf; the thesis's LSTM reached 1.8x / 1.3x."""
     summary = evaluate("hardware", tmp_path, models=["pgnn"], say=lambda _: None)
     pgnn, rigid = summary["scenarios"]["pgnn"], summary["scenarios"]["rigid-body"]
     for axis in ("x", "y"):
