@@ -68,6 +68,10 @@ class FeatureConfig:
     model_rate_hz: float | None = None  # down-sample to this rate; None keeps the data rate
     edge_periods: float = 0.0  # filter corner periods at each end of a trajectory left out
     # of every loss (`edge_samples`); 0 as in the thesis
+    # the rigid-body model's forces pass the labels' filter (`filter_labels`) before they are
+    # compared with the labels: the pgnn's prior in its residual labels (learning.train), the
+    # regressor in the identification (learning.identify)
+    filtered_prior: bool = True
 
     def edge_samples(self, rate_hz: float) -> int:
         """Samples at `rate_hz` at each end of a trajectory where the zero-phase filter's
@@ -168,13 +172,20 @@ def prepare_trajectory(traj: Trajectory, rate_hz: float, config: FeatureConfig,
         pos = pos + config.position_noise_m * rng.standard_normal(pos.shape)
         forces = forces + noise * rng.standard_normal(forces.shape)
     pos = lowpass(pos, rate_hz, config.cutoff_hz, config.filter_order)
-    if config.filter_forces:
-        forces = lowpass(forces, rate_hz, config.cutoff_hz, config.filter_order)
+    forces = filter_labels(forces, rate_hz, config)
     vel, acc = differentiate(pos, rate_hz)
     step = decimation(rate_hz, config.model_rate_hz)
     features = motion_features(pos[::step], vel[::step], acc[::step], config.feature_set)
     return features, forces[::step]
 
+
+def filter_labels(labels: np.ndarray, rate_hz: float, config: FeatureConfig) -> np.ndarray:
+    """Labels (n, k) sampled at `rate_hz` through the filter `config` gives the labels (the
+    motion's low-pass where `filter_forces`, else none): what a signal compared with the
+    labels must pass through too."""
+    if not config.filter_forces:
+        return labels
+    return lowpass(labels, rate_hz, config.cutoff_hz, config.filter_order)
 
 
 def label_signal(traj: Trajectory, name: str) -> np.ndarray:

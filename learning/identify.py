@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import functools
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -55,7 +55,12 @@ from flexff.controllers.identified import (
 from flexff.fmu.errors import InputError
 from flexff.learning.batches import TRAIN, interior
 from flexff.learning.dataset import Dataset, load_dataset
-from flexff.learning.features import FeatureConfig, decimation, prepare_trajectory
+from flexff.learning.features import (
+    FeatureConfig,
+    decimation,
+    filter_labels,
+    prepare_trajectory,
+)
 from flexff.plant.parameters import NOMINAL
 
 STRUCTURE_SAMPLES = 500  # random workspace samples that reveal the base parameters
@@ -262,12 +267,19 @@ def identify_motion(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,
     if len(pos) < len(linear_names()):
         raise InputError(f"{len(pos)} samples cannot determine {len(linear_names())} "
                          f"parameters: give more data")
+    return _least_squares(lambda width: regressor(pos, vel, acc, width), forces)
+
+
+def _least_squares(regressor_at: Callable[[float], np.ndarray],
+                   forces: np.ndarray) -> Identification:
+    """identify_motion on the regressor `regressor_at(width)` (2n, 41) of n samples whose
+    forces (n, 2) are given."""
     base = base_parameters()
     labels = np.asarray(forces, dtype=float).reshape(-1)
     independent = list(base.independent)
 
     def fit(width: float) -> tuple[float, float, np.ndarray]:
-        w = regressor(pos, vel, acc, width)
+        w = regressor_at(width)
         return _residual_norm(w[:, independent], labels), width, w
 
     # min over a generator holds two regressors (2n x 41) at most, not one per width
@@ -279,7 +291,7 @@ def identify_motion(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,
     return Identification(
         values=beta, std=std, estimated=tuple(bool(k) for k in free), w_stribeck=width,
         residual_rms=_axis_rms(residual), label_rms=_axis_rms(labels),
-        nominal_rms=_axis_rms(labels - full @ _nominal_theta()), samples=len(pos),
+        nominal_rms=_axis_rms(labels - full @ _nominal_theta()), samples=len(labels) // 2,
         metric=np.linalg.qr(full[:, independent], mode="r") / np.sqrt(len(labels)))
 
 
@@ -341,25 +353,47 @@ def identify(data: str | Path, features: FeatureConfig | None = None) -> Identif
                          f"'train' in manifest.json or collect more data")
     rate = dataset.sample_rate_hz
     model_rate = rate / decimation(rate, features.model_rate_hz)
-    edge = features.edge_samples(model_rate)
     compact = replace(features, feature_set="compact")
     pairs = [prepare_trajectory(t, rate, compact) for t in trajectories]
-    return replace(identify_samples([x for x, _ in pairs], [f for _, f in pairs], "compact",
-                                    edge), data=identified_on(dataset, features))
+    return replace(identify_samples([x for x, _ in pairs], [f for _, f in pairs], compact,
+                                    model_rate), data=identified_on(dataset, features))
 
 
-def identify_samples(features: list[np.ndarray], forces: list[np.ndarray], feature_set: str,
-                     edge: int = 0) -> Identification:
-    """Identify on prepared trajectories: features (n, n_features) of `feature_set` and
-    forces (n, 2) in SI units, the first and last `edge` samples of each left out, at most
-    MAX_SAMPLES of them, evenly spaced (what `identify` and the physics-guided model's prior
-    in learning.train share)."""
+def identify_samples(features: list[np.ndarray], forces: list[np.ndarray],
+                     config: FeatureConfig, rate_hz: float) -> Identification:
+    """Identify on trajectories prepared with `config` at `rate_hz`: features (n, n_features)
+    of its feature set and forces (n, 2) in SI units, the first and last edge samples of each
+    (config.edge_samples) left out, at most MAX_SAMPLES of them, evenly spaced (what
+    `identify` and the physics-guided model's prior in learning.train share).
+
+    The regressor passes through the labels' filter (learning.features.filter_labels),
+    trajectory by trajectory, before the samples are taken (unless `config.filtered_prior`
+    is off): the model is linear in its
+    parameters, so the filtered force is the filtered regressor times them, where the
+    regressor of the filtered motion steps with the Coulomb friction at each motor reversal
+    and the filtered force does not (hardware stand-in: residual 4.1 / 6.6 mN against 4.6 /
+    7.2 mN, identified feedforward e2 192 / 98 against 158 / 77)."""
+    edge = config.edge_samples(rate_hz)
     keep = [interior(len(x), edge) == TRAIN for x in features]
-    x, f = (np.concatenate([a[k] for a, k in zip(arrays, keep)]) for arrays in (features, forces))
-    stride = -(-len(x) // MAX_SAMPLES)
-    x, f = x[::stride], f[::stride]
-    pos, vel, acc = motion_columns(feature_set)
-    return identify_motion(x[:, pos], x[:, vel], x[:, acc], f)
+    count = sum(int(k.sum()) for k in keep)
+    if count < len(linear_names()):
+        raise InputError(f"{count} samples cannot determine {len(linear_names())} "
+                         f"parameters: give more data")
+    stride = -(-count // MAX_SAMPLES)
+    taken = [np.flatnonzero(k)[::stride] for k in keep]  # per trajectory, about evenly spaced
+    pos, vel, acc = motion_columns(config.feature_set)
+    n_theta = len(linear_names())
+
+    def regressor_at(width: float) -> np.ndarray:
+        rows = []
+        for x, samples in zip(features, taken):
+            w = regressor(x[:, pos], x[:, vel], x[:, acc], width).reshape(len(x), 2 * n_theta)
+            if config.filtered_prior:
+                w = filter_labels(w, rate_hz, config)
+            rows.append(w[samples].reshape(-1, n_theta))
+        return np.concatenate(rows)
+
+    return _least_squares(regressor_at, np.concatenate([f[k] for f, k in zip(forces, taken)]))
 
 
 def identified_on(dataset: Dataset, features: FeatureConfig) -> dict[str, Any]:

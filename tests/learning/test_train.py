@@ -3,6 +3,7 @@ bad requests fail with a message that says what to do."""
 
 import copy
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,10 +17,11 @@ from flexff.learning.deploy import predict
 from flexff.learning.features import FeatureConfig, decimation, prepare_trajectory
 from flexff.learning.identify import identify_samples
 from flexff.learning.presets import make_config
+from flexff.learning.rigid import rigid_forces
 from flexff.learning.run_folder import load_run
-from flexff.learning.synthetic import synthetic_dataset
+from flexff.learning.synthetic import motion_trajectory, skew_sine_circle, synthetic_dataset
 from flexff.learning.threads import cpu_threads, torch_threads
-from flexff.learning.train import learning_rate, train
+from flexff.learning.train import learning_rate, prior_labels, train
 from flexff.plant.parameters import HARDWARE, MOTOR_FRICTION
 
 TINY = {"lstm": {"hidden": 16, "layers": 2, "linear_skip": False},
@@ -78,14 +80,19 @@ def test_training_is_reproducible(data, tmp_path):
 
 @pytest.mark.parametrize("kind", ["lstm", "pgnn"])
 def test_reported_test_mse_is_that_of_the_si_model(data, tmp_path, kind):
-    """The metric's units, end to end: min-max-scaled labels, from the deployed forces, the
-    filter's edges left out."""
+    """The metric's units, end to end: min-max-scaled labels, from the deployed forces (the
+    pgnn's with its prior through the labels' filter, as its labels were made), the filter's
+    edges left out."""
     metrics = train(kind, "fast", data, tmp_path / "run", progress=False, epochs=2, **TINY[kind])
     run = load_run(tmp_path / "run")
     dataset = load_dataset(data)
     features, forces = prepare_trajectory(dataset.split("test")[0], dataset.sample_rate_hz,
                                           run.config.features)
     predicted = predict(run, features)
+    if kind == "pgnn":
+        prior = run.prior_parameters
+        predicted += (prior_labels(features, prior, run.config.features, run.model_rate_hz)
+                      - rigid_forces(features, run.config.features.feature_set, prior))
     edge = run.config.features.edge_samples(run.model_rate_hz)
     assert edge > 0
     scaled = ((predicted - forces) / run.label_scaler.span)[edge:-edge]
@@ -115,12 +122,35 @@ def test_the_prior_is_the_rigid_body_model_identified_on_the_training_set(tmp_pa
     rate = dataset.sample_rate_hz
     model_rate = rate / decimation(rate, features.model_rate_hz)
     pairs = [prepare_trajectory(t, rate, features) for t in dataset.split("train")]
-    expected = identify_samples([x for x, _ in pairs], [f for _, f in pairs],
-                                features.feature_set, features.edge_samples(model_rate))
+    expected = identify_samples([x for x, _ in pairs], [f for _, f in pairs], features,
+                                model_rate)
     assert run.prior_parameters == pytest.approx(expected.parameters(), rel=1e-9)
     assert metrics["prior_parameters"] == run.prior_parameters
     assert run.prior_parameters["tau_coulomb1"] == pytest.approx(2 * 7e-3, rel=0.2)
     assert metrics["prior_test_mse"] < 0.1 * metrics["rigid_body_test_mse"]
+
+
+def test_the_residual_labels_filter_the_prior_as_the_labels_are_filtered():
+    """A slow circle (motor reversals every few seconds) whose force is exactly the prior's,
+    friction included: the labels hold its friction steps low-passed, so the prior through
+    the same filter leaves no residual, the prior as it is a wiggle at every reversal (what
+    the pgnn learned and deployed on the hardware stand-in, learning.train.prior_labels)."""
+    rate = 100.0
+    t = np.arange(2000) / rate
+    motion = skew_sine_circle(t, duration=20.0, radius=0.03, turns=3.0, start_angle=0.0)
+    trajectory = motion_trajectory("circle", "train", 0, t, motion, {}, force_noise=0.0)
+    config = FeatureConfig(feature_set="compact", quantize_encoders=False, position_noise_m=0.0,
+                           force_noise_n=0.0, edge_periods=2.0)
+    features, forces = prepare_trajectory(trajectory, rate, config)
+    friction = {k: float(v) for k, v in HARDWARE.flat_values(*MOTOR_FRICTION).items()}
+    edge = config.edge_samples(rate)
+
+    def residual(filtered: bool) -> float:
+        prior = prior_labels(features, friction, replace(config, filtered_prior=filtered), rate)
+        return float(np.sqrt(np.mean((forces - prior)[edge:-edge] ** 2)))
+
+    assert residual(filtered=False) > 1e-3  # N: the friction steps, 7 mNm per motor
+    assert residual(filtered=True) < 1e-3 * residual(filtered=False)
 
 
 def test_validation_windows_are_a_seeded_shuffle():
