@@ -242,12 +242,8 @@ def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
     task's TET and overruns (which the network must not cause) and the network task's."""
     fmu = build_fmu(onnx_system(slow_graph(folder / "slow.onnx"), step, every, task=True),
                     folder / "slow.fmu")
-    steps = max(1, round(seconds / step))
-    inputs = {"inputs[0]": 1.0, "inputs[1]": 2.0}
-    with Master([ResolvedFmu("slow", fmu)], list(inputs), step) as master, \
-            realtime_process(paced_cpu()):
-        recording = master.run(inputs, steps, pacing=Pacing(rt_factor=1.0))
-    table = recording.timing.table(recording.wall_s)
+    table = _paced_alone(ResolvedFmu("slow", fmu), {"inputs[0]": 1.0, "inputs[1]": 2.0},
+                         seconds, step)
     return {"every_steps": every, "tasks": table["tasks"], "lateness_us": table["lateness_us"],
             "overruns": table["overruns"],
             "rate_transition_overruns": table["rate_transition_overruns"]}
@@ -267,14 +263,20 @@ def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
                                    ir_version=9)  # onnx's default is newer than onnxruntime reads
     onnx.save(model, folder / "one_node.onnx")
     fmu = build_fmu(onnx_system(folder / "one_node.onnx", step, every), folder / "one_node.fmu")
-    steps = max(1, round(seconds / step))
-    inputs = {"u[0]": 1.0, "u[1]": 2.0}
-    with Master([ResolvedFmu("graph", fmu)], list(inputs), step) as master, \
-            realtime_process(paced_cpu()):
-        recording = master.run(inputs, steps, pacing=Pacing(rt_factor=1.0))
-    table = recording.timing.table(recording.wall_s)
+    table = _paced_alone(ResolvedFmu("graph", fmu), {"u[0]": 1.0, "u[1]": 2.0}, seconds, step)
     return {"every_steps": every, "tet_us": table["tet_us"],
             "network_call_us": table["network_call_us"]["graph"]}
+
+
+def _paced_alone(fmu: ResolvedFmu, inputs: dict[str, float], seconds: float,
+                 step: float) -> dict[str, Any]:
+    """The realtime table of `fmu` alone, its inputs held constant, paced at `step` for
+    `seconds` as `--realtime --cpu K` runs it."""
+    with Master([fmu], list(inputs), step) as master, realtime_process(paced_cpu()):
+        recording = master.run(inputs, max(1, round(seconds / step)),
+                               pacing=Pacing(rt_factor=1.0))
+    table: dict[str, Any] = recording.timing.table(recording.wall_s)
+    return table
 
 
 def slow_graph(path: Path, size: int = 256, layers: int = 6) -> Path:
