@@ -12,8 +12,8 @@
  * system permits), the worker gets the same policy one priority below, so that it is neither
  * preempted by ordinary processes nor able to preempt the step; otherwise it is an ordinary
  * thread like its caller. It also runs on the CPUs its caller may run on: a paced run pinned to
- * one core (flexff run --cpu K) runs the network on that core in the base task's idle time, as
- * Simulink Real-Time's multitasking does on one core. Measured on the 2-core development VM
+ * one core (flexff run --realtime --cpu K) runs the network there in the base task's idle
+ * time, as Simulink Real-Time's multitasking does on one core. Measured on the 2-core VM
  * (LSTM, 30 s paced at 1 kHz): the 1 kHz task's TET p99 11 us on one core, 25 to 27 us with
  * the worker on the other core or unpinned, where each hand-over wakes a second CPU.
  *
