@@ -21,6 +21,7 @@ from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import Recording
 from flexff.cosim.run import run_config, simulate
 from flexff.cosim.scenario import Scenario, resolve
+from flexff.cosim.schema import RunConfig
 from flexff.cosim.timing import Pacing
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
@@ -125,16 +126,24 @@ def learned_feedforward_benchmark(folder: Path, models: dict[str, Path],
     return results
 
 
-def _hardware_loop(folder: Path, model: Path, mode: str, seconds: float | None) -> Scenario:
-    """The closed loop of the hardware evaluation with the learned feedforward `model` in
-    `mode`, for its 100 s or its first `seconds`."""
-    config = parse_config({
+HARDWARE_REFERENCE = "thesis-hardware-eval"  # the paced loops' reference, 100 s
+
+
+def _hardware_loop_config(seconds: float | None, name: str, **tables: dict[str, Any]
+                         ) -> RunConfig:
+    """The closed loop of the hardware evaluation (hardware plant, PID with notch, the thesis
+    hardware reference) for its 100 s or its first `seconds`, with further `tables`."""
+    return parse_config({
         "run": {"stop": seconds} if seconds else {},
-        "reference": {"kind": "thesis-hardware-eval"},
-        "plant": {"variant": "hardware", "seed": 1},
-        "feedforward": {"kind": "learned", "model": str(model), "mode": mode}},
-        name=f"realtime-{model.stem}-{mode}")
-    return resolve(config, folder)
+        "reference": {"kind": HARDWARE_REFERENCE},
+        "plant": {"variant": "hardware", "seed": 1}, **tables}, name=name)
+
+
+def _hardware_loop(folder: Path, model: Path, mode: str, seconds: float | None) -> Scenario:
+    """The hardware loop with the learned feedforward `model` in `mode`, resolved."""
+    return resolve(_hardware_loop_config(
+        seconds, f"realtime-{model.stem}-{mode}",
+        feedforward={"kind": "learned", "model": str(model), "mode": mode}), folder)
 
 
 def _e2(recording: Recording) -> dict[str, float]:
@@ -157,7 +166,7 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
     (`paced_cpu`) as `flexff run --realtime --cpu K` runs: the network's task then runs on
     that core in the base task's idle time."""
     cpu = paced_cpu()
-    results: dict[str, Any] = {"reference": "thesis-hardware-eval", "cpu": cpu}
+    results: dict[str, Any] = {"reference": HARDWARE_REFERENCE, "cpu": cpu}
     paced_s = 0.0
     for kind in kinds:
         recording = simulate(_hardware_loop(folder, models[kind], "task", seconds),
@@ -209,11 +218,7 @@ def recording_benchmark(folder: Path, seconds: float | None = None,
     runs: dict[str, list[dict[str, Any]]] = {"on": [], "off": []}
     for i in range(pairs):
         for mode, record in (("on", {}), ("off", LEAST_RECORD)):
-            config = parse_config({
-                "run": {"stop": seconds} if seconds else {},
-                "reference": {"kind": "thesis-hardware-eval"},
-                "plant": {"variant": "hardware", "seed": 1},
-                "record": record}, name=f"recording-{mode}")
+            config = _hardware_loop_config(seconds, f"recording-{mode}", record=record)
             table = run_config(config, folder / f"recording-{mode}-{i}", progress=False,
                                pacing=Pacing(rt_factor=1.0), cpu=paced_cpu())["realtime"]
             tet = table["tasks"]["base"]["tet_us"]
@@ -221,7 +226,7 @@ def recording_benchmark(folder: Path, seconds: float | None = None,
                                "lateness_p99_us": table["lateness_us"]["p99"],
                                "overruns": table["overruns"], "steps": table["steps"]})
     median = {mode: _median_run(done) for mode, done in runs.items()}
-    return {"reference": "thesis-hardware-eval", "period_us": 1e3, "off_record": LEAST_RECORD,
+    return {"reference": HARDWARE_REFERENCE, "period_us": 1e3, "off_record": LEAST_RECORD,
             "runs": runs, "median": median,
             "ratio_on_over_off": {k: median["on"]["tet_us"][k] / median["off"]["tet_us"][k]
                                   for k in ("p50", "p99")}}
