@@ -165,16 +165,17 @@ class _Timing:
     def table(self, wall_s: float) -> dict[str, Any]:
         """The `realtime` table of metrics.json (times in microseconds)."""
         tet, fmu_tet, lateness = self._counted()
+        tet_us = _stats(tet)
         table: dict[str, Any] = {
             "period_us": self.period * US,
             "target_real_time_factor": self.pacing.rt_factor if self.pacing else None,
             "achieved_real_time_factor": tet.size * self.step / wall_s if wall_s > 0 else None,
             "steps": tet.size,
-            "tet_us": _stats(tet),
+            "tet_us": tet_us,
             "tet_us_per_fmu": {n: _stats(d) for n, d in zip(self.names, fmu_tet)},
-            "tet_over_period_p99": tet.percentile(99.0) / self.period if tet.size else None,
+            "tet_over_period_p99": tet_us["p99"] / US / self.period if tet.size else None,
             "network_call_us": self.network_calls,
-            "tasks": self.tasks(),
+            "tasks": self._tasks(tet_us),
         }
         if self.resolution is not None:
             table["percentile_resolution"] = self.resolution
@@ -190,13 +191,13 @@ class _Timing:
                 "process": dataclasses.asdict(self.process) if self.process else None})
         return table
 
-    def tasks(self) -> dict[str, dict[str, Any]]:
-        """Per task, as Simulink Real-Time lists them: the base task (every step: its TET and
-        overruns) and each network in its own task (`FMU.network`: its period, the time per
-        call and its rate-transition overruns, which its FMU counts paced or not; the base task's
-        overruns only mean something when paced)."""
+    def _tasks(self, tet_us: dict[str, float]) -> dict[str, dict[str, Any]]:
+        """Per task, as Simulink Real-Time lists them: the base task (every step: its TET
+        statistics `tet_us` and overruns) and each network in its own task (`FMU.network`: its
+        period, the time per call and its rate-transition overruns, which its FMU counts paced
+        or not; the base task's overruns only mean something when paced)."""
         tasks: dict[str, dict[str, Any]] = {"base": {
-            "period_us": self.period * US, "tet_us": _stats(self._counted()[0]),
+            "period_us": self.period * US, "tet_us": tet_us,
             "overruns": self.overruns if self.pacing else None}}
         for name, calls in self.network_calls.items():
             if "overruns" not in calls:
