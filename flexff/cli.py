@@ -431,7 +431,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 def _ilc(args: argparse.Namespace) -> int:
     from flexff.cosim.run import load_run_config
-    from flexff.learning.ilc import RESULT, ilc
+    from flexff.learning.ilc import NOISE_FLOOR, RESULT, ilc
 
     state = ilc(load_run_config(args.config), args.output, args.iterations, args.cutoff)
     for trial in state["trials"]:
@@ -440,6 +440,9 @@ def _ilc(args: argparse.Namespace) -> int:
               f"alone / trial = ({x['e2_ratio']:.4g}, {y['e2_ratio']:.4g})")
     print(f"best: trial {state['best']}; its feedforward force -> {args.output}/{RESULT} "
           f"(ilc.json, e2.png beside it)")
+    if floor := state[NOISE_FLOOR]:
+        print(f"noise floor: e2 = ({floor['x']:.4g}, {floor['y']:.4g}) m/sqrt(s), what the "
+              f"encoders' noise and quantization add; no feedforward goes below it")
     return 0
 
 

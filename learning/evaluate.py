@@ -9,7 +9,8 @@
    networks' data (learning.identify);
 4. run iterative learning control (learning.ilc) on the environment's evaluation reference,
    into ilc/ (resumes what is there): the best feedforward force for that one reference, which
-   the networks, knowing no reference in advance, can approach but hardly beat;
+   the networks, knowing no reference in advance, can approach but hardly beat, and the
+   loop's noise floor, what its encoders add to every feedforward's e2;
 5. co-simulate the environment's evaluation reference on its plant: PID alone, with the
    rigid-body feedforward (nominal, then identified parameters), with each learned model as an
    ONNX feedforward FMU, and with the ILC's force table ("limit"). As in the thesis, "sim" runs
@@ -17,7 +18,8 @@
    sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz circles) on the hardware
    plant;
 6. write the report (learning.report): summary.json, table.md (with what each model's training
-   cost, and each scenario's e2 as a multiple of the limit's) and the figures.
+   cost, each scenario's e2 as a multiple of the limit's, and the noise floor) and the
+   figures.
 
 Given a run configuration (`loop`, learning.loop), steps 1, 4 and 5 run on that loop instead
 of the environment's plant: the set is collected on it under PID alone, and every scenario is
@@ -59,7 +61,7 @@ from flexff.learning.encoders import effects_of, loop_encoders, warn_ideal_prepr
 from flexff.learning.export import export
 from flexff.learning.features import FeatureConfig
 from flexff.learning.identify import REPORT, identified_on, identify, write_identification
-from flexff.learning.ilc import ITERATIONS, RESULT, ilc
+from flexff.learning.ilc import ITERATIONS, NOISE_FLOOR, RESULT, ilc
 from flexff.learning.loop import (
     default_loop,
     on_reference,
@@ -215,8 +217,8 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     files: dict[str, Path] = {**onnx_files,
                               IDENTIFIED: _identified(Path(data), preset, env, out, say)}
     say(f"iterative learning control on the evaluation reference into {out / 'ilc'} (the limit)")
-    ilc(scenario_config(env, "pid", loop=loop), out / "ilc", ilc_iterations, progress=progress,
-        say=say)
+    limit = ilc(scenario_config(env, "pid", loop=loop), out / "ilc", ilc_iterations,
+                progress=progress, say=say)
     recordings: dict[str, Recording] = {}
     for name in ["pid", "rigid-body", IDENTIFIED, *groups, LIMIT]:
         folder = out / "cosim" / name
@@ -227,7 +229,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
             f"real-time factor {metrics['real_time_factor']:.0f}")
         if warning := range_warning(metrics):
             say(f"{name}: {warning}")
-    return write_report(recordings, env, out, model_training)
+    return write_report(recordings, env, out, model_training, limit[NOISE_FLOOR])
 
 
 def preprocessing(env: str, preset: str = "fast") -> FeatureConfig:

@@ -217,6 +217,18 @@ def markdown_table(summary: dict[str, dict[str, Any]], env: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def floor_note(summary: Mapping[str, Mapping[str, Any]], floor: Mapping[str, float]) -> str:
+    """The noise floor under the table (learning.ilc.noise_floor), with the ILC limit's e2
+    as a multiple of it where the summary has the limit."""
+    text = (f"Noise floor: e2 x, y = {floor['x']:.3g}, {floor['y']:.3g} m/√s, what the encoders' "
+            f"noise and quantization add (the ILC force run with and without them). No "
+            f"feedforward's e2 goes below it")
+    if LIMIT in summary:
+        text += ("; the ILC limit's is " + " / ".join(
+            f"{summary[LIMIT][a]['e2'] / floor[a]:.3g}x" for a in AXES) + " of it")
+    return text + ".\n"
+
+
 def _check_recordings(recordings: Mapping[str, Recording]) -> None:
     _check_pid(recordings, "recordings")
     for name, rec in recordings.items():
@@ -339,10 +351,12 @@ def training_table(training: Mapping[str, Mapping[str, Any]]) -> str:
 
 
 def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
-                 training: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Any]:
+                 training: Mapping[str, Mapping[str, Any]] | None = None,
+                 noise_floor: Mapping[str, float] | None = None) -> dict[str, Any]:
     """Write summary.json, table.md, paths.png, errors.png and forces.png into `out`; return
     the summary.json content. `training` (model -> learning.train metrics) adds what each
-    model's training cost and reached, in both files.
+    model's training cost and reached, in both files; `noise_floor` (e2 per axis that the
+    encoders add, learning.ilc.noise_floor) adds the floor under every feedforward's e2.
 
     `recordings` maps a scenario name ("pid" required; see SCENARIO_LABELS) to the Recording
     of its run on the thesis's evaluation reference, in display order: x_ref, y_ref, x, y for
@@ -357,6 +371,9 @@ def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
     content = {"env": env, "scenarios": summary, "thesis": copy.deepcopy(THESIS_TABLES[env]),
                "units": dict(UNITS)}
     table = markdown_table(summary, env)
+    if noise_floor:
+        content["noise_floor"] = dict(noise_floor)
+        table += "\n" + floor_note(summary, noise_floor)
     if training:
         content["training"] = {name: {key: m.get(key) for key in TRAINING_KEYS}
                                for name, m in training.items()}

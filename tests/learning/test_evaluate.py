@@ -32,6 +32,7 @@ def test_every_scenario_is_reported(evaluation):
     out, summary, lines = evaluation
     assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "pgnn", "limit"]
     assert json.loads((out / "summary.json").read_text()) == summary
+    assert "noise_floor" not in summary  # the nominal plant's encoders measure exactly
     assert read_identified(out / "identified" / "identified.json")
     assert any(line.startswith("identified: residual") for line in lines)
     assert "| identified rigid-body FF |" in (out / "table.md").read_text()
@@ -161,6 +162,7 @@ def test_hardware_physics_guided_feedforward_beats_the_rigid_body_one(tmp_path):
     for axis in ("x", "y"):
         assert pgnn[axis]["e2_ratio"] > max(50.0, 5 * rigid[axis]["e2_ratio"])
         assert pgnn[axis]["einf_ratio"] > 3 * rigid[axis]["einf_ratio"]
+        assert summary["noise_floor"][axis] < summary["scenarios"]["limit"][axis]["e2"] * 1.2
 
 
 def test_a_current_level_model_is_its_own_scenario(evaluation, tmp_path):

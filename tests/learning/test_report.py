@@ -19,6 +19,7 @@ from flexff.cosim.recording import Recording
 from flexff.learning.report import (
     SCENARIO_LABELS,
     THESIS_TABLES,
+    floor_note,
     markdown_table,
     summarize,
     write_report,
@@ -221,3 +222,19 @@ def test_every_scenario_as_a_multiple_of_the_ilc_limit():
     without = summarize({name: tracking_metrics(rec) for name, rec in scenarios().items()})
     assert "e2_per_limit" not in without["lstm"]["x"]
     assert "ILC limit" not in markdown_table(without, "sim")
+
+
+def test_the_noise_floor_goes_into_the_summary_and_under_the_table(tmp_path):
+    """Given the floor (half the limit's e2 on each axis), summary.json keeps it and table.md
+    says it with the limit as a multiple of it; without a limit the multiple is left out."""
+    recordings = {**scenarios(), "limit": sines(1 / 200)}
+    limit = tracking_metrics(recordings["limit"])
+    floor = {axis: limit[axis]["e2"] / 2 for axis in ("x", "y")}
+    content = write_report(recordings, "hardware", tmp_path, noise_floor=floor)
+    assert json.loads((tmp_path / "summary.json").read_text())["noise_floor"] == floor
+    table = (tmp_path / "table.md").read_text(encoding="utf-8")
+    assert table == markdown_table(content["scenarios"], "hardware") + "\n" + floor_note(
+        content["scenarios"], floor)
+    assert f"e2 x, y = {floor['x']:.3g}, {floor['y']:.3g} m/√s" in table
+    assert "the ILC limit's is 2x / 2x of it." in table
+    assert "ILC limit" not in floor_note(summarize({"pid": limit}), floor)
