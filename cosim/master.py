@@ -69,6 +69,7 @@ from flexff.cosim.engine import (
     pointer,
     start_schedule,
 )
+from flexff.cosim.handover import ChunkBuffers, Handover, StepTimes, Worker
 from flexff.cosim.isolation import IsolatedInstance
 from flexff.cosim.recording import CHUNK_MIN_ROWS, Recording, chunk_rows
 from flexff.cosim.schema import ALGORITHMS, point_time
@@ -356,14 +357,15 @@ class Master:
 
     def stream(self, sources: Mapping[str, np.ndarray | float], steps: int, sink: Sink,
                record: Sequence[str] | None = None, progress: bool | None = None,
-               pacing: Pacing | None = None, keep_timing: bool = True) -> Streamed:
+               pacing: Pacing | None = None, keep_timing: bool = True,
+               worker: Worker | None = None) -> Streamed:
         """Run as `run` does, handing the record to `sink` chunk by chunk while it runs
         (cosim.recording.chunk_rows points a chunk; a paced run one every PACED_CHUNK_S
-        seconds), so that
-        memory stays flat in the run's length. Without `keep_timing` the steps' execution
-        times (and, paced, their lateness) are counted in histograms and a bounded trace
-        (cosim.timing.StreamedTiming), not kept one by one. A run that fails hands over the
-        points before the failure first."""
+        seconds), so that memory stays flat in the run's length. Without `keep_timing` the
+        steps' execution times (and, paced, their lateness) are counted in histograms and a
+        bounded trace (cosim.timing.StreamedTiming), not kept one by one. With a `worker`,
+        each chunk is split, written and counted in its thread while the next one runs
+        (cosim.handover). A run that fails hands over the points before the failure first."""
         if self._ran:
             raise RuntimeError("a Master runs once; load the FMUs again for another run")
         self._ran = True
@@ -379,9 +381,11 @@ class Master:
             columns, np.arange(len(self.signals)))
         rows = min(steps + 1, chunk_rows(1 + len(record)) if pacing is None else
                    PROGRESS_CHUNK * max(1, round(PACED_CHUNK_S / self.step / PROGRESS_CHUNK)))
-        out = np.empty((rows, len(floats)))
         source_rows = np.empty((rows, len(self.sources)))
-        typed_out = [np.empty(rows, dtype=object) for _ in typed]
+        sets = [ChunkBuffers.allocate(rows, len(floats), len(typed),
+                                      None if keep_timing else len(self._plans),
+                                      touch=pacing is not None)
+                for _ in range(1 if worker is None else 2)]
         needed = {q for _, q in typed} | {k.from_name for k in self.links if k.kind != "float64"}
         for p in self._plans:  # typed outputs cost a call each: read only those in use
             p.typed_outputs = [n for n in p.typed_outputs if f"{p.name}.{n}" in needed]
@@ -396,45 +400,50 @@ class Master:
         if self.algorithm == "jacobi":
             _fill_source_rows(source_rows, source_columns, 0)
             self._propagate_initial_values(source_rows[0])
-        hook = _TypedHook(self, [(column, q) for column, (_, q) in zip(typed_out, typed)])
-        timing_rows = steps if keep_timing else rows
-        run = self._engine_run(source_rows, out, None if full else columns, hook, steps,
-                               pacing, timing_rows)
+        hook = _TypedHook(self, [(column, q) for column, (_, q) in zip(sets[0].typed, typed)])
+        run = self._engine_run(source_rows, sets, None if full else columns, hook, steps,
+                               pacing)
         streamed_timing = None if keep_timing else StreamedTiming.counting(
             self.step, tuple(p.name for p in self._plans), steps, pacing)
         float_columns = {j: c for c, (j, _) in enumerate(floats)}
         typed_columns = {j: c for c, (j, _) in enumerate(typed)}
 
-        def window(base: int) -> None:
-            """Point the engine's buffers so that point k lands in (and its sources come
-            from) row k - base."""
+        def window(base: int, buffers: ChunkBuffers) -> None:
+            """Point the engine at `buffers`, so that point k lands in (and its sources come
+            from, filled before) row k - base."""
             hook.base = base
-            _fill_source_rows(source_rows, source_columns, base)
+            hook.columns = [(column, q) for column, (_, q) in zip(buffers.typed, typed)]
             run.sources = _shifted(source_rows, base)
-            run.record = _shifted(out, base)
-            if not keep_timing:
-                run.tet, run.lateness = _shifted(self._tet, base), _shifted(self._lateness, base)
-                run.fmu_tet = _shifted(self._fmu_tet, base)
+            run.record = _shifted(buffers.record, base)
+            if buffers.times is not None:
+                run.tet, run.fmu_tet, run.lateness = (_shifted(a, base) for a in buffers.times)
 
-        def hand(base: int, end: int) -> None:
+        def deliver(buffers: ChunkBuffers, base: int, end: int) -> None:
             """Give the sink points base .. end - 1 (and count their steps' times)."""
             n = end - base
-            if n <= 0:
-                return
-            chunk = {name: out[:n, float_columns[j]].copy() if j in float_columns
-                     else _typed_array(typed_out[typed_columns[j]][:n])
+            chunk = {name: buffers.record[:n, float_columns[j]].copy() if j in float_columns
+                     else _typed_array(buffers.typed[typed_columns[j]][:n])
                      for j, name in enumerate(record)}
             sink.write(base, self.time(np.arange(base, end)), chunk)
-            if streamed_timing is not None:
+            if streamed_timing is not None and buffers.times is not None:
                 made = max(0, min(end, steps) - base)
-                streamed_timing.add(base, self._tet[:made], self._fmu_tet[:made],
-                                    self._lateness[:made])
+                streamed_timing.add(base, *(a[:made] for a in buffers.times))
+
+        handover = Handover(sets, deliver, worker)
+
+        def hand(base: int, end: int) -> None:
+            """Hand points base .. end - 1 over, and go on at point `end` (its sources filled
+            before the handover wakes its worker)."""
+            if end > base:
+                _fill_source_rows(source_rows, source_columns, end)
+                window(end, handover.hand(base, end))
 
         if progress is None:
             progress = sys.stderr.isatty() and steps >= PROGRESS_MIN_STEPS
         engine = library()
         status, end, base, wall = OK, steps + 1, 0, 0.0
-        window(base)
+        _fill_source_rows(source_rows, source_columns, base)
+        window(base, handover.current)
         gc_was_enabled = gc.isenabled()
         gc.disable()  # no collection pauses inside the loop
         try:
@@ -452,59 +461,66 @@ class Master:
                     if k1 - base == rows or k1 == steps + 1:
                         hand(base, k1)
                         base = k1
-                        window(base)
+            stopped_at = run.failed_k if status == OVERRUN else None
+            row = (stopped_at or 0) - base  # the stopped step's row in the chunk buffers
+            chunk_times = handover.current.times
+            stopped_step = (float(chunk_times.tet[row]), float(chunk_times.lateness[row])) if (
+                stopped_at is not None and chunk_times is not None) else (0.0, 0.0)
+            if status == FAILED:  # points before failed_k were recorded, failed_k if its
+                hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))
+            elif stopped_at is not None:
+                end = stopped_at + 1  # points 0 .. stopped_at were recorded, the step was made
+                hand(base, end)
         finally:
+            handover.wait()
             if gc_was_enabled:
                 gc.enable()
-        if status == FAILED:  # points before failed_k were recorded, failed_k if its step failed
-            hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))
+        handover.check()
+        if status == FAILED:  # step failed
             raise hook.error or self._plans[run.failed_fmu].fail(
                 f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
-        stopped_at = run.failed_k if status == OVERRUN else None
-        if stopped_at is not None:
-            end = stopped_at + 1  # points 0 .. stopped_at were recorded, the step was made
-            hand(base, end)
         network = {p.name: times for p in self._plans if (times := p.instance.network_times())}
         listed = tuple(run.first_overruns[:min(run.overruns, MAX_LISTED_OVERRUNS)])
         if streamed_timing is not None:
-            row = (stopped_at or 0) - base  # the stopped step's row in the chunk buffers
             return Streamed(end, wall, dataclasses.replace(
                 streamed_timing, overruns=run.overruns, task_overruns=run.task_overruns,
                 first_overruns=listed, stopped_at=stopped_at, network_calls=network,
-                stopped_step=(float(self._tet[row]), float(self._lateness[row]))
-                if stopped_at is not None else (0.0, 0.0)))
+                stopped_step=stopped_step))
         made = end if stopped_at is not None else steps  # the steps the engine made
-        timing = StepTiming(self.step, tuple(p.name for p in self._plans), self._tet[:made],
-                            self._fmu_tet[:made], self._lateness[:made], pacing, run.overruns,
-                            run.task_overruns, listed, stopped_at, network_calls=network)
+        tet, fmu_tet, lateness = (a[:made] for a in self._times)
+        timing = StepTiming(self.step, tuple(p.name for p in self._plans), tet, fmu_tet,
+                            lateness, pacing, run.overruns, run.task_overruns, listed,
+                            stopped_at, network_calls=network)
         return Streamed(end, wall, timing)
 
     def time(self, k: Any) -> Any:
         """The time of point(s) k (cosim.schema.point_time)."""
         return point_time(self.start, self.step, k)
 
-    def _engine_run(self, source_rows: np.ndarray, out: np.ndarray,
+    def _engine_run(self, source_rows: np.ndarray, sets: Sequence[ChunkBuffers],
                     columns: np.ndarray | None, hook: _TypedHook, steps: int,
-                    pacing: Pacing | None, timing_rows: int) -> EngineRun:
-        """The engine's plan and buffers, all allocated here, before the loop."""
+                    pacing: Pacing | None) -> EngineRun:
+        """The engine's plan and buffers, allocated before the loop: the chunk buffers `sets`
+        and the step times of every step, unless the chunk buffers count them."""
         self._plan_structs = (EngineFmuPlan * len(self._plans))(
             *(p.engine_plan() for p in self._plans))
-        self._tet = np.zeros(timing_rows)
-        self._fmu_tet = np.zeros((timing_rows, len(self._plans)))
-        self._lateness = np.zeros(timing_rows)
+        first = sets[0]
+        self._times = StepTimes.zeros(steps, len(self._plans)) if first.times is None \
+            else first.times
         if pacing is not None:  # touched now, so the paced loop takes no page fault in them
-            for array in (source_rows, out, self._tet, self._fmu_tet, self._lateness):
+            for array in (source_rows, *self._times):
                 array.fill(0.0)  # (cosim.realtime locks pages as they are touched)
-        self._arrays = (source_rows, out, columns)  # the engine's buffers live as long
+        self._arrays = (source_rows, sets, columns)  # the engine's buffers live as long
         self._hook = TYPED_HOOK(hook) if hook.needed else TYPED_HOOK()
         return EngineRun(
             step=self.step, start_time=self.start, steps=steps, n_fmus=len(self._plans),
             fmus=self._plan_structs,
             bus=pointer(self._bus), n_bus=self._bus.size, n_sources=len(self.sources),
-            sources=pointer(source_rows), record=pointer(out), columns=pointer(columns, c_long),
-            n_columns=out.shape[1], typed=self._hook, typed_record=bool(hook.columns),
-            tet=pointer(self._tet), fmu_tet=pointer(self._fmu_tet),
-            lateness=pointer(self._lateness), paced=pacing is not None,
+            sources=pointer(source_rows), record=pointer(first.record),
+            columns=pointer(columns, c_long), n_columns=first.record.shape[1], typed=self._hook,
+            typed_record=bool(hook.columns),
+            tet=pointer(self._times.tet), fmu_tet=pointer(self._times.fmu_tet),
+            lateness=pointer(self._times.lateness), paced=pacing is not None,
             period=self.step / pacing.rt_factor if pacing else self.step,
             max_overruns=pacing.max_overruns if pacing else 0,
             grace_steps=math.ceil(pacing.grace / self.step - 1e-9) if pacing else 0)

@@ -24,9 +24,7 @@ from __future__ import annotations
 import dataclasses
 import errno
 import json
-import queue
 import tempfile
-import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -34,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from flexff.cosim.config import expanded, load_config
+from flexff.cosim.handover import Worker
 from flexff.cosim.master import CosimError, Master, Streamed
 from flexff.cosim.memory import MemoryNeeded, check_memory
 from flexff.cosim.metrics import Tracking, summary_metrics
@@ -222,37 +221,6 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
     atomic_write(path, lambda tmp: tmp.write_text(text))
 
 
-class BackgroundSink:
-    """Hands each chunk to a thread that feeds `sink`, so that a paced run's loop never waits
-    for the file: the engine releases the GIL while it steps, and the thread writes then.
-    `finish` waits for what is queued (and raises what the thread met)."""
-
-    def __init__(self, sink: RunSink) -> None:
-        self.sink = sink
-        self.error: Exception | None = None
-        self.queue: queue.SimpleQueue[tuple[int, np.ndarray, Mapping[str, np.ndarray]] | None] \
-            = queue.SimpleQueue()
-        self.thread = threading.Thread(target=self._work, name="flexff-record", daemon=True)
-        self.thread.start()
-
-    def write(self, k0: int, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
-        self.queue.put((k0, time, columns))
-
-    def _work(self) -> None:
-        while (chunk := self.queue.get()) is not None:
-            if self.error is None:
-                try:
-                    self.sink.write(*chunk)
-                except Exception as error:  # raised in the run's thread by finish()
-                    self.error = error
-
-    def finish(self) -> None:
-        self.queue.put(None)
-        self.thread.join()
-        if self.error is not None:
-            raise self.error
-
-
 def _kept(recorded: Sequence[str], config: RunConfig) -> dict[str, str]:
     """The record's columns, file name -> recorded name: the signals the configuration asked
     for, and in a manipulator run (one with a reference or one of flexff's built-in FMUs) the
@@ -322,17 +290,17 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
 
 def _stream(master: Master, scenario: Scenario, sink: RunSink, recorded: Sequence[str],
             progress: bool | None, pacing: Pacing | None, cpu: int | None) -> Streamed:
-    """master.stream, paced in a process set up for real time where `pacing` is given (the
-    record then written by a thread of its own, BackgroundSink)."""
+    """master.stream, paced in a process set up for real time where `pacing` is given (each
+    chunk then split, written and counted by a thread of its own, cosim.handover)."""
     if pacing is None:
         return master.stream(scenario.sources, scenario.steps, sink, recorded, progress,
                              keep_timing=False)
-    background = BackgroundSink(sink)
+    worker = Worker()  # before the loop's thread takes SCHED_FIFO and its core
     try:
         with realtime_process(cpu) as process:
-            streamed = master.stream(scenario.sources, scenario.steps, background, recorded,
-                                     progress, pacing, keep_timing=False)
+            streamed = master.stream(scenario.sources, scenario.steps, sink, recorded,
+                                     progress, pacing, keep_timing=False, worker=worker)
     finally:
-        background.finish()
+        worker.join()
     return dataclasses.replace(streamed, timing=dataclasses.replace(streamed.timing,
                                                                     process=process))

@@ -8,6 +8,8 @@ microsecond a step, so the pacing (not the FMUs) sets the wall time.
 import dataclasses
 import json
 import mmap
+import os
+import threading
 import time
 from pathlib import Path
 
@@ -16,6 +18,7 @@ import pytest
 
 from flexff.cli import main
 from flexff.cosim.engine import idle_timing
+from flexff.cosim.handover import Worker
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import load_recording
@@ -168,7 +171,7 @@ def stream(steps: int, pacing: Pacing):
     """A paced run of VanDerPol at 1 ms whose timing is counted, not kept (as run_config's)."""
     with Master(van_der_pol(), [], 1e-3) as master:
         streamed = master.stream({}, steps, _Discard(), pacing=pacing, keep_timing=False)
-        return streamed, master._tet.size
+        return streamed, master._times.tet.size
 
 
 def _timing_values(timing: StreamedTiming) -> int:
@@ -191,6 +194,29 @@ def test_a_paced_streamed_runs_timing_takes_memory_flat_in_its_length():
         assert timing.trace().tet.filled <= 1000
         held.append(_timing_values(timing))
     assert held[0] == held[1]
+
+
+def test_a_paced_runs_chunks_are_delivered_by_a_thread_that_keeps_its_cpus():
+    """The record's Worker is made before the loop's thread takes one core: it delivers
+    every chunk, in order, on the CPUs the process had, not on the loop's core."""
+    allowed = os.sched_getaffinity(0)
+    if len(allowed) < 2:
+        pytest.skip("needs two CPUs")
+    seen = []
+
+    class Sink:
+        def write(self, k0, time, columns):
+            seen.append((k0, threading.current_thread().name, os.sched_getaffinity(0)))
+
+    worker = Worker()
+    try:
+        with Master(van_der_pol(), [], 1e-3) as master, realtime_process(cpu=max(allowed)):
+            master.stream({}, 2500, Sink(), pacing=Pacing(rt_factor=10.0), keep_timing=False,
+                          worker=worker)
+    finally:
+        worker.join()
+    assert [k0 for k0, _, _ in seen] == [0, 1000, 2000]
+    assert all(name == "flexff-record" and cpus == allowed for _, name, cpus in seen)
 
 
 def test_a_streamed_timing_table_agrees_with_the_exact_one(rng):

@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 
 import numpy as np
@@ -16,6 +17,7 @@ from flexff import api, results
 from flexff.cli import main
 from flexff.cosim.config import parse_config
 from flexff.cosim.decimate import Envelope, Strided
+from flexff.cosim.handover import ChunkBuffers, Handover, Worker
 from flexff.cosim.plots import RunPlots
 from flexff.cosim.recording import (
     CSV_NAME,
@@ -24,7 +26,6 @@ from flexff.cosim.recording import (
     chunk_rows,
     load_recording,
 )
-from flexff.cosim.run import BackgroundSink
 from flexff.cosim.timing import RESOLUTION, Histogram, Pacing
 from flexff.fmu.errors import InputError
 from tests.helpers import REFERENCE_FMUS, REPOSITORY
@@ -173,23 +174,33 @@ def test_results_load_and_export(tmp_path):
         results.load(tmp_path / "missing")
 
 
-def test_a_paced_runs_record_is_written_by_a_thread_in_order():
-    """BackgroundSink feeds its sink in the order of the chunks, and raises at finish what
-    the writing thread met."""
-    seen = []
+def test_a_handover_delivers_in_order_in_its_workers_thread_and_raises_at_check():
+    """Two sets of buffers take turns: each is filled again only once delivered. A delivery
+    that raises stops the later ones, and check() raises it in the loop's thread."""
+    seen, threads = [], set()
+    sets = [ChunkBuffers.allocate(10, 1, 0, None, touch=True) for _ in range(2)]
 
-    class Sink:
-        def write(self, k0, time, columns):
-            if k0 == 20:
-                raise OSError("disk full")
-            seen.append(k0)
+    def deliver(buffers, base, end):
+        threads.add(threading.current_thread().name)
+        if base == 20:
+            raise OSError("disk full")
+        seen.append((base, end, float(buffers.record[0, 0])))
 
-    background = BackgroundSink(Sink())
-    for k0 in range(0, 30, 10):
-        background.write(k0, np.arange(k0, k0 + 10) * 1e-3, {})
+    worker = Worker()
+    handover = Handover(sets, deliver, worker)
+    for base in range(0, 40, 10):
+        handover.current.record[0, 0] = base
+        handover.hand(base, base + 10)
+    handover.wait()
     with pytest.raises(OSError, match="disk full"):
-        background.finish()
-    assert seen == [0, 10] and not background.thread.is_alive()
+        handover.check()
+    worker.join()
+    assert seen == [(0, 10, 0.0), (10, 20, 10.0)] and threads == {"flexff-record"}
+    assert not worker.thread.is_alive()
+    inline = Handover(sets[:1], deliver, None)
+    assert inline.hand(40, 50) is sets[0] and seen[-1][:2] == (40, 50)
+    with pytest.raises(ValueError, match="two with a worker"):
+        Handover(sets, deliver, None)
 
 
 def test_a_paced_run_streams_its_record(tmp_path):
