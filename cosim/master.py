@@ -466,8 +466,8 @@ class Master:
             chunk_times = handover.current.times
             stopped_step = (float(chunk_times.tet[row]), float(chunk_times.lateness[row])) if (
                 stopped_at is not None and chunk_times is not None) else (0.0, 0.0)
-            if status == FAILED:  # points before failed_k were recorded, failed_k if its
-                hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))
+            if status == FAILED:  # points before failed_k were recorded, failed_k if its step
+                hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))  # failed
             elif stopped_at is not None:
                 end = stopped_at + 1  # points 0 .. stopped_at were recorded, the step was made
                 hand(base, end)
@@ -476,7 +476,7 @@ class Master:
             if gc_was_enabled:
                 gc.enable()
         handover.check()
-        if status == FAILED:  # step failed
+        if status == FAILED:
             raise hook.error or self._plans[run.failed_fmu].fail(
                 f"{CALLS[run.failed_call]} at t = {self.time(run.failed_k):.9g} s")
         network = {p.name: times for p in self._plans if (times := p.instance.network_times())}
