@@ -17,9 +17,11 @@
    the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the 100 s reference of
    sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz circles) on the hardware
    plant;
-6. write the report (learning.report): summary.json, table.md (with what each model's training
-   cost, each scenario's e2 as a multiple of the limit's, and the noise floor) and the
-   figures.
+6. run every scenario but the limit on the references of the set's test split, which no model
+   trained on (learning.held_out);
+7. write the report (learning.report): summary.json, table.md (with what each model's training
+   cost, each scenario's e2 as a multiple of the limit's, the noise floor and the held-out
+   references' ratios) and the figures.
 
 Given a run configuration (`loop`, learning.loop), steps 1, 4 and 5 run on that loop instead
 of the environment's plant: the set is collected on it under PID alone, and every scenario is
@@ -43,7 +45,7 @@ loop's reaction to the encoders' noise (ENVIRONMENTS).
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -60,6 +62,7 @@ from flexff.learning.dataset import load_dataset
 from flexff.learning.encoders import effects_of, loop_encoders, warn_ideal_preprocessing
 from flexff.learning.export import export
 from flexff.learning.features import FeatureConfig
+from flexff.learning.held_out import BASE, FOLDER, references_held_out, run_held_out
 from flexff.learning.identify import REPORT, identified_on, identify, write_identification
 from flexff.learning.ilc import ITERATIONS, NOISE_FLOOR, RESULT, ilc
 from flexff.learning.loop import (
@@ -133,12 +136,13 @@ IDENTIFIED = "identified"  # the scenario of the rigid-body feedforward with ide
 
 
 def scenario_config(env: str, name: str, model: Path | None = None, mode: str = "step",
-                    loop: RunConfig | None = None, table: Path | None = None) -> RunConfig:
-    """The environment's evaluation reference on `loop` (default: its plant under PID), with
-    the feedforward of scenario `name`: "pid" (none), "rigid-body", "identified" (the
-    rigid-body one with the parameters of the file `model`, learning.identify), LIMIT (the
-    force table `table` that learning.ilc wrote), or a learned model (the ONNX file `model`);
-    every signal recorded."""
+                    loop: RunConfig | None = None, table: Path | None = None,
+                    reference: Mapping[str, Any] | None = None) -> RunConfig:
+    """The environment's evaluation reference (or the [reference] table `reference`) on `loop`
+    (default: its plant under PID), with the feedforward of scenario `name`: "pid" (none),
+    "rigid-body", "identified" (the rigid-body one with the parameters of the file `model`,
+    learning.identify), LIMIT (the force table `table` that learning.ilc wrote), or a learned
+    model (the ONNX file `model`); every signal recorded."""
     environment = ENVIRONMENTS[env]
     base = loop or default_loop(environment.plant)
     if name == LIMIT:
@@ -159,7 +163,8 @@ def scenario_config(env: str, name: str, model: Path | None = None, mode: str = 
             builtin, options = "learned-feedforward", {"model": Path(model).resolve(),
                                                        "mode": mode}
         looped = with_feedforward(base, builtin, options)
-    config = on_reference(looped, {"kind": environment.reference}, f"{env}-{name}", seed=1)
+    config = on_reference(looped, reference or {"kind": environment.reference}, f"{env}-{name}",
+                          seed=1)
     return replace(config, record=RecordConfig())
 
 
@@ -229,7 +234,18 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
             f"real-time factor {metrics['real_time_factor']:.0f}")
         if warning := range_warning(metrics):
             say(f"{name}: {warning}")
-    return write_report(recordings, env, out, model_training, limit[NOISE_FLOOR])
+    held_out = None
+    references, other = references_held_out(load_dataset(data))
+    if other:
+        say(f"held-out references: {', '.join(other)} left out (no [reference] table)")
+    if references:
+        say(f"every feedforward on the {len(references)} references of the test split into "
+            f"{out / FOLDER}")
+        held_out = run_held_out({name: {scenario: scenario_config(
+            env, scenario, files.get(scenario), loop=loop, reference=reference)
+            for scenario in [BASE, "rigid-body", IDENTIFIED, *groups]}
+            for name, reference in references.items()}, out / FOLDER, progress)
+    return write_report(recordings, env, out, model_training, limit[NOISE_FLOOR], held_out)
 
 
 def preprocessing(env: str, preset: str = "fast") -> FeatureConfig:

@@ -229,6 +229,20 @@ def floor_note(summary: Mapping[str, Mapping[str, Any]], floor: Mapping[str, flo
     return text + ".\n"
 
 
+def held_out_table(held_out: Mapping[str, Any]) -> str:
+    """The scenarios' e2 ratios PID alone / scenario on the test split's references
+    (learning.held_out): their geometric mean and the worst, x / y."""
+    lines = [f"On the {len(held_out['references'])} references of the test split (no model "
+             f"trained on them), e2 ratio PID alone / scenario, x / y:", "",
+             "| scenario | geometric mean | worst |", "|---|---:|---:|"]
+    for name, mean in held_out["geometric_mean"].items():
+        worst = held_out["worst"][name]
+        lines.append(f"| {SCENARIO_LABELS.get(name, name)} | "
+                     + " | ".join(" / ".join(f"{d[a]:.3g}" for a in AXES) for d in (mean, worst))
+                     + " |")
+    return "\n".join(lines) + "\n"
+
+
 def _check_recordings(recordings: Mapping[str, Recording]) -> None:
     _check_pid(recordings, "recordings")
     for name, rec in recordings.items():
@@ -352,11 +366,14 @@ def training_table(training: Mapping[str, Mapping[str, Any]]) -> str:
 
 def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
                  training: Mapping[str, Mapping[str, Any]] | None = None,
-                 noise_floor: Mapping[str, float] | None = None) -> dict[str, Any]:
+                 noise_floor: Mapping[str, float] | None = None,
+                 held_out: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Write summary.json, table.md, paths.png, errors.png and forces.png into `out`; return
     the summary.json content. `training` (model -> learning.train metrics) adds what each
     model's training cost and reached, in both files; `noise_floor` (e2 per axis that the
-    encoders add, learning.ilc.noise_floor) adds the floor under every feedforward's e2.
+    encoders add, learning.ilc.noise_floor) adds the floor under every feedforward's e2;
+    `held_out` (learning.held_out.run_held_out) each scenario's ratios on the references of
+    the test split.
 
     `recordings` maps a scenario name ("pid" required; see SCENARIO_LABELS) to the Recording
     of its run on the thesis's evaluation reference, in display order: x_ref, y_ref, x, y for
@@ -374,6 +391,9 @@ def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
     if noise_floor:
         content["noise_floor"] = dict(noise_floor)
         table += "\n" + floor_note(summary, noise_floor)
+    if held_out:
+        content["held_out"] = dict(held_out)
+        table += "\n" + held_out_table(held_out)
     if training:
         content["training"] = {name: {key: m.get(key) for key in TRAINING_KEYS}
                                for name, m in training.items()}

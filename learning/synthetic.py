@@ -63,7 +63,8 @@ def periodic_spline(t: np.ndarray, lap: float, points: np.ndarray) -> np.ndarray
 
 def random_motion(rng: np.random.Generator, t: np.ndarray,
                   duration: float) -> tuple[np.ndarray, dict[str, Any]]:
-    """A circle (two times in three) or a spline (1 to 4 laps) with random, feasible parameters."""
+    """A circle (two times in three) or a spline (1 to 4 laps) with random, feasible parameters,
+    and its description: the circle's is the [reference] table of the same motion."""
     if rng.uniform() < 2 / 3:
         radius = rng.uniform(0.007, 0.045)
         max_turns = duration / (4 * np.pi) * np.sqrt(MAX_ACCELERATION / radius)
@@ -71,8 +72,8 @@ def random_motion(rng: np.random.Generator, t: np.ndarray,
         turns = float(rng.uniform(min(1.0, most), most))
         start_angle = float(rng.uniform(-np.pi, np.pi))
         direction = int(rng.choice([-1, 1]))
-        spec = {"kind": "circle", "radius": radius, "turns": turns, "start_angle": start_angle,
-                "direction": direction}
+        spec = {"kind": "circle", "centre": [0.0, 0.0], "radius": radius,  # a [reference]
+                "turns": direction * turns, "start_angle": start_angle, "duration": duration}
         return skew_sine_circle(t, duration, radius, turns, start_angle, direction), spec
     while True:
         count = int(rng.integers(4, 7))

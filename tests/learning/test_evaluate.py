@@ -12,6 +12,7 @@ from flexff.controllers.identified import read_identified
 from flexff.controllers.model_card import read_card
 from flexff.cosim.recording import load_recording
 from flexff.cosim.references import build_reference
+from flexff.learning.dataset import load_dataset
 from flexff.learning.evaluate import ENVIRONMENTS, evaluate, preprocessing, scenario_config
 from flexff.learning.presets import make_config
 from flexff.learning.synthetic import synthetic_dataset
@@ -43,6 +44,28 @@ def test_every_scenario_is_reported(evaluation):
     training = summary["training"]["pgnn"]
     assert training["epochs"] == 1 and training["seconds"] > 0 and training["test_mse"] > 0
     assert "| physics-guided FF | " in (out / "table.md").read_text().split("Training")[1]
+
+
+def test_every_feedforward_runs_on_the_held_out_references(evaluation):
+    """The test split's reference, which no model trained on: every scenario but the ILC
+    limit runs on it in closed loop, its ratio PID alone / scenario from the runs' own
+    metrics; the nominal rigid-body model, exact on this plant, far ahead of PID alone."""
+    out, summary, lines = evaluation
+    held = summary["held_out"]
+    names = [t.name for t in load_dataset(out / "data").split("test")]
+    assert held["references"] == names and len(names) == 1
+    assert list(held["e2_ratio"]) == ["rigid-body", "identified", "pgnn"]
+    folder = out / "held-out" / names[0]
+    pid = json.loads((folder / "pid" / "metrics.json").read_text())
+    for scenario, by_axis in held["e2_ratio"].items():
+        own = json.loads((folder / scenario / "metrics.json").read_text())
+        for axis in ("x", "y"):
+            ratio = pid[axis]["e2"] / own[axis]["e2"]
+            assert by_axis[axis] == [pytest.approx(ratio, rel=1e-12)]
+            assert held["geometric_mean"][scenario][axis] == pytest.approx(ratio, rel=1e-12)
+    assert min(held["worst"]["rigid-body"].values()) > 10
+    assert "references of the test split" in (out / "table.md").read_text()
+    assert any("references of the test split" in line for line in lines)
 
 
 def test_rigid_body_feedforward_is_exact_on_the_nominal_plant(evaluation):

@@ -20,6 +20,7 @@ from flexff.learning.report import (
     SCENARIO_LABELS,
     THESIS_TABLES,
     floor_note,
+    held_out_table,
     markdown_table,
     summarize,
     write_report,
@@ -238,3 +239,16 @@ def test_the_noise_floor_goes_into_the_summary_and_under_the_table(tmp_path):
     assert f"e2 x, y = {floor['x']:.3g}, {floor['y']:.3g} m/√s" in table
     assert "the ILC limit's is 2x / 2x of it." in table
     assert "ILC limit" not in floor_note(summarize({"pid": limit}), floor)
+
+
+def test_the_held_out_references_table_gives_each_scenarios_mean_and_worst(tmp_path):
+    held = {"references": ["a", "b"],
+            "e2_ratio": {"tcn": {"x": [100.0, 400.0], "y": [10.0, 1000.0]}},
+            "geometric_mean": {"tcn": {"x": 200.0, "y": 100.0}},
+            "worst": {"tcn": {"x": 100.0, "y": 10.0}}}
+    content = write_report(scenarios(), "sim", tmp_path, held_out=held)
+    assert json.loads((tmp_path / "summary.json").read_text())["held_out"] == held
+    table = (tmp_path / "table.md").read_text(encoding="utf-8")
+    assert table.endswith(held_out_table(held)) and content["held_out"] == held
+    assert "On the 2 references of the test split" in table
+    assert "| TCN FF | 200 / 100 | 100 / 10 |" in table
