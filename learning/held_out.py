@@ -6,10 +6,10 @@ axis the e2 ratio PID alone / scenario on every reference, their geometric mean 
 
 Measured on the hardware set's ten test references (six circles of 0.07 to 0.28 Hz, four
 splines), e2 ratio x / y, geometric mean: identified rigid-body 194 / 199, physics-guided
-149 / 124, TCN 17 / 22, CNN-LSTM 15 / 13, LSTM 10 / 13. On the slow evaluation reference the
-physics-guided model beats the identified one (397 / 189 against 218 / 163); on the fastest
-circle (0.28 Hz) it reaches 7 / 9 against 40 / 44, and the LSTM there does worse than PID
-alone.
+225 / 221, TCN 17 / 22, CNN-LSTM 15 / 13, LSTM 10 / 13. Four of the ten leave the models'
+training range (the run's feedforward_range says so); there the LSTM did worse than PID alone
+(0.44 / 0.54), and the physics-guided model, before its residual faded out beyond the range
+(learning.deploy.trust), fell to 7 / 9 against its prior's 40 / 44.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ import torch
 from flexff.controllers.features import reference_features
 from flexff.controllers.model_card import ModelCard, read_card
 from flexff.learning.dataset import REFERENCE_SIGNALS, load_dataset
-from flexff.learning.deploy import SIModel, predict
+from flexff.learning.deploy import TRUST_FADE, SIModel, predict, trust
 from flexff.learning.export import TOLERANCE, export, run_sequence, run_steps, session
 from flexff.learning.features import prepare_trajectory
 from flexff.learning.rigid import rigid_forces
@@ -87,6 +87,30 @@ def test_onnxruntime_matches_pytorch_in_both_forms(data, runs, tmp_path, kind):
     assert _relative(whole, expected) < TOLERANCE
     assert _relative(steps, expected) < TOLERANCE
     assert _relative(steps, whole) < TOLERANCE
+
+
+def test_the_physics_guided_residual_fades_out_beyond_its_training_range(data, runs, tmp_path):
+    """Inside the training range the pgnn's graph gives its network's residual; where a
+    feature lies TRUST_FADE spans beyond, none: the model is its prior alone there."""
+    path = export(runs / "pgnn", tmp_path / "pgnn.onnx")
+    run = load_run(runs / "pgnn")
+    features, _ = _test_inputs(data, run)
+    low, span = run.feature_scaler.low, run.feature_scaler.span
+    inside = np.clip(features, low, low + span)
+    runtime = session(path)
+    assert np.abs(run_sequence(runtime, inside)).min() > 0
+    beyond = inside.copy()
+    beyond[len(beyond) // 2:, 0] = low[0] - TRUST_FADE * span[0]
+    residual = run_sequence(runtime, beyond)
+    assert np.array_equal(residual[:len(beyond) // 2], run_sequence(runtime, inside)[
+        :len(beyond) // 2]) and not residual[len(beyond) // 2:].any()
+
+
+def test_trust_is_one_inside_the_range_and_falls_with_the_farthest_feature():
+    scaled = torch.tensor([[0.0, 1.0], [0.5, 1.0 + TRUST_FADE / 2], [-TRUST_FADE / 4, 1.2],
+                           [0.5, -2 * TRUST_FADE]], dtype=torch.float64)
+    expected = [1.0, 0.5, 1.0 - 0.2 / TRUST_FADE, 0.0]
+    assert trust(scaled)[:, 0].tolist() == pytest.approx(expected, abs=1e-12)
 
 
 @pytest.mark.parametrize("kind", ["lstm", "pgnn"])
