@@ -14,10 +14,10 @@ training range (the run's feedforward_range says so); there the LSTM did worse t
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
+from statistics import geometric_mean
 from typing import Any
 
 from tqdm import tqdm
@@ -69,11 +69,8 @@ def run_held_out(configs: Mapping[str, Mapping[str, RunConfig]], out: Path,
     ratios = {name: {axis: [e2[r][BASE][axis] / e2[r][name][axis] for r in references]
                      for axis in AXES} for name in names}
     return {"references": references, "e2_ratio": ratios,
-            "geometric_mean": {name: {axis: _geometric_mean(values) for axis, values
+            "geometric_mean": {name: {axis: geometric_mean(values) for axis, values
                                       in by_axis.items()} for name, by_axis in ratios.items()},
             "worst": {name: {axis: min(values) for axis, values in by_axis.items()}
                       for name, by_axis in ratios.items()}}
 
-
-def _geometric_mean(values: list[float]) -> float:
-    return math.exp(sum(math.log(v) for v in values) / len(values))
