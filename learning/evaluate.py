@@ -234,18 +234,27 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
             f"real-time factor {metrics['real_time_factor']:.0f}")
         if warning := range_warning(metrics):
             say(f"{name}: {warning}")
-    held_out = None
+    held_out = _held_out(env, Path(data), [BASE, "rigid-body", IDENTIFIED, *groups], files,
+                         loop, out, say, progress)
+    return write_report(recordings, env, out, model_training, limit[NOISE_FLOOR], held_out)
+
+
+def _held_out(env: str, data: Path, scenarios: Sequence[str], files: Mapping[str, Path],
+              loop: RunConfig | None, out: Path, say: Callable[[str], None],
+              progress: bool) -> dict[str, Any] | None:
+    """`scenarios` on the references of the test split of `data` (learning.held_out), None
+    where it has none that a run takes."""
     references, other = references_held_out(load_dataset(data))
     if other:
         say(f"held-out references: {', '.join(other)} left out (no [reference] table)")
-    if references:
-        say(f"every feedforward on the {len(references)} references of the test split into "
-            f"{out / FOLDER}")
-        held_out = run_held_out({name: {scenario: scenario_config(
-            env, scenario, files.get(scenario), loop=loop, reference=reference)
-            for scenario in [BASE, "rigid-body", IDENTIFIED, *groups]}
-            for name, reference in references.items()}, out / FOLDER, progress)
-    return write_report(recordings, env, out, model_training, limit[NOISE_FLOOR], held_out)
+    if not references:
+        return None
+    say(f"every feedforward on the {len(references)} references of the test split into "
+        f"{out / FOLDER}")
+    return run_held_out({name: {scenario: scenario_config(env, scenario, files.get(scenario),
+                                                          loop=loop, reference=reference)
+                                for scenario in scenarios}
+                         for name, reference in references.items()}, out / FOLDER, progress)
 
 
 def preprocessing(env: str, preset: str = "fast") -> FeatureConfig:
