@@ -425,7 +425,8 @@ def _evaluate(args: argparse.Namespace) -> int:
              scheduler=args.scheduler, currents=args.currents)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
-          f"forces.png, the .onnx models, ilc/ for the limit)")
+          f"forces.png, the .onnx models, ilc/ for the limit, held-out/ for the test split's "
+          f"references)")
     return 0
 
 
