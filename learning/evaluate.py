@@ -225,7 +225,8 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     limit = ilc(scenario_config(env, "pid", loop=loop), out / "ilc", ilc_iterations,
                 progress=progress, say=say)
     recordings: dict[str, Recording] = {}
-    for name in ["pid", "rigid-body", IDENTIFIED, *groups, LIMIT]:
+    feedforwards = [BASE, "rigid-body", IDENTIFIED, *groups]  # each on any reference
+    for name in [*feedforwards, LIMIT]:
         folder = out / "cosim" / name
         metrics = run_config(scenario_config(env, name, files.get(name), loop=loop,
                                              table=out / "ilc" / RESULT), folder)
@@ -234,8 +235,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
             f"real-time factor {metrics['real_time_factor']:.0f}")
         if warning := range_warning(metrics):
             say(f"{name}: {warning}")
-    held_out = _held_out(env, Path(data), [BASE, "rigid-body", IDENTIFIED, *groups], files,
-                         loop, out, say, progress)
+    held_out = _held_out(env, Path(data), feedforwards, files, loop, out, say, progress)
     return write_report(recordings, env, out, model_training, limit[NOISE_FLOOR], held_out)
 
 
