@@ -4,7 +4,13 @@ A function of (position, velocity, acceleration) only, the same for training dat
 filtered measured motion) and for deployment (the reference x_ref ... ay_ref). The full set
 is the 21 coordinates of eq. (2.1) and their first and second time derivatives, obtained
 exactly by the chain rule (qd = J v, qdd = J a + (dJ/dt) v, with J = dq/dpos) rather than by
-differentiating 21 noisy signals; the compact set is (x, y, vx, vy, ax, ay). Kinematics are
+differentiating 21 noisy signals; the compact set is (x, y, vx, vy, ax, ay). The directions set
+is the full set and each motor's direction of motion, tanh(theta_si_dot / w) at the velocity
+scales DIRECTION_WIDTHS: a motor's Coulomb friction flips with its direction, a step no smooth
+function of the 63 full features holds and one a network learns poorly from them (the hardware
+stand-in's TCN, trained on the identified rigid-body model's own forces as noise-free labels,
+missed them by up to 13 mN at each motor reversal of its evaluation reference: e2 50 / 49x
+PID alone; with these features 169 / 138x). Kinematics are
 the nominal model's: the feedforward knows nothing better. As a CasADi Function it is both
 evaluated in numpy (learning/) and generated into C inside the feedforward FMU.
 """
@@ -17,11 +23,15 @@ import casadi as ca
 import numpy as np
 
 from flexff.fmu.errors import InputError
-from flexff.plant.kinematics import COORDINATE_NAMES, EE_INDEX
+from flexff.plant.kinematics import COORDINATE_NAMES, EE_INDEX, SHOULDER_INDEX
 from flexff.plant.model import PlantModel
 from flexff.plant.signals import REFERENCE, names, reference_motion, units
 
-FEATURE_SETS = ("full", "compact")
+FEATURE_SETS = ("full", "compact", "directions")
+# velocity scales of the motors' direction features [rad/s]: a basis that a network's linear
+# part combines into the friction's own transition, whatever its width (the hardware stand-in's
+# is 0.01 rad/s; these three fit its friction to 0.33 mN rms on its evaluation reference)
+DIRECTION_WIDTHS = (0.003, 0.01, 0.03)
 COMPACT_NAMES = ("x", "y", "vx", "vy", "ax", "ay")  # the wrist's motion, in REFERENCE's units
 
 
@@ -29,9 +39,10 @@ def feature_names(feature_set: str) -> list[str]:
     """Signal names of the features, in column order."""
     if feature_set == "compact":
         return list(COMPACT_NAMES)
-    if feature_set == "full":
-        return (list(COORDINATE_NAMES) + [f"{n}_dot" for n in COORDINATE_NAMES]
+    if feature_set in ("full", "directions"):
+        full = (list(COORDINATE_NAMES) + [f"{n}_dot" for n in COORDINATE_NAMES]
                 + [f"{n}_ddot" for n in COORDINATE_NAMES])
+        return full + (_direction_names() if feature_set == "directions" else [])
     raise InputError(f"unknown feature set {feature_set!r}: choose one of "
                      f"{', '.join(FEATURE_SETS)}")
 
@@ -41,7 +52,14 @@ def feature_units(feature_set: str) -> list[str]:
     if feature_set == "compact":
         return list(units(REFERENCE))
     base = ["rad" if n.startswith("theta") else "m" for n in COORDINATE_NAMES]
-    return base + [f"{u}/s" for u in base] + [f"{u}/s2" for u in base]
+    directions = ["1"] * len(_direction_names()) if feature_set == "directions" else []
+    return base + [f"{u}/s" for u in base] + [f"{u}/s2" for u in base] + directions
+
+
+def _direction_names() -> list[str]:
+    """The directions set's last columns: each motor's direction at each velocity scale."""
+    return [f"tanh({COORDINATE_NAMES[k]}_dot/{w:g})" for w in DIRECTION_WIDTHS
+            for k in SHOULDER_INDEX]
 
 
 def motion_columns(feature_set: str) -> tuple[list[int], list[int], list[int]]:
@@ -66,10 +84,14 @@ def motion_function(feature_set: str) -> ca.Function:
     pos, vel, acc = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2), ca.SX.sym("acc", 2)
     if feature_set == "compact":
         out = ca.vertcat(pos, vel, acc)
-    elif feature_set == "full":
+    elif feature_set in ("full", "directions"):
         q = model.coordinates(pos, model.parameter_values())
         jac = ca.jacobian(q, pos)
-        out = ca.vertcat(q, jac @ vel, jac @ acc + ca.jtimes(jac @ vel, pos, vel))
+        qd = jac @ vel
+        out = ca.vertcat(q, qd, jac @ acc + ca.jtimes(qd, pos, vel))
+        if feature_set == "directions":
+            motors = ca.vertcat(*[qd[k] for k in SHOULDER_INDEX])
+            out = ca.vertcat(out, *[ca.tanh(motors / w) for w in DIRECTION_WIDTHS])
     else:
         feature_names(feature_set)  # raises with the list of known sets
     return ca.Function(f"features_{feature_set}", [pos, vel, acc], [out],

@@ -53,7 +53,9 @@ LABELS = {"forces": LABEL_SIGNALS, "currents": CURRENT_SIGNALS}
 class FeatureConfig:
     """Everything that turns a recorded trajectory into features and labels."""
 
-    feature_set: str = "full"  # "full": 63 coordinates/velocities/accelerations; or "compact"
+    # "full": 63 coordinates/velocities/accelerations; "directions": those and the motors'
+    # directions of motion; or "compact" (controllers.features)
+    feature_set: str = "full"
     encoders: int = 2  # forward kinematics from theta_s1..2 (thesis) or all three
     quantize_encoders: bool = True  # count the angles in whole encoder counts first (seed)
     cutoff_hz: float = 1.8  # low-pass corner, slightly above the 1.7 Hz first mode (seed)

@@ -33,7 +33,10 @@ from tests.fmu_toys import LoggedSlave, status_of
 from tests.runners import run_fmu, run_fmu_libcosim
 
 STEPS = 600  # 0.6 s of the thesis evaluation reference at 1 kHz
-TINY = {"lstm": {"hidden": 12}, "pgnn": {"channels": 8, "levels": 3}}
+# one model per kind of input the FMU computes in C: the full features (LSTM), the directions
+# set (TCN) and the full features with the rigid-body prior (pgnn)
+TINY = {"lstm": {"hidden": 12}, "tcn": {"channels": 8, "levels": 2, "feature_set": "directions"},
+        "pgnn": {"channels": 8, "levels": 3}}
 
 
 @pytest.fixture(scope="module")

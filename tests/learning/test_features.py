@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 
 from flexff.controllers.features import (
+    DIRECTION_WIDTHS,
+    FEATURE_SETS,
     feature_names,
     feature_units,
     motion_columns,
@@ -41,6 +43,21 @@ def test_chain_rule_velocities_match_finite_differences_of_the_coordinates(nomin
     assert np.abs(acceleration - qdd).max() < 1e-6 * np.abs(acceleration).max()
 
 
+def test_direction_features_are_the_full_set_and_each_motors_smoothed_direction():
+    t = np.linspace(0.0, 3.0, 301)
+    motion = skew_sine_circle(t, 3.0, radius=0.03, turns=2, start_angle=0.4).T
+    columns = motion[:, 0:2], motion[:, 2:4], motion[:, 4:6]
+    full, directions = (motion_features(*columns, s) for s in ("full", "directions"))
+    np.testing.assert_array_equal(directions[:, :63], full)
+    motors = full[:, [21 + k for k in SHOULDER_INDEX]]  # theta_s1..3_dot (chain rule, above)
+    expected = np.hstack([np.tanh(motors / w) for w in DIRECTION_WIDTHS])
+    np.testing.assert_allclose(directions[:, 63:], expected, atol=1e-15)
+    assert feature_names("directions")[63:66] == [f"tanh(theta_s{k}_dot/0.003)" for k in (1, 2, 3)]
+    # every motor turns both ways on two turns of a circle: each feature spans its range
+    assert np.all(directions[:, 63:66].max(axis=0) > 0.99)
+    assert np.all(directions[:, 63:66].min(axis=0) < -0.99)
+
+
 def test_compact_features_are_the_motion_itself():
     rng = np.random.default_rng(1)
     pos, vel, acc = (rng.normal(0, s, (10, 2)) for s in (0.02, 0.1, 1.0))
@@ -48,7 +65,7 @@ def test_compact_features_are_the_motion_itself():
                                   np.hstack([pos, vel, acc]))
 
 
-@pytest.mark.parametrize("feature_set", ["full", "compact"])
+@pytest.mark.parametrize("feature_set", FEATURE_SETS)
 def test_motion_columns_point_at_the_wrist_signals(feature_set):
     rng = np.random.default_rng(2)
     pos, vel, acc = (rng.normal(0, s, (5, 2)) for s in (0.02, 0.1, 1.0))
