@@ -24,9 +24,11 @@ test, tests/flexff/test_cli.py, checks the outcome):
   least-squares fit and the network learns the rest. On the nominal sim plant the rest is
   small: the least-squares fit alone reaches a test MSE of 1.95e-8 and each network 1.96e-8
   to 2.01e-8, and the closed-loop figures of the LSTM and CNN-LSTM agree to three digits. On
-  the hardware stand-in (friction, a tool mode, noisy encoders) the network part matters: the
-  linear fit alone gives e2 11 / 11 there, the TCN with it 31 / 38, the LSTM 27 / 31 (10 / 12
-  without the skip, after 60 epochs; learning.evaluate).
+  the hardware stand-in (friction, a tool mode, noisy encoders) the network part matters: on
+  the 63 full features the linear fit alone gave e2 11 / 11 there, the TCN with it 31 / 38,
+  the LSTM 27 / 31 (10 / 12 without the skip, after 60 epochs); with the motors' directions
+  among the features, which let the linear fit hold the Coulomb friction, the TCN 132 / 63
+  (learning.evaluate).
 - Smaller recurrent networks (one LSTM layer of 64 instead of two of 100): 0.8 s per epoch
   against 2.3 s, and e2 68 / 91 against 48 / 56 after the same 120 epochs without skip.
 - TCN of 4 levels of 64 channels, batches of 16 windows: 0.9 s per epoch (128 channels:
