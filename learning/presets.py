@@ -28,7 +28,7 @@ test, tests/flexff/test_cli.py, checks the outcome):
   the 63 full features the linear fit alone gave e2 11 / 11 there, the TCN with it 31 / 38,
   the LSTM 27 / 31 (10 / 12 without the skip, after 60 epochs); with the motors' directions
   among the features, which let the linear fit hold the Coulomb friction, the TCN 132 / 63
-  (learning.evaluate).
+  (wrist position from two encoders; learning.evaluate).
 - Smaller recurrent networks (one LSTM layer of 64 instead of two of 100): 0.8 s per epoch
   against 2.3 s, and e2 68 / 91 against 48 / 56 after the same 120 epochs without skip.
 - TCN of 4 levels of 64 channels, batches of 16 windows: 0.9 s per epoch (128 channels:

@@ -161,14 +161,15 @@ def test_each_environment_runs_the_seeds_own_evaluation_reference(env, variant, 
 def test_the_identified_model_is_preprocessed_as_the_physics_guided_prior():
     """On the hardware stand-in every model, the identified one (identified with
     `preprocessing`, the physics-guided model's) among them, low-passes at 1 Hz; the
-    black-box networks also see the motors' directions (learning.evaluate.ENVIRONMENTS: each
-    measured the better for its models)."""
+    black-box networks also see the motors' directions, and the wrist position from all three
+    encoders (learning.evaluate.ENVIRONMENTS: each measured the better for its models)."""
     hardware = ENVIRONMENTS["hardware"]
     pgnn = make_config("pgnn", "fast", **hardware.overrides("fast", "pgnn")).features
     assert preprocessing("hardware") == pgnn and pgnn.feature_set == "full"
     for kind in ("lstm", "cnn-lstm", "tcn"):
         features = make_config(kind, "fast", **hardware.overrides("fast", kind)).features
-        assert features == replace(pgnn, feature_set="directions", model_rate_hz=25.0)
+        assert features == replace(pgnn, feature_set="directions", encoders=3,
+                                   model_rate_hz=25.0)
     assert pgnn.cutoff_hz == 1.0 and preprocessing("sim").cutoff_hz == 5.0
 
 
@@ -181,7 +182,7 @@ def test_hardware_physics_guided_feedforward_beats_the_rigid_body_one(tmp_path):
     feedforward of the nominal model, and reaches issue 16's 50x; so does the TCN, a
     black-box network, with the motors' directions among its inputs. Measured: pgnn
     393x / 193x in e2 (five seeds, 1 Hz corner; 105x / 88x before issue 25's changes), TCN
-    132x / 63x (31x / 38x without the directions, 4.4 / 4.8 times the rigid-body
+    83x / 71x (31x / 38x without the directions, 4.4 / 4.8 times the rigid-body
     feedforward's), rigid-body 7.0x / 7.9x and 5.8x / 7.6x in einf; the thesis's LSTM reached
     1.8x / 1.3x."""
     summary = evaluate("hardware", tmp_path, models=["tcn", "pgnn"], say=lambda _: None)
