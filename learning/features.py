@@ -45,7 +45,9 @@ from flexff.plant.kinematics import SHOULDER_INDEX
 # wrist, or the motor currents it commanded (after the control allocation). Measured with
 # flexff evaluate --currents (fast preset, e2 ratio PID alone / feedforward, x / y, forces
 # against currents): sim TCN 207 / 246 against 276 / 335, pgnn 304 / 362 against 386 / 468;
-# hardware stand-in TCN 31 / 38 against 39 / 44, pgnn (3 seeds) 107 / 89 against 97 / 91.
+# hardware stand-in TCN 31 / 38 against 39 / 44, pgnn (3 seeds) 107 / 89 against 97 / 91;
+# with the hardware environment's directions, 1 Hz corner and three encoders, TCN 83 / 71
+# against 135 / 114 (the test split's references: geometric means 40 / 47 against 42 / 53).
 LABELS = {"forces": LABEL_SIGNALS, "currents": CURRENT_SIGNALS}
 
 
