@@ -29,8 +29,9 @@ from flexff.plant.signals import REFERENCE, names, reference_motion, units
 
 FEATURE_SETS = ("full", "compact", "directions")
 # velocity scales of the motors' direction features [rad/s]: a basis that a network's linear
-# part combines into the friction's own transition, whatever its width (the hardware stand-in's
-# is 0.01 rad/s; these three fit its friction to 0.33 mN rms on its evaluation reference)
+# part combines into the friction's own transition, whatever its width (the hardware
+# stand-in's is 0.01 rad/s: least squares on these features alone misses its friction force,
+# 23 mN rms along its evaluation reference, by under 0.33 mN)
 DIRECTION_WIDTHS = (0.003, 0.01, 0.03)
 COMPACT_NAMES = ("x", "y", "vx", "vy", "ax", "ay")  # the wrist's motion, in REFERENCE's units
 
