@@ -6,10 +6,13 @@ import pytest
 from flexff.controllers.features import (
     DIRECTION_WIDTHS,
     FEATURE_SETS,
+    MAP_CHUNK,
+    evaluate_samples,
     feature_names,
     feature_units,
     motion_columns,
     motion_features,
+    motion_function,
     reference_features,
 )
 from flexff.learning.dataset import REFERENCE_SIGNALS
@@ -41,6 +44,18 @@ def test_chain_rule_velocities_match_finite_differences_of_the_coordinates(nomin
     velocity, acceleration = feats[2:-2, 21:42], feats[2:-2, 42:]
     assert np.abs(velocity - qd).max() < 1e-8 * np.abs(velocity).max()
     assert np.abs(acceleration - qdd).max() < 1e-6 * np.abs(acceleration).max()
+
+
+@pytest.mark.parametrize("n", [1, MAP_CHUNK, 2 * MAP_CHUNK + 5])
+def test_samples_evaluated_in_chunks_equal_one_call_each(n):
+    rng = np.random.default_rng(n)
+    pos, vel, acc = (rng.normal(0, s, (n, 2)) for s in (0.01, 0.05, 0.5))
+    got = evaluate_samples(motion_function("full"), pos, vel, acc)
+    some = sorted({0, n // 2, n - 1})
+    expected = [np.asarray(motion_function("full")(pos[k], vel[k], acc[k])).ravel()
+                for k in some]
+    assert got.shape == (n, 63)
+    np.testing.assert_array_equal(got[some], expected)
 
 
 def test_direction_features_are_the_full_set_and_each_motors_smoothed_direction():
