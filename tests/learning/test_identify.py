@@ -29,6 +29,7 @@ from flexff.learning.identify import (
     identify_samples,
     linear_names,
     regressor,
+    width_columns,
     write_identification,
 )
 from flexff.learning.synthetic import motion_trajectory, skew_sine_circle, synthetic_dataset
@@ -65,6 +66,19 @@ def test_the_regressor_is_the_inverse_dynamics():
     w = regressor(pos, vel, acc, TRUE.w_stribeck)
     assert np.allclose(w @ true_theta(), true_forces(pos, vel, acc).ravel(), rtol=1e-10,
                        atol=1e-12)
+
+
+def test_only_the_coulomb_columns_depend_on_the_tanh_width():
+    """What lets identification evaluate the other 38 columns once for all candidate widths:
+    a width-free column is the same at any width, and a subset is the full regressor's."""
+    fixed, varying = width_columns()
+    assert [linear_names()[k] for k in varying] == ["tau_coulomb1", "tau_coulomb2",
+                                                    "tau_coulomb3"]
+    pos, vel, acc = motion(30, seed=3)
+    narrow, wide = regressor(pos, vel, acc, 1e-3), regressor(pos, vel, acc, 1e-1)
+    assert np.array_equal(narrow[:, list(fixed)], wide[:, list(fixed)])
+    assert not np.allclose(narrow[:, list(varying)], wide[:, list(varying)])
+    assert np.array_equal(regressor(pos, vel, acc, 1e-1, varying), wide[:, list(varying)])
 
 
 def test_the_base_parameters_group_what_acts_together():
