@@ -5,7 +5,6 @@ and the one reader of time tables on top (references, [[source]] tables, machine
 from __future__ import annotations
 
 import csv
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -77,7 +76,7 @@ def read_time_table(path: Path, required: Sequence[str] = (),
         if header.count(name) > 1:
             raise error(f"{path}: column {name} appears {header.count(name)} times in the "
                         f"header row")
-    body = [(line, row) for line, row in rows[1:] if any(cell.strip() for cell in row)]
+    body = [(line, row) for line, row in rows[1:] if "".join(row).strip()]
     table = TimeTable(path, {}, tuple(line for line, _ in body))
     for k, (_, cells) in enumerate(body):
         if len(cells) != len(header):
@@ -98,13 +97,19 @@ def read_time_table(path: Path, required: Sequence[str] = (),
 
 def _numbers(table: TimeTable, name: str, cells: list[str], error: type[InputError]
              ) -> np.ndarray:
-    """A column's cells as finite float64 numbers."""
-    values = np.empty(len(cells))
-    for k, cell in enumerate(cells):
-        try:
-            values[k] = float(cell)
-        except ValueError:
-            raise error(f"{table.path}: column {name}, {table.row(k)}: not a number") from None
-        if not math.isfinite(values[k]):
-            raise error(f"{table.path}: column {name}, {table.row(k)}: NaN or Inf")
+    """A column's cells as finite float64 numbers (numpy parses them at once; a cell it
+    refuses is then found one by one, for the message)."""
+    try:
+        values = np.array(cells, dtype=float)
+    except ValueError:
+        for k, cell in enumerate(cells):
+            try:
+                float(cell)
+            except ValueError:
+                raise error(f"{table.path}: column {name}, {table.row(k)}: not a number") \
+                    from None
+        raise  # numpy refused what Python reads: not expected, so not hidden
+    if not np.all(np.isfinite(values)):
+        k = int(np.argmin(np.isfinite(values)))
+        raise error(f"{table.path}: column {name}, {table.row(k)}: NaN or Inf")
     return values
