@@ -23,14 +23,22 @@ from typing import Any
 from tqdm import tqdm
 
 from flexff.cosim.config import parse_config
+from flexff.cosim.executor import execute
 from flexff.cosim.metrics import AXES
 from flexff.cosim.run import run_config
 from flexff.cosim.schema import RecordConfig, RunConfig
-from flexff.fmu.errors import InputError
+from flexff.fmu.errors import InputError, RunError
 from flexff.learning.dataset import Dataset
 
 FOLDER = "held-out"  # in flexff evaluate's output folder: one run per reference and scenario
 BASE = "pid"  # the scenario every ratio divides
+
+
+def _e2_of_run(job: tuple[RunConfig, Path]) -> dict[str, float]:
+    """e2 per axis of one run (in a worker process)."""
+    config, folder = job
+    metrics = run_config(config, folder, progress=False)
+    return {axis: metrics[axis]["e2"] for axis in AXES}
 
 
 def references_held_out(dataset: Dataset) -> tuple[dict[str, Mapping[str, Any]], list[str]]:
@@ -49,21 +57,24 @@ def references_held_out(dataset: Dataset) -> tuple[dict[str, Mapping[str, Any]],
 
 
 def run_held_out(configs: Mapping[str, Mapping[str, RunConfig]], out: Path,
-                 progress: bool = True) -> dict[str, Any]:
+                 progress: bool = True, workers: int | None = None) -> dict[str, Any]:
     """Run `configs` (reference name -> scenario -> its run on that reference, BASE among
-    them) into out/REFERENCE/SCENARIO with the least record; return, per scenario but BASE,
-    the e2 ratio BASE / scenario on each reference ("e2_ratio": scenario -> axis -> list in
-    the order of "references"), their geometric mean and their least ("worst")."""
-    e2: dict[str, dict[str, dict[str, float]]] = {}
-    runs = sum(len(scenarios) for scenarios in configs.values())
-    with tqdm(total=runs, unit="run", desc="held-out references", disable=not progress) as bar:
-        for reference, scenarios in configs.items():
-            e2[reference] = {}
-            for name, config in scenarios.items():
-                light = replace(config, record=RecordConfig(signals=(), plot=False))
-                metrics = run_config(light, out / reference / name, progress=False)
-                e2[reference][name] = {axis: metrics[axis]["e2"] for axis in AXES}
-                bar.update()
+    them) into out/REFERENCE/SCENARIO with the least record, in up to `workers` processes
+    (default: one per CPU; cosim.executor); return, per scenario but BASE, the e2 ratio BASE /
+    scenario on each reference ("e2_ratio": scenario -> axis -> list in the order of
+    "references"), their geometric mean and their least ("worst")."""
+    keys = [(reference, name) for reference, scenarios in configs.items() for name in scenarios]
+    jobs = [(replace(configs[reference][name], record=RecordConfig(signals=(), plot=False)),
+             out / reference / name) for reference, name in keys]
+    e2: dict[str, dict[str, dict[str, float]]] = {reference: {} for reference in configs}
+    with tqdm(total=len(jobs), unit="run", desc="held-out references",
+              disable=not progress) as bar, execute(_e2_of_run, jobs, workers) as running:
+        for finished in running:
+            reference, name = keys[finished.index]
+            if finished.result is None:
+                raise finished.error or RunError(f"held-out run {reference}/{name} cancelled")
+            e2[reference][name] = finished.result
+            bar.update()
     references = list(configs)
     names = [n for n in (configs[references[0]] if references else {}) if n != BASE]
     ratios = {name: {axis: [e2[r][BASE][axis] / e2[r][name][axis] for r in references]
