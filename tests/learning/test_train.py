@@ -78,6 +78,19 @@ def test_training_is_reproducible(data, tmp_path):
     assert all(torch.equal(a[n], b[n]) for n in a)
 
 
+def test_an_ensembles_members_share_one_identification_of_the_prior(data, tmp_path):
+    """Seeds differ, the prior does not: a process identifies it once per data set and
+    preprocessing, and a run of other preprocessing identifies its own."""
+    training._identified_prior.cache_clear()
+    runs = [train("pgnn", "fast", data, tmp_path / f"seed{seed}", progress=False, epochs=1,
+                  seed=seed, **TINY["pgnn"]) for seed in (0, 1)]
+    assert runs[0]["prior_parameters"] == runs[1]["prior_parameters"]
+    assert training._identified_prior.cache_info()[:2] == (1, 1)  # hits, misses
+    train("pgnn", "fast", data, tmp_path / "other", progress=False, epochs=1, cutoff_hz=5.0,
+          **TINY["pgnn"])
+    assert training._identified_prior.cache_info()[:2] == (1, 2)
+
+
 @pytest.mark.parametrize("kind", ["lstm", "pgnn"])
 def test_reported_test_mse_is_that_of_the_si_model(data, tmp_path, kind):
     """The metric's units, end to end: min-max-scaled labels, from the deployed forces (the
