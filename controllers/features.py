@@ -127,9 +127,9 @@ def evaluate_samples(function: ca.Function, *columns: np.ndarray) -> np.ndarray:
     """Evaluate a one-sample Function on n samples given as (n, k) arrays; returns (n, m).
 
     The samples go through one map of MAP_CHUNK samples, built once per Function, chunk by
-    chunk (the last one padded): building a map takes time in proportion to its size (0.25 s
-    for 1e5 samples of the full features, longer than evaluating them), so a map per call
-    of another length cost more than the work itself."""
+    chunk (the last one padded): building a map takes time in proportion to its size, so a
+    map per call of another length cost as much again as the work (1e5 samples of the full
+    features: 1.87 s with a map of their own, 1.07 s in chunks)."""
     n = columns[0].shape[0]
     mapped = _chunk_map(function)
     inputs = [np.asarray(c, dtype=float).reshape(n, -1) for c in columns]
