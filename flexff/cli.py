@@ -326,7 +326,8 @@ def _data_collect(args: argparse.Namespace) -> int:
         from flexff.cosim.run import load_run_config
 
         config = load_run_config(args.config)
-    report = run_collection(args.set, args.output, args.workers, args.scheduler, config=config)
+    report = run_collection(args.set, args.output, args.workers, args.scheduler, config=config,
+                            draws=args.draws)
     for line in report.problems():
         print(line, file=sys.stderr)
     cancelled = f", {len(report.cancelled)} not run" if report.cancelled else ""
@@ -582,6 +583,9 @@ def build_parser() -> argparse.ArgumentParser:
     collect.add_argument("--workers", type=int,
                          help="parallel local processes, at least 1 (default: CPUs)")
     collect.add_argument("--scheduler", help="address of a Dask scheduler to run on instead")
+    collect.add_argument("--draws", type=int, default=1, metavar="N",
+                         help="draw the set's training trajectories N times (default 1: the set "
+                              "as the thesis gives it; the test split stays the same)")
     collect.set_defaults(handler=_data_collect)
     imports = data_commands.add_parser(
         "import", help="turn logs of a real machine (CSV or MATLAB .mat) into a dataset folder")

@@ -173,15 +173,17 @@ class _Folder:
 
 def collect(set_name: str, out: str | Path, workers: int | None = None,
             scheduler: str | None = None, progress: bool = True,
-            limit: int | None = None, config: RunConfig | None = None) -> Path:
+            limit: int | None = None, config: RunConfig | None = None, draws: int = 1) -> Path:
     """Collect trajectory set `set_name` into folder `out` (resuming what is there); return it.
 
     `config`: the loop to run (learning.loop; default: the set's built-in plant under PID).
     Raises CollectionError after the other trajectories finished if any failed, and
     DataFolderError if `out` holds another set or loop. `limit` collects the first `limit`
-    trajectories only (the manifest then lists just those).
+    trajectories only (the manifest then lists just those). `draws`: how many times the set's
+    training trajectories are drawn (learning.trajectories.trajectory_set); a folder of fewer
+    draws is completed, its trajectories are the same.
     """
-    report = run_collection(set_name, out, workers, scheduler, progress, limit, config)
+    report = run_collection(set_name, out, workers, scheduler, progress, limit, config, draws)
     if not report.ok:
         raise CollectionError(report)
     return report.path
@@ -189,11 +191,11 @@ def collect(set_name: str, out: str | Path, workers: int | None = None,
 
 def run_collection(set_name: str, out: str | Path, workers: int | None = None,
                    scheduler: str | None = None, progress: bool = True,
-                   limit: int | None = None, config: RunConfig | None = None
+                   limit: int | None = None, config: RunConfig | None = None, draws: int = 1
                    ) -> CollectionReport:
     """`collect`, returning the report instead of raising for failed trajectories."""
     start = time.perf_counter()
-    trajectories = trajectory_set(set_name)
+    trajectories = trajectory_set(set_name, draws)
     if limit is not None and limit < 1:
         raise InputError(f"limit must be at least 1, got {limit}")
     if workers is not None and workers < 1:

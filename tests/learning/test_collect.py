@@ -261,6 +261,15 @@ def test_workers_must_be_at_least_one(tmp_path, capsys):
     assert not (tmp_path / "sim").exists()
 
 
+def test_the_cli_refuses_fewer_than_one_draw(tmp_path, capsys):
+    from flexff.cli import main
+
+    assert main(["data", "collect", "--set", "sim", "-o", str(tmp_path / "sim"),
+                 "--draws", "0"]) == 2
+    assert "draws must be a whole number of at least 1, got 0" in capsys.readouterr().err
+    assert not (tmp_path / "sim").exists()
+
+
 def _full_disk(path, signals):
     raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
@@ -356,14 +365,15 @@ def test_hardware_files_keep_every_tenth_sample(tmp_path):
 def test_cli_prints_a_summary_and_the_status(monkeypatch, tmp_path, capsys):
     from flexff.cli import main
 
-    def fake(set_name, out, workers, scheduler, config):
-        assert (set_name, workers, scheduler, config) == ("hardware", 3, "tcp://h:8786", None)
+    def fake(set_name, out, workers, scheduler, config, draws):
+        assert (set_name, workers, scheduler, config, draws) == \
+            ("hardware", 3, "tcp://h:8786", None, 2)
         return CollectionReport(Path(out), set_name, (Outcome("circle-01", 1.0, 7.25),),
                                 ("circle-00",), (Outcome("circle-02", error="boom"),), 4.0)
 
     monkeypatch.setattr("flexff.learning.collect.run_collection", fake)
     status = main(["data", "collect", "--set", "hardware", "-o", str(tmp_path), "--workers", "3",
-                   "--scheduler", "tcp://h:8786"])
+                   "--scheduler", "tcp://h:8786", "--draws", "2"])
     out, err = capsys.readouterr()
     assert status == 1
     assert "hardware: 3 trajectories" in out and "1 run, 1 skipped (already there), 1 failed" in out

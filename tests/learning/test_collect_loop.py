@@ -217,7 +217,7 @@ def test_cli_passes_the_configuration(monkeypatch, tmp_path, capsys):
 
     seen = {}
 
-    def fake(set_name, out, workers, scheduler, config):
+    def fake(set_name, out, workers, scheduler, config, draws):
         seen["config"] = config
         return CollectionReport(Path(out), set_name, (), (), (), 0.0)
 

@@ -108,6 +108,27 @@ def test_hardware_protocol():
             assert 1.0 <= abs(motion[0]["turns"]) <= 22.0
 
 
+@pytest.mark.parametrize("name", ["sim", "hardware"])
+def test_more_draws_add_training_trajectories_and_keep_the_set(name):
+    one, three = trajectory_set(name), trajectory_set(name, 3)
+    drawn = {t.name: t for t in three.trajectories}
+    assert all(drawn[t.name] == t for t in one.trajectories)  # the set itself, unchanged
+    extra = [t for t in three.trajectories if t.name not in {u.name for u in one.trajectories}]
+    train = [t for t in one.trajectories if t.split == "train"]
+    assert [t.name for t in extra] == [f"{t.name}-draw{j}" for j in (1, 2) for t in train]
+    assert all(t.split == "train" for t in extra)
+    references = [json.dumps(t.reference, sort_keys=True) for t in three.trajectories]
+    assert len(set(references)) == len(references)  # new motion, not repeats
+    assert len({t.seed for t in three.trajectories}) == len(three.trajectories)
+    assert trajectory_set(name, 3) == three
+
+
+@pytest.mark.parametrize("draws", [0, -1, 1.5, True])
+def test_draws_are_a_whole_number_of_at_least_one(draws):
+    with pytest.raises(ValueError, match="draws must be a whole number of at least 1"):
+        trajectory_set("sim", draws)
+
+
 def test_unknown_set():
     with pytest.raises(ValueError, match="unknown trajectory set 'lab'"):
         trajectory_set("lab")
