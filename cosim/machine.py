@@ -1,0 +1,278 @@
+"""A machine description: the axes a feedforward is learned for, as plain data checked once.
+
+Given in a run configuration as `[machine]` (or `machine = "FILE.toml"`, a file holding such a
+table), read by `parse_machine`, then checked against the loop's FMUs by `check_signals`. Each
+`[[machine.axis]]` names the axis (its reference signals are `<axis>_ref`, `v<axis>_ref`,
+`a<axis>_ref`, `j<axis>_ref`, derived by flexff), the measured position (`instance.variable`,
+or an expression of such outputs: the kinematic map), the FMU input the feedforward drives,
+the effort the loop commands (the labels), units, and the excitation limits (`range`,
+`velocity`, `acceleration`, optional `jerk`). `[machine.prior]` chooses the physics prior's
+terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
+Every key is listed in KEYS; every error is a ConfigError naming `machine.key`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from flexff.cosim.schema import ConfigError
+from flexff.fmu.expressions import Expression, ExpressionError, parse_expression
+
+AXIS_NAME = re.compile(r"[A-Za-z][A-Za-z0-9]*\Z")
+PRIOR_TERMS = ("inertia", "viscous", "coulomb", "coulomb_asymmetric", "offset")
+DEFAULT_PRIOR_TERMS = ("inertia", "viscous", "coulomb", "offset")
+KEYS = {
+    "machine": ("name", "axis", "prior"),
+    "axis": ("name", "unit", "measured", "feedforward", "effort", "effort_unit", "range",
+             "velocity", "acceleration", "jerk"),
+    "prior": ("terms", "extra", "coulomb_width"),
+}
+
+
+@dataclass(frozen=True)
+class Limits:
+    """The excitation's bounds on one axis: position range, |velocity|, |acceleration| and
+    (optional) |jerk|, in the axis's unit per second to the power."""
+
+    low: float
+    high: float
+    velocity: float
+    acceleration: float
+    jerk: float | None = None
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One axis: what the loop measures and commands on it, in which units."""
+
+    name: str
+    measured: Expression  # of "instance.variable" outputs; a bare name is the signal itself
+    feedforward: str  # "instance.variable": the FMU input the learned model drives
+    effort: str  # "instance.variable": the commanded effort, the model's label
+    limits: Limits
+    unit: str = "m"
+    effort_unit: str = "N"
+
+    @property
+    def reference(self) -> str:
+        return f"{self.name}_ref"
+
+    @property
+    def derivatives(self) -> tuple[str, str, str]:
+        """The reference's velocity, acceleration and jerk signals, derived by flexff."""
+        return tuple(f"{d}{self.name}_ref" for d in "vaj")  # type: ignore[return-value]
+
+    @property
+    def motion(self) -> tuple[str, str, str]:
+        """The names of position, velocity and acceleration in prior terms' expressions."""
+        return self.name, f"v{self.name}", f"a{self.name}"
+
+
+@dataclass(frozen=True)
+class Prior:
+    """The physics prior: per axis, the linear-in-parameters terms of PRIOR_TERMS and user
+    terms (`extra[axis][term]`, expressions of the axes' motion names); `coulomb_width` is the
+    tanh width of Coulomb friction in the axis's velocity unit (None: derived from the data)."""
+
+    terms: tuple[str, ...] = DEFAULT_PRIOR_TERMS
+    extra: Mapping[str, Mapping[str, Expression]] = field(default_factory=dict)
+    coulomb_width: float | None = None
+
+
+@dataclass(frozen=True)
+class Machine:
+    """A machine's axes and prior, checked."""
+
+    name: str
+    axes: tuple[Axis, ...]
+    prior: Prior = Prior()
+
+    def axis(self, name: str) -> Axis:
+        return next(a for a in self.axes if a.name == name)
+
+    @property
+    def reference_signals(self) -> tuple[str, ...]:
+        """Every axis's position, velocity, acceleration and jerk reference, axis by axis."""
+        return tuple(n for a in self.axes for n in (a.reference, *a.derivatives))
+
+
+def load_machine(path: str | Path, origin: str | None = None) -> Machine:
+    """The `[machine]` table of the TOML file at `path`."""
+    path = Path(path)
+    where = origin or str(path)
+    if not path.is_file():
+        raise ConfigError(where, "machine", f"no such machine description file: {path}")
+    try:
+        data = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+        raise ConfigError(str(path), "file", f"not valid TOML: {error}") from None
+    if not isinstance(data.get("machine"), dict):
+        raise ConfigError(str(path), "machine", "the file holds no [machine] table")
+    return parse_machine(data["machine"], str(path), path.resolve().parent)
+
+
+def parse_machine(table: Any, origin: str, base: Path = Path(".")) -> Machine:
+    """A `[machine]` table, or the name of a file holding one (relative to `base`), checked."""
+    if isinstance(table, str):
+        return load_machine(base / table, origin)
+    _Check(origin).table(table, "machine", "machine")
+    check = _Check(origin)
+    axes_tables = table.get("axis")
+    if not isinstance(axes_tables, list) or not axes_tables:
+        raise check.error("machine.axis", "give at least one axis as [[machine.axis]]")
+    axes = tuple(check.axis(t, f"machine.axis[{k}]") for k, t in enumerate(axes_tables))
+    names = [a.name for a in axes]
+    taken = {n for a in axes for n in (*a.motion[1:], *a.derivatives)}
+    for k, axis in enumerate(axes):
+        if names.index(axis.name) != k:
+            raise check.error(f"machine.axis[{k}].name", f"the axis {axis.name!r} is named twice")
+        if axis.name in taken:
+            raise check.error(f"machine.axis[{k}].name", f"{axis.name!r} is also a derived "
+                              "name of another axis (v<axis>, a<axis>): rename one")
+    name = table.get("name", "machine")
+    if not isinstance(name, str) or not name:
+        raise check.error("machine.name", f"expected a non-empty string, got {name!r}")
+    prior = check.prior(table.get("prior", {}), axes)
+    return Machine(name, axes, prior)
+
+
+def check_signals(machine: Machine, outputs: Iterable[str], inputs: Iterable[str],
+                  origin: str) -> None:
+    """Refuse a description whose signals the loop lacks: measured signals and efforts must
+    be outputs (`instance.variable` or source signals), feedforwards inputs."""
+    outputs, inputs = set(outputs), set(inputs)
+    for k, axis in enumerate(machine.axes):
+        key = f"machine.axis[{k}]"
+        for name in sorted(axis.measured.names):
+            if name not in outputs:
+                raise ConfigError(origin, f"{key}.measured", f"{name!r} is not an output of "
+                                  f"the loop{_nearest(name, outputs)}")
+        if axis.feedforward not in inputs:
+            raise ConfigError(origin, f"{key}.feedforward", f"{axis.feedforward!r} is not an "
+                              f"input of the loop{_nearest(axis.feedforward, inputs)}")
+        if axis.effort not in outputs:
+            raise ConfigError(origin, f"{key}.effort", f"{axis.effort!r} is not an output of "
+                              f"the loop{_nearest(axis.effort, outputs)}")
+        if axis.effort in axis.measured.names:
+            raise ConfigError(origin, f"{key}.effort", f"{axis.effort!r} is the measured "
+                              "position, not an effort: name the output the controller commands")
+
+
+def _nearest(name: str, names: set[str]) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(name, sorted(names), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+class _Check:
+    """Reads one description; every error names `machine.key`."""
+
+    def __init__(self, origin: str) -> None:
+        self.origin = origin
+
+    def error(self, key: str, message: str) -> ConfigError:
+        return ConfigError(self.origin, key, message)
+
+    def table(self, table: Any, key: str, kind: str) -> None:
+        if not isinstance(table, Mapping):
+            raise self.error(key, f"expected a table, got {table!r}")
+        unknown = sorted(set(table) - set(KEYS[kind]))
+        if unknown:
+            raise self.error(f"{key}.{unknown[0]}", f"unknown key (known: {', '.join(KEYS[kind])})")
+
+    def text(self, table: Mapping[str, Any], key: str, name: str, default: str | None = None
+             ) -> str:
+        value = table.get(name, default)
+        if value is None:
+            raise self.error(f"{key}.{name}", "required")
+        if not isinstance(value, str) or not value:
+            raise self.error(f"{key}.{name}", f"expected a non-empty string, got {value!r}")
+        return value
+
+    def number(self, table: Mapping[str, Any], key: str, name: str, positive: bool = True
+               ) -> float | None:
+        value = table.get(name)
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or not math.isfinite(value) or (positive and value <= 0):
+            raise self.error(f"{key}.{name}", f"expected a {'positive ' if positive else ''}"
+                             f"finite number, got {value!r}")
+        return float(value)
+
+    def signal(self, table: Mapping[str, Any], key: str, name: str) -> str:
+        value = self.text(table, key, name)
+        if not re.fullmatch(r"[^.\s]+\.\S+", value):
+            raise self.error(f"{key}.{name}", f"expected 'instance.variable', got {value!r}")
+        return value
+
+    def axis(self, table: Any, key: str) -> Axis:
+        self.table(table, key, "axis")
+        name = self.text(table, key, "name")
+        if not AXIS_NAME.match(name):
+            raise self.error(f"{key}.name", f"{name!r}: an axis name is a letter, then letters "
+                             "or digits (it names signals such as <axis>_ref)")
+        try:
+            measured = parse_expression(self.text(table, key, "measured"), f"{key}.measured")
+        except ExpressionError as error:
+            raise self.error(f"{key}.measured", str(error).split(": ", 1)[1]) from None
+        if not measured.names:
+            raise self.error(f"{key}.measured", "names no signal of the loop")
+        limits = self.limits(table, key)
+        return Axis(name, measured, self.signal(table, key, "feedforward"),
+                    self.signal(table, key, "effort"), limits,
+                    self.text(table, key, "unit", "m"), self.text(table, key, "effort_unit", "N"))
+
+    def limits(self, table: Mapping[str, Any], key: str) -> Limits:
+        span = table.get("range")
+        if not (isinstance(span, list) and len(span) == 2 and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in span) and span[0] < span[1]):
+            raise self.error(f"{key}.range", f"expected [low, high] with low < high, got {span!r}")
+        bounds = {n: self.number(table, key, n) for n in ("velocity", "acceleration", "jerk")}
+        for name in ("velocity", "acceleration"):
+            if bounds[name] is None:
+                raise self.error(f"{key}.{name}", "required: the excitation's bound on |"
+                                 f"{name}| in the axis's unit per second"
+                                 f"{'' if name == 'velocity' else ' squared'}")
+        velocity, acceleration = bounds["velocity"], bounds["acceleration"]
+        assert velocity is not None and acceleration is not None
+        return Limits(float(span[0]), float(span[1]), velocity, acceleration, bounds["jerk"])
+
+    def prior(self, table: Any, axes: tuple[Axis, ...]) -> Prior:
+        self.table(table, "machine.prior", "prior")
+        terms = table.get("terms", list(DEFAULT_PRIOR_TERMS))
+        if not isinstance(terms, list) or any(t not in PRIOR_TERMS for t in terms):
+            raise self.error("machine.prior.terms", f"expected a list of {', '.join(PRIOR_TERMS)}"
+                             f", got {terms!r}")
+        if "coulomb" in terms and "coulomb_asymmetric" in terms:
+            raise self.error("machine.prior.terms", "coulomb and coulomb_asymmetric model the "
+                             "same friction: choose one")
+        motion = {n for a in axes for n in a.motion}
+        extra: dict[str, dict[str, Expression]] = {}
+        for axis_name, entries in table.get("extra", {}).items():
+            key = f"machine.prior.extra.{axis_name}"
+            if axis_name not in {a.name for a in axes}:
+                raise self.error(key, f"no axis is named {axis_name!r}")
+            if not isinstance(entries, Mapping):
+                raise self.error(key, "expected a table of term = \"expression\"")
+            extra[axis_name] = {}
+            for term, text in entries.items():
+                try:
+                    expression = parse_expression(text, f"{key}.{term}")
+                except ExpressionError as error:
+                    raise self.error(f"{key}.{term}", str(error).split(": ", 1)[1]) from None
+                unknown = sorted(expression.names - motion)
+                if unknown:
+                    raise self.error(f"{key}.{term}", f"names {', '.join(unknown)}; a term may "
+                                     f"use {', '.join(sorted(motion))}")
+                extra[axis_name][term] = expression
+        width = self.number(table, "machine.prior", "coulomb_width")
+        return Prior(tuple(terms), extra, width)
