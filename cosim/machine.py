@@ -6,7 +6,8 @@ table), read by `parse_machine`, then checked against the loop's FMUs by `check_
 `a<axis>_ref`, `j<axis>_ref`, derived by flexff), the measured position (`instance.variable`,
 or an expression of such outputs: the kinematic map), the FMU input the feedforward drives,
 the effort the loop commands (the labels), units, and the excitation limits (`range`,
-`velocity`, `acceleration`, optional `jerk`). `[machine.prior]` chooses the physics prior's
+`velocity`, `acceleration`, optional `jerk`); records and datasets name the measured position
+`<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
 terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
 Every key is listed in KEYS; every error is a ConfigError naming `machine.key`.
 """
@@ -69,6 +70,16 @@ class Axis:
         return tuple(f"{d}{self.name}_ref" for d in "vaj")  # type: ignore[return-value]
 
     @property
+    def measured_signal(self) -> str:
+        """The measured position's name in records and datasets."""
+        return f"{self.name}_measured"
+
+    @property
+    def effort_signal(self) -> str:
+        """The commanded effort's name in records and datasets (the labels)."""
+        return f"{self.name}_effort"
+
+    @property
     def motion(self) -> tuple[str, str, str]:
         """The names of position, velocity and acceleration in prior terms' expressions."""
         return self.name, f"v{self.name}", f"a{self.name}"
@@ -100,6 +111,12 @@ class Machine:
     def reference_signals(self) -> tuple[str, ...]:
         """Every axis's position, velocity, acceleration and jerk reference, axis by axis."""
         return tuple(n for a in self.axes for n in (a.reference, *a.derivatives))
+
+    @property
+    def signals(self) -> tuple[str, ...]:
+        """A dataset's columns beside `time`: references, measured positions, efforts."""
+        return (*self.reference_signals, *(a.measured_signal for a in self.axes),
+                *(a.effort_signal for a in self.axes))
 
 
 def load_machine(path: str | Path, origin: str | None = None) -> Machine:

@@ -18,7 +18,7 @@ def test_an_axis_gets_its_reference_and_derived_names():
     x = drive.axis("x")
     assert (x.reference, x.derivatives, x.motion) == (
         "x_ref", ("vx_ref", "ax_ref", "jx_ref"), ("x", "vx", "ax"))
-    assert drive.reference_signals == ("x_ref", "vx_ref", "ax_ref", "jx_ref")
+    assert drive.signals == ("x_ref", "vx_ref", "ax_ref", "jx_ref", "x_measured", "x_effort")
     assert (x.limits.low, x.limits.high, x.limits.jerk) == (-0.05, 0.05, None)
     assert drive.prior.terms == ("inertia", "viscous", "coulomb", "offset")
 
