@@ -4,7 +4,8 @@ Given in a run configuration as `[machine]` (or `machine = "FILE.toml"`, a file 
 table), read by `parse_machine`, then checked against the loop's FMUs by `check_signals`. Each
 `[[machine.axis]]` names the axis (its reference signals are `<axis>_ref`, `v<axis>_ref`,
 `a<axis>_ref`, `j<axis>_ref`, derived by flexff), the measured position (`instance.variable`,
-or an expression of such outputs: the kinematic map), the FMU input the feedforward drives,
+or an expression of such outputs: the kinematic map; `true`, optional: the true position a
+simulation gives, which only the metrics read), the FMU input the feedforward drives,
 the effort the loop commands (the labels), units, and the excitation limits (`range`,
 `velocity`, `acceleration`, optional `jerk`); records and datasets name the measured position
 `<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
@@ -30,8 +31,8 @@ PRIOR_TERMS = ("inertia", "viscous", "coulomb", "coulomb_asymmetric", "offset")
 DEFAULT_PRIOR_TERMS = ("inertia", "viscous", "coulomb", "offset")
 KEYS = {
     "machine": ("name", "axis", "prior"),
-    "axis": ("name", "unit", "measured", "feedforward", "effort", "effort_unit", "range",
-             "velocity", "acceleration", "jerk"),
+    "axis": ("name", "unit", "measured", "true", "feedforward", "effort", "effort_unit",
+             "range", "velocity", "acceleration", "jerk"),
     "prior": ("terms", "extra", "coulomb_width"),
 }
 
@@ -59,6 +60,13 @@ class Axis:
     limits: Limits
     unit: str = "m"
     effort_unit: str = "N"
+    true: Expression | None = None  # the true position, for evaluation only (a simulation's)
+
+    @property
+    def evaluated(self) -> Expression:
+        """The position the tracking metrics compare with the reference: the true one where
+        the loop gives it, else the measured one."""
+        return self.true or self.measured
 
     @property
     def reference(self) -> str:
@@ -166,10 +174,11 @@ def check_signals(machine: Machine, outputs: Iterable[str], inputs: Iterable[str
     outputs, inputs = set(outputs), set(inputs)
     for k, axis in enumerate(machine.axes):
         key = f"machine.axis[{k}]"
-        for name in sorted(axis.measured.names):
-            if name not in outputs:
-                raise ConfigError(origin, f"{key}.measured", f"{name!r} is not an output of "
-                                  f"the loop{_nearest(name, outputs)}")
+        for part, position in (("measured", axis.measured), ("true", axis.true)):
+            for name in sorted(position.names if position else ()):
+                if name not in outputs:
+                    raise ConfigError(origin, f"{key}.{part}", f"{name!r} is not an output of "
+                                      f"the loop{_nearest(name, outputs)}")
         if axis.feedforward not in inputs:
             raise ConfigError(origin, f"{key}.feedforward", f"{axis.feedforward!r} is not an "
                               f"input of the loop{_nearest(axis.feedforward, inputs)}")
@@ -236,16 +245,23 @@ class _Check:
         if not AXIS_NAME.match(name):
             raise self.error(f"{key}.name", f"{name!r}: an axis name is a letter, then letters "
                              "or digits (it names signals such as <axis>_ref)")
-        try:
-            measured = parse_expression(self.text(table, key, "measured"), f"{key}.measured")
-        except ExpressionError as error:
-            raise self.error(f"{key}.measured", str(error).split(": ", 1)[1]) from None
-        if not measured.names:
-            raise self.error(f"{key}.measured", "names no signal of the loop")
+        measured = self.position(table, key, "measured")
+        true = self.position(table, key, "true") if "true" in table else None
         limits = self.limits(table, key)
         return Axis(name, measured, self.signal(table, key, "feedforward"),
                     self.signal(table, key, "effort"), limits,
-                    self.text(table, key, "unit", "m"), self.text(table, key, "effort_unit", "N"))
+                    self.text(table, key, "unit", "m"), self.text(table, key, "effort_unit", "N"),
+                    true)
+
+    def position(self, table: Mapping[str, Any], key: str, name: str) -> Expression:
+        """A position: one signal of the loop or an expression of several (a kinematic map)."""
+        try:
+            position = parse_expression(self.text(table, key, name), f"{key}.{name}")
+        except ExpressionError as error:
+            raise self.error(f"{key}.{name}", str(error).split(": ", 1)[1]) from None
+        if not position.names:
+            raise self.error(f"{key}.{name}", "names no signal of the loop")
+        return position
 
     def limits(self, table: Mapping[str, Any], key: str) -> Limits:
         span = table.get("range")

@@ -1,25 +1,62 @@
-"""Tracking metrics of a run: per axis e = reference - true position.
+"""Tracking metrics of a run: per axis e = reference - position.
 
-  e2   = sqrt(sum_k e_k^2 * dt) / T   the thesis's "average 2-norm" [m/sqrt(s)]
-  einf = max_k |e_k|                  [m]
-  rms  = sqrt(mean_k e_k^2)           [m]
+  e2   = sqrt(sum_k e_k^2 * dt) / T   the thesis's "average 2-norm" [unit/sqrt(s)]
+  einf = max_k |e_k|                  [unit]
+  rms  = sqrt(mean_k e_k^2)           [unit]
 
-over every communication point k = 0 .. N of a run of length T = N dt. The true position is
-the plant's `x`, `y` outputs, which only evaluation ever sees. A streamed run sums the squares
+over every communication point k = 0 .. N of a run of length T = N dt. The axes are a machine
+description's (`machine_axes`: `<axis>_ref` against the true position where the loop gives
+one, else the measured one, each an expression of recorded signals) or, by default, the
+manipulator's x and y (`x_ref` against the plant's true `x`). A streamed run sums the squares
 and keeps the largest error chunk by chunk (Tracking), so it never holds the whole record.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from flexff.cosim.machine import Machine
 from flexff.cosim.recording import Recording, signal_name
+from flexff.fmu.expressions import Expression, evaluate, parse_expression
 
 AXES = ("x", "y")
+
+
+@dataclass(frozen=True)
+class TrackedAxis:
+    """One axis's error e = reference - position, each an expression of recorded signals
+    (a short name `x` stands for the one recorded `fmu.x`, as signal_name finds it)."""
+
+    name: str
+    reference: Expression
+    position: Expression
+
+    def columns(self, names: Collection[str]) -> dict[str, str]:
+        """Each name the expressions read -> its recorded column (KeyError if missing)."""
+        return {n: signal_name(names, n) for n in self.reference.names | self.position.names}
+
+    def error(self, columns: Mapping[str, np.ndarray], found: Mapping[str, str]) -> np.ndarray:
+        values = {n: columns[c] for n, c in found.items()}
+        key = f"axis {self.name}"
+        return np.asarray(evaluate(self.reference, values, key)
+                          - evaluate(self.position, values, key), dtype=float)
+
+
+def _tracked(name: str, reference: str, position: Expression) -> TrackedAxis:
+    return TrackedAxis(name, parse_expression(reference, name), position)
+
+
+MANIPULATOR_AXES = tuple(_tracked(a, f"{a}_ref", parse_expression(a, a)) for a in AXES)
+
+
+def machine_axes(machine: Machine) -> tuple[TrackedAxis, ...]:
+    """The tracked axes of a machine description."""
+    return tuple(_tracked(a.name, a.reference, a.evaluated) for a in machine.axes)
 
 
 def error_norms(error: np.ndarray, step: float) -> dict[str, float]:
@@ -33,56 +70,58 @@ def error_norms(error: np.ndarray, step: float) -> dict[str, float]:
             "rms": math.sqrt(float(np.mean(error**2)))}
 
 
-def tracking_metrics(recording: Recording) -> dict[str, dict[str, float]]:
-    """{"x": {...}, "y": {...}} from the recorded reference and true position."""
-    return {axis: error_norms(recording[f"{axis}_ref"] - recording[axis], recording.step)
-            for axis in AXES}
+def tracking_metrics(recording: Recording, axes: Sequence[TrackedAxis] = MANIPULATOR_AXES
+                     ) -> dict[str, dict[str, float]]:
+    """{axis: {e2, einf, rms}} from the recorded references and positions."""
+    return {a.name: error_norms(a.error(recording.signals, a.columns(recording.signals)),
+                                recording.step) for a in axes}
 
 
 class Tracking:
     """The tracking metrics of a run fed chunk by chunk (`add`): per axis the sum of e^2, the
-    largest |e| and the count, over the recorded columns `names` (reference and true position
-    found by their short names)."""
+    largest |e| and the count, over the recorded columns `names`."""
 
-    def __init__(self, names: Sequence[str], step: float) -> None:
+    def __init__(self, names: Sequence[str], step: float,
+                 axes: Sequence[TrackedAxis] = MANIPULATOR_AXES) -> None:
         self.step = step
-        self.columns = {a: (signal_name(names, f"{a}_ref"), signal_name(names, a)) for a in AXES}
-        self.squares = dict.fromkeys(AXES, 0.0)
-        self.largest = dict.fromkeys(AXES, 0.0)
+        self.axes = {a.name: (a, a.columns(names)) for a in axes}
+        self.squares = dict.fromkeys(self.axes, 0.0)
+        self.largest = dict.fromkeys(self.axes, 0.0)
         self.count = 0
 
     @staticmethod
-    def tracks(names: Sequence[str]) -> bool:
-        """Whether `names` holds a reference and a true position for both axes."""
+    def tracks(names: Sequence[str], axes: Sequence[TrackedAxis] = MANIPULATOR_AXES) -> bool:
+        """Whether `names` holds what every axis's reference and position read."""
         try:
-            for a in AXES:
-                signal_name(names, a), signal_name(names, f"{a}_ref")
+            for a in axes:
+                a.columns(names)
         except KeyError:
             return False
         return True
 
     def add(self, columns: Mapping[str, np.ndarray]) -> None:
-        for axis, (ref, true) in self.columns.items():
-            error = columns[ref] - columns[true]
-            self.squares[axis] += float(np.sum(error**2))
-            self.largest[axis] = max(self.largest[axis], float(np.max(np.abs(error)))
+        for name, (axis, found) in self.axes.items():
+            error = axis.error(columns, found)
+            self.squares[name] += float(np.sum(error**2))
+            self.largest[name] = max(self.largest[name], float(np.max(np.abs(error)))
                                      if error.size else 0.0)
         self.count += len(next(iter(columns.values()))) if columns else 0
 
     def metrics(self) -> dict[str, dict[str, float]]:
-        """{"x": {e2, einf, rms}, "y": {...}} (error_norms' definitions)."""
+        """{axis: {e2, einf, rms}} (error_norms' definitions)."""
         if self.count < 2:
             raise ValueError("the error needs at least two samples")
         duration = (self.count - 1) * self.step
         return {a: {"e2": math.sqrt(self.squares[a] * self.step) / duration,
                     "einf": self.largest[a], "rms": math.sqrt(self.squares[a] / self.count)}
-                for a in AXES}
+                for a in self.axes}
 
 
-def run_metrics(recording: Recording) -> dict[str, Any]:
+def run_metrics(recording: Recording, axes: Sequence[TrackedAxis] = MANIPULATOR_AXES
+                ) -> dict[str, Any]:
     """The content of metrics.json of a recording held in memory (summary_metrics)."""
-    tracked = all(n in recording for axis in AXES for n in (axis, f"{axis}_ref"))
-    return summary_metrics(tracking_metrics(recording) if tracked else {},
+    tracked = Tracking.tracks(tuple(recording.signals), axes)
+    return summary_metrics(tracking_metrics(recording, axes) if tracked else {},
                            float(recording.time[-1] - recording.time[0]), recording.wall_s,
                            recording.timing)
 
