@@ -63,6 +63,7 @@ from typing import Any
 import tomli_w
 
 from flexff.cosim.example_configs import config_examples as config_examples  # public API
+from flexff.cosim.machine import machine_table, parse_machine
 from flexff.cosim.memory import MemoryNeeded
 from flexff.cosim.references import REFERENCE_KINDS, Reference, SegmentError, build_reference
 from flexff.cosim.schema import (
@@ -93,7 +94,7 @@ FEEDFORWARD_KINDS = ("none", "rigid-body", "learned")  # kind K is the built-in 
 RENAMED_KINDS = {"model": "rigid-body", "onnx": "learned"}  # old [feedforward] kind -> now
 FEEDFORWARD_MODES = ("step", "task", "precomputed")
 SHORT_FORM = ("plant", "controller", "feedforward")
-TABLES = ("run", "reference", "source", "fmu", "connection", "record", *SHORT_FORM)
+TABLES = ("run", "reference", "source", "fmu", "connection", "record", "machine", *SHORT_FORM)
 PLANT_EXTRA = ("max_substep",)  # plant FMU parameters beyond the System's own
 START_PARAMETERS = ("x_start", "y_start")
 
@@ -182,6 +183,8 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                       "csv": config.record.csv,
                       **({"plot": config.record.plot} if config.record.plot is not None else {}),
                       **({"every": config.record.every} if config.record.every != 1 else {})}
+    if config.machine is not None:
+        data["machine"] = machine_table(config.machine)
     return data
 
 
@@ -250,7 +253,9 @@ class _Parser:
             sources=tuple(sources), connections=self.connections(data.get("connection", []),
                                                                  fmus),
             algorithm=self.choice(run, "run", "algorithm", ALGORITHMS, "gauss-seidel"),
-            record=self.record(self.table(data, "record")), origin=self.origin)
+            record=self.record(self.table(data, "record")), origin=self.origin,
+            machine=parse_machine(data["machine"], self.origin, self.base)
+            if "machine" in data else None)
         object.__setattr__(config, "checked", True)  # frozen; see RunConfig
         return config
 

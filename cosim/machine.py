@@ -167,6 +167,24 @@ def parse_machine(table: Any, origin: str, base: Path = Path(".")) -> Machine:
     return Machine(name, axes, prior)
 
 
+def machine_table(machine: Machine) -> dict[str, Any]:
+    """The description as the TOML table `parse_machine` reads (cosim.config.expanded)."""
+    axes = [{"name": a.name, "unit": a.unit, "measured": a.measured.text,
+             **({"true": a.true.text} if a.true else {}), "feedforward": a.feedforward,
+             "effort": a.effort, "effort_unit": a.effort_unit,
+             "range": [a.limits.low, a.limits.high], "velocity": a.limits.velocity,
+             "acceleration": a.limits.acceleration,
+             **({"jerk": a.limits.jerk} if a.limits.jerk is not None else {})}
+            for a in machine.axes]
+    prior = {"terms": list(machine.prior.terms),
+             **({"extra": {axis: {term: e.text for term, e in terms.items()}
+                           for axis, terms in machine.prior.extra.items()}}
+                if machine.prior.extra else {}),
+             **({"coulomb_width": machine.prior.coulomb_width}
+                if machine.prior.coulomb_width is not None else {})}
+    return {"name": machine.name, "axis": axes, "prior": prior}
+
+
 def check_signals(machine: Machine, outputs: Iterable[str], inputs: Iterable[str],
                   origin: str) -> None:
     """Refuse a description whose signals the loop lacks: measured signals and efforts must

@@ -35,7 +35,13 @@ from flexff.cosim.config import expanded, load_config
 from flexff.cosim.handover import Worker
 from flexff.cosim.master import CosimError, Master, Streamed
 from flexff.cosim.memory import MemoryNeeded, check_memory
-from flexff.cosim.metrics import Tracking, summary_metrics
+from flexff.cosim.metrics import (
+    MANIPULATOR_AXES,
+    TrackedAxis,
+    Tracking,
+    machine_axes,
+    summary_metrics,
+)
 from flexff.cosim.plots import PLOT_SIGNALS, RunPlots, plot_tet
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import Recording, RecordWriter, atomic_write, signal_name
@@ -156,9 +162,11 @@ class RunSink:
     metrics where the run has a reference and a true position, and the plots if `plot`."""
 
     def __init__(self, folder: Path, recorded: Sequence[str], kept: dict[str, str],
-                 points: int, step: float, plot: bool, every: int = 1) -> None:
+                 points: int, step: float, plot: bool, every: int = 1,
+                 axes: Sequence[TrackedAxis] = MANIPULATOR_AXES) -> None:
         self.writer, self.kept, self.every = RecordWriter(folder), kept, every
-        self.tracking = Tracking(recorded, step) if Tracking.tracks(recorded) else None
+        self.tracking = Tracking(recorded, step, axes) if Tracking.tracks(recorded, axes) \
+            else None
         self.plots = RunPlots(recorded, points, step) if plot else None
         self.last_time: float | None = None  # of the last point handed over
 
@@ -172,6 +180,11 @@ class RunSink:
             self.tracking.add(columns)
         if self.plots is not None:
             self.plots.add(k0, columns)
+
+
+def tracked_axes(config: RunConfig) -> tuple[TrackedAxis, ...]:
+    """The axes a run's metrics track: its machine description's, else the manipulator's."""
+    return MANIPULATOR_AXES if config.machine is None else machine_axes(config.machine)
 
 
 def _known(master: Master, name: str) -> bool:
@@ -260,7 +273,7 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
         with scenario.master() as master:
             recorded = _wanted(scenario, master)
             sink = RunSink(out, recorded, _kept(recorded, config), config.steps + 1,
-                           config.step, plot, config.record.every)
+                           config.step, plot, config.record.every, tracked_axes(config))
             try:
                 streamed = _stream(master, scenario, sink, recorded, progress, pacing, cpu)
             except CosimError as error:

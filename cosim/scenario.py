@@ -19,6 +19,7 @@ import numpy as np
 
 from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME, read_time_table
+from flexff.cosim.machine import check_signals
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.references import Reference, build_reference
 from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig, point_time
@@ -79,6 +80,10 @@ def resolve(config: RunConfig, folder: str | Path) -> Scenario:
         links = wire(ports, list(sources), config.connections, config.algorithm)
     except WiringError as error:
         raise ConfigError(config.origin, error.key, error.message) from None
+    if config.machine is not None:
+        check_signals(config.machine, [*sources, *(f"{p.name}.{n}" for p in ports
+                                                   for n in p.info.outputs)],
+                      [f"{p.name}.{n}" for p in ports for n in p.info.inputs], config.origin)
     return Scenario(config, tuple(fmus), tuple(links), sources)
 
 

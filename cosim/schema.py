@@ -36,6 +36,9 @@ General form (SI units):
                    offset (SSP's LinearTransformation: to = gain * from + offset)
   [record]         signals = [names] (default: all), csv (bool, default false),
                    plot (bool, default: in a manipulator run), every (int, default 1)
+  [machine]        the machine's description (cosim.machine), or machine = "FILE.toml": its
+                   axes' signals are checked against the loop, and the tracking metrics are
+                   its axes'
 
 Inputs without a [[connection]] take, by name, the output of the same name of another FMU or
 the source signal of that name (cosim.wiring). The manipulator's short form ([plant],
@@ -47,9 +50,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from flexff.fmu.errors import InputError
+
+if TYPE_CHECKING:  # cosim.machine reads ConfigError from here
+    from flexff.cosim.machine import Machine
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
 STEP_TOLERANCE = 1e-9  # relative: stop / step must be this close to a whole number
@@ -153,6 +159,7 @@ class RunConfig:
     start: float = 0.0  # the start time [s]
     tolerance: float | None = None  # [run] tolerance as given (None: each FMU's own)
     step_timeout: float | None = None  # [s] per call of an isolated FMU (None: none)
+    machine: Machine | None = None  # the machine description, if given
     checked: bool = field(default=False, init=False, compare=False, repr=False)
 
     @property

@@ -12,7 +12,7 @@ from __future__ import annotations
 import ast
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -42,11 +42,11 @@ class ExpressionError(InputError):
 @dataclass(frozen=True)
 class Expression:
     """A checked expression: its text, its tree and the names it reads (FUNCTIONS and
-    CONSTANTS excluded)."""
+    CONSTANTS excluded); equal where their texts are."""
 
     text: str
-    tree: ast.expr
-    names: frozenset[str]
+    tree: ast.expr = field(compare=False, repr=False)
+    names: frozenset[str] = field(compare=False)
 
 
 def parse_expression(text: str, key: str) -> Expression:
