@@ -34,8 +34,8 @@ the same command again continues after the last one.
 from __future__ import annotations
 
 import json
+import math
 import shutil
-import tempfile
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -45,53 +45,40 @@ import numpy as np
 from matplotlib.figure import Figure
 from tqdm import tqdm
 
-from flexff.cosim.config import expanded
 from flexff.cosim.csv_text import TIME
-from flexff.cosim.metrics import AXES, error_norms, tracking_metrics
 from flexff.cosim.plots import save_figure
-from flexff.cosim.recording import Recording, atomic_write
-from flexff.cosim.run import output_folder, simulate
-from flexff.cosim.scenario import resolve
+from flexff.cosim.recording import atomic_write
+from flexff.cosim.run import output_folder
 from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.errors import InputError
-from flexff.learning.ilc_filter import (
-    CUTOFF_HZ,
-    LearningFilter,
-    check_cutoff,
-    learning_filter,
-)
-from flexff.learning.loop import dataset_taps, with_feedforward, with_feedforward_table
-from flexff.plant.parameters import NOMINAL, PlantParameters
-from flexff.plant.signals import FEEDBACK_FORCES, FEEDFORWARD_FORCES, TRUE_POSITION, names
-from flexff.plant.variants import VARIANTS
+from flexff.learning.ilc_filter import CUTOFF_HZ, LearningFilter, check_cutoff
+from flexff.learning.ilc_loops import IlcLoop, ManipulatorLoop
 
 ITERATIONS = 10  # learning trials after PID alone
 RESULT = "feedforward.csv"
 STATE = "ilc.json"
 NOISE_FLOOR = "noise_floor"  # ilc.json's key: e2 per axis of the measurement noise's share
-EXACT_ENCODERS = {"noise_std": 0.0, "encoder_quantization": 0.0}  # a plant measuring exactly
 
 
 def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
         cutoff_hz: float = CUTOFF_HZ, progress: bool = True,
         say: Callable[[str], None] = print) -> dict[str, Any]:
     """Run PID alone and `iterations` learning trials of `config` (continuing the iteration in
-    `out` where one with the same loop and cutoff is there); return the content of ilc.json."""
+    `out` where one with the same loop and cutoff is there); return the content of ilc.json.
+    A loop with a [machine] description learns each of its axes' feedforward inputs
+    (learning.ilc_loops.MachineLoop), any other is the manipulator's (ManipulatorLoop)."""
     if iterations < 1:
         raise InputError(f"--iterations must be at least 1, got {iterations}")
-    if config.reference is None:
-        raise InputError(f"{config.origin}: the loop has no [reference]: iterative learning "
-                         f"repeats one reference; add a [reference] table")
+    plain = replace(config, record=RecordConfig(csv=False))
+    loop: IlcLoop = ManipulatorLoop(plain)
     check_cutoff(cutoff_hz, config.step)
     out = output_folder(out)
     (out / "tables").mkdir(exist_ok=True)
-    loop = replace(config, record=RecordConfig(csv=False))
-    identity = {"loop": json.loads(json.dumps(expanded(with_feedforward(loop)), default=str)),
-                "cutoff_hz": cutoff_hz}
+    identity = {"loop": loop.identity(), "cutoff_hz": cutoff_hz}
     state = _resumed(out, identity)
     if not state["trials"]:
-        _write_table(out / "tables" / "trial-000.csv", loop.step,
-                     np.zeros((loop.steps + 1, len(FEEDFORWARD_FORCES))))
+        _write_table(out / "tables" / "trial-000.csv", plain.step,
+                     np.zeros((plain.steps + 1, len(loop.columns))), loop.columns)
     done = len(state["trials"])
     if done:
         say(f"{out}: {done} trial(s) there" + (", continuing" if done <= iterations else ""))
@@ -100,77 +87,42 @@ def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
     with tqdm(total=iterations + 1, initial=min(done, iterations + 1), unit="trial",
               disable=not progress, desc="ILC") as bar:
         for trial in range(done, iterations + 1):
-            seed = _seed(loop, trial)
-            table = out / "tables" / f"trial-{trial:03d}.csv"
-            recording, applied, error = _trial(with_feedforward_table(_seeded(loop, seed),
-                                                                      table))
+            ran_trial = loop.trial(out / "tables" / f"trial-{trial:03d}.csv", trial)
             if filter_ is None:
-                filter_ = learning_filter(recording.signals, loop.step, _plant_model(loop),
-                                          cutoff_hz)
-            _write_table(out / "tables" / f"trial-{trial + 1:03d}.csv", loop.step,
-                         filter_.update(applied, error))
-            state["trials"].append(_trial_record(trial, seed, recording, state["trials"]))
-            _finish(out, state)
+                filter_ = loop.learning_filter(ran_trial.recording, cutoff_hz)
+            _write_table(out / "tables" / f"trial-{trial + 1:03d}.csv", plain.step,
+                         filter_.update(ran_trial.applied, ran_trial.error), loop.columns)
+            state["trials"].append(_trial_record(trial, ran_trial.seed,
+                                                 loop.metrics(ran_trial.recording),
+                                                 state["trials"]))
+            _finish(out, state, loop)
             bar.update()
             bar.set_postfix_str(", ".join(f"e2 {a} {state['trials'][-1][a]['e2']:.3g}"
-                                          for a in AXES))
+                                          for a in loop.axes))
     if ran or NOISE_FLOOR not in state:
-        state[NOISE_FLOOR] = noise_floor(loop, out / RESULT)
-        _finish(out, state)
+        state[NOISE_FLOOR] = loop.noise_floor(out / RESULT)
+        _finish(out, state, loop)
     return state
 
 
-def noise_floor(loop: RunConfig, table: Path) -> dict[str, float] | None:
-    """The e2 per axis that the built-in plant's encoder noise and quantization cause in
-    `loop` fed the force table `table`: the e2 of the difference of its tracking errors with
-    them (the loop's own seed) and without. None for a loop without a built-in plant (an FMU's
-    noise cannot be switched off) or whose plant measures exactly."""
-    plant = loop.builtin("plant")
-    if plant is None:
-        return None
-    measured = _plant_parameters(loop)
-    if measured.noise_std == 0.0 and measured.encoder_quantization <= 0.5:
-        return None
-    exact = replace(loop, fmus=tuple(replace(f, parameters={**f.parameters, **EXACT_ENCODERS})
-                                     if f.builtin == "plant" else f for f in loop.fmus))
-    noisy, clean = (_trial(with_feedforward_table(c, table))[2] for c in (loop, exact))
-    return {a: error_norms(noisy[:, k] - clean[:, k], loop.step)["e2"]
-            for k, a in enumerate(AXES)}
-
-
-def _trial(config: RunConfig) -> tuple[Recording, np.ndarray, np.ndarray]:
-    """Run one trial; its recording, the force the plant received (feedforward as the
-    controller read it plus feedback, (n, 2) [N]) and the tracking error (n, 2) [m]."""
-    with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
-        scenario = resolve(config, folder)
-        taps = dataset_taps(scenario)
-        recording = simulate(scenario, progress=False)
-    applied = np.column_stack([taps[ff].read(recording) + taps[fb].read(recording) for ff, fb
-                               in zip(names(FEEDFORWARD_FORCES), names(FEEDBACK_FORCES))])
-    error = np.column_stack([recording[f"{a}_ref"] - taps[a].read(recording)
-                             for a in names(TRUE_POSITION)])
-    return recording, applied, error
-
-
-def _trial_record(trial: int, seed: int | None, recording: Recording,
+def _trial_record(trial: int, seed: int | None, metrics: dict[str, dict[str, float]],
                   before: list[dict[str, Any]]) -> dict[str, Any]:
     """One trial's line in ilc.json: its norms per axis and their ratio PID alone / trial."""
-    metrics = tracking_metrics(recording)
     pid = before[0] if before else metrics
-    return {"trial": trial, "seed": seed, **{a: {**metrics[a], "e2_ratio": (
-        pid[a]["e2"] / metrics[a]["e2"] if metrics[a]["e2"] > 0 else None)} for a in AXES}}
+    return {"trial": trial, "seed": seed, **{a: {**m, "e2_ratio": (
+        pid[a]["e2"] / m["e2"] if m["e2"] > 0 else None)} for a, m in metrics.items()}}
 
 
-def _finish(out: Path, state: dict[str, Any]) -> None:
+def _finish(out: Path, state: dict[str, Any], loop: IlcLoop) -> None:
     """After a trial: the best trial's table as the result, ilc.json, e2.png."""
     trials = state["trials"]
-    best = min(trials, key=lambda t: float(np.hypot(t["x"]["e2"], t["y"]["e2"])))["trial"]
+    best = min(trials, key=lambda t: math.hypot(*(t[a]["e2"] for a in loop.axes)))["trial"]
     state["best"] = best
     atomic_write(out / RESULT, lambda tmp: shutil.copyfile(
         out / "tables" / f"trial-{best:03d}.csv", tmp))
     text = json.dumps(state, indent=2) + "\n"
     atomic_write(out / STATE, lambda tmp: tmp.write_text(text, "utf-8"))
-    plot_trials(trials, out / "e2.png", state.get(NOISE_FLOOR))
+    plot_trials(trials, out / "e2.png", state.get(NOISE_FLOOR), loop.axes, loop.unit)
 
 
 def _resumed(out: Path, identity: dict[str, Any]) -> dict[str, Any]:
@@ -197,63 +149,30 @@ def _resumed(out: Path, identity: dict[str, Any]) -> dict[str, Any]:
     return {**state, "trials": trials[:kept]}
 
 
-def _write_table(path: Path, step: float, force: np.ndarray) -> None:
-    """The feedforward force (n, 2) [N] at t = 0, step, ... as a CSV time table."""
+def _write_table(path: Path, step: float, force: np.ndarray, columns: tuple[str, ...]) -> None:
+    """The feedforward (n, len(columns)) at t = 0, step, ... as a CSV time table."""
     time = np.arange(force.shape[0]) * step
-    header = ",".join([TIME, *names(FEEDFORWARD_FORCES)])
+    header = ",".join([TIME, *columns])
     atomic_write(path, lambda tmp: np.savetxt(tmp, np.column_stack([time, force]),
                                               fmt="%.17g", delimiter=",", header=header,
                                               comments=""))
 
 
-def _seed(loop: RunConfig, trial: int) -> int | None:
-    """Trial `trial`'s noise seed of the built-in plant (None without one)."""
-    plant = loop.builtin("plant")
-    return None if plant is None else int(plant.options.get("seed", 0)) + 1 + trial
-
-
-def _seeded(loop: RunConfig, seed: int | None) -> RunConfig:
-    if seed is None:
-        return loop
-    return replace(loop, fmus=tuple(replace(f, options={**f.options, "seed": seed})
-                                    if f.builtin == "plant" else f for f in loop.fmus))
-
-
-def _plant_parameters(loop: RunConfig) -> PlantParameters:
-    """The true parameters of the loop's built-in plant: its variant's with the loop's values
-    (the nominal ones for a plant FMU by path)."""
-    plant = loop.builtin("plant")
-    if plant is None:
-        return NOMINAL
-    known = set(PlantParameters.names())
-    return VARIANTS[plant.options["variant"]].parameters.with_values(
-        **{k: float(v) for k, v in plant.parameters.items() if k in known})
-
-
-def _plant_model(loop: RunConfig) -> PlantParameters:
-    """The parameters of the loop's plant model (_plant_parameters), its tool (where it has
-    one) counted at the wrist, for below its mount's mode it moves with the wrist."""
-    parameters = _plant_parameters(loop)
-    plant = loop.builtin("plant")
-    if plant is None or not VARIANTS[plant.options["variant"]].parasitic_mode:
-        return parameters
-    return parameters.with_values(m_ee=parameters.m_ee + parameters.m_tool)
-
-
 def plot_trials(trials: list[dict[str, Any]], path: Path,
-                floor: dict[str, float] | None = None) -> Path:
+                floor: dict[str, float] | None = None, axes: tuple[str, ...] = ("x", "y"),
+                unit: str = "m") -> Path:
     """e2 per axis against trial (log scale), trial 0 being PID alone, and the noise `floor`
     per axis (dashed) where there is one."""
     figure = Figure(figsize=(6.5, 4))
     ax = figure.subplots()
     numbers = [t["trial"] for t in trials]
-    for axis in AXES:
+    for axis in axes:
         line, = ax.semilogy(numbers, [t[axis]["e2"] for t in trials], "o-", ms=4,
                             label=f"e2 {axis}")
         if floor is not None:
             ax.axhline(floor[axis], ls="--", lw=1, color=line.get_color(),
                        label=f"noise floor {axis}")
-    ax.set(xlabel="trial (0: PID alone)", ylabel="e2 [m/√s]",
+    ax.set(xlabel="trial (0: PID alone)", ylabel=f"e2 [{unit}/√s]",
            title="iterative learning control: tracking error per trial")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(loc="upper right")

@@ -47,8 +47,19 @@ def on_references(loop: RunConfig, table: Path, stop: float, name: str,
     axis's feedforward from the CSV table `feedforward` (columns `<axis>_ff`) or zero."""
     machine = loop_machine(loop)
     given = set(machine.reference_signals)
+    reference = None if loop.reference is None or given.isdisjoint(Reference.SIGNALS) \
+        else loop.reference
+    sources = (*_other_sources(loop, given), SourceConfig("csv", path=Path(table)))
+    return with_feedforward(replace(loop, name=name, start=0.0, stop=stop, reference=reference,
+                                    sources=sources), feedforward)
+
+
+def with_feedforward(loop: RunConfig, feedforward: Path | None = None) -> RunConfig:
+    """`loop` with each axis's feedforward input fed from the CSV table `feedforward`
+    (columns `<axis>_ff`), or zero for None; whatever fed those inputs before goes."""
+    machine = loop_machine(loop)
     fed = {feedforward_signal(a.name) for a in machine.axes}
-    sources = [*_other_sources(loop, given | fed), SourceConfig("csv", path=Path(table))]
+    sources = _other_sources(loop, fed)
     if feedforward is not None:
         sources.append(SourceConfig("csv", path=Path(feedforward)))
     else:
@@ -58,10 +69,7 @@ def on_references(loop: RunConfig, table: Path, stop: float, name: str,
                    *(ConnectionConfig(feedforward_signal(a.name), a.feedforward,
                                       key=f"machine.axis[{k}].feedforward")
                      for k, a in enumerate(machine.axes)))
-    reference = None if loop.reference is None or given.isdisjoint(Reference.SIGNALS) \
-        else loop.reference
-    return checked(replace(loop, name=name, start=0.0, stop=stop, reference=reference,
-                           sources=tuple(sources), connections=connections))
+    return checked(replace(loop, sources=tuple(sources), connections=connections))
 
 
 def _other_sources(loop: RunConfig, replaced: set[str]) -> list[SourceConfig]:

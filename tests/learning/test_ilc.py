@@ -18,13 +18,14 @@ from flexff.cosim.scenario import reference_samples
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
 from flexff.learning import ilc as ilc_module
-from flexff.learning.ilc import EXACT_ENCODERS, NOISE_FLOOR, ilc
+from flexff.learning.ilc import NOISE_FLOOR, ilc
 from flexff.learning.ilc_filter import (
     CUTOFF_HZ,
     LearningFilter,
     learning_filter,
     model_inverse_dynamics,
 )
+from flexff.learning.ilc_loops import EXACT_ENCODERS
 from flexff.learning.loop import with_feedforward_table
 from flexff.plant.parameters import NOMINAL
 from flexff.plant.system import plant_system

@@ -1,0 +1,164 @@
+"""The loops iterative learning control (learning.ilc) runs: what a trial is on each kind.
+
+An IlcLoop runs one trial with its feedforward from a table and says what the plant received,
+how far it missed the reference and what the learning filter's model is. ManipulatorLoop is
+flexff's manipulator (built-in controller's Fx_ff, Fy_ff; its built-in plant's noise seeded
+per trial and its noise floor measured).
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from flexff.cosim.config import expanded
+from flexff.cosim.metrics import AXES, error_norms, tracking_metrics
+from flexff.cosim.recording import Recording
+from flexff.cosim.run import simulate
+from flexff.cosim.scenario import resolve
+from flexff.cosim.schema import RunConfig
+from flexff.fmu.errors import InputError
+from flexff.learning.ilc_filter import LearningFilter, learning_filter
+from flexff.learning.loop import dataset_taps, with_feedforward, with_feedforward_table
+from flexff.plant.parameters import NOMINAL, PlantParameters
+from flexff.plant.signals import FEEDBACK_FORCES, FEEDFORWARD_FORCES, TRUE_POSITION, names
+from flexff.plant.variants import VARIANTS
+
+EXACT_ENCODERS = {"noise_std": 0.0, "encoder_quantization": 0.0}  # a plant measuring exactly
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One trial's record, the effort the plant received (n, axes) and the tracking error
+    (n, axes), and the noise seed it ran with (None: the loop's own)."""
+
+    recording: Recording
+    applied: np.ndarray
+    error: np.ndarray
+    seed: int | None
+
+
+class IlcLoop(Protocol):
+    """What the iteration needs of a loop."""
+
+    axes: tuple[str, ...]  # the axes, in the order of the tables' columns
+    columns: tuple[str, ...]  # the feedforward tables' columns beside time
+    unit: str  # the positions' unit
+
+    def identity(self) -> Any:
+        """The loop as an iteration in a folder must match to be continued (JSON)."""
+
+    def trial(self, table: Path, trial: int) -> Trial:
+        """Run trial number `trial` with its feedforward from `table`."""
+
+    def learning_filter(self, recording: Recording, cutoff_hz: float) -> LearningFilter:
+        """The learning filter along the reference of `recording` (trial 0's)."""
+
+    def metrics(self, recording: Recording) -> dict[str, dict[str, float]]:
+        """e2, einf, rms per axis."""
+
+    def noise_floor(self, table: Path) -> dict[str, float] | None:
+        """e2 per axis that the measurement noise causes with `table` (None: unknown)."""
+
+
+def run_trial(config: RunConfig) -> tuple[Recording, Any]:
+    """Run `config` once; its recording and its resolved scenario."""
+    with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
+        scenario = resolve(config, folder)
+        return simulate(scenario, progress=False), scenario
+
+
+class ManipulatorLoop:
+    """flexff's manipulator loop (its built-in controller, a [reference])."""
+
+    axes: tuple[str, ...] = AXES
+    columns: tuple[str, ...] = names(FEEDFORWARD_FORCES)
+    unit = "m"
+
+    def __init__(self, config: RunConfig) -> None:
+        if config.reference is None:
+            raise InputError(f"{config.origin}: the loop has no [reference]: iterative learning "
+                             f"repeats one reference; add a [reference] table")
+        self.config = config
+
+    def identity(self) -> Any:
+        return json.loads(json.dumps(expanded(with_feedforward(self.config)), default=str))
+
+    def trial(self, table: Path, trial: int) -> Trial:
+        seed = self.seed(trial)
+        recording, applied, error = self._run(with_feedforward_table(self._seeded(seed), table))
+        return Trial(recording, applied, error, seed)
+
+    def _run(self, config: RunConfig) -> tuple[Recording, np.ndarray, np.ndarray]:
+        """The recording, the force the plant received (feedforward as the controller read it
+        plus feedback, (n, 2) [N]) and the tracking error (n, 2) [m]."""
+        recording, scenario = run_trial(config)
+        taps = dataset_taps(scenario)
+        applied = np.column_stack([taps[ff].read(recording) + taps[fb].read(recording)
+                                   for ff, fb in zip(names(FEEDFORWARD_FORCES),
+                                                     names(FEEDBACK_FORCES))])
+        error = np.column_stack([recording[f"{a}_ref"] - taps[a].read(recording)
+                                 for a in names(TRUE_POSITION)])
+        return recording, applied, error
+
+    def learning_filter(self, recording: Recording, cutoff_hz: float) -> LearningFilter:
+        return learning_filter(recording.signals, self.config.step, self._plant_model(),
+                               cutoff_hz)
+
+    def metrics(self, recording: Recording) -> dict[str, dict[str, float]]:
+        return tracking_metrics(recording)
+
+    def noise_floor(self, table: Path) -> dict[str, float] | None:
+        """The e2 per axis that the built-in plant's encoder noise and quantization cause
+        with the force table `table`: the e2 of the difference of its tracking errors with them
+        (the loop's own seed) and without. None for a loop without a built-in plant (an FMU's
+        noise cannot be switched off) or whose plant measures exactly."""
+        loop = self.config
+        if loop.builtin("plant") is None:
+            return None
+        measured = self._plant_parameters()
+        if measured.noise_std == 0.0 and measured.encoder_quantization <= 0.5:
+            return None
+        exact = replace(loop, fmus=tuple(replace(f, parameters={**f.parameters,
+                                                                **EXACT_ENCODERS})
+                                         if f.builtin == "plant" else f for f in loop.fmus))
+        noisy, clean = (self._run(with_feedforward_table(c, table))[2] for c in (loop, exact))
+        return {a: error_norms(noisy[:, k] - clean[:, k], loop.step)["e2"]
+                for k, a in enumerate(AXES)}
+
+    def seed(self, trial: int) -> int | None:
+        """Trial `trial`'s noise seed of the built-in plant (None without one): a fresh one
+        each trial, so that the iteration learns what repeats, not one noise sequence."""
+        plant = self.config.builtin("plant")
+        return None if plant is None else int(plant.options.get("seed", 0)) + 1 + trial
+
+    def _seeded(self, seed: int | None) -> RunConfig:
+        if seed is None:
+            return self.config
+        return replace(self.config, fmus=tuple(
+            replace(f, options={**f.options, "seed": seed}) if f.builtin == "plant" else f
+            for f in self.config.fmus))
+
+    def _plant_parameters(self) -> PlantParameters:
+        """The true parameters of the loop's built-in plant: its variant's with the loop's
+        values (the nominal ones for a plant FMU by path)."""
+        plant = self.config.builtin("plant")
+        if plant is None:
+            return NOMINAL
+        known = set(PlantParameters.names())
+        return VARIANTS[plant.options["variant"]].parameters.with_values(
+            **{k: float(v) for k, v in plant.parameters.items() if k in known})
+
+    def _plant_model(self) -> PlantParameters:
+        """The parameters of the loop's plant model (_plant_parameters), its tool (where it
+        has one) counted at the wrist, for below its mount's mode it moves with the wrist."""
+        parameters = self._plant_parameters()
+        plant = self.config.builtin("plant")
+        if plant is None or not VARIANTS[plant.options["variant"]].parasitic_mode:
+            return parameters
+        return parameters.with_values(m_ee=parameters.m_ee + parameters.m_tool)
