@@ -96,15 +96,23 @@ def learning_filter(reference: Mapping[str, np.ndarray], step: float,
     """The learning filter of a loop whose plant has `parameters`, along `reference` (x_ref ..
     ay_ref, sampled every `step` seconds); InputError for a cutoff at or above the Nyquist
     frequency or a reference too short to filter."""
-    check_cutoff(cutoff_hz, step)
     motion = tuple(np.column_stack([reference[f"{d}x_ref"], reference[f"{d}y_ref"]])
                    for d in ("", "v", "a"))
+    return filter_along((motion[0], motion[1], motion[2]), step,
+                        model_inverse_dynamics(parameters), cutoff_hz)
+
+
+def filter_along(motion: tuple[np.ndarray, np.ndarray, np.ndarray], step: float,
+                 inverse_dynamics: ca.Function, cutoff_hz: float = CUTOFF_HZ) -> LearningFilter:
+    """The learning filter of the model `inverse_dynamics` (pos, vel, acc) -> effort of one
+    sample along the reference `motion` (position, velocity, acceleration, each (n, axes));
+    InputError for a cutoff at or above the Nyquist frequency or a reference too short."""
+    check_cutoff(cutoff_hz, step)
     n = motion[0].shape[0]
     if n <= 3 * (2 * ORDER + 1):
         raise InputError(f"the reference has {n} points: the learning filter needs more than "
                          f"{3 * (2 * ORDER + 1)}; lengthen run.stop")
-    return LearningFilter(step, model_inverse_dynamics(parameters), (motion[0], motion[1],
-                                                                     motion[2]), cutoff_hz)
+    return LearningFilter(step, inverse_dynamics, motion, cutoff_hz)
 
 
 def check_cutoff(cutoff_hz: float, step: float) -> None:

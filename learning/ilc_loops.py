@@ -3,27 +3,34 @@
 An IlcLoop runs one trial with its feedforward from a table and says what the plant received,
 how far it missed the reference and what the learning filter's model is. ManipulatorLoop is
 flexff's manipulator (built-in controller's Fx_ff, Fy_ff; its built-in plant's noise seeded
-per trial and its noise floor measured).
+per trial and its noise floor measured); MachineLoop any loop with a [machine] description,
+on the references its sources give, each axis's feedforward input learned, the filter's model
+`model(machine, trial 0's recording)` (an inverse model of the axes' motion).
 """
 
 from __future__ import annotations
 
 import json
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
 
+import casadi as ca
 import numpy as np
 
 from flexff.cosim.config import expanded
-from flexff.cosim.metrics import AXES, error_norms, tracking_metrics
+from flexff.cosim.machine import Machine
+from flexff.cosim.metrics import AXES, error_norms, machine_axes, tracking_metrics
 from flexff.cosim.recording import Recording
 from flexff.cosim.run import simulate
-from flexff.cosim.scenario import resolve
-from flexff.cosim.schema import RunConfig
+from flexff.cosim.scenario import resolve, source_signals
+from flexff.cosim.schema import ConfigError, RunConfig
 from flexff.fmu.errors import InputError
-from flexff.learning.ilc_filter import LearningFilter, learning_filter
+from flexff.fmu.expressions import evaluate
+from flexff.learning import machine_loop
+from flexff.learning.ilc_filter import LearningFilter, filter_along, learning_filter
 from flexff.learning.loop import dataset_taps, with_feedforward, with_feedforward_table
 from flexff.plant.parameters import NOMINAL, PlantParameters
 from flexff.plant.signals import FEEDBACK_FORCES, FEEDFORWARD_FORCES, TRUE_POSITION, names
@@ -162,3 +169,54 @@ class ManipulatorLoop:
         if plant is None or not VARIANTS[plant.options["variant"]].parasitic_mode:
             return parameters
         return parameters.with_values(m_ee=parameters.m_ee + parameters.m_tool)
+
+
+InverseModel = Callable[[Machine, Recording], ca.Function]  # -> (pos, vel, acc) -> effort
+
+
+class MachineLoop:
+    """A loop with a [machine] description: each axis's feedforward input learned on the
+    references the loop's sources give (`<axis>_ref`, `v<axis>_ref`, `a<axis>_ref`)."""
+
+    def __init__(self, config: RunConfig, model: InverseModel) -> None:
+        self.config, self.model = config, model
+        self.machine = machine_loop.loop_machine(config)
+        given = set(source_signals(config))
+        for k, axis in enumerate(self.machine.axes):
+            missing = [n for n in (axis.reference, *axis.derivatives[:2]) if n not in given]
+            if missing:
+                raise ConfigError(config.origin, f"machine.axis[{k}]", (
+                    f"the loop's sources give no {', '.join(missing)}: iterative learning "
+                    f"repeats one reference; give the axis's reference, velocity and "
+                    f"acceleration in a CSV [[source]] (learning.excitation writes one)"))
+        self.axes = tuple(a.name for a in self.machine.axes)
+        self.columns = tuple(machine_loop.feedforward_signal(a) for a in self.axes)
+        units = {a.unit for a in self.machine.axes}
+        self.unit = units.pop() if len(units) == 1 else "unit"
+
+    def identity(self) -> Any:
+        return json.loads(json.dumps(expanded(machine_loop.with_feedforward(self.config)),
+                                     default=str))
+
+    def trial(self, table: Path, trial: int) -> Trial:
+        recording, _ = run_trial(machine_loop.with_feedforward(self.config, table))
+        applied = np.column_stack([recording[a.effort] for a in self.machine.axes])
+        error = np.column_stack([
+            recording[a.reference] - evaluate(a.evaluated, {
+                n: recording[n] for n in a.evaluated.names}, f"machine.axis[{k}]")
+            for k, a in enumerate(self.machine.axes)])
+        return Trial(recording, applied, error, None)
+
+    def learning_filter(self, recording: Recording, cutoff_hz: float) -> LearningFilter:
+        motion = tuple(np.column_stack([recording[n] for n in names])
+                       for names in zip(*((a.reference, *a.derivatives[:2])
+                                          for a in self.machine.axes)))
+        return filter_along((motion[0], motion[1], motion[2]), self.config.step,
+                            self.model(self.machine, recording), cutoff_hz)
+
+    def metrics(self, recording: Recording) -> dict[str, dict[str, float]]:
+        return tracking_metrics(recording, machine_axes(self.machine))
+
+    def noise_floor(self, table: Path) -> dict[str, float] | None:
+        """Unknown: a plant FMU's noise cannot be switched off."""
+        return None

@@ -1,0 +1,161 @@
+"""Features and labels for any machine: per axis its motion (position, velocity, acceleration,
+jerk) and its directions of motion, from one CasADi function that training evaluates on the
+filtered measured motion and the feedforward FMU generates into C on the reference.
+
+Preprocessing, every choice a setting (MachineFeatures) whose default comes from the data: the
+measured positions, optionally counted in steps of `quantization` and given white noise
+(training only), pass a zero-phase Butterworth low-pass (`cutoff_hz`; default `data_cutoff`:
+twice the frequency under which 99.9 % of the references' acceleration energy lies), the
+efforts the same filter, and velocity, acceleration and jerk come by central differences; then
+both are decimated to the model rate (default: the data rate divided down to at least
+MODEL_RATE_PER_CUTOFF times the corner). A direction of motion is tanh(v / w) for widths w that
+are fractions of the axis's velocity limit: Coulomb friction steps with it, which no smooth
+function of the motion holds.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+
+import casadi as ca
+import numpy as np
+
+from flexff.controllers.features import evaluate_samples
+from flexff.cosim.machine import Machine
+from flexff.fmu.errors import InputError
+from flexff.learning.features import differentiate, lowpass
+
+ENERGY_SHARE = 0.999  # of the references' acceleration energy under the band's edge
+CUTOFF_PER_BAND = 2.0  # the default corner: this many times the band's edge
+MODEL_RATE_PER_CUTOFF = 20.0  # the default model rate: at least this many times the corner
+DIRECTION_WIDTHS = (0.003, 0.01, 0.03)  # tanh widths, fractions of each velocity limit
+
+
+@dataclass(frozen=True)
+class MachineFeatures:
+    """Everything that turns a machine's trajectory into features and labels; None: derived
+    from the data (`resolved`)."""
+
+    cutoff_hz: float | None = None
+    filter_order: int = 4
+    quantization: Mapping[str, float] = field(default_factory=dict)  # axis -> step [unit]
+    position_noise: Mapping[str, float] = field(default_factory=dict)  # axis -> std [unit]
+    effort_noise: Mapping[str, float] = field(default_factory=dict)  # axis -> std [effort unit]
+    model_rate_hz: float | None = None
+    jerk: bool = True
+    direction_widths: tuple[float, ...] = DIRECTION_WIDTHS
+
+    def resolved(self, rate_hz: float, references: list[Mapping[str, np.ndarray]],
+                 machine: Machine) -> MachineFeatures:
+        """The settings with every None derived from the data (`references`: the training
+        trajectories' signals), checked."""
+        cutoff = self.cutoff_hz or data_cutoff(references, machine, rate_hz)
+        if not 0 < cutoff < rate_hz / 2:
+            raise InputError(f"cutoff_hz {cutoff:g} must lie between 0 and the Nyquist "
+                             f"frequency {rate_hz / 2:g} Hz of the data")
+        model_rate = self.model_rate_hz or rate_hz / max(
+            1, math.floor(rate_hz / (MODEL_RATE_PER_CUTOFF * cutoff)))
+        names = {a.name for a in machine.axes}
+        for key, values in (("quantization", self.quantization),
+                            ("position_noise", self.position_noise),
+                            ("effort_noise", self.effort_noise)):
+            for axis, value in values.items():
+                if axis not in names or not value >= 0:
+                    raise InputError(f"{key}.{axis}: expected a number >= 0 for one of the "
+                                     f"axes {', '.join(sorted(names))}, got {value!r}")
+        if self.filter_order < 1 or any(w <= 0 for w in self.direction_widths):
+            raise InputError("filter_order must be at least 1 and direction widths positive")
+        return replace(self, cutoff_hz=cutoff, model_rate_hz=model_rate)
+
+    def decimation(self, rate_hz: float) -> int:
+        assert self.model_rate_hz is not None, "resolved() first"
+        factor = rate_hz / self.model_rate_hz
+        if factor < 1 or abs(factor - round(factor)) > 1e-9:
+            raise InputError(f"model_rate_hz {self.model_rate_hz:g} must divide the data rate "
+                             f"{rate_hz:g} Hz by a whole number")
+        return round(factor)
+
+
+def data_cutoff(references: list[Mapping[str, np.ndarray]], machine: Machine,
+                rate_hz: float) -> float:
+    """CUTOFF_PER_BAND times the frequency under which ENERGY_SHARE of the references'
+    acceleration energy lies (all axes and trajectories), at most 0.4 times Nyquist."""
+    curves = []  # (frequencies, cumulative share of the energy) per trajectory and axis
+    for signals in references:
+        for axis in machine.axes:
+            acceleration = np.asarray(signals[axis.derivatives[1]], dtype=float)
+            power = np.abs(np.fft.rfft(acceleration - acceleration.mean())) ** 2
+            curves.append((np.fft.rfftfreq(acceleration.size, 1.0 / rate_hz),
+                           np.cumsum(power) / max(float(power.sum()), 1e-300)))
+    if not curves:
+        raise InputError("no training trajectory to derive the filter's corner from")
+    finest = min(float(f[1]) for f, _ in curves)
+    frequencies = np.arange(0.0, rate_hz / 2, finest)
+    spectra = [np.interp(frequencies, f, share) for f, share in curves]
+    share = np.mean(spectra, axis=0)
+    edge = float(frequencies[np.searchsorted(share, ENERGY_SHARE)])
+    return float(min(max(CUTOFF_PER_BAND * edge, 4 * frequencies[1]), 0.2 * rate_hz))
+
+
+def feature_names(machine: Machine, config: MachineFeatures) -> list[str]:
+    """The features' names, axis by axis."""
+    names = []
+    for axis in machine.axes:
+        names += list(axis.motion) + ([f"j{axis.name}"] if config.jerk else [])
+        names += [f"dir_{axis.name}_{w:g}" for w in config.direction_widths]
+    return names
+
+
+def reference_inputs(machine: Machine) -> list[str]:
+    """The signals the features read, in order: each axis's reference and its derivatives."""
+    return list(machine.reference_signals)
+
+
+def feature_function(machine: Machine, config: MachineFeatures) -> ca.Function:
+    """(reference signals, axis by axis: position, velocity, acceleration, jerk) -> features."""
+    return _feature_function(tuple(a.limits.velocity for a in machine.axes), config.jerk,
+                             config.direction_widths)
+
+
+@functools.lru_cache(maxsize=16)  # one Function, so evaluate_samples' map is built once
+def _feature_function(velocity_limits: tuple[float, ...], jerk: bool,
+                      widths: tuple[float, ...]) -> ca.Function:
+    u = ca.SX.sym("u", 4 * len(velocity_limits))
+    out = []
+    for k, limit in enumerate(velocity_limits):
+        position, velocity, acceleration, third = (u[4 * k + d] for d in range(4))
+        out += [position, velocity, acceleration] + ([third] if jerk else [])
+        out += [ca.tanh(velocity / (w * limit)) for w in widths]
+    return ca.Function("machine_features", [u], [ca.vertcat(*out)], ["reference"], ["features"])
+
+
+def prepare(signals: Mapping[str, np.ndarray], rate_hz: float, machine: Machine,
+            config: MachineFeatures, rng: np.random.Generator | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Features (n, n_features) and labels (n, axes) at the model rate from a trajectory's
+    signals (machine.signals), `config` resolved; with `rng` (training only) its noise."""
+    assert config.cutoff_hz is not None, "resolved() first"
+    motion, efforts = [], []
+    for axis in machine.axes:
+        position = np.asarray(signals[axis.measured_signal], dtype=float)
+        effort = np.asarray(signals[axis.effort_signal], dtype=float)
+        step = config.quantization.get(axis.name, 0.0)
+        if step > 0:
+            position = step * np.floor(position / step + 0.5)
+        if rng is not None:
+            position = position + config.position_noise.get(axis.name, 0.0) \
+                * rng.standard_normal(position.shape)
+            effort = effort + config.effort_noise.get(axis.name, 0.0) \
+                * rng.standard_normal(effort.shape)
+        position = lowpass(position, rate_hz, config.cutoff_hz, config.filter_order)
+        velocity, acceleration = differentiate(position, rate_hz)
+        jerk = np.gradient(acceleration, 1.0 / rate_hz)
+        motion.append(np.column_stack([position, velocity, acceleration, jerk]))
+        efforts.append(lowpass(effort, rate_hz, config.cutoff_hz, config.filter_order))
+    step = config.decimation(rate_hz)
+    features = evaluate_samples(feature_function(machine, config),
+                                np.column_stack(motion)[::step])
+    return features, np.column_stack(efforts)[::step]
