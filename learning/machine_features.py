@@ -10,20 +10,23 @@ efforts the same filter, and velocity, acceleration and jerk come by central dif
 both are decimated to the model rate (default: the data rate divided down to at least
 MODEL_RATE_PER_CUTOFF times the corner). A direction of motion is tanh(v / w) for widths w that
 are fractions of the axis's velocity limit: Coulomb friction steps with it, which no smooth
-function of the motion holds.
+function of the motion holds (controllers.machine_features defines the features).
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
-import casadi as ca
 import numpy as np
 
 from flexff.controllers.features import evaluate_samples
+from flexff.controllers.machine_features import (
+    DIRECTION_WIDTHS,
+    FeatureInputs,
+    feature_function,
+)
 from flexff.cosim.machine import Machine
 from flexff.fmu.errors import InputError
 from flexff.learning.features import differentiate, lowpass
@@ -31,7 +34,6 @@ from flexff.learning.features import differentiate, lowpass
 ENERGY_SHARE = 0.999  # of the references' acceleration energy under the band's edge
 CUTOFF_PER_BAND = 2.0  # the default corner: this many times the band's edge
 MODEL_RATE_PER_CUTOFF = 20.0  # the default model rate: at least this many times the corner
-DIRECTION_WIDTHS = (0.003, 0.01, 0.03)  # tanh widths, fractions of each velocity limit
 
 
 @dataclass(frozen=True)
@@ -47,6 +49,11 @@ class MachineFeatures:
     model_rate_hz: float | None = None
     jerk: bool = True
     direction_widths: tuple[float, ...] = DIRECTION_WIDTHS
+
+    @property
+    def inputs(self) -> FeatureInputs:
+        """What the feedforward FMU needs to compute the same features."""
+        return FeatureInputs(self.jerk, self.direction_widths)
 
     def resolved(self, rate_hz: float, references: list[Mapping[str, np.ndarray]],
                  machine: Machine) -> MachineFeatures:
@@ -100,38 +107,6 @@ def data_cutoff(references: list[Mapping[str, np.ndarray]], machine: Machine,
     return float(min(max(CUTOFF_PER_BAND * edge, 4 * frequencies[1]), 0.2 * rate_hz))
 
 
-def feature_names(machine: Machine, config: MachineFeatures) -> list[str]:
-    """The features' names, axis by axis."""
-    names = []
-    for axis in machine.axes:
-        names += list(axis.motion) + ([f"j{axis.name}"] if config.jerk else [])
-        names += [f"dir_{axis.name}_{w:g}" for w in config.direction_widths]
-    return names
-
-
-def reference_inputs(machine: Machine) -> list[str]:
-    """The signals the features read, in order: each axis's reference and its derivatives."""
-    return list(machine.reference_signals)
-
-
-def feature_function(machine: Machine, config: MachineFeatures) -> ca.Function:
-    """(reference signals, axis by axis: position, velocity, acceleration, jerk) -> features."""
-    return _feature_function(tuple(a.limits.velocity for a in machine.axes), config.jerk,
-                             config.direction_widths)
-
-
-@functools.lru_cache(maxsize=16)  # one Function, so evaluate_samples' map is built once
-def _feature_function(velocity_limits: tuple[float, ...], jerk: bool,
-                      widths: tuple[float, ...]) -> ca.Function:
-    u = ca.SX.sym("u", 4 * len(velocity_limits))
-    out = []
-    for k, limit in enumerate(velocity_limits):
-        position, velocity, acceleration, third = (u[4 * k + d] for d in range(4))
-        out += [position, velocity, acceleration] + ([third] if jerk else [])
-        out += [ca.tanh(velocity / (w * limit)) for w in widths]
-    return ca.Function("machine_features", [u], [ca.vertcat(*out)], ["reference"], ["features"])
-
-
 def prepare(signals: Mapping[str, np.ndarray], rate_hz: float, machine: Machine,
             config: MachineFeatures, rng: np.random.Generator | None = None
             ) -> tuple[np.ndarray, np.ndarray]:
@@ -156,6 +131,6 @@ def prepare(signals: Mapping[str, np.ndarray], rate_hz: float, machine: Machine,
         motion.append(np.column_stack([position, velocity, acceleration, jerk]))
         efforts.append(lowpass(effort, rate_hz, config.cutoff_hz, config.filter_order))
     step = config.decimation(rate_hz)
-    features = evaluate_samples(feature_function(machine, config),
+    features = evaluate_samples(feature_function(machine, config.inputs),
                                 np.column_stack(motion)[::step])
     return features, np.column_stack(efforts)[::step]

@@ -4,15 +4,10 @@ import numpy as np
 import pytest
 
 from flexff.controllers.features import evaluate_samples
+from flexff.controllers.machine_features import feature_function, feature_names
 from flexff.cosim.machine import parse_machine
 from flexff.fmu.errors import InputError
-from flexff.learning.machine_features import (
-    MachineFeatures,
-    data_cutoff,
-    feature_function,
-    feature_names,
-    prepare,
-)
+from flexff.learning.machine_features import MachineFeatures, data_cutoff, prepare
 
 RATE = 1000.0
 
@@ -50,7 +45,7 @@ def test_features_of_clean_motion_are_the_motion_and_labels_the_effort():
     config = MachineFeatures(cutoff_hz=5.0, model_rate_hz=100.0).resolved(RATE, [], one)
     signals = sine({"x": 0.5})
     features, labels = prepare(signals, RATE, one, config)
-    assert feature_names(one, config) == ["x", "vx", "ax", "jx", "dir_x_0.003", "dir_x_0.01",
+    assert feature_names(one, config.inputs) == ["x", "vx", "ax", "jx", "dir_x_0.003", "dir_x_0.01",
                                           "dir_x_0.03"]
     inner = slice(200, -200)  # away from the filter's ends
     expected = [signals[n][::10] for n in ("x_ref", "vx_ref", "ax_ref", "jx_ref")]
@@ -66,7 +61,7 @@ def test_the_same_function_runs_on_the_reference():
     config = MachineFeatures(cutoff_hz=5.0, jerk=False).resolved(RATE, [], three)
     signals = sine({"q1": 0.5, "q2": 0.3, "z": 0.2})
     reference = np.column_stack([signals[n] for n in three.reference_signals])
-    features = evaluate_samples(feature_function(three, config), reference)
+    features = evaluate_samples(feature_function(three, config.inputs), reference)
     assert features.shape == (reference.shape[0], 3 * 6)
     np.testing.assert_allclose(features[:, 6 + 1], signals["vq2_ref"])
 
