@@ -30,11 +30,12 @@ def rigid_body_force(reference: ca.SX, parameters: Mapping[str, float] | None = 
 
 def feedforward_system(name: str, description: str, reference: ca.SX, force: ca.SX,
                        step: float, result: ca.SX | None = None,
-                       outputs: Sequence[Variable] = FEEDFORWARD_FORCES, **options: Any) -> System:
+                       outputs: Sequence[Variable] = FEEDFORWARD_FORCES,
+                       inputs: Sequence[Variable] = REFERENCE, **options: Any) -> System:
     """A discrete, stateless System from the reference signals to F_ff (or to other
-    `outputs`: a current-level model's i1_ff..i3_ff): `force` is an expression of the symbol
-    `reference` (the six REFERENCE signals) and, for a System with an embedded network
-    (`options["network"]`), of the network's `result`."""
+    `outputs`: a current-level model's i1_ff..i3_ff; another machine's `inputs` and
+    `outputs`): `force` is an expression of the symbol `reference` (the `inputs`) and, for a
+    System with an embedded network (`options["network"]`), of the network's `result`."""
     x, p, w = ca.SX.sym("x", 0), ca.SX.sym("p", 0), ca.SX.sym("w", 0)
     arguments = [x, reference, p, w, *([] if result is None else [result])]
     return System(
@@ -42,7 +43,7 @@ def feedforward_system(name: str, description: str, reference: ca.SX, force: ca.
         description=description,
         kind="discrete",
         states=(),
-        inputs=REFERENCE,
+        inputs=tuple(inputs),
         outputs=tuple(outputs),
         parameters=(),
         initial_state=ca.Function("initial_state", [p], [ca.SX(0, 1)]),
