@@ -124,23 +124,9 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
                     for x, f in zip(xs, fs)]
         return [label_scaler.transform(f) for f in fs]
 
-    roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge)
-    device = pick_device(config.device)
-    with reproducible(config.seed, config.threads):
-        network = build_network(config.model, train_x[0].shape[1],
-                                n_outputs=train_f[0].shape[1], **config.architecture)
-        network.to(device)
-        train_data = SequenceSet.build([feature_scaler.transform(x) for x in train_x],
-                                       targets(train_x, train_f), roles, device)
-        test_data = SequenceSet.build([feature_scaler.transform(x) for x in test_x],
-                                      targets(test_x, test_f),
-                                      [interior(len(x), edge) for x in test_x], device)
-        fitted = train_data.role == TRAIN
-        fit_linear_skip(network, train_data.x[fitted], train_data.y[fitted])
-        saver = _Saver(out, settings, every)
-        history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint,
-                            on_epoch)
-        metrics = {
+    def measure(network: SequenceNetwork, train_data: SequenceSet, test_data: SequenceSet
+                ) -> dict[str, Any]:
+        return {
             "model": config.model, "preset": config.preset, "units": MSE_UNITS,
             "train_mse": role_mse(network, train_data, TRAIN),
             "val_mse": role_mse(network, train_data, VALIDATION),
@@ -153,16 +139,14 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
             **({} if prior is None else {
                 "prior_parameters": prior,
                 "prior_test_mse": _prior_mse(test_x, test_f, label_scaler, edge, prior,
-                                             config.features, model_rate)}),
-            "parameters": parameter_count(network),
-            "seconds_per_epoch": float(np.mean(history["seconds"])),
-            "seconds": time.perf_counter() - start,  # this call's wall time, data preparation in
-            "epochs": config.epochs, "best_epoch": history["best_epoch"],
-            "model_rate_hz": model_rate, "device": str(device),
-            "threads": torch.get_num_threads() if device.type == "cpu" else None,
-            "history": {k: history[k] for k in ("train", "val", "seconds")},
-        }
-    network.cpu()
+                                             config.features, model_rate)})}
+
+    network, history, metrics = fit_network(
+        config, [feature_scaler.transform(x) for x in train_x], targets(train_x, train_f),
+        [feature_scaler.transform(x) for x in test_x], targets(test_x, test_f), edge, rng,
+        Checkpoints(out, settings, every), checkpoint, measure, progress, on_epoch)
+    metrics = {**metrics, "seconds": time.perf_counter() - start,  # data preparation in
+               "model_rate_hz": model_rate}
     save_run(out, config, network, feature_scaler, label_scaler,
              feature_names(feature_set), list(LABELS[config.features.labels]), model_rate,
              {"data": {"path": str(Path(dataset.path).resolve()), "set": dataset.set,
@@ -198,6 +182,43 @@ def _prepare(trajectories: list[Trajectory], rate: float, features: FeatureConfi
              rng: np.random.Generator | None) -> tuple[list[np.ndarray], list[np.ndarray]]:
     pairs = [prepare_trajectory(t, rate, features, rng) for t in trajectories]
     return [x for x, _ in pairs], [f for _, f in pairs]
+
+
+def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np.ndarray],
+                test_x: list[np.ndarray], test_y: list[np.ndarray], edge: int,
+                rng: np.random.Generator, saver: Checkpoints, checkpoint: dict[str, Any] | None,
+                measure: Callable[[SequenceNetwork, SequenceSet, SequenceSet], dict[str, Any]],
+                progress: bool = True, on_epoch: EpochReport | None = None
+                ) -> tuple[SequenceNetwork, dict[str, Any], dict[str, Any]]:
+    """Train `config`'s network on scaled features and targets (lists of (n, k) arrays, one
+    per trajectory; `edge` samples at each end out of every loss), the training trajectories'
+    windows split into training and validation; return the network (best epoch, on the CPU),
+    its history, and `measure`'s metrics with the timing and device: any machine's training
+    (this module's `fit`, learning.machine_train) runs through here."""
+    roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge)
+    device = pick_device(config.device)
+    with reproducible(config.seed, config.threads):
+        network = build_network(config.model, train_x[0].shape[1],
+                                n_outputs=train_y[0].shape[1], **config.architecture)
+        network.to(device)
+        train_data = SequenceSet.build(train_x, train_y, roles, device)
+        test_data = SequenceSet.build(test_x, test_y, [interior(len(x), edge) for x in test_x],
+                                      device)
+        fitted = train_data.role == TRAIN
+        fit_linear_skip(network, train_data.x[fitted], train_data.y[fitted])
+        history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint,
+                            on_epoch)
+        metrics = {
+            **measure(network, train_data, test_data),
+            "parameters": parameter_count(network),
+            "seconds_per_epoch": float(np.mean(history["seconds"])),
+            "epochs": config.epochs, "best_epoch": history["best_epoch"],
+            "device": str(device),
+            "threads": torch.get_num_threads() if device.type == "cpu" else None,
+            "history": {k: history[k] for k in ("train", "val", "seconds")},
+        }
+    network.cpu()
+    return network, history, metrics
 
 
 def _prior_parameters(config: TrainConfig, dataset: Dataset, model_rate: float
@@ -266,7 +287,7 @@ def _prior_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,
     return float(np.mean(np.concatenate(errors) ** 2))
 
 
-class _Saver:
+class Checkpoints:
     """Writes the checkpoints of one training run (see `learning.run_folder`)."""
 
     def __init__(self, out: Path, settings: dict[str, Any], every: int) -> None:
@@ -312,7 +333,7 @@ def _restore(checkpoint: dict[str, Any], network: SequenceNetwork,
 
 
 def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
-              rng: np.random.Generator, progress: bool, saver: _Saver,
+              rng: np.random.Generator, progress: bool, saver: Checkpoints,
               checkpoint: dict[str, Any] | None, on_epoch: EpochReport | None) -> dict[str, Any]:
     optimizer = torch.optim.Adam(network.parameters(), lr=config.learning_rate)
     recurrent = config.model in RECURRENT

@@ -57,14 +57,14 @@ def _same_weights(a, b):
 
 def _stop_after(monkeypatch, epochs_done):
     """Interrupt training once the checkpoint after `epochs_done` epochs is written."""
-    real = training._Saver.epoch_done
+    real = training.Checkpoints.epoch_done
 
     def stopping(self, epochs, network, optimizer, rng, history, *rest):
         real(self, epochs, network, optimizer, rng, history, *rest)
         if len(history["train"]) == epochs_done:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(training._Saver, "epoch_done", stopping)
+    monkeypatch.setattr(training.Checkpoints, "epoch_done", stopping)
 
 
 def test_an_interrupted_run_resumes_to_the_same_weights(data, other, uninterrupted, tmp_path,
@@ -153,13 +153,13 @@ from pathlib import Path
 import flexff.learning.train as training
 from flexff.cli import main
 held, args = Path(sys.argv[1]), sys.argv[2:]
-real = training._Saver.epoch_done
+real = training.Checkpoints.epoch_done
 def held_after_the_first(self, epochs, network, optimizer, rng, history, *rest):
     real(self, epochs, network, optimizer, rng, history, *rest)
     if len(history["train"]) == 1:
         held.write_text("held")
         time.sleep(600)
-training._Saver.epoch_done = held_after_the_first
+training.Checkpoints.epoch_done = held_after_the_first
 sys.exit(main(args))
 """
 
