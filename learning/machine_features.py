@@ -5,7 +5,8 @@ filtered measured motion and the feedforward FMU generates into C on the referen
 Preprocessing, every choice a setting (MachineFeatures) whose default comes from the data: the
 measured positions, optionally counted in steps of `quantization` and given white noise
 (training only), pass a zero-phase Butterworth low-pass (`cutoff_hz`; default `data_cutoff`:
-twice the frequency under which 99.9 % of the references' acceleration energy lies), the
+twice the frequency under which 99.9 % of the references' acceleration energy lies, Hann
+windowed), the
 efforts the same filter, and velocity, acceleration and jerk come by central differences; then
 both are decimated to the model rate (default: the data rate divided down to at least
 MODEL_RATE_PER_CUTOFF times the corner). A direction of motion is tanh(v / w) for widths w that
@@ -94,7 +95,8 @@ def data_cutoff(references: list[Mapping[str, np.ndarray]], machine: Machine,
     for signals in references:
         for axis in machine.axes:
             acceleration = np.asarray(signals[axis.derivatives[1]], dtype=float)
-            power = np.abs(np.fft.rfft(acceleration - acceleration.mean())) ** 2
+            window = np.hanning(acceleration.size)  # leakage of a non-periodic record
+            power = np.abs(np.fft.rfft((acceleration - acceleration.mean()) * window)) ** 2
             curves.append((np.fft.rfftfreq(acceleration.size, 1.0 / rate_hz),
                            np.cumsum(power) / max(float(power.sum()), 1e-300)))
     if not curves:

@@ -1,0 +1,133 @@
+"""Training for any machine: a machine's trajectories in, a run folder out, through the same
+network, optimiser, checkpoints and run folder as the manipulator's (learning.train).
+
+Features and labels come from learning.machine_features (its settings derived from the
+training data where not given); the labels are each axis's effort, scaled to the training
+span. run.json keeps the machine description and the resolved feature settings beside the
+training configuration, so that export and the feedforward FMU compute the same features.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flexff.controllers.machine_features import feature_names
+from flexff.cosim.machine import Machine, machine_table
+from flexff.fmu.errors import InputError
+from flexff.learning.batches import TRAIN, VALIDATION, SequenceSet
+from flexff.learning.machine_features import MachineFeatures, prepare
+from flexff.learning.models import SequenceNetwork, uses_prior
+from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig
+from flexff.learning.run_folder import save_run, start_run
+from flexff.learning.scaling import MinMaxScaler
+from flexff.learning.train import (
+    Checkpoints,
+    EpochReport,
+    fit_network,
+    plot_losses,
+    role_mse,
+)
+
+MSE_UNITS = "MSE of min-max scaled efforts, axis by axis (run.json label_names)"
+
+
+@dataclass(frozen=True)
+class MachineTrajectory:
+    """One trajectory of a machine's data: its name, split ("train" or "test") and signals
+    (time and machine.signals), sampled at the data's rate."""
+
+    name: str
+    split: str
+    signals: Mapping[str, np.ndarray]
+
+
+def features_to_dict(features: MachineFeatures) -> dict[str, Any]:
+    """The settings as JSON data (run.json)."""
+    plain: dict[str, Any] = json.loads(json.dumps(dataclasses.asdict(features)))
+    return plain
+
+
+def features_from_dict(data: Mapping[str, Any]) -> MachineFeatures:
+    return MachineFeatures(**{**data, "direction_widths": tuple(data["direction_widths"])})
+
+
+def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
+                trajectories: Sequence[MachineTrajectory], digest: str, out: Path,
+                features: MachineFeatures | None = None, progress: bool = True,
+                resume: bool | None = None, force: bool = True,
+                checkpoint_every: int | None = None, on_epoch: EpochReport | None = None
+                ) -> dict[str, Any]:
+    """Train `config`'s model on a machine's trajectories (`digest` names the data) with the
+    feature settings `features` (default: all derived from the data); write the run folder
+    `out`; return the metrics."""
+    start = time.perf_counter()
+    if uses_prior(config.model):
+        raise InputError(f"{config.model}: the physics-guided model of a machine needs its "
+                         f"identified prior; train lstm, cnn-lstm or tcn")
+    every = CHECKPOINT_EVERY[config.preset] if checkpoint_every is None else checkpoint_every
+    train_set = [t for t in trajectories if t.split == "train"]
+    test_set = [t for t in trajectories if t.split == "test"]
+    for split, chosen in (("train", train_set), ("test", test_set)):
+        if not chosen:
+            raise InputError(f"the '{split}' split is empty: mark some trajectories "
+                             f"'{split}' (flexff data import --test, or the excitation's split)")
+    resolved = (features or MachineFeatures()).resolved(
+        rate_hz, [t.signals for t in train_set], machine)
+    settings = {"config": {k: v for k, v in config.to_dict().items()
+                           if k not in ("device", "threads")},
+                "features": features_to_dict(resolved), "machine": machine_table(machine),
+                "data": digest}
+    checkpoint = start_run(out, json.loads(json.dumps(settings)), resume, force)
+    rng = np.random.default_rng(config.seed)
+    train_x, train_f = _prepared(train_set, rate_hz, machine, resolved, rng)
+    test_x, test_f = _prepared(test_set, rate_hz, machine, resolved, None)
+    feature_scaler, label_scaler = MinMaxScaler.fit(train_x), MinMaxScaler.fit(train_f)
+    assert resolved.model_rate_hz is not None and resolved.cutoff_hz is not None
+    model_rate = resolved.model_rate_hz
+    edge = math.ceil(config.features.edge_periods / resolved.cutoff_hz * model_rate)
+
+    def measure(network: SequenceNetwork, train_data: SequenceSet, test_data: SequenceSet
+                ) -> dict[str, Any]:
+        return {"model": config.model, "preset": config.preset, "units": MSE_UNITS,
+                "train_mse": role_mse(network, train_data, TRAIN),
+                "val_mse": role_mse(network, train_data, VALIDATION),
+                "test_mse": role_mse(network, test_data, TRAIN),
+                "test_mse_per_trajectory": {t.name: role_mse(network, test_data, TRAIN, only=[i])
+                                            for i, t in enumerate(test_set)}}
+
+    network, history, metrics = fit_network(
+        config, [feature_scaler.transform(x) for x in train_x],
+        [label_scaler.transform(f) for f in train_f],
+        [feature_scaler.transform(x) for x in test_x], [label_scaler.transform(f) for f in test_f],
+        edge, rng, Checkpoints(out, settings, every), checkpoint, measure, progress, on_epoch)
+    metrics = {**metrics, "seconds": time.perf_counter() - start, "model_rate_hz": model_rate,
+               "cutoff_hz": resolved.cutoff_hz}
+    save_run(out, config, network, feature_scaler, label_scaler,
+             feature_names(machine, resolved.inputs), [a.effort_signal for a in machine.axes],
+             model_rate,
+             {"machine": machine_table(machine), "machine_features": features_to_dict(resolved),
+              "data": {"sha256": digest, "sample_rate_hz": rate_hz,
+                       "train": [t.name for t in train_set],
+                       "test": [t.name for t in test_set]},
+              "parameters": metrics["parameters"]},
+             {"metrics.json": lambda path: path.write_text(json.dumps(metrics, indent=2) + "\n"),
+              "loss.png": lambda path: plot_losses(history, path,
+                                                   f"{config.model} ({config.preset}), "
+                                                   f"{machine.name}")})
+    return {**metrics, "run": str(out)}
+
+
+def _prepared(trajectories: list[MachineTrajectory], rate_hz: float, machine: Machine,
+              features: MachineFeatures, rng: np.random.Generator | None
+              ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    pairs = [prepare(t.signals, rate_hz, machine, features, rng) for t in trajectories]
+    return [x for x, _ in pairs], [f for _, f in pairs]

@@ -1,0 +1,65 @@
+"""Training for any machine: a 1-axis and a 3-axis machine's trajectories to a run folder."""
+
+import json
+
+import numpy as np
+import pytest
+
+from flexff.cosim.machine import parse_machine
+from flexff.fmu.errors import InputError
+from flexff.learning.machine_features import MachineFeatures
+from flexff.learning.machine_train import MachineTrajectory, fit_machine
+from flexff.learning.presets import make_config
+from flexff.learning.run_folder import load_run
+
+RATE = 1000.0
+MASS, DAMPING, COULOMB = 2.0, 20.0, 1.5
+
+
+def machine(names):
+    return parse_machine({"name": "synthetic", "axis": [
+        {"name": n, "measured": f"p.{n}", "feedforward": f"c.{n}_ff", "effort": f"c.{n}_u",
+         "range": [-0.1, 0.1], "velocity": 0.5, "acceleration": 5.0} for n in names]}, "m")
+
+
+def trajectory(names, seed, split, seconds=8.0):
+    """Random multi-sines per axis; the effort of a mass with viscous and Coulomb friction."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 1 / RATE)
+    signals = {"time": t}
+    for name in names:
+        f = rng.uniform(0.2, 1.5, 3)
+        a = rng.uniform(0.005, 0.02, 3) * (f[0] / f)
+        w = 2 * np.pi * f[:, None]
+        x, v = (a[:, None] * np.sin(w * t)).sum(0), (a[:, None] * w * np.cos(w * t)).sum(0)
+        acc = -(a[:, None] * w**2 * np.sin(w * t)).sum(0)
+        jerk = -(a[:, None] * w**3 * np.cos(w * t)).sum(0)
+        signals |= {f"{name}_ref": x, f"v{name}_ref": v, f"a{name}_ref": acc,
+                    f"j{name}_ref": jerk, f"{name}_measured": x,
+                    f"{name}_effort": MASS * acc + DAMPING * v + COULOMB * np.tanh(v / 1e-3)}
+    return MachineTrajectory(f"{split}-{seed}", split, signals)
+
+
+@pytest.mark.parametrize("names", [("x",), ("q1", "q2", "z")])
+def test_a_machine_trains_into_a_run_folder(names, tmp_path):
+    data = [trajectory(names, k, "train") for k in range(6)] + [
+        trajectory(names, 10 + k, "test") for k in range(2)]
+    config = make_config("tcn", "fast", epochs=2)
+    metrics = fit_machine(config, machine(names), RATE, data, "digest", tmp_path / "run",
+                          MachineFeatures(), progress=False)
+    run = load_run(tmp_path / "run")
+    info = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert info["label_names"] == [f"{n}_effort" for n in names]
+    assert [a["name"] for a in info["machine"]["axis"]] == list(names)
+    assert run.feature_names[:4] == [names[0], f"v{names[0]}", f"a{names[0]}", f"j{names[0]}"]
+    assert 3.0 < metrics["cutoff_hz"] < 3.5  # twice the 1.5 Hz band's edge
+    assert RATE / metrics["model_rate_hz"] == pytest.approx(round(RATE / metrics["model_rate_hz"]))
+    # the linear skip's least squares hold inertia, damping and the friction's direction
+    assert metrics["test_mse"] < 1e-3
+    assert (tmp_path / "run" / "loss.png").is_file()
+
+
+def test_the_physics_guided_model_asks_for_its_prior(tmp_path):
+    with pytest.raises(InputError, match="needs its identified prior"):
+        fit_machine(make_config("pgnn", "fast", epochs=1), machine(("x",)), RATE,
+                    [trajectory(("x",), 0, "train")], "d", tmp_path / "run")
