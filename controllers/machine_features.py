@@ -33,6 +33,16 @@ def feature_names(machine: Machine, config: FeatureInputs) -> list[str]:
     return names
 
 
+def feature_units(machine: Machine, config: FeatureInputs) -> list[str]:
+    """The features' units, as feature_names orders them (directions are pure numbers)."""
+    units = []
+    for axis in machine.axes:
+        units += [axis.unit, f"{axis.unit}/s", f"{axis.unit}/s2"]
+        units += [f"{axis.unit}/s3"] if config.jerk else []
+        units += ["1"] * len(config.direction_widths)
+    return units
+
+
 def feature_function(machine: Machine, config: FeatureInputs) -> ca.Function:
     """(reference signals, axis by axis: position, velocity, acceleration, jerk) -> features."""
     return _feature_function(tuple(a.limits.velocity for a in machine.axes), config.jerk,

@@ -1,16 +1,26 @@
-"""Any machine's model-based feedforward as a stateless System: the machine's reference
-signals in (each axis's position, velocity, acceleration and jerk reference), `<axis>_ff` out,
-the effort an inverse model of the axes' motion gives along the reference (the identified
-linear model of learning's identification, or any CasADi function of the same form).
+"""Any machine's feedforward as a System: the machine's reference signals in (each axis's
+position, velocity, acceleration and jerk reference), `<axis>_ff` out. Either the effort an
+inverse model of the axes' motion gives along the reference (`inverse_model_system`: the
+identified linear model, or any CasADi function of that form), or a learned model exported by
+flexff (`learned_machine_feedforward_system`): its features computed from the reference in
+generated C (controllers.machine_features), its ONNX graph run as the manipulator's learned
+feedforward runs it (controllers.learned_feedforward: step or task mode, extrapolated between
+the model's calls).
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import casadi as ca
 
 from flexff.controllers.feedforward import feedforward_system
-from flexff.cosim.machine import Machine
+from flexff.controllers.learned_feedforward import model_period
+from flexff.controllers.machine_features import FeatureInputs, feature_function
+from flexff.controllers.model_card import read_card
+from flexff.cosim.machine import Machine, parse_machine
 from flexff.fmu.errors import InputError
+from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System, Variable
 
 DERIVATIVES = ("position", "velocity", "acceleration", "jerk")
@@ -59,3 +69,36 @@ def inverse_model_system(machine: Machine, inverse: ca.Function, step: float,
                               inverse(*reference_motion(machine, reference)), step,
                               outputs=feedforward_variables(machine),
                               inputs=reference_variables(machine))
+
+
+def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
+                                       task: bool = False) -> System:
+    """The System of the feedforward FMU running `model`, a machine's exported model; with
+    `task` its network runs in its own task."""
+    card = read_card(model)
+    if card.machine is None or card.machine_features is None:
+        raise InputError(f"{model} is a model of the manipulator: build it with `flexff fmu "
+                         f"build learned-feedforward`")
+    machine = parse_machine(card.machine, f"{model}: metadata machine")
+    inputs = FeatureInputs(card.machine_features["jerk"],
+                           tuple(card.machine_features["direction_widths"]))
+    reference = ca.SX.sym("u", 4 * len(machine.axes))
+    x, p = ca.SX.sym("x", 0), ca.SX.sym("p", 0)
+    network = graph_network(read_graph(model, time_axis=True),
+                            ca.Function("network_input", [x, reference, p],
+                                        [feature_function(machine, inputs)(reference)]),
+                            model_period(card, step, model), None, task)
+    if network.n_outputs != len(machine.axes):
+        raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
+                         f"machine {machine.name!r} has {len(machine.axes)} axes")
+    result = ca.SX.sym("r", network.n_outputs)
+    mode = "task" if task else "step"
+    return feedforward_system(
+        "learned_feedforward",
+        f"learned feedforward of {machine.name}: {card.model_kind} model at "
+        f"{card.sample_rate_hz:g} Hz in onnxruntime, {mode} mode",
+        reference, result, step, result, outputs=feedforward_variables(machine),
+        inputs=reference_variables(machine),
+        extra={"flexff.feedforward.mode": mode, "flexff.model.model_kind": card.model_kind,
+               "flexff.model.sample_rate_hz": str(card.sample_rate_hz)},
+        network=network)

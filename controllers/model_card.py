@@ -39,7 +39,7 @@ USAGE = ("inputs (T, n_inputs) float64 in SI units -> outputs (T, n_outputs) flo
          "every 1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
          "extrapolate the outputs from the last two calls when the host runs faster.")
 _JSON = ("input_signals", "input_units", "output_signals", "output_units", "state",
-         "prior_parameters", "feature_range")
+         "prior_parameters", "feature_range", "machine", "machine_features")
 _NUMBERS = {"sample_rate_hz": float, "history_samples": int, "ensemble_members": int}
 
 
@@ -50,7 +50,10 @@ class ModelCard:
     `state`: one {"input", "output", "shape", "initial"} per state tensor (fmu.onnx_graph reads
     the pairs); `prior_parameters`: the nominal-model parameters the prior replaces (flat plant
     parameter names, SI values); `feature_range`: {"signals", "low", "high"} of the training
-    data, None for a model exported without it.
+    data, None for a model exported without it. Another machine's model carries its
+    description (`machine`, cosim.machine's table) and the settings of its features
+    (`machine_features`: jerk, direction_widths; controllers.machine_features), and outputs
+    each axis's `<axis>_ff`.
     """
 
     feature_set: str
@@ -69,6 +72,8 @@ class ModelCard:
     feature_range: dict[str, Any] | None = None
     ensemble_members: int = 1
     flexff_version: str = "unknown"
+    machine: dict[str, Any] | None = None
+    machine_features: dict[str, Any] | None = None
 
     def metadata(self) -> dict[str, str]:
         """The card as onnx metadata_props (strings; lists and objects as JSON)."""
@@ -108,10 +113,16 @@ class ModelCard:
 
     @property
     def labels(self) -> str:
-        """What the model outputs: "forces" (Fx_ff, Fy_ff) or "currents" (i1_ff..i3_ff)."""
+        """What the model outputs: "forces" (Fx_ff, Fy_ff) or "currents" (i1_ff..i3_ff); another
+        machine's model "efforts" (its axes' <axis>_ff)."""
+        if self.machine is not None:
+            return "efforts"
         return next(k for k, v in OUTPUTS.items() if list(names(v)) == self.output_signals)
 
     def _check(self, where: str | Path) -> None:
+        if self.machine is not None:
+            self._check_machine(where)
+            return
         known = {k: list(names(v)) for k, v in OUTPUTS.items()}
         if self.output_signals not in known.values():
             raise InputError(f"{where}: output signals {self.output_signals} are neither "
@@ -129,6 +140,24 @@ class ModelCard:
                              f"{json.dumps(self.prior_parameters)} are not nominal-model "
                              f"parameters ({error}); export the model again with "
                              f"`flexff export`") from None
+
+
+    def _check_machine(self, where: str | Path) -> None:
+        """Another machine's model: its outputs are its axes' feedforwards, its features
+        computed by the FMU from the reference, no manipulator prior."""
+        try:
+            axes = [a["name"] for a in self.machine["axis"]]  # type: ignore[index]
+        except (KeyError, TypeError):
+            raise InputError(f"{where}: metadata machine is not a machine description; export "
+                             f"the model again with `flexff export`") from None
+        if self.output_signals != [f"{a}_ff" for a in axes]:
+            raise InputError(f"{where}: output signals {self.output_signals} are not the "
+                             f"feedforwards of the machine's axes {axes}; export it again")
+        if self.input_kind != "features" or self.prior != "none" \
+                or not isinstance(self.machine_features, dict):
+            raise InputError(f"{where}: a machine's model takes its features and carries their "
+                             f"settings (machine_features); export it again with `flexff "
+                             f"export`")
 
 
 def read_card(model: str | Path) -> ModelCard:

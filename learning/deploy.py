@@ -28,6 +28,7 @@ import torch
 from torch import nn
 
 from flexff.controllers.features import feature_units, reference_feature_function
+from flexff.controllers.machine_features import feature_units as machine_feature_units
 from flexff.controllers.model_card import INPUT_KINDS
 from flexff.fmu.errors import InputError
 from flexff.learning.casadi_torch import TorchFunction
@@ -71,12 +72,19 @@ class SIModel(nn.Module):
         self.network = run.network.eval()
         self.inputs = inputs
         by_reference = inputs == "reference"
+        machine = run.machine
+        if machine is not None and by_reference:
+            raise InputError(f"{run.path}: a machine's model takes its features; the "
+                             f"feedforward FMU computes them from the reference")
         self.input_names = list(names(REFERENCE)) if by_reference else run.feature_names
-        self.input_units = list(units(REFERENCE)) if by_reference else feature_units(feature_set)
+        self.input_units = (list(units(REFERENCE)) if by_reference else
+                            feature_units(feature_set) if machine is None else
+                            machine_feature_units(machine, run.feature_inputs))
         self.reference = (TorchFunction(reference_feature_function(feature_set))
                           if by_reference else None)
         self.residual = uses_prior(run.config.model)
-        self.labels = run.config.features.labels  # what it outputs: forces or currents
+        # what it outputs: forces or currents, or another machine's efforts
+        self.labels = run.config.features.labels if machine is None else "efforts"
         self.prior_parameters = run.prior_parameters
         self.prior = (RigidBodyForce(feature_set, self.prior_parameters, self.labels)
                       if self.residual and prior else None)

@@ -98,9 +98,11 @@ def _si_model(runs: list[Run], inputs: str) -> SIModel | EnsembleSIModel:
 
 def _check_members(runs: list[Run]) -> None:
     """Ensemble members must run alike: same model kind, features, rate and prior."""
-    def key(r: Run) -> tuple[str, str, float, str, str]:
+    def key(r: Run) -> tuple[str, str, float, str, str, str]:
         return (r.config.model, r.config.features.feature_set, r.model_rate_hz,
-                json.dumps(r.prior_parameters, sort_keys=True), r.config.features.labels)
+                json.dumps(r.prior_parameters, sort_keys=True), r.config.features.labels,
+                json.dumps([r.info.get(k) for k in ("machine", "machine_features")],
+                           sort_keys=True))
 
     if len({key(r) for r in runs}) > 1:
         raise InputError("the runs of one export must share model kind, feature set, model "
@@ -123,6 +125,11 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
             output_names=[model.labels, *[f"{n}_out" for n in state_names]],
             dynamic_axes={"inputs": {0: "time"}, model.labels: {0: "time"}})
     graph = onnx.load(str(path))
+    machine = loaded.machine
+    if machine is None:
+        outputs = list(names(OUTPUTS[model.labels])), list(units(OUTPUTS[model.labels]))
+    else:
+        outputs = [f"{a.name}_ff" for a in machine.axes], [a.effort_unit for a in machine.axes]
     low = np.min([r.feature_scaler.low for r in runs], axis=0)
     high = np.max([r.feature_scaler.high for r in runs], axis=0)
     card = ModelCard(
@@ -131,14 +138,14 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
         input_kind=inputs, prior="rigid-body" if model.residual else "none",
         prior_parameters=model.prior_parameters, input_signals=model.input_names,
         input_units=model.input_units,
-        output_signals=list(names(OUTPUTS[model.labels])),
-        output_units=list(units(OUTPUTS[model.labels])),
+        output_signals=outputs[0], output_units=outputs[1],
         feature_range={"signals": loaded.feature_names, "low": low.tolist(),
                        "high": high.tolist()},
         sample_rate_hz=float(loaded.model_rate_hz),
         state=[{"input": n, "output": f"{n}_out", "shape": list(s.shape), "initial": "zeros"}
                for n, s in zip(state_names, state)],
-        history_samples=max(r.network.history for r in runs), flexff_version=flexff_version())
+        history_samples=max(r.network.history for r in runs), flexff_version=flexff_version(),
+        machine=loaded.info.get("machine"), machine_features=loaded.info.get("machine_features"))
     onnx.helper.set_model_props(graph, card.metadata())
     onnx.checker.check_model(graph)
     onnx.save(graph, str(path))

@@ -28,6 +28,8 @@ from typing import Any
 
 import torch
 
+from flexff.controllers.machine_features import FeatureInputs
+from flexff.cosim.machine import Machine, parse_machine
 from flexff.cosim.recording import atomic_write
 from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
@@ -71,6 +73,19 @@ class Run:
     feature_names: list[str]
     model_rate_hz: float
     info: dict[str, Any]
+
+    @property
+    def machine(self) -> Machine | None:
+        """The description of the machine a run of learning.machine_train learned (None: the
+        manipulator's run)."""
+        table = self.info.get("machine")
+        return None if table is None else parse_machine(table, str(self.path / RUN_FILE))
+
+    @property
+    def feature_inputs(self) -> FeatureInputs:
+        """The feature choices of a machine's run (learning.machine_features)."""
+        settings = self.info["machine_features"]
+        return FeatureInputs(settings["jerk"], tuple(settings["direction_widths"]))
 
     @property
     def prior_parameters(self) -> dict[str, float]:

@@ -5,12 +5,20 @@ import json
 import numpy as np
 import pytest
 
+from flexff.controllers.features import evaluate_samples
+from flexff.controllers.machine_features import feature_function
+from flexff.controllers.machine_feedforward import learned_machine_feedforward_system
+from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import parse_machine
+from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
+from flexff.fmu.validation import validate_fmu
+from flexff.learning.export import export, run_steps, session
 from flexff.learning.machine_features import MachineFeatures
 from flexff.learning.machine_train import MachineTrajectory, fit_machine
 from flexff.learning.presets import make_config
 from flexff.learning.run_folder import load_run
+from tests.runners import run_fmu
 
 RATE = 1000.0
 MASS, DAMPING, COULOMB = 2.0, 20.0, 1.5
@@ -63,3 +71,27 @@ def test_the_physics_guided_model_asks_for_its_prior(tmp_path):
     with pytest.raises(InputError, match="needs its identified prior"):
         fit_machine(make_config("pgnn", "fast", epochs=1), machine(("x",)), RATE,
                     [trajectory(("x",), 0, "train")], "d", tmp_path / "run")
+
+
+def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
+    """Export the run, build the FMU: at each of the model's calls the FMU gives what
+    onnxruntime gives on the features of the reference."""
+    names = ("x",)
+    data = [trajectory(names, k, "train") for k in range(4)] + [trajectory(names, 9, "test")]
+    fit_machine(make_config("lstm", "fast", epochs=1), machine(names), RATE, data, "d",
+                tmp_path / "run", progress=False)
+    model = export(tmp_path / "run", tmp_path / "model.onnx")
+    card = read_card(model)
+    assert (card.labels, card.output_signals, card.output_units) == ("efforts", ["x_ff"], ["N"])
+    fmu = build_fmu(learned_machine_feedforward_system(model, 1e-3), tmp_path / "ff.fmu")
+    assert validate_fmu(fmu) == []
+    reference = trajectory(names, 20, "test", seconds=1.0).signals
+    inputs = ["x_ref", "vx_ref", "ax_ref", "jx_ref"]
+    result = run_fmu(fmu, 900, 1e-3, {n: reference[n][:900] for n in inputs}, record=["x_ff"])
+    period = round(RATE / card.sample_rate_hz)
+    calls = np.arange(0, 900, period)
+    features = evaluate_samples(feature_function(machine(names), load_run(
+        tmp_path / "run").feature_inputs), np.column_stack([reference[n] for n in inputs]))
+    expected = run_steps(session(model), features[calls])[:, 0]
+    np.testing.assert_allclose(result["x_ff"][calls], expected,
+                               rtol=1e-5, atol=1e-5 * np.abs(expected).max())
