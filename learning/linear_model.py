@@ -114,7 +114,7 @@ class LinearModel:
         """(positions, velocities, accelerations: one entry per axis) -> efforts."""
         n = len(self.machine.axes)
         pos, vel, acc = (ca.SX.sym(name, n) for name in ("pos", "vel", "acc"))
-        motion = {}
+        motion: dict[str, ca.SX] = {}
         for k, axis in enumerate(self.machine.axes):
             motion.update(zip(axis.motion, (pos[k], vel[k], acc[k])))
         efforts = [ca.dot(ca.vertcat(*_columns(self.machine, k, motion,
