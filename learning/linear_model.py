@@ -61,7 +61,8 @@ def term_names(machine: Machine, axis_index: int) -> list[str]:
     return names + list(machine.prior.extra.get(axis.name, {}))
 
 
-def _columns(machine: Machine, k: int, motion: Motion, width: float, backend: Any) -> list[Any]:
+def _columns(machine: Machine, k: int, motion: Mapping[str, Any], width: float, backend: Any
+             ) -> list[Any]:
     """One axis's regressor columns on NumPy arrays (backend np) or CasADi symbols (ca)."""
     axis = machine.axes[k]
     v, a = motion[axis.motion[1]], motion[axis.motion[2]]
