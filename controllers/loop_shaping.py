@@ -141,7 +141,7 @@ def axis_plant(model: PlantModel | None = None, tolerance: float = 1e-9) -> Axis
     return AxisPlant(float(mass[0, 0]), float(damping[0, 0]), float(stiffness[0, 0]))
 
 
-def _series(first: StateSpace, second: StateSpace) -> StateSpace:
+def series(first: StateSpace, second: StateSpace) -> StateSpace:
     """`first` followed by `second` (same time domain); states of `first` come first."""
     a = np.block([[first.A, np.zeros((first.A.shape[0], second.A.shape[0]))],
                   [second.B @ first.C, second.A]])
@@ -150,12 +150,12 @@ def _series(first: StateSpace, second: StateSpace) -> StateSpace:
     return StateSpace(a, b, c, second.D @ first.D, first.step)
 
 
-def _from_polynomials(numerator: np.ndarray, denominator: np.ndarray) -> StateSpace:
+def from_polynomials(numerator: np.ndarray, denominator: np.ndarray) -> StateSpace:
     a, b, c, d = tf2ss(numerator, denominator)
     return StateSpace(a, b, c, d)
 
 
-def _tustin(ss: StateSpace, step: float, prewarp: float) -> StateSpace:
+def tustin(ss: StateSpace, step: float, prewarp: float) -> StateSpace:
     """Bilinear map s = w0 / tan(w0 step / 2) (z - 1)/(z + 1): exact response at w0.
 
     That is plain Tustin with the fictitious step 2 tan(w0 step / 2) / w0.
@@ -175,7 +175,7 @@ def _notch(wn: float, zeta: tuple[float, float]) -> StateSpace:
     z1, z2 = zeta
     if not 0 <= z1 < z2:
         raise InputError(f"notch damping ratios {zeta} must satisfy 0 <= z1 < z2")
-    return _from_polynomials(np.array([1, 2 * z1 * wn, wn**2]), np.array([1, 2 * z2 * wn, wn**2]))
+    return from_polynomials(np.array([1, 2 * z1 * wn, wn**2]), np.array([1, 2 * z2 * wn, wn**2]))
 
 
 def design_pid(crossover_hz: float = 2.66, step: float = 1e-3, notch_hz: float | None = None,
@@ -193,16 +193,16 @@ def design_pid(crossover_hz: float = 2.66, step: float = 1e-3, notch_hz: float |
     wc = 2 * math.pi * crossover_hz
     wd, wt, wi = wc / 3, 3 * wc, wc / 10
     notch = _notch(2 * math.pi * notch_hz, notch_zeta) if notch_hz is not None else None
-    loop = (_from_polynomials(*_pid_polynomials(1.0, wd, wt, wi)).response(wc)[0]
+    loop = (from_polynomials(*_pid_polynomials(1.0, wd, wt, wi)).response(wc)[0]
             * plant.state_space().response(wc)[0])
     if notch is not None:
         loop *= notch.response(wc)[0]
     kp = float(1.0 / abs(loop))
-    pid = _from_polynomials(*_pid_polynomials(kp, wd, wt, wi))
-    continuous, discrete = pid, _tustin(pid, step, wc)
+    pid = from_polynomials(*_pid_polynomials(kp, wd, wt, wi))
+    continuous, discrete = pid, tustin(pid, step, wc)
     if notch is not None and notch_hz is not None:
-        continuous = _series(pid, notch)
-        discrete = _series(discrete, _tustin(notch, step, 2 * math.pi * notch_hz))
+        continuous = series(pid, notch)
+        discrete = series(discrete, tustin(notch, step, 2 * math.pi * notch_hz))
     return PIDDesign(
         crossover_hz=crossover_hz, step=step, kp=kp, wd=wd, wt=wt, wi=wi, notch_hz=notch_hz,
         notch_zeta=(notch_zeta[0], notch_zeta[1]) if notch_hz is not None else None, plant=plant,

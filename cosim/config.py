@@ -62,6 +62,7 @@ from typing import Any
 
 import tomli_w
 
+from flexff.cosim.builtins import registered
 from flexff.cosim.example_configs import config_examples as config_examples  # public API
 from flexff.cosim.machine import machine_table, parse_machine
 from flexff.cosim.memory import MemoryNeeded
@@ -395,9 +396,11 @@ class _Parser:
             raise self.error(where, f"expected a table [fmu.{name}], got {t!r}")
         if "." in name or not name:
             raise self.error(where, "an FMU name must not be empty or contain a dot")
+        builtins = {**BUILTIN_OPTIONS,
+                    **{n: b.options for n, b in registered().items()}}
         if ("path" in t) == ("builtin" in t):
             raise self.error(where, "give either path = \"file.fmu\" or builtin = one of "
-                                    f"{', '.join(BUILTIN_OPTIONS)}")
+                                    f"{', '.join(builtins)}")
         unconnected = self.choice(t, where, "unconnected", UNCONNECTED, "error")
         parameters = t.get("parameters", {})
         if not isinstance(parameters, dict):
@@ -411,11 +414,13 @@ class _Parser:
                                                                              where),
                              unconnected=unconnected, tolerance=self.tolerance(t, where),
                              isolate=self.isolate(t, where), solver=self.solver(t, where, path))
-        builtin = self.choice(t, where, "builtin", tuple(BUILTIN_OPTIONS), None)
+        builtin = self.choice(t, where, "builtin", tuple(builtins), None)
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
-                             *BUILTIN_OPTIONS[builtin]))
+                             *builtins[builtin]))
         options: dict[str, Any] = {}
-        if builtin == "plant":
+        if builtin not in BUILTIN_OPTIONS:  # a registered one (cosim.builtins)
+            options = {k: t[k] for k in builtins[builtin] if k in t}
+        elif builtin == "plant":
             variant = self.choice(t, where, "variant", tuple(VARIANTS), "nominal")
             options = {"variant": variant, **self.seed(t, where)}
             for key in parameters:

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from flexff.cosim.builtins import registered
 from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import check_signals
@@ -171,6 +172,18 @@ def _fmu_file(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any], folde
 
 
 def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any]) -> System:
+    assert f.builtin is not None
+    other = registered().get(f.builtin)
+    if other is not None:  # a machine package's (cosim.builtins)
+        try:
+            return other.system(f.options, config.step)
+        except InputError as error:
+            raise ConfigError(config.origin, f"fmu.{f.name}", str(error)) from None
+    return _manipulator_system(f, config, sources)
+
+
+def _manipulator_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any]
+                        ) -> System:
     from flexff.controllers.feedforward import rigid_body_feedforward_system
     from flexff.controllers.identified import read_identified
     from flexff.controllers.learned_feedforward import learned_feedforward_system

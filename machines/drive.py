@@ -1,0 +1,117 @@
+"""A 1-axis linear drive as a continuous System: a motor carriage driven by the effort `F`
+[N] (limited to +-force_limit), viscous and one-sided Coulomb friction (smooth over
+coulomb_width), a cogging force of the magnet pitch, and a load on a spring-damper mount (a
+resonance); the encoder reads the carriage in steps of `encoder` metres, with optional white
+noise. Outputs: the measured position `x`, and for evaluation only the true carriage position
+`x_true`, its velocity `v_true` and the load's position `x_load`.
+
+The numbers are a small linear-motor stage's (DRIVE: 2 kg moving, 250 Hz mount, 1 um
+encoder); every one is a tunable FMU parameter.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import casadi as ca
+
+from flexff.fmu.errors import InputError
+from flexff.fmu.system import Parameter, System, Variable
+
+
+@dataclass(frozen=True)
+class DriveParameters:
+    """The drive's physics [SI]."""
+
+    m_motor: float = 1.6  # carriage and coil [kg]
+    m_load: float = 0.4  # load on the mount [kg]
+    mount_hz: float = 250.0  # the load's resonance on its mount (carriage held) [Hz]
+    mount_damping: float = 0.02  # its damping ratio
+    viscous: float = 20.0  # [N s/m]
+    coulomb_positive: float = 1.5  # friction while moving forward [N]
+    coulomb_negative: float = 1.2  # friction while moving back [N]
+    coulomb_width: float = 1e-3  # velocity over which the friction turns [m/s]
+    cogging: float = 0.5  # amplitude of the cogging force [N]
+    pitch: float = 0.016  # the magnets' pitch [m]
+    force_limit: float = 200.0  # the amplifier's limit [N]
+    encoder: float = 1e-6  # encoder resolution [m]; 0: exact
+    noise_std: float = 0.0  # white measurement noise [m]
+
+    @property
+    def mass(self) -> float:
+        """The moving mass below the mount's resonance [kg]."""
+        return self.m_motor + self.m_load
+
+
+DRIVE = DriveParameters()
+UNITS = {"m_motor": "kg", "m_load": "kg", "mount_hz": "Hz", "mount_damping": "1",
+         "viscous": "N.s/m", "coulomb_positive": "N", "coulomb_negative": "N",
+         "coulomb_width": "m/s", "cogging": "N", "pitch": "m", "force_limit": "N",
+         "encoder": "m", "noise_std": "m"}
+POSITIVE = ("m_motor", "m_load", "mount_hz", "coulomb_width", "pitch", "force_limit")
+
+
+def effort_of(p: Any, position: Any, velocity: Any, acceleration: Any, backend: Any = ca) -> Any:
+    """The rigid drive's inverse dynamics (the mount's load moving with the carriage): the
+    effort a feedforward needs, for tests and as the truth identification is checked against."""
+    tanh = backend.tanh(velocity / p.coulomb_width)
+    return (p.mass * acceleration + p.viscous * velocity
+            + p.coulomb_positive * 0.5 * (1 + tanh) - p.coulomb_negative * 0.5 * (1 - tanh)
+            + p.cogging * backend.sin(2 * math.pi * position / p.pitch))
+
+
+def drive_system(parameters: DriveParameters = DRIVE, x_start: float = 0.0) -> System:
+    """The drive as a continuous System, every physical parameter tunable."""
+    names = list(asdict(parameters))
+    p = ca.SX.sym("p", len(names) + 1)
+    q = DriveParameters(*(p[k] for k in range(len(names))))  # type: ignore[arg-type]
+    start = p[len(names)]
+    x = ca.SX.sym("x", 4)  # carriage position, velocity, load position, velocity
+    force = ca.SX.sym("F")
+    w = ca.SX.sym("w")
+    position, velocity, load, load_velocity = (x[k] for k in range(4))
+    stiffness = q.m_load * (2 * math.pi * q.mount_hz) ** 2
+    damping = 2 * q.mount_damping * q.m_load * 2 * math.pi * q.mount_hz
+    mount = stiffness * (position - load) + damping * (velocity - load_velocity)
+    applied = ca.fmin(ca.fmax(force, -q.force_limit), q.force_limit)
+    tanh = ca.tanh(velocity / q.coulomb_width)
+    friction = (q.viscous * velocity + q.coulomb_positive * 0.5 * (1 + tanh)
+                - q.coulomb_negative * 0.5 * (1 - tanh))
+    cogging = q.cogging * ca.sin(2 * math.pi * position / q.pitch)
+    acceleration = (applied - friction - cogging - mount) / q.m_motor
+    dx = ca.vertcat(velocity, acceleration, load_velocity, mount / q.m_load)
+    read = position + q.noise_std * w
+    measured = ca.if_else(q.encoder > 0, q.encoder * ca.floor(read / q.encoder + 0.5), read)
+    return System(
+        name="drive",
+        description="1-axis linear drive: mass, viscous and one-sided Coulomb friction, "
+                    "cogging, a load on a resonant mount, effort limit, encoder",
+        kind="continuous",
+        states=(Variable("x_carriage", "m"), Variable("v_carriage", "m/s"),
+                Variable("x_mount", "m"), Variable("v_mount", "m/s")),
+        inputs=(Variable("F", "N", "commanded force"),),
+        outputs=(Variable("x", "m", "measured position (encoder)"),
+                 Variable("x_true", "m", "true carriage position (evaluation only)"),
+                 Variable("v_true", "m/s", "true carriage velocity (evaluation only)"),
+                 Variable("x_load", "m", "load position")),
+        parameters=(*(Parameter(n, UNITS[n], n.replace("_", " "), float(getattr(parameters, n)),
+                                positive=n in POSITIVE) for n in names),
+                    Parameter("x_start", "m", "initial position (at rest)", x_start, fixed=True)),
+        initial_state=ca.Function("initial_state", [p], [ca.vertcat(start, 0, start, 0)]),
+        dynamics=ca.Function("dynamics", [x, force, p], [dx]),
+        output=ca.Function("output", [x, force, p, w],
+                           [ca.vertcat(measured, position, velocity, load)]),
+        n_noise=1,
+        max_substep=1e-4,
+    )
+
+
+def drive_from_options(options: Mapping[str, Any], step: float) -> System:
+    """The drive of a configuration's options (none: the FMU's parameters set the physics)."""
+    if options:
+        raise InputError(f"{sorted(options)[0]}: the drive has no options; set its physics as "
+                         f"parameters")
+    return drive_system()
