@@ -263,10 +263,12 @@ def _print_result(name: object, metrics: dict[str, Any], output: object) -> None
     from flexff.cosim.run import range_warning
 
     tracking = ""
-    if "x" in metrics:
-        x, y = metrics["x"], metrics["y"]
-        tracking = (f"e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), einf = ({x['einf']:.4g}, "
-                    f"{y['einf']:.4g}) m, ")
+    axes = [a for a, m in metrics.items() if isinstance(m, dict) and "e2" in m]
+    if axes:  # the manipulator's x, y or a machine description's axes
+        e2 = ", ".join(f"{metrics[a]['e2']:.4g}" for a in axes)
+        einf = ", ".join(f"{metrics[a]['einf']:.4g}" for a in axes)
+        tracking = (f"e2 = ({e2}) m/sqrt(s), einf = ({einf}) m, " if axes == ["x", "y"] else
+                    f"e2 ({', '.join(axes)}) = ({e2}), einf = ({einf}) in the axes' units, ")
     print(f"{name}: {tracking}real-time factor {metrics['real_time_factor']:.0f} -> {output}")
     timing = metrics.get("realtime", {})
     if timing.get("target_real_time_factor"):

@@ -14,7 +14,6 @@ import json
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +23,7 @@ from flexff.controllers.machine_features import feature_names
 from flexff.cosim.machine import Machine, machine_table
 from flexff.fmu.errors import InputError
 from flexff.learning.batches import TRAIN, VALIDATION, SequenceSet
+from flexff.learning.machine_dataset import MachineTrajectory
 from flexff.learning.machine_features import MachineFeatures, prepare
 from flexff.learning.models import SequenceNetwork, uses_prior
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig
@@ -38,16 +38,6 @@ from flexff.learning.train import (
 )
 
 MSE_UNITS = "MSE of min-max scaled efforts, axis by axis (run.json label_names)"
-
-
-@dataclass(frozen=True)
-class MachineTrajectory:
-    """One trajectory of a machine's data: its name, split ("train" or "test") and signals
-    (time and machine.signals), sampled at the data's rate."""
-
-    name: str
-    split: str
-    signals: Mapping[str, np.ndarray]
 
 
 def features_to_dict(features: MachineFeatures) -> dict[str, Any]:
