@@ -17,8 +17,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from flexff.controllers.linear_prior import LinearModel
 from flexff.controllers.machine_feedforward import (
     inverse_model_system,
@@ -34,12 +32,18 @@ from flexff.learning.ilc import ilc
 from flexff.learning.linear_model import identify_linear, write_linear_model
 from flexff.learning.machine_collect import collect_machine
 from flexff.learning.machine_dataset import MachineDataset
-from flexff.learning.machine_features import MachineFeatures, label_filter, motion
+from flexff.learning.machine_features import (
+    MachineFeatures,
+    label_filter,
+    motion,
+    named_motion,
+)
 from flexff.learning.machine_loop import loop_machine, with_feedforward, with_feedforward_fmu
 from flexff.learning.machine_train import fit_machine
+from flexff.learning.models import uses_prior
 from flexff.learning.presets import make_config
 
-MODELS = ("lstm", "cnn-lstm", "tcn")
+MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")
 SUMMARY = "summary.json"
 
 
@@ -56,10 +60,7 @@ def identify_dataset(data: MachineDataset, features: MachineFeatures | None = No
     motions, efforts = [], []
     for trajectory in train:
         moved, effort = motion(trajectory.signals, rate, machine, resolved)
-        named: dict[str, np.ndarray] = {}
-        for k, axis in enumerate(machine.axes):
-            named.update(zip(axis.motion, moved[:, 4 * k:4 * k + 3].T))
-        motions.append(named)
+        motions.append(named_motion(moved, machine))
         efforts.append({a.name: effort[:, k] for k, a in enumerate(machine.axes)})
     return identify_linear(machine, motions, efforts,
                            lambda values: label_filter(values, rate, resolved))
@@ -85,7 +86,8 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     for kind in models:
         config = make_config(kind, preset, **overrides)
         training[kind] = fit_machine(config, machine, data.sample_rate_hz, data.trajectories,
-                                     data.digest, out / "runs" / kind, progress=progress)
+                                     data.digest, out / "runs" / kind, progress=progress,
+                                     prior=identified if uses_prior(kind) else None)
         model = export(out / "runs" / kind, out / "models" / f"{kind}.onnx")
         fmus[kind] = build_fmu(learned_machine_feedforward_system(model, loop.step),
                                out / "fmus" / f"{kind}.fmu")

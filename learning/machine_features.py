@@ -145,6 +145,14 @@ def motion(signals: Mapping[str, np.ndarray], rate_hz: float, machine: Machine,
     return np.column_stack(columns), np.column_stack(efforts)
 
 
+def named_motion(moved: np.ndarray, machine: Machine) -> dict[str, np.ndarray]:
+    """`motion`'s columns by the axes' motion names (x, vx, ax of every axis)."""
+    named: dict[str, np.ndarray] = {}
+    for k, axis in enumerate(machine.axes):
+        named.update(zip(axis.motion, moved[:, 4 * k:4 * k + 3].T))
+    return named
+
+
 def label_filter(values: np.ndarray, rate_hz: float, config: MachineFeatures) -> np.ndarray:
     """The labels' low-pass and decimation to the model rate, along axis 0: applied to the
     efforts and to whatever is compared with them (features, regressor columns) alike."""
