@@ -396,8 +396,8 @@ class _Parser:
             raise self.error(where, f"expected a table [fmu.{name}], got {t!r}")
         if "." in name or not name:
             raise self.error(where, "an FMU name must not be empty or contain a dot")
-        builtins = {**BUILTIN_OPTIONS,
-                    **{n: b.options for n, b in registered().items()}}
+        builtins = {**BUILTIN_OPTIONS, **({n: b.options for n, b in registered().items()}
+                                          if "path" not in t else {})}
         if ("path" in t) == ("builtin" in t):
             raise self.error(where, "give either path = \"file.fmu\" or builtin = one of "
                                     f"{', '.join(builtins)}")
