@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
+from flexff import api
 from flexff.controllers.block_options import OptionError
 from flexff.controllers.blocks_pid import AxisPid, designed_pid, pid_from_options, pid_system
 from flexff.controllers.blocks_signal import gain_from_options, sum_from_options
@@ -157,3 +158,31 @@ def test_sum_and_gain(fmus):
 def test_pid_options_name_the_key_at_fault(options, key):
     with pytest.raises(OptionError, match=key):
         pid_from_options(options, STEP)
+
+
+def test_sum_and_gain_run_as_builtins(tmp_path):
+    """The registry path: built-in sum and gain named in a configuration, chained by name."""
+    config = tmp_path / "chain.toml"
+    config.write_text("""
+[run]
+step = 0.001
+stop = 0.01
+
+[[source]]
+kind = "constant"
+values = { a = 1.5, b = 0.25 }
+
+[fmu.total]
+builtin = "sum"
+inputs = ["a", "b"]
+output = "c"
+signs = [1, -1]
+
+[fmu.scaled]
+builtin = "gain"
+input = "c"
+output = "d"
+gain = 4.0
+""")
+    recording = api.simulate(api.load(config))
+    np.testing.assert_allclose(recording["scaled.d"], 4.0 * (1.5 - 0.25))
