@@ -1,5 +1,5 @@
-"""Non-ideal effects shared by the example machines, as CasADi expressions: asymmetric smooth
-Coulomb friction, effort saturation, encoder quantization with noise."""
+"""Non-ideal effects of a machine model, as CasADi expressions (machines.stage uses them): smooth
+asymmetric Coulomb friction, zero at rest, effort saturation, encoder counts with noise."""
 
 from __future__ import annotations
 

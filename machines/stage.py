@@ -33,9 +33,9 @@ def parameters(axes: Sequence[str] = AXES) -> tuple[Parameter, ...]:
     gantry, cross = axes
     per_axis = tuple(p for a, (viscous, pos, neg, limit) in zip(axes, _AXIS_VALUES) for p in (
         Parameter(f"viscous_{a}", "N.s/m", f"viscous friction, {a} axis", viscous),
-        Parameter(f"coulomb_pos_{a}", "N", f"Coulomb friction moving +, {a} axis", pos),
-        Parameter(f"coulomb_neg_{a}", "N", f"Coulomb friction moving - (magnitude), {a} axis",
-                  neg),
+        Parameter(f"coulomb_positive_{a}", "N", f"Coulomb friction moving +, {a} axis", pos),
+        Parameter(f"coulomb_negative_{a}", "N",
+                  f"Coulomb friction moving - (magnitude), {a} axis", neg),
         Parameter(f"force_limit_{a}", "N", f"amplifier force limit, {a} axis", limit, True)))
     return (
         Parameter("mass_beam", "kg", f"beam with the {gantry} carriages", 6.0, True),
@@ -46,7 +46,7 @@ def parameters(axes: Sequence[str] = AXES) -> tuple[Parameter, ...]:
         *per_axis,
         Parameter("coulomb_width", "m/s", "velocity over which Coulomb friction turns", 1e-3,
                   True),
-        Parameter("resolution", "m", "encoder resolution (both axes)", 1e-6, True),
+        Parameter("encoder", "m", "encoder resolution (both axes)", 1e-6, True),
         Parameter("noise_std", "m", "encoder noise standard deviation", 0.0),
         Parameter(f"{gantry}_start", "m", f"initial {gantry} (at rest)", 0.0, fixed=True),
         Parameter(f"{cross}_start", "m", f"initial {cross} (at rest)", 0.0, fixed=True),
@@ -77,7 +77,7 @@ def stage_system(axes: Sequence[str] = AXES) -> System:
     q, qd = state[:3], state[3:]
     forces = [saturated(u[k], v[f"force_limit_{a}"]) for k, a in enumerate(axes)]
     friction = [-v[f"viscous_{a}"] * qd[k] + coulomb_friction(
-        qd[k], v[f"coulomb_pos_{a}"], v[f"coulomb_neg_{a}"], v["coulomb_width"])
+        qd[k], v[f"coulomb_positive_{a}"], v[f"coulomb_negative_{a}"], v["coulomb_width"])
         for k, a in enumerate(axes)]
     generalized = ca.vertcat(forces[0] + friction[0], forces[1] + friction[1],
                              -v["yaw_damping"] * qd[2])
@@ -88,7 +88,7 @@ def stage_system(axes: Sequence[str] = AXES) -> System:
            - ca.gradient(potential, q))
     tool = ca.vertcat(q[0] - q[1] * ca.sin(q[2]), q[1] * ca.cos(q[2]))
     tool_velocity = ca.jacobian(tool, q) @ qd
-    measured = [encoder(q[k], v["resolution"], v["noise_std"], w[k]) for k in range(2)]
+    measured = [encoder(q[k], v["encoder"], v["noise_std"], w[k]) for k in range(2)]
     outputs = tuple(o for k, a in enumerate(axes) for o in (
         (Variable(a, "m", f"measured {a} (encoder)"),
           Variable(f"{a}_true", "m", f"true tool {a} (evaluation only)"),

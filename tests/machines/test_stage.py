@@ -52,8 +52,8 @@ def _energy(r, v):
 
 
 def test_stage_couples_the_axes_through_yaw_and_conserves_energy(stage):
-    lossless = {"yaw_damping": 0.0, **{f"{k}_{a}": 0.0 for k in ("viscous", "coulomb_pos",
-                                                                 "coulomb_neg") for a in "xy"}}
+    lossless = {"yaw_damping": 0.0, **{f"{k}_{a}": 0.0 for k in (
+        "viscous", "coulomb_positive", "coulomb_negative") for a in "xy"}}
     push = {"Fx": lambda t: 50.0 if t < 0.05 else 0.0, "Fy": lambda t: 20.0 if t < 0.05 else 0.0}
     states = ["y_pos", "yaw_angle", "x_vel", "y_vel", "yaw_rate", "yaw"]
     r = _run(stage, push, 0.3, states, y_start=0.2, **lossless)
