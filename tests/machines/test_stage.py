@@ -105,3 +105,26 @@ def test_stage_options_are_checked():
         stage_from_options({"speed": 1}, STEP)
     with pytest.raises(OptionError, match="axes"):
         stage_from_options({"axes": ["x"]}, STEP)
+
+
+@pytest.mark.slow
+def test_identification_recovers_the_stage_parameters(tmp_path):
+    """flexff's data collection and identification on the example loop find each axis's moving
+    mass, viscous and Coulomb friction (the coupled yaw mode stays outside the per-axis prior)."""
+    data, found = tmp_path / "data", tmp_path / "identified.json"
+    for command in (["data", "collect", "--config", str(EXAMPLE), "-o", str(data), "--workers",
+                     "1", "--trajectories", "6", "2", "--duration", "8"],
+                    ["identify", str(data), "-o", str(found)]):
+        subprocess.run([sys.executable, "-m", "flexff", *command], check=True,
+                       capture_output=True, cwd=ROOT)
+    axes = json.loads(found.read_text())["axes"]
+    v = true_parameters()
+    truth = {"x": (v["mass_beam"] + v["mass_carriage"], v["viscous_x"], v["coulomb_positive_x"],
+                   v["coulomb_negative_x"]),
+             "y": (v["mass_carriage"], v["viscous_y"], v["coulomb_positive_y"],
+                   v["coulomb_negative_y"])}
+    for axis, values in truth.items():
+        assert axes[axis]["terms"] == ["inertia", "viscous", "coulomb_positive",
+                                       "coulomb_negative"]
+        np.testing.assert_allclose(axes[axis]["parameters"][:2], values[:2], rtol=0.02)
+        np.testing.assert_allclose(axes[axis]["parameters"][2:], values[2:], rtol=0.1)
