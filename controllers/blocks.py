@@ -1,5 +1,6 @@
 """Generic loop blocks as discrete Systems, free of any machine: a PID per axis (loop-shaped on
-the axis's mass, optional notch and low-pass, anti-windup), a summing junction and a gain.
+the axis's mass, optional notch and low-pass, anti-windup); the summing junction and the gain
+are in controllers.blocks_signal, a PID with tunable gains in controllers.blocks_pid.
 
 PID signals per axis `a`: inputs `a_ref` (reference position), `a` (measured position),
 `a_ff` (feedforward effort, added after the PID); outputs `a_effort` (the commanded effort,
