@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.io import loadmat
@@ -19,6 +20,7 @@ from scipy.io.matlab import matfile_version
 from scipy.signal import savgol_filter
 
 from flexff.cosim.csv_text import TIME, read_time_table
+from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
 from flexff.learning.features import decimation
 from flexff.learning.presets import PRESETS, make_config
@@ -45,6 +47,22 @@ class Log:
     @property
     def rate_hz(self) -> float:
         return 1.0 / float(np.median(np.diff(self.columns[TIME])))
+
+
+def check_output(out: Path, rate_hz: float | None) -> None:
+    """Refuse an output folder that holds files, and a rate that is no positive number."""
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise LogError(f"{out} exists and is not an empty folder: import into a new folder")
+    if rate_hz is not None and not (np.isfinite(rate_hz) and rate_hz > 0):
+        raise LogError(f"--rate must be a positive number of Hz, got {rate_hz}")
+
+
+def log_entry(log: Log, how: str) -> dict[str, Any]:
+    """A trajectory's manifest record of the log it came from and how it was resampled."""
+    return {"path": str(log.path.resolve()), "format": log.format,
+            "sha256": file_sha256(log.path), "rate_hz": log.rate_hz,
+            "samples": len(log.columns[TIME]), "start_s": float(log.columns[TIME][0]),
+            "resampled": how}
 
 
 def split_by_file(paths: list[Path], test: Sequence[str] | None) -> dict[str, str]:

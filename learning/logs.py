@@ -39,7 +39,6 @@ from typing import Any
 
 import numpy as np
 
-from flexff.fmu.cache import file_sha256
 from flexff.learning.dataset import (
     ENCODER_SIGNALS,
     IMPORTED,
@@ -58,7 +57,9 @@ from flexff.learning.log_files import (
     LogError,
     check_length,
     check_log,
+    check_output,
     common_rate,
+    log_entry,
     read_log,
     reference_derivative,
     resampled,
@@ -100,22 +101,6 @@ def import_logs(files: Sequence[str | Path], out: str | Path, rate_hz: float | N
 
     write_folder(out, fill)
     return load_dataset(out)
-
-
-def check_output(out: Path, rate_hz: float | None) -> None:
-    """Refuse an output folder that holds files, and a rate that is no positive number."""
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise LogError(f"{out} exists and is not an empty folder: import into a new folder")
-    if rate_hz is not None and not (np.isfinite(rate_hz) and rate_hz > 0):
-        raise LogError(f"--rate must be a positive number of Hz, got {rate_hz}")
-
-
-def log_entry(log: Log, how: str) -> dict[str, Any]:
-    """A trajectory's manifest record of the log it came from and how it was resampled."""
-    return {"path": str(log.path.resolve()), "format": log.format,
-            "sha256": file_sha256(log.path), "rate_hz": log.rate_hz,
-            "samples": len(log.columns["time"]), "start_s": float(log.columns["time"][0]),
-            "resampled": how}
 
 
 def _derive(log: Log, signals: dict[str, np.ndarray], rate: float) -> dict[str, str]:
