@@ -109,8 +109,9 @@ class Prior:
 class LogMap:
     """How the machine's logs hold its dataset signals: the time column's name, named numbers
     (`scalars`, e.g. a drive's gain) and, per signal of Machine.signals, an expression of the
-    log's column names and the scalars (`x_effort = "gain * vir"`). A signal not mapped is
-    the log's column of its own name (a reference only where the log holds it)."""
+    log's column names and the scalars (`x_effort = "gain * vir"`; a scalar hides a column
+    of its name). A signal not mapped is the log's column of its own name (a reference only
+    where the log holds it)."""
 
     time: str = "time"
     scalars: Mapping[str, float] = field(default_factory=dict)

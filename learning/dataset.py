@@ -32,9 +32,20 @@ import numpy as np
 
 from flexff.fmu.cache import file_sha256
 
-# FORMAT, MANIFEST, DatasetError and Trajectory: other modules import them from here too
+# `X as X`: other modules import FORMAT, MANIFEST, DatasetError and Trajectory from here
 from flexff.learning.dataset_files import (
     FORMAT as FORMAT,
+)
+from flexff.learning.dataset_files import (
+    MACHINE_VERSION,
+    MANIPULATOR_VERSIONS,
+    check_arrays,
+    check_entries,
+    digest,
+    is_sha256,
+    read_arrays,
+    save_arrays,
+    save_manifest,
 )
 from flexff.learning.dataset_files import (
     MANIFEST as MANIFEST,
@@ -45,20 +56,10 @@ from flexff.learning.dataset_files import (
 from flexff.learning.dataset_files import (
     Trajectory as Trajectory,
 )
-from flexff.learning.dataset_files import (
-    check_arrays,
-    check_entries,
-    digest,
-    is_sha256,
-    read_arrays,
-    save_arrays,
-    save_manifest,
-)
 from flexff.plant.signals import CURRENTS, ENCODERS, FORCES, REFERENCE, TRUE_POSITION, names
 
-VERSION = 3
-READS = (2, VERSION)  # the versions load_dataset reads (module doc)
-MACHINE_VERSION = 4  # learning.machine_dataset's: any machine's signals
+READS = MANIPULATOR_VERSIONS  # the versions load_dataset reads (module doc)
+VERSION = READS[-1]
 COLLECTED = "flexff data collect"  # the manifest's `source` for a collected set
 IMPORTED = "flexff data import"  # ... and for imported logs
 WRITTEN = "learning.dataset.write_dataset"

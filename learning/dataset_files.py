@@ -26,6 +26,8 @@ from flexff.cosim.recording import atomic_write
 from flexff.fmu.errors import InputError
 
 FORMAT = "flexff-dataset"
+MANIPULATOR_VERSIONS = (2, 3)  # learning.dataset's: the manipulator's signals
+MACHINE_VERSION = 4  # learning.machine_dataset's: a machine description's signals
 MANIFEST = "manifest.json"
 SPLITS = ("train", "test")
 

@@ -24,7 +24,7 @@ What the format needs and the logs do not hold is derived, and marked so in the 
 manifest entry (`derived`): the true position x, y from the encoders by the nominal forward
 kinematics (three encoders, least squares), and a missing reference signal: a position from
 the derived position, a velocity or acceleration by a cubic Savitzky-Golay filter over
-SMOOTHING_S of the reference position, as cosim.references.read_csv derives them. Training
+log_files.SMOOTHING_S of the reference position, as cosim.references.read_csv derives them. Training
 reads only the encoders and the forces (learning.dataset.TRAINED), never a derived signal.
 
 The folder is written under a temporary name beside `out` and renamed at the end, so an error

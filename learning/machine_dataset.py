@@ -26,7 +26,9 @@ from flexff.cosim.machine import Machine
 from flexff.fmu.cache import file_sha256
 from flexff.learning.dataset_files import (
     FORMAT,
+    MACHINE_VERSION,
     MANIFEST,
+    MANIPULATOR_VERSIONS,
     DatasetError,
     Trajectory,
     check_arrays,
@@ -39,8 +41,7 @@ from flexff.learning.dataset_files import (
     write_folder,
 )
 
-VERSION = 4
-MANIPULATOR_VERSIONS = (2, 3)  # learning.dataset's
+VERSION = MACHINE_VERSION
 ENTRY_KEYS = ("name", "split", "file", "sha256")  # set here, not by a caller's details
 AGAIN = "write the dataset again with this flexff version"
 

@@ -122,7 +122,7 @@ def _mapped(log: Log, machine: Machine, sources: list[_Source]) -> Log:
             value = evaluate(source.expression, scope, source.key or source.signal)
         values = np.broadcast_to(np.asarray(value, dtype=np.float64), log.columns[TIME].shape)
         bad = np.flatnonzero(~np.isfinite(values))
-        if bad.size:
+        if bad.size:  # a mapped expression's: a column's own values are checked when read
             raise LogError(f"{log.path}: {source.key} = {source.expression.text!r}, "
                            f"{log.row(int(bad[0]))}: NaN or Inf")
         signals[source.signal] = np.array(values)
