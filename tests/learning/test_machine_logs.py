@@ -14,6 +14,7 @@ from flexff.cosim.machine import parse_machine
 from flexff.learning.log_files import LogError
 from flexff.learning.machine_dataset import load_machine_dataset
 from flexff.learning.machine_logs import import_machine_logs
+from tests.helpers import matlab_v73_header
 
 RATE = 1000.0
 SAMPLES = 2000  # 2 s: two windows of the fast preset (learning.logs's shortest)
@@ -99,6 +100,33 @@ def test_a_matlab_log_gives_what_its_csv_gives(tmp_path):
     assert all(np.array_equal(a[n][s], b[n][s]) for n in a for s in csv.signals)
     manifest = json.loads((mat.path / "manifest.json").read_text())
     assert manifest["trajectories"][0]["log"]["format"] == "MATLAB v5/v7"
+
+
+def test_a_matlab_v73_log(tmp_path):
+    h5py = pytest.importorskip("h5py")
+    path = tmp_path / "logs" / "run-a.mat"
+    path.parent.mkdir()
+    with h5py.File(path, "w", userblock_size=512) as handle:  # MATLAB's layout: 1 x n
+        for name, values in renamed(motion(0)).items():
+            handle.create_dataset(name, data=values[None, :])
+            handle[name].attrs["MATLAB_class"] = np.bytes_("double")
+    matlab_v73_header(path)
+    csv = write_log(tmp_path / "logs" / "run-b.csv", renamed(motion(1)))
+    v73 = import_machine_logs([path, csv], tmp_path / "v73", drive(MAP))
+    plain = import_machine_logs(logs(tmp_path / "csv", renamed), tmp_path / "csv-data",
+                                drive(MAP))
+    a, b = arrays(v73.path), arrays(plain.path)
+    assert all(np.array_equal(a[n][s], b[n][s]) for n in a for s in v73.signals)
+
+
+def test_a_rate_keeps_every_nth_sample(tmp_path):
+    full = import_machine_logs(logs(tmp_path / "logs", renamed), tmp_path / "1000", drive(MAP))
+    tenth = import_machine_logs(logs(tmp_path / "logs", renamed), tmp_path / "100", drive(MAP),
+                                rate_hz=100.0)
+    assert tenth.sample_rate_hz == 100.0
+    a, b = full.trajectories[0].signals, tenth.trajectories[0].signals
+    for signal in ("time", "x_ref", "x_measured", "x_effort"):
+        assert np.array_equal(a[signal][::10], b[signal]), signal
 
 
 def test_a_missing_reference_is_derived_and_marked(tmp_path):
