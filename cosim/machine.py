@@ -329,6 +329,9 @@ class _Check:
             if not SCALAR_NAME.match(name) or name in FUNCTIONS or name in CONSTANTS:
                 raise self.error(key, "a scalar's name is a letter or _, then letters, digits "
                                  "or _, and no function or constant of an expression")
+            if name in signals:
+                raise self.error(key, f"{name} is a dataset signal, read from the log's "
+                                 f"column of its name: name the scalar otherwise")
             self.number(scalars, "machine.log.scalars", name, positive=False)
         columns = table.get("columns", {})
         if not isinstance(columns, Mapping):

@@ -35,6 +35,7 @@ def test_a_map_is_read_as_data():
     ({"scalars": {"gain": 2.5}, "columns": {"x_effort": "gain * 2"}},
      r"machine\.log\.columns\.x_effort", "names no column of the log, only scalars"),
     ({"scalars": {"pi": 3.0}}, r"machine\.log\.scalars\.pi", "no function or constant"),
+    ({"scalars": {"x_ref": 0.0}}, r"machine\.log\.scalars\.x_ref", "is a dataset signal"),
     ({"scalars": {"gain": "2.5"}}, r"machine\.log\.scalars\.gain", "finite number"),
     ({"time": ""}, r"machine\.log\.time", "non-empty string"),
     ({"rows": 3}, r"machine\.log\.rows", "unknown key"),
