@@ -598,9 +598,10 @@ def build_parser() -> argparse.ArgumentParser:
                               "ay_ref), one trajectory each; with --machine, the columns its "
                               "[machine.log] names")
     imports.add_argument("--machine", metavar="DESC.toml",
-                         help="a file with a [machine] table (a description, or a run "
-                              "configuration holding one): import that machine's logs through "
-                              "its [machine.log] map into a machine dataset (version 4)")
+                         help="a TOML file with a [machine] table (a description, or a run "
+                              "configuration that holds the table itself): import that "
+                              "machine's logs through its [machine.log] map into a machine "
+                              "dataset (version 4)")
     imports.add_argument("-o", "--output", required=True, help="the dataset folder (new)")
     imports.add_argument("--rate", type=float, metavar="HZ",
                          help="the dataset's sample rate: the logs are resampled to it "
