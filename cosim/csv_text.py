@@ -55,23 +55,26 @@ OLD_TIME = "t"
 
 def read_time_table(path: Path, required: Sequence[str] = (),
                     optional: Sequence[str] | None = None,
-                    error: type[InputError] = InputError) -> TimeTable:
+                    error: type[InputError] = InputError, time: str = TIME) -> TimeTable:
     """The time table in the CSV file at `path`: a header row naming `time` (or `t`) and the
     `required` columns, then rows of numbers, every one finite, time strictly increasing. It
     keeps the `required` and `optional` columns (every column when `optional` is None). Every
     problem is an `error` naming the file, column and row (never the file's content): the one
-    reader of references, [[source]] tables and machine logs."""
+    reader of references, [[source]] tables and machine logs. A machine log's map may name
+    the time column otherwise (`time`): the table keeps it as `time`, and does not read a
+    column the file names `time`."""
     rows = read_rows(path, error)
     header = [name.strip() for name in rows[0][1]]
-    if TIME not in header and OLD_TIME in header:
+    if time == TIME and TIME not in header and OLD_TIME in header:
         header[header.index(OLD_TIME)] = TIME
-    wanted = [TIME, *(n for n in required if n != TIME)]
+    wanted = [time, *(n for n in required if n != time)]
     missing = [n for n in wanted if n not in header]
     if missing:
         also = f" (optionally {', '.join(optional)})" if optional else ""
         raise error(f"{path}: missing column(s) {', '.join(missing)}: the header row must name "
                     f"{', '.join(wanted)}{also}")
-    kept = [n for n in header if n in wanted or optional is None or n in optional]
+    kept = [n for n in header
+            if n in wanted or ((optional is None or n in optional) and n != TIME)]
     for name in kept:
         if header.count(name) > 1:
             raise error(f"{path}: column {name} appears {header.count(name)} times in the "
@@ -83,14 +86,14 @@ def read_time_table(path: Path, required: Sequence[str] = (),
             raise error(f"{path}: {table.row(k)} has {len(cells)} cells, the header "
                         f"{len(header)}")
     for name in kept:
-        table.columns[name] = _numbers(table, name, [cells[header.index(name)]
-                                                     for _, cells in body], error)
+        table.columns[TIME if name == time else name] = _numbers(
+            table, name, [cells[header.index(name)] for _, cells in body], error)
     if len(body) < 2:
         raise error(f"{path}: {len(body)} data row(s): a time table needs at least two")
     steps = np.diff(table.time)
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0)) + 1
-        raise error(f"{path}: column time, {table.row(k)}: time does not increase "
+        raise error(f"{path}: column {time}, {table.row(k)}: time does not increase "
                     f"(t = {table.time[k - 1]:.9g} s, then {table.time[k]:.9g} s)")
     return table
 

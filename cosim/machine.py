@@ -10,6 +10,7 @@ the effort the loop commands (the labels), units, and the excitation limits (`ra
 `velocity`, `acceleration`, optional `jerk`); records and datasets name the measured position
 `<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
 terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
+`[machine.log]` says how the machine's logs name these signals (LogMap: `flexff data import`).
 Every key is listed in KEYS; every error is a ConfigError naming `machine.key`.
 """
 
@@ -24,16 +25,24 @@ from pathlib import Path
 from typing import Any
 
 from flexff.cosim.schema import ConfigError
-from flexff.fmu.expressions import Expression, ExpressionError, parse_expression
+from flexff.fmu.expressions import (
+    CONSTANTS,
+    FUNCTIONS,
+    Expression,
+    ExpressionError,
+    parse_expression,
+)
 
 AXIS_NAME = re.compile(r"[A-Za-z][A-Za-z0-9]*\Z")
+SCALAR_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 PRIOR_TERMS = ("inertia", "viscous", "coulomb", "coulomb_asymmetric", "offset")
 DEFAULT_PRIOR_TERMS = ("inertia", "viscous", "coulomb", "offset")
 KEYS = {
-    "machine": ("name", "axis", "prior"),
+    "machine": ("name", "axis", "prior", "log"),
     "axis": ("name", "unit", "measured", "true", "feedforward", "effort", "effort_unit",
              "range", "velocity", "acceleration", "jerk"),
     "prior": ("terms", "extra", "coulomb_width"),
+    "log": ("time", "scalars", "columns"),
 }
 
 
@@ -105,12 +114,26 @@ class Prior:
 
 
 @dataclass(frozen=True)
+class LogMap:
+    """How the machine's logs hold its dataset signals: the time column's name, named numbers
+    (`scalars`, e.g. a drive's gain) and, per signal of Machine.signals, an expression of the
+    log's column names and the scalars (`x_effort = "gain * vir"`; a scalar hides a column
+    of its name). A signal not mapped is the log's column of its own name (a reference only
+    where the log holds it)."""
+
+    time: str = "time"
+    scalars: Mapping[str, float] = field(default_factory=dict)
+    columns: Mapping[str, Expression] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Machine:
-    """A machine's axes and prior, checked."""
+    """A machine's axes, prior and log map, checked."""
 
     name: str
     axes: tuple[Axis, ...]
     prior: Prior = Prior()
+    log: LogMap = LogMap()
 
     def axis(self, name: str) -> Axis:
         return next(a for a in self.axes if a.name == name)
@@ -164,7 +187,8 @@ def parse_machine(table: Any, origin: str, base: Path = Path(".")) -> Machine:
     if not isinstance(name, str) or not name:
         raise check.error("machine.name", f"expected a non-empty string, got {name!r}")
     prior = check.prior(table.get("prior", {}), axes)
-    return Machine(name, axes, prior)
+    log = check.log(table.get("log", {}), Machine(name, axes).signals)
+    return Machine(name, axes, prior, log)
 
 
 def machine_table(machine: Machine) -> dict[str, Any]:
@@ -182,7 +206,9 @@ def machine_table(machine: Machine) -> dict[str, Any]:
                 if machine.prior.extra else {}),
              **({"coulomb_width": machine.prior.coulomb_width}
                 if machine.prior.coulomb_width is not None else {})}
-    return {"name": machine.name, "axis": axes, "prior": prior}
+    log = {"time": machine.log.time, "scalars": dict(machine.log.scalars),
+           "columns": {n: e.text for n, e in machine.log.columns.items()}}
+    return {"name": machine.name, "axis": axes, "prior": prior, "log": log}
 
 
 def check_signals(machine: Machine, outputs: Iterable[str], inputs: Iterable[str],
@@ -327,3 +353,39 @@ class _Check:
                 extra[axis_name][term] = expression
         width = self.number(table, "machine.prior", "coulomb_width")
         return Prior(tuple(terms), extra, width)
+
+    def log(self, table: Any, signals: tuple[str, ...]) -> LogMap:
+        self.table(table, "machine.log", "log")
+        time = self.text(table, "machine.log", "time", "time")
+        scalars = table.get("scalars", {})
+        if not isinstance(scalars, Mapping):
+            raise self.error("machine.log.scalars", "expected a table of name = number")
+        for name in scalars:
+            key = f"machine.log.scalars.{name}"
+            if not SCALAR_NAME.match(name) or name in FUNCTIONS or name in CONSTANTS:
+                raise self.error(key, "a scalar's name is a letter or _, then letters, digits "
+                                 "or _, and no function or constant of an expression")
+            if name in signals:
+                raise self.error(key, f"{name} is a dataset signal, read from the log's "
+                                 f"column of its name: name the scalar otherwise")
+            self.number(scalars, "machine.log.scalars", name, positive=False)
+        columns = table.get("columns", {})
+        if not isinstance(columns, Mapping):
+            raise self.error("machine.log.columns", "expected a table of signal = "
+                             "\"expression of the log's columns\"")
+        expressions = {}
+        for signal, text in columns.items():
+            key = f"machine.log.columns.{signal}"
+            if signal == "time":
+                raise self.error(key, "the time column is named by machine.log.time")
+            if signal not in signals:
+                raise self.error(key, f"{signal!r} is not a dataset signal of this machine"
+                                 f"{_nearest(signal, set(signals))}; its signals: "
+                                 f"{', '.join(signals)}")
+            try:
+                expressions[signal] = parse_expression(text, key)
+            except ExpressionError as error:
+                raise self.error(key, str(error).split(": ", 1)[1]) from None
+            if not expressions[signal].names - set(scalars):
+                raise self.error(key, f"{text!r} names no column of the log, only scalars")
+        return LogMap(time, {n: float(v) for n, v in scalars.items()}, expressions)

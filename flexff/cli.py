@@ -368,7 +368,8 @@ def _data_collect(args: argparse.Namespace) -> int:
             train, test = args.trajectories
             data = collect_machine(config, args.output, train, test, args.duration,
                                    workers=args.workers)
-            print(f"{data.machine.name}: {len(data.trajectories)} trajectories -> {data.path}")
+            print(f"{data.description.name}: {len(data.trajectories)} trajectories -> "
+                  f"{data.path}")
             return 0
     if args.set is None:
         raise InputError("data collect needs --set NAME, or --config LOOP.toml with a [machine]")
@@ -390,10 +391,14 @@ def _data_collect(args: argparse.Namespace) -> int:
 
 
 def _data_import(args: argparse.Namespace) -> int:
+    from flexff.cosim.machine import load_machine
     from flexff.learning.logs import import_logs
+    from flexff.learning.machine_logs import import_machine_logs
 
     test = None if args.test is None else [n.strip() for n in args.test.split(",") if n.strip()]
-    dataset = import_logs(args.files, args.output, args.rate, test)
+    dataset = (import_logs(args.files, args.output, args.rate, test) if args.machine is None
+               else import_machine_logs(args.files, args.output, load_machine(args.machine),
+                                        args.rate, test))
     for t in dataset.trajectories:
         print(f"{t.name} ({t.split}): {len(t)} samples; derived, not measured: "
               f"{', '.join(t.derived) or 'nothing'}")
@@ -445,7 +450,7 @@ def _train_machine(args: argparse.Namespace) -> int:
     data = load_machine_dataset(args.data)
     config = make_config(args.model, args.preset, seed=(args.seed or [0])[0],
                          **({"epochs": args.epochs} if args.epochs else {}))
-    metrics = fit_machine(config, data.machine, data.sample_rate_hz, data.trajectories,
+    metrics = fit_machine(config, data.description, data.sample_rate_hz, data.trajectories,
                           data.digest, Path(args.output), resume=args.resume, force=args.force,
                           checkpoint_every=args.checkpoint_every,
                           prior=identify_dataset(data) if args.model == "pgnn" else None)
@@ -677,7 +682,13 @@ def build_parser() -> argparse.ArgumentParser:
         "import", help="turn logs of a real machine (CSV or MATLAB .mat) into a dataset folder")
     imports.add_argument("files", nargs="+", metavar="FILE",
                          help="logs with columns time, theta_s1..3, Fx, Fy (optionally x_ref .. "
-                              "ay_ref), one trajectory each")
+                              "ay_ref), one trajectory each; with --machine, the columns its "
+                              "[machine.log] names")
+    imports.add_argument("--machine", metavar="DESC.toml",
+                         help="a TOML file with a [machine] table (a description, or a run "
+                              "configuration that holds the table itself): import that "
+                              "machine's logs through its [machine.log] map into a machine "
+                              "dataset (version 4)")
     imports.add_argument("-o", "--output", required=True, help="the dataset folder (new)")
     imports.add_argument("--rate", type=float, metavar="HZ",
                          help="the dataset's sample rate: the logs are resampled to it "

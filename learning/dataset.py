@@ -22,31 +22,48 @@ is refused.
 
 from __future__ import annotations
 
-import hashlib
-import io
 import json
-import zipfile
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from flexff.cosim.recording import atomic_write
 from flexff.fmu.cache import file_sha256
-from flexff.fmu.errors import InputError
+
+# `X as X`: other modules import FORMAT, MANIFEST, DatasetError and Trajectory from here
+from flexff.learning.dataset_files import (
+    FORMAT as FORMAT,
+)
+from flexff.learning.dataset_files import (
+    MACHINE_VERSION,
+    MANIPULATOR_VERSIONS,
+    check_arrays,
+    check_entries,
+    digest,
+    is_sha256,
+    read_arrays,
+    save_arrays,
+    save_manifest,
+)
+from flexff.learning.dataset_files import (
+    MANIFEST as MANIFEST,
+)
+from flexff.learning.dataset_files import (
+    DatasetError as DatasetError,
+)
+from flexff.learning.dataset_files import (
+    Trajectory as Trajectory,
+)
 from flexff.plant.signals import CURRENTS, ENCODERS, FORCES, REFERENCE, TRUE_POSITION, names
 
-FORMAT = "flexff-dataset"
-VERSION = 3
-READS = (2, VERSION)  # the versions load_dataset reads (module doc)
-MANIFEST = "manifest.json"
+READS = MANIPULATOR_VERSIONS  # the versions load_dataset reads (module doc)
+VERSION = READS[-1]
 COLLECTED = "flexff data collect"  # the manifest's `source` for a collected set
 IMPORTED = "flexff data import"  # ... and for imported logs
 WRITTEN = "learning.dataset.write_dataset"
 SETS = ("sim", "hardware")
-SPLITS = ("train", "test")
 # a trajectory's columns (plant.signals): reference, encoders, true position, force labels
 REFERENCE_SIGNALS = names(REFERENCE)
 ENCODER_SIGNALS = names(ENCODERS)
@@ -56,25 +73,6 @@ SIGNALS = ("time", *REFERENCE_SIGNALS, *ENCODER_SIGNALS, *POSITION_SIGNALS, *LAB
 CURRENT_SIGNALS = names(CURRENTS)  # optional columns (module doc): a current-level model's labels
 TRAINED = ("time", *ENCODER_SIGNALS, *LABEL_SIGNALS)  # what training reads (learning.features)
 RECOLLECT = "collect the data again with this flexff version: flexff data collect ..."
-
-
-class DatasetError(InputError):
-    """A dataset folder that cannot be used; the message says which file and what to do."""
-
-
-@dataclass(frozen=True)
-class Trajectory:
-    """One recorded run: its manifest entry and its signals (float64 arrays of equal length)."""
-
-    name: str
-    split: str
-    signals: Mapping[str, np.ndarray]
-    reference: Mapping[str, Any] = field(default_factory=dict)
-    seed: int = 0
-    derived: Mapping[str, str] = field(default_factory=dict)  # signal -> how it was computed
-
-    def __len__(self) -> int:
-        return len(self.signals["time"])
 
 
 @dataclass(frozen=True)
@@ -105,7 +103,7 @@ def load_dataset(path: str | Path) -> Dataset:
         raise DatasetError(f"{manifest_path} is not valid JSON ({err}); {RECOLLECT}") from None
     _check_manifest(manifest, manifest_path)
     source = manifest.get("source")
-    if manifest["sha256"] != _digest(manifest, splits=False):
+    if manifest["sha256"] != digest(manifest, splits=False):
         redo = {COLLECTED: f"run flexff data collect into {path} again with the set it was "
                            f"collected with",
                 IMPORTED: "import the logs again"}.get(source, "write the dataset again")
@@ -121,7 +119,7 @@ def load_dataset(path: str | Path) -> Dataset:
                          for entry in manifest["trajectories"])
     return Dataset(path=path, set=manifest["set"], sample_rate_hz=rate,
                    plant=manifest.get("plant", {}), trajectories=trajectories,
-                   digest=_digest(manifest, splits=True))
+                   digest=digest(manifest, splits=True))
 
 
 def write_dataset(path: str | Path, set_name: str, sample_rate_hz: float, plant: Mapping[str, Any],
@@ -148,15 +146,7 @@ def write_dataset(path: str | Path, set_name: str, sample_rate_hz: float, plant:
 def save_signals(path: Path, signals: Mapping[str, np.ndarray]) -> None:
     """Write one trajectory's SIGNALS (and CURRENT_SIGNALS, where `signals` holds them) as
     float64 arrays to the .npz `path`, atomically."""
-    arrays = {s: np.asarray(signals[s], dtype=np.float64) for s in SIGNALS}
-    arrays.update(_currents(signals, str(path)))
-
-    def write(tmp: Path) -> None:
-        with open(tmp, "wb") as handle:  # a file object keeps numpy from adding ".npz"
-            # numpy's stub types savez's **kwds and its allow_pickle: bool alike
-            np.savez(handle, **arrays)  # type: ignore[arg-type]
-
-    atomic_write(path, write)
+    save_arrays(path, {**{s: signals[s] for s in SIGNALS}, **_currents(signals, str(path))})
 
 
 def write_manifest(path: Path, set_name: str, sample_rate_hz: float, plant: Mapping[str, Any],
@@ -169,111 +159,50 @@ def write_manifest(path: Path, set_name: str, sample_rate_hz: float, plant: Mapp
     manifest = {"format": FORMAT, "version": VERSION, "set": set_name, "source": source,
                 "sample_rate_hz": sample_rate_hz, "plant": dict(plant), **(extra or {}),
                 "trajectories": entries}
-    manifest["sha256"] = _digest(manifest, splits=False)
+    manifest["sha256"] = digest(manifest, splits=False)
     _check_manifest(manifest, path / MANIFEST)
-    text = json.dumps(manifest, indent=2) + "\n"
-    atomic_write(path / MANIFEST, lambda tmp: tmp.write_text(text))
-
-
-def _digest(manifest: Mapping[str, Any], splits: bool) -> str:
-    """sha256 of the manifest but its own hash (and, unless `splits`, the trajectories' splits)."""
-    content = {k: v for k, v in manifest.items() if k != "sha256"}
-    content["trajectories"] = [{k: v for k, v in e.items() if splits or k != "split"}
-                               for e in manifest["trajectories"]]
-    text = json.dumps(content, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
+    save_manifest(path, manifest)
 
 
 def _check_manifest(manifest: Any, where: Path) -> None:
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         found = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
         raise DatasetError(f"{where}: format is {found!r}, expected {FORMAT!r}; {RECOLLECT}")
+    if manifest.get("version") == MACHINE_VERSION:
+        raise DatasetError(f"{where}: a dataset of version {MACHINE_VERSION} (a machine "
+                           f"description's signals), not the manipulator's: read it with "
+                           f"learning.machine_dataset.load_machine_dataset")
     if manifest.get("version") not in READS:
         raise DatasetError(f"{where}: dataset version {manifest.get('version')!r}, this flexff "
                            f"reads versions {', '.join(map(str, READS))}; {RECOLLECT}")
-    if not _is_sha256(manifest.get("sha256")):
+    if not is_sha256(manifest.get("sha256")):
         raise DatasetError(f"{where}: 'sha256' is missing or not a sha256; {RECOLLECT}")
     if manifest.get("set") not in SETS:
         raise DatasetError(f"{where}: 'set' is {manifest.get('set')!r}, expected one of {SETS}")
     rate = manifest.get("sample_rate_hz")
     if not isinstance(rate, (int, float)) or not np.isfinite(rate) or rate <= 0:
         raise DatasetError(f"{where}: 'sample_rate_hz' must be a positive number, got {rate!r}")
-    entries = manifest.get("trajectories")
-    if not isinstance(entries, list) or not entries:
-        raise DatasetError(f"{where}: no trajectories listed; {RECOLLECT}")
-    names = set()
-    for k, entry in enumerate(entries):
-        if not isinstance(entry, dict) or not {"name", "split", "file", "sha256"} <= set(entry):
-            raise DatasetError(f"{where}: trajectory entry {k} needs 'name', 'split', 'file' and "
-                               f"'sha256'; {RECOLLECT}")
-        if not isinstance(entry["name"], str) or not isinstance(entry["file"], str):
-            raise DatasetError(f"{where}: trajectory entry {k}: 'name' and 'file' must be text")
-        if not _is_sha256(entry["sha256"]):
-            raise DatasetError(f"{where}: trajectory {entry['name']!r} has no valid 'sha256'; "
-                               f"{RECOLLECT}")
-        if entry["split"] not in SPLITS:
-            raise DatasetError(f"{where}: trajectory {entry['name']!r} has split "
-                               f"{entry['split']!r}, expected one of {SPLITS}")
-        if entry["name"] in names:
-            raise DatasetError(f"{where}: trajectory name {entry['name']!r} appears twice")
-        names.add(entry["name"])
-        _check_derived(entry, where)
-
-
-def _check_derived(entry: Mapping[str, Any], where: Path) -> None:
-    derived = entry.get("derived", {})
-    if not isinstance(derived, dict) or not all(isinstance(k, str) and isinstance(v, str)
-                                                for k, v in derived.items()):
-        raise DatasetError(f"{where}: trajectory {entry['name']!r}: 'derived' must map signal "
-                           f"names to text")
-    trained = [s for s in TRAINED if s in derived]
-    if trained:
-        raise DatasetError(f"{where}: trajectory {entry['name']!r}: {', '.join(trained)} "
-                           f"marked derived, but training reads them as measured: they must "
-                           f"come from the logs")
-
-
-def _is_sha256(value: Any) -> bool:
-    return isinstance(value, str) and len(value) == 64 and all(c in "0123456789abcdef"
-                                                               for c in value)
+    check_entries(manifest.get("trajectories"), where, RECOLLECT)
+    for entry in manifest["trajectories"]:
+        trained = [s for s in TRAINED if s in entry.get("derived", {})]
+        if trained:
+            raise DatasetError(f"{where}: trajectory {entry['name']!r}: {', '.join(trained)} "
+                               f"marked derived, but training reads them as measured: they "
+                               f"must come from the logs")
 
 
 def _load_trajectory(folder: Path, entry: Mapping[str, Any], rate: float,
                      fix: str) -> Trajectory:
     file = folder / entry["file"]
-    if not file.is_file():
-        raise DatasetError(f"{file} is listed in {MANIFEST} but missing; {fix}")
-    content = file.read_bytes()
-    try:
-        with np.load(io.BytesIO(content)) as npz:
-            missing = [s for s in SIGNALS if s not in npz.files]
-            signals = {s: np.asarray(npz[s], dtype=np.float64)
-                       for s in (*SIGNALS, *CURRENT_SIGNALS) if s in npz.files}
-    except (zipfile.BadZipFile, EOFError, ValueError, OSError):
-        raise DatasetError(f"{file} is truncated or not a .npz file; {fix}") from None
-    if hashlib.sha256(content).hexdigest() != entry["sha256"]:
-        raise DatasetError(f"{file} is not the file {MANIFEST} lists for trajectory "
-                           f"{entry['name']!r} (its sha256 differs: changed, or swapped with "
-                           f"another trajectory's); {fix}")
+    signals = read_arrays(folder, entry, (*SIGNALS, *CURRENT_SIGNALS), fix)
+    missing = [s for s in SIGNALS if s not in signals]
     if missing:
         raise DatasetError(f"{file} lacks signals {missing}; {fix}")
     try:
         _currents(signals, str(file))
     except ValueError as error:
         raise DatasetError(f"{error}; {fix}") from None
-    lengths = {s: a.shape for s, a in signals.items()}
-    if any(a.ndim != 1 for a in signals.values()) or len(set(lengths.values())) != 1:
-        raise DatasetError(f"{file}: signals must be 1-D arrays of equal length, got {lengths}; "
-                           f"{fix}")
-    for s, a in signals.items():
-        bad = np.flatnonzero(~np.isfinite(a))
-        if bad.size:
-            raise DatasetError(f"{file}: signal {s!r} has {bad.size} NaN/Inf value(s), first at "
-                               f"sample {bad[0]}; fix or drop this trajectory, or {fix}")
-    steps = np.diff(signals["time"])
-    if steps.size == 0 or not np.allclose(steps, 1.0 / rate, rtol=1e-6, atol=1e-9):
-        raise DatasetError(f"{file}: 'time' must be sampled at the manifest's {rate:g} Hz "
-                           f"(steps of {1.0 / rate:g} s); {fix}")
+    check_arrays(file, signals, rate, fix)
     return Trajectory(name=entry["name"], split=entry["split"], signals=signals,
                       reference=entry.get("reference", {}), seed=int(entry.get("seed", 0)),
                       derived=entry.get("derived", {}))

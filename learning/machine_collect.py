@@ -29,8 +29,8 @@ from flexff.learning.excitation import CLASSES, excitation_set, write_table
 from flexff.learning.machine_dataset import (
     MachineDataset,
     load_machine_dataset,
-    write_manifest,
-    write_trajectory,
+    save_trajectory,
+    write_machine_manifest,
 )
 from flexff.learning.machine_loop import loop_machine, on_references, record_signals
 
@@ -47,13 +47,12 @@ class _Job:
     folder: Path
 
 
-def _collect_one(job: _Job) -> dict[str, Any]:
+def _collect_one(job: _Job) -> None:
     run = on_references(job.loop, job.table, job.duration, job.name)
     recording = simulate_config(run, progress=False)
     machine = loop_machine(job.loop)
-    return write_trajectory(job.folder, job.name,
-                            {"time": recording.time, **record_signals(recording, machine)},
-                            machine)
+    save_trajectory(job.folder / f"{job.name}.npz", machine,
+                    {"time": recording.time, **record_signals(recording, machine)})
 
 
 def collect_machine(loop: RunConfig, out: str | Path, n_train: int = 24, n_test: int = 6,
@@ -77,8 +76,9 @@ def collect_machine(loop: RunConfig, out: str | Path, n_train: int = 24, n_test:
         if not table.is_file():
             write_table(excitation, table)
         entries[excitation.name] = {"name": excitation.name, "split": excitation.split,
-                                    "kind": excitation.kind, "file": f"{excitation.name}.npz",
-                                    "reference": f"references/{excitation.name}.csv"}
+                                    "file": f"{excitation.name}.npz",
+                                    "reference": {"kind": excitation.kind,
+                                                  "table": f"references/{excitation.name}.csv"}}
         if not (folder / f"{excitation.name}.npz").is_file():
             jobs.append(_Job(loop, table, duration, excitation.name, folder))
     failed = []
@@ -92,8 +92,8 @@ def collect_machine(loop: RunConfig, out: str | Path, n_train: int = 24, n_test:
     if failed:
         raise RunError(f"{len(failed)} of {len(jobs)} runs failed, the others are kept in "
                        f"{folder} (run the command again for the rest): {failed[0]}")
-    write_manifest(folder, machine, 1.0 / loop.step, list(entries.values()), SOURCE)
-    return load_machine_dataset(folder)
+    write_machine_manifest(folder, machine, 1.0 / loop.step, list(entries.values()), SOURCE)
+    return load_machine_dataset(folder, machine)
 
 
 def _check_folder(folder: Path, settings: dict[str, Any]) -> None:

@@ -52,7 +52,7 @@ def identify_dataset(data: MachineDataset, features: MachineFeatures | None = No
     """The prior's linear model identified on the training trajectories: the regressor of
     their measured motion and their efforts through the labels' filter and decimation alike
     (learning.machine_features)."""
-    machine = data.machine
+    machine = data.description
     rate = data.sample_rate_hz
     train = [t for t in data.trajectories if t.split == "train"]
     resolved = (features or MachineFeatures()).resolved(rate, [t.signals for t in train],

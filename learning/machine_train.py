@@ -24,7 +24,7 @@ from flexff.controllers.machine_features import feature_names
 from flexff.cosim.machine import Machine, machine_table
 from flexff.fmu.errors import InputError
 from flexff.learning.batches import TRAIN, VALIDATION, SequenceSet
-from flexff.learning.machine_dataset import MachineTrajectory
+from flexff.learning.dataset_files import Trajectory
 from flexff.learning.machine_features import (
     MachineFeatures,
     label_filter,
@@ -58,7 +58,7 @@ def features_from_dict(data: Mapping[str, Any]) -> MachineFeatures:
 
 
 def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
-                trajectories: Sequence[MachineTrajectory], digest: str, out: Path,
+                trajectories: Sequence[Trajectory], digest: str, out: Path,
                 features: MachineFeatures | None = None, progress: bool = True,
                 resume: bool | None = None, force: bool = True,
                 checkpoint_every: int | None = None, on_epoch: EpochReport | None = None,
@@ -135,7 +135,7 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
     return {**metrics, "run": str(out)}
 
 
-def _prior_efforts(prior: LinearModel | None, trajectories: list[MachineTrajectory],
+def _prior_efforts(prior: LinearModel | None, trajectories: list[Trajectory],
                    rate_hz: float, machine: Machine, features: MachineFeatures
                    ) -> list[np.ndarray] | None:
     """The prior's efforts along each trajectory's measured motion, through the labels'
@@ -151,7 +151,7 @@ def _prior_efforts(prior: LinearModel | None, trajectories: list[MachineTrajecto
     return out
 
 
-def _prepared(trajectories: list[MachineTrajectory], rate_hz: float, machine: Machine,
+def _prepared(trajectories: list[Trajectory], rate_hz: float, machine: Machine,
               features: MachineFeatures, rng: np.random.Generator | None
               ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     pairs = [prepare(t.signals, rate_hz, machine, features, rng) for t in trajectories]

@@ -50,3 +50,11 @@ def readme_block(marker: str) -> str:
     found = re.search(rf"<!-- {re.escape(marker)} -->\n```\w+\n(.*?)```", text, re.DOTALL)
     assert found, f"README.md has no code block after <!-- {marker} -->"
     return found.group(1)
+
+
+def matlab_v73_header(path: Path) -> None:
+    """The 128-byte header of a MATLAB v7.3 file (version 0x0200, little endian), written over
+    the start of the HDF5 file at `path` (made with a 512-byte user block)."""
+    text = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Thu Jan  1 00:00:00 2026 HDF5"
+    with open(path, "r+b") as handle:
+        handle.write(text.ljust(116, b" ") + bytes(8) + b"\x00\x02IM")

@@ -12,10 +12,10 @@ from flexff.learning.dataset import (
     CURRENT_SIGNALS,
     SIGNALS,
     DatasetError,
-    _digest,
     load_dataset,
     write_manifest,
 )
+from flexff.learning.dataset_files import digest
 from flexff.learning.synthetic import synthetic_dataset
 
 
@@ -31,7 +31,7 @@ def test_a_version_2_folder_without_currents_is_read(folder):
         np.savez(path, **arrays)
     _rewrite_manifest(folder)
     manifest = {**json.loads((folder / "manifest.json").read_text()), "version": 2}
-    manifest["sha256"] = _digest(manifest, splits=False)  # as version 2 wrote it
+    manifest["sha256"] = digest(manifest, splits=False)  # as version 2 wrote it
     (folder / "manifest.json").write_text(json.dumps(manifest))
     assert set(load_dataset(folder).trajectories[0].signals) == set(SIGNALS)
 

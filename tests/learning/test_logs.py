@@ -27,6 +27,7 @@ from flexff.learning.features import prepare_trajectory
 from flexff.learning.logs import FK, import_logs
 from flexff.learning.presets import make_config
 from flexff.learning.train import train
+from tests.helpers import matlab_v73_header
 
 MEASURED = ("time", *ENCODER_SIGNALS, *LABEL_SIGNALS)
 FIRST = 3  # collected trajectories
@@ -165,16 +166,9 @@ def test_matlab_v73_with_h5py(collected, tmp_path):
         for name in MEASURED:
             handle.create_dataset(name, data=values[name][None, :])
             handle[name].attrs["MATLAB_class"] = np.bytes_("double")
-    _matlab_header(path)
+    matlab_v73_header(path)
     dataset = import_logs([path, files[1]], tmp_path / "data")
     assert all(np.array_equal(dataset.trajectories[0].signals[n], values[n]) for n in MEASURED)
-
-
-def _matlab_header(path: Path) -> None:
-    """The 128-byte header of a MATLAB v7.3 file (version 0x0200, little endian)."""
-    text = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Thu Jan  1 00:00:00 2026 HDF5"
-    with open(path, "r+b") as handle:
-        handle.write(text.ljust(116, b" ") + bytes(8) + b"\x00\x02IM")
 
 
 # -- errors -----------------------------------------------------------------------------------
@@ -257,7 +251,7 @@ def _case(case: str, base: dict, folder: Path, monkeypatch) -> tuple[list, str]:
             message = f"{first}: column Fy has 1500 rows, time 2000"
         elif case == "mat v7.3 without h5py":
             first.write_bytes(bytes(1024))
-            _matlab_header(first)
+            matlab_v73_header(first)
             monkeypatch.setitem(sys.modules, "h5py", None)  # as if it were not installed
             return [first, write_log(second, b)], (f"{first}: this is a MATLAB v7.3 file: install "
                                                    f"h5py (pip install 'flexff[matlab]')")

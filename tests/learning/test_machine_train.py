@@ -13,8 +13,8 @@ from flexff.cosim.machine import parse_machine
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
 from flexff.fmu.validation import validate_fmu
+from flexff.learning.dataset_files import Trajectory as MachineTrajectory
 from flexff.learning.export import export, run_steps, session
-from flexff.learning.machine_dataset import MachineTrajectory
 from flexff.learning.machine_features import MachineFeatures
 from flexff.learning.machine_train import fit_machine
 from flexff.learning.presets import make_config
@@ -60,7 +60,7 @@ def test_a_machine_trains_into_a_run_folder(names, tmp_path):
     info = json.loads((tmp_path / "run" / "run.json").read_text())
     assert info["label_names"] == [f"{n}_effort" for n in names]
     assert [a["name"] for a in info["machine"]["axis"]] == list(names)
-    assert run.feature_names[:4] == [names[0], f"v{names[0]}", f"a{names[0]}", f"j{names[0]}"]
+    assert run.feature_names[:4] == [names[0], f"v{names[0]}", f"a{names[0]}", f"dir_{names[0]}_0.003"]
     assert 3.0 < metrics["cutoff_hz"] < 3.5  # twice the 1.5 Hz band's edge
     assert RATE / metrics["model_rate_hz"] == pytest.approx(round(RATE / metrics["model_rate_hz"]))
     # the linear skip's least squares hold inertia, damping and the friction's direction
