@@ -3,15 +3,20 @@ agree with the position, the same set for the same seed, a test split drawn apar
 move fits refused by key, the table read back by a run's CSV source, and its plot."""
 
 import re
+import shutil
 
 import numpy as np
 import pytest
 
+from flexff.cosim.config import load_config
 from flexff.cosim.machine import parse_machine
+from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import source_signals
 from flexff.cosim.schema import ConfigError, RunConfig, SourceConfig
 from flexff.learning.excitation import CLASSES, EVERY_CLASS, excitation_set, write_table
 from flexff.learning.excitation_plot import plot_excitation
+from flexff.learning.machine_loop import loop_machine, on_references, record_signals
+from tests.learning.test_machine_loop import EXAMPLES, LOOP
 
 RATE = 1000.0
 TOLERANCE = 1e-9  # relative, on the limits
@@ -155,6 +160,22 @@ def test_the_table_is_what_a_run_reads_from_its_csv_source(tmp_path):
     assert list(read) == list(excitation.machine.reference_signals)
     for name, values in excitation.signals.items():
         np.testing.assert_allclose(read[name], values, rtol=0, atol=1e-12 * np.abs(values).max())
+
+
+def test_a_loop_runs_on_the_table(tmp_path):
+    """The machine loop's path (learning.machine_loop.on_references): a feedthrough FMU whose
+    measured position is twice the reference it receives."""
+    shutil.copy(EXAMPLES / "reference-fmus" / "fmi2" / "Feedthrough.fmu", tmp_path)
+    (tmp_path / "loop.toml").write_text(LOOP)
+    loop = load_config(tmp_path / "loop.toml")
+    excitation = excitation_set(loop_machine(loop), 1, 0, 3.0, 100.0, classes=("spline",))[0]
+    table = write_table(excitation, tmp_path / "references" / "spline-000.csv")
+    columns = record_signals(simulate_config(on_references(loop, table, 3.0, "spline")),
+                             loop_machine(loop))
+    for name, values in excitation.signals.items():
+        np.testing.assert_allclose(columns[name], values, atol=1e-12)
+    np.testing.assert_allclose(columns["x_measured"], 2 * excitation.signals["x_ref"],
+                               atol=1e-12)
 
 
 def test_the_plot_is_a_png(tmp_path):
