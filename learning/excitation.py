@@ -7,9 +7,11 @@ Classes (learning.excitation_shapes has their shapes, each with analytic derivat
   limit, rests between (robot identification's excitation: inertia apart from Coulomb friction);
 - "spline": clamped quintic splines through random points, scaled in time, rests between;
 - "multisine": sines at random frequencies and phases, faded in and out, scaled into the limits;
-- "rest": the axis holds (another axis moves alone: coupling terms), only on request.
+- on request "rest" (every axis holds) and "solo" (one axis in turn moves, the others hold:
+  what the others feel of its motion is the coupling alone).
 Every trajectory starts at its range's centre and ends at rest; each move's peaks are a random
-share of the limits. Each axis draws from its own generator, train and test from streams apart.
+share of the limits. Each axis draws from its own generator, train and test from streams apart;
+synchronised moves start and end together on every axis (the faster slowed down).
 An axis whose limits no move fits is refused with the key at fault (check_limits).
 """
 
@@ -29,6 +31,7 @@ from flexff.cosim.schema import ConfigError
 from flexff.learning.excitation_shapes import (
     Shape,
     SkewSine,
+    Stretched,
     bang_bang,
     binding_limit,
     quintic_spline,
@@ -37,7 +40,7 @@ from flexff.learning.excitation_shapes import (
 )
 
 CLASSES = ("moves", "bang-bang", "spline", "multisine")  # the default set's classes, in turn
-EVERY_CLASS = (*CLASSES, "rest")
+EVERY_CLASS = (*CLASSES, "rest", "solo")
 SHARE = (0.3, 0.9)  # a move's peaks: this share of the limits, drawn uniformly
 REST = (0.1, 0.6)  # rests between moves [s], drawn uniformly
 MARGIN = 0.95  # of the range used by the moves
@@ -68,65 +71,89 @@ class Excitation:
 
 def excitation_set(machine: Machine, n_train: int, n_test: int, duration: float,
                    rate_hz: float, seed: int = 0, classes: Sequence[str] = CLASSES,
-                   origin: str = "machine") -> list[Excitation]:
+                   origin: str = "machine", synchronised: bool = False) -> list[Excitation]:
     """`n_train` + `n_test` trajectories of `duration` s sampled at `rate_hz`, the classes in
-    turn, every axis its own independent trajectory; the same for the same seed, the test
-    split from generators of its own (it does not change with `n_train`). Errors name
-    `origin` (the description's file) and the key."""
+    turn, every axis its own independent trajectory (or, `synchronised`, moves that start
+    and end together on every axis); the same for the same seed, the test split from
+    generators of its own (it does not change with `n_train`). Errors name `origin` (the
+    description's file) and the key."""
     _check_request(n_train, n_test, duration, rate_hz, seed, classes)
     check_limits(machine, duration, origin)
     t = np.arange(round(duration * rate_hz) + 1) / rate_hz
+    limits = [axis.limits for axis in machine.axes]
     out = []
     for split, count, stream, prefix in (("train", n_train, 0, ""), ("test", n_test, 1, "test-")):
         for k in range(count):
             kind = classes[k % len(classes)]
+            rngs = [np.random.default_rng([seed, stream, k, a]) for a in range(len(limits))]
+            if kind == "solo":
+                moving = k // len(classes) % len(limits)  # the solos' turn
+                motions = [trajectories("moves" if a == moving else "rest", [lim], t, [rng])[0]
+                           for a, (lim, rng) in enumerate(zip(limits, rngs))]
+            else:
+                motions = trajectories(kind, limits, t, rngs, synchronised)
             signals: dict[str, np.ndarray] = {}
-            for a, axis in enumerate(machine.axes):
-                rng = np.random.default_rng([seed, stream, k, a])
-                values = axis_trajectory(kind, axis.limits, t, rng)
+            for axis, values in zip(machine.axes, motions):
                 signals.update(zip((axis.reference, *axis.derivatives), values))
             out.append(Excitation(f"{prefix}{kind}-{k:03d}", split, kind, t, signals, machine))
     return out
 
 
-def axis_trajectory(kind: str, limits: Limits, t: np.ndarray, rng: np.random.Generator
-                    ) -> np.ndarray:
-    """Position, velocity, acceleration and jerk (4, n) of one axis's trajectory of class
-    `kind` at the times `t` (from 0)."""
-    centre = 0.5 * (limits.low + limits.high)
+def trajectories(kind: str, limits: Sequence[Limits], t: np.ndarray,
+                 rngs: Sequence[np.random.Generator], synchronised: bool = False
+                 ) -> list[np.ndarray]:
+    """Position, velocity, acceleration and jerk (4, n) of each axis's trajectory of class
+    `kind` at the times `t` (from 0), each axis drawing from its own generator; moves
+    `synchronised` last as long as the slowest axis's (the others slowed down)."""
     if kind == "multisine":
-        return _multisine(limits, t, rng)
+        return [_multisine(lim, t, rng) for lim, rng in zip(limits, rngs)]
+    centres = [0.5 * (lim.low + lim.high) for lim in limits]
     if kind == "rest":
-        out = np.zeros((4, t.size))
-        out[0] = centre
-        return out
-    draws: dict[str, Callable[[float, np.random.Generator], Shape]] = {
+        return [np.vstack([np.full(t.size, c), np.zeros((3, t.size))]) for c in centres]
+    draws = [_draw(kind, lim) for lim in limits]
+    if synchronised:
+        return _chained(centres, t, rngs, draws)
+    return [_chained([c], t, [rng], [draw])[0] for c, rng, draw in zip(centres, rngs, draws)]
+
+
+Draw = Callable[[float, np.random.Generator], Shape]
+
+
+def _draw(kind: str, limits: Limits) -> Draw:
+    """How a move of class `kind` is drawn from a position on an axis with `limits`."""
+    draws: dict[str, Draw] = {
         "moves": lambda x, r: _skew_sine_move(limits, x, r),
         "bang-bang": lambda x, r: bang_bang(_target(limits, x, r) - x, limits, _share(r)),
         "spline": lambda x, r: _spline_move(limits, x, r)}
-    return _chained(centre, t, rng, draws[kind])
+    return draws[kind]
 
 
-def _chained(start: float, t: np.ndarray, rng: np.random.Generator,
-             draw: Callable[[float, np.random.Generator], Shape]) -> np.ndarray:
-    """Moves drawn one after the other from `start`, each after a rest, until the next does
-    not fit before the last rest."""
-    out = np.zeros((4, t.size))
-    out[0] = start
-    position, begin, end = start, float(rng.uniform(*REST)), float(t[-1]) - REST[0]
+def _chained(starts: Sequence[float], t: np.ndarray, rngs: Sequence[np.random.Generator],
+             draws: Sequence[Draw]) -> list[np.ndarray]:
+    """Moves drawn one after the other from `starts`, each after a rest (the first axis's
+    generator draws the rests), every axis's move slowed down to the longest one, until the
+    next does not fit before the last rest."""
+    out = [np.vstack([np.full(t.size, start), np.zeros((3, t.size))]) for start in starts]
+    positions = list(starts)
+    begin, end = float(rngs[0].uniform(*REST)), float(t[-1]) - REST[0]
     while True:
-        shape = next((s for s in (draw(position, rng) for _ in range(FILL_TRIES))
-                      if begin + s.duration <= end), None)
-        if shape is None:
+        for _ in range(FILL_TRIES):
+            shapes = [draw(x, rng) for draw, x, rng in zip(draws, positions, rngs)]
+            duration = max(shape.duration for shape in shapes)
+            if begin + duration <= end:
+                break
+        else:
             return out
         local = t - begin
-        during, after = (local >= 0) & (local <= shape.duration), local > shape.duration
-        out[:, during] = shape(local[during])
-        out[0, during] += position
-        position += float(shape(np.array([shape.duration]))[0, 0])
-        out[0, after] = position
-        out[1:, after] = 0.0
-        begin += shape.duration + float(rng.uniform(*REST))
+        during, after = (local >= 0) & (local <= duration), local > duration
+        for a, shape in enumerate(shapes):
+            stretched = shape if shape.duration == duration else Stretched(shape, duration)
+            out[a][:, during] = stretched(local[during])
+            out[a][0, during] += positions[a]
+            positions[a] += float(shape(np.array([shape.duration]))[0, 0])
+            out[a][0, after] = positions[a]
+            out[a][1:, after] = 0.0
+        begin += duration + float(rngs[0].uniform(*REST))
 
 
 def _band(limits: Limits) -> tuple[float, float]:

@@ -5,8 +5,8 @@ as a (4, n) array (position, velocity, acceleration, jerk), at rest at both ends
 so that its peaks stay within `share` of an axis's Limits: the skew-sine move (the thesis's
 line, eq. 4.2), the bang-bang move (piecewise-constant acceleration, or jerk where the axis
 has a jerk limit: robot identification's trapezoidal and S-curve velocity profiles) and a
-clamped quintic spline through intermediate points, scaled in time. learning.excitation chains
-them into trajectories.
+clamped quintic spline through intermediate points, scaled in time. Any of them can be slowed
+down to a longer duration (Stretched: synchronised moves). learning.excitation chains them.
 """
 
 from __future__ import annotations
@@ -85,6 +85,7 @@ class PiecewiseJerk:
         return sum(s[0] for s in self.segments)
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
+        t = np.clip(t, 0.0, self.duration)  # a time past the end by rounding is the end
         out = np.zeros((4, t.size))
         start, x, v = 0.0, 0.0, 0.0
         for k, (length, a, j) in enumerate(self.segments):
@@ -97,6 +98,20 @@ class PiecewiseJerk:
                     v + a * length + j * length**2 / 2)
             start += length
         return out
+
+
+@dataclass(frozen=True)
+class Stretched:
+    """`shape` slowed down to last `duration` s (at least its own): velocity, acceleration and
+    jerk shrink by the ratio to the power 1, 2, 3, so it stays within the limits it kept."""
+
+    shape: Shape
+    duration: float
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        ratio = self.shape.duration / self.duration
+        slowed: np.ndarray = self.shape(t * ratio) * ratio ** np.arange(4)[:, None]
+        return slowed
 
 
 def bang_bang(distance: float, limits: Limits, share: float) -> PiecewiseJerk:

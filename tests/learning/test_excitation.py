@@ -42,8 +42,9 @@ def motion(excitation, axis):
 @pytest.mark.parametrize("jerk", [None, 400.0])  # 400 rad/s^3 binds the S-curves and splines
 def test_every_class_keeps_every_axis_within_its_limits(jerk):
     three, jerk_reached = machine(jerk), 0.0
-    for excitation in excitation_set(three, 10, 0, 8.0, RATE, seed=1, classes=EVERY_CLASS):
-        for axis in three.axes:
+    for k, excitation in enumerate(excitation_set(three, 12, 0, 8.0, RATE, seed=1,
+                                                  classes=EVERY_CLASS)):
+        for index, axis in enumerate(three.axes):
             x, v, a, j = motion(excitation, axis)
             limits = axis.limits
             span = limits.high - limits.low
@@ -56,8 +57,10 @@ def test_every_class_keeps_every_axis_within_its_limits(jerk):
                 jerk_reached = max(jerk_reached, np.abs(j).max() / limits.jerk)
             assert x[0] == pytest.approx(0.5 * (limits.low + limits.high))
             assert abs(v[0]) + abs(v[-1]) <= 1e-9 * limits.velocity  # at rest at both ends
-            moves = excitation.kind != "rest"
-            assert (np.ptp(x) > 0.2 * span) == moves
+            solo = excitation.kind == "solo"  # the k // 6-th solo moves axis k // 6 alone
+            moves = excitation.kind != "rest" and (not solo or index == k // len(EVERY_CLASS))
+            least = 0.05 if excitation.kind == "multisine" else 0.15  # of the range
+            assert (np.ptp(x) > least * span) == moves
             if moves and excitation.kind != "multisine":  # moves reach for the limits
                 assert max(np.abs(v).max() / limits.velocity,
                            np.abs(a).max() / limits.acceleration) > 0.3
@@ -120,6 +123,23 @@ def test_each_axis_moves_on_its_own():
         velocity = [v / np.abs(v).max() for v in (motion(excitation, a)[1] for a in three.axes)]
         assert np.corrcoef(velocity).max(initial=0, where=~np.eye(3, dtype=bool)) < 0.9
         assert excitation.kind == "multisine" or not np.array_equal(still[0], still[2])
+
+
+def test_synchronised_moves_start_and_end_together_within_the_limits():
+    three = machine(400.0)
+    for excitation in excitation_set(three, 3, 0, 8.0, RATE, seed=7, synchronised=True):
+        moving = []
+        for axis in three.axes:
+            x, v, a, j = motion(excitation, axis)
+            limits = axis.limits
+            assert limits.low <= x.min() and x.max() <= limits.high
+            for value, bound in ((v, limits.velocity), (a, limits.acceleration),
+                                 (j, limits.jerk or np.inf)):
+                assert np.abs(value).max() <= bound * (1 + TOLERANCE)
+            assert_integrates(x, v, 1 / RATE, f"{excitation.name} {axis.name}", np.abs(a).max())
+            moving.append(v != 0)
+        assert np.array_equal(moving[0], moving[1]) and np.array_equal(moving[0], moving[2])
+        assert 0.3 < moving[0].mean() < 1
 
 
 @pytest.mark.parametrize(("changes", "duration", "key", "message"), [
