@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +50,8 @@ SPLINE_POINTS = (2, 4)  # points a spline passes through after its start
 SPLINE_TRIES = 20  # draws of a spline's points that overshoot the range before a single point
 FILL_TRIES = 3  # draws of a move that does not fit the time left before the axis rests
 SINES = 4  # a multisine's sines
+PHASE_SAMPLES = 5  # samples a bang-bang phase lasts at least (_resolved)
+MOVE_SAMPLES = 20  # samples a move lasts at least
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,6 +107,7 @@ def trajectories(kind: str, limits: Sequence[Limits], t: np.ndarray,
     """Position, velocity, acceleration and jerk (4, n) of each axis's trajectory of class
     `kind` at the times `t` (from 0), each axis drawing from its own generator; moves
     `synchronised` last as long as the slowest axis's (the others slowed down)."""
+    limits = [_resolved(lim, float(t[1] - t[0])) for lim in limits]
     if kind == "multisine":
         return [_multisine(lim, t, rng) for lim, rng in zip(limits, rngs)]
     centres = [0.5 * (lim.low + lim.high) for lim in limits]
@@ -139,7 +142,8 @@ def _chained(starts: Sequence[float], t: np.ndarray, rngs: Sequence[np.random.Ge
     while True:
         for _ in range(FILL_TRIES):
             shapes = [draw(x, rng) for draw, x, rng in zip(draws, positions, rngs)]
-            duration = max(shape.duration for shape in shapes)
+            duration = max(*(shape.duration for shape in shapes),
+                           MOVE_SAMPLES * float(t[1] - t[0]))
             if begin + duration <= end:
                 break
         else:
@@ -154,6 +158,16 @@ def _chained(starts: Sequence[float], t: np.ndarray, rngs: Sequence[np.random.Ge
             out[a][0, after] = positions[a]
             out[a][1:, after] = 0.0
         begin += duration + float(rngs[0].uniform(*REST))
+
+
+def _resolved(limits: Limits, step: float) -> Limits:
+    """The limits the moves keep at the sampling `step`: an acceleration reached no faster
+    than in PHASE_SAMPLES steps from zero to the velocity, a jerk likewise to it, so that the
+    samples show every phase of a move (a shorter one would fall between them)."""
+    acceleration = min(limits.acceleration, limits.velocity / (PHASE_SAMPLES * step))
+    jerk = None if limits.jerk is None else min(limits.jerk,
+                                                acceleration / (PHASE_SAMPLES * step))
+    return replace(limits, acceleration=acceleration, jerk=jerk)
 
 
 def _band(limits: Limits) -> tuple[float, float]:

@@ -97,6 +97,16 @@ def test_derivatives_agree_with_the_position(jerk):
             assert_integrates(a, j, 1 / RATE, f"{where} jerk")
 
 
+def test_every_phase_of_a_move_shows_on_the_samples():
+    """An acceleration that would reach the velocity within a sample is lowered so that the
+    bang-bang's phases last samples (else velocity would step between them, acceleration 0)."""
+    sharp = machine(**{"range": [0.0, 0.02], "velocity": 0.012, "acceleration": 200.0})
+    for excitation in excitation_set(sharp, 2, 0, 6.0, 100.0, seed=8, classes=["bang-bang"]):
+        _, v, a, j = motion(excitation, sharp.axes[1])
+        assert np.count_nonzero(a) >= 2 * 4 * np.count_nonzero(np.diff(v != 0) & (v[1:] != 0))
+        assert_integrates(v, a, 1 / 100.0, excitation.name, np.abs(j).max())
+
+
 def test_the_set_is_the_same_for_a_seed_and_its_test_split_is_drawn_apart():
     one, again = (excitation_set(machine(), 4, 3, 4.0, RATE, seed=3) for _ in range(2))
     other = excitation_set(machine(), 4, 3, 4.0, RATE, seed=4)
