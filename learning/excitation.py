@@ -112,7 +112,7 @@ def trajectories(kind: str, limits: Sequence[Limits], t: np.ndarray,
         return [_multisine(lim, t, rng) for lim, rng in zip(limits, rngs)]
     centres = [0.5 * (lim.low + lim.high) for lim in limits]
     if kind == "rest":
-        return [np.vstack([np.full(t.size, c), np.zeros((3, t.size))]) for c in centres]
+        return [_held(c, t) for c in centres]
     draws = [_draw(kind, lim) for lim in limits]
     if synchronised:
         return _chained(centres, t, rngs, draws)
@@ -136,7 +136,7 @@ def _chained(starts: Sequence[float], t: np.ndarray, rngs: Sequence[np.random.Ge
     """Moves drawn one after the other from `starts`, each after a rest (the first axis's
     generator draws the rests), every axis's move slowed down to the longest one, until the
     next does not fit before the last rest."""
-    out = [np.vstack([np.full(t.size, start), np.zeros((3, t.size))]) for start in starts]
+    out = [_held(start, t) for start in starts]
     positions = list(starts)
     begin, end = float(rngs[0].uniform(*REST)), float(t[-1]) - REST[0]
     while True:
@@ -158,6 +158,11 @@ def _chained(starts: Sequence[float], t: np.ndarray, rngs: Sequence[np.random.Ge
             out[a][0, after] = positions[a]
             out[a][1:, after] = 0.0
         begin += duration + float(rngs[0].uniform(*REST))
+
+
+def _held(position: float, t: np.ndarray) -> np.ndarray:
+    """At rest at `position` at the times `t`: (4, n)."""
+    return np.vstack([np.full(t.size, position), np.zeros((3, t.size))])
 
 
 def _resolved(limits: Limits, step: float) -> Limits:
