@@ -1,206 +1,307 @@
 """Excitation for any machine: reference trajectories per axis within its description's limits,
 and the CSV tables a loop reads them from (learning.machine_loop.on_references).
 
-Classes, each with analytic velocity, acceleration and jerk:
-- "moves": point-to-point skew-sine moves (the thesis's lines) between random points of the
-  range, each as fast as the limits allow times a random share, with rests between;
-- "bang-bang": trapezoidal-velocity moves, +a, coast, -a (robot identification's excitation:
-  they separate inertia from Coulomb friction); their acceleration steps, so an axis with a
-  jerk limit gets skew-sine moves instead;
-- "multisine": a sum of sines at random frequencies and phases, scaled into the limits.
-An axis whose limits no move fits (a range too short for the velocity and acceleration within
-the duration) is refused with the key at fault. Every trajectory starts and ends at rest.
+Classes (learning.excitation_shapes has their shapes, each with analytic derivatives):
+- "moves": skew-sine moves (the thesis's lines) between random points of the range, rests between;
+- "bang-bang": trapezoidal-velocity moves (+a, coast, -a), S-curves where the axis has a jerk
+  limit, rests between (robot identification's excitation: inertia apart from Coulomb friction);
+- "spline": clamped quintic splines through random points, scaled in time, rests between;
+- "multisine": sines at random frequencies and phases, faded in and out, scaled into the limits;
+- on request "rest" (every axis holds) and "solo" (one axis in turn moves, the others hold:
+  what the others feel of its motion is the coupling alone).
+Every trajectory starts at its range's centre and ends at rest; each move's peaks are a random
+share of the limits. Each axis draws from its own generator, train and test from streams apart;
+synchronised moves start and end together on every axis (the faster slowed down).
+An axis whose limits no move fits is refused with the key at fault (check_limits).
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from flexff.cosim.csv_text import TIME
-from flexff.cosim.machine import Axis, Limits, Machine
+from flexff.cosim.machine import Limits, Machine
 from flexff.cosim.recording import atomic_write
 from flexff.cosim.schema import ConfigError
+from flexff.learning.excitation_shapes import (
+    Shape,
+    SkewSine,
+    Stretched,
+    bang_bang,
+    binding_limit,
+    quintic_spline,
+    skew_sine_time,
+    spline_extent,
+)
 
-CLASSES = ("moves", "bang-bang", "multisine")
-SHARE = (0.3, 0.9)  # a move's speed: this share of the limits, drawn uniformly
+CLASSES = ("moves", "bang-bang", "spline", "multisine")  # the default set's classes, in turn
+EVERY_CLASS = (*CLASSES, "rest", "solo")
+SHARE = (0.3, 0.9)  # a move's peaks: this share of the limits, drawn uniformly
 REST = (0.1, 0.6)  # rests between moves [s], drawn uniformly
 MARGIN = 0.95  # of the range used by the moves
+MIN_STROKE = 0.2  # of the used range: the shortest move drawn
+MIN_REACH = 0.1  # a move across the range must reach this share of velocity and acceleration
+SPLINE_POINTS = (2, 4)  # points a spline passes through after its start
+SPLINE_TRIES = 20  # draws of a spline's points that overshoot the range before a single point
+FILL_TRIES = 3  # draws of a move that does not fit the time left before the axis rests
+SINES = 4  # a multisine's sines
+PHASE_SAMPLES = 5  # samples a bang-bang phase lasts at least (_resolved)
+MOVE_SAMPLES = 20  # samples a move lasts at least
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Excitation:
-    """One trajectory of a machine: its name, split and every axis's reference signals."""
+    """One trajectory of a machine: its name, split, class and every axis's reference
+    signals (`<axis>_ref`, `v<axis>_ref`, `a<axis>_ref`, `j<axis>_ref`) at `time` [s]."""
 
     name: str
     split: str
     kind: str
     time: np.ndarray
-    signals: dict[str, np.ndarray]  # <axis>_ref, v<axis>_ref, a<axis>_ref, j<axis>_ref
-
-
-def _skew_sine(distance: float, duration: float, t: np.ndarray) -> np.ndarray:
-    """Position, velocity, acceleration, jerk (4, n) of a skew-sine move over `duration`."""
-    s = np.clip(t / duration, 0.0, 1.0)
-    w = 2 * math.pi / duration
-    inside = (t >= 0) & (t <= duration)
-    return np.array([distance * (s - np.sin(2 * math.pi * s) / (2 * math.pi)),
-                     inside * distance / duration * (1 - np.cos(2 * math.pi * s)),
-                     inside * distance / duration * w * np.sin(2 * math.pi * s),
-                     inside * distance / duration * w * w * np.cos(2 * math.pi * s)])
-
-
-def _move_time(distance: float, limits: Limits, share: float) -> float:
-    """The shortest skew-sine move over `distance` within `share` of the limits."""
-    d = abs(distance)
-    times = [2 * d / (share * limits.velocity),
-             math.sqrt(2 * math.pi * d / (share * limits.acceleration))]
-    if limits.jerk is not None:
-        times.append((4 * math.pi**2 * d / (share * limits.jerk)) ** (1 / 3))
-    return max(times)
-
-
-def _moves(axis: Axis, t: np.ndarray, rng: np.random.Generator, bang: bool) -> np.ndarray:
-    """Rest-to-rest moves one after the other until the duration is filled."""
-    limits = axis.limits
-    centre, half = 0.5 * (limits.low + limits.high), 0.5 * MARGIN * (limits.high - limits.low)
-    out = np.zeros((4, t.size))
-    out[0] = centre
-    position, start = centre, float(rng.uniform(*REST))
-    while True:
-        target = float(rng.uniform(centre - half, centre + half))
-        share = float(rng.uniform(*SHARE))
-        profile: Callable[[np.ndarray], np.ndarray]
-        if bang and limits.jerk is None:
-            profile = _bang_bang(target - position, limits, share)
-            duration = profile.duration
-        else:
-            duration = _move_time(target - position, limits, share)
-            profile = functools.partial(_skew_sine, target - position, duration)
-        if start + duration > t[-1]:
-            break
-        local = t - start
-        segment = profile(local)
-        after = local > duration
-        out[:, ~after & (local >= 0)] = segment[:, ~after & (local >= 0)]
-        out[0, ~after & (local >= 0)] += position
-        out[0, after] = target
-        out[1:, after] = 0.0
-        position, start = target, start + duration + float(rng.uniform(*REST))
-    return out
-
-
-@dataclass(frozen=True)
-class _BangBang:
-    """A trapezoidal-velocity move: `accelerate` s at +acceleration, `coast` s at the peak
-    velocity, `accelerate` s at -acceleration (jerk zero between the steps)."""
-
-    distance: float
-    acceleration: float
-    accelerate: float  # seconds of acceleration (and of deceleration)
-    coast: float
+    signals: dict[str, np.ndarray]
+    machine: Machine
 
     @property
     def duration(self) -> float:
-        return 2 * self.accelerate + self.coast
-
-    def __call__(self, t: np.ndarray) -> np.ndarray:
-        sign = math.copysign(1.0, self.distance)
-        a, ta, tc = self.acceleration, self.accelerate, self.coast
-        acc = np.where((t >= 0) & (t < ta), a, 0.0) - np.where(
-            (t >= ta + tc) & (t <= 2 * ta + tc), a, 0.0)
-        vmax = a * ta
-        vel = np.clip(np.where(t < ta, a * t, np.where(t < ta + tc, vmax,
-                                                         vmax - a * (t - ta - tc))), 0, vmax)
-        vel = np.where((t < 0) | (t > self.duration), 0.0, vel)
-        first = 0.5 * a * np.clip(t, 0, ta) ** 2
-        cruise = vmax * np.clip(t - ta, 0, tc)
-        back = np.clip(t - ta - tc, 0, ta)
-        pos = first + cruise + vmax * back - 0.5 * a * back**2
-        return sign * np.array([pos, vel, acc, np.zeros_like(t)])
+        return float(self.time[-1] - self.time[0])
 
 
-def _bang_bang(distance: float, limits: Limits, share: float) -> _BangBang:
-    d = abs(distance)
-    a, v = share * limits.acceleration, share * limits.velocity
-    ta = min(v / a, math.sqrt(d / a))
-    coast = max(d - a * ta * ta, 0.0) / (a * ta) if ta > 0 else 0.0
-    return _BangBang(distance, a, ta, coast)
+def excitation_set(machine: Machine, n_train: int, n_test: int, duration: float,
+                   rate_hz: float, seed: int = 0, classes: Sequence[str] = CLASSES,
+                   origin: str = "machine", synchronised: bool = False) -> list[Excitation]:
+    """`n_train` + `n_test` trajectories of `duration` s sampled at `rate_hz`, the classes in
+    turn, every axis its own independent trajectory (or, `synchronised`, moves that start
+    and end together on every axis); the same for the same seed, the test split from
+    generators of its own (it does not change with `n_train`). Errors name `origin` (the
+    description's file) and the key."""
+    _check_request(n_train, n_test, duration, rate_hz, seed, classes)
+    check_limits(machine, duration, origin)
+    t = np.arange(round(duration * rate_hz) + 1) / rate_hz
+    limits = [axis.limits for axis in machine.axes]
+    out = []
+    for split, count, stream, prefix in (("train", n_train, 0, ""), ("test", n_test, 1, "test-")):
+        for k in range(count):
+            kind = classes[k % len(classes)]
+            rngs = [np.random.default_rng([seed, stream, k, a]) for a in range(len(limits))]
+            if kind == "solo":
+                moving = k // len(classes) % len(limits)  # the solos' turn
+                motions = [trajectories("moves" if a == moving else "rest", [lim], t, [rng])[0]
+                           for a, (lim, rng) in enumerate(zip(limits, rngs))]
+            else:
+                motions = trajectories(kind, limits, t, rngs, synchronised)
+            signals: dict[str, np.ndarray] = {}
+            for axis, values in zip(machine.axes, motions):
+                signals.update(zip((axis.reference, *axis.derivatives), values))
+            out.append(Excitation(f"{prefix}{kind}-{k:03d}", split, kind, t, signals, machine))
+    return out
 
 
-def _multisine(axis: Axis, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Sines at random frequencies in the band the limits allow, faded in and out, scaled so
-    that position, velocity and acceleration stay within the limits."""
-    limits = axis.limits
-    half = 0.5 * MARGIN * (limits.high - limits.low)
-    top = math.sqrt(limits.acceleration / half) / (2 * math.pi)  # full range at full a
-    frequencies = rng.uniform(0.1 * top, top, 4) if top > 0 else np.zeros(4)
-    phases = rng.uniform(0, 2 * math.pi, 4)
-    # faded in and out by f = sin^2(pi t / T): at rest at both ends; derivatives exact
-    c = math.pi / t[-1]
-    fade = [0.5 * (1 - np.cos(2 * c * t)), c * np.sin(2 * c * t),
-            2 * c * c * np.cos(2 * c * t), -4 * c**3 * np.sin(2 * c * t)]
+def trajectories(kind: str, limits: Sequence[Limits], t: np.ndarray,
+                 rngs: Sequence[np.random.Generator], synchronised: bool = False
+                 ) -> list[np.ndarray]:
+    """Position, velocity, acceleration and jerk (4, n) of each axis's trajectory of class
+    `kind` at the times `t` (from 0), each axis drawing from its own generator; moves
+    `synchronised` last as long as the slowest axis's (the others slowed down)."""
+    limits = [_resolved(lim, float(t[1] - t[0])) for lim in limits]
+    if kind == "multisine":
+        return [_multisine(lim, t, rng) for lim, rng in zip(limits, rngs)]
+    centres = [0.5 * (lim.low + lim.high) for lim in limits]
+    if kind == "rest":
+        return [_held(c, t) for c in centres]
+    draws = [_draw(kind, lim) for lim in limits]
+    if synchronised:
+        return _chained(centres, t, rngs, draws)
+    return [_chained([c], t, [rng], [draw])[0] for c, rng, draw in zip(centres, rngs, draws)]
+
+
+Draw = Callable[[float, np.random.Generator], Shape]
+
+
+def _draw(kind: str, limits: Limits) -> Draw:
+    """How a move of class `kind` is drawn from a position on an axis with `limits`."""
+    draws: dict[str, Draw] = {
+        "moves": lambda x, r: _skew_sine_move(limits, x, r),
+        "bang-bang": lambda x, r: bang_bang(_target(limits, x, r) - x, limits, _share(r)),
+        "spline": lambda x, r: _spline_move(limits, x, r)}
+    return draws[kind]
+
+
+def _chained(starts: Sequence[float], t: np.ndarray, rngs: Sequence[np.random.Generator],
+             draws: Sequence[Draw]) -> list[np.ndarray]:
+    """Moves drawn one after the other from `starts`, each after a rest (the first axis's
+    generator draws the rests), every axis's move slowed down to the longest one, until the
+    next does not fit before the last rest."""
+    out = [_held(start, t) for start in starts]
+    positions = list(starts)
+    begin, end = float(rngs[0].uniform(*REST)), float(t[-1]) - REST[0]
+    while True:
+        for _ in range(FILL_TRIES):
+            shapes = [draw(x, rng) for draw, x, rng in zip(draws, positions, rngs)]
+            duration = max(*(shape.duration for shape in shapes),
+                           MOVE_SAMPLES * float(t[1] - t[0]))
+            if begin + duration <= end:
+                break
+        else:
+            return out
+        local = t - begin
+        during, after = (local >= 0) & (local <= duration), local > duration
+        for a, shape in enumerate(shapes):
+            stretched = shape if shape.duration == duration else Stretched(shape, duration)
+            out[a][:, during] = stretched(local[during])
+            out[a][0, during] += positions[a]
+            positions[a] += float(shape(np.array([shape.duration]))[0, 0])
+            out[a][0, after] = positions[a]
+            out[a][1:, after] = 0.0
+        begin += duration + float(rngs[0].uniform(*REST))
+
+
+def _held(position: float, t: np.ndarray) -> np.ndarray:
+    """At rest at `position` at the times `t`: (4, n)."""
+    return np.vstack([np.full(t.size, position), np.zeros((3, t.size))])
+
+
+def _resolved(limits: Limits, step: float) -> Limits:
+    """The limits the moves keep at the sampling `step`: an acceleration reached no faster
+    than in PHASE_SAMPLES steps from zero to the velocity, a jerk likewise to it, so that the
+    samples show every phase of a move (a shorter one would fall between them)."""
+    acceleration = min(limits.acceleration, limits.velocity / (PHASE_SAMPLES * step))
+    jerk = None if limits.jerk is None else min(limits.jerk,
+                                                acceleration / (PHASE_SAMPLES * step))
+    return replace(limits, acceleration=acceleration, jerk=jerk)
+
+
+def _band(limits: Limits) -> tuple[float, float]:
+    """The part of the range the moves use (MARGIN of it, about the centre)."""
+    centre, half = 0.5 * (limits.low + limits.high), 0.5 * MARGIN * (limits.high - limits.low)
+    return centre - half, centre + half
+
+
+def _share(rng: np.random.Generator) -> float:
+    return float(rng.uniform(*SHARE))
+
+
+def _target(limits: Limits, position: float, rng: np.random.Generator) -> float:
+    """A random point of the band at least MIN_STROKE of it away from `position`."""
+    low, high = _band(limits)
+    while True:
+        target = float(rng.uniform(low, high))
+        if abs(target - position) >= MIN_STROKE * (high - low):
+            return target
+
+
+def _skew_sine_move(limits: Limits, position: float, rng: np.random.Generator) -> SkewSine:
+    distance = _target(limits, position, rng) - position
+    return SkewSine(distance, skew_sine_time(distance, limits, _share(rng)))
+
+
+def _spline_move(limits: Limits, position: float, rng: np.random.Generator) -> Shape:
+    """A spline through 2-4 random points of the band, drawn again while it overshoots the
+    band or moves less than MIN_STROKE; after SPLINE_TRIES draws one point (no overshoot)."""
+    low, high = _band(limits)
+    share = _share(rng)
+    for _ in range(SPLINE_TRIES):
+        points = rng.uniform(low, high, int(rng.integers(SPLINE_POINTS[0], SPLINE_POINTS[1] + 1)))
+        shape = quintic_spline(points - position, limits, share)
+        lowest, highest = spline_extent(shape)
+        if position + lowest >= low and position + highest <= high \
+                and max(-lowest, highest) >= MIN_STROKE * (high - low):
+            return shape
+    return quintic_spline([_target(limits, position, rng) - position], limits, share)
+
+
+def _multisine(limits: Limits, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """SINES sines in the band the limits allow (up to where the band's amplitude takes the
+    whole acceleration, down to two periods in the duration), faded in and out by
+    sin^2(pi t / T), scaled to a random share of the tightest limit."""
+    low, high = _band(limits)
+    half, duration = 0.5 * (high - low), float(t[-1])
+    top = math.sqrt(limits.acceleration / half) / (2 * math.pi)
+    frequencies = rng.uniform(min(max(0.1 * top, 2 / duration), top), top, SINES)
+    phases = rng.uniform(0, 2 * math.pi, SINES)
+    c = math.pi / duration
+    fade = [0.5 * (1 - np.cos(2 * c * t)), c * np.sin(2 * c * t), 2 * c * c * np.cos(2 * c * t),
+            -4 * c**3 * np.sin(2 * c * t)]
     w = 2 * math.pi * frequencies[:, None]
     angle = w * t + phases[:, None]
     sines = [(w**n * np.sin(angle + n * math.pi / 2)).sum(0) for n in range(4)]
-    binomial = ((1,), (1, 1), (1, 2, 1), (1, 3, 3, 1))
-    derivatives = [sum(b * fade[n - m] * sines[m] for m, b in enumerate(binomial[n]))
-                   for n in range(4)]
+    binomial = ((1,), (1, 1), (1, 2, 1), (1, 3, 3, 1))  # Leibniz's rule for fade * sines
+    derivatives = np.array([sum(b * fade[n - m] * sines[m] for m, b in enumerate(binomial[n]))
+                            for n in range(4)])
     bounds = [half, limits.velocity, limits.acceleration, limits.jerk or math.inf]
-    scale = min(b / max(float(np.abs(d).max()), 1e-300) for b, d in zip(bounds, derivatives))
-    out = np.array(derivatives) * scale * float(rng.uniform(*SHARE))
+    scale = min(b / float(np.abs(d).max()) for b, d in zip(bounds, derivatives))
+    out = derivatives * scale * _share(rng)
     out[0] += 0.5 * (limits.low + limits.high)
     return out
 
 
 def check_limits(machine: Machine, duration: float, origin: str = "machine") -> None:
-    """Refuse limits that no move fits in `duration`, naming the key."""
+    """Refuse an axis whose limits no move fits, naming the key: a move over MIN_STROKE of
+    the range longer than `duration` (its binding limit), or limits that a move across the
+    whole range cannot come near (MIN_REACH: a jerk too low for the acceleration, a range
+    too short for the velocity; often a unit slip)."""
     for k, axis in enumerate(machine.axes):
-        limits = axis.limits
-        shortest = _move_time(0.5 * MARGIN * (limits.high - limits.low), limits, SHARE[1])
-        if shortest + 2 * REST[1] > duration:
-            key = f"machine.axis[{k}]"
-            raise ConfigError(origin, f"{key}.velocity", (
-                f"a move over half the range {limits.low:g} .. {limits.high:g} {axis.unit} "
-                f"takes {shortest:.3g} s at these limits, longer than the {duration:g} s "
-                f"trajectory: raise velocity, acceleration or jerk, or the duration"))
+        limits, unit, key = axis.limits, axis.unit, f"machine.axis[{k}]"
+        low, high = _band(limits)
+        stroke = MIN_STROKE * (high - low)
+        shortest = skew_sine_time(stroke, limits, 1.0)
+        if shortest + 2 * REST[0] > duration:
+            name = binding_limit(stroke, limits)
+            raise ConfigError(origin, f"{key}.{name}", (
+                f"a move over {MIN_STROKE:.0%} of the range ({stroke:.3g} {unit}) takes "
+                f"{shortest:.3g} s at this {name}, longer than the {duration:g} s trajectory: "
+                f"raise {name} or the duration"))
+        across = skew_sine_time(high - low, limits, 1.0)
+        acceleration = 2 * math.pi * (high - low) / across**2
+        if binding_limit(high - low, limits) == "jerk" \
+                and acceleration < MIN_REACH * limits.acceleration:
+            raise ConfigError(origin, f"{key}.jerk", (
+                f"{limits.jerk:g} {unit}/s^3 is so low that a move across the range reaches "
+                f"{acceleration:.3g} {unit}/s^2, under {MIN_REACH:.0%} of the acceleration "
+                f"{limits.acceleration:g}: raise jerk or lower acceleration"))
+        velocity = 2 * (high - low) / across
+        if velocity < MIN_REACH * limits.velocity:
+            raise ConfigError(origin, f"{key}.range", (
+                f"{limits.low:g} .. {limits.high:g} {unit} is too short for these limits: a "
+                f"move across it reaches {velocity:.3g} {unit}/s, under {MIN_REACH:.0%} of the "
+                f"velocity {limits.velocity:g}: widen the range or lower velocity (units?)"))
 
 
-def excitation_set(machine: Machine, n_train: int, n_test: int, duration: float,
-                   rate_hz: float, seed: int = 0, classes: Sequence[str] = CLASSES
-                   ) -> list[Excitation]:
-    """`n_train` + `n_test` trajectories of `duration` s at `rate_hz`, the classes in turn,
-    every axis its own independent trajectory; the same for the same seed."""
-    unknown = [c for c in classes if c not in CLASSES]
-    if unknown or not classes:
-        raise ConfigError("excitation", "classes", f"{unknown or classes}: choose among "
-                          f"{', '.join(CLASSES)}")
-    if n_train < 1 or n_test < 0 or not duration > 0 or not rate_hz > 0:
-        raise ConfigError("excitation", "count", "at least one training trajectory, a positive "
-                          "duration and rate")
-    check_limits(machine, duration)
-    t = np.arange(round(duration * rate_hz) + 1) / rate_hz
-    out = []
-    for k in range(n_train + n_test):
-        kind = classes[k % len(classes)]
-        rng = np.random.default_rng([seed, k])
-        signals: dict[str, np.ndarray] = {}
-        for axis in machine.axes:
-            values = (_multisine(axis, t, rng) if kind == "multisine"
-                      else _moves(axis, t, rng, kind == "bang-bang"))
-            signals.update(zip((axis.reference, *axis.derivatives), values))
-        split = "train" if k < n_train else "test"
-        out.append(Excitation(f"{kind}-{k:03d}", split, kind, t, signals))
-    return out
+def _check_request(n_train: int, n_test: int, duration: float, rate_hz: float, seed: int,
+                   classes: Sequence[str]) -> None:
+    """Refuse a set request that is not whole counts, a positive duration and rate, a seed
+    and known classes, naming the argument."""
+    def whole(value: object, least: int) -> bool:
+        return isinstance(value, int) and not isinstance(value, bool) and value >= least
+
+    def positive(value: object) -> bool:
+        return isinstance(value, int | float) and not isinstance(value, bool) \
+            and math.isfinite(value) and value > 0
+
+    unknown = [c for c in classes if c not in EVERY_CLASS]
+    problems = {
+        "classes": (unknown or not classes, f"{list(classes)}: choose among "
+                    f"{', '.join(EVERY_CLASS)}"),
+        "n_train": (not whole(n_train, 1), f"{n_train!r}: give at least one"),
+        "n_test": (not whole(n_test, 0), f"{n_test!r}: give a whole number, 0 or more"),
+        "seed": (not whole(seed, 0), f"{seed!r}: give a whole number, 0 or more"),
+        "duration": (not positive(duration), f"{duration!r}: give a positive number of s"),
+        "rate_hz": (not positive(rate_hz) or (positive(duration) and duration * rate_hz < 2),
+                    f"{rate_hz!r}: give a positive rate with at least two samples in the "
+                    f"duration"),
+    }
+    for name, (wrong, message) in problems.items():
+        if wrong:
+            raise ConfigError("excitation", name, message)
 
 
 def write_table(excitation: Excitation, path: str | Path) -> Path:
-    """The trajectory as a CSV time table (time and its reference signals)."""
+    """The trajectory as a CSV time table (time and its reference signals): a `[[source]]`
+    kind = "csv" of a run reads it (learning.machine_loop.on_references)."""
     names = list(excitation.signals)
     data = np.column_stack([excitation.time, *(excitation.signals[n] for n in names)])
     header = ",".join([TIME, *names])
