@@ -153,6 +153,19 @@ def test_condition_and_standard_deviations_against_the_normal_equations():
     assert relative == pytest.approx(100 * np.sqrt(covariance[1, 1]) / theta[1])
 
 
+@pytest.mark.parametrize("share", [1e-3, 5e-5])  # |R_kk| 6e-5 and 3e-6: both QR paths
+def test_nearly_dependent_columns_as_numpy_s_least_squares(share):
+    drive = machine(terms=["inertia", "viscous"], extra={"x": {"near": f"vx + {share} * x"}})
+    m = exact_motion(("x",), seed=6)
+    labels = 2.0 * m["ax"] + 20.0 * m["vx"] + 3.0 * (m["vx"] + share * m["x"]) \
+        + np.random.default_rng(0).normal(0.0, 0.01, m["x"].size)
+    fit = identify_linear(drive, m, {"x": labels}).axes["x"]
+    w = regressor(drive, m, WIDTH)["x"]
+    np.testing.assert_allclose(fit.parameters, np.linalg.lstsq(w, labels, rcond=None)[0],
+                               rtol=1e-6)
+    assert fit.condition == pytest.approx(np.linalg.cond(w / np.linalg.norm(w, axis=0)))
+
+
 def test_terms_the_data_cannot_tell_apart_are_refused_by_name():
     m = exact_motion(("x",))
     one_sided_and_offset = machine(terms=["inertia", "coulomb_asymmetric", "offset"])
