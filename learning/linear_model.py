@@ -82,10 +82,11 @@ def parallel_filter(rate_hz: float, cutoff_hz: float, filter_order: int = 4,
     """The labels' zero-phase low-pass, `edge_periods` corner periods left out at each end and
     decimation (default: SAMPLES_PER_CUTOFF samples per corner period), for identify_linear's
     `filtered`: regressor columns and efforts alike."""
+    if decimation is not None and not (isinstance(decimation, int) and decimation >= 1):
+        raise InputError(f"decimation: expected a whole number >= 1, got {decimation!r}")
+    if not edge_periods >= 0:
+        raise InputError(f"edge_periods: expected a number >= 0, got {edge_periods!r}")
     step = decimation or max(1, math.floor(rate_hz / (SAMPLES_PER_CUTOFF * cutoff_hz)))
-    if step < 1 or edge_periods < 0:
-        raise InputError(f"decimation: expected a whole number >= 1, got {decimation!r}; "
-                         f"edge_periods: expected >= 0, got {edge_periods!r}")
     edge = math.ceil(edge_periods / cutoff_hz * rate_hz)
 
     def filtered(values: np.ndarray) -> np.ndarray:

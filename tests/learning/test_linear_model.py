@@ -7,6 +7,7 @@ import pytest
 
 from flexff.controllers.linear_prior import term_names
 from flexff.cosim.machine import parse_machine
+from flexff.fmu.errors import InputError
 from flexff.learning.linear_model import (
     IdentificationError,
     identify_linear,
@@ -185,6 +186,10 @@ def test_terms_the_data_cannot_tell_apart_are_refused_by_name():
     with pytest.raises(IdentificationError, match=r"axis x: 2 samples cannot determine 2"):
         identify_linear(machine(terms=["inertia", "viscous"]),
                         {k: v[:2] for k, v in m.items()}, {"x": m["vx"][:2]})
+    with pytest.raises(InputError, match=r"decimation: expected a whole number >= 1, got 0"):
+        parallel_filter(RATE, 5.0, decimation=0)
+    with pytest.raises(InputError, match=r"too short for the filter's edges \(400 samples"):
+        parallel_filter(RATE, 5.0)(np.zeros((800, 2)))
     with pytest.raises(IdentificationError, match=r"machine.prior.extra.x.viscous: the name"):
         identify_linear(machine(extra={"x": {"viscous": "vx"}}), m, {"x": m["vx"]})
 
