@@ -37,7 +37,7 @@ from flexff.learning.features import lowpass
 WIDTHS = (0.001, 0.003, 0.01, 0.03)  # Coulomb tanh widths to try, fractions of the v limit
 # the width's search between the best of WIDTHS' neighbours ends within this share of it: on the
 # drive's loop (true width 1e-3 m/s between WIDTHS' 7.5e-4 and 2.5e-3) the best of WIDTHS left a
-# relative error of 2.7 % and the Coulomb levels 4 % off, the true width 0.76 % and 0.4 %
+# relative error of 2.7 % and the Coulomb levels 4 % off; refined, 0.76 % and within 0.5 %
 WIDTH_TOLERANCE = 0.01
 # |R_kk| of the QR of the unit-norm columns: the sine of the angle between a column and the
 # span of those before it; below this the column is a combination of them
