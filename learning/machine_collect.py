@@ -68,7 +68,7 @@ def collect_machine(loop: RunConfig, out: str | Path, n_train: int = 24, n_test:
                 "classes": list(classes)}
     _check_folder(folder, settings)
     excitations = excitation_set(machine, n_train, n_test, duration, 1.0 / loop.step, seed,
-                                 classes)
+                                 classes, origin=loop.origin)
     (folder / "references").mkdir(exist_ok=True)
     entries, jobs = {}, []
     for excitation in excitations:

@@ -29,12 +29,11 @@ from flexff.cosim.schema import RunConfig
 from flexff.fmu.build import build_fmu
 from flexff.learning.export import export
 from flexff.learning.ilc import ilc
-from flexff.learning.linear_model import identify_linear, write_linear_model
+from flexff.learning.linear_model import identify_linear, parallel_filter, write_linear_model
 from flexff.learning.machine_collect import collect_machine
 from flexff.learning.machine_dataset import MachineDataset
 from flexff.learning.machine_features import (
     MachineFeatures,
-    label_filter,
     motion,
     named_motion,
 )
@@ -50,8 +49,9 @@ SUMMARY = "summary.json"
 def identify_dataset(data: MachineDataset, features: MachineFeatures | None = None
                      ) -> LinearModel:
     """The prior's linear model identified on the training trajectories: the regressor of
-    their measured motion and their efforts through the labels' filter and decimation alike
-    (learning.machine_features)."""
+    their measured motion and their efforts through the labels' low-pass alike, decimated to
+    two samples a corner period (learning.linear_model.parallel_filter: its standard
+    deviations then hold), the filter's ends left out."""
     machine = data.description
     rate = data.sample_rate_hz
     train = [t for t in data.trajectories if t.split == "train"]
@@ -62,8 +62,9 @@ def identify_dataset(data: MachineDataset, features: MachineFeatures | None = No
         moved, effort = motion(trajectory.signals, rate, machine, resolved)
         motions.append(named_motion(moved, machine))
         efforts.append({a.name: effort[:, k] for k, a in enumerate(machine.axes)})
+    assert resolved.cutoff_hz is not None
     return identify_linear(machine, motions, efforts,
-                           lambda values: label_filter(values, rate, resolved))
+                           parallel_filter(rate, resolved.cutoff_hz, resolved.filter_order))
 
 
 def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = MODELS,
