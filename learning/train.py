@@ -92,6 +92,7 @@ def train(model: str, preset: str, data: str | Path, out: str | Path, progress: 
     "best_epoch"} (learning.workers draws bars from it).
     """
     config = make_config(model, preset, **overrides)
+    pick_device(config.device)  # a device that is not there fails before the data loads
     return fit(config, load_dataset(data), Path(out), progress, resume, force, checkpoint_every,
                on_epoch)
 
@@ -101,6 +102,7 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
         on_epoch: EpochReport | None = None) -> dict[str, Any]:
     """Train with a ready configuration on a loaded dataset; see `train`."""
     start = time.perf_counter()
+    device = pick_device(config.device)  # before any work: a device that is not there fails now
     every = CHECKPOINT_EVERY[config.preset] if checkpoint_every is None else checkpoint_every
     if every < 1:
         raise InputError(f"checkpoint_every must be at least 1 epoch, got {every}")
@@ -125,7 +127,6 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
         return [label_scaler.transform(f) for f in fs]
 
     roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge)
-    device = pick_device(config.device)
     with reproducible(config.seed, config.threads):
         network = build_network(config.model, train_x[0].shape[1],
                                 n_outputs=train_f[0].shape[1], **config.architecture)

@@ -1,0 +1,126 @@
+"""Training, resuming, the networks and their export on a device other than the CPU.
+
+Without a GPU the device is emulated (tests.learning.fake_device): every tensor keeps its
+side, and an operation mixing the two fails as it does on CUDA. The emulated runs must equal
+the CPU's exactly, as the same arithmetic runs underneath. With CUDA the fast preset also
+trains on the GPU itself (skipped here)."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import flexff.learning.train as training
+from flexff.fmu.errors import InputError
+from flexff.learning.export import export
+from flexff.learning.models import build_network, fit_linear_skip
+from flexff.learning.run_folder import load_run
+from flexff.learning.synthetic import synthetic_dataset
+from flexff.learning.train import train
+from tests.learning.fake_device import DEVICE, FakeDevice
+
+pytestmark = pytest.mark.usefixtures("few_threads")
+
+# the fast preset's networks, smaller; the LSTM and TCN keep their linear skip
+TINY = {"lstm": {"hidden": 8}, "cnn-lstm": {"hidden": 8, "conv_channels": [4, 4, 2]},
+        "tcn": {"channels": 8, "levels": 2}, "pgnn": {"channels": 8, "levels": 2}}
+CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return synthetic_dataset(tmp_path_factory.mktemp("tiny") / "data", n_train=4, n_test=1,
+                             duration=4.0, rate_hz=200.0, seed=7)
+
+
+def _weights(path):
+    return load_run(path).network.state_dict()
+
+
+def _same(a, b):
+    return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+@pytest.mark.parametrize("kind", list(TINY))
+def test_training_on_another_device_mixes_no_tensors_and_equals_the_cpus(data, tmp_path,
+                                                                          kind):
+    on_cpu = train(kind, "fast", data, tmp_path / "cpu", progress=False, epochs=2,
+                   device="cpu", **TINY[kind])
+    with FakeDevice() as device:
+        on_device = train(kind, "fast", data, tmp_path / "device", progress=False, epochs=2,
+                          device=str(DEVICE), **TINY[kind])
+    assert device.checked > 1000  # the mode saw the training
+    assert on_device["device"] == str(DEVICE)
+    assert on_device["history"]["train"] == on_cpu["history"]["train"]
+    assert _same(_weights(tmp_path / "device"), _weights(tmp_path / "cpu"))
+
+
+def test_a_run_trained_on_another_device_exports(data, tmp_path):
+    with FakeDevice():
+        train("tcn", "fast", data, tmp_path / "run", progress=False, epochs=1,
+              device=str(DEVICE), **TINY["tcn"])
+    assert export(tmp_path / "run", tmp_path / "tcn.onnx").is_file()
+
+
+def test_a_checkpoint_written_on_the_cpu_resumes_on_another_device(data, tmp_path,
+                                                                   monkeypatch):
+    whole = tmp_path / "whole"
+    train("lstm", "fast", data, whole, progress=False, epochs=2, device="cpu", **TINY["lstm"])
+    real = training._Saver.epoch_done
+
+    def stop_after_one(self, epochs, network, optimizer, rng, history, *rest):
+        real(self, epochs, network, optimizer, rng, history, *rest)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(training._Saver, "epoch_done", stop_after_one)
+    with pytest.raises(KeyboardInterrupt):
+        train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2, device="cpu",
+              checkpoint_every=1, **TINY["lstm"])
+    monkeypatch.setattr(training._Saver, "epoch_done", real)
+    with FakeDevice():
+        train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2,
+              device=str(DEVICE), **TINY["lstm"])
+    assert _same(_weights(tmp_path / "cut"), _weights(whole))
+
+
+@pytest.mark.parametrize("kind", ["tcn", "cnn-lstm"])
+def test_the_step_form_of_a_network_on_another_device_mixes_no_tensors(kind):
+    network = build_network(kind, 5, linear_skip=True, **TINY[kind]).eval()
+    x, y = torch.randn(1, 30, 5), torch.randn(30, 2)
+    expected = network.step_form()(x)[0]
+    with FakeDevice(), torch.no_grad():
+        network.to(DEVICE)
+        fit_linear_skip(network, x.to(DEVICE)[0], y.to(DEVICE))
+        stepped = network.step_form()
+        state, outputs = None, []
+        for t in range(x.shape[1]):
+            out, state = stepped(x[:, t:t + 1].to(DEVICE), state)
+            outputs.append(out.cpu())
+    assert not torch.equal(torch.cat(outputs, dim=1), expected)  # the skip was fitted
+    assert torch.cat(outputs, dim=1).shape == expected.shape
+
+
+def test_the_emulated_device_finds_a_mix_up():
+    with FakeDevice(), pytest.raises(RuntimeError, match="same device"):
+        torch.cat([torch.ones(2, 1).to(DEVICE), torch.ones(2, 1)], dim=1)
+
+
+def test_cuda_asked_for_without_cuda_is_refused_before_any_work(data, tmp_path, monkeypatch):
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.setattr(training, "load_dataset", lambda path: pytest.fail("data loaded"))
+    with pytest.raises(InputError, match="CUDA is not available"):
+        train("lstm", "fast", data, tmp_path / "run", progress=False, device="cuda")
+
+
+@CUDA
+@pytest.mark.parametrize("kind", list(TINY))
+def test_the_fast_preset_trains_on_cuda_as_on_the_cpu(data, tmp_path, kind):
+    runs = {device: train(kind, "fast", data, tmp_path / device, progress=False, epochs=3,
+                          device=device) for device in ("cpu", "cuda")}
+    assert runs["cuda"]["device"].startswith("cuda")
+    assert np.isfinite(runs["cuda"]["test_mse"])
+    # other kernels, other rounding: the same loss to a few percent, not bit for bit
+    assert runs["cuda"]["test_mse"] == pytest.approx(runs["cpu"]["test_mse"], rel=0.2)
+    export(tmp_path / "cuda", tmp_path / f"{kind}.onnx")
+    assert json.loads((tmp_path / "cuda" / "metrics.json").read_text())["device"] == "cuda"
