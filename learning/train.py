@@ -42,6 +42,7 @@ from flexff.learning.batches import (
     window_roles,
 )
 from flexff.learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
+from flexff.learning.devices import pick_device
 from flexff.learning.features import (
     LABELS,
     FeatureConfig,
@@ -446,16 +447,6 @@ def role_mse(network: SequenceNetwork, data: SequenceSet, role: int,
         total += float(((pred - data.y[group]) ** 2 * weight).sum())
         count += int(mask.sum()) * pred.shape[-1]
     return total / count if count else math.nan
-
-
-def pick_device(name: str) -> torch.device:
-    """'auto': CUDA when available, else CPU; or the named device."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise InputError(f"device {name!r} asked for, but CUDA is not available: "
-                         f"use 'cpu' or 'auto'")
-    return torch.device(name)
 
 
 @contextmanager

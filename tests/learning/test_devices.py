@@ -124,3 +124,24 @@ def test_the_fast_preset_trains_on_cuda_as_on_the_cpu(data, tmp_path, kind):
     assert runs["cuda"]["test_mse"] == pytest.approx(runs["cpu"]["test_mse"], rel=0.2)
     export(tmp_path / "cuda", tmp_path / f"{kind}.onnx")
     assert json.loads((tmp_path / "cuda" / "metrics.json").read_text())["device"] == "cuda"
+
+
+def test_the_command_lines_devices_are_the_librarys():
+    from flexff.cli import DEVICES as OFFERED
+    from flexff.learning.devices import DEVICES
+
+    assert OFFERED == DEVICES
+
+
+@pytest.mark.parametrize("command", [
+    ["train", "--model", "lstm", "--data", "DATA", "-o", "OUT"],
+    ["evaluate", "-o", "OUT"], ["demo", "-o", "OUT"]])
+def test_cuda_without_cuda_is_one_line_and_exit_code_2(command, tmp_path, monkeypatch, capsys):
+    from flexff.cli import main
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.chdir(tmp_path)
+    assert main([*command, "--device", "cuda"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "CUDA is not available" in lines[0]
+    assert not (tmp_path / "OUT").exists() or not any((tmp_path / "OUT").iterdir())
