@@ -36,6 +36,24 @@ class FakeDevice(TorchFunctionMode):
         self._on_device: WeakIdKeyDictionary = WeakIdKeyDictionary()
         self.checked = 0  # operations checked: proof that the mode saw the work
 
+    def __enter__(self) -> FakeDevice:
+        # pickling (torch.save) asks a tensor's device outside the torch-function protocol:
+        # there it must see where the data is, or it saves a device tensor as meta, without data
+        self._pickle = torch.Tensor._reduce_ex_internal
+        pickle = self._pickle
+
+        def on_host(tensor: torch.Tensor, proto: int) -> Any:
+            with torch._C.DisableTorchFunction():
+                return pickle(tensor, proto)
+
+        torch.Tensor._reduce_ex_internal = on_host  # type: ignore[method-assign]
+        super().__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        super().__exit__(*exc)
+        torch.Tensor._reduce_ex_internal = self._pickle  # type: ignore[method-assign]
+
     def _held(self, tensor: torch.Tensor) -> bool:
         return tensor in self._on_device
 

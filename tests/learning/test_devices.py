@@ -6,6 +6,7 @@ the CPU's exactly, as the same arithmetic runs underneath. With CUDA the fast pr
 trains on the GPU itself (skipped here)."""
 
 import json
+from contextlib import nullcontext
 
 import numpy as np
 import pytest
@@ -63,8 +64,14 @@ def test_a_run_trained_on_another_device_exports(data, tmp_path):
     assert export(tmp_path / "run", tmp_path / "tcn.onnx").is_file()
 
 
-def test_a_checkpoint_written_on_the_cpu_resumes_on_another_device(data, tmp_path,
-                                                                   monkeypatch):
+def _on(device):
+    """The block on `device`: the emulated one, or the CPU."""
+    return FakeDevice() if device == str(DEVICE) else nullcontext()
+
+
+@pytest.mark.parametrize("first,then", [("cpu", str(DEVICE)), (str(DEVICE), "cpu")])
+def test_a_checkpoint_resumes_on_another_device_to_the_same_weights(data, tmp_path,
+                                                                    monkeypatch, first, then):
     whole = tmp_path / "whole"
     train("lstm", "fast", data, whole, progress=False, epochs=2, device="cpu", **TINY["lstm"])
     real = training._Saver.epoch_done
@@ -74,13 +81,14 @@ def test_a_checkpoint_written_on_the_cpu_resumes_on_another_device(data, tmp_pat
         raise KeyboardInterrupt
 
     monkeypatch.setattr(training._Saver, "epoch_done", stop_after_one)
-    with pytest.raises(KeyboardInterrupt):
-        train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2, device="cpu",
+    with _on(first), pytest.raises(KeyboardInterrupt):
+        train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2, device=first,
               checkpoint_every=1, **TINY["lstm"])
     monkeypatch.setattr(training._Saver, "epoch_done", real)
-    with FakeDevice():
-        train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2,
-              device=str(DEVICE), **TINY["lstm"])
+    with _on(then):
+        resumed = train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2,
+                        device=then, **TINY["lstm"])
+    assert len(resumed["history"]["train"]) == 2
     assert _same(_weights(tmp_path / "cut"), _weights(whole))
 
 
