@@ -8,7 +8,9 @@ there (`device=` of a factory function) or computed from such, and reports `devi
 `.device`. An operation that takes tensors from both sides fails as CUDA does; as on CUDA, a
 0-dimensional host tensor may join device tensors, `copy_` may copy across, and a device
 tensor may be indexed by host indices. `.cpu()` brings a copy back; `.numpy()` of a device
-tensor fails as it does on CUDA.
+tensor fails as it does on CUDA. What it cannot see: kernels CUDA lacks (it knows one,
+torch.linalg.lstsq's drivers other than gels) and CUDA's own rounding; the tests marked for
+CUDA (tests/learning/test_devices.py) run those where a GPU is.
 """
 
 from __future__ import annotations
