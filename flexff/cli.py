@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # the command line loads numpy and the rest only in the comma
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to keep torch unloaded
 PRESETS = ("fast", "thesis")
+DEVICES = ("auto", "cpu", "cuda")  # learning.devices', named here to keep torch unloaded
 ITERATIONS, CUTOFF_HZ = 10, 20.0  # learning.ilc's defaults, named here to keep scipy unloaded
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
                 PermissionError)  # OSErrors about paths the user gave: exit code 2, as are
@@ -72,7 +73,7 @@ def _evaluate_machine(args: argparse.Namespace, loop: Any) -> int:
 
     train, test = args.trajectories
     evaluate_machine(loop, args.output, args.models, args.preset, train, test, args.duration,
-                     **({"epochs": args.epochs} if args.epochs else {}))
+                     device=args.device, **({"epochs": args.epochs} if args.epochs else {}))
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, identified.json, data/, runs/, "
           f"models/, fmus/, ilc/ for the limit)")
@@ -421,7 +422,7 @@ def _train(args: argparse.Namespace) -> int:
 
         metrics = train(args.model, args.preset, args.data, args.output, resume=args.resume,
                         force=args.force, checkpoint_every=args.checkpoint_every,
-                        **overrides, seed=seeds[0])
+                        **overrides, seed=seeds[0], device=args.device)
         print(json.dumps(metrics, indent=2, default=str))
         return 0
     from flexff.learning.workers import TrainJob, train_parallel
@@ -433,7 +434,7 @@ def _train(args: argparse.Namespace) -> int:
         raise InputError(f"--seed: each seed once, got {seeds}")
     jobs = [TrainJob(args.model, args.preset, Path(args.data), Path(args.output) / f"seed{s}",
                      {**overrides, "seed": s}, label=f"seed{s}") for s in seeds]
-    results = train_parallel(jobs, scheduler=args.scheduler)
+    results = train_parallel(jobs, scheduler=args.scheduler, device=args.device)
     print(json.dumps(results, indent=2, default=str))
     return 0
 
@@ -449,7 +450,7 @@ def _train_machine(args: argparse.Namespace) -> int:
         raise InputError("a machine's dataset trains one seed here, on its efforts")
     data = load_machine_dataset(args.data)
     config = make_config(args.model, args.preset, seed=(args.seed or [0])[0],
-                         **({"epochs": args.epochs} if args.epochs else {}))
+                         device=args.device, **({"epochs": args.epochs} if args.epochs else {}))
     metrics = fit_machine(config, data.description, data.sample_rate_hz, data.trajectories,
                           data.digest, Path(args.output), resume=args.resume, force=args.force,
                           checkpoint_every=args.checkpoint_every,
@@ -511,7 +512,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     if loop is not None and loop.machine is not None:
         return _evaluate_machine(args, loop)
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
-             scheduler=args.scheduler, currents=args.currents)
+             scheduler=args.scheduler, currents=args.currents, device=args.device)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
           f"forces.png, the .onnx models, ilc/ for the limit, held-out/ for the test split's "
@@ -543,7 +544,7 @@ def _demo(args: argparse.Namespace) -> int:
     from flexff.demo import run_demo
 
     output_folder(args.output)
-    return run_demo(args.output)
+    return run_demo(args.output, args.device)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -725,6 +726,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "ensemble)")
     train.add_argument("--scheduler", help="address of a Dask scheduler to train on (its "
                                            "workers see this file system)")
+    _device_option(train, "train on")
     train.set_defaults(handler=_train)
 
     export = commands.add_parser("export", help="export a training run (or an ensemble of "
@@ -789,6 +791,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--epochs", type=int, help="override the preset's number of epochs")
     evaluation.add_argument("--scheduler", help="address of a Dask scheduler to collect and "
                                                 "train on (its workers see this file system)")
+    _device_option(evaluation, "train the networks on")
     machine_options(evaluation)
     evaluation.set_defaults(handler=_evaluate)
 
@@ -809,8 +812,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     demo = commands.add_parser("demo", help="the whole pipeline on the embedded defaults")
     demo.add_argument("-o", "--output", default="flexff-demo", help="output folder")
+    _device_option(demo, "train the networks on")
     demo.set_defaults(handler=_demo)
     return parser
+
+
+def _device_option(command: argparse.ArgumentParser, what: str) -> None:
+    command.add_argument("--device", default="auto", choices=DEVICES,
+                         help=f"where to {what}: auto (CUDA when available, default), cpu or "
+                              f"cuda (one training process per GPU)")
 
 
 def _failure(error: BaseException, command: str, debug: bool = False) -> tuple[int, str]:

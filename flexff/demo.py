@@ -39,9 +39,13 @@ def _build_plants(out: Path) -> bool:
     return ok
 
 
-def run_demo(output: str | Path) -> int:
-    """Run the demo into folder `output`; print what it finds; 0 on success."""
+def run_demo(output: str | Path, device: str = "auto") -> int:
+    """Run the demo into folder `output`, training on `device` ('auto', 'cpu', 'cuda';
+    learning.devices); print what it finds; 0 on success."""
+    from flexff.learning.devices import pick_device
     from flexff.learning.evaluate import evaluate
+
+    pick_device(device)  # a device that is not there fails before the FMUs are built
 
     out = Path(output)
     out.mkdir(parents=True, exist_ok=True)
@@ -51,7 +55,8 @@ def run_demo(output: str | Path) -> int:
     _done(start)
     start = _stage("2/2 evaluation (sim): data, training (fast preset), ONNX export, "
                    "co-simulation of the thesis evaluation reference")
-    evaluate("sim", out, "fast", say=lambda line: print(f"   {line}", flush=True))
+    evaluate("sim", out, "fast", say=lambda line: print(f"   {line}", flush=True),
+             device=device)
     _done(start)
     print("\n" + (out / "table.md").read_text())
     print(f"results in {out}/ (summary.json, table.md, paths.png, errors.png, forces.png, "

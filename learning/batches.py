@@ -84,23 +84,27 @@ class SequenceSet:
     def __len__(self) -> int:
         return self.x.shape[0]
 
-    def groups(self, batch_size: int, rng: np.random.Generator) -> list[np.ndarray]:
-        """The trajectory indices in shuffled groups of at most batch_size."""
-        order = rng.permutation(len(self))
-        return [order[k:k + batch_size] for k in range(0, len(order), batch_size)]
+    def groups(self, batch_size: int, rng: np.random.Generator) -> list[torch.Tensor]:
+        """The trajectory indices in shuffled groups of at most batch_size, on the data's
+        device (one copy per call, none per group)."""
+        order = torch.as_tensor(rng.permutation(len(self)), device=self.x.device)
+        return list(order.split(batch_size))
 
 
 class WindowSampler:
     """Random windows of the TRAIN samples for convolutional networks.
 
     Each item is (history (B, history, F), x (B, window, F), y (B, window, 2), mask (B, window)).
+    Everything stays on the data's device: an epoch copies only its shuffled order there.
     """
 
     def __init__(self, data: SequenceSet, window: int, history: int) -> None:
         self.data, self.window, self.history = data, window, history
         role = data.role.cpu().numpy()
-        self.starts = [(i, s) for i in range(len(data)) for s in range(0, role.shape[1], window)
-                       if (role[i, s:s + window] == TRAIN).any()]
+        starts = [(i, s) for i in range(len(data)) for s in range(0, role.shape[1], window)
+                  if (role[i, s:s + window] == TRAIN).any()]
+        # (trajectory, first sample) of each window
+        self._starts = torch.as_tensor(starts, dtype=torch.int64, device=data.x.device)
         n, _, width = data.x.shape
         self._x = torch.cat([data.x.new_zeros(n, history, width), data.x,
                              data.x.new_zeros(n, window, width)], dim=1)
@@ -110,16 +114,14 @@ class WindowSampler:
 
     def batches(self, batch_size: int, rng: np.random.Generator) -> Iterator[Batch]:
         """Yield shuffled batches covering every training window once."""
-        order = rng.permutation(len(self.starts))
+        order = torch.as_tensor(rng.permutation(len(self)), device=self._x.device)
         span = torch.arange(self.history + self.window, device=self._x.device)
-        for k in range(0, len(order), batch_size):
-            items = np.array([self.starts[j] for j in order[k:k + batch_size]])
-            traj = torch.as_tensor(items[:, 0], device=self._x.device)
-            start = torch.as_tensor(items[:, 1], device=self._x.device)
+        for items in self._starts[order].split(batch_size):
+            traj, start = items[:, 0], items[:, 1]
             x = self._x[traj[:, None], start[:, None] + span]
             out = start[:, None] + span[:self.window]
             yield (x[:, :self.history], x[:, self.history:], self._y[traj[:, None], out],
                    self._mask[traj[:, None], out])
 
     def __len__(self) -> int:
-        return len(self.starts)
+        return len(self._starts)

@@ -110,7 +110,7 @@ class SIModel(nn.Module):
         return (forces, *new_state)
 
     def initial_state(self) -> tuple[torch.Tensor, ...]:
-        return self.network.initial_state(1)
+        return self.network.initial_state(1, self.feature_low.device)
 
     def state_names(self) -> list[str]:
         return self.network.state_names()

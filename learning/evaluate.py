@@ -1,10 +1,11 @@
 """`flexff evaluate`: the thesis's Table 5.2 (sim) or 6.2 (hardware) for flexff, end to end.
 
 1. collect the environment's trajectory set under PID (resumes what is there);
-2. train the models side by side, one process per core (learning.workers; a finished run with
-   the same settings is reused), and export each to ONNX (an ensemble's members, where the
-   environment asks for one, as one graph of their mean); `currents` adds, per kind named,
-   the same model trained on the motor currents (scenario KIND-currents);
+2. train the models side by side, one process per core, on CUDA one per GPU (learning.workers,
+   learning.devices; a finished run with the same settings is reused), and export each to
+   ONNX (an ensemble's members, where the environment asks for one, as one graph of their
+   mean); `currents` adds, per kind named, the same model trained on the motor currents
+   (scenario KIND-currents);
 3. identify the rigid-body model's parameters on the training set, preprocessed as the
    networks' data (learning.identify);
 4. run iterative learning control (learning.ilc) on the environment's evaluation reference,
@@ -60,6 +61,7 @@ from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.errors import InputError
 from flexff.learning.collect import collect
 from flexff.learning.dataset import load_dataset
+from flexff.learning.devices import pick_device, training_gpus
 from flexff.learning.encoders import effects_of, loop_encoders, warn_ideal_preprocessing
 from flexff.learning.export import export
 from flexff.learning.features import FeatureConfig
@@ -188,15 +190,17 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
              data: str | Path | None = None, epochs: int | None = None,
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
              progress: bool = True, scheduler: str | None = None,
-             ilc_iterations: int = ITERATIONS, currents: Sequence[str] = ()
-             ) -> dict[str, Any]:
+             ilc_iterations: int = ITERATIONS, currents: Sequence[str] = (),
+             device: str = "auto") -> dict[str, Any]:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
     collects and evaluates on that run configuration instead of the environment's plant;
     `scheduler` collects and trains on that Dask cluster (learning.workers); `ilc_iterations`
     are the learning trials of the limit (learning.ilc); `currents` adds the current-level
     model of each kind named (scenario KIND-currents, the same settings with labels =
-    "currents", learning.features)."""
+    "currents", learning.features); `device` ('auto', 'cpu', 'cuda') is where the networks
+    train (learning.devices), checked before any work."""
+    on_gpu = bool(training_gpus(pick_device(device)))
     if env not in ENVIRONMENTS:
         raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
     for kind in (*models, *currents):
@@ -225,10 +229,11 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     jobs = {job.name: job for group in groups.values() for job in group}
     training = {name: m for name, job in jobs.items() if (m := _finished(job))}
     if todo := [name for name in jobs if name not in training]:
-        where = f"on {scheduler}" if scheduler else "one process per core"
+        where = f"on {scheduler}" if scheduler else \
+            f"one process per {'GPU' if on_gpu else 'core'}"
         say(f"training {', '.join(todo)} ({preset} preset), {where}")
     training.update(train_parallel([jobs[name] for name in todo], progress=progress,
-                                   scheduler=scheduler))
+                                   scheduler=scheduler, device=device))
     onnx_files, model_training = {}, {}
     for kind, group in groups.items():
         metrics = model_training[kind] = _ensemble_metrics([training[j.name] for j in group])

@@ -25,6 +25,7 @@ from flexff.cosim.machine import Machine, machine_table
 from flexff.fmu.errors import InputError
 from flexff.learning.batches import TRAIN, VALIDATION, SequenceSet
 from flexff.learning.dataset_files import Trajectory
+from flexff.learning.devices import pick_device
 from flexff.learning.machine_features import (
     MachineFeatures,
     label_filter,
@@ -69,6 +70,7 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
     machine's identified linear model (learning.machine_evaluate.identify_dataset), its efforts
     through the labels' filter as the labels are."""
     start = time.perf_counter()
+    pick_device(config.device)  # before any work: a device that is not there fails now
     if uses_prior(config.model) != (prior is not None):
         raise InputError(f"{config.model}: the physics-guided model (pgnn) and only it learns "
                          f"over an identified prior: give the prior for pgnn, none for others")

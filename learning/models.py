@@ -155,8 +155,8 @@ class StreamingTCN(SequenceNetwork):
         self.history = tcn.history
         self.blocks, self.head = tcn.blocks, tcn.head
         self.lengths = [block.shrink for block in _levels(tcn)]
-        level_input = torch.zeros(1, tcn.n_features, 1, dtype=tcn.head.weight.dtype,
-                                  device=tcn.head.weight.device)
+        weight = tcn.head.weight
+        level_input = torch.zeros(1, tcn.n_features, 1, dtype=weight.dtype, device=weight.device)
         with torch.no_grad():
             for i, block in enumerate(_levels(tcn)):
                 self.register_buffer(f"rest{i}", level_input.clone())
@@ -292,16 +292,15 @@ class LinearSkip(SequenceNetwork):
 def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor) -> None:
     """Set the skip of a LinearSkip network to the least-squares fit y ~ x W + b over the
     samples (n, n_features), (n, n_outputs), and zero the inner network's head, so that training
-    starts from the linear fit."""
+    starts from the linear fit.
+
+    The fit is solved on the CPU whatever device the samples and the network are on: the
+    nearly collinear features need the SVD-based driver (gelsd), which CUDA lacks."""
     if not isinstance(network, LinearSkip):
         return
-    # solved on the CPU in float64 wherever the network lives: gelsd (rank-revealing) runs on
-    # the CPU only, and the fit is small; copy_ brings the result to the network's device
-    inputs = x.detach().to("cpu", torch.float64)
-    design = torch.cat([inputs, torch.ones(len(inputs), 1, dtype=torch.float64, device="cpu")],
-                       dim=1)
-    solution = torch.linalg.lstsq(design, y.detach().to("cpu", torch.float64),
-                                  driver="gelsd").solution
+    x, y = x.detach().cpu().double(), y.detach().cpu().double()
+    design = torch.cat([x, torch.ones(len(x), 1, dtype=torch.float64)], dim=1)
+    solution = torch.linalg.lstsq(design, y, driver="gelsd").solution
     with torch.no_grad():
         network.linear.weight.copy_(solution[:-1].T)
         network.linear.bias.copy_(solution[-1])

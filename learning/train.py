@@ -42,6 +42,7 @@ from flexff.learning.batches import (
     window_roles,
 )
 from flexff.learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
+from flexff.learning.devices import pick_device
 from flexff.learning.features import (
     LABELS,
     FeatureConfig,
@@ -92,6 +93,7 @@ def train(model: str, preset: str, data: str | Path, out: str | Path, progress: 
     "best_epoch"} (learning.workers draws bars from it).
     """
     config = make_config(model, preset, **overrides)
+    pick_device(config.device)  # a device that is not there fails before the data loads
     return fit(config, load_dataset(data), Path(out), progress, resume, force, checkpoint_every,
                on_epoch)
 
@@ -101,6 +103,7 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
         on_epoch: EpochReport | None = None) -> dict[str, Any]:
     """Train with a ready configuration on a loaded dataset; see `train`."""
     start = time.perf_counter()
+    pick_device(config.device)  # before any work: a device that is not there fails now
     every = CHECKPOINT_EVERY[config.preset] if checkpoint_every is None else checkpoint_every
     if every < 1:
         raise InputError(f"checkpoint_every must be at least 1 epoch, got {every}")
@@ -466,16 +469,6 @@ def role_mse(network: SequenceNetwork, data: SequenceSet, role: int,
         total += float(((pred - data.y[group]) ** 2 * weight).sum())
         count += int(mask.sum()) * pred.shape[-1]
     return total / count if count else math.nan
-
-
-def pick_device(name: str) -> torch.device:
-    """'auto': CUDA when available, else CPU; or the named device."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise InputError(f"device {name!r} asked for, but CUDA is not available: "
-                         f"use 'cpu' or 'auto'")
-    return torch.device(name)
 
 
 @contextmanager

@@ -1,4 +1,5 @@
-"""Training several models side by side, one process per core, with a progress bar each.
+"""Training several models side by side, one process per core (per GPU on CUDA), with a
+progress bar each.
 
 The networks' operations are small, so one model gains little from a second thread (and loses
 much when that thread waits for a busy core, learning.threads); the models of an evaluation
@@ -6,7 +7,10 @@ are independent, so they train in parallel processes instead, one thread each, t
 expensive first so that the cores finish together. Measured on the 2-core machine: the demo's
 four models took 265 s one after the other on two threads and about 130 s side by side.
 
-A worker reports each epoch through a queue; this process draws the bars. Workers die with
+A worker reports each epoch through a queue; this process draws the bars.
+
+On CUDA the runs take one process per GPU instead (learning.devices), each worker bound to its
+own GPU before it trains, and the cores divided among those processes. Workers die with
 this process (even by SIGKILL), and what they finished is kept: every run folder resumes from
 its last checkpoint (learning.train).
 
@@ -27,9 +31,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import torch
 from tqdm import tqdm
 
 from flexff.cosim.executor import die_with_parent, execute
+from flexff.learning.devices import pick_device, training_gpus
 from flexff.learning.threads import granted_cores
 
 POLL_S = 0.2  # how often the bars are redrawn while the workers run
@@ -56,44 +62,77 @@ class TrainJob:
 
 def train_parallel(jobs: Sequence[TrainJob], workers: int | None = None,
                    progress: bool = True, scheduler: str | None = None,
-                   threads: int | None = None) -> dict[str, dict[str, Any]]:
-    """Train every job, `workers` at a time (default: one per core granted, at most one per
-    job), each on `threads` threads (default: cores // workers), or on the Dask cluster at
-    `scheduler` (one thread each unless told); return the metrics per job name. The first
-    failure is raised once the runs under way have finished (an evaluation run again reuses
-    them); the jobs not started are cancelled."""
+                   threads: int | None = None, device: str = "auto"
+                   ) -> dict[str, dict[str, Any]]:
+    """Train every job on `device` ('auto', 'cpu', 'cuda'), `workers` at a time (default: one
+    per core granted, on CUDA one per GPU; at most one per job and per GPU), each on
+    `threads` threads (default: cores // workers), or on the Dask cluster at `scheduler`
+    (one thread each unless told; its workers resolve 'auto' themselves); return the metrics
+    per job name. The first failure is raised once the runs under way have finished (an
+    evaluation run again reuses them); the jobs not started are cancelled."""
     if not jobs:
         return {}
     ordered = sorted(jobs, key=lambda job: -job.cost)
     if scheduler is not None:
-        return _train_on_cluster(ordered, scheduler, threads or 1, progress)
-    workers = max(1, min(workers or granted_cores(), len(jobs)))
+        return _train_on_cluster(ordered, scheduler, threads or 1, progress, device)
+    picked = pick_device(device)
+    gpus = training_gpus(picked)
+    workers = worker_count(len(jobs), workers, len(gpus))
     threads = threads or max(1, granted_cores() // workers)
+    run_on = "cuda" if gpus else str(picked)  # a worker's own GPU is its current one
     context = multiprocessing.get_context("spawn")
-    with context.Manager() as manager, ProcessPoolExecutor(
-            max_workers=workers, mp_context=context, initializer=die_with_parent,
-            initargs=(os.getpid(),)) as pool:
-        epochs = manager.Queue()
-        futures = {pool.submit(_train_one, job, threads, epochs): job for job in ordered}
-        bars = {job.name: tqdm(desc=job.name, position=k, unit="epoch", leave=True,
-                                disable=not progress, dynamic_ncols=True)
-                for k, job in enumerate(ordered)}
-        try:
-            _follow(futures, epochs, bars)
-        finally:
-            for bar in bars.values():
-                bar.close()
-        return {futures[f].name: f.result() for f in futures}
+    with context.Manager() as manager:
+        free_gpus = manager.Queue()
+        for gpu in gpus:
+            free_gpus.put(gpu)
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                                 initializer=_start_worker,
+                                 initargs=(os.getpid(), free_gpus if gpus else None)) as pool:
+            epochs = manager.Queue()
+            futures = {pool.submit(_train_one, job, threads, run_on, epochs): job
+                       for job in ordered}
+            return _run(futures, ordered, epochs, progress)
+
+
+def worker_count(jobs: int, requested: int | None, gpus: int) -> int:
+    """Training processes side by side: `requested` (default one per core granted), at most
+    one per job, and on CUDA (`gpus` > 0) at most one per GPU: several processes on one GPU
+    only contend for it."""
+    count = max(1, min(requested or gpus or granted_cores(), jobs))
+    return min(count, gpus) if gpus else count
+
+
+def _start_worker(parent: int, free_gpus: Any) -> None:
+    """Pool initializer: die with `parent`; on CUDA take a GPU of the queue `free_gpus` (one
+    per worker) and make it this process's current device."""
+    die_with_parent(parent)
+    if free_gpus is not None:
+        torch.cuda.set_device(free_gpus.get_nowait())
+
+
+def _run(futures: dict[Future[dict[str, Any]], TrainJob], ordered: Sequence[TrainJob],
+         epochs: Any, progress: bool) -> dict[str, dict[str, Any]]:
+    """Follow the submitted runs with a bar each; their metrics per job name."""
+    bars = {job.name: tqdm(desc=job.name, position=k, unit="epoch", leave=True,
+                           disable=not progress, dynamic_ncols=True)
+            for k, job in enumerate(ordered)}
+    try:
+        _follow(futures, epochs, bars)
+    finally:
+        for bar in bars.values():
+            bar.close()
+    return {futures[f].name: f.result() for f in futures}
 
 
 def _train_on_cluster(ordered: Sequence[TrainJob], scheduler: str, threads: int,
-                      progress: bool) -> dict[str, dict[str, Any]]:
+                      progress: bool, device: str) -> dict[str, dict[str, Any]]:
     """The jobs on a Dask cluster, one bar counting the runs finished (a worker's epochs do
     not reach this process)."""
     results: dict[str, dict[str, Any]] = {}
-    with execute(_train_alone, [(job, threads) for job in ordered], scheduler=scheduler) \
-            as running, tqdm(total=len(ordered), desc=f"training on {scheduler}", unit="run",
-                             disable=not progress, dynamic_ncols=True) as bar:
+    tasks = [(job, threads, device) for job in ordered]
+    bar = tqdm(total=len(ordered), desc=f"training on {scheduler}", unit="run",
+               disable=not progress, dynamic_ncols=True)
+    with execute(_train_alone, tasks, scheduler=scheduler) as running, bar:
         for finished in running:
             if finished.error is not None:
                 running.cancel()
@@ -137,19 +176,19 @@ def _drain(epochs: Any, bars: dict[str, tqdm[Any]]) -> None:
         bar.update(report["epoch"] - bar.n)
 
 
-def _train_one(job: TrainJob, threads: int, epochs: Any) -> dict[str, Any]:
-    """Worker: one training run, each epoch reported on the queue `epochs`."""
+def _train_one(job: TrainJob, threads: int, device: str, epochs: Any) -> dict[str, Any]:
+    """Worker: one training run on `device`, each epoch reported on the queue `epochs`."""
     from flexff.learning.train import train
 
     return train(job.model, job.preset, job.data, job.run, progress=False,
                  on_epoch=lambda report: epochs.put((job.name, report)),
-                 **{**job.overrides, "threads": threads})
+                 **{**job.overrides, "threads": threads, "device": device})
 
 
-def _train_alone(task: tuple[TrainJob, int]) -> dict[str, Any]:
-    """Cluster worker: one training run on the given number of threads."""
+def _train_alone(task: tuple[TrainJob, int, str]) -> dict[str, Any]:
+    """Cluster worker: one training run on the given number of threads and device."""
     from flexff.learning.train import train
 
-    job, threads = task
+    job, threads, device = task
     return train(job.model, job.preset, job.data, job.run, progress=False,
-                 **{**job.overrides, "threads": threads})
+                 **{**job.overrides, "threads": threads, "device": device})

@@ -1,73 +1,155 @@
-"""Device mix-ups found without a GPU: every tensor a learning module creates names its device
-(or takes another tensor's), and each network's forward pass stays on the device of its input
-(the `meta` device: shapes without data, where a tensor made on the CPU cannot join)."""
+"""Training, resuming, the networks and their export on a device other than the CPU.
 
-import ast
-from pathlib import Path
+Without a GPU the device is emulated (tests.learning.fake_device): every tensor keeps its
+side, and an operation mixing the two fails as it does on CUDA. The emulated runs must equal
+the CPU's exactly, as the same arithmetic runs underneath. With CUDA the fast preset also
+trains on the GPU itself (skipped here)."""
 
+import json
+from contextlib import nullcontext
+
+import numpy as np
 import pytest
 import torch
 
-from flexff.learning.models import NETWORKS, build_network, fit_linear_skip
+import flexff.learning.train as training
+from flexff.fmu.errors import InputError
+from flexff.learning.export import export
+from flexff.learning.models import build_network, fit_linear_skip
+from flexff.learning.run_folder import load_run
+from flexff.learning.synthetic import synthetic_dataset
+from flexff.learning.train import train
+from tests.learning.fake_device import DEVICE, FakeDevice
 
-LEARNING = Path(__file__).parents[2] / "learning"
-FACTORIES = {"zeros", "ones", "empty", "full", "arange", "linspace", "rand", "randn",
-             "randint", "eye", "tensor", "as_tensor"}
-# modules that run on the CPU by design: export and its SI model, the CasADi bridge
-CPU_ONLY = {"export.py", "deploy.py", "casadi_torch.py", "rigid.py"}
+pytestmark = pytest.mark.usefixtures("few_threads")
 
-
-def factory_calls_without_device(source: str) -> list[int]:
-    lines = []
-    for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) \
-                and isinstance(node.func.value, ast.Name) and node.func.value.id == "torch" \
-                and node.func.attr in FACTORIES \
-                and not any(k.arg == "device" for k in node.keywords):
-            lines.append(node.lineno)
-    return lines
+# the fast preset's networks, smaller; the LSTM and TCN keep their linear skip
+TINY = {"lstm": {"hidden": 8}, "cnn-lstm": {"hidden": 8, "conv_channels": [4, 4, 2]},
+        "tcn": {"channels": 8, "levels": 2}, "pgnn": {"channels": 8, "levels": 2}}
+CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 
 
-def test_the_check_finds_a_factory_without_a_device():
-    assert factory_calls_without_device("torch.ones(3, 1, dtype=torch.float64)") == [1]
-    assert factory_calls_without_device("torch.ones(3, device=x.device)") == []
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return synthetic_dataset(tmp_path_factory.mktemp("tiny") / "data", n_train=4, n_test=1,
+                             duration=4.0, rate_hz=200.0, seed=7)
 
 
-@pytest.mark.parametrize("module", sorted(p.name for p in LEARNING.glob("*.py")
-                                          if p.name not in CPU_ONLY))
-def test_learning_modules_create_tensors_on_a_named_device(module):
-    """The crash of a CUDA run (torch.cat of a CPU tensor with CUDA ones) came from a tensor
-    made without a device; each must name one (or be made like another, new_zeros)."""
-    found = factory_calls_without_device((LEARNING / module).read_text())
-    assert not found, f"learning/{module}: torch factory calls without device= at {found}"
+def _weights(path):
+    return load_run(path).network.state_dict()
 
 
-@pytest.mark.parametrize("kind", sorted(NETWORKS))
-@pytest.mark.parametrize("skip", [False, True])
-def test_forward_passes_stay_on_the_device_of_their_input(kind, skip):
-    if skip and NETWORKS[kind][1]:
-        pytest.skip("the physics-guided network has no linear skip")
-    network = build_network(kind, 7, n_outputs=2, linear_skip=skip).to("meta")
-    out, state = network(torch.empty(3, 120, 7, device="meta"))
-    assert out.device.type == "meta" and out.shape == (3, 120, 2)
-    assert all(s.device.type == "meta" for s in state)
-    step = network.step_form().to("meta")
-    out, _ = step(torch.empty(1, 1, 7, device="meta"))
-    assert out.device.type == "meta"
+def _same(a, b):
+    return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
-def test_the_linear_skip_is_fitted_on_the_cpu_and_lands_on_the_network():
-    network = build_network("tcn", 3, n_outputs=2, linear_skip=True)
-    x = torch.randn(500, 3, generator=torch.Generator().manual_seed(0))
-    y = x @ torch.tensor([[1.0, -2.0], [0.5, 0.0], [0.0, 3.0]]) + torch.tensor([0.1, -0.2])
-    fit_linear_skip(network, x, y)
-    torch.testing.assert_close(network.linear.weight.T.double(), torch.tensor(
-        [[1.0, -2.0], [0.5, 0.0], [0.0, 3.0]], dtype=torch.float64), atol=1e-5, rtol=0)
+@pytest.mark.parametrize("kind", list(TINY))
+def test_training_on_another_device_mixes_no_tensors_and_equals_the_cpus(data, tmp_path,
+                                                                          kind):
+    on_cpu = train(kind, "fast", data, tmp_path / "cpu", progress=False, epochs=2,
+                   device="cpu", **TINY[kind])
+    with FakeDevice() as device:
+        on_device = train(kind, "fast", data, tmp_path / "device", progress=False, epochs=2,
+                          device=str(DEVICE), **TINY[kind])
+    assert device.checked > 1000  # the mode saw the training
+    assert on_device["device"] == str(DEVICE)
+    assert on_device["history"]["train"] == on_cpu["history"]["train"]
+    assert _same(_weights(tmp_path / "device"), _weights(tmp_path / "cpu"))
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
-def test_a_network_trains_its_linear_skip_on_cuda():
-    network = build_network("tcn", 3, n_outputs=2, linear_skip=True).to("cuda")
-    x = torch.randn(500, 3, device="cuda")
-    fit_linear_skip(network, x, 2 * x[:, :2])
-    assert network.linear.weight.device.type == "cuda"
+def test_a_run_trained_on_another_device_exports(data, tmp_path):
+    with FakeDevice():
+        train("tcn", "fast", data, tmp_path / "run", progress=False, epochs=1,
+              device=str(DEVICE), **TINY["tcn"])
+    assert export(tmp_path / "run", tmp_path / "tcn.onnx").is_file()
+
+
+def _on(device):
+    """The block on `device`: the emulated one, or the CPU."""
+    return FakeDevice() if device == str(DEVICE) else nullcontext()
+
+
+@pytest.mark.parametrize("first,then", [("cpu", str(DEVICE)), (str(DEVICE), "cpu")])
+def test_a_checkpoint_resumes_on_another_device_to_the_same_weights(data, tmp_path,
+                                                                    monkeypatch, first, then):
+    whole = tmp_path / "whole"
+    train("lstm", "fast", data, whole, progress=False, epochs=2, device="cpu", **TINY["lstm"])
+    real = training._Saver.epoch_done
+
+    def stop_after_one(self, epochs, network, optimizer, rng, history, *rest):
+        real(self, epochs, network, optimizer, rng, history, *rest)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(training._Saver, "epoch_done", stop_after_one)
+    with _on(first), pytest.raises(KeyboardInterrupt):
+        train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2, device=first,
+              checkpoint_every=1, **TINY["lstm"])
+    monkeypatch.setattr(training._Saver, "epoch_done", real)
+    with _on(then):
+        resumed = train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2,
+                        device=then, **TINY["lstm"])
+    assert len(resumed["history"]["train"]) == 2
+    assert _same(_weights(tmp_path / "cut"), _weights(whole))
+
+
+@pytest.mark.parametrize("kind", ["tcn", "cnn-lstm"])
+def test_the_step_form_of_a_network_on_another_device_mixes_no_tensors(kind):
+    network = build_network(kind, 5, linear_skip=True, **TINY[kind]).eval()
+    x, y = torch.randn(1, 30, 5), torch.randn(30, 2)
+    expected = network.step_form()(x)[0]
+    with FakeDevice(), torch.no_grad():
+        network.to(DEVICE)
+        fit_linear_skip(network, x.to(DEVICE)[0], y.to(DEVICE))
+        stepped = network.step_form()
+        state, outputs = None, []
+        for t in range(x.shape[1]):
+            out, state = stepped(x[:, t:t + 1].to(DEVICE), state)
+            outputs.append(out.cpu())
+    assert not torch.equal(torch.cat(outputs, dim=1), expected)  # the skip was fitted
+    assert torch.cat(outputs, dim=1).shape == expected.shape
+
+
+def test_the_emulated_device_finds_a_mix_up():
+    with FakeDevice(), pytest.raises(RuntimeError, match="same device"):
+        torch.cat([torch.ones(2, 1).to(DEVICE), torch.ones(2, 1)], dim=1)
+
+
+def test_cuda_asked_for_without_cuda_is_refused_before_any_work(data, tmp_path, monkeypatch):
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.setattr(training, "load_dataset", lambda path: pytest.fail("data loaded"))
+    with pytest.raises(InputError, match="CUDA is not available"):
+        train("lstm", "fast", data, tmp_path / "run", progress=False, device="cuda")
+
+
+@CUDA
+@pytest.mark.parametrize("kind", list(TINY))
+def test_the_fast_preset_trains_on_cuda_as_on_the_cpu(data, tmp_path, kind):
+    runs = {device: train(kind, "fast", data, tmp_path / device, progress=False, epochs=3,
+                          device=device) for device in ("cpu", "cuda")}
+    assert runs["cuda"]["device"].startswith("cuda")
+    assert np.isfinite(runs["cuda"]["test_mse"])
+    # other kernels, other rounding: the same loss to a few percent, not bit for bit
+    assert runs["cuda"]["test_mse"] == pytest.approx(runs["cpu"]["test_mse"], rel=0.2)
+    export(tmp_path / "cuda", tmp_path / f"{kind}.onnx")
+    assert json.loads((tmp_path / "cuda" / "metrics.json").read_text())["device"] == "cuda"
+
+
+def test_the_command_lines_devices_are_the_librarys():
+    from flexff.cli import DEVICES as OFFERED
+    from flexff.learning.devices import DEVICES
+
+    assert OFFERED == DEVICES
+
+
+@pytest.mark.parametrize("command", [
+    ["train", "--model", "lstm", "--data", "DATA", "-o", "OUT"],
+    ["evaluate", "-o", "OUT"], ["demo", "-o", "OUT"]])
+def test_cuda_without_cuda_is_one_line_and_exit_code_2(command, tmp_path, monkeypatch, capsys):
+    from flexff.cli import main
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.chdir(tmp_path)
+    assert main([*command, "--device", "cuda"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "CUDA is not available" in lines[0]
+    assert not (tmp_path / "OUT").exists() or not any((tmp_path / "OUT").iterdir())

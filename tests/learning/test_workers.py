@@ -4,9 +4,10 @@ and a failed one is reported, not lost."""
 import pytest
 import torch
 
+import flexff.learning.workers
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.train import train
-from flexff.learning.workers import TrainJob, train_parallel
+from flexff.learning.workers import TrainJob, train_parallel, worker_count
 
 TINY = {"pgnn": {"channels": 8, "levels": 3, "epochs": 2},
         "tcn": {"channels": 8, "levels": 3, "epochs": 2}}
@@ -62,3 +63,13 @@ def test_training_on_a_dask_cluster_equals_training_here(data, tmp_path):
         weights = [torch.load(tmp_path / folder / kind / "model.pt", weights_only=True)
                    for folder in ("here", "there")]
         assert all(torch.equal(weights[0][name], weights[1][name]) for name in weights[0])
+
+
+def test_on_cuda_the_trainings_take_one_process_per_gpu(monkeypatch):
+    monkeypatch.setattr(flexff.learning.workers, "granted_cores", lambda: 16)
+    assert worker_count(jobs=8, requested=None, gpus=0) == 8  # the CPU: one per core
+    assert worker_count(jobs=30, requested=None, gpus=0) == 16
+    assert worker_count(jobs=8, requested=None, gpus=1) == 1  # one GPU: one process
+    assert worker_count(jobs=8, requested=None, gpus=2) == 2
+    assert worker_count(jobs=8, requested=4, gpus=1) == 1
+    assert worker_count(jobs=1, requested=None, gpus=2) == 1
