@@ -74,17 +74,17 @@ def test_a_checkpoint_resumes_on_another_device_to_the_same_weights(data, tmp_pa
                                                                     monkeypatch, first, then):
     whole = tmp_path / "whole"
     train("lstm", "fast", data, whole, progress=False, epochs=2, device="cpu", **TINY["lstm"])
-    real = training._Saver.epoch_done
+    real = training.Checkpoints.epoch_done
 
     def stop_after_one(self, epochs, network, optimizer, rng, history, *rest):
         real(self, epochs, network, optimizer, rng, history, *rest)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(training._Saver, "epoch_done", stop_after_one)
+    monkeypatch.setattr(training.Checkpoints, "epoch_done", stop_after_one)
     with _on(first), pytest.raises(KeyboardInterrupt):
         train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2, device=first,
               checkpoint_every=1, **TINY["lstm"])
-    monkeypatch.setattr(training._Saver, "epoch_done", real)
+    monkeypatch.setattr(training.Checkpoints, "epoch_done", real)
     with _on(then):
         resumed = train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2,
                         device=then, **TINY["lstm"])
