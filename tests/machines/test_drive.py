@@ -1,7 +1,6 @@
 """The 1-axis drive FMU against independent physics, and the generic PID on it in closed loop."""
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
