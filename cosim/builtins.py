@@ -29,7 +29,8 @@ if TYPE_CHECKING:
 
 OPTION_KINDS = ("any", "number", "integer", "flag", "number-or-flag", "choice", "file")
 Factory = Callable[..., "System"]  # (options, step), and the sources where reads_sources
-# (checker, options, parameters, where, start) -> the checked start values
+# (checker, options, parameters, `fmu.NAME`, the reference's first point or None) -> the
+# checked start values
 ParameterCheck = Callable[["TableChecker", Mapping[str, Any], Mapping[str, Any], str,
                            "tuple[float, float] | None"], dict[str, Any]]
 # (the FMU's configuration, the sampled reference signals, step) -> entries of metrics.json

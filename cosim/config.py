@@ -187,9 +187,11 @@ class _Parser(TableChecker):
     """Checks one configuration; every error names the file and `table.key`."""
 
     def parse(self, data: Mapping[str, Any], name: str) -> RunConfig:
-        forms = short_forms()
+        others = [t for t in data if t not in TABLES]
+        # a plain general form loads no machine package (cosim.plugins)
+        forms = short_forms() if others or "fmu" not in data else ()
         tables = (*TABLES, *(t for form in forms for t in form.tables))
-        for table in data:
+        for table in others:
             if table not in tables:
                 raise self.error(table, f"unknown table [{table}] (known: {', '.join(tables)})")
         short = self.short_form(data, forms)
@@ -337,10 +339,9 @@ class _Parser(TableChecker):
             raise self.error(where, f"expected a table [fmu.{name}], got {t!r}")
         if "." in name or not name:
             raise self.error(where, "an FMU name must not be empty or contain a dot")
-        builtins = registered()
         if ("path" in t) == ("builtin" in t):
             raise self.error(where, "give either path = \"file.fmu\" or builtin = one of "
-                                    f"{', '.join(builtins)}")
+                                    f"{', '.join(registered())}")
         unconnected = self.choice(t, where, "unconnected", UNCONNECTED, "error")
         parameters = t.get("parameters", {})
         if not isinstance(parameters, dict):
@@ -354,6 +355,7 @@ class _Parser(TableChecker):
                                                                              where),
                              unconnected=unconnected, tolerance=self.tolerance(t, where),
                              isolate=self.isolate(t, where), solver=self.solver(t, where, path))
+        builtins = registered()
         builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
                              *builtin.keys))

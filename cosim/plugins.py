@@ -43,8 +43,8 @@ class ShortForm:
 
 @dataclass(frozen=True)
 class ReferenceKind:
-    """A [reference] kind: `check` turns its table into checked options (None: no keys
-    beside `kind`), `build` samples it (options, step) -> cosim.references.Reference."""
+    """A [reference] kind: `check` turns its table, keys included, into checked options
+    (None: no keys beside `kind`); `build` samples it (options, step) -> Reference."""
 
     name: str
     build: Callable[[Mapping[str, Any], float], Reference]

@@ -88,7 +88,7 @@ class ConfigError(InputError):
 class ReferenceConfig:
     """The reference's kind and its checked keys (paths absolute)."""
 
-    kind: str = "thesis-eval"
+    kind: str
     options: Mapping[str, Any] = field(default_factory=dict)
 
 
