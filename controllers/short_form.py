@@ -12,7 +12,6 @@ FMUs feedforward -> controller -> plant (controllers.manipulator registers it):
                  (default) | "precomputed"); a current-level model (its card's outputs
                  i1_ff..i3_ff) feeds the controller's current feedforward (controller option
                  current_feedforward = true), and its force feedforward Fx_ff, Fy_ff gets zero
-
 It needs a [reference]; a configuration without [fmu.*] tables is this loop with its defaults.
 """
 
