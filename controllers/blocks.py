@@ -137,11 +137,3 @@ def pid_from_options(options: Mapping[str, Any], step: float) -> System:
             raise InputError(f"axes[{k}]: {error}") from None
     return pid_system(axes, step)
 
-
-def register() -> None:
-    """The loop blocks as built-in FMUs (entry point of cosim.builtins)."""
-    from flexff.cosim.builtins import register_builtin
-
-    register_builtin("pid", ("axes",), pid_from_options,
-                     "a PID per axis: axes = [{name, mass, crossover_hz, damping, stiffness, "
-                     "notch_hz, lowpass_hz, effort_limit, unit, effort_unit}]")

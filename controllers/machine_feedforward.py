@@ -16,6 +16,7 @@ import casadi as ca
 
 from flexff.controllers.feedforward import feedforward_system
 from flexff.controllers.learned_feedforward import model_period
+from flexff.controllers.linear_prior import linear_model_from_dict
 from flexff.controllers.machine_features import FeatureInputs, feature_function
 from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import Machine, parse_machine
@@ -92,13 +93,19 @@ def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
         raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
                          f"machine {machine.name!r} has {len(machine.axes)} axes")
     result = ca.SX.sym("r", network.n_outputs)
+    effort = result
+    if card.prior == "linear":  # a physics-guided model: its residual plus the prior
+        assert card.machine_prior is not None  # the card's check
+        prior = linear_model_from_dict(card.machine_prior, f"{model}: metadata machine_prior")
+        effort = result + prior.casadi_function()(*reference_motion(machine, reference))
     mode = "task" if task else "step"
     return feedforward_system(
         "learned_feedforward",
         f"learned feedforward of {machine.name}: {card.model_kind} model at "
         f"{card.sample_rate_hz:g} Hz in onnxruntime, {mode} mode",
-        reference, result, step, result, outputs=feedforward_variables(machine),
+        reference, effort, step, result, outputs=feedforward_variables(machine),
         inputs=reference_variables(machine),
-        extra={"flexff.feedforward.mode": mode, "flexff.model.model_kind": card.model_kind,
+        extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": card.prior,
+               "flexff.model.model_kind": card.model_kind,
                "flexff.model.sample_rate_hz": str(card.sample_rate_hz)},
         network=network)

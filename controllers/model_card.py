@@ -26,7 +26,7 @@ from flexff.plant.signals import CURRENT_FEEDFORWARD, FEEDFORWARD_FORCES, names,
 FORMAT = "flexff-feedforward"
 VERSION = 1
 INPUT_KINDS = ("features", "reference")
-PRIORS = ("none", "rigid-body")
+PRIORS = ("none", "rigid-body", "linear")  # linear: a machine's identified model
 # what a model outputs (learning.features' label levels): forces before the control allocation,
 # or the motor currents after it (the controller's current feedforward)
 OUTPUTS = {"forces": FEEDFORWARD_FORCES, "currents": CURRENT_FEEDFORWARD}
@@ -39,7 +39,7 @@ USAGE = ("inputs (T, n_inputs) float64 in SI units -> outputs (T, n_outputs) flo
          "every 1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
          "extrapolate the outputs from the last two calls when the host runs faster.")
 _JSON = ("input_signals", "input_units", "output_signals", "output_units", "state",
-         "prior_parameters", "feature_range", "machine", "machine_features")
+         "prior_parameters", "feature_range", "machine", "machine_features", "machine_prior")
 _NUMBERS = {"sample_rate_hz": float, "history_samples": int, "ensemble_members": int}
 
 
@@ -74,6 +74,7 @@ class ModelCard:
     flexff_version: str = "unknown"
     machine: dict[str, Any] | None = None
     machine_features: dict[str, Any] | None = None
+    machine_prior: dict[str, Any] | None = None  # the identified linear model (prior "linear")
 
     def metadata(self) -> dict[str, str]:
         """The card as onnx metadata_props (strings; lists and objects as JSON)."""
@@ -153,10 +154,12 @@ class ModelCard:
         if self.output_signals != [f"{a}_ff" for a in axes]:
             raise InputError(f"{where}: output signals {self.output_signals} are not the "
                              f"feedforwards of the machine's axes {axes}; export it again")
-        if self.input_kind != "features" or self.prior != "none" \
-                or not isinstance(self.machine_features, dict):
-            raise InputError(f"{where}: a machine's model takes its features and carries their "
-                             f"settings (machine_features); export it again with `flexff "
+        if self.input_kind != "features" or not isinstance(self.machine_features, dict) \
+                or self.prior not in ("none", "linear") \
+                or (self.prior == "linear") != isinstance(self.machine_prior, dict):
+            raise InputError(f"{where}: a machine's model takes its features, carries their "
+                             f"settings (machine_features) and, with the prior 'linear', its "
+                             f"identified model (machine_prior); export it again with `flexff "
                              f"export`")
 
 

@@ -4,17 +4,19 @@ registered by controllers.manipulator).
 
 A built-in is a name, its options (Option: kind, default, allowed values, a further check) and a
 factory (options, step) -> fmu.system.System that fmu.build turns into an FMU when a run
-resolves; optionally a check of its `parameters`, options that are also start values, the
-run's sampled sources as the factory's third argument, and entries it adds to metrics.json.
-Packages register theirs through the entry point group `flexff.builtins` (cosim.plugins: a
-function that calls `register_builtin`, loaded on first look-up); a script may call
-`register_builtin` itself.
+resolves, a function or its "module:function" path, imported only then (a run of FMUs by path
+pays for no CasADi); optionally a check of its `parameters`, options that are also start
+values, the run's sampled sources as the factory's third argument, and entries it adds to
+metrics.json. Packages register theirs through the entry point group `flexff.builtins`
+(cosim.plugins: a light function that calls `register_builtin`, loaded on first look-up of a
+built-in); a script may call `register_builtin` itself.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
 from flexff.cosim.plugins import loaded
@@ -75,7 +77,7 @@ class Builtin:
 
     name: str
     options: tuple[Option, ...]
-    system: Factory
+    factory: Factory | str  # or "module:function"
     description: str = ""
     parameters: ParameterCheck | None = None  # None: its parameters go to the FMU as given
     start_options: tuple[str, ...] = ()  # options the FMU also gets as start values
@@ -86,19 +88,28 @@ class Builtin:
     def keys(self) -> tuple[str, ...]:
         return tuple(o.key for o in self.options)
 
+    def system(self, options: Mapping[str, Any], step: float, sources: Mapping[str, Any]
+               ) -> System:
+        """The System of `options` at `step` (`sources`: the run's sampled source signals)."""
+        factory = self.factory
+        if isinstance(factory, str):
+            module, _, function = factory.partition(":")
+            factory = getattr(import_module(module), function)
+        return factory(options, step, sources) if self.reads_sources else factory(options, step)
+
 
 _REGISTRY: dict[str, Builtin] = {}
 
 
-def register_builtin(name: str, options: Sequence[str | Option], system: Factory,
+def register_builtin(name: str, options: Sequence[str | Option], factory: Factory | str,
                      description: str = "", *, parameters: ParameterCheck | None = None,
                      start_options: tuple[str, ...] = (), reads_sources: bool = False,
                      metrics: RunMetrics | None = None) -> None:
     """Make `name` a built-in FMU of run configurations (an option given by its key alone is
-    taken as given). Registering the same built-in again changes nothing; another one under a
-    taken name is a ValueError."""
+    taken as given; `factory` a function or its "module:function" path). Registering the same
+    built-in again changes nothing; another one under a taken name is a ValueError."""
     builtin = Builtin(name, tuple(o if isinstance(o, Option) else Option(o) for o in options),
-                      system, description, parameters, start_options, reads_sources, metrics)
+                      factory, description, parameters, start_options, reads_sources, metrics)
     if _REGISTRY.get(name, builtin) != builtin:
         raise ValueError(f"a built-in FMU {name!r} is already registered")
     _REGISTRY[name] = builtin

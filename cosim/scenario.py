@@ -179,9 +179,7 @@ def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any])
     assert f.builtin is not None
     builtin = registered()[f.builtin]
     try:
-        if builtin.reads_sources:
-            return builtin.system(f.options, config.step, sources)
-        return builtin.system(f.options, config.step)
+        return builtin.system(f.options, config.step, sources)
     except OptionError as error:
         raise ConfigError(config.origin, f"fmu.{f.name}.{error.option}", str(error)) from None
     except InputError as error:

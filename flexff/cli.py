@@ -66,6 +66,19 @@ def _output_file(path: str) -> None:
     output_folder(Path(path).parent)
 
 
+def _evaluate_machine(args: argparse.Namespace, loop: Any) -> int:
+    """evaluate --config LOOP.toml whose loop has a [machine]: the workflow on that machine."""
+    from flexff.learning.machine_evaluate import evaluate_machine
+
+    train, test = args.trajectories
+    evaluate_machine(loop, args.output, args.models, args.preset, train, test, args.duration,
+                     **({"epochs": args.epochs} if args.epochs else {}))
+    print((Path(args.output) / "table.md").read_text())
+    print(f"results in {args.output}/ (summary.json, table.md, identified.json, data/, runs/, "
+          f"models/, fmus/, ilc/ for the limit)")
+    return 0
+
+
 def _fmu_build(args: argparse.Namespace) -> int:
     from flexff.fmu.build import build_fmu
 
@@ -92,7 +105,14 @@ def _fmu_build(args: argparse.Namespace) -> int:
         if args.model is None:
             raise InputError("fmu build learned-feedforward needs --model M.onnx (flexff "
                              "export)")
-        system = learned_feedforward_system(args.model, args.step, task=args.task)
+        from flexff.controllers.model_card import read_card
+
+        if read_card(args.model).machine is not None:
+            from flexff.controllers.machine_feedforward import learned_machine_feedforward_system
+
+            system = learned_machine_feedforward_system(args.model, args.step, args.task)
+        else:
+            system = learned_feedforward_system(args.model, args.step, task=args.task)
     else:
         from flexff.plant.system import plant_system
 
@@ -258,15 +278,31 @@ def _sweep_values(text: str) -> tuple[str, list[Any]]:
             from None
 
 
+def machine_options(parser: argparse.ArgumentParser) -> None:
+    """The excitation of a loop with a [machine] (learning.excitation)."""
+    parser.add_argument("--trajectories", type=int, nargs=2, default=[24, 6],
+                        metavar=("TRAIN", "TEST"),
+                        help="a [machine] loop: excitation trajectories (default 24 6)")
+    parser.add_argument("--duration", type=float, default=20.0, metavar="S",
+                        help="a [machine] loop: seconds per trajectory (default 20)")
+
+
+def _tracked_axes(metrics: dict[str, Any]) -> list[str]:
+    """The axes a run's or trial's metrics hold: the manipulator's x, y or a machine's."""
+    return [a for a, m in metrics.items() if isinstance(m, dict) and "e2" in m]
+
+
 def _print_result(name: object, metrics: dict[str, Any], output: object) -> None:
     """One line per run, and a second where its learned feedforward extrapolates."""
     from flexff.cosim.run import range_warning
 
     tracking = ""
-    if "x" in metrics:
-        x, y = metrics["x"], metrics["y"]
-        tracking = (f"e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), einf = ({x['einf']:.4g}, "
-                    f"{y['einf']:.4g}) m, ")
+    axes = _tracked_axes(metrics)
+    if axes:  # the manipulator's x, y or a machine description's axes
+        e2 = ", ".join(f"{metrics[a]['e2']:.4g}" for a in axes)
+        einf = ", ".join(f"{metrics[a]['einf']:.4g}" for a in axes)
+        tracking = (f"e2 = ({e2}) m/sqrt(s), einf = ({einf}) m, " if axes == ["x", "y"] else
+                    f"e2 ({', '.join(axes)}) = ({e2}), einf = ({einf}) in the axes' units, ")
     print(f"{name}: {tracking}real-time factor {metrics['real_time_factor']:.0f} -> {output}")
     timing = metrics.get("realtime", {})
     if timing.get("target_real_time_factor"):
@@ -326,6 +362,16 @@ def _data_collect(args: argparse.Namespace) -> int:
         from flexff.cosim.run import load_run_config
 
         config = load_run_config(args.config)
+        if config.machine is not None:
+            from flexff.learning.machine_collect import collect_machine
+
+            train, test = args.trajectories
+            data = collect_machine(config, args.output, train, test, args.duration,
+                                   workers=args.workers)
+            print(f"{data.machine.name}: {len(data.trajectories)} trajectories -> {data.path}")
+            return 0
+    if args.set is None:
+        raise InputError("data collect needs --set NAME, or --config LOOP.toml with a [machine]")
     report = run_collection(args.set, args.output, args.workers, args.scheduler, config=config,
                             draws=args.draws)
     for line in report.problems():
@@ -359,6 +405,10 @@ def _data_import(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     """One run into OUTPUT, or with several --seed or a --scheduler one run per seed into
     OUTPUT/seedN, side by side (learning.workers); prints the metrics as JSON."""
+    from flexff.learning.machine_dataset import is_machine_dataset
+
+    if is_machine_dataset(args.data):
+        return _train_machine(args)
     overrides = {"labels": args.labels, **({"epochs": args.epochs} if args.epochs else {})}
     seeds = args.seed or [0]
     if len(seeds) == 1 and args.scheduler is None:
@@ -383,6 +433,26 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train_machine(args: argparse.Namespace) -> int:
+    """train on a machine's dataset: one seed, its prior identified on it for pgnn."""
+    from flexff.learning.machine_dataset import load_machine_dataset
+    from flexff.learning.machine_evaluate import identify_dataset
+    from flexff.learning.machine_train import fit_machine
+    from flexff.learning.presets import make_config
+
+    if len(args.seed or [0]) > 1 or args.scheduler is not None or args.labels != "forces":
+        raise InputError("a machine's dataset trains one seed here, on its efforts")
+    data = load_machine_dataset(args.data)
+    config = make_config(args.model, args.preset, seed=(args.seed or [0])[0],
+                         **({"epochs": args.epochs} if args.epochs else {}))
+    metrics = fit_machine(config, data.machine, data.sample_rate_hz, data.trajectories,
+                          data.digest, Path(args.output), resume=args.resume, force=args.force,
+                          checkpoint_every=args.checkpoint_every,
+                          prior=identify_dataset(data) if args.model == "pgnn" else None)
+    print(json.dumps(metrics, indent=2, default=str))
+    return 0
+
+
 def _export(args: argparse.Namespace) -> int:
     from flexff.learning.export import export
 
@@ -395,6 +465,17 @@ def _identify(args: argparse.Namespace) -> int:
     from flexff.cosim.run import output_folder
     from flexff.learning.evaluate import preprocessing
     from flexff.learning.identify import identify, write_identification
+    from flexff.learning.machine_dataset import is_machine_dataset
+
+    if is_machine_dataset(args.data):
+        from flexff.learning.linear_model import write_linear_model
+        from flexff.learning.machine_dataset import load_machine_dataset
+        from flexff.learning.machine_evaluate import identify_dataset
+
+        model = identify_dataset(load_machine_dataset(args.data))
+        print(model.summary())
+        print(f"wrote {write_linear_model(model, args.output)}")
+        return 0
 
     output_folder(args.output)
     identification = identify(args.data, preprocessing(args.env))
@@ -422,6 +503,8 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     loop = None if args.config is None else load_run_config(args.config)
     output_folder(args.output)
+    if loop is not None and loop.machine is not None:
+        return _evaluate_machine(args, loop)
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
              scheduler=args.scheduler, currents=args.currents)
     print((Path(args.output) / "table.md").read_text())
@@ -437,9 +520,11 @@ def _ilc(args: argparse.Namespace) -> int:
 
     state = ilc(load_run_config(args.config), args.output, args.iterations, args.cutoff)
     for trial in state["trials"]:
-        x, y = trial["x"], trial["y"]
-        print(f"trial {trial['trial']}: e2 = ({x['e2']:.4g}, {y['e2']:.4g}) m/sqrt(s), PID "
-              f"alone / trial = ({x['e2_ratio']:.4g}, {y['e2_ratio']:.4g})")
+        axes = _tracked_axes(trial)
+        e2 = ", ".join(f"{trial[a]['e2']:.4g}" for a in axes)
+        ratio = ", ".join(f"{trial[a]['e2_ratio']:.4g}" for a in axes)
+        unit = " m/sqrt(s)" if axes == ["x", "y"] else f" ({', '.join(axes)})"
+        print(f"trial {trial['trial']}: e2 = ({e2}){unit}, PID alone / trial = ({ratio})")
     print(f"best: trial {state['best']}; its feedforward force -> {args.output}/{RESULT} "
           f"(ilc.json, e2.png beside it)")
     if floor := state[NOISE_FLOOR]:
@@ -574,8 +659,8 @@ def build_parser() -> argparse.ArgumentParser:
     collect = data_commands.add_parser(
         "collect", help="co-simulate a trajectory set under PID into a dataset folder "
                         "(resumes an interrupted collection)")
-    collect.add_argument("--set", required=True,
-                         help="the trajectory set (an unknown name lists them)")
+    collect.add_argument("--set", help="the manipulator's trajectory set (an unknown name lists "
+                                       "them); a loop with a [machine] gets its excitation")
     collect.add_argument("--config", metavar="CONFIG.toml|SYSTEM.ssp",
                          help="the loop to collect on (flexff's controller and any plant); "
                               "default: the set's built-in plant under PID")
@@ -586,6 +671,7 @@ def build_parser() -> argparse.ArgumentParser:
     collect.add_argument("--draws", type=int, default=1, metavar="N",
                          help="draw the set's training trajectories N times (default 1: the set "
                               "as the thesis gives it; the test split stays the same)")
+    machine_options(collect)
     collect.set_defaults(handler=_data_collect)
     imports = data_commands.add_parser(
         "import", help="turn logs of a real machine (CSV or MATLAB .mat) into a dataset folder")
@@ -692,6 +778,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--epochs", type=int, help="override the preset's number of epochs")
     evaluation.add_argument("--scheduler", help="address of a Dask scheduler to collect and "
                                                 "train on (its workers see this file system)")
+    machine_options(evaluation)
     evaluation.set_defaults(handler=_evaluate)
 
     learning = commands.add_parser(
@@ -703,9 +790,10 @@ def build_parser() -> argparse.ArgumentParser:
     learning.add_argument("-o", "--output", required=True, help="the output folder")
     learning.add_argument("--iterations", type=int, default=ITERATIONS, metavar="N",
                           help=f"learning trials after PID alone (default {ITERATIONS})")
-    learning.add_argument("--cutoff", type=float, default=CUTOFF_HZ, metavar="HZ",
+    learning.add_argument("--cutoff", type=float, default=None, metavar="HZ",
                           help=f"corner of the zero-phase low-pass Q of the learning filter "
-                               f"(default {CUTOFF_HZ:g})")
+                               f"(default {CUTOFF_HZ:g} on the manipulator, 0.15 times the "
+                               f"rate on a loop with a [machine])")
     learning.set_defaults(handler=_ilc)
 
     demo = commands.add_parser("demo", help="the whole pipeline on the embedded defaults")

@@ -135,7 +135,8 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
     card = ModelCard(
         model_kind=loaded.config.model, preset=loaded.config.preset,
         ensemble_members=len(runs), feature_set=loaded.config.features.feature_set,
-        input_kind=inputs, prior="rigid-body" if model.residual else "none",
+        input_kind=inputs,
+        prior=("none" if not model.residual else "rigid-body" if machine is None else "linear"),
         prior_parameters=model.prior_parameters, input_signals=model.input_names,
         input_units=model.input_units,
         output_signals=outputs[0], output_units=outputs[1],
@@ -145,7 +146,8 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
         state=[{"input": n, "output": f"{n}_out", "shape": list(s.shape), "initial": "zeros"}
                for n, s in zip(state_names, state)],
         history_samples=max(r.network.history for r in runs), flexff_version=flexff_version(),
-        machine=loaded.info.get("machine"), machine_features=loaded.info.get("machine_features"))
+        machine=loaded.info.get("machine"), machine_features=loaded.info.get("machine_features"),
+        machine_prior=loaded.info.get("machine_prior"))
     onnx.helper.set_model_props(graph, card.metadata())
     onnx.checker.check_model(graph)
     onnx.save(graph, str(path))

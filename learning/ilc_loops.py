@@ -31,6 +31,7 @@ from flexff.fmu.errors import InputError
 from flexff.fmu.expressions import evaluate
 from flexff.learning import machine_loop
 from flexff.learning.ilc_filter import LearningFilter, filter_along, learning_filter
+from flexff.learning.linear_model import identify_linear
 from flexff.learning.loop import dataset_taps, with_feedforward, with_feedforward_table
 from flexff.plant.parameters import NOMINAL, PlantParameters
 from flexff.plant.signals import FEEDBACK_FORCES, FEEDFORWARD_FORCES, TRUE_POSITION, names
@@ -172,6 +173,17 @@ class ManipulatorLoop:
 
 
 InverseModel = Callable[[Machine, Recording], ca.Function]  # -> (pos, vel, acc) -> effort
+
+
+def identified_on_trial(machine: Machine, recording: Recording) -> ca.Function:
+    """The linear model of the machine's prior identified on one trial: the effort the loop
+    commanded against the reference's motion (learning.linear_model)."""
+    motion: dict[str, np.ndarray] = {}
+    for axis in machine.axes:
+        motion.update(zip(axis.motion, (recording[n] for n in (axis.reference,
+                                                              *axis.derivatives[:2]))))
+    efforts = {a.name: recording[a.effort] for a in machine.axes}
+    return identify_linear(machine, motion, efforts).casadi_function()
 
 
 class MachineLoop:

@@ -4,11 +4,13 @@ filtered measured motion and the feedforward FMU generates into C on the referen
 
 Preprocessing, every choice a setting (MachineFeatures) whose default comes from the data: the
 measured positions, optionally counted in steps of `quantization` and given white noise
-(training only), pass a zero-phase Butterworth low-pass (`cutoff_hz`; default `data_cutoff`:
-twice the frequency under which 99.9 % of the references' acceleration energy lies, Hann
-windowed), the
-efforts the same filter, and velocity, acceleration and jerk come by central differences; then
-both are decimated to the model rate (default: the data rate divided down to at least
+(training only), pass a zero-phase Butterworth low-pass at MOTION_PER_CUTOFF times the
+labels' corner, velocity, acceleration and jerk come by central differences, and the features
+of that motion then pass the labels' own low-pass with the efforts (`cutoff_hz`; default
+`data_cutoff`: twice the frequency under which 99 % of the references' velocity energy lies,
+Hann windowed, at most a twentieth of the rate; parallel filtering, as robot identification
+filters its regressor); both are decimated to the model rate (default: the data rate divided
+down to at least
 MODEL_RATE_PER_CUTOFF times the corner). A direction of motion is tanh(v / w) for widths w that
 are fractions of the axis's velocity limit: Coulomb friction steps with it, which no smooth
 function of the motion holds (controllers.machine_features defines the features).
@@ -32,8 +34,11 @@ from flexff.cosim.machine import Machine
 from flexff.fmu.errors import InputError
 from flexff.learning.features import differentiate, lowpass
 
-ENERGY_SHARE = 0.999  # of the references' acceleration energy under the band's edge
+ENERGY_SHARE = 0.99  # of the references' velocity energy under the band's edge
 CUTOFF_PER_BAND = 2.0  # the default corner: this many times the band's edge
+HIGHEST_CUTOFF = 0.05  # the default corner at most: this share of the data rate
+MOTION_PER_CUTOFF = 4.0  # the measured motion's corner: this many times the labels'
+
 MODEL_RATE_PER_CUTOFF = 20.0  # the default model rate: at least this many times the corner
 
 
@@ -48,7 +53,7 @@ class MachineFeatures:
     position_noise: Mapping[str, float] = field(default_factory=dict)  # axis -> std [unit]
     effort_noise: Mapping[str, float] = field(default_factory=dict)  # axis -> std [effort unit]
     model_rate_hz: float | None = None
-    jerk: bool = True
+    jerk: bool = False  # a jerk feature: three differences of measured positions are noisy
     direction_widths: tuple[float, ...] = DIRECTION_WIDTHS
 
     @property
@@ -90,14 +95,17 @@ class MachineFeatures:
 def data_cutoff(references: list[Mapping[str, np.ndarray]], machine: Machine,
                 rate_hz: float) -> float:
     """CUTOFF_PER_BAND times the frequency under which ENERGY_SHARE of the references'
-    acceleration energy lies (all axes and trajectories), at most 0.4 times Nyquist."""
+    velocity energy lies (all axes and trajectories), at most HIGHEST_CUTOFF of the rate: the
+    band the feedforward must reproduce, well below where the encoders' noise dominates the
+    differentiated positions (an acceleration's or jerk's band reaches far out at every step
+    of a bang-bang move)."""
     curves = []  # (frequencies, cumulative share of the energy) per trajectory and axis
     for signals in references:
         for axis in machine.axes:
-            acceleration = np.asarray(signals[axis.derivatives[1]], dtype=float)
-            window = np.hanning(acceleration.size)  # leakage of a non-periodic record
-            power = np.abs(np.fft.rfft((acceleration - acceleration.mean()) * window)) ** 2
-            curves.append((np.fft.rfftfreq(acceleration.size, 1.0 / rate_hz),
+            velocity = np.asarray(signals[axis.derivatives[0]], dtype=float)
+            window = np.hanning(velocity.size)  # leakage of a non-periodic record
+            power = np.abs(np.fft.rfft((velocity - velocity.mean()) * window)) ** 2
+            curves.append((np.fft.rfftfreq(velocity.size, 1.0 / rate_hz),
                            np.cumsum(power) / max(float(power.sum()), 1e-300)))
     if not curves:
         raise InputError("no training trajectory to derive the filter's corner from")
@@ -106,16 +114,18 @@ def data_cutoff(references: list[Mapping[str, np.ndarray]], machine: Machine,
     spectra = [np.interp(frequencies, f, share) for f, share in curves]
     share = np.mean(spectra, axis=0)
     edge = float(frequencies[np.searchsorted(share, ENERGY_SHARE)])
-    return float(min(max(CUTOFF_PER_BAND * edge, 4 * frequencies[1]), 0.2 * rate_hz))
+    return float(min(max(CUTOFF_PER_BAND * edge, 4 * frequencies[1]), HIGHEST_CUTOFF * rate_hz))
 
 
-def prepare(signals: Mapping[str, np.ndarray], rate_hz: float, machine: Machine,
-            config: MachineFeatures, rng: np.random.Generator | None = None
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """Features (n, n_features) and labels (n, axes) at the model rate from a trajectory's
-    signals (machine.signals), `config` resolved; with `rng` (training only) its noise."""
+def motion(signals: Mapping[str, np.ndarray], rate_hz: float, machine: Machine,
+           config: MachineFeatures, rng: np.random.Generator | None = None
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Each axis's measured motion (n, 4 axes: position, velocity, acceleration, jerk) at the
+    data rate, filtered at the motion's corner (MOTION_PER_CUTOFF times the labels'), and the
+    raw efforts (n, axes); with `rng` (training only) the settings' noise added first."""
     assert config.cutoff_hz is not None, "resolved() first"
-    motion, efforts = [], []
+    corner = min(MOTION_PER_CUTOFF * config.cutoff_hz, 0.45 * rate_hz)
+    columns, efforts = [], []
     for axis in machine.axes:
         position = np.asarray(signals[axis.measured_signal], dtype=float)
         effort = np.asarray(signals[axis.effort_signal], dtype=float)
@@ -127,12 +137,36 @@ def prepare(signals: Mapping[str, np.ndarray], rate_hz: float, machine: Machine,
                 * rng.standard_normal(position.shape)
             effort = effort + config.effort_noise.get(axis.name, 0.0) \
                 * rng.standard_normal(effort.shape)
-        position = lowpass(position, rate_hz, config.cutoff_hz, config.filter_order)
+        position = lowpass(position, rate_hz, corner, config.filter_order)
         velocity, acceleration = differentiate(position, rate_hz)
         jerk = np.gradient(acceleration, 1.0 / rate_hz)
-        motion.append(np.column_stack([position, velocity, acceleration, jerk]))
-        efforts.append(lowpass(effort, rate_hz, config.cutoff_hz, config.filter_order))
-    step = config.decimation(rate_hz)
-    features = evaluate_samples(feature_function(machine, config.inputs),
-                                np.column_stack(motion)[::step])
-    return features, np.column_stack(efforts)[::step]
+        columns.append(np.column_stack([position, velocity, acceleration, jerk]))
+        efforts.append(effort)
+    return np.column_stack(columns), np.column_stack(efforts)
+
+
+def named_motion(moved: np.ndarray, machine: Machine) -> dict[str, np.ndarray]:
+    """`motion`'s columns by the axes' motion names (x, vx, ax of every axis)."""
+    named: dict[str, np.ndarray] = {}
+    for k, axis in enumerate(machine.axes):
+        named.update(zip(axis.motion, moved[:, 4 * k:4 * k + 3].T))
+    return named
+
+
+def label_filter(values: np.ndarray, rate_hz: float, config: MachineFeatures) -> np.ndarray:
+    """The labels' low-pass and decimation to the model rate, along axis 0: applied to the
+    efforts and to whatever is compared with them (features, regressor columns) alike."""
+    assert config.cutoff_hz is not None, "resolved() first"
+    filtered = lowpass(values, rate_hz, config.cutoff_hz, config.filter_order)
+    return np.asarray(filtered[::config.decimation(rate_hz)])
+
+
+def prepare(signals: Mapping[str, np.ndarray], rate_hz: float, machine: Machine,
+            config: MachineFeatures, rng: np.random.Generator | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Features (n, n_features) and labels (n, axes) at the model rate from a trajectory's
+    signals (machine.signals), `config` resolved; with `rng` (training only) its noise. The
+    features of the measured motion pass the labels' filter as the efforts do."""
+    moved, efforts = motion(signals, rate_hz, machine, config, rng)
+    features = evaluate_samples(feature_function(machine, config.inputs), moved)
+    return label_filter(features, rate_hz, config), label_filter(efforts, rate_hz, config)

@@ -23,7 +23,13 @@ from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import Machine
 from flexff.cosim.recording import Recording
 from flexff.cosim.references import Reference
-from flexff.cosim.schema import ConfigError, ConnectionConfig, RunConfig, SourceConfig
+from flexff.cosim.schema import (
+    ConfigError,
+    ConnectionConfig,
+    FmuConfig,
+    RunConfig,
+    SourceConfig,
+)
 from flexff.fmu.expressions import evaluate
 
 
@@ -70,6 +76,22 @@ def with_feedforward(loop: RunConfig, feedforward: Path | None = None) -> RunCon
                                       key=f"machine.axis[{k}].feedforward")
                      for k, a in enumerate(machine.axes)))
     return checked(replace(loop, sources=tuple(sources), connections=connections))
+
+
+def with_feedforward_fmu(loop: RunConfig, fmu: Path, name: str = "feedforward") -> RunConfig:
+    """`loop` with the FMU `fmu` (inputs: the reference signals, by name; outputs `<axis>_ff`)
+    feeding each axis's feedforward input, stepped first; whatever fed those inputs before
+    goes."""
+    machine = loop_machine(loop)
+    fed = {feedforward_signal(a.name) for a in machine.axes}
+    inputs = {a.feedforward for a in machine.axes}
+    connections = (*(c for c in loop.connections if c.to_name not in inputs),
+                   *(ConnectionConfig(f"{name}.{feedforward_signal(a.name)}", a.feedforward,
+                                      key=f"machine.axis[{k}].feedforward")
+                     for k, a in enumerate(machine.axes)))
+    fmus = (FmuConfig(name, path=Path(fmu)), *(f for f in loop.fmus if f.name != name))
+    return checked(replace(loop, fmus=fmus, sources=tuple(_other_sources(loop, fed)),
+                           connections=connections))
 
 
 def _other_sources(loop: RunConfig, replaced: set[str]) -> list[SourceConfig]:

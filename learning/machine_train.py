@@ -14,17 +14,24 @@ import json
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from flexff.controllers.linear_prior import LinearModel
 from flexff.controllers.machine_features import feature_names
 from flexff.cosim.machine import Machine, machine_table
 from flexff.fmu.errors import InputError
 from flexff.learning.batches import TRAIN, VALIDATION, SequenceSet
-from flexff.learning.machine_features import MachineFeatures, prepare
+from flexff.learning.machine_dataset import MachineTrajectory
+from flexff.learning.machine_features import (
+    MachineFeatures,
+    label_filter,
+    motion,
+    named_motion,
+    prepare,
+)
 from flexff.learning.models import SequenceNetwork, uses_prior
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig
 from flexff.learning.run_folder import save_run, start_run
@@ -38,16 +45,6 @@ from flexff.learning.train import (
 )
 
 MSE_UNITS = "MSE of min-max scaled efforts, axis by axis (run.json label_names)"
-
-
-@dataclass(frozen=True)
-class MachineTrajectory:
-    """One trajectory of a machine's data: its name, split ("train" or "test") and signals
-    (time and machine.signals), sampled at the data's rate."""
-
-    name: str
-    split: str
-    signals: Mapping[str, np.ndarray]
 
 
 def features_to_dict(features: MachineFeatures) -> dict[str, Any]:
@@ -64,15 +61,17 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
                 trajectories: Sequence[MachineTrajectory], digest: str, out: Path,
                 features: MachineFeatures | None = None, progress: bool = True,
                 resume: bool | None = None, force: bool = True,
-                checkpoint_every: int | None = None, on_epoch: EpochReport | None = None
-                ) -> dict[str, Any]:
+                checkpoint_every: int | None = None, on_epoch: EpochReport | None = None,
+                prior: LinearModel | None = None) -> dict[str, Any]:
     """Train `config`'s model on a machine's trajectories (`digest` names the data) with the
     feature settings `features` (default: all derived from the data); write the run folder
-    `out`; return the metrics."""
+    `out`; return the metrics. The physics-guided model learns the residual over `prior`, the
+    machine's identified linear model (learning.machine_evaluate.identify_dataset), its efforts
+    through the labels' filter as the labels are."""
     start = time.perf_counter()
-    if uses_prior(config.model):
-        raise InputError(f"{config.model}: the physics-guided model of a machine needs its "
-                         f"identified prior; train lstm, cnn-lstm or tcn")
+    if uses_prior(config.model) != (prior is not None):
+        raise InputError(f"{config.model}: the physics-guided model (pgnn) and only it learns "
+                         f"over an identified prior: give the prior for pgnn, none for others")
     every = CHECKPOINT_EVERY[config.preset] if checkpoint_every is None else checkpoint_every
     train_set = [t for t in trajectories if t.split == "train"]
     test_set = [t for t in trajectories if t.split == "test"]
@@ -85,12 +84,19 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
     settings = {"config": {k: v for k, v in config.to_dict().items()
                            if k not in ("device", "threads")},
                 "features": features_to_dict(resolved), "machine": machine_table(machine),
-                "data": digest}
+                "data": digest, "prior": None if prior is None else prior.to_dict()}
     checkpoint = start_run(out, json.loads(json.dumps(settings)), resume, force)
     rng = np.random.default_rng(config.seed)
     train_x, train_f = _prepared(train_set, rate_hz, machine, resolved, rng)
     test_x, test_f = _prepared(test_set, rate_hz, machine, resolved, None)
     feature_scaler, label_scaler = MinMaxScaler.fit(train_x), MinMaxScaler.fit(train_f)
+    train_prior = _prior_efforts(prior, train_set, rate_hz, machine, resolved)
+    test_prior = _prior_efforts(prior, test_set, rate_hz, machine, resolved)
+
+    def targets(fs: list[np.ndarray], priors: list[np.ndarray] | None) -> list[np.ndarray]:
+        if priors is None:
+            return [label_scaler.transform(f) for f in fs]
+        return [(f - p) / label_scaler.span for f, p in zip(fs, priors)]
     assert resolved.model_rate_hz is not None and resolved.cutoff_hz is not None
     model_rate = resolved.model_rate_hz
     edge = math.ceil(config.features.edge_periods / resolved.cutoff_hz * model_rate)
@@ -102,12 +108,14 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
                 "val_mse": role_mse(network, train_data, VALIDATION),
                 "test_mse": role_mse(network, test_data, TRAIN),
                 "test_mse_per_trajectory": {t.name: role_mse(network, test_data, TRAIN, only=[i])
-                                            for i, t in enumerate(test_set)}}
+                                            for i, t in enumerate(test_set)},
+                **({} if test_prior is None else {"prior_test_mse": float(np.mean(
+                    np.concatenate([((f - p) / label_scaler.span)[edge:len(f) - edge]
+                                    for f, p in zip(test_f, test_prior)]) ** 2))})}
 
     network, history, metrics = fit_network(
-        config, [feature_scaler.transform(x) for x in train_x],
-        [label_scaler.transform(f) for f in train_f],
-        [feature_scaler.transform(x) for x in test_x], [label_scaler.transform(f) for f in test_f],
+        config, [feature_scaler.transform(x) for x in train_x], targets(train_f, train_prior),
+        [feature_scaler.transform(x) for x in test_x], targets(test_f, test_prior),
         edge, rng, Checkpoints(out, settings, every), checkpoint, measure, progress, on_epoch)
     metrics = {**metrics, "seconds": time.perf_counter() - start, "model_rate_hz": model_rate,
                "cutoff_hz": resolved.cutoff_hz}
@@ -115,6 +123,7 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
              feature_names(machine, resolved.inputs), [a.effort_signal for a in machine.axes],
              model_rate,
              {"machine": machine_table(machine), "machine_features": features_to_dict(resolved),
+              **({} if prior is None else {"machine_prior": prior.to_dict()}),
               "data": {"sha256": digest, "sample_rate_hz": rate_hz,
                        "train": [t.name for t in train_set],
                        "test": [t.name for t in test_set]},
@@ -124,6 +133,22 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
                                                    f"{config.model} ({config.preset}), "
                                                    f"{machine.name}")})
     return {**metrics, "run": str(out)}
+
+
+def _prior_efforts(prior: LinearModel | None, trajectories: list[MachineTrajectory],
+                   rate_hz: float, machine: Machine, features: MachineFeatures
+                   ) -> list[np.ndarray] | None:
+    """The prior's efforts along each trajectory's measured motion, through the labels'
+    filter and decimation (what its labels are compared with); None without a prior."""
+    if prior is None:
+        return None
+    out = []
+    for trajectory in trajectories:
+        moved, _ = motion(trajectory.signals, rate_hz, machine, features)
+        efforts = prior.predict(named_motion(moved, machine))
+        out.append(label_filter(np.column_stack([efforts[a.name] for a in machine.axes]),
+                                rate_hz, features))
+    return out
 
 
 def _prepared(trajectories: list[MachineTrajectory], rate_hz: float, machine: Machine,

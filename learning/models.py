@@ -155,7 +155,8 @@ class StreamingTCN(SequenceNetwork):
         self.history = tcn.history
         self.blocks, self.head = tcn.blocks, tcn.head
         self.lengths = [block.shrink for block in _levels(tcn)]
-        level_input = torch.zeros(1, tcn.n_features, 1, dtype=tcn.head.weight.dtype)
+        level_input = torch.zeros(1, tcn.n_features, 1, dtype=tcn.head.weight.dtype,
+                                  device=tcn.head.weight.device)
         with torch.no_grad():
             for i, block in enumerate(_levels(tcn)):
                 self.register_buffer(f"rest{i}", level_input.clone())
@@ -294,8 +295,13 @@ def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor) 
     starts from the linear fit."""
     if not isinstance(network, LinearSkip):
         return
-    design = torch.cat([x.double(), torch.ones(len(x), 1, dtype=torch.float64)], dim=1)
-    solution = torch.linalg.lstsq(design, y.double(), driver="gelsd").solution
+    # solved on the CPU in float64 wherever the network lives: gelsd (rank-revealing) runs on
+    # the CPU only, and the fit is small; copy_ brings the result to the network's device
+    inputs = x.detach().to("cpu", torch.float64)
+    design = torch.cat([inputs, torch.ones(len(inputs), 1, dtype=torch.float64, device="cpu")],
+                       dim=1)
+    solution = torch.linalg.lstsq(design, y.detach().to("cpu", torch.float64),
+                                  driver="gelsd").solution
     with torch.no_grad():
         network.linear.weight.copy_(solution[:-1].T)
         network.linear.bias.copy_(solution[-1])

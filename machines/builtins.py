@@ -1,11 +1,11 @@
-"""The example machines' plants as built-in FMUs (entry point of cosim.builtins)."""
+"""The example machines' plants as built-in FMUs (entry point of cosim.builtins): registered
+by name and path, imported only when a run builds one."""
 
 from __future__ import annotations
 
+from flexff.cosim.builtins import register_builtin
+
 
 def register() -> None:
-    from flexff.cosim.builtins import register_builtin
-    from flexff.machines.drive import drive_from_options
-
-    register_builtin("drive", (), drive_from_options,
+    register_builtin("drive", (), "flexff.machines.drive:drive_from_options",
                      "1-axis linear drive (machines.drive): effort F in, encoder x out")

@@ -14,8 +14,9 @@ from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
 from flexff.fmu.validation import validate_fmu
 from flexff.learning.export import export, run_steps, session
+from flexff.learning.machine_dataset import MachineTrajectory
 from flexff.learning.machine_features import MachineFeatures
-from flexff.learning.machine_train import MachineTrajectory, fit_machine
+from flexff.learning.machine_train import fit_machine
 from flexff.learning.presets import make_config
 from flexff.learning.run_folder import load_run
 from tests.runners import run_fmu

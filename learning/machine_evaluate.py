@@ -1,0 +1,126 @@
+"""`flexff evaluate --loop LOOP.toml`: the whole workflow on any machine's loop, and the
+comparison an engineer would make, per axis.
+
+The loop's dataset is collected (learning.machine_collect), the linear model of its prior
+identified on the training trajectories (learning.linear_model), each model trained
+(learning.machine_train), exported and built into its feedforward FMU; then, on the loop's own
+reference (its sources), the loop runs under PID alone, with the identified model's
+feedforward, with each learned one, and iterative learning control finds the best
+feedforward for that one reference (the limit; learning.ilc). summary.json holds every run's
+e2, einf, rms per axis and its e2 ratio PID alone / scenario; table.md the ratios.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from flexff.controllers.linear_prior import LinearModel
+from flexff.controllers.machine_feedforward import (
+    inverse_model_system,
+    learned_machine_feedforward_system,
+)
+from flexff.cosim.metrics import machine_axes, tracking_metrics
+from flexff.cosim.recording import atomic_write
+from flexff.cosim.run import simulate_config
+from flexff.cosim.schema import RunConfig
+from flexff.fmu.build import build_fmu
+from flexff.learning.export import export
+from flexff.learning.ilc import ilc
+from flexff.learning.linear_model import identify_linear, write_linear_model
+from flexff.learning.machine_collect import collect_machine
+from flexff.learning.machine_dataset import MachineDataset
+from flexff.learning.machine_features import (
+    MachineFeatures,
+    label_filter,
+    motion,
+    named_motion,
+)
+from flexff.learning.machine_loop import loop_machine, with_feedforward, with_feedforward_fmu
+from flexff.learning.machine_train import fit_machine
+from flexff.learning.models import uses_prior
+from flexff.learning.presets import make_config
+
+MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")
+SUMMARY = "summary.json"
+
+
+def identify_dataset(data: MachineDataset, features: MachineFeatures | None = None
+                     ) -> LinearModel:
+    """The prior's linear model identified on the training trajectories: the regressor of
+    their measured motion and their efforts through the labels' filter and decimation alike
+    (learning.machine_features)."""
+    machine = data.machine
+    rate = data.sample_rate_hz
+    train = [t for t in data.trajectories if t.split == "train"]
+    resolved = (features or MachineFeatures()).resolved(rate, [t.signals for t in train],
+                                                        machine)
+    motions, efforts = [], []
+    for trajectory in train:
+        moved, effort = motion(trajectory.signals, rate, machine, resolved)
+        motions.append(named_motion(moved, machine))
+        efforts.append({a.name: effort[:, k] for k, a in enumerate(machine.axes)})
+    return identify_linear(machine, motions, efforts,
+                           lambda values: label_filter(values, rate, resolved))
+
+
+def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = MODELS,
+                     preset: str = "fast", n_train: int = 24, n_test: int = 6,
+                     duration: float = 20.0, ilc_iterations: int = 10,
+                     workers: int | None = None, progress: bool = True,
+                     **overrides: Any) -> dict[str, Any]:
+    """Collect, identify, train, export, build and compare on `loop`; write `out`."""
+    machine = loop_machine(loop)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    data = collect_machine(loop, out / "data", n_train, n_test, duration, workers=workers,
+                           progress=progress)
+    identified = identify_dataset(data)
+    write_linear_model(identified, out / "identified.json")
+    fmus = {"identified": build_fmu(inverse_model_system(
+        machine, identified.casadi_function(), loop.step,
+        f"identified linear model of {machine.name}"), out / "fmus" / "identified.fmu")}
+    training = {}
+    for kind in models:
+        config = make_config(kind, preset, **overrides)
+        training[kind] = fit_machine(config, machine, data.sample_rate_hz, data.trajectories,
+                                     data.digest, out / "runs" / kind, progress=progress,
+                                     prior=identified if uses_prior(kind) else None)
+        model = export(out / "runs" / kind, out / "models" / f"{kind}.onnx")
+        fmus[kind] = build_fmu(learned_machine_feedforward_system(model, loop.step),
+                               out / "fmus" / f"{kind}.fmu")
+    axes = machine_axes(machine)
+    runs = {"pid": with_feedforward(loop),
+            **{name: with_feedforward_fmu(loop, path) for name, path in fmus.items()}}
+    metrics = {name: tracking_metrics(simulate_config(run, progress=False), axes)
+               for name, run in runs.items()}
+    limit = ilc(loop, out / "ilc", ilc_iterations, progress=progress, say=lambda _: None,
+                model=lambda _machine, _recording: identified.casadi_function())
+    best = next(t for t in limit["trials"] if t["trial"] == limit["best"])
+    metrics["ilc"] = {a.name: {k: best[a.name][k] for k in ("e2", "einf", "rms")}
+                      for a in machine.axes}
+    summary = {"machine": machine.name, "axes": [a.name for a in machine.axes],
+               "scenarios": {name: {a: {**m, "e2_ratio": metrics["pid"][a]["e2"] / m["e2"]}
+                                    for a, m in per_axis.items()}
+                             for name, per_axis in metrics.items()},
+               "training": {k: {"seconds": v["seconds"], "test_mse": v["test_mse"]}
+                            for k, v in training.items()},
+               "identified": identified.to_dict()["axes"]}
+    text = json.dumps(summary, indent=2) + "\n"
+    atomic_write(out / SUMMARY, lambda tmp: tmp.write_text(text, "utf-8"))
+    atomic_write(out / "table.md", lambda tmp: tmp.write_text(ratio_table(summary), "utf-8"))
+    return summary
+
+
+def ratio_table(summary: dict[str, Any]) -> str:
+    """The e2 ratios PID alone / scenario per axis as a Markdown table."""
+    scenarios = list(summary["scenarios"])
+    lines = ["| axis | " + " | ".join(scenarios) + " |",
+             "|---|" + "---:|" * len(scenarios)]
+    for axis in summary["axes"]:
+        lines.append(f"| {axis} | " + " | ".join(
+            f"{summary['scenarios'][s][axis]['e2_ratio']:.3g}" for s in scenarios) + " |")
+    return "\n".join(lines) + "\n"
+
