@@ -56,7 +56,8 @@ def columns(machine: Machine, k: int, motion: Mapping[str, Any], width: float, b
     tanh = backend.tanh(v / width)
     one = v * 0 + 1
     by_term = {"inertia": [a], "viscous": [v], "coulomb": [tanh], "offset": [one],
-               "coulomb_asymmetric": [0.5 * (1 + tanh), -0.5 * (1 - tanh)]}
+               # one-sided levels, zero at rest: -> 1 moving forward, -> -1 moving back
+               "coulomb_asymmetric": [0.5 * (tanh + tanh**2), 0.5 * (tanh - tanh**2)]}
     columns = [c for term in machine.prior.terms for c in by_term[term]]
     for term, expression in machine.prior.extra.get(axis.name, {}).items():
         key = f"machine.prior.extra.{axis.name}.{term}"

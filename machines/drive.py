@@ -57,10 +57,15 @@ POSITIVE = ("m_motor", "m_load", "mount_hz", "coulomb_width", "pitch", "force_li
 def effort_of(p: Any, position: Any, velocity: Any, acceleration: Any, backend: Any = ca) -> Any:
     """The rigid drive's inverse dynamics (the mount's load moving with the carriage): the
     effort a feedforward needs, for tests and as the truth identification is checked against."""
-    tanh = backend.tanh(velocity / p.coulomb_width)
-    return (p.mass * acceleration + p.viscous * velocity
-            + p.coulomb_positive * 0.5 * (1 + tanh) - p.coulomb_negative * 0.5 * (1 - tanh)
+    return (p.mass * acceleration + coulomb(p, velocity, backend) + p.viscous * velocity
             + p.cogging * backend.sin(2 * math.pi * position / p.pitch))
+
+
+def coulomb(p: Any, velocity: Any, backend: Any = ca) -> Any:
+    """One-sided Coulomb friction, smooth over coulomb_width and zero at rest: the positive
+    level moving forward, minus the negative one moving back."""
+    tanh = backend.tanh(velocity / p.coulomb_width)
+    return 0.5 * (p.coulomb_positive * (tanh + tanh**2) + p.coulomb_negative * (tanh - tanh**2))
 
 
 def drive_system(parameters: DriveParameters = DRIVE, x_start: float = 0.0) -> System:
@@ -77,9 +82,7 @@ def drive_system(parameters: DriveParameters = DRIVE, x_start: float = 0.0) -> S
     damping = 2 * q.mount_damping * q.m_load * 2 * math.pi * q.mount_hz
     mount = stiffness * (position - load) + damping * (velocity - load_velocity)
     applied = ca.fmin(ca.fmax(force, -q.force_limit), q.force_limit)
-    tanh = ca.tanh(velocity / q.coulomb_width)
-    friction = (q.viscous * velocity + q.coulomb_positive * 0.5 * (1 + tanh)
-                - q.coulomb_negative * 0.5 * (1 - tanh))
+    friction = q.viscous * velocity + coulomb(q, velocity)
     cogging = q.cogging * ca.sin(2 * math.pi * position / q.pitch)
     acceleration = (applied - friction - cogging - mount) / q.m_motor
     dx = ca.vertcat(velocity, acceleration, load_velocity, mount / q.m_load)

@@ -41,8 +41,9 @@ def motion(names, seconds=20.0, rate=1000.0, seed=0):
 
 def drive_effort(m):
     v = m["vx"]
-    return (2.0 * m["ax"] + 20.0 * v + 1.5 * 0.5 * (1 + np.tanh(v / 1e-3))
-            - 1.2 * 0.5 * (1 - np.tanh(v / 1e-3)) + 0.5 * np.sin(2 * np.pi * m["x"] / PITCH))
+    tanh = np.tanh(v / 1e-3)
+    return (2.0 * m["ax"] + 20.0 * v + 0.5 * 1.5 * (tanh + tanh**2)
+            + 0.5 * 1.2 * (tanh - tanh**2) + 0.5 * np.sin(2 * np.pi * m["x"] / PITCH))
 
 
 def test_a_drive_is_recovered_to_1e_6_from_noise_free_data():
