@@ -1,14 +1,11 @@
 """Run configurations: a TOML file parsed and checked into cosim.schema's plain data before
 anything is built or run, and written back out in the general form (`flexff config expand`).
 
-The tables of the general form are listed in cosim.schema. The reference and the manipulator's
-short form:
+The tables of the general form are listed in cosim.schema. The reference:
 
-  [reference]    kind = "thesis-eval" | "thesis-hardware-eval" | "circle" | "line-circle" |
-                 "spline" | "segments" | "csv", and its keys:
-                   thesis-eval: none (the thesis's evaluation reference, sec. 5.7, 15 s)
-                   thesis-hardware-eval: none (its evaluation reference on the real machine,
-                           sec. 6.6, 100 s)
+  [reference]    kind = "circle" | "line-circle" | "spline" | "segments" | "csv", or a kind a
+                 machine package registers (cosim.plugins; the manipulator's thesis-eval and
+                 thesis-hardware-eval: plant.references), and its keys:
                    circle: radius, duration, centre = [x, y] (default [0, 0]), turns (default 1,
                            negative runs clockwise), start_angle (rad, default 0)
                    line-circle: a skew-sine line from `start` (default [0, 0]) in line_duration
@@ -27,22 +24,11 @@ short form:
                               points (its velocity does not start at zero)
                            keys are named `reference.segments[k].key` in errors
                    csv: path (relative to the configuration's folder), smoothing_window (s)
-  [plant]        variant = "nominal" | "hardware", seed (encoder noise), and any plant FMU
-                 parameter by name (m_up1 = 0.25, noise_std, max_substep, x_start, ...);
-                 x_start, y_start default to the reference's first point
-  [controller]   crossover_hz, notch (true / false / Hz), encoders (2 or 3); defaults follow
-                 the plant variant (controllers.feedback.DEFAULTS)
-  [feedforward]  kind = "none" | "rigid-body" (optionally with identified = "file.json", the
-                 parameters `flexff identify` found in place of the nominal ones) | "learned"
-                 (with model = "file.onnx", an exported learned model, and mode = "step"
-                 (default) | "precomputed"); a current-level model (its card's outputs
-                 i1_ff..i3_ff) feeds the controller's current feedforward (controller option
-                 current_feedforward = true), and its force feedforward Fx_ff, Fy_ff gets zero
 
-A configuration without [fmu.*] tables is the manipulator's loop: the short form, with the
-defaults of its tables. The same keys (variant, seed, crossover_hz, notch, encoders,
-identified, model, mode, and the controller's current_feedforward) are the options of the
-built-in FMUs in the general form, with the plant's physical parameters in `parameters`.
+Built-in FMUs, their options and short forms come from machine packages (cosim.builtins,
+cosim.plugins): the manipulator's are documented in controllers.manipulator (its built-ins) and
+controllers.short_form ([plant], [controller], [feedforward]; a configuration without [fmu.*]
+tables is its loop).
 
 Any problem (unknown table or key, wrong type, missing file, an FMU variable that does not
 exist or has another type, a reference outside the workspace, a step that does not divide the
@@ -52,9 +38,7 @@ when the FMUs are resolved, before anything runs.
 
 from __future__ import annotations
 
-import math
 import tomllib
-import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -62,14 +46,20 @@ from typing import Any
 
 import tomli_w
 
-from flexff.cosim.builtins import registered
+from flexff.cosim.builtins import checked_options, registered
+from flexff.cosim.checks import TableChecker
 from flexff.cosim.example_configs import config_examples as config_examples  # public API
 from flexff.cosim.machine import machine_table, parse_machine
 from flexff.cosim.memory import MemoryNeeded
-from flexff.cosim.references import REFERENCE_KINDS, Reference, SegmentError, build_reference
+from flexff.cosim.plugins import ShortForm, check_workspace, reference_kinds, short_forms
+from flexff.cosim.references import (
+    Reference,
+    SegmentError,
+    build_reference,
+    reference_kind_names,
+)
 from flexff.cosim.schema import (
     ALGORITHMS,
-    BUILTIN_OPTIONS,
     SOURCE_KINDS,
     UNCONNECTED,
     ConfigError,
@@ -81,23 +71,13 @@ from flexff.cosim.schema import (
     SourceConfig,
     whole_steps,
 )
-from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
 from flexff.fmu.model_exchange import SOLVERS
-from flexff.plant.parameters import NOMINAL
-from flexff.plant.signals import CURRENT_FEEDFORWARD, FEEDFORWARD_FORCES, names
-from flexff.plant.variants import VARIANTS
 
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
                 "circle": ("kind", "centre", "turns", "duration"),
                 "spline": ("kind", "points", "duration")}
-FEEDFORWARD_KINDS = ("none", "rigid-body", "learned")  # kind K is the built-in "K-feedforward"
-RENAMED_KINDS = {"model": "rigid-body", "onnx": "learned"}  # old [feedforward] kind -> now
-FEEDFORWARD_MODES = ("step", "task", "precomputed")
-SHORT_FORM = ("plant", "controller", "feedforward")
-TABLES = ("run", "reference", "source", "fmu", "connection", "record", "machine", *SHORT_FORM)
-PLANT_EXTRA = ("max_substep",)  # plant FMU parameters beyond the System's own
-START_PARAMETERS = ("x_start", "y_start")
+TABLES = ("run", "reference", "source", "fmu", "connection", "record", "machine")
 
 
 def load_config(path: str | Path) -> RunConfig:
@@ -203,27 +183,22 @@ def _plain(value: Any) -> Any:
     return str(value) if isinstance(value, Path) else value
 
 
-class _Parser:
+class _Parser(TableChecker):
     """Checks one configuration; every error names the file and `table.key`."""
 
-    def __init__(self, origin: str, base: Path) -> None:
-        self.origin, self.base = origin, base
-
-    def error(self, key: str, message: str) -> ConfigError:
-        return ConfigError(self.origin, key, message)
-
     def parse(self, data: Mapping[str, Any], name: str) -> RunConfig:
-        for table in data:
-            if table not in TABLES:
-                raise self.error(table, f"unknown table [{table}] (known: {', '.join(TABLES)})")
-        general = "fmu" in data
-        short = any(t in data for t in SHORT_FORM) or not general
+        others = [t for t in data if t not in TABLES]
+        # a plain general form loads no machine package (cosim.plugins)
+        forms = short_forms() if others or "fmu" not in data else ()
+        tables = (*TABLES, *(t for form in forms for t in form.tables))
+        for table in others:
+            if table not in tables:
+                raise self.error(table, f"unknown table [{table}] (known: {', '.join(tables)})")
+        short = self.short_form(data, forms)
         run = self.table(data, "run")
         self.keys(run, "run", ("step", "start", "stop", "tolerance", "step_timeout", "algorithm",
                                "order"))
         step = self.number(run, "run", "step", 1e-3, positive=True)
-        if short and "reference" not in data:
-            raise self.error("reference", "the [reference] table is required")
         reference, signal = None, None
         if "reference" in data:
             reference = self.reference(self.table(data, "reference"))
@@ -231,8 +206,8 @@ class _Parser:
         fmus: list[FmuConfig] = []
         sources: list[SourceConfig] = []
         start = (float(signal.x[0]), float(signal.y[0])) if signal is not None else None
-        if short:
-            fmus, sources = self.short_form(data, start)
+        if short is not None:
+            fmus, sources = short.expand(self, data, start)
         for fmu_name, table in self.table(data, "fmu").items():
             if any(f.name == fmu_name for f in fmus):
                 raise self.error(f"fmu.{fmu_name}", f"the FMU {fmu_name!r} is also given by the "
@@ -343,51 +318,19 @@ class _Parser:
                                           f"(the FMUs: {', '.join(names)}), got {order!r}")
         return tuple(next(f for f in fmus if f.name == n) for n in order)
 
-    # -- the manipulator's short form ---------------------------------------------------
-    def short_form(self, data: Mapping[str, Any], start: tuple[float, float] | None
-                   ) -> tuple[list[FmuConfig], list[SourceConfig]]:
-        """[feedforward], [controller], [plant] as built-in FMUs in that order; without a
-        feedforward, its forces are constant zero sources."""
-        plant = self.table(data, "plant")
-        variant = self.choice(plant, "plant", "variant", tuple(VARIANTS), "nominal")
-        fmus: list[FmuConfig] = []
-        sources: list[SourceConfig] = []
-        ff = self.table(data, "feedforward")
-        if ff.get("kind") in RENAMED_KINDS:
-            new = RENAMED_KINDS[ff["kind"]]
-            warnings.warn(f"{self.origin}: [feedforward] kind = {ff['kind']!r} is deprecated, "
-                          f"write kind = {new!r} (the same feedforward: the built-in "
-                          f"{new}-feedforward)",
-                          FutureWarning, stacklevel=2)
-            ff = {**ff, "kind": new}
-        kind = self.choice(ff, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
-        self.keys(ff, "feedforward", {"learned": ("kind", "model", "mode"),
-                                      "rigid-body": ("kind", "identified")}.get(kind, ("kind",)))
-        given: tuple[str, ...] = ()  # the controller's feedforward inputs a feedforward FMU feeds
-        if kind != "none":
-            options = self.feedforward_options(ff, "feedforward")
-            fmus.append(FmuConfig("feedforward", builtin=f"{kind}-feedforward", options=options))
-            given = names(FEEDFORWARD_FORCES)
-            if "model" in options:  # a learned model's card says what it feeds
-                from flexff.controllers.model_card import read_card  # onnx: learned runs only
-
-                given = tuple(read_card(options["model"]).output_signals)
-        currents = given == names(CURRENT_FEEDFORWARD)  # a current-level model (model_card)
-        zeros = [n for n in names(FEEDFORWARD_FORCES, CURRENT_FEEDFORWARD if currents else ())
-                 if n not in given]
-        if zeros:
-            sources.append(SourceConfig("constant", dict.fromkeys(zeros, 0.0)))
-        controller = self.table(data, "controller")
-        self.keys(controller, "controller", ("crossover_hz", "notch", "encoders"))
-        fmus.append(FmuConfig("controller", builtin="controller", options={
-            "variant": variant, **self.controller_options(controller, "controller"),
-            **({"current_feedforward": True} if currents else {})}))
-        self.keys(plant, "plant", ("variant", "seed", *self.plant_parameter_names(variant)))
-        values = {k: v for k, v in plant.items() if k not in ("variant", "seed")}
-        fmus.append(FmuConfig("plant", builtin="plant", options={
-            "variant": variant, **self.seed(plant, "plant")},
-            parameters=self.plant_parameters(values, variant, "plant", start or (0.0, 0.0))))
-        return fmus, sources
+    # -- a machine's short form ----------------------------------------------------------
+    def short_form(self, data: Mapping[str, Any], forms: tuple[ShortForm, ...]
+                   ) -> ShortForm | None:
+        """The short form whose tables `data` has (cosim.plugins), else, without [fmu.*]
+        tables, the default one; None: the general form alone."""
+        given = [f for f in forms if any(t in data for t in f.tables)]
+        if len(given) > 1:
+            raise self.error(", ".join(t for f in given[1:] for t in f.tables if t in data),
+                             f"tables of two machines' short forms ({given[0].name}, "
+                             f"{given[1].name}): write one of them in the general form")
+        if given or "fmu" in data:
+            return given[0] if given else None
+        return next((f for f in forms if f.default), None)
 
     # -- [fmu.NAME] ---------------------------------------------------------------------
     def fmu(self, name: str, t: Any, start: tuple[float, float] | None) -> FmuConfig:
@@ -396,11 +339,9 @@ class _Parser:
             raise self.error(where, f"expected a table [fmu.{name}], got {t!r}")
         if "." in name or not name:
             raise self.error(where, "an FMU name must not be empty or contain a dot")
-        builtins = {**BUILTIN_OPTIONS, **({n: b.options for n, b in registered().items()}
-                                          if "path" not in t else {})}
         if ("path" in t) == ("builtin" in t):
             raise self.error(where, "give either path = \"file.fmu\" or builtin = one of "
-                                    f"{', '.join(builtins)}")
+                                    f"{', '.join(registered())}")
         unconnected = self.choice(t, where, "unconnected", UNCONNECTED, "error")
         parameters = t.get("parameters", {})
         if not isinstance(parameters, dict):
@@ -414,29 +355,16 @@ class _Parser:
                                                                              where),
                              unconnected=unconnected, tolerance=self.tolerance(t, where),
                              isolate=self.isolate(t, where), solver=self.solver(t, where, path))
-        builtin = self.choice(t, where, "builtin", tuple(builtins), None)
+        builtins = registered()
+        builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
-                             *builtins[builtin]))
-        options: dict[str, Any] = {}
-        if builtin not in BUILTIN_OPTIONS:  # a registered one (cosim.builtins)
-            options = {k: t[k] for k in builtins[builtin] if k in t}
-        elif builtin == "plant":
-            variant = self.choice(t, where, "variant", tuple(VARIANTS), "nominal")
-            options = {"variant": variant, **self.seed(t, where)}
-            for key in parameters:
-                if key not in self.plant_parameter_names(variant):
-                    raise self.error(f"{where}.parameters.{key}", "unknown plant parameter "
-                                     f"(known: {', '.join(self.plant_parameter_names(variant))})")
-            parameters = self.plant_parameters(parameters, variant, f"{where}.parameters",
-                                               start or (0.0, 0.0))
-        elif builtin == "controller":
-            options = {"variant": self.choice(t, where, "variant", tuple(VARIANTS), "nominal"),
-                       **self.controller_options(t, where)}
-        elif builtin in ("learned-feedforward", "rigid-body-feedforward"):
-            options = self.feedforward_options(t, where)
-        return FmuConfig(name, builtin=builtin, options=options, parameters=dict(parameters),
-                         unconnected=unconnected, tolerance=self.tolerance(t, where),
-                         isolate=self.isolate(t, where))
+                             *builtin.keys))
+        options = checked_options(self, builtin, t, where)
+        if builtin.parameters is not None:
+            parameters = builtin.parameters(self, options, parameters, where, start)
+        return FmuConfig(name, builtin=builtin.name, options=options,
+                         parameters=dict(parameters), unconnected=unconnected,
+                         tolerance=self.tolerance(t, where), isolate=self.isolate(t, where))
 
     def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str
                        ) -> dict[str, Any]:
@@ -458,89 +386,6 @@ class _Parser:
                 raise self.error(f"{where}.parameters.{key}", f"{v.type} variable: {error}"
                                  ) from None
         return checked
-
-    def plant_parameter_names(self, variant: str) -> tuple[str, ...]:
-        from flexff.plant.system import plant_parameters  # CasADi: manipulator runs only
-
-        return (*(p.name for p in plant_parameters(variant)), *PLANT_EXTRA)
-
-    def plant_parameters(self, t: Mapping[str, Any], variant: str, where: str,
-                         start: tuple[float, float]) -> dict[str, float]:
-        """Plant parameter values, checked physically; x_start, y_start default to `start`."""
-        from flexff.plant.kinematics import check_workspace
-        from flexff.plant.system import plant_parameters
-
-        known = {p.name: p for p in plant_parameters(variant)}
-        values = dict(zip(START_PARAMETERS, start))
-        for key in t:
-            positive = key in PLANT_EXTRA or known[key].positive
-            values[key] = self.number(t, where, key, None, positive=positive)
-        physical = {k: v for k, v in values.items() if k not in (*START_PARAMETERS,
-                                                                 *PLANT_EXTRA)}
-        try:
-            VARIANTS[variant].parameters.with_values(**physical)
-            check_workspace(VARIANTS[variant].parameters, values["x_start"], values["y_start"],
-                            "the start position (x_start, y_start)")
-        except ValueError as error:
-            keys = ", ".join(f"{where}.{k}" for k in t) or where
-            raise self.error(keys, str(error)) from None
-        return values
-
-    def seed(self, t: Mapping[str, Any], where: str) -> dict[str, int]:
-        seed = self.integer(t, where, "seed", None)
-        if seed is None:
-            return {}
-        if not -2**31 <= seed < 2**31:
-            raise self.error(f"{where}.seed", f"{seed} does not fit a 32-bit FMI Integer")
-        return {"seed": seed}
-
-    def controller_options(self, t: Mapping[str, Any], where: str) -> dict[str, Any]:
-        from flexff.controllers.allocation import ENCODER_CHOICES
-
-        options: dict[str, Any] = {}
-        if "notch" in t:
-            notch = t["notch"]
-            options["notch"] = notch if isinstance(notch, bool) else self.number(
-                t, where, "notch", None, positive=True)
-        encoders = self.integer(t, where, "encoders", 2)
-        if encoders not in ENCODER_CHOICES:
-            raise self.error(f"{where}.encoders", f"must be one of {ENCODER_CHOICES}, got "
-                                                  f"{encoders}")
-        options["encoders"] = encoders
-        if t.get("current_feedforward", False) is not False:  # only an added input is written
-            if t["current_feedforward"] is not True:
-                raise self.error(f"{where}.current_feedforward", f"expected true or false, got "
-                                 f"{t['current_feedforward']!r}")
-            options["current_feedforward"] = True
-        if "crossover_hz" in t:
-            options["crossover_hz"] = self.number(t, where, "crossover_hz", None, positive=True)
-        return options
-
-    def feedforward_options(self, t: Mapping[str, Any], where: str) -> dict[str, Any]:
-        """A learned feedforward's model and mode; the rigid-body one's identified
-        parameters, if any."""
-        from flexff.controllers.identified import read_identified  # manipulator runs only
-        from flexff.controllers.model_card import read_card  # onnx: learned runs only
-
-        if "model" not in t and t.get("builtin", t.get("kind")) in ("rigid-body",
-                                                                      "rigid-body-feedforward"):
-            if "identified" not in t:
-                return {}
-            identified = self.path(t, where, "identified")
-            try:
-                read_identified(identified)
-            except InputError as exc:
-                raise self.error(f"{where}.identified", str(exc)) from None
-            return {"identified": identified}
-        model = self.path(t, where, "model")
-        if model.suffix.lower() != ".onnx":
-            raise self.error(f"{where}.model", f"{model} is not an .onnx file")
-        try:
-            read_card(model)
-        except ValueError as exc:
-            raise self.error(f"{where}.model", str(exc)) from None
-        return {"model": model,
-                "mode": self.choice(t, where, "mode", FEEDFORWARD_MODES, "step")}
 
     # -- connections, sources, record ---------------------------------------------------
     def connections(self, specs: Any, fmus: Sequence[FmuConfig]
@@ -623,11 +468,14 @@ class _Parser:
 
     # -- [reference] ----------------------------------------------------------------------
     def reference(self, t: Mapping[str, Any]) -> ReferenceConfig:
-        kind = self.choice(t, "reference", "kind", REFERENCE_KINDS, None)
+        kind = self.choice(t, "reference", "kind", reference_kind_names(), None)
         r = "reference"
-        if kind in ("thesis-eval", "thesis-hardware-eval"):
-            self.keys(t, r, ("kind",))
-            return ReferenceConfig(kind)
+        machine_kind = reference_kinds().get(kind)
+        if machine_kind is not None:  # a machine package's (cosim.plugins)
+            if machine_kind.check is None:
+                self.keys(t, r, ("kind",))
+                return ReferenceConfig(kind)
+            return ReferenceConfig(kind, machine_kind.check(self, t))
         if kind == "csv":
             self.keys(t, r, ("kind", "path", "smoothing_window"))
             return ReferenceConfig(kind, {
@@ -636,10 +484,8 @@ class _Parser:
         if kind == "segments":
             self.keys(t, r, ("kind", "start", "segments"))
             start = self.point(t, r, "start", (0.0, 0.0))
-            from flexff.plant.kinematics import check_workspace
-
             try:
-                check_workspace(NOMINAL, *start, "the start point")
+                check_workspace(*start, "the start point")
             except ValueError as error:
                 raise self.error("reference.start", str(error)) from None
             return ReferenceConfig(kind, {"start": start, "segments": self.segments(t)})
@@ -687,76 +533,3 @@ class _Parser:
             values["duration"] = self.number(spec, where, "duration", None, positive=True)
             checked.append(values)
         return tuple(checked)
-
-    # -- values -------------------------------------------------------------------------
-    def table(self, data: Mapping[str, Any], name: str) -> Mapping[str, Any]:
-        table = data.get(name, {})
-        if not isinstance(table, dict):
-            raise self.error(name, f"expected a table [{name}], got {table!r}")
-        return table
-
-    def keys(self, t: Mapping[str, Any], table: str, allowed: Sequence[str]) -> None:
-        for key in t:
-            if key not in allowed:
-                raise self.error(f"{table}.{key}", f"unknown key (known in [{table}]: "
-                                                   f"{', '.join(allowed)})")
-
-    def number(self, t: Mapping[str, Any], table: str, key: str, default: float | None,
-               positive: bool = False) -> float:
-        if key not in t:
-            if default is None:
-                raise self.error(f"{table}.{key}", "required")
-            return default
-        value = t[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.error(f"{table}.{key}", f"expected a number, got {value!r} "
-                                               f"({type(value).__name__})")
-        if not math.isfinite(value) or (positive and value <= 0):
-            raise self.error(f"{table}.{key}", f"must be {'positive and ' if positive else ''}"
-                                               f"finite, got {value!r}")
-        return float(value)
-
-    def integer(self, t: Mapping[str, Any], table: str, key: str, default: int | None) -> Any:
-        value = t.get(key, default)
-        if key in t and (isinstance(value, bool) or not isinstance(value, int)):
-            raise self.error(f"{table}.{key}", f"expected an integer, got {value!r} "
-                                               f"({type(value).__name__})")
-        return value
-
-    def choice(self, t: Mapping[str, Any], table: str, key: str, options: tuple[str, ...],
-               default: str | None) -> str:
-        value = t.get(key, default)
-        if value is None:
-            raise self.error(f"{table}.{key}", f"required: one of {', '.join(options)}")
-        if value not in options:
-            raise self.error(f"{table}.{key}", f"unknown {key} {value!r}: choose one of "
-                                               f"{', '.join(options)}")
-        return str(value)
-
-    def path(self, t: Mapping[str, Any], table: str, key: str) -> Path:
-        value = t.get(key)
-        if not isinstance(value, str) or not value:
-            raise self.error(f"{table}.{key}", f"expected a file path, got {value!r}")
-        path = (self.base / value).resolve()
-        if not path.is_file():
-            raise self.error(f"{table}.{key}", f"no such file: {path}")
-        return path
-
-    def point(self, t: Mapping[str, Any], table: str, key: str,
-              default: tuple[float, float] | None) -> tuple[float, float]:
-        if key not in t and default is None:
-            raise self.error(f"{table}.{key}", "required: [x, y] in m")
-        value = t.get(key, list(default or ()))
-        if not (isinstance(value, list) and len(value) == 2 and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                for v in value)):
-            raise self.error(f"{table}.{key}", f"expected [x, y] in m, got {value!r}")
-        return float(value[0]), float(value[1])
-
-    def points(self, t: Mapping[str, Any], table: str, key: str, minimum: int = 3
-               ) -> tuple[tuple[float, float], ...]:
-        value = t.get(key)
-        if not isinstance(value, list) or len(value) < minimum:
-            raise self.error(f"{table}.{key}", f"expected at least {minimum} [x, y] points, got "
-                                               f"{value!r}")
-        return tuple(self.point({key: v}, table, key, (0.0, 0.0)) for v in value)

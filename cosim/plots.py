@@ -3,8 +3,9 @@
   path.png    the true x-y path against the reference
   error.png   tracking error e = reference - true position over time, per axis
   forces.png  feedback, feedforward and total end-effector force over time, per axis
-  signals.png every recorded float signal over time, for a run without the manipulator's
-              signals (at most MAX_PANELS of them)
+  signals.png every recorded float signal over time, for a run without those signals
+              (PLOT_SIGNALS: per axis x, y the reference, the true position, the feedback and
+              the feedforward force; at most MAX_PANELS of them)
   tet.png     a paced run's task execution time per step, each FMU's share, the period and
               the overruns (drawn from a bounded trace, cosim.timing.TetTrace)
 
@@ -25,21 +26,16 @@ import numpy as np
 from flexff.cosim.decimate import Envelope, Strided
 from flexff.cosim.recording import Recording, atomic_write, signal_name
 from flexff.cosim.timing import US, StepTiming, StreamedTiming
-from flexff.plant.signals import (
-    FEEDBACK_FORCES,
-    FEEDFORWARD_FORCES,
-    POSITION_REFERENCE,
-    TRUE_POSITION,
-    names,
-)
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-PLOT_SIGNALS = names(POSITION_REFERENCE, TRUE_POSITION, FEEDBACK_FORCES, FEEDFORWARD_FORCES)
+AXES = ("x", "y")
+# a tracking loop's signals per axis: reference, true position, feedback and feedforward force
+PATH_SIGNALS = (*(f"{a}_ref" for a in AXES), *AXES)
+PLOT_SIGNALS = (*PATH_SIGNALS, *(f"F{a}_fb" for a in AXES), *(f"F{a}_ff" for a in AXES))
 MAX_PANELS = 8
 MM = 1e3
-AXES = ("x", "y")
 
 
 def _figure(**options: Any) -> Figure:
@@ -57,7 +53,7 @@ def save_figure(figure: Figure, path: Path) -> Path:
 
 class RunPlots:
     """The plots of one run of `points` points `step` apart, fed chunk by chunk (`add`) with
-    the recorded columns by name: the manipulator's (path, error, forces) where `recorded` has
+    the recorded columns by name: path, error and forces where `recorded` has
     PLOT_SIGNALS, else one panel per float signal."""
 
     def __init__(self, recorded: Sequence[str], points: int, step: float) -> None:
@@ -66,8 +62,7 @@ class RunPlots:
             self.columns = {s: signal_name(recorded, s) for s in PLOT_SIGNALS}
         except KeyError:
             self.columns = {}
-        self.path = {s: Strided(points) for s in names(POSITION_REFERENCE, TRUE_POSITION)
-                     } if self.columns else {}
+        self.path = {s: Strided(points) for s in PATH_SIGNALS} if self.columns else {}
         self.series: dict[str, Envelope] = {}
         self.panels: list[str] | None = None if not self.columns else []
 
@@ -96,7 +91,7 @@ class RunPlots:
 
     def write(self, folder: str | Path) -> list[Path]:
         """Write path.png, error.png and forces.png into `folder` (signals.png for a run
-        without the manipulator's signals); return their paths."""
+        without PLOT_SIGNALS); return their paths."""
         folder = Path(folder)
         if not self.columns:
             return [self._signals(folder / "signals.png")]

@@ -6,8 +6,9 @@ and periodic cubic splines through given points. `Chain` joins segments end to s
 must be continuous) and `sample` evaluates a path on the communication grid. Tables from CSV
 files are resampled onto the grid, with missing derivatives from a Savitzky-Golay filter.
 
-Every segment checks its arguments and that it stays inside the nominal workspace, and raises
-InputError naming the offending point otherwise. Sampling checks first that the samples fit
+Every segment checks its arguments and that it stays inside the workspace (the checks the
+machine packages register, cosim.plugins), and raises InputError naming the offending point
+otherwise. Sampling checks first that the samples fit
 into the available memory (MemoryNeeded, an InputError, says how much they need).
 """
 
@@ -26,23 +27,11 @@ import numpy as np
 
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.memory import check_memory
+from flexff.cosim.plugins import check_workspace, reference_kinds
 from flexff.fmu.errors import InputError
-from flexff.plant.parameters import NOMINAL
-from flexff.plant.signals import REFERENCE, names
 
 if TYPE_CHECKING:  # SciPy and CasADi load with the references that use them
     from scipy.interpolate import CubicSpline
-
-# evaluation reference of the thesis (section 5.7)
-THESIS_LINE_END = (0.0098, -0.0098)
-THESIS_LINE_TIME = 3.0
-THESIS_RADIUS = 0.014
-THESIS_TURNS = 11.5
-THESIS_CIRCLE_TIME = 12.0
-# evaluation reference of the thesis on the real machine (section 6.6)
-THESIS_HW_LINE_END = (0.0082, 0.0082)
-THESIS_HW_LINE_TIME, THESIS_HW_REST, THESIS_HW_CIRCLE_TIME, THESIS_HW_END = 21.0, 1.0, 75.0, 3.0
-THESIS_HW_TURNS = 9.0
 
 JOIN_TOLERANCE = 1e-9  # m: largest position jump accepted between chained segments
 SAVGOL_ORDER = 3  # the polynomial a CSV reference's derivatives are fitted with (read_csv)
@@ -61,7 +50,8 @@ class Reference:
     ax: np.ndarray
     ay: np.ndarray
 
-    SIGNALS: ClassVar[tuple[str, ...]] = names(REFERENCE)
+    SIGNALS: ClassVar[tuple[str, ...]] = ("x_ref", "y_ref", "vx_ref", "vy_ref", "ax_ref",
+                                          "ay_ref")
 
     def __post_init__(self) -> None:
         arrays = self._arrays()
@@ -110,11 +100,9 @@ class Segment:
 
     def _validate(self) -> None:
         """Positive finite duration and, on a dense grid, the whole path in the workspace."""
-        from flexff.plant.kinematics import check_workspace
-
         _positive("duration", self.duration, "s")
         dense = self.evaluate(np.linspace(0.0, self.duration, max(2001, int(self.duration * 2000))))
-        check_workspace(NOMINAL, dense[0], dense[1], f"{type(self).__name__} point")
+        check_workspace(dense[0], dense[1], f"{type(self).__name__} point")
 
 
 @dataclass(frozen=True)
@@ -261,46 +249,6 @@ def sample(path: Segment, step: float = 1e-3) -> Reference:
     return Reference(t, *path.evaluate(t))
 
 
-def thesis_evaluation_path() -> Chain:
-    """The evaluation reference of the thesis (sec. 5.7), 15 s.
-
-    A skew-sine line from the centre to (0.0098, -0.0098) m in 3 s, then 11.5 counter-clockwise
-    turns of radius 0.014 m in 12 s. The line ends 0.01386 m from the centre, not 0.014, so the
-    circle's centre is shifted by 0.1 mm along the -45 degree diagonal to start exactly there:
-    the radius and the line's end point stay as given, and the path stays continuous.
-    """
-    end = np.array(THESIS_LINE_END)
-    start_angle = math.atan2(end[1], end[0])
-    centre = end - THESIS_RADIUS * np.array([math.cos(start_angle), math.sin(start_angle)])
-    return Chain((Line((0.0, 0.0), THESIS_LINE_END, THESIS_LINE_TIME),
-                  Circle(tuple(centre), THESIS_RADIUS, start_angle, THESIS_TURNS,
-                         THESIS_CIRCLE_TIME)))
-
-
-def thesis_evaluation(step: float = 1e-3) -> Reference:
-    """The thesis's evaluation reference sampled at `step`."""
-    return sample(thesis_evaluation_path(), step)
-
-
-def thesis_hardware_evaluation_path() -> Chain:
-    """The thesis's evaluation reference on the real machine (sec. 6.6, Table 6.2), 100 s.
-
-    A skew-sine line from the centre to (8.2, 8.2) mm in 21 s, 1 s at rest, 9 counter-clockwise
-    turns about the centre in 75 s (0.12 Hz on average; the radius, 11.6 mm, is the line end's
-    distance from the centre), 3 s at rest.
-    """
-    end = THESIS_HW_LINE_END
-    return Chain((Line((0.0, 0.0), end, THESIS_HW_LINE_TIME), Hold(end, THESIS_HW_REST),
-                  Circle((0.0, 0.0), math.hypot(*end), math.atan2(end[1], end[0]),
-                         THESIS_HW_TURNS, THESIS_HW_CIRCLE_TIME),
-                  Hold(end, THESIS_HW_END)))
-
-
-def thesis_hardware_evaluation(step: float = 1e-3) -> Reference:
-    """The thesis's evaluation reference on the real machine sampled at `step`."""
-    return sample(thesis_hardware_evaluation_path(), step)
-
-
 def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.025) -> Reference:
     """A reference from a CSV table with columns time (or t), x_ref, y_ref (and optionally
     vx_ref, vy_ref, ax_ref, ay_ref; cosim.csv_text's time table), resampled onto the grid t0,
@@ -312,13 +260,11 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
     from scipy.interpolate import CubicSpline
     from scipy.signal import savgol_filter
 
-    from flexff.plant.kinematics import check_workspace
-
     _positive("step", step, "s")
     _positive("smoothing_window", smoothing_window, "s")
     table = read_time_table(Path(path), ("x_ref", "y_ref"), Reference.SIGNALS[2:])
     columns, t = table.columns, table.time
-    check_workspace(NOMINAL, columns["x_ref"], columns["y_ref"], f"{path}: point")
+    check_workspace(columns["x_ref"], columns["y_ref"], f"{path}: point")
     n = math.floor((t[-1] - t[0]) / step + 1e-9) + 1
     check_memory(SAMPLED_ARRAYS * n, f"{path}: resampling the {t[-1] - t[0]:g} s table every "
                                      f"{step:g} s")
@@ -337,7 +283,7 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
             if name not in resampled:
                 resampled[name] = savgol_filter(resampled[f"{axis}_ref"], window, SAVGOL_ORDER,
                                                 deriv=order, delta=step)
-    check_workspace(NOMINAL, resampled["x_ref"], resampled["y_ref"],
+    check_workspace(resampled["x_ref"], resampled["y_ref"],
                     f"{path}: resampled point")
     return Reference(grid, *(resampled[name] for name in Reference.SIGNALS))
 
@@ -361,8 +307,12 @@ def _finite_point(name: str, point: Sequence[float]) -> None:
         raise InputError(f"{name} must be a finite (x, y) pair in m, got {point!r}")
 
 
-REFERENCE_KINDS = ("thesis-eval", "thesis-hardware-eval", "circle", "line-circle", "spline",
-                   "segments", "csv")
+GENERIC_KINDS = ("circle", "line-circle", "spline", "segments", "csv")
+
+
+def reference_kind_names() -> tuple[str, ...]:
+    """Every [reference] kind: the machine packages' (cosim.plugins), then GENERIC_KINDS."""
+    return (*reference_kinds(), *GENERIC_KINDS)
 
 
 def build_reference(kind: str, options: Mapping[str, Any], step: float) -> Reference:
@@ -392,10 +342,9 @@ _SAMPLED: OrderedDict[str, Reference] = OrderedDict()
 
 def _built(kind: str, options: Mapping[str, Any], step: float) -> Reference:
     o = options
-    if kind == "thesis-eval":
-        return thesis_evaluation(step)
-    if kind == "thesis-hardware-eval":
-        return thesis_hardware_evaluation(step)
+    registered = reference_kinds().get(kind)
+    if registered is not None:
+        return registered.build(options, step)
     if kind == "csv":
         ref = read_csv(o["path"], step, o["smoothing_window"])
         return Reference(ref.t - ref.t[0], ref.x, ref.y, ref.vx, ref.vy, ref.ax, ref.ay)

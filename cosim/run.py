@@ -2,11 +2,12 @@
 
 The folder gets signals.parquet (and signals.csv on request, see cosim.recording), written
 while the run runs, with every recorded signal named `fmu.output` (sources by their own
-names), and in a manipulator run the manipulator's signals under their short names as well;
-metrics.json (cosim.metrics: wall time and real-time
-factor, and the tracking errors where the run has a reference and a true position; with a
-learned feedforward also `feedforward_range`, where the reference leaves the model's training
-range); the plots (cosim.plots; by default in a manipulator run only, `[record] plot` says
+names), and in a manipulator run (one with a reference or a built-in FMU) the signals the
+machine packages name (cosim.plugins) under their short names as well; metrics.json
+(cosim.metrics: wall time and real-time factor, and the tracking errors where the run has a
+reference and a true position; and what its built-ins add, cosim.builtins: a learned
+feedforward's `feedforward_range`, where the reference leaves the model's training range);
+the plots (cosim.plots; by default in a manipulator run only, `[record] plot` says
 otherwise); and run.json, the checked configuration in the general form. The built-in FMUs are
 built into the fmu/ cache and loaded from a temporary copy.
 
@@ -31,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from flexff.cosim.builtins import registered
 from flexff.cosim.config import expanded, load_config
 from flexff.cosim.handover import Worker
 from flexff.cosim.master import CosimError, Master, Streamed
@@ -43,27 +45,13 @@ from flexff.cosim.metrics import (
     summary_metrics,
 )
 from flexff.cosim.plots import PLOT_SIGNALS, RunPlots, plot_tet
+from flexff.cosim.plugins import short_names
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import Recording, RecordWriter, atomic_write, signal_name
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ConfigError, RunConfig
 from flexff.cosim.timing import OverrunError, Pacing
-from flexff.plant.signals import (
-    CURRENTS,
-    ENCODERS,
-    FEEDBACK_FORCES,
-    FEEDFORWARD_FORCES,
-    REFERENCE,
-    TORQUES,
-    TRUE_POSITION,
-    TRUE_VELOCITY,
-    names,
-)
-
-# the manipulator's signals (plant.signals), kept under their short names in recordings
-MANIPULATOR_SIGNALS = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, ENCODERS,
-                            TRUE_POSITION, TRUE_VELOCITY, TORQUES)
 
 
 def load_run_config(path: str | Path) -> RunConfig:
@@ -202,20 +190,17 @@ def simulate_config(config: RunConfig, progress: bool | None = None) -> Recordin
         return simulate(resolve(config, folder), progress)
 
 
-def feedforward_range(scenario: Scenario) -> dict[str, Any] | None:
-    """Where the reference of a learned-feedforward run leaves the model's training range
-    (controllers.training_range): {"margin", "outside": [features, farthest first]}, or None
-    for a model exported without its range."""
-    from flexff.controllers.training_range import MARGIN, training_range_excess  # onnx, SciPy
-
-    learned = scenario.config.learned_feedforward
-    if learned is None:
-        raise ValueError("the run has no learned feedforward")
-    model = learned.options["model"]
-    excess = training_range_excess(model, scenario.reference(), scenario.step)
-    if excess is None:
-        return None
-    return {"margin": MARGIN, "outside": [dataclasses.asdict(e) for e in excess]}
+def builtin_metrics(scenario: Scenario) -> dict[str, Any]:
+    """The entries the run's built-ins add to metrics.json (cosim.builtins: a learned
+    feedforward's `feedforward_range`, where the reference leaves the model's training
+    range); the first FMU's where two give the same entry."""
+    metrics: dict[str, Any] = {}
+    for f in scenario.config.fmus:
+        hook = registered()[f.builtin].metrics if f.builtin else None
+        if hook is not None:
+            for key, value in hook(f, scenario.reference(), scenario.step).items():
+                metrics.setdefault(key, value)
+    return metrics
 
 
 def range_warning(metrics: dict[str, Any]) -> str | None:
@@ -236,11 +221,11 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
 
 def _kept(recorded: Sequence[str], config: RunConfig) -> dict[str, str]:
     """The record's columns, file name -> recorded name: the signals the configuration asked
-    for, and in a manipulator run (one with a reference or one of flexff's built-in FMUs) the
-    manipulator's short names beside their full ones."""
+    for, and in a manipulator run (one with a reference or a built-in FMU) the short names the
+    machine packages name (cosim.plugins.short_names) beside their full ones."""
     names = config.record.signals
     kept = {n: n for n in (recorded if names is None else names)}
-    for short in MANIPULATOR_SIGNALS if _manipulator(config) else ():
+    for short in short_names() if _manipulator(config) else ():
         if short in kept or (names is not None and not any(
                 n.partition(".")[2] == short for n in names)):
             continue
@@ -286,8 +271,7 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
         duration = (streamed.points - 1) * config.step
         metrics = summary_metrics(sink.tracking.metrics() if sink.tracking else {}, duration,
                                   streamed.wall_s, streamed.timing)
-        if config.learned_feedforward is not None:
-            metrics["feedforward_range"] = feedforward_range(scenario)
+        metrics |= builtin_metrics(scenario)
     sink.writer.close(csv=config.record.csv)
     if sink.plots is not None:
         sink.plots.write(out)

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from flexff.cosim.builtins import registered
+from flexff.cosim.builtins import OptionError, registered
 from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import check_signals
@@ -155,9 +155,11 @@ def _csv_series(source: SourceConfig, config: RunConfig, key: str) -> dict[str, 
 
 
 def _start_values(f: FmuConfig) -> dict[str, Any]:
+    """The FMU's parameters, and the options of a built-in that are start values too."""
     values = dict(f.parameters)
-    if f.builtin == "plant" and "seed" in f.options:
-        values["seed"] = f.options["seed"]
+    if f.builtin is not None:
+        options = f.options
+        values |= {k: options[k] for k in registered()[f.builtin].start_options if k in options}
     return values
 
 
@@ -172,50 +174,13 @@ def _fmu_file(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any], folde
 
 
 def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any]) -> System:
+    """The System of a built-in (cosim.builtins); its factory's InputError becomes a
+    ConfigError naming `fmu.NAME` (`fmu.NAME.option` for an OptionError)."""
     assert f.builtin is not None
-    other = registered().get(f.builtin)
-    if other is not None:  # a machine package's (cosim.builtins)
-        try:
-            return other.system(f.options, config.step)
-        except InputError as error:
-            raise ConfigError(config.origin, f"fmu.{f.name}", str(error)) from None
-    return _manipulator_system(f, config, sources)
-
-
-def _manipulator_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any]
-                        ) -> System:
-    from flexff.controllers.feedforward import rigid_body_feedforward_system
-    from flexff.controllers.identified import read_identified
-    from flexff.controllers.learned_feedforward import learned_feedforward_system
-    from flexff.plant.system import plant_system
-
-    o = f.options
-    if f.builtin == "plant":
-        return plant_system(o["variant"])
-    if f.builtin == "controller":
-        return controller_for(o, config.step)
-    if f.builtin == "rigid-body-feedforward":
-        identified = read_identified(o["identified"]) if "identified" in o else None
-        return rigid_body_feedforward_system(config.step, identified)
-    reference = None
-    if o["mode"] == "precomputed":
-        reference = {n: sources[n] for n in Reference.SIGNALS if n in sources}
-        if len(reference) != len(Reference.SIGNALS):
-            raise ConfigError(config.origin, f"fmu.{f.name}.mode", "the precomputed mode needs "
-                              "a [reference] to precompute the feedforward over")
-    return learned_feedforward_system(o["model"], config.step, reference, o["mode"] == "task")
-
-
-def controller_for(options: Mapping[str, Any], step: float) -> System:
-    """The feedback controller of a built-in controller's options, sampled at `step`."""
-    from flexff.controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
-
-    variant, crossover = options["variant"], options.get("crossover_hz")
-    notch, encoders = options.get("notch"), options.get("encoders", 2)
-    if notch is False and DEFAULTS[variant].notch:
-        # the variant's defaults would add the notch: design without it at its crossover
-        return controller_system("nominal", crossover or DEFAULTS[variant].crossover_hz, None,
-                                 encoders, step, options.get("current_feedforward", False))
-    notch_hz = parasitic_mode_hz() if notch is True else (notch or None)
-    return controller_system(variant, crossover, notch_hz, encoders, step,
-                             options.get("current_feedforward", False))
+    builtin = registered()[f.builtin]
+    try:
+        return builtin.system(f.options, config.step, sources)
+    except OptionError as error:
+        raise ConfigError(config.origin, f"fmu.{f.name}.{error.option}", str(error)) from None
+    except InputError as error:
+        raise ConfigError(config.origin, f"fmu.{f.name}", str(error)) from None

@@ -17,10 +17,10 @@ General form (SI units):
                    kind = "csv", path = "file.csv": a header `time,<name>,...`, one source
                    signal per column, linearly interpolated onto the step (held after its end)
   [fmu.NAME]       path = "file.fmu" (any FMI 2.0 or 3.0 co-simulation FMU, relative to the
-                   configuration) or builtin = "plant" | "controller" |
-                   "rigid-body-feedforward" | "learned-feedforward" with the built-in's options
-                   (BUILTIN_OPTIONS: the rigid-body one's `identified` names a file of
-                   identified parameters, `flexff identify`); parameters = {variable =
+                   configuration) or builtin = a registered built-in's name with its options
+                   (cosim.builtins; the manipulator's plant, controller,
+                   rigid-body-feedforward and learned-feedforward are documented in
+                   controllers.manipulator); parameters = {variable =
                    value} (start values of parameters or inputs, checked against the FMU's
                    variables and types);
                    unconnected = "error" (default) | "start" (inputs left unconnected keep
@@ -41,8 +41,9 @@ General form (SI units):
                    its axes'
 
 Inputs without a [[connection]] take, by name, the output of the same name of another FMU or
-the source signal of that name (cosim.wiring). The manipulator's short form ([plant],
-[controller], [feedforward]) is shorthand for the FMUs feedforward -> controller -> plant.
+the source signal of that name (cosim.wiring). A machine package may register a short form
+(cosim.plugins): the manipulator's ([plant], [controller], [feedforward],
+controllers.short_form) is shorthand for the FMUs feedforward -> controller -> plant.
 """
 
 from __future__ import annotations
@@ -60,12 +61,6 @@ if TYPE_CHECKING:  # cosim.machine reads ConfigError from here
 ALGORITHMS = ("gauss-seidel", "jacobi")
 STEP_TOLERANCE = 1e-9  # relative: stop / step must be this close to a whole number
 UNCONNECTED = ("error", "start")
-BUILTIN_OPTIONS = {  # built-in FMU -> its options
-    "plant": ("variant", "seed"),
-    "controller": ("variant", "crossover_hz", "notch", "encoders", "current_feedforward"),
-    "rigid-body-feedforward": ("identified",),
-    "learned-feedforward": ("model", "mode"),
-}
 SOURCE_KINDS = ("constant", "csv")
 
 
@@ -93,7 +88,7 @@ class ConfigError(InputError):
 class ReferenceConfig:
     """The reference's kind and its checked keys (paths absolute)."""
 
-    kind: str = "thesis-eval"
+    kind: str
     options: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -169,7 +164,3 @@ class RunConfig:
     def builtin(self, kind: str) -> FmuConfig | None:
         """The first FMU that is the built-in `kind`, or None."""
         return next((f for f in self.fmus if f.builtin == kind), None)
-
-    @property
-    def learned_feedforward(self) -> FmuConfig | None:
-        return self.builtin("learned-feedforward")

@@ -15,7 +15,6 @@ from flexff.controllers.feedback import HOME_ANGLES, INPUTS, controller_system
 from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.controllers.model_card import ModelCard, read_card
 from flexff.cosim.config import parse_config
-from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import resolve
 from flexff.fmu.build import build_fmu
@@ -33,6 +32,7 @@ from flexff.learning.loop import default_loop, with_feedforward
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.threads import torch_threads
 from flexff.learning.train import train
+from flexff.plant.references import thesis_evaluation
 from flexff.plant.signals import CURRENT_FEEDFORWARD, names
 from tests.controllers.test_learned_feedforward import STEPS, independent_forces
 from tests.runners import run_fmu

@@ -17,7 +17,6 @@ from flexff.controllers.features import feature_names, reference_features
 from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.controllers.training_range import MARGIN, RangeExcess
 from flexff.cosim.config import config_examples, parse_config
-from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.run import range_warning, run_config, simulate
 from flexff.cosim.scenario import resolve
 from flexff.fmu.build import build_fmu
@@ -28,6 +27,7 @@ from flexff.learning.rigid import rigid_forces
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.threads import torch_threads
 from flexff.learning.train import train
+from flexff.plant.references import thesis_evaluation
 from tests.fmu.test_network import running_sum_graph
 from tests.fmu_toys import LoggedSlave, status_of
 from tests.runners import run_fmu, run_fmu_libcosim

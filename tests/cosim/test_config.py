@@ -6,10 +6,10 @@ import json
 import pytest
 
 from flexff.controllers.feedback import parasitic_mode_hz
+from flexff.controllers.manipulator import controller_for
 from flexff.cosim.config import ConfigError, config_examples, load_config, parse_config
-from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.run import run_config
-from flexff.cosim.scenario import controller_for
+from flexff.plant.references import thesis_evaluation
 
 GOOD = """
 [run]

@@ -14,11 +14,11 @@ import pytest
 from flexff.cosim.libcosim import run_libcosim
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.metrics import error_norms
-from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.scenario import reference_samples
 from flexff.cosim.wiring import SOURCE, Port, wire
 from flexff.fmu.fmpy_instance import FmpyInstance
 from flexff.fmu.importer import read_fmu
+from flexff.plant.references import thesis_evaluation
 
 STEP, STEPS = 1e-3, 15000
 NANOSECONDS = 1_000_000

@@ -7,10 +7,10 @@ import pytest
 from flexff.cosim.floor import run_c_loop
 from flexff.cosim.master import CosimError, Master, ResolvedFmu
 from flexff.cosim.recording import chunk_rows
-from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.scenario import reference_samples
 from flexff.cosim.wiring import SOURCE, Port, wire
 from flexff.fmu.importer import read_fmu
+from flexff.plant.references import thesis_evaluation
 from tests.helpers import REFERENCE_FMUS
 from tests.loops import STEP, loop_systems, monolithic
 

@@ -16,9 +16,8 @@ from flexff.cosim.references import (
     Spline,
     read_csv,
     sample,
-    thesis_evaluation,
-    thesis_evaluation_path,
 )
+from flexff.plant.references import thesis_evaluation, thesis_evaluation_path
 
 STEP = 1e-3
 

@@ -20,7 +20,6 @@ import flexff
 from flexff.cli import main
 from flexff.cosim.config import config_examples
 from flexff.cosim.recording import load_recording
-from flexff.cosim.references import thesis_evaluation
 from flexff.fmu.importer import read_fmu
 from flexff.fmu.validation import validate_fmu
 from flexff.learning import collect
@@ -28,6 +27,7 @@ from flexff.learning.dataset import MANIFEST, REFERENCE_SIGNALS, load_dataset
 from flexff.learning.export import export
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.train import train
+from flexff.plant.references import thesis_evaluation
 from tests.controllers.test_learned_feedforward import independent_forces
 from tests.cosim.test_ssp import write_config
 from tests.runners import run_fmu

@@ -14,7 +14,6 @@ from flexff.controllers.features import nominal_model
 from flexff.controllers.feedforward import rigid_body_feedforward_system, rigid_body_force
 from flexff.controllers.identified import read_identified
 from flexff.cosim.config import parse_config
-from flexff.cosim.references import thesis_evaluation
 from flexff.cosim.run import run_config
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
@@ -34,6 +33,7 @@ from flexff.learning.identify import (
 )
 from flexff.learning.synthetic import motion_trajectory, skew_sine_circle, synthetic_dataset
 from flexff.plant.parameters import HARDWARE, NOMINAL
+from flexff.plant.references import thesis_evaluation
 from tests.cosim.test_batch import SHORT  # a 1 s run of the manipulator
 from tests.helpers import workspace_points
 from tests.runners import run_fmu

@@ -1,0 +1,219 @@
+"""The thesis's manipulator as one machine of cosim, registered like any user's (entry point
+`manipulator` of `flexff.builtins`). Its built-in FMUs, `[fmu.NAME] builtin = ...`:
+
+  plant                   variant = "nominal" | "hardware", seed (encoder noise); `parameters`:
+                          plant FMU parameters by name (m_up1, noise_std, max_substep, ...),
+                          checked physically; x_start, y_start default to the reference's start
+  controller              variant, crossover_hz, notch (true / false / Hz), encoders (2 or 3),
+                          current_feedforward; defaults follow the variant (feedback.DEFAULTS)
+  rigid-body-feedforward  identified = "file.json" (`flexff identify`'s parameters)
+  learned-feedforward     model = "file.onnx", mode = "step" (default) | "task" |
+                          "precomputed"; metrics.json gains `feedforward_range`
+
+and its short form (controllers.short_form), the reference kinds thesis-eval and
+thesis-hardware-eval (plant.references), the nominal workspace and its signals' short names.
+CasADi and onnx load only where a plant, controller or model is checked or built.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+from flexff.cosim.builtins import Option, OptionError, register_builtin
+from flexff.cosim.plugins import (
+    ReferenceKind,
+    register_reference_kind,
+    register_short_form,
+    register_short_names,
+    register_workspace_check,
+)
+from flexff.cosim.references import Reference
+from flexff.plant.signals import (
+    CURRENTS,
+    ENCODERS,
+    FEEDBACK_FORCES,
+    FEEDFORWARD_FORCES,
+    REFERENCE,
+    TORQUES,
+    TRUE_POSITION,
+    TRUE_VELOCITY,
+    names,
+)
+from flexff.plant.variants import VARIANTS
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from flexff.cosim.checks import TableChecker
+    from flexff.cosim.schema import FmuConfig
+    from flexff.fmu.system import System
+
+FEEDFORWARD_MODES = ("step", "task", "precomputed")
+PLANT_EXTRA = ("max_substep",)  # plant FMU parameters beyond the System's own
+START_PARAMETERS = ("x_start", "y_start")
+# the manipulator's signals, kept under their short names in recordings (cosim.run)
+SHORT_NAMES = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, ENCODERS,
+                    TRUE_POSITION, TRUE_VELOCITY, TORQUES)
+
+
+def register() -> None:
+    """Register the manipulator's built-ins, short form, reference kinds, workspace and
+    signals (cosim.builtins, cosim.plugins)."""
+    from flexff.controllers.short_form import SHORT_FORM_TABLES, expand
+    from flexff.plant.references import thesis_evaluation, thesis_hardware_evaluation
+
+    variant = Option("variant", "choice", "nominal", choices=tuple(VARIANTS))
+    register_builtin("plant", (variant, Option("seed", "integer", check=_fmi_integer)),
+                     _plant, "the flexure manipulator's plant", parameters=_plant_parameters,
+                     start_options=("seed",))
+    register_builtin("controller", (
+        variant, Option("notch", "number-or-flag", positive=True),
+        Option("encoders", "integer", 2, check=_encoders), Option("current_feedforward", "flag"),
+        Option("crossover_hz", "number", positive=True)), controller_for,
+        "the manipulator's feedback controller (controllers.feedback)")
+    register_builtin("rigid-body-feedforward", (Option("identified", "file", check=_identified),),
+                     _rigid_body, "the nominal (or identified) rigid-body feedforward")
+    register_builtin("learned-feedforward", (
+        Option("model", "file", required=True, suffix=".onnx", check=_model_card),
+        Option("mode", "choice", "step", choices=FEEDFORWARD_MODES)), _learned,
+        "an exported learned model run by onnxruntime", reads_sources=True,
+        metrics=feedforward_range)
+    register_short_form("manipulator", SHORT_FORM_TABLES, expand, default=True)
+    register_reference_kind(ReferenceKind("thesis-eval", lambda _, step: thesis_evaluation(step)))
+    register_reference_kind(ReferenceKind(
+        "thesis-hardware-eval", lambda _, step: thesis_hardware_evaluation(step)))
+    register_workspace_check(_nominal_workspace)
+    register_short_names(SHORT_NAMES)
+
+
+# -- checks --------------------------------------------------------------------------------
+def _fmi_integer(seed: int) -> None:
+    if not -2**31 <= seed < 2**31:
+        raise ValueError(f"{seed} does not fit a 32-bit FMI Integer")
+
+
+def _encoders(encoders: int) -> None:
+    from flexff.controllers.allocation import ENCODER_CHOICES  # CasADi
+
+    if encoders not in ENCODER_CHOICES:
+        raise ValueError(f"must be one of {ENCODER_CHOICES}, got {encoders}")
+
+
+def _identified(path: Any) -> None:
+    from flexff.controllers.identified import read_identified
+
+    read_identified(path)
+
+
+def _model_card(path: Any) -> None:
+    from flexff.controllers.model_card import read_card  # onnx: learned runs only
+
+    read_card(path)
+
+
+def _nominal_workspace(x: Any, y: Any, what: str) -> None:
+    from flexff.plant.kinematics import check_workspace  # CasADi
+    from flexff.plant.parameters import NOMINAL
+
+    check_workspace(NOMINAL, x, y, what)
+
+
+def plant_parameter_names(variant: str) -> tuple[str, ...]:
+    """The plant FMU's parameters of `variant` a configuration may set."""
+    from flexff.plant.system import plant_parameters  # CasADi: manipulator runs only
+
+    return (*(p.name for p in plant_parameters(variant)), *PLANT_EXTRA)
+
+
+def checked_plant_parameters(checker: TableChecker, t: Mapping[str, Any], variant: str,
+                             where: str, start: tuple[float, float]) -> dict[str, float]:
+    """Plant parameter values, checked physically; x_start, y_start default to `start`."""
+    from flexff.plant.kinematics import check_workspace
+    from flexff.plant.system import plant_parameters
+
+    known = {p.name: p for p in plant_parameters(variant)}
+    values = dict(zip(START_PARAMETERS, start))
+    for key in t:
+        positive = key in PLANT_EXTRA or known[key].positive
+        values[key] = checker.number(t, where, key, None, positive=positive)
+    physical = {k: v for k, v in values.items() if k not in (*START_PARAMETERS, *PLANT_EXTRA)}
+    try:
+        VARIANTS[variant].parameters.with_values(**physical)
+        check_workspace(VARIANTS[variant].parameters, values["x_start"], values["y_start"],
+                        "the start position (x_start, y_start)")
+    except ValueError as error:
+        keys = ", ".join(f"{where}.{k}" for k in t) or where
+        raise checker.error(keys, str(error)) from None
+    return values
+
+
+def _plant_parameters(checker: TableChecker, options: Mapping[str, Any],
+                      parameters: Mapping[str, Any], where: str,
+                      start: tuple[float, float] | None) -> dict[str, Any]:
+    known = plant_parameter_names(options["variant"])
+    for key in parameters:
+        if key not in known:
+            raise checker.error(f"{where}.parameters.{key}", f"unknown plant parameter (known: "
+                                                            f"{', '.join(known)})")
+    return checked_plant_parameters(checker, parameters, options["variant"],
+                                    f"{where}.parameters", start or (0.0, 0.0))
+
+
+# -- factories -----------------------------------------------------------------------------
+def _plant(options: Mapping[str, Any], step: float) -> System:
+    from flexff.plant.system import plant_system
+
+    return plant_system(options["variant"])
+
+
+def controller_for(options: Mapping[str, Any], step: float) -> System:
+    """The feedback controller of a built-in controller's options, sampled at `step`."""
+    from flexff.controllers.feedback import DEFAULTS, controller_system, parasitic_mode_hz
+
+    variant, crossover = options["variant"], options.get("crossover_hz")
+    notch, encoders = options.get("notch"), options.get("encoders", 2)
+    if notch is False and DEFAULTS[variant].notch:
+        # the variant's defaults would add the notch: design without it at its crossover
+        return controller_system("nominal", crossover or DEFAULTS[variant].crossover_hz, None,
+                                 encoders, step, options.get("current_feedforward", False))
+    notch_hz = parasitic_mode_hz() if notch is True else (notch or None)
+    return controller_system(variant, crossover, notch_hz, encoders, step,
+                             options.get("current_feedforward", False))
+
+
+def _rigid_body(options: Mapping[str, Any], step: float) -> System:
+    from flexff.controllers.feedforward import rigid_body_feedforward_system
+    from flexff.controllers.identified import read_identified
+
+    identified = read_identified(options["identified"]) if "identified" in options else None
+    return rigid_body_feedforward_system(step, identified)
+
+
+def _learned(options: Mapping[str, Any], step: float, sources: Mapping[str, Any]) -> System:
+    from flexff.controllers.learned_feedforward import learned_feedforward_system
+
+    reference = None
+    if options["mode"] == "precomputed":
+        reference = {n: sources[n] for n in Reference.SIGNALS if n in sources}
+        if len(reference) != len(Reference.SIGNALS):
+            raise OptionError("mode", "the precomputed mode needs a [reference] to precompute "
+                                      "the feedforward over")
+    return learned_feedforward_system(options["model"], step, reference,
+                                      options["mode"] == "task")
+
+
+# -- metrics -------------------------------------------------------------------------------
+def feedforward_range(fmu: FmuConfig, reference: Mapping[str, np.ndarray], step: float
+                      ) -> dict[str, Any]:
+    """{"feedforward_range": where the reference leaves the learned model's training range}
+    (controllers.training_range): {"margin", "outside": [features, farthest first]}, or None
+    for a model exported without its range."""
+    from flexff.controllers.training_range import MARGIN, training_range_excess  # onnx, SciPy
+
+    excess = training_range_excess(fmu.options["model"], reference, step)
+    if excess is None:
+        return {"feedforward_range": None}
+    return {"feedforward_range": {"margin": MARGIN,
+                                  "outside": [dataclasses.asdict(e) for e in excess]}}

@@ -1,0 +1,85 @@
+"""The manipulator's short form of a run configuration, expanded to the general form's built-in
+FMUs feedforward -> controller -> plant (controllers.manipulator registers it):
+
+  [plant]        variant = "nominal" | "hardware", seed (encoder noise), and any plant FMU
+                 parameter by name (m_up1 = 0.25, noise_std, max_substep, x_start, ...);
+                 x_start, y_start default to the reference's first point
+  [controller]   crossover_hz, notch (true / false / Hz), encoders (2 or 3); defaults follow
+                 the plant variant (controllers.feedback.DEFAULTS)
+  [feedforward]  kind = "none" | "rigid-body" (optionally with identified = "file.json", the
+                 parameters `flexff identify` found in place of the nominal ones) | "learned"
+                 (with model = "file.onnx", an exported learned model, and mode = "step"
+                 (default) | "precomputed"); a current-level model (its card's outputs
+                 i1_ff..i3_ff) feeds the controller's current feedforward (controller option
+                 current_feedforward = true), and its force feedforward Fx_ff, Fy_ff gets zero
+It needs a [reference]; a configuration without [fmu.*] tables is this loop with its defaults.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+from flexff.controllers.manipulator import checked_plant_parameters, plant_parameter_names
+from flexff.cosim.builtins import checked_options, registered
+from flexff.cosim.checks import TableChecker
+from flexff.cosim.schema import FmuConfig, SourceConfig
+from flexff.plant.signals import CURRENT_FEEDFORWARD, FEEDFORWARD_FORCES, names
+from flexff.plant.variants import VARIANTS
+
+SHORT_FORM_TABLES = ("plant", "controller", "feedforward")
+FEEDFORWARD_KINDS = ("none", "rigid-body", "learned")  # kind K is the built-in "K-feedforward"
+RENAMED_KINDS = {"model": "rigid-body", "onnx": "learned"}  # old [feedforward] kind -> now
+
+
+def expand(checker: TableChecker, data: Mapping[str, Any], start: tuple[float, float] | None
+           ) -> tuple[list[FmuConfig], list[SourceConfig]]:
+    """[feedforward], [controller], [plant] as built-in FMUs in that order; without a
+    feedforward, its forces are constant zero sources."""
+    if start is None:
+        raise checker.error("reference", "the [reference] table is required")
+    builtins = registered()
+    plant = checker.table(data, "plant")
+    variant = checker.choice(plant, "plant", "variant", tuple(VARIANTS), "nominal")
+    fmus: list[FmuConfig] = []
+    sources: list[SourceConfig] = []
+    ff = checker.table(data, "feedforward")
+    if ff.get("kind") in RENAMED_KINDS:
+        new = RENAMED_KINDS[ff["kind"]]
+        warnings.warn(f"{checker.origin}: [feedforward] kind = {ff['kind']!r} is deprecated, "
+                      f"write kind = {new!r} (the same feedforward: the built-in "
+                      f"{new}-feedforward)", FutureWarning, stacklevel=3)
+        ff = {**ff, "kind": new}
+    kind = checker.choice(ff, "feedforward", "kind", FEEDFORWARD_KINDS, "none")
+    given: tuple[str, ...] = ()  # the controller's feedforward inputs a feedforward FMU feeds
+    if kind != "none":
+        feedforward = builtins[f"{kind}-feedforward"]
+        checker.keys(ff, "feedforward", ("kind", *feedforward.keys))
+        options = checked_options(checker, feedforward, ff, "feedforward")
+        fmus.append(FmuConfig("feedforward", builtin=feedforward.name, options=options))
+        given = names(FEEDFORWARD_FORCES)
+        if "model" in options:  # a learned model's card says what it feeds
+            from flexff.controllers.model_card import read_card  # onnx: learned runs only
+
+            given = tuple(read_card(options["model"]).output_signals)
+    else:
+        checker.keys(ff, "feedforward", ("kind",))
+    currents = given == names(CURRENT_FEEDFORWARD)  # a current-level model (model_card)
+    zeros = [n for n in names(FEEDFORWARD_FORCES, CURRENT_FEEDFORWARD if currents else ())
+             if n not in given]
+    if zeros:
+        sources.append(SourceConfig("constant", dict.fromkeys(zeros, 0.0)))
+    controller = checker.table(data, "controller")
+    checker.keys(controller, "controller", ("crossover_hz", "notch", "encoders"))
+    fmus.append(FmuConfig("controller", builtin="controller", options={
+        **checked_options(checker, builtins["controller"], {**controller, "variant": variant},
+                          "controller"),
+        **({"current_feedforward": True} if currents else {})}))
+    checker.keys(plant, "plant", ("variant", "seed", *plant_parameter_names(variant)))
+    values = {k: v for k, v in plant.items() if k not in ("variant", "seed")}
+    fmus.append(FmuConfig("plant", builtin="plant", options=checked_options(
+        checker, builtins["plant"], {k: plant[k] for k in ("seed",) if k in plant} | {
+            "variant": variant}, "plant"),
+        parameters=checked_plant_parameters(checker, values, variant, "plant", start)))
+    return fmus, sources

@@ -1,0 +1,111 @@
+"""What machine packages add to cosim beside built-in FMUs (cosim.builtins), and the loading of
+the entry points (group `flexff.builtins`) through which they register it all.
+
+  short forms       tables of their own (the manipulator's [plant], [controller],
+                    [feedforward]) that expand to FMUs and sources of the general form
+  reference kinds   [reference] kinds of a machine (the thesis's evaluation references)
+  workspace checks  where every reference must stay (refusing a point with ValueError)
+  short names       recorded signals a run keeps under their short names too (cosim.run)
+
+Each entry point names a function without arguments that calls the `register_*` functions;
+they are loaded once, the first time anything registered is looked up.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from flexff.cosim.checks import TableChecker
+    from flexff.cosim.references import Reference
+    from flexff.cosim.schema import FmuConfig, SourceConfig
+
+GROUP = "flexff.builtins"
+# (checker, the configuration's tables, the reference's first point or None) -> FMUs, sources
+Expander = Callable[["TableChecker", Mapping[str, Any], "tuple[float, float] | None"],
+                    "tuple[list[FmuConfig], list[SourceConfig]]"]
+WorkspaceCheck = Callable[[Any, Any, str], None]  # (x, y, what the points are)
+
+
+@dataclass(frozen=True)
+class ShortForm:
+    """A machine's tables and their expansion; `default`: it also expands a configuration
+    without [fmu.*] tables."""
+
+    name: str
+    tables: tuple[str, ...]
+    expand: Expander
+    default: bool = False
+
+
+@dataclass(frozen=True)
+class ReferenceKind:
+    """A [reference] kind: `check` turns its table, keys included, into checked options
+    (None: no keys beside `kind`); `build` samples it (options, step) -> Reference."""
+
+    name: str
+    build: Callable[[Mapping[str, Any], float], Reference]
+    check: Callable[[TableChecker, Mapping[str, Any]], dict[str, Any]] | None = None
+
+
+_SHORT_FORMS: dict[str, ShortForm] = {}
+_REFERENCE_KINDS: dict[str, ReferenceKind] = {}
+_WORKSPACE_CHECKS: list[WorkspaceCheck] = []
+_SHORT_NAMES: dict[str, None] = {}  # ordered, each once
+_LOADED: list[bool] = []
+
+
+def loaded() -> None:
+    """Load the entry points of GROUP, once per process."""
+    if _LOADED:
+        return
+    _LOADED.append(True)
+    for point in entry_points(group=GROUP):
+        point.load()()
+
+
+def register_short_form(name: str, tables: tuple[str, ...], expand: Expander,
+                        default: bool = False) -> None:
+    """Let the tables `tables` of a configuration expand (`expand`) to the general form."""
+    _SHORT_FORMS[name] = ShortForm(name, tables, expand, default)
+
+
+def register_reference_kind(kind: ReferenceKind) -> None:
+    """Make `kind.name` a [reference] kind."""
+    _REFERENCE_KINDS[kind.name] = kind
+
+
+def register_workspace_check(check: WorkspaceCheck) -> None:
+    """Make every reference stay where `check` lets it (it raises ValueError otherwise)."""
+    if check not in _WORKSPACE_CHECKS:
+        _WORKSPACE_CHECKS.append(check)
+
+
+def register_short_names(names: tuple[str, ...]) -> None:
+    """Keep the recorded signals `names` under their short names too (cosim.run)."""
+    _SHORT_NAMES.update(dict.fromkeys(names))
+
+
+def short_forms() -> tuple[ShortForm, ...]:
+    loaded()
+    return tuple(_SHORT_FORMS.values())
+
+
+def reference_kinds() -> dict[str, ReferenceKind]:
+    loaded()
+    return dict(_REFERENCE_KINDS)
+
+
+def check_workspace(x: Any, y: Any, what: str) -> None:
+    """Points (x, y) [m] through every registered workspace check."""
+    loaded()
+    for check in _WORKSPACE_CHECKS:
+        check(x, y, what)
+
+
+def short_names() -> tuple[str, ...]:
+    loaded()
+    return tuple(_SHORT_NAMES)
