@@ -235,8 +235,9 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
 
     seen = {}
 
-    def fake(env, out, preset, models, data, epochs, loop, scheduler, currents=()):
-        seen.update(env=env, loop=loop, scheduler=scheduler)
+    def fake(env, out, preset, models, data, epochs, loop, scheduler, currents=(),
+             device="auto"):
+        seen.update(env=env, loop=loop, scheduler=scheduler, device=device)
         (Path(out) / "table.md").write_text("| table |\n")
 
     monkeypatch.setattr("flexff.learning.evaluate.evaluate", fake)
