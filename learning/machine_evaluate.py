@@ -1,9 +1,10 @@
-"""`flexff evaluate --loop LOOP.toml`: the whole workflow on any machine's loop, and the
+"""`flexff evaluate --config LOOP.toml`: the whole workflow on any machine's loop, and the
 comparison an engineer would make, per axis.
 
 The loop's dataset is collected (learning.machine_collect), the linear model of its prior
 identified on the training trajectories (learning.linear_model), each model trained
-(learning.machine_train), exported and built into its feedforward FMU; then, on the loop's own
+(learning.machine_train, the models side by side in worker processes, one per core or GPU),
+exported and built into its feedforward FMU; then, on the loop's own
 reference (its sources), the loop runs under PID alone, with the identified model's
 feedforward, with each learned one, and iterative learning control finds the best
 feedforward for that one reference (the limit; learning.ilc). summary.json holds every run's
@@ -14,24 +15,30 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flexff.controllers.linear_prior import LinearModel
+from tqdm import tqdm
+
+from flexff.controllers.linear_prior import LinearModel, linear_model_from_dict
 from flexff.controllers.machine_feedforward import (
     inverse_model_system,
     learned_machine_feedforward_system,
 )
+from flexff.cosim.executor import execute
 from flexff.cosim.metrics import machine_axes, tracking_metrics
 from flexff.cosim.recording import atomic_write
 from flexff.cosim.run import simulate_config
 from flexff.cosim.schema import RunConfig
 from flexff.fmu.build import build_fmu
+from flexff.fmu.errors import RunError
+from flexff.learning.devices import pick_device, training_gpus
 from flexff.learning.export import export
 from flexff.learning.ilc import ilc
 from flexff.learning.linear_model import identify_linear, parallel_filter, write_linear_model
 from flexff.learning.machine_collect import collect_machine
-from flexff.learning.machine_dataset import MachineDataset
+from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
 from flexff.learning.machine_features import (
     MachineFeatures,
     motion,
@@ -41,6 +48,7 @@ from flexff.learning.machine_loop import loop_machine, with_feedforward, with_fe
 from flexff.learning.machine_train import fit_machine
 from flexff.learning.models import uses_prior
 from flexff.learning.presets import make_config
+from flexff.learning.workers import worker_count
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")
 SUMMARY = "summary.json"
@@ -83,15 +91,25 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     fmus = {"identified": build_fmu(inverse_model_system(
         machine, identified.casadi_function(), loop.step,
         f"identified linear model of {machine.name}"), out / "fmus" / "identified.fmu")}
-    training = {}
+    jobs = [_Training(kind, preset, overrides, data.path, out,
+                      identified.to_dict() if uses_prior(kind) else None) for kind in models]
+    gpus = len(training_gpus(pick_device(overrides.get("device", "auto"))))
+    training, failed = {}, []
+    with tqdm(total=len(jobs), unit="model", desc="train", disable=not progress) as bar, \
+            execute(_train, jobs, worker_count(len(jobs), workers, gpus)) as execution:
+        for finished in execution:
+            kind = jobs[finished.index].kind
+            if finished.error is not None:
+                failed.append(f"{kind}: {finished.error}")
+            else:
+                assert finished.result is not None
+                training[kind] = finished.result
+            bar.update()
+    if failed:
+        raise RunError(f"training failed: {'; '.join(failed)}")
     for kind in models:
-        config = make_config(kind, preset, **overrides)
-        training[kind] = fit_machine(config, machine, data.sample_rate_hz, data.trajectories,
-                                     data.digest, out / "runs" / kind, progress=progress,
-                                     prior=identified if uses_prior(kind) else None)
-        model = export(out / "runs" / kind, out / "models" / f"{kind}.onnx")
-        fmus[kind] = build_fmu(learned_machine_feedforward_system(model, loop.step),
-                               out / "fmus" / f"{kind}.fmu")
+        fmus[kind] = build_fmu(learned_machine_feedforward_system(
+            out / "models" / f"{kind}.onnx", loop.step), out / "fmus" / f"{kind}.fmu")
     axes = machine_axes(machine)
     runs = {"pid": with_feedforward(loop),
             **{name: with_feedforward_fmu(loop, path) for name, path in fmus.items()}}
@@ -113,6 +131,29 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     atomic_write(out / SUMMARY, lambda tmp: tmp.write_text(text, "utf-8"))
     atomic_write(out / "table.md", lambda tmp: tmp.write_text(ratio_table(summary), "utf-8"))
     return summary
+
+
+@dataclass(frozen=True)
+class _Training:
+    """One model to train and export in a worker process: what it needs, all picklable."""
+
+    kind: str
+    preset: str
+    overrides: dict[str, Any]
+    data: Path
+    out: Path
+    prior: dict[str, Any] | None  # the identified model (controllers.linear_prior), for pgnn
+
+
+def _train(job: _Training) -> dict[str, Any]:
+    """Train `job`'s model on the dataset, export it; its metrics."""
+    data = load_machine_dataset(job.data)
+    prior = None if job.prior is None else linear_model_from_dict(job.prior, "the prior")
+    metrics = fit_machine(make_config(job.kind, job.preset, **job.overrides), data.description,
+                          data.sample_rate_hz, data.trajectories, data.digest,
+                          job.out / "runs" / job.kind, progress=False, prior=prior)
+    export(job.out / "runs" / job.kind, job.out / "models" / f"{job.kind}.onnx")
+    return metrics
 
 
 def ratio_table(summary: dict[str, Any]) -> str:
