@@ -20,7 +20,7 @@ DIRECTION_WIDTHS = (0.003, 0.01, 0.03)  # tanh widths, fractions of each velocit
 class FeatureInputs:
     """The choices that define the features beside the machine: jerk or not, the widths."""
 
-    jerk: bool = True
+    jerk: bool = False
     direction_widths: tuple[float, ...] = DIRECTION_WIDTHS
 
 

@@ -1,6 +1,7 @@
 """Features and labels for any machine: per axis its motion (position, velocity, acceleration,
-jerk) and its directions of motion, from one CasADi function that training evaluates on the
-filtered measured motion and the feedforward FMU generates into C on the reference.
+optionally jerk) and its directions of motion, from one CasADi function that training
+evaluates on the filtered measured motion and the feedforward FMU generates into C on the
+reference.
 
 Preprocessing, every choice a setting (MachineFeatures) whose default comes from the data: the
 measured positions, optionally counted in steps of `quantization` and given white noise
