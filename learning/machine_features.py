@@ -11,10 +11,9 @@ of that motion then pass the labels' own low-pass with the efforts (`cutoff_hz`;
 `data_cutoff`: twice the frequency under which 99 % of the references' velocity energy lies,
 Hann windowed, at most a twentieth of the rate; parallel filtering, as robot identification
 filters its regressor); both are decimated to the model rate (default: the data rate divided
-down to at least
-MODEL_RATE_PER_CUTOFF times the corner). A direction of motion is tanh(v / w) for widths w that
-are fractions of the axis's velocity limit: Coulomb friction steps with it, which no smooth
-function of the motion holds (controllers.machine_features defines the features).
+down to at least MODEL_RATE_PER_CUTOFF times the corner). A direction of motion is tanh(v / w)
+for widths w that are fractions of the axis's velocity limit: Coulomb friction steps with it,
+which no smooth function of the motion holds (controllers.machine_features defines them).
 """
 
 from __future__ import annotations
