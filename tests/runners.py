@@ -3,16 +3,18 @@ libcosim, the second importer.
 
 Inputs are given as arrays, there are no connections. With `run_fmu` sample k is read at
 t_k = k * step after setting the inputs of step k, so direct feedthrough shows up as it would
-in a Gauss-Seidel master.
+in a Gauss-Seidel master. `simulate_with_fmpy` runs fmpy.simulate_fmu itself, inputs as
+functions of time (it reads a direct feedthrough one input late: use it for constant inputs
+or states).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-from fmpy import read_model_description
+from fmpy import read_model_description, simulate_fmu
 from libcosimpy.CosimExecution import CosimExecution
 from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
 from libcosimpy.CosimManipulator import CosimManipulator
@@ -92,4 +94,17 @@ def run_fmu_libcosim(path: str | Path, steps: int, step: float = 1e-3,
         out[k] = observer.last_real_values(index, record_refs)
     result = {"time": (np.arange(steps) + 1) * step}
     result.update({n: out[:, i] for i, n in enumerate(record)})
+    return result
+
+
+def simulate_with_fmpy(path: str | Path, inputs: Mapping[str, Callable[[float], float]],
+                       stop: float, outputs: Sequence[str], step: float = 1e-3,
+                       **start: float) -> np.ndarray:
+    """fmpy.simulate_fmu at `step` with `inputs` {name: f(t)} sampled at every step."""
+    t = np.arange(0.0, stop + step / 2, step)
+    table = np.array(list(zip(t, *[np.vectorize(f, otypes=[float])(t) for f in inputs.values()])),
+                     dtype=[("time", float)] + [(n, float) for n in inputs])
+    result: np.ndarray = simulate_fmu(str(path), stop_time=stop, step_size=step,
+                                      output_interval=step, input=table, output=list(outputs),
+                                      start_values=start)
     return result

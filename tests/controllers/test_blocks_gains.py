@@ -5,7 +5,6 @@ import math
 
 import numpy as np
 import pytest
-from fmpy import simulate_fmu
 
 from flexff import api
 from flexff.controllers.block_options import OptionError
@@ -13,7 +12,7 @@ from flexff.controllers.blocks_pid import AxisPid, designed_pid, pid_from_option
 from flexff.controllers.blocks_signal import gain_from_options, sum_from_options
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
-from tests.runners import run_fmu
+from tests.runners import run_fmu, simulate_with_fmpy
 
 STEP = 1e-3
 KP, KI, KD, FILTER_HZ = 2.0, 3.0, 0.01, 50.0
@@ -39,15 +38,6 @@ def fmus(tmp_path_factory):
     return {name: build_fmu(s, folder / f"{name}.fmu") for name, s in systems.items()}
 
 
-def _run(path, inputs, stop, outputs, **start):
-    """FMPy run at STEP with `inputs` {name: f(t)} sampled at every step."""
-    t = np.arange(0.0, stop + STEP / 2, STEP)
-    table = np.array(list(zip(t, *[np.vectorize(f, otypes=[float])(t) for f in inputs.values()])),
-                     dtype=[("time", float)] + [(n, float) for n in inputs])
-    return simulate_fmu(str(path), stop_time=stop, step_size=STEP, output_interval=STEP,
-                        input=table, output=outputs, start_values=start)
-
-
 def test_blocks_validate(fmus):
     for name in ("pid", "back_calculation", "filtered", "sum", "gain"):
         assert validate_fmu(fmus[name]) == [], name
@@ -56,9 +46,9 @@ def test_blocks_validate(fmus):
 def test_pid_step_in_error_matches_the_hand_computation(fmus):
     """e = 1 from t = 0, feedforward 0.5: effort_k = kp + ki t_k + kd (1 - a) a^k / step + 0.5,
     a = tau / (tau + step), tau = 1 / (2 pi derivative_filter_hz); the y axis runs on its own."""
-    r = _run(fmus["pid"], {"x_ref": lambda t: 1.0, "x_ff": lambda t: 0.5, "y_ref": lambda t: 0.0,
-                           "y": lambda t: -2.0}, 0.05,
-             ["x_effort", "x_fb", "y_effort"])
+    inputs = {"x_ref": lambda t: 1.0, "x_ff": lambda t: 0.5, "y_ref": lambda t: 0.0,
+              "y": lambda t: -2.0}
+    r = simulate_with_fmpy(fmus["pid"], inputs, 0.05, ["x_effort", "x_fb", "y_effort"])
     t, k = r["time"], np.arange(len(r))
     tau = 1 / (2 * math.pi * FILTER_HZ)
     a = tau / (tau + STEP)
@@ -75,7 +65,7 @@ def test_anti_windup_bounds_the_integrator_and_releases_at_once(fmus):
     error = {"x_ref": lambda t: 1.0 if t < 1.0 else -1.0}
     ends = {}
     for name in ("back_calculation", "clamp", "unlimited"):
-        r = _run(fmus[name], error, 1.2, ["x_integral", "x_effort"])
+        r = simulate_with_fmpy(fmus[name], error, 1.2, ["x_integral", "x_effort"])
         before, after = r["time"] < 1.0, r["time"] > 1.0
         ends[name] = r["x_integral"][before][-1]
         if name != "unlimited":
@@ -140,7 +130,7 @@ def test_sum_and_gain(fmus):
     ramp = 1.0 + STEP * np.arange(10)
     r = run_fmu(fmus["sum"], 10, STEP, {"a": ramp, "b": 3.0}, record=["c"])
     np.testing.assert_allclose(r["c"][:10], ramp - 6.0, atol=1e-12)
-    r = _run(fmus["gain"], {"a": lambda t: 2.0}, 0.01, ["b"], gain=-1.5)
+    r = simulate_with_fmpy(fmus["gain"], {"a": lambda t: 2.0}, 0.01, ["b"], gain=-1.5)
     np.testing.assert_allclose(r["b"], -3.0)
 
 

@@ -9,14 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import simulate_fmu
 
 from flexff import api
 from flexff.controllers.block_options import OptionError
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
 from flexff.machines.stage import stage_from_options, true_parameters
-from tests.runners import run_fmu, run_fmu_libcosim
+from tests.runners import run_fmu, run_fmu_libcosim, simulate_with_fmpy
 
 STEP = 1e-3
 ROOT = Path(__file__).parents[2]
@@ -26,16 +25,6 @@ EXAMPLE = ROOT / "machines" / "examples" / "stage.toml"
 @pytest.fixture(scope="module")
 def stage(tmp_path_factory):
     return build_fmu(stage_from_options({}, STEP), tmp_path_factory.mktemp("stage") / "s.fmu")
-
-
-def _run(path, inputs, stop, outputs, **start):
-    """FMPy run at STEP with `inputs` {name: f(t)} sampled at every step (constant inputs or
-    states only: fmpy.simulate_fmu reads direct feedthrough one input late)."""
-    t = np.arange(0.0, stop + STEP / 2, STEP)
-    table = np.array(list(zip(t, *[np.vectorize(f, otypes=[float])(t) for f in inputs.values()])),
-                     dtype=[("time", float)] + [(n, float) for n in inputs])
-    return simulate_fmu(str(path), stop_time=stop, step_size=STEP, output_interval=STEP,
-                        input=table, output=outputs, start_values=start)
 
 
 def test_stage_validates(stage):
@@ -56,11 +45,12 @@ def test_stage_couples_the_axes_through_yaw_and_conserves_energy(stage):
         "viscous", "coulomb_positive", "coulomb_negative") for a in "xy"}}
     push = {"Fx": lambda t: 50.0 if t < 0.05 else 0.0, "Fy": lambda t: 20.0 if t < 0.05 else 0.0}
     states = ["y_pos", "yaw_angle", "x_vel", "y_vel", "yaw_rate", "yaw"]
-    r = _run(stage, push, 0.3, states, y_start=0.2, **lossless)
+    r = simulate_with_fmpy(stage, push, 0.3, states, y_start=0.2, **lossless)
     energy = _energy(r, true_parameters())[r["time"] > 0.06]
     assert np.ptp(energy) < 1e-6 * np.mean(energy)
     assert np.max(np.abs(r["yaw"])) > 1e-6  # an x push off centre turns the beam
-    centred = _run(stage, {"Fx": lambda t: 50.0, "Fy": lambda t: 0.0}, 0.1, ["yaw", "y_true"])
+    centred = simulate_with_fmpy(stage, {"Fx": lambda t: 50.0, "Fy": lambda t: 0.0}, 0.1,
+                                 ["yaw", "y_true"])
     assert np.max(np.abs(centred["yaw"])) == 0.0  # carriage at the centre: no yaw, no drift
     assert np.max(np.abs(centred["y_true"])) == 0.0
 
@@ -69,7 +59,7 @@ def test_stage_couples_the_axes_through_yaw_and_conserves_energy(stage):
                                               (-10.0, -(10.0 - 0.7) / 15),
                                               (200.0, (80.0 - 0.9) / 15)])
 def test_cross_axis_friction_is_asymmetric_and_the_force_saturates(stage, force, speed):
-    r = _run(stage, {"Fx": lambda t: 0.0, "Fy": lambda t: force}, 2.0, ["vy_true"])
+    r = simulate_with_fmpy(stage, {"Fx": lambda t: 0.0, "Fy": lambda t: force}, 2.0, ["vy_true"])
     assert r["vy_true"][-1] == pytest.approx(speed, rel=1e-4)
 
 
