@@ -22,7 +22,6 @@ is refused.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +43,7 @@ from flexff.learning.dataset_files import (
     digest,
     is_sha256,
     read_arrays,
+    read_manifest,
     save_arrays,
     save_manifest,
 )
@@ -94,13 +94,7 @@ class Dataset:
 def load_dataset(path: str | Path) -> Dataset:
     """Read and check a dataset folder; raise DatasetError saying what is wrong and what to do."""
     path = Path(path)
-    manifest_path = path / MANIFEST
-    if not manifest_path.is_file():
-        raise DatasetError(f"{path} is not a flexff dataset: {MANIFEST} is missing ({RECOLLECT})")
-    try:
-        manifest = json.loads(manifest_path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise DatasetError(f"{manifest_path} is not valid JSON ({err}); {RECOLLECT}") from None
+    manifest_path, manifest = read_manifest(path, RECOLLECT)
     _check_manifest(manifest, manifest_path)
     source = manifest.get("source")
     if manifest["sha256"] != digest(manifest, splits=False):

@@ -84,6 +84,18 @@ def save_manifest(folder: Path, manifest: Mapping[str, Any]) -> None:
     atomic_write(folder / MANIFEST, lambda tmp: tmp.write_text(text))
 
 
+def read_manifest(folder: Path, redo: str) -> tuple[Path, Any]:
+    """The path of a dataset folder's manifest and its content, unchecked; DatasetError (with
+    `redo`, what to do) where it is missing or not JSON."""
+    path = folder / MANIFEST
+    if not path.is_file():
+        raise DatasetError(f"{folder} is not a flexff dataset: {MANIFEST} is missing ({redo})")
+    try:
+        return path, json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise DatasetError(f"{path} is not valid JSON ({err}); {redo}") from None
+
+
 def check_entries(entries: Any, where: Path, redo: str) -> None:
     """Refuse trajectory entries without name, split, file and sha256, with a split not in
     SPLITS, a name twice, or a `derived` that is no map of signal to text; `redo` says what to

@@ -39,6 +39,7 @@ from flexff.learning.dataset_files import (
     digest,
     is_sha256,
     read_arrays,
+    read_manifest,
     save_arrays,
     save_manifest,
     write_folder,
@@ -142,13 +143,7 @@ def load_machine_dataset(path: str | Path, machine: Machine | None = None) -> Ma
     """Read and check a machine dataset folder, and, given `machine`, that it was written for
     that description; raise DatasetError saying what is wrong and what to do."""
     path = Path(path)
-    manifest_path = path / MANIFEST
-    if not manifest_path.is_file():
-        raise DatasetError(f"{path} is not a flexff dataset: {MANIFEST} is missing")
-    try:
-        manifest = json.loads(manifest_path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise DatasetError(f"{manifest_path} is not valid JSON ({err}); {AGAIN}") from None
+    manifest_path, manifest = read_manifest(path, AGAIN)
     _check_manifest(manifest, manifest_path)
     fix = f"write it again ({manifest['source']})"
     if manifest["sha256"] != digest(manifest, splits=False):
