@@ -91,6 +91,7 @@ class LinearModel:
 
     machine: Machine
     axes: dict[str, AxisFit]
+    lead_s: float = 0.0  # the efforts' lead over the motion: the feedforward looks this far ahead
 
     def predict(self, motion: Motion) -> dict[str, np.ndarray]:
         """Each axis's effort along `motion` (motion_of)."""
@@ -115,7 +116,8 @@ class LinearModel:
 
     def to_dict(self) -> dict[str, Any]:
         return {"format": FORMAT, "machine": machine_table(self.machine),
-                "axes": {name: fit.__dict__ for name, fit in self.axes.items()}}
+                "axes": {name: fit.__dict__ for name, fit in self.axes.items()},
+                "lead_s": self.lead_s}
 
     def summary(self) -> str:
         """The parameters with their standard deviations, axis by axis."""
@@ -140,7 +142,8 @@ def linear_model_from_dict(data: Mapping[str, Any], where: str) -> LinearModel:
             raise ValueError(f"format {data.get('format')!r}")
         machine = parse_machine(data["machine"], where)
         axes = {name: AxisFit(**fit) for name, fit in data["axes"].items()}
+        lead = float(data.get("lead_s", 0.0))
     except (ValueError, KeyError, TypeError, AttributeError) as error:
         raise InputError(f"{where}: not an identified linear model ({error}): identify one "
                          f"with flexff identify") from None
-    return LinearModel(machine, axes)
+    return LinearModel(machine, axes, lead)

@@ -44,6 +44,20 @@ def feedforward_variables(machine: Machine) -> tuple[Variable, ...]:
                  for a in machine.axes)
 
 
+def ahead(reference: ca.SX, lead_s: float) -> ca.SX:
+    """The inputs' symbol (per axis position, velocity, acceleration, jerk) `lead_s` ahead, by
+    its Taylor series at constant jerk: where the effort commanded now acts (a held effort
+    acts over the step after its sample; learning.machine_features aligned the labels so)."""
+    if not lead_s:
+        return reference
+    out = []
+    for k in range(reference.size1() // 4):
+        p, v, a, j = (reference[4 * k + d] for d in range(4))
+        t = lead_s
+        out += [p + v * t + a * t**2 / 2 + j * t**3 / 6, v + a * t + j * t**2 / 2, a + j * t, j]
+    return ca.vertcat(*out)
+
+
 def reference_motion(machine: Machine, reference: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
     """Positions, velocities and accelerations (one entry per axis) of the inputs' symbol."""
     n = len(machine.axes)
@@ -52,9 +66,9 @@ def reference_motion(machine: Machine, reference: ca.SX) -> tuple[ca.SX, ca.SX, 
 
 
 def inverse_model_system(machine: Machine, inverse: ca.Function, step: float,
-                         description: str) -> System:
+                         description: str, lead_s: float = 0.0) -> System:
     """The feedforward of `inverse` (positions, velocities, accelerations -> efforts, one
-    entry per axis) along the reference, at the run's `step`."""
+    entry per axis) along the reference `lead_s` ahead, at the run's `step`."""
     n = len(machine.axes)
     if not step > 0:
         raise InputError(f"step must be positive, got {step}")
@@ -67,7 +81,7 @@ def inverse_model_system(machine: Machine, inverse: ca.Function, step: float,
                          f"out")
     reference = ca.SX.sym("u", 4 * n)
     return feedforward_system("machine_feedforward", description, reference,
-                              inverse(*reference_motion(machine, reference)), step,
+                              inverse(*reference_motion(machine, ahead(reference, lead_s))), step,
                               outputs=feedforward_variables(machine),
                               inputs=reference_variables(machine))
 
@@ -81,23 +95,26 @@ def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
         raise InputError(f"{model} is a model of the manipulator: build it with `flexff fmu "
                          f"build learned-feedforward`")
     machine = parse_machine(card.machine, f"{model}: metadata machine")
-    inputs = FeatureInputs(card.machine_features["jerk"],
-                           tuple(card.machine_features["direction_widths"]))
+    inputs = FeatureInputs.from_settings(card.machine_features)
     reference = ca.SX.sym("u", 4 * len(machine.axes))
+    looked_ahead = ahead(reference, float(card.machine_features.get("lead_s") or 0.0))
     x, p = ca.SX.sym("x", 0), ca.SX.sym("p", 0)
+    features = feature_function(machine, inputs)(looked_ahead)
     network = graph_network(read_graph(model, time_axis=True),
-                            ca.Function("network_input", [x, reference, p],
-                                        [feature_function(machine, inputs)(reference)]),
+                            ca.Function("network_input", [x, reference, p], [features]),
                             model_period(card, step, model), None, task)
     if network.n_outputs != len(machine.axes):
         raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
                          f"machine {machine.name!r} has {len(machine.axes)} axes")
     result = ca.SX.sym("r", network.n_outputs)
     effort = result
+    if card.linear_inputs is not None:  # the network's skip, at every step of the loop
+        effort = effort + ca.mtimes(ca.DM(card.linear_inputs["weights"]), features) \
+            + ca.DM(card.linear_inputs["bias"])
     if card.prior == "linear":  # a physics-guided model: its residual plus the prior
         assert card.machine_prior is not None  # the card's check
         prior = linear_model_from_dict(card.machine_prior, f"{model}: metadata machine_prior")
-        effort = result + prior.casadi_function()(*reference_motion(machine, reference))
+        effort = result + prior.casadi_function()(*reference_motion(machine, looked_ahead))
     mode = "task" if task else "step"
     return feedforward_system(
         "learned_feedforward",

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import onnx
 
 from flexff.fmu.errors import InputError
@@ -39,7 +40,8 @@ USAGE = ("inputs (T, n_inputs) float64 in SI units -> outputs (T, n_outputs) flo
          "every 1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
          "extrapolate the outputs from the last two calls when the host runs faster.")
 _JSON = ("input_signals", "input_units", "output_signals", "output_units", "state",
-         "prior_parameters", "feature_range", "machine", "machine_features", "machine_prior")
+         "prior_parameters", "feature_range", "machine", "machine_features", "machine_prior",
+         "linear_inputs")
 _NUMBERS = {"sample_rate_hz": float, "history_samples": int, "ensemble_members": int}
 
 
@@ -53,7 +55,10 @@ class ModelCard:
     data, None for a model exported without it. Another machine's model carries its
     description (`machine`, cosim.machine's table) and the settings of its features
     (`machine_features`: jerk, direction_widths; controllers.machine_features), and outputs
-    each axis's `<axis>_ff`.
+    each axis's `<axis>_ff`; `linear_inputs` {"weights" (outputs x inputs), "bias"}: a linear
+    map of the inputs that the runner adds to the graph's outputs at every one of its own steps
+    (a network's linear skip, kept out of the graph so that a model called at its slower rate
+    still follows friction steps and cogging at the runner's).
     """
 
     feature_set: str
@@ -75,6 +80,7 @@ class ModelCard:
     machine: dict[str, Any] | None = None
     machine_features: dict[str, Any] | None = None
     machine_prior: dict[str, Any] | None = None  # the identified linear model (prior "linear")
+    linear_inputs: dict[str, Any] | None = None  # added to the outputs at every runner step
 
     def metadata(self) -> dict[str, str]:
         """The card as onnx metadata_props (strings; lists and objects as JSON)."""
@@ -156,11 +162,27 @@ class ModelCard:
                              f"feedforwards of the machine's axes {axes}; export it again")
         if self.input_kind != "features" or not isinstance(self.machine_features, dict) \
                 or self.prior not in ("none", "linear") \
-                or (self.prior == "linear") != isinstance(self.machine_prior, dict):
+                or (self.prior == "linear") != isinstance(self.machine_prior, dict) \
+                or not _linear_map_fits(self.linear_inputs, len(axes),
+                                        len(self.input_signals)):
             raise InputError(f"{where}: a machine's model takes its features, carries their "
                              f"settings (machine_features) and, with the prior 'linear', its "
-                             f"identified model (machine_prior); export it again with `flexff "
-                             f"export`")
+                             f"identified model (machine_prior), and any linear map of its "
+                             f"inputs (linear_inputs) of its sizes; export it again with "
+                             f"`flexff export`")
+
+
+def _linear_map_fits(linear: Any, n_out: int, n_in: int) -> bool:
+    """Whether `linear` is None or {"weights": n_out x n_in numbers, "bias": n_out numbers}."""
+    if linear is None:
+        return True
+    try:
+        weights = np.asarray(linear["weights"], dtype=float)
+        bias = np.asarray(linear["bias"], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        return False
+    return weights.shape == (n_out, n_in) and bias.shape == (n_out,) \
+        and bool(np.all(np.isfinite(weights)) and np.all(np.isfinite(bias)))
 
 
 def read_card(model: str | Path) -> ModelCard:

@@ -80,6 +80,19 @@ def _evaluate_machine(args: argparse.Namespace, loop: Any) -> int:
     return 0
 
 
+def _evaluate_logs(args: argparse.Namespace) -> int:
+    """evaluate --data LOGS, a machine's dataset with no loop: force prediction on its test
+    logs."""
+    from flexff.learning.log_evaluate import evaluate_logs
+
+    evaluate_logs(args.data, args.output, args.models, args.preset, device=args.device,
+                  **({"epochs": args.epochs} if args.epochs else {}))
+    print((Path(args.output) / "table.md").read_text())
+    print(f"relative 2-norm of the effort error on the test logs; results in {args.output}/ "
+          f"(summary.json, table.md, identified.json, runs/, models/)")
+    return 0
+
+
 def _fmu_build(args: argparse.Namespace) -> int:
     from flexff.fmu.build import build_fmu
 
@@ -511,6 +524,11 @@ def _evaluate(args: argparse.Namespace) -> int:
     output_folder(args.output)
     if loop is not None and loop.machine is not None:
         return _evaluate_machine(args, loop)
+    if loop is None and args.data is not None:
+        from flexff.learning.machine_dataset import is_machine_dataset
+
+        if is_machine_dataset(args.data):
+            return _evaluate_logs(args)
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
              scheduler=args.scheduler, currents=args.currents, device=args.device)
     print((Path(args.output) / "table.md").read_text())
@@ -787,7 +805,9 @@ def build_parser() -> argparse.ArgumentParser:
                             choices=MODELS,
                             help="also the current-level model of these kinds: labels i1..i3, "
                                  "fed forward after the control allocation")
-    evaluation.add_argument("--data", help="a collected dataset folder to use")
+    evaluation.add_argument("--data", help="a collected dataset folder to use; a machine's "
+                                           "imported logs alone: each model's force "
+                                           "prediction on the test logs")
     evaluation.add_argument("--epochs", type=int, help="override the preset's number of epochs")
     evaluation.add_argument("--scheduler", help="address of a Dask scheduler to collect and "
                                                 "train on (its workers see this file system)")

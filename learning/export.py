@@ -22,6 +22,9 @@ down-sampled): a runner at a higher rate, such as the feedforward FMU at 1 kHz, 
 every 1/sample_rate_hz seconds with the current inputs and extrapolates the forces linearly
 from the last two calls in between (holding them instead would lag by half a model period).
 
+A machine's network with a linear skip is exported without it: the card's `linear_inputs`
+holds the skip in SI units, for the runner to add at each of its steps (learning.deploy).
+
 The physics-guided model is exported as its residual: the graph's forces plus the rigid-body
 feedforward of the nominal model (eq. 2.4, controllers.feedforward) on the same reference,
 with the parameters identified in training, are the model's forces; the metadata says so
@@ -92,7 +95,7 @@ def _export(runs: list[Run], out: Path, inputs: str) -> Path:
 
 
 def _si_model(runs: list[Run], inputs: str) -> SIModel | EnsembleSIModel:
-    members = [SIModel(r, inputs, prior=False) for r in runs]
+    members = [SIModel(r, inputs, prior=False, skip_outside=r.machine is not None) for r in runs]
     return (members[0] if len(members) == 1 else EnsembleSIModel(members)).eval()
 
 
@@ -147,7 +150,9 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
                for n, s in zip(state_names, state)],
         history_samples=max(r.network.history for r in runs), flexff_version=flexff_version(),
         machine=loaded.info.get("machine"), machine_features=loaded.info.get("machine_features"),
-        machine_prior=loaded.info.get("machine_prior"))
+        machine_prior=loaded.info.get("machine_prior"),
+        linear_inputs=None if model.linear_map is None else {
+            "weights": model.linear_map[0].tolist(), "bias": model.linear_map[1].tolist()})
     onnx.helper.set_model_props(graph, card.metadata())
     onnx.checker.check_model(graph)
     onnx.save(graph, str(path))

@@ -100,13 +100,14 @@ def parallel_filter(rate_hz: float, cutoff_hz: float, filter_order: int = 4,
 
 def identify_linear(machine: Machine, motion: Motion | Sequence[Motion],
                     efforts: Mapping[str, np.ndarray] | Sequence[Mapping[str, np.ndarray]],
-                    filtered: Filter | None = None) -> LinearModel:
+                    filtered: Filter | None = None, lead_s: float = 0.0) -> LinearModel:
     """Least squares of each axis's `efforts` on its regressor along `motion` (one trajectory,
     or a list of them with their efforts). `filtered` (n, k) -> (m, k) is applied to each
     trajectory's regressor columns and to its efforts alike before they are stacked: the
     labels' own low-pass and decimation (parallel filtering: a term linear in its parameters
     keeps them through any linear filter, so a friction step smoothed in the labels is matched
-    by its column smoothed the same way)."""
+    by its column smoothed the same way). `lead_s`: how long before the motion its efforts were
+    commanded (learning.machine_features aligned them), kept for the feedforward."""
     motions = [motion] if isinstance(motion, Mapping) else list(motion)
     labels_list = [efforts] if isinstance(efforts, Mapping) else list(efforts)
     keep = filtered or (lambda values: values)
@@ -131,7 +132,7 @@ def identify_linear(machine: Machine, motion: Motion | Sequence[Motion],
             return _fit(machine, k, stacked, labels, width)
 
         fits[axis.name] = _smallest_residual(fit_at, widths)
-    return LinearModel(machine, fits)
+    return LinearModel(machine, fits, lead_s)
 
 
 def _smallest_residual(fit_at: Callable[[float], AxisFit], widths: list[float]) -> AxisFit:

@@ -70,9 +70,10 @@ def identify_dataset(data: MachineDataset, features: MachineFeatures | None = No
         moved, effort = motion(trajectory.signals, rate, machine, resolved)
         motions.append(named_motion(moved, machine))
         efforts.append({a.name: effort[:, k] for k, a in enumerate(machine.axes)})
-    assert resolved.cutoff_hz is not None
+    assert resolved.cutoff_hz is not None and resolved.lead_s is not None
     return identify_linear(machine, motions, efforts,
-                           parallel_filter(rate, resolved.cutoff_hz, resolved.filter_order))
+                           parallel_filter(rate, resolved.cutoff_hz, resolved.filter_order),
+                           resolved.lead_s)
 
 
 def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = MODELS,
@@ -90,23 +91,10 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     write_linear_model(identified, out / "identified.json")
     fmus = {"identified": build_fmu(inverse_model_system(
         machine, identified.casadi_function(), loop.step,
-        f"identified linear model of {machine.name}"), out / "fmus" / "identified.fmu")}
-    jobs = [_Training(kind, preset, overrides, data.path, out,
-                      identified.to_dict() if uses_prior(kind) else None) for kind in models]
-    gpus = len(training_gpus(pick_device(overrides.get("device", "auto"))))
-    training, failed = {}, []
-    with tqdm(total=len(jobs), unit="model", desc="train", disable=not progress) as bar, \
-            execute(_train, jobs, worker_count(len(jobs), workers, gpus)) as execution:
-        for finished in execution:
-            kind = jobs[finished.index].kind
-            if finished.error is not None:
-                failed.append(f"{kind}: {finished.error}")
-            else:
-                assert finished.result is not None
-                training[kind] = finished.result
-            bar.update()
-    if failed:
-        raise RunError(f"training failed: {'; '.join(failed)}")
+        f"identified linear model of {machine.name}", identified.lead_s),
+        out / "fmus" / "identified.fmu")}
+    training = train_models(data, identified, out, models, preset, workers, progress,
+                            **overrides)
     for kind in models:
         fmus[kind] = build_fmu(learned_machine_feedforward_system(
             out / "models" / f"{kind}.onnx", loop.step), out / "fmus" / f"{kind}.fmu")
@@ -131,6 +119,31 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     atomic_write(out / SUMMARY, lambda tmp: tmp.write_text(text, "utf-8"))
     atomic_write(out / "table.md", lambda tmp: tmp.write_text(ratio_table(summary), "utf-8"))
     return summary
+
+
+def train_models(data: MachineDataset, identified: LinearModel, out: Path,
+                 models: Sequence[str], preset: str, workers: int | None, progress: bool,
+                 **overrides: Any) -> dict[str, dict[str, Any]]:
+    """Train and export each of `models` on `data` side by side in worker processes (one per
+    core, or per GPU), the physics-guided one over `identified`, into `out`/runs/<kind> and
+    `out`/models/<kind>.onnx; each one's metrics."""
+    jobs = [_Training(kind, preset, overrides, data.path, out,
+                      identified.to_dict() if uses_prior(kind) else None) for kind in models]
+    gpus = len(training_gpus(pick_device(overrides.get("device", "auto"))))
+    training, failed = {}, []
+    with tqdm(total=len(jobs), unit="model", desc="train", disable=not progress) as bar, \
+            execute(_train, jobs, worker_count(len(jobs), workers, gpus)) as execution:
+        for finished in execution:
+            kind = jobs[finished.index].kind
+            if finished.error is not None:
+                failed.append(f"{kind}: {finished.error}")
+            else:
+                assert finished.result is not None
+                training[kind] = finished.result
+            bar.update()
+    if failed:
+        raise RunError(f"training failed: {'; '.join(failed)}")
+    return training
 
 
 @dataclass(frozen=True)

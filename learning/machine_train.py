@@ -92,8 +92,8 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
     train_x, train_f = _prepared(train_set, rate_hz, machine, resolved, rng)
     test_x, test_f = _prepared(test_set, rate_hz, machine, resolved, None)
     feature_scaler, label_scaler = MinMaxScaler.fit(train_x), MinMaxScaler.fit(train_f)
-    train_prior = _prior_efforts(prior, train_set, rate_hz, machine, resolved)
-    test_prior = _prior_efforts(prior, test_set, rate_hz, machine, resolved)
+    train_prior = prior_efforts(prior, train_set, rate_hz, machine, resolved)
+    test_prior = prior_efforts(prior, test_set, rate_hz, machine, resolved)
 
     def targets(fs: list[np.ndarray], priors: list[np.ndarray] | None) -> list[np.ndarray]:
         if priors is None:
@@ -137,7 +137,7 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
     return {**metrics, "run": str(out)}
 
 
-def _prior_efforts(prior: LinearModel | None, trajectories: list[Trajectory],
+def prior_efforts(prior: LinearModel | None, trajectories: list[Trajectory],
                    rate_hz: float, machine: Machine, features: MachineFeatures
                    ) -> list[np.ndarray] | None:
     """The prior's efforts along each trajectory's measured motion, through the labels'

@@ -84,8 +84,7 @@ class Run:
     @property
     def feature_inputs(self) -> FeatureInputs:
         """The feature choices of a machine's run (learning.machine_features)."""
-        settings = self.info["machine_features"]
-        return FeatureInputs(settings["jerk"], tuple(settings["direction_widths"]))
+        return FeatureInputs.from_settings(self.info["machine_features"])
 
     @property
     def prior_parameters(self) -> dict[str, float]:

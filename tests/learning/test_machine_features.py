@@ -35,26 +35,29 @@ def sine(frequencies, seconds=20.0):
 def test_the_corner_and_the_model_rate_come_from_the_references():
     one = machine()
     config = MachineFeatures().resolved(RATE, [sine({"x": 0.5})], one)
-    assert config.cutoff_hz == pytest.approx(1.0, rel=0.15)  # twice the 0.5 Hz band
-    assert RATE / config.model_rate_hz == 45  # at least 20 times the 1.1 Hz, dividing 1 kHz
-    assert data_cutoff([sine({"x": 4.0})], one, RATE) == pytest.approx(8.0, rel=0.05)
+    assert config.cutoff_hz == pytest.approx(2.0, rel=0.15)  # four times the 0.5 Hz band
+    assert RATE / config.model_rate_hz == 45  # at least 10 times the 2.2 Hz, dividing 1 kHz
+    assert config.lead_s == 0.5 / RATE  # a zero-order hold
+    assert data_cutoff([sine({"x": 4.0})], one, RATE) == pytest.approx(16.0, rel=0.05)
 
 
 def test_features_of_clean_motion_are_the_motion_and_labels_the_effort():
     one = machine()
-    config = MachineFeatures(cutoff_hz=5.0, model_rate_hz=100.0, jerk=True).resolved(RATE, [],
-                                                                                    one)
+    config = MachineFeatures(cutoff_hz=5.0, model_rate_hz=100.0, jerk=True, lead_s=0.0
+                             ).resolved(RATE, [], one)
     signals = sine({"x": 0.5})
     features, labels = prepare(signals, RATE, one, config)
-    assert feature_names(one, config.inputs) == ["x", "vx", "ax", "jx", "dir_x_0.003", "dir_x_0.01",
-                                          "dir_x_0.03"]
+    assert feature_names(one, config.inputs) == [
+        "x", "vx", "ax", "jx", "dir_x_0.003", "dir_x_0.01", "dir_x_0.03",
+        "moving_x_0.003", "moving_x_0.01", "moving_x_0.03"]
     inner = slice(200, -200)  # away from the filter's ends
     expected = [signals[n][::10] for n in ("x_ref", "vx_ref", "ax_ref", "jx_ref")]
     for column, values in zip(features.T, expected):
         np.testing.assert_allclose(column[inner], values[inner], atol=1e-4 * np.abs(values).max())
     moving = np.abs(features[:, 1]) > 0.5 * np.abs(features[:, 1]).max()  # past the filtered step
     assert np.array_equal(np.sign(features[moving, 4]), np.sign(features[moving, 1]))
-    assert np.abs(features[:, 4:]).max() < 1.2  # a smoothed step: the filter rings a little
+    assert np.abs(features[:, 4:7]).max() < 1.2  # a smoothed step: the filter rings a little
+    np.testing.assert_allclose(features[moving, 7:], 1.0, atol=0.05)  # moving at all (rings)
     np.testing.assert_allclose(labels[inner, 0], signals["x_effort"][::10][inner], rtol=0,
                                atol=1e-4 * np.abs(signals["x_effort"]).max())
 
@@ -65,8 +68,8 @@ def test_the_same_function_runs_on_the_reference():
     signals = sine({"q1": 0.5, "q2": 0.3, "z": 0.2})
     reference = np.column_stack([signals[n] for n in three.reference_signals])
     features = evaluate_samples(feature_function(three, config.inputs), reference)
-    assert features.shape == (reference.shape[0], 3 * 6)
-    np.testing.assert_allclose(features[:, 6 + 1], signals["vq2_ref"])
+    assert features.shape == (reference.shape[0], 3 * 9)  # motion, 3 directions, 3 "moving"
+    np.testing.assert_allclose(features[:, 9 + 1], signals["vq2_ref"])
 
 
 def test_quantization_and_noise_are_settings_per_axis():

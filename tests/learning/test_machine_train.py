@@ -2,12 +2,13 @@
 
 import json
 
+import casadi as ca
 import numpy as np
 import pytest
 
 from flexff.controllers.features import evaluate_samples
 from flexff.controllers.machine_features import feature_function
-from flexff.controllers.machine_feedforward import learned_machine_feedforward_system
+from flexff.controllers.machine_feedforward import ahead, learned_machine_feedforward_system
 from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import parse_machine
 from flexff.fmu.build import build_fmu
@@ -62,7 +63,7 @@ def test_a_machine_trains_into_a_run_folder(names, tmp_path):
     assert [a["name"] for a in info["machine"]["axis"]] == list(names)
     first = names[0]
     assert run.feature_names[:4] == [first, f"v{first}", f"a{first}", f"dir_{first}_0.003"]
-    assert 2.5 < metrics["cutoff_hz"] < 3.5  # twice the 1.5 Hz band's edge
+    assert 5.0 < metrics["cutoff_hz"] < 7.0  # four times the 1.5 Hz band's edge
     assert RATE / metrics["model_rate_hz"] == pytest.approx(round(RATE / metrics["model_rate_hz"]))
     # the linear skip's least squares hold inertia, damping and the friction's direction
     assert metrics["test_mse"] < 1e-3
@@ -77,7 +78,8 @@ def test_the_physics_guided_model_asks_for_its_prior(tmp_path):
 
 def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
     """Export the run, build the FMU: at each of the model's calls the FMU gives what
-    onnxruntime gives on the features of the reference."""
+    onnxruntime gives on the features of the reference half a sample ahead (the labels'
+    lead), plus the linear skip the card holds."""
     names = ("x",)
     data = [trajectory(names, k, "train") for k in range(4)] + [trajectory(names, 9, "test")]
     fit_machine(make_config("lstm", "fast", epochs=1), machine(names), RATE, data, "d",
@@ -92,8 +94,13 @@ def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
     result = run_fmu(fmu, 900, 1e-3, {n: reference[n][:900] for n in inputs}, record=["x_ff"])
     period = round(RATE / card.sample_rate_hz)
     calls = np.arange(0, 900, period)
-    features = evaluate_samples(feature_function(machine(names), load_run(
-        tmp_path / "run").feature_inputs), np.column_stack([reference[n] for n in inputs]))
-    expected = run_steps(session(model), features[calls])[:, 0]
+    u = ca.SX.sym("u", 4)
+    features_ahead = ca.Function("f", [u], [feature_function(machine(names), load_run(
+        tmp_path / "run").feature_inputs)(ahead(u, 0.5 / RATE))])
+    features = evaluate_samples(features_ahead, np.column_stack([reference[n] for n in inputs]))
+    assert card.linear_inputs is not None  # the fast LSTM's skip, outside the graph
+    skip = features[calls] @ np.asarray(card.linear_inputs["weights"]).T \
+        + np.asarray(card.linear_inputs["bias"])
+    expected = run_steps(session(model), features[calls])[:, 0] + skip[:, 0]
     np.testing.assert_allclose(result["x_ff"][calls], expected,
                                rtol=1e-5, atol=1e-5 * np.abs(expected).max())
