@@ -59,7 +59,7 @@ def cli_markdown() -> str:
         name = " ".join(words)
         usage = " ".join(sub.format_usage().split())[len("usage: "):]
         out += [f"## flexff {name}", "", cell(text[:1].upper() + text[1:]) + ".", "",
-                "```text", usage, "```", "",
+                "```text", usage, *(["", sub.epilog] if sub.epilog else []), "```", "",
                 "| argument | choices | default | meaning |", "|---|---|---|---|"]
         for action in sub._actions:
             if isinstance(action, argparse._HelpAction):

@@ -331,6 +331,13 @@ def _config_example(args: argparse.Namespace) -> int:
     return 0
 
 
+def _example_names() -> list[str]:
+    """The names of the example configurations (cosim/examples/*.toml), for --help."""
+    from flexff.cosim.example_configs import config_examples
+
+    return list(config_examples())
+
+
 def _results_export(args: argparse.Namespace) -> int:
     from flexff.results import export_csv
 
@@ -635,9 +642,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     config = commands.add_parser("config", help="run configurations")
     config_commands = config.add_subparsers(dest="config_command", required=True)
-    example = config_commands.add_parser("example", help="print an example configuration "
-                                                         "(no name: list them)")
-    example.add_argument("name", nargs="?", help="the example's name")
+    example = config_commands.add_parser(
+        "example", help="print an example configuration (no name: list them)",
+        epilog="examples:\n" + "\n".join(f"  {n}" for n in _example_names()),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    example.add_argument("name", nargs="?", metavar="NAME",
+                         help="the example's name (listed below)")
     example.set_defaults(handler=_config_example)
     expand = config_commands.add_parser("expand", help="print a configuration in the general "
                                                        "form ([fmu.*], [[connection]], ...)")

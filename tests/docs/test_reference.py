@@ -79,3 +79,12 @@ def test_every_command_and_option_has_an_entry_on_the_cli_page(site):
         for action in parser._actions:
             for option in set(action.option_strings) - {"-h", "--help"}:
                 assert f"<code>{option}</code>" in page, (words, option)
+
+
+def test_config_example_help_lists_the_examples(capsys):
+    from flexff.cli import main
+    from flexff.cosim.example_configs import config_examples
+
+    assert main(["config", "example", "--help"]) == 0
+    shown = capsys.readouterr().out
+    assert all(f"\n  {name}\n" in shown + "\n" for name in config_examples())
