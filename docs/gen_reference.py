@@ -50,6 +50,13 @@ def _default(action: argparse.Action) -> str:
     return code(" ".join(map(str, default)) if isinstance(default, list) else default)
 
 
+def usage(parser: argparse.ArgumentParser) -> str:
+    """The parser's usage, wrapped at 96 characters whatever the terminal."""
+    formatter = argparse.HelpFormatter(parser.prog, width=96)
+    formatter.add_usage(parser.usage, parser._actions, parser._mutually_exclusive_groups, "")
+    return formatter.format_help().strip()
+
+
 def cli_markdown() -> str:
     """The reference of every `flexff` command: usage, help and a table of its arguments."""
     parser = build_parser()
@@ -57,9 +64,8 @@ def cli_markdown() -> str:
            ""]
     for words, sub, text in commands(parser):
         name = " ".join(words)
-        usage = " ".join(sub.format_usage().split())[len("usage: "):]
-        out += [f"## flexff {name}", "", cell(text[:1].upper() + text[1:]) + ".", "",
-                "```text", usage, *(["", sub.epilog] if sub.epilog else []), "```", "",
+        out += [f"## flexff {name}", "", cell(text), "",
+                "```text", usage(sub), *(["", sub.epilog] if sub.epilog else []), "```", "",
                 "| argument | choices | default | meaning |", "|---|---|---|---|"]
         for action in sub._actions:
             if isinstance(action, argparse._HelpAction):
@@ -79,10 +85,13 @@ def config_markdown() -> str:
         anchor = table.replace(".", "-").replace("[k]", "")
         bracket = f"[[{table}]]" if table in ("source", "connection", "machine.axis") \
             else f"[{table}]"
+        kinds = any(k.kinds for k in keys)  # a column saying which kind a key is for
         out += [f"### `{bracket}` {{ #{anchor} }}", "",
-                "| key | type | default | unit | meaning | for |", "|---|---|---|---|---|---|"]
+                "| key | type | default | unit | meaning |" + (" for |" if kinds else ""),
+                "|---|---|---|---|---|" + ("---|" if kinds else "")]
         out += [f"| {code(k.name)} | {cell(k.type)} | {cell(k.default)} | {cell(k.unit)} | "
-                f"{cell(k.meaning)} | {cell(', '.join(k.kinds))} |" for k in keys]
+                f"{cell(k.meaning)} |" + (f" {cell(', '.join(k.kinds))} |" if kinds else "")
+                for k in keys]
         out.append("")
     return "\n".join(out)
 
