@@ -148,10 +148,17 @@ def bench_markdown() -> str:
 
 def record(kind: str, source: Path, command: str, started: str, ended: str,
            commit: str | None = None) -> None:
-    """Copy a command's JSON into docs/results/KIND/ with its stamp (machine, date, commit)."""
+    """Copy a command's JSON (and the demo's errors.png) into docs/results/KIND/ with its
+    stamp: machine, date, commit."""
     folder = RESULTS / kind
     folder.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(source, folder / source.name)
+    plot = source.parent / "errors.png"
+    if kind == "demo" and plot.is_file():  # the run's picture, in 256 colours (a quarter)
+        from PIL import Image
+
+        Image.open(plot).convert("RGB").quantize(256, Image.Quantize.MAXCOVERAGE).save(
+            folder / plot.name, optimize=True)
     commit = commit or subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True,
                                       text=True, check=True, cwd=DOCS).stdout.strip()
     cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text()
