@@ -88,3 +88,12 @@ def test_config_example_help_lists_the_examples(capsys):
     assert main(["config", "example", "--help"]) == 0
     shown = capsys.readouterr().out
     assert all(f"\n  {name}\n" in shown + "\n" for name in config_examples())
+
+
+def test_every_api_object_has_an_entry_on_the_api_page(site):
+    from flexff import api
+
+    page = (site / "reference" / "api" / "index.html").read_text()
+    for name in api.__all__:
+        target = getattr(api, name)
+        assert f'id="{target.__module__}.{target.__qualname__}"' in page, name

@@ -11,7 +11,7 @@ import pytest
 from tests.helpers import REPOSITORY
 
 STEP = re.compile(r"<!-- (run|save: (\S+)) -->\n```\w*\n(.*?)```", re.DOTALL)
-TUTORIALS = ["first-cosimulation", "own-machine"]
+TUTORIALS = ["first-cosimulation", "thesis-feedforward", "own-machine", "real-time"]
 
 
 def steps(page: str) -> list[tuple[str | None, str]]:
