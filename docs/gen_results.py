@@ -14,7 +14,6 @@ import math
 import os
 import platform
 import re
-import shutil
 import subprocess
 from datetime import datetime
 from pathlib import Path
@@ -49,7 +48,7 @@ def pair(axes: dict[str, Any], key: str) -> str:
 def load(kind: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """The JSON of `kind` (demo: summary.json, bench: bench.json) and its stamp."""
     folder = RESULTS / kind
-    name = "summary.json" if kind == "demo" else "bench.json"
+    name = "summary.json" if kind == "demo" else "bench.json"  # bench, processes
     return (json.loads((folder / name).read_text()),
             json.loads((folder / "stamp.json").read_text()))
 
@@ -146,13 +145,41 @@ def bench_markdown() -> str:
     return "\n".join(out) + "\n"
 
 
+def processes_markdown() -> str:
+    """Whole processes side by side (flexff bench --processes), from docs/results/processes."""
+    bench, stamp = load("processes")
+    out = [stamp_line(stamp), "", f"### One FMU, whole processes ({bench['fmu']}, "
+           f"medians of {bench['repeats']} runs)", "",
+           "| steps | tool | wall [s] | peak memory [MiB] | flexff's speed-up |",
+           "|---:|---|---:|---:|---:|"]
+    for key, runs in bench.items():
+        if key.endswith("_steps"):
+            for tool in ("flexff", "fmpy", "ecos"):
+                if tool in runs:
+                    r = runs[tool]
+                    speedup = runs.get(f"speedup_vs_{tool}", "")
+                    out.append(f"| {key.removesuffix('_steps')} | {tool} | "
+                               f"{figure(r['wall_s'])} | {figure(r['peak_mib'])} | "
+                               f"{figure(speedup) if speedup else ''} |")
+    if isinstance(bench.get("ecos"), str):
+        out += ["", f"Ecos did not run: {bench['ecos']}."]
+    out += ["", "### Start-up", "", "| process | wall [s] | peak memory [MiB] |",
+            "|---|---:|---:|"]
+    for name, r in bench["startup"].items():
+        out.append(f"| {name} | {figure(r['wall_s'])} | {figure(r['peak_mib'])} |")
+    return "\n".join(out) + "\n"
+
+
 def record(kind: str, source: Path, command: str, started: str, ended: str,
            commit: str | None = None) -> None:
     """Copy a command's JSON (and the demo's errors.png) into docs/results/KIND/ with its
     stamp: machine, date, commit."""
     folder = RESULTS / kind
     folder.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(source, folder / source.name)
+    data = json.loads(source.read_text())
+    if isinstance(data.get("ecos"), str):  # why Ecos did not run names this machine's paths
+        data["ecos"] = data["ecos"].split(" for /")[0]
+    (folder / source.name).write_text(json.dumps(data, indent=2) + "\n")
     plot = source.parent / "errors.png"
     if kind == "demo" and plot.is_file():  # the run's picture, in 256 colours (a quarter)
         from PIL import Image
@@ -182,7 +209,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="what", required=True)
     rec = sub.add_parser("record")
-    rec.add_argument("kind", choices=("demo", "bench"))
+    rec.add_argument("kind", choices=("demo", "bench", "processes"))
     rec.add_argument("source", type=Path)
     rec.add_argument("--command", required=True)
     rec.add_argument("--started", required=True)

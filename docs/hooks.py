@@ -17,6 +17,7 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "signals": gen_reference.signals_markdown,
     "results-demo": gen_results.demo_markdown,
     "results-bench": gen_results.bench_markdown,
+    "results-processes": gen_results.processes_markdown,
 }
 MARKER = re.compile(r"<!-- generated: ([a-z-]+) -->")
 

@@ -118,7 +118,7 @@ def test_the_benchmarks_page_shows_the_bench(site):
 
 
 def test_pages_are_stamped(site):
-    for page, kind in (("thesis", "demo"), ("benchmarks", "bench")):
+    for page, kind in (("thesis", "demo"), ("benchmarks", "bench"), ("benchmarks", "processes")):
         stamp = json.loads((RESULTS / kind / "stamp.json").read_text())
         text = (site / "results" / page / "index.html").read_text()
         assert stamp["commit"][:10] in text and stamp["date"] in text, page
@@ -135,3 +135,23 @@ def test_the_readme_table_is_generated_from_the_summary():
     shown = _numbers(flexff_row.split("|", 2)[2])
     expected = [summary["scenarios"][m][a]["e2_ratio"] for m in gen_results.MODELS for a in "xy"]
     assert len(shown) == len(expected) and all(map(_close, shown, expected))
+
+
+def test_the_benchmarks_page_shows_the_processes(site):
+    bench = json.loads((RESULTS / "processes" / "bench.json").read_text())
+    page = site / "results" / "benchmarks" / "index.html"
+    parser = _Tables()
+    parser.feed(page.read_text())
+    table = next(t for t in parser.tables if t[0][:2] == ["steps", "tool"])
+    shown = {(row[0], row[1]): row[2:] for row in table[1:]}
+    for key, runs in bench.items():
+        if key.endswith("_steps"):
+            for tool in ("flexff", "fmpy"):
+                wall, peak, _ = shown[key.removesuffix("_steps"), tool]
+                assert _close(float(wall), runs[tool]["wall_s"]), (key, tool)
+                assert _close(float(peak), runs[tool]["peak_mib"]), (key, tool)
+            assert _close(float(shown[key.removesuffix("_steps"), "fmpy"][2]),
+                          runs["speedup_vs_fmpy"])
+    startup = _rows(page, "process")
+    for name, r in bench["startup"].items():
+        assert _close(float(startup[name][0]), r["wall_s"]), name
