@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # the command line loads numpy and the rest only in the comma
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to keep torch unloaded
 PRESETS = ("fast", "thesis")
+TRAJECTORY_SETS = ("sim", "hardware")  # learning.dataset.SETS, named here to keep numpy unloaded
 DEVICES = ("auto", "cpu", "cuda")  # learning.devices', named here to keep torch unloaded
 ITERATIONS, CUTOFF_HZ = 10, 20.0  # learning.ilc's defaults, named here to keep scipy unloaded
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
@@ -675,8 +676,9 @@ def build_parser() -> argparse.ArgumentParser:
     collect = data_commands.add_parser(
         "collect", help="co-simulate a trajectory set under PID into a dataset folder "
                         "(resumes an interrupted collection)")
-    collect.add_argument("--set", help="the manipulator's trajectory set (an unknown name lists "
-                                       "them); a loop with a [machine] gets its excitation")
+    collect.add_argument("--set", help=f"the manipulator's trajectory set: "
+                                       f"{' or '.join(TRAJECTORY_SETS)}; a loop with a "
+                                       f"[machine] gets its excitation")
     collect.add_argument("--config", metavar="CONFIG.toml|SYSTEM.ssp",
                          help="the loop to collect on (flexff's controller and any plant); "
                               "default: the set's built-in plant under PID")

@@ -97,3 +97,10 @@ def test_every_api_object_has_an_entry_on_the_api_page(site):
     for name in api.__all__:
         target = getattr(api, name)
         assert f'id="{target.__module__}.{target.__qualname__}"' in page, name
+
+
+def test_data_collect_help_lists_the_library_s_trajectory_sets():
+    from flexff.cli import TRAJECTORY_SETS
+    from flexff.learning.dataset import SETS
+
+    assert TRAJECTORY_SETS == SETS
