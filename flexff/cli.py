@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # the command line loads numpy and the rest only in the comma
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to keep torch unloaded
 PRESETS = ("fast", "thesis")
+TRAJECTORY_SETS = ("sim", "hardware")  # learning.dataset.SETS, named here to keep numpy unloaded
 DEVICES = ("auto", "cpu", "cuda")  # learning.devices', named here to keep torch unloaded
 ITERATIONS, CUTOFF_HZ = 10, 20.0  # learning.ilc's defaults, named here to keep scipy unloaded
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
@@ -344,6 +345,13 @@ def _config_example(args: argparse.Namespace) -> int:
     return 0
 
 
+def _example_names() -> list[str]:
+    """The names of the example configurations (cosim/examples/*.toml), for --help."""
+    from flexff.cosim.example_configs import config_examples
+
+    return list(config_examples())
+
+
 def _results_export(args: argparse.Namespace) -> int:
     from flexff.results import export_csv
 
@@ -653,9 +661,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     config = commands.add_parser("config", help="run configurations")
     config_commands = config.add_subparsers(dest="config_command", required=True)
-    example = config_commands.add_parser("example", help="print an example configuration "
-                                                         "(no name: list them)")
-    example.add_argument("name", nargs="?", help="the example's name")
+    example = config_commands.add_parser(
+        "example", help="print an example configuration (no name: list them)",
+        epilog="examples:\n" + "\n".join(f"  {n}" for n in _example_names()),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    example.add_argument("name", nargs="?", metavar="NAME",
+                         help="the example's name (listed below)")
     example.set_defaults(handler=_config_example)
     expand = config_commands.add_parser("expand", help="print a configuration in the general "
                                                        "form ([fmu.*], [[connection]], ...)")
@@ -683,8 +694,9 @@ def build_parser() -> argparse.ArgumentParser:
     collect = data_commands.add_parser(
         "collect", help="co-simulate a trajectory set under PID into a dataset folder "
                         "(resumes an interrupted collection)")
-    collect.add_argument("--set", help="the manipulator's trajectory set (an unknown name lists "
-                                       "them); a loop with a [machine] gets its excitation")
+    collect.add_argument("--set", help=f"the manipulator's trajectory set: "
+                                       f"{' or '.join(TRAJECTORY_SETS)}; a loop with a "
+                                       f"[machine] gets its excitation")
     collect.add_argument("--config", metavar="CONFIG.toml|SYSTEM.ssp",
                          help="the loop to collect on (flexff's controller and any plant); "
                               "default: the set's built-in plant under PID")

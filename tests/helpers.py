@@ -34,7 +34,7 @@ def simulate(model, x0, params, times, current=(0.0, 0.0, 0.0), rtol=1e-12, atol
 
 
 def run_readme_snippet(folder: Path, name: str) -> str:
-    """The README's `<!-- NAME.py -->` block saved as NAME.py in `folder`, then its
+    """The documentation's `<!-- NAME.py -->` block saved as NAME.py in `folder`, then its
     `<!-- NAME.sh -->` block run there with this Python first on the PATH; its output."""
     (folder / f"{name}.py").write_text(readme_block(f"{name}.py"))
     environment = {**os.environ, "PATH": f"{os.path.dirname(sys.executable)}:{os.environ['PATH']}"}
@@ -45,11 +45,15 @@ def run_readme_snippet(folder: Path, name: str) -> str:
 
 
 def readme_block(marker: str) -> str:
-    """The fenced code block right after `<!-- marker -->` in the README."""
-    text = (REPOSITORY / "README.md").read_text()
-    found = re.search(rf"<!-- {re.escape(marker)} -->\n```\w+\n(.*?)```", text, re.DOTALL)
-    assert found, f"README.md has no code block after <!-- {marker} -->"
-    return found.group(1)
+    """The fenced code block right after `<!-- marker -->` in README.md or a page of docs/,
+    its `--8<-- "FILE"` lines (MkDocs snippets) replaced by FILE's text."""
+    pages = [REPOSITORY / "README.md", *sorted((REPOSITORY / "docs").rglob("*.md"))]
+    pattern = rf"<!-- {re.escape(marker)} -->\n```\w+\n(.*?)```"
+    found = next(filter(None, (re.search(pattern, p.read_text(), re.DOTALL) for p in pages)),
+                 None)
+    assert found, f"no page has a code block after <!-- {marker} -->"
+    return re.sub(r'^--8<-- "([^"]+)"\n', lambda m: (REPOSITORY / m[1]).read_text(),
+                  found.group(1), flags=re.MULTILINE)
 
 
 def matlab_v73_header(path: Path) -> None:

@@ -1,0 +1,167 @@
+"""Every key of a run configuration's general form, as data: name, type, default, unit, meaning.
+
+The documentation's configuration reference is rendered from `KEYS`, and a test checks it
+against the keys that cosim.config's parser and cosim.machine accept. Built-in FMUs' options
+come from their registry (cosim.builtins), not from here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Key:
+    """One key of one table; `kinds`: the table's `kind` (or form) values it belongs to."""
+
+    table: str
+    name: str
+    type: str
+    default: str
+    unit: str
+    meaning: str
+    kinds: tuple[str, ...] = ()
+
+
+REFERENCE_KINDS = ("circle", "line-circle", "spline", "segments", "csv")
+CIRCLE = ("circle", "line-circle")
+SEGMENT_KINDS = ("line", "hold", "circle", "spline")
+
+KEYS: tuple[Key, ...] = (
+    # [run]
+    Key("run", "step", "number", "0.001", "s", "The communication step."),
+    Key("run", "start", "number", "first FMU's default experiment, else 0", "s",
+        "The start time. Point k is at start + k * step."),
+    Key("run", "stop", "number", "start + the reference's duration, else the first FMU's "
+        "default experiment", "s", "The end time, as in FMI. The run lasts stop - start, "
+        "a whole number of steps."),
+    Key("run", "tolerance", "number", "each FMU's default experiment", "1",
+        "Relative tolerance of every FMU's own solver."),
+    Key("run", "step_timeout", "number", "none", "s",
+        "Bound on each call of an FMU in its own process (needs isolate)."),
+    Key("run", "algorithm", "string", '"gauss-seidel"', "",
+        'The master algorithm: "gauss-seidel" or "jacobi".'),
+    Key("run", "order", "list of strings", "the order of the [fmu.*] tables", "",
+        "Every FMU name once, in stepping order."),
+    # [reference]
+    Key("reference", "kind", "string", "required", "",
+        "circle, line-circle, spline, segments, csv, or a kind a machine package registers.",
+        REFERENCE_KINDS),
+    Key("reference", "radius", "number", "required", "m", "The circle's radius.", CIRCLE),
+    Key("reference", "centre", "[x, y]", "[0, 0]", "m", "The circle's centre.", CIRCLE),
+    Key("reference", "turns", "number", "1", "1", "Turns; negative runs clockwise.", CIRCLE),
+    Key("reference", "start_angle", "number", "0", "rad", "Where on the circle it starts.",
+        CIRCLE),
+    Key("reference", "duration", "number", "required", "s", "How long the path takes.",
+        ("circle", "spline")),
+    Key("reference", "start", "[x, y]", "[0, 0]", "m", "The starting point.",
+        ("line-circle", "segments")),
+    Key("reference", "line_duration", "number", "required", "s",
+        "The skew-sine line to the circle's start point.", ("line-circle",)),
+    Key("reference", "circle_duration", "number", "required", "s", "The circle after the line.",
+        ("line-circle",)),
+    Key("reference", "points", "list of [x, y]", "required", "m",
+        "The closed periodic spline's points.", ("spline",)),
+    Key("reference", "segments", "list of tables", "required", "",
+        "Segments run in order, each from where the previous one ended.", ("segments",)),
+    Key("reference", "path", "string", "required", "",
+        "A CSV table, relative to the configuration's folder.", ("csv",)),
+    Key("reference", "smoothing_window", "number", "0.025", "s",
+        "Smoothing of the table's derivatives.", ("csv",)),
+    # reference.segments[k]
+    Key("reference.segments[k]", "kind", "string", "required", "",
+        "line, hold, circle or spline.", SEGMENT_KINDS),
+    Key("reference.segments[k]", "to", "[x, y]", "required", "m", "The line's end point.",
+        ("line",)),
+    Key("reference.segments[k]", "centre", "[x, y]", "[0, 0]", "m",
+        "The circle's centre; radius and start angle follow from the current point.",
+        ("circle",)),
+    Key("reference.segments[k]", "turns", "number", "1", "1",
+        "Turns, not zero; negative runs clockwise.", ("circle",)),
+    Key("reference.segments[k]", "points", "list of [x, y]", "required", "m",
+        "A closed spline through the current point, then these.", ("spline",)),
+    Key("reference.segments[k]", "duration", "number", "required", "s",
+        "How long the segment takes.", SEGMENT_KINDS),
+    # [[source]]
+    Key("source", "kind", "string", "required", "", '"constant" or "csv".',
+        ("constant", "csv")),
+    Key("source", "values", "table", "required", "",
+        "Constant signals: {name = number, ...}.", ("constant",)),
+    Key("source", "path", "string", "required", "",
+        "A CSV table: header `time,<name>,...`, interpolated onto the step.", ("csv",)),
+    # [fmu.NAME]
+    Key("fmu.NAME", "path", "string", "path or builtin", "",
+        "Any FMI 2.0 or 3.0 FMU, relative to the configuration.", ("path",)),
+    Key("fmu.NAME", "builtin", "string", "path or builtin", "",
+        "A registered built-in FMU; its options are keys of this table.", ("builtin",)),
+    Key("fmu.NAME", "parameters", "table", "{}", "",
+        "Start values of parameters or inputs, checked against the FMU's variables.",
+        ("path", "builtin")),
+    Key("fmu.NAME", "unconnected", "string", '"error"', "",
+        '"error", or "start": unconnected inputs keep their start values.',
+        ("path", "builtin")),
+    Key("fmu.NAME", "tolerance", "number", "[run] tolerance, else the default experiment",
+        "1", "Relative tolerance of this FMU's own solver.", ("path", "builtin")),
+    Key("fmu.NAME", "isolate", "boolean", "false", "",
+        "Run the FMU in its own process: a crash or hang ends the run with an error.",
+        ("path", "builtin")),
+    Key("fmu.NAME", "solver", "string", "none (co-simulation)", "",
+        '"cvode": run the FMU as model exchange.', ("path",)),
+    # [[connection]]
+    Key("connection", "from", "string", "required", "", '"fmu.output" or a source signal.'),
+    Key("connection", "to", "string", "required", "", '"fmu.input".'),
+    Key("connection", "gain", "number", "1", "1", "to = gain * from + offset."),
+    Key("connection", "offset", "number", "0", "the input's", "to = gain * from + offset."),
+    # [record]
+    Key("record", "signals", "list of strings", "all", "", "The signals to record."),
+    Key("record", "csv", "boolean", "false", "", "Also write signals.csv."),
+    Key("record", "plot", "boolean", "true in a manipulator run", "", "Draw the plots."),
+    Key("record", "every", "integer", "1", "", "Keep every N-th point (metrics see them all)."),
+    # [machine]
+    Key("machine", "name", "string", "required", "", "The machine's name."),
+    Key("machine", "axis", "list of tables", "required", "", "The axes ([[machine.axis]])."),
+    Key("machine", "prior", "table", "all default terms", "",
+        "The identified model's terms ([machine.prior])."),
+    Key("machine", "log", "table", "the dataset's own names", "",
+        "How the machine's logs name its signals ([machine.log])."),
+    Key("machine.axis", "name", "string", "required", "",
+        "A letter, then letters or digits; names <axis>_ref, v<axis>_ref, ..."),
+    Key("machine.axis", "unit", "string", '"m"', "", "The axis's position unit."),
+    Key("machine.axis", "measured", "string", "required", "",
+        '"instance.variable", or an expression of outputs (a kinematic map).'),
+    Key("machine.axis", "true", "string", "none", "",
+        "The true position a simulation gives; only the metrics read it."),
+    Key("machine.axis", "feedforward", "string", "required", "",
+        "The FMU input the feedforward drives."),
+    Key("machine.axis", "effort", "string", "required", "",
+        "The output the controller commands: the labels."),
+    Key("machine.axis", "effort_unit", "string", '"N"', "", "The effort's unit."),
+    Key("machine.axis", "range", "[low, high]", "required", "axis unit",
+        "The excitation's position range."),
+    Key("machine.axis", "velocity", "number", "required", "axis unit/s",
+        "The excitation's bound on |velocity|."),
+    Key("machine.axis", "acceleration", "number", "required", "axis unit/s^2",
+        "The excitation's bound on |acceleration|."),
+    Key("machine.axis", "jerk", "number", "none", "axis unit/s^3",
+        "The excitation's bound on |jerk|."),
+    Key("machine.prior", "terms", "list of strings",
+        '["inertia", "viscous", "coulomb", "offset"]', "",
+        "inertia, viscous, coulomb, coulomb_asymmetric, offset."),
+    Key("machine.prior", "extra", "table", "{}", "",
+        'Per axis, term = "expression" of the axes\' x, vx, ax.'),
+    Key("machine.prior", "coulomb_width", "number", "chosen by the identification",
+        "axis unit/s", "The width of the friction's tanh."),
+    Key("machine.log", "time", "string", '"time"', "", "The log's time column [s]."),
+    Key("machine.log", "scalars", "table", "{}", "", "Named numbers for the expressions."),
+    Key("machine.log", "columns", "table", "{}", "",
+        "Dataset signal = expression of the log's columns and scalars."),
+)
+
+TABLES = ("run", "reference", "reference.segments[k]", "source", "fmu.NAME", "connection",
+          "record", "machine", "machine.axis", "machine.prior", "machine.log")
+
+
+def keys_of(table: str, kind: str | None = None) -> tuple[str, ...]:
+    """The names of `table`'s keys (for `kind`, if given), in the order of KEYS."""
+    return tuple(k.name for k in KEYS
+                 if k.table == table and (kind is None or not k.kinds or kind in k.kinds))

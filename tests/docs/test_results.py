@@ -1,0 +1,159 @@
+"""Every figure on a results page and in README.md's table is the one its JSON holds: the
+tables are read back from the built site and each cell compared with the JSON."""
+
+import json
+import math
+import re
+from html.parser import HTMLParser
+
+from tests.helpers import REPOSITORY
+
+RESULTS = REPOSITORY / "docs" / "results"
+
+
+class _Tables(HTMLParser):
+    """Every table of a page: its rows, as lists of cell texts."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.tables: list[list[list[str]]] = []
+        self.cell: list[str] | None = None
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "table":
+            self.tables.append([])
+        elif tag == "tr":
+            self.tables[-1].append([])
+        elif tag in ("td", "th"):
+            self.cell = []
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th") and self.cell is not None:
+            self.tables[-1][-1].append("".join(self.cell).strip())
+            self.cell = None
+
+    def handle_data(self, data):
+        if self.cell is not None:
+            self.cell.append(data)
+
+
+def _rows(page, *header: str) -> dict[str, list[str]]:
+    """The rows of the table of `page` whose header row starts with `header`, by first cell."""
+    parser = _Tables()
+    parser.feed(page.read_text())
+    table = next(t for t in parser.tables if tuple(t[0][:len(header)]) == header)
+    return {row[0]: row[1:] for row in table[1:]}
+
+
+def _numbers(cell: str) -> list[float]:
+    return [float(n) for n in re.findall(r"-?\d+(?:\.\d+)?(?:e-?\d+)?", cell)]
+
+
+def _close(shown: float, value: float) -> bool:
+    """`shown` is `value` to the three significant figures the pages print."""
+    return math.isclose(shown, value, rel_tol=5e-3)
+
+
+def test_the_thesis_page_shows_the_summary(site):
+    summary = json.loads((RESULTS / "demo" / "summary.json").read_text())
+    page = site / "results" / "thesis" / "index.html"
+    rows = _rows(page, "scenario")
+    names = {"PID alone": "pid", "rigid-body FF": "rigid-body", "LSTM": "lstm",
+             "identified rigid-body FF": "identified", "CNN-LSTM": "cnn-lstm", "TCN": "tcn",
+             "physics-guided": "pgnn", "ILC limit": "limit"}
+    checked = 0
+    for name, key in names.items():
+        s = summary["scenarios"][key]
+        e2, e2_ratio, einf_ratio, per_limit = (_numbers(c) for c in rows[name][:4])
+        for shown, metric in ((e2, "e2"), (e2_ratio, "e2_ratio"), (einf_ratio, "einf_ratio"),
+                              (per_limit, "e2_per_limit")):
+            assert all(_close(v, s[a][metric]) for v, a in zip(shown, "xy")), (name, metric)
+            checked += 2
+    assert checked == 64
+    training = _rows(page, "model")
+    for name, key in names.items():
+        if key in summary["training"]:
+            t = summary["training"][key]
+            seconds, epochs, parameters, mse = training[name]
+            assert _close(float(seconds), t["seconds"]) and _close(float(mse), t["test_mse"])
+            assert epochs == f"{t['epochs']} ({t['best_epoch']})"
+            assert parameters == str(t["parameters"])
+    held = _rows(page, "scenario", "geometric mean x / y")
+    for key, ratios in summary["held_out"]["e2_ratio"].items():
+        name = next(n for n, k in names.items() if k == key)
+        mean, worst = (_numbers(c) for c in held[name])
+        for a, shown_mean, shown_worst in zip("xy", mean, worst):
+            assert _close(shown_mean, math.exp(sum(map(math.log, ratios[a])) / len(ratios[a])))
+            assert _close(shown_worst, min(ratios[a]))
+
+
+
+def test_the_benchmarks_page_shows_the_bench(site):
+    bench = json.loads((RESULTS / "bench" / "bench.json").read_text())
+    page = site / "results" / "benchmarks" / "index.html"
+    rows = _rows(page, "plant")
+    for variant, p in bench["plant_step"].items():
+        shown = [_numbers(c)[0] for c in rows[variant]]
+        assert all(_close(v, p[k]) for v, k in zip(shown, (
+            "master_us_per_step", "isolated_us_per_step", "python_us_per_step",
+            "c_us_per_step"))), variant
+    loop = bench["closed_loop"]
+    rows = _rows(page, "engine")
+    import gen_results
+
+    for engine, us in loop["us_per_step"].items():
+        shown = [_numbers(c)[0] for c in rows[gen_results.ENGINES.get(engine, engine)]]
+        assert _close(shown[0], us) and _close(shown[1], loop["real_time_factor"][engine])
+    rows = _rows(page, "feedforward")
+    for name, f in bench["learned_feedforward"].items():
+        if isinstance(f, dict):
+            shown = [_numbers(c)[0] for c in rows[name]]
+            assert _close(shown[0], f["us_per_step"]), name
+            assert _close(shown[1], f["ratio_over_without_feedforward"]), name
+    rows = _rows(page, "loop")
+    for name in ("tcn", "lstm", "idle"):
+        r = bench["realtime"][name]
+        base = r["tasks"]["base"] if "tasks" in r else r
+        tet = _numbers(rows[name][0])
+        assert all(map(_close, tet, (base["tet_us"][q] for q in ("p50", "p99", "max")))), name
+        assert int(rows[name][1]) == r["overruns"], name
+
+
+def test_pages_are_stamped(site):
+    for page, kind in (("thesis", "demo"), ("benchmarks", "bench"), ("benchmarks", "processes")):
+        stamp = json.loads((RESULTS / kind / "stamp.json").read_text())
+        text = (site / "results" / page / "index.html").read_text()
+        assert stamp["commit"][:10] in text and stamp["date"] in text, page
+
+
+def test_the_readme_table_is_generated_from_the_summary():
+    import gen_results
+
+    summary = json.loads((RESULTS / "demo" / "summary.json").read_text())
+    readme = (REPOSITORY / "README.md").read_text()
+    assert f"{gen_results.README_START}\n{gen_results.readme_table(summary)}\n" \
+           f"{gen_results.README_END}" in readme
+    flexff_row = next(line for line in readme.splitlines() if line.startswith("| flexff"))
+    shown = _numbers(flexff_row.split("|", 2)[2])
+    expected = [summary["scenarios"][m][a]["e2_ratio"] for m in gen_results.MODELS for a in "xy"]
+    assert len(shown) == len(expected) and all(map(_close, shown, expected))
+
+
+def test_the_benchmarks_page_shows_the_processes(site):
+    bench = json.loads((RESULTS / "processes" / "bench.json").read_text())
+    page = site / "results" / "benchmarks" / "index.html"
+    parser = _Tables()
+    parser.feed(page.read_text())
+    table = next(t for t in parser.tables if t[0][:2] == ["steps", "tool"])
+    shown = {(row[0], row[1]): row[2:] for row in table[1:]}
+    for key, runs in bench.items():
+        if key.endswith("_steps"):
+            for tool in ("flexff", "fmpy"):
+                wall, peak, _ = shown[key.removesuffix("_steps"), tool]
+                assert _close(float(wall), runs[tool]["wall_s"]), (key, tool)
+                assert _close(float(peak), runs[tool]["peak_mib"]), (key, tool)
+            assert _close(float(shown[key.removesuffix("_steps"), "fmpy"][2]),
+                          runs["speedup_vs_fmpy"])
+    startup = _rows(page, "process")
+    for name, r in bench["startup"].items():
+        assert _close(float(startup[name][0]), r["wall_s"]), name
