@@ -7,8 +7,10 @@ NAME_out of the same shape (where the graph leaves a dimension symbolic, the run
 start). The FMU runs it every `period` communication steps on `input_function(x, u, p)` and
 hands the result to the System's output function (see System); `table` switches it to the
 precomputed mode, `task` runs it in its own task (a worker thread of the FMU, its result used
-one period after the call started, c/wrapper_task.c). The FMU bundles the graph (resources/)
-and the libonnxruntime of the installed onnxruntime wheel (binaries/<platform>/).
+one period after the call started, c/wrapper_task.c). `runtime` says what computes the graph:
+"c" (default), the graph generated as C (fmu.network_c) and compiled into the FMU, which then
+needs nothing but its own sources; "onnxruntime", the FMU bundles the graph (resources/) and
+the libonnxruntime of the installed onnxruntime wheel (binaries/<platform>/).
 fmu.onnx_graph brings any graph of fixed-size float tensors to this convention.
 """
 
@@ -26,6 +28,7 @@ from flexff.fmu.errors import InputError, MissingPackage
 
 MAX_RANK = 4  # of a state tensor (NET_MAX_RANK in onnx_network.h)
 MAX_TENSORS = 64  # inputs, or outputs, of one graph (MAX_TENSORS in onnx_network.c)
+RUNTIMES = ("c", "onnxruntime")  # what computes the graph in the FMU, the default first
 ELEMENT_TYPES: dict[int, str] = {onnx.TensorProto.FLOAT: "float32",
                                  onnx.TensorProto.DOUBLE: "float64"}
 
@@ -60,8 +63,10 @@ class Network:
     period: int = 1  # communication steps between calls
     table: np.ndarray | None = None  # precomputed mode: rows (time, inputs...) at every step
     task: bool = False  # in its own task: the result of the call at step k used from k + period
+    runtime: str = RUNTIMES[0]  # generated C compiled into the FMU, or onnxruntime
 
     def __post_init__(self) -> None:
+        check_runtime(self.runtime)
         if self.period < 1:
             raise InputError(f"the network's period must be at least one step, got {self.period}")
         if self.task and self.table is not None:
@@ -71,6 +76,18 @@ class Network:
                                        or not np.all(np.isfinite(self.table))):
             raise ValueError("the precomputation table must be a finite 2-D array with rows "
                              "(time, inputs...)")
+
+
+def check_runtime(runtime: str) -> None:
+    """InputError naming the runtimes if `runtime` is not one."""
+    if runtime not in RUNTIMES:
+        raise InputError(f"unknown network runtime {runtime!r}: choose one of "
+                         f"{', '.join(RUNTIMES)}")
+
+
+def runtime_label(runtime: str) -> str:
+    """How a description names the runtime: 'generated C' or 'onnxruntime'."""
+    return "generated C" if runtime == "c" else runtime
 
 
 def read_network(model: str | Path, input_function: ca.Function, period: int = 1,

@@ -21,6 +21,7 @@ kind, or with attributes it does not handle, is refused with one line naming nod
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 
@@ -33,6 +34,7 @@ from flexff.fmu.network_c_writer import Writer, refuse
 from flexff.fmu.network_plan import Plan, plan_graph
 
 KERNELS_HEADER = "net_kernels.h"  # in fmu/c/, next to the generated file when compiled
+FMU_PREFIX = "flexff_net"  # the generated graph in an FMU (c/c_network.c calls it)
 
 
 def supported_operators() -> list[str]:
@@ -53,7 +55,9 @@ def generate_network_c(model: str | Path | onnx.ModelProto, prefix: str = "flexf
     plan = plan_graph(loaded, label)
     for node in plan.nodes:
         if node.op_type not in OPERATORS or node.domain not in ("", "ai.onnx"):
-            raise InputError(f"{label}: {refuse(node, 'operator not supported by the C network; supported: ' + ', '.join(supported_operators()))}")
+            why = ("operator not supported by the C network; supported: "
+                   + ", ".join(supported_operators()))
+            raise InputError(f"{label}: {refuse(node, why)}")
     writer = Writer(plan)
     body: list[str] = []
     for node in plan.nodes:
@@ -66,6 +70,21 @@ def generate_network_c(model: str | Path | onnx.ModelProto, prefix: str = "flexf
         body += [f"    {line}" for line in writer.declarations()]
     return {f"{prefix}.h": _header(plan, prefix), f"{prefix}.c": _source(plan, prefix, writer,
                                                                            body)}
+
+
+def fmu_network_sources(model: str | Path) -> dict[str, str]:
+    """generate_network_c of the graph file `model` with the FMU's prefix, remembered by the
+    file's contents (a System is checked and then built from the same graph)."""
+    return dict(_remembered(Path(model).read_bytes(), str(model)))
+
+
+@functools.lru_cache(maxsize=8)
+def _remembered(data: bytes, name: str) -> tuple[tuple[str, str], ...]:
+    try:
+        loaded = onnx.load_from_string(data)
+    except Exception as exc:  # onnx raises DecodeError and others for a broken file
+        raise InputError(f"{name} is not a readable ONNX model: {exc}") from exc
+    return tuple(generate_network_c(loaded, FMU_PREFIX, name).items())
 
 
 def _comment(text: str) -> str:

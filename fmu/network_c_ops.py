@@ -402,8 +402,8 @@ def _conv(w: Writer, node: onnx.NodeProto) -> list[str]:
                            f"explicit pads")
     kernel_values = w.value(node, node.input[1], "weight")
     pads = list(at.get("pads", [0, 0]))  # type: ignore[call-overload]
-    stride = int(list(at.get("strides", [1]))[0])  # type: ignore[call-overload]
-    dilation = int(list(at.get("dilations", [1]))[0])  # type: ignore[call-overload]
+    stride = int(next(iter(at.get("strides", [1]))))  # type: ignore[call-overload]
+    dilation = int(next(iter(at.get("dilations", [1]))))  # type: ignore[call-overload]
     groups = int(at.get("group", 1))  # type: ignore[call-overload]
     batch, channels, length = x.shape
     filters, per_group, kernel = weights.shape
@@ -467,7 +467,8 @@ def _lstm(w: Writer, node: onnx.NodeProto) -> list[str]:
 
 UNARY = {
     "Relu": ("({x} > 0 ? {x} : ({T})0)", False), "Neg": ("(-{x})", False),
-    "Abs": ("({x} < 0 ? -{x} : {x})", False), "Sigmoid": ("(({T})1 / (({T})1 + exp{f}(-{x})))", True),
+    "Abs": ("({x} < 0 ? -{x} : {x})", False),
+    "Sigmoid": ("(({T})1 / (({T})1 + exp{f}(-{x})))", True),
     "Tanh": ("tanh{f}({x})", True), "Exp": ("exp{f}({x})", True), "Log": ("log{f}({x})", True),
     "Sqrt": ("sqrt{f}({x})", True), "Sin": ("sin{f}({x})", True), "Cos": ("cos{f}({x})", True),
     "Tan": ("tan{f}({x})", True), "Atan": ("atan{f}({x})", True), "Asin": ("asin{f}({x})", True),
@@ -493,6 +494,6 @@ OPERATORS: dict[str, Emitter] = {
     "Identity": _alias, "Reshape": _alias, "Flatten": _alias, "Squeeze": _alias,
     "Unsqueeze": _alias,
     "Transpose": _transpose, "Slice": _slice, "Gather": _gather, "Expand": _expand,
-    "Concat": _concat, **{op: _reduce for op in REDUCTIONS}, "CumSum": _cumsum,
+    "Concat": _concat, **dict.fromkeys(REDUCTIONS, _reduce), "CumSum": _cumsum,
     "MatMul": _matmul, "Gemm": _gemm, "Conv": _conv, "LSTM": _lstm,
 }
