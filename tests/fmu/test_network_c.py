@@ -203,6 +203,7 @@ def test_fmpy_builds_the_binary_from_the_sources_alone(feedforward_fmus, tmp_pat
     with zipfile.ZipFile(feedforward_fmus["lstm", "c"]) as zf:
         zf.extractall(folder)
     shutil.rmtree(folder / "binaries")
+    (tmp_path / "build").mkdir()
     build.build_platform_binary(folder, tmp_path / "build")
     fmu = tmp_path / "lstm.fmu"
     with zipfile.ZipFile(fmu, "w") as zf:
