@@ -37,7 +37,7 @@ from flexff.controllers.features import feature_names, reference_feature_functio
 from flexff.controllers.feedforward import feedforward_system, rigid_body_force
 from flexff.controllers.model_card import OUTPUTS, ModelCard, read_card
 from flexff.fmu.errors import InputError
-from flexff.fmu.network import RUNTIMES, runtime_label
+from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System
 from flexff.plant.signals import REFERENCE, names, reference_motion

@@ -21,7 +21,7 @@ from flexff.controllers.machine_features import FeatureInputs, feature_function
 from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import Machine, parse_machine
 from flexff.fmu.errors import InputError
-from flexff.fmu.network import RUNTIMES, runtime_label
+from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System, Variable
 

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from flexff.fmu.errors import InputError, RunError
+from flexff.fmu.network_runtime import RUNTIMES
 from flexff.plant.variants import VARIANTS
 
 if TYPE_CHECKING:  # the command line loads numpy and the rest only in the command that runs
@@ -86,8 +87,6 @@ def _fmu_build(args: argparse.Namespace) -> int:
     if args.kind == "plant" and (args.task or args.runtime is not None):
         raise InputError("--task and --runtime are about an embedded network: the plant has "
                          "none")
-    from flexff.fmu.network import RUNTIMES
-
     runtime = args.runtime or RUNTIMES[0]
     if args.kind != "onnx" and (args.graph is not None or args.every is not None):
         raise InputError("only fmu build onnx takes a graph file and --every (a learned "
@@ -587,7 +586,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="learned-feedforward, onnx: run the network in its own task (a "
                             "thread of the FMU), its result used one call period later, as "
                             "Simulink Real-Time's multitasking does")
-    build.add_argument("--runtime", choices=("c", "onnxruntime"),  # fmu.network.RUNTIMES
+    build.add_argument("--runtime", choices=RUNTIMES,
                        help="learned-feedforward, onnx: what computes the network: c (default) "
                             "compiles it into the FMU as generated C, whose sources then build "
                             "anywhere alone; onnxruntime bundles the graph and onnxruntime's "

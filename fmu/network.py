@@ -25,10 +25,10 @@ import numpy as np
 import onnx
 
 from flexff.fmu.errors import InputError, MissingPackage
+from flexff.fmu.network_runtime import RUNTIMES, check_runtime
 
 MAX_RANK = 4  # of a state tensor (NET_MAX_RANK in onnx_network.h)
 MAX_TENSORS = 64  # inputs, or outputs, of one graph (MAX_TENSORS in onnx_network.c)
-RUNTIMES = ("c", "onnxruntime")  # what computes the graph in the FMU, the default first
 ELEMENT_TYPES: dict[int, str] = {onnx.TensorProto.FLOAT: "float32",
                                  onnx.TensorProto.DOUBLE: "float64"}
 
@@ -76,18 +76,6 @@ class Network:
                                        or not np.all(np.isfinite(self.table))):
             raise ValueError("the precomputation table must be a finite 2-D array with rows "
                              "(time, inputs...)")
-
-
-def check_runtime(runtime: str) -> None:
-    """InputError naming the runtimes if `runtime` is not one."""
-    if runtime not in RUNTIMES:
-        raise InputError(f"unknown network runtime {runtime!r}: choose one of "
-                         f"{', '.join(RUNTIMES)}")
-
-
-def runtime_label(runtime: str) -> str:
-    """How a description names the runtime: 'generated C' or 'onnxruntime'."""
-    return "generated C" if runtime == "c" else runtime
 
 
 def read_network(model: str | Path, input_function: ca.Function, period: int = 1,

@@ -19,7 +19,7 @@ from pathlib import Path
 import casadi as ca
 
 from flexff.fmu.errors import InputError
-from flexff.fmu.network import RUNTIMES, runtime_label
+from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import Port, graph_network, read_graph
 from flexff.fmu.system import System, Variable
 

@@ -35,8 +35,9 @@ from onnx import helper as oh
 
 from flexff.fmu import cache
 from flexff.fmu.errors import InputError
-from flexff.fmu.network import RUNTIMES, Network, check_runtime, load_model, read_network
+from flexff.fmu.network import Network, load_model, read_network
 from flexff.fmu.network_c import fmu_network_sources
+from flexff.fmu.network_runtime import RUNTIMES, check_runtime
 
 FLOATS: dict[int, str] = {TensorProto.FLOAT: "float32", TensorProto.DOUBLE: "float64"}
 RESERVED = "flexff/"  # names of the adapter: FMU_INPUTS, FMU_OUTPUTS, the graph's under GRAPH
