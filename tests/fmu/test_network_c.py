@@ -17,6 +17,8 @@ from onnx import helper as oh
 
 from flexff.controllers.features import reference_features
 from flexff.controllers.learned_feedforward import learned_feedforward_system
+from flexff.cosim.config import config_examples, parse_config
+from flexff.cosim.run import run_config
 from flexff.fmu.build import build_fmu
 from flexff.fmu.compile import compiler
 from flexff.fmu.errors import InputError
@@ -212,3 +214,16 @@ def test_fmpy_builds_the_binary_from_the_sources_alone(feedforward_fmus, tmp_pat
                 zf.write(path, path.relative_to(folder).as_posix())
     expected = reference_run(feedforward_fmus["lstm", "c"], 200)
     assert np.array_equal(reference_run(fmu, 200), expected)
+
+
+def test_closed_loop_e2_is_the_same_with_either_runtime(models, tmp_path):
+    """The thesis's evaluation loop with the physics-guided model: e2 of the C network within
+    1e-3 (relative) of onnxruntime's."""
+    e2 = {}
+    for runtime in ("c", "onnxruntime"):
+        text = config_examples()["thesis-eval-pid"].replace(
+            'kind = "none"', f'kind = "learned"\nmodel = "{models / "pgnn.onnx"}"\n'
+                             f'runtime = "{runtime}"').replace("stop = 15.0", "stop = 2.0")
+        metrics = run_config(parse_config(text, name=runtime), tmp_path / runtime)
+        e2[runtime] = np.array([metrics[axis]["e2"] for axis in ("x", "y")])
+    assert np.all(np.abs(e2["c"] - e2["onnxruntime"]) <= 1e-3 * e2["onnxruntime"])
