@@ -44,7 +44,6 @@ TINY = {"lstm": {"hidden": 12, "layers": 2},
 # the features' operators (Atan, Sqrt, Where, ...) besides the network's
 GRAPHS = [*TINY, "tcn-reference"]
 KERNELS = REPOSITORY / "fmu" / "c"
-FLOATS = {TensorProto.FLOAT: np.float32, TensorProto.DOUBLE: np.float64}
 
 
 @pytest.fixture(scope="module")
@@ -77,10 +76,11 @@ class CNetwork:
         self.work = ctypes.create_string_buffer(self.lib.net_work_size())
         plan = plan_graph(onnx.load(str(model)), str(model))  # the shapes of one row per call
         self.inputs = [t.name for t in plan.inputs]
-        self.outputs = {t.name: (t.shape, FLOATS[t.dtype]) for t in plan.outputs}
+        self.outputs = {t.name: (t.shape, oh.tensor_dtype_to_np_dtype(t.dtype))
+                        for t in plan.outputs}
 
     def run(self, feeds: dict[str, np.ndarray]) -> list[np.ndarray]:
-        ins = [np.ascontiguousarray(feeds[n], dtype=feeds[n].dtype) for n in self.inputs]
+        ins = [np.ascontiguousarray(feeds[n]) for n in self.inputs]
         outs = [np.zeros(shape, dtype) for shape, dtype in self.outputs.values()]
         pointers = [(ctypes.c_void_p * len(a))(*[x.ctypes.data for x in a]) for a in (ins, outs)]
         assert self.lib.net_run(self.work, *pointers) == 0
