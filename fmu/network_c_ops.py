@@ -158,6 +158,15 @@ def _leaky_relu(w: Writer, node: onnx.NodeProto) -> list[str]:
     return _map(w, node, [node.input[0]], lambda e: f"({e[0]} >= 0 ? {e[0]} : {alpha} * {e[0]})")
 
 
+def _is_inf(w: Writer, node: onnx.NodeProto) -> list[str]:
+    _float_input(w, node)
+    a = attributes(node)
+    positive = int(a.get("detect_positive", 1))  # type: ignore[call-overload]
+    negative = int(a.get("detect_negative", 1))  # type: ignore[call-overload]
+    return _map(w, node, [node.input[0]],
+                lambda e: f"(isinf({e[0]}) && ({e[0]} > 0 ? {positive} : {negative}))")
+
+
 def _alias(w: Writer, node: onnx.NodeProto) -> list[str]:
     return w.alias(node.output[0], node.input[0])
 
@@ -478,6 +487,7 @@ UNARY = {
     "Round": ("nearbyint{f}({x})", True), "Reciprocal": ("(({T})1 / {x})", True),
     "Softplus": ("log{f}(exp{f}({x}) + ({T})1)", True),
     "Sign": ("(({T})({x} > 0) - ({T})({x} < 0))", False), "Not": ("(!{x})", False),
+    "IsNaN": ("isnan({x})", True),
 }
 BINARY = {
     "Add": "({a} + {b})", "Sub": "({a} - {b})", "Mul": "({a} * {b})", "Div": "({a} / {b})",
@@ -491,6 +501,7 @@ OPERATORS: dict[str, Emitter] = {
     "Max": _variadic("({a} > {b} ? {a} : {b})"), "Min": _variadic("({a} < {b} ? {a} : {b})"),
     "Sum": _variadic("({a} + {b})"),
     "Pow": _pow, "Where": _where, "Cast": _cast, "Clip": _clip, "LeakyRelu": _leaky_relu,
+    "IsInf": _is_inf,
     "Identity": _alias, "Reshape": _alias, "Flatten": _alias, "Squeeze": _alias,
     "Unsqueeze": _alias,
     "Transpose": _transpose, "Slice": _slice, "Gather": _gather, "Expand": _expand,

@@ -48,6 +48,8 @@ CASES = {
     **{op: case(op, [("a", B, (2, 3)), ("b", B, (3,))], [("y", B)]) for op in ("And", "Or",
                                                                                 "Xor")},
     "Not": case("Not", [("a", B, (2, 3))], [("y", B)]),
+    "IsNaN": case("IsNaN", [("a", F, (4,))], [("y", B)]),
+    "IsInf": case("IsInf", [("a", F, (4,))], [("y", B)], detect_negative=0),
     "Where": case("Where", [("c", B, (3, 1)), X, ("b", F, (4,))], [("y", F)]),
     "Cast": case("Cast", [X], [("y", D)], to=D),
     "Cast-bool": case("Cast", [X], [("y", B)], to=B),
@@ -106,6 +108,8 @@ def inputs_for(op, inputs, rng):
             continue
         if dtype == B:
             values[name] = rng.random(shape) < 0.5
+        elif op in ("IsNaN", "IsInf"):
+            values[name] = np.array([np.nan, np.inf, -np.inf, 1.0], dtype=np.float32)
         elif op in POSITIVE or (op == "Pow" and name == "x"):
             values[name] = rng.uniform(0.5, 2.0, shape).astype(np.float32)
         elif op in UNIT:
