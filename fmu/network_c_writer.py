@@ -100,8 +100,8 @@ class Writer:
 
 
 def literal(value: object, dtype: int) -> str:
-    """`value` as a C literal of the element type `dtype` (exact: float32 in 9 significant
-    digits, float64 in the shortest form that reads back equal)."""
+    """`value` as a C literal of the element type `dtype`, exact: the shortest decimal that
+    reads back as the same float32 (numpy's) or float64 (Python's)."""
     if dtype == TensorProto.BOOL:
         return "1" if bool(value) else "0"
     if dtype in (TensorProto.INT64, TensorProto.INT32):
@@ -114,7 +114,7 @@ def literal(value: object, dtype: int) -> str:
     if math.isinf(number):
         text = "INFINITY" if number > 0 else "-INFINITY"
         return text if single else f"(double){text}"
-    text = f"{number:.9g}" if single else repr(number)
+    text = str(np.float32(number)) if single else repr(number)
     if not any(c in text for c in ".e"):
         text += ".0"
     return text + ("f" if single else "")
