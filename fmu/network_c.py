@@ -78,7 +78,7 @@ def fmu_network_sources(model: str | Path) -> dict[str, str]:
     return dict(_remembered(Path(model).read_bytes(), str(model)))
 
 
-@functools.lru_cache(maxsize=8)
+@functools.lru_cache(maxsize=4)  # a thesis-size TCN is 10 MB of C
 def _remembered(data: bytes, name: str) -> tuple[tuple[str, str], ...]:
     try:
         loaded = onnx.load_from_string(data)

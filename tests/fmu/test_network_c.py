@@ -24,6 +24,7 @@ from flexff.fmu.compile import compiler
 from flexff.fmu.errors import InputError
 from flexff.fmu.network_c import generate_network_c, supported_operators
 from flexff.fmu.network_plan import plan_graph
+from flexff.fmu.onnx_fmu import onnx_system
 from flexff.fmu.validation import validate_fmu
 from flexff.learning.dataset import REFERENCE_SIGNALS
 from flexff.learning.export import export, run_steps, session
@@ -227,3 +228,15 @@ def test_closed_loop_e2_is_the_same_with_either_runtime(models, tmp_path):
         metrics = run_config(parse_config(text, name=runtime), tmp_path / runtime)
         e2[runtime] = np.array([metrics[axis]["e2"] for axis in ("x", "y")])
     assert np.all(np.abs(e2["c"] - e2["onnxruntime"]) <= 1e-3 * e2["onnxruntime"])
+
+
+def test_fmu_build_onnx_refuses_what_c_cannot_compute_unless_told_onnxruntime(tmp_path):
+    model = graph_of(oh.make_node("Hardmax", ["x"], ["y"], name="pick"),
+                     [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 4])],
+                     [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 4])])
+    path = tmp_path / "hardmax.onnx"
+    onnx.save(model, str(path))
+    with pytest.raises(InputError, match=rf"^{path}: node '.*pick' \(Hardmax\): operator not "
+                                         rf"supported by the C network"):
+        onnx_system(path)
+    assert onnx_system(path, runtime="onnxruntime").network.runtime == "onnxruntime"
