@@ -4,11 +4,12 @@ control allocation).
 
 The FMU takes the reference signals (x_ref ... ay_ref) every 1 ms step, computes the model's
 inputs from them in generated C (the 63 features of eq. 2.1 and their derivatives by the
-nominal inverse kinematics, or the reference itself), runs the ONNX graph with onnxruntime at
-the model's own rate (metadata `sample_rate_hz`) and extrapolates its forces linearly in
-between. A physics-guided model's graph is a residual: the rigid-body feedforward (eq. 2.4 on
-the nominal model, with the motor friction identified in training) is added in generated C at
-every step, so friction's steps at each reversal come at 1 kHz, not extrapolated.
+nominal inverse kinematics, or the reference itself), runs the ONNX graph (as generated C
+compiled into the FMU by default, or with onnxruntime) at the model's own rate (metadata
+`sample_rate_hz`) and extrapolates its forces linearly in between. A physics-guided model's
+graph is a residual: the rigid-body feedforward (eq. 2.4 on the nominal model, with the motor
+friction identified in training) is added in generated C at every step, so friction's steps
+at each reversal come at 1 kHz, not extrapolated.
 
 Two modes with equal results: step by step (the graph's recurrent state carried in the FMU
 state) and precomputed (the whole reference given at build time, run through the graph in
@@ -36,6 +37,7 @@ from flexff.controllers.features import feature_names, reference_feature_functio
 from flexff.controllers.feedforward import feedforward_system, rigid_body_force
 from flexff.controllers.model_card import OUTPUTS, ModelCard, read_card
 from flexff.fmu.errors import InputError
+from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System
 from flexff.plant.signals import REFERENCE, names, reference_motion
@@ -45,10 +47,11 @@ REFERENCE_NAMES = list(names(REFERENCE))
 
 def learned_feedforward_system(model: str | Path, step: float = 1e-3,
                                reference: Mapping[str, np.ndarray] | None = None,
-                               task: bool = False) -> System:
+                               task: bool = False, runtime: str = RUNTIMES[0]) -> System:
     """The System of the feedforward FMU running `model`; with `reference` (x_ref ... ay_ref
     at every step from t = 0) it is built in the precomputed mode for that reference, with
-    `task` its network runs in its own task."""
+    `task` its network runs in its own task; `runtime` computes the graph ("c": generated C,
+    or "onnxruntime")."""
     card = read_card(model)
     period = model_period(card, step, model)
     u = ca.SX.sym("u", len(REFERENCE_NAMES))
@@ -63,7 +66,8 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     x, p = ca.SX.sym("x", 0), ca.SX.sym("p", 0)
     network = graph_network(read_graph(model, time_axis=True),
                             ca.Function("network_input", [x, u, p], [inputs]), period,
-                            None if reference is None else _table(reference, step), task)
+                            None if reference is None else _table(reference, step), task,
+                            runtime)
     outputs = OUTPUTS[card.labels]
     if network.n_outputs != len(outputs):
         raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
@@ -80,9 +84,10 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     return feedforward_system(
         "learned_feedforward",
         (f"learned feedforward: {card.model_kind} model at {card.sample_rate_hz:g} Hz in "
-         f"onnxruntime{added}, {mode} mode"),
+         f"{runtime_label(runtime)}{added}, {mode} mode"),
         u, force, step, r, outputs,
         extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": card.prior,
+               "flexff.network.runtime": runtime,
                "flexff.feedforward.prior_parameters": json.dumps(card.prior_parameters),
                **{f"flexff.model.{k}": str(getattr(card, k))
                   for k in ("model_kind", "preset", "feature_set", "input_kind",

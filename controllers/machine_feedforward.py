@@ -21,6 +21,7 @@ from flexff.controllers.machine_features import FeatureInputs, feature_function
 from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import Machine, parse_machine
 from flexff.fmu.errors import InputError
+from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System, Variable
 
@@ -87,9 +88,11 @@ def inverse_model_system(machine: Machine, inverse: ca.Function, step: float,
 
 
 def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
-                                       task: bool = False) -> System:
+                                       task: bool = False, runtime: str = RUNTIMES[0]
+                                       ) -> System:
     """The System of the feedforward FMU running `model`, a machine's exported model; with
-    `task` its network runs in its own task."""
+    `task` its network runs in its own task; `runtime` computes the graph ("c" or
+    "onnxruntime")."""
     card = read_card(model)
     if card.machine is None or card.machine_features is None:
         raise InputError(f"{model} is a model of the manipulator: build it with `flexff fmu "
@@ -102,7 +105,7 @@ def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
     features = feature_function(machine, inputs)(looked_ahead)
     network = graph_network(read_graph(model, time_axis=True),
                             ca.Function("network_input", [x, reference, p], [features]),
-                            model_period(card, step, model), None, task)
+                            model_period(card, step, model), None, task, runtime)
     if network.n_outputs != len(machine.axes):
         raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
                          f"machine {machine.name!r} has {len(machine.axes)} axes")
@@ -119,10 +122,10 @@ def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
     return feedforward_system(
         "learned_feedforward",
         f"learned feedforward of {machine.name}: {card.model_kind} model at "
-        f"{card.sample_rate_hz:g} Hz in onnxruntime, {mode} mode",
+        f"{card.sample_rate_hz:g} Hz in {runtime_label(runtime)}, {mode} mode",
         reference, effort, step, result, outputs=feedforward_variables(machine),
         inputs=reference_variables(machine),
         extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": card.prior,
-               "flexff.model.model_kind": card.model_kind,
+               "flexff.network.runtime": runtime, "flexff.model.model_kind": card.model_kind,
                "flexff.model.sample_rate_hz": str(card.sample_rate_hz)},
         network=network)

@@ -8,7 +8,8 @@
                           current_feedforward; defaults follow the variant (feedback.DEFAULTS)
   rigid-body-feedforward  identified = "file.json" (`flexff identify`'s parameters)
   learned-feedforward     model = "file.onnx", mode = "step" (default) | "task" |
-                          "precomputed"; metrics.json gains `feedforward_range`
+                          "precomputed", runtime = "c" (default: the network as generated C) |
+                          "onnxruntime"; metrics.json gains `feedforward_range`
 
 and its short form (controllers.short_form), the reference kinds thesis-eval and
 thesis-hardware-eval (plant.references), the nominal workspace and its signals' short names.
@@ -30,6 +31,7 @@ from flexff.cosim.plugins import (
     register_workspace_check,
 )
 from flexff.cosim.references import Reference
+from flexff.fmu.network_runtime import RUNTIMES
 from flexff.plant.signals import (
     CURRENTS,
     ENCODERS,
@@ -77,8 +79,10 @@ def register() -> None:
                      _rigid_body, "the nominal (or identified) rigid-body feedforward")
     register_builtin("learned-feedforward", (
         Option("model", "file", required=True, suffix=".onnx", check=_model_card),
-        Option("mode", "choice", "step", choices=FEEDFORWARD_MODES)), _learned,
-        "an exported learned model run by onnxruntime", reads_sources=True,
+        Option("mode", "choice", "step", choices=FEEDFORWARD_MODES),
+        Option("runtime", "choice", RUNTIMES[0], choices=RUNTIMES)), _learned,
+        "an exported learned model, its network as generated C or in onnxruntime",
+        reads_sources=True,
         metrics=feedforward_range)
     register_short_form("manipulator", SHORT_FORM_TABLES, expand, default=True)
     register_reference_kind(ReferenceKind("thesis-eval", lambda _, step: thesis_evaluation(step)))
@@ -201,7 +205,7 @@ def _learned(options: Mapping[str, Any], step: float, sources: Mapping[str, Any]
             raise OptionError("mode", "the precomputed mode needs a [reference] to precompute "
                                       "the feedforward over")
     return learned_feedforward_system(options["model"], step, reference,
-                                      options["mode"] == "task")
+                                      options["mode"] == "task", options["runtime"])
 
 
 # -- metrics -------------------------------------------------------------------------------

@@ -8,8 +8,9 @@ FMUs feedforward -> controller -> plant (controllers.manipulator registers it):
                  the plant variant (controllers.feedback.DEFAULTS)
   [feedforward]  kind = "none" | "rigid-body" (optionally with identified = "file.json", the
                  parameters `flexff identify` found in place of the nominal ones) | "learned"
-                 (with model = "file.onnx", an exported learned model, and mode = "step"
-                 (default) | "precomputed"); a current-level model (its card's outputs
+                 (with model = "file.onnx", an exported learned model, mode = "step"
+                 (default) | "task" | "precomputed" and runtime = "c" (default) |
+                 "onnxruntime"); a current-level model (its card's outputs
                  i1_ff..i3_ff) feeds the controller's current feedforward (controller option
                  current_feedforward = true), and its force feedforward Fx_ff, Fy_ff gets zero
 It needs a [reference]; a configuration without [fmu.*] tables is this loop with its defaults.

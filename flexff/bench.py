@@ -242,11 +242,12 @@ def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
                            step: float = 1e-3) -> dict[str, Any]:
-    """A network slower than the period (slow_graph, about 3 ms a call) in its own task every
-    `every` steps of `step` seconds (25 Hz at 1 kHz), paced alone for `seconds`: the base
-    task's TET and overruns (which the network must not cause) and the network task's."""
-    fmu = build_fmu(onnx_system(slow_graph(folder / "slow.onnx"), step, every, task=True),
-                    folder / "slow.fmu")
+    """A network slower than the period (slow_graph, about 3 ms a call in onnxruntime) in its
+    own task every `every` steps of `step` seconds (25 Hz at 1 kHz), paced alone for `seconds`:
+    the base task's TET and overruns (which the network must not cause) and the network
+    task's."""
+    fmu = build_fmu(onnx_system(slow_graph(folder / "slow.onnx"), step, every, task=True,
+                                runtime="onnxruntime"), folder / "slow.fmu")
     table = _paced_alone(ResolvedFmu("slow", fmu), {"inputs[0]": 1.0, "inputs[1]": 2.0},
                          seconds, step)
     return {"every_steps": every, "tasks": table["tasks"], "lateness_us": table["lateness_us"],
@@ -256,10 +257,10 @@ def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
 
 def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
                              step: float = 1e-3) -> dict[str, Any]:
-    """The floor of an onnxruntime call in a paced loop: a graph of one Add node as an FMU,
-    called every `every` steps of `step` seconds (the hardware models' 25 Hz at 1 kHz), paced
-    alone for `seconds`. Its call time is what a network call costs on this machine before
-    any arithmetic."""
+    """The floor of an onnxruntime call in a paced loop: a graph of one Add node as an FMU (its
+    network in onnxruntime), called every `every` steps of `step` seconds (the hardware models'
+    25 Hz at 1 kHz), paced alone for `seconds`. Its call time is what a network call costs on
+    this machine before any arithmetic."""
     graph = onnx.helper.make_graph(
         [onnx.helper.make_node("Add", ["u", "u"], ["y"])], "one_node",
         [onnx.helper.make_tensor_value_info("u", onnx.TensorProto.DOUBLE, [1, 2])],
@@ -267,7 +268,8 @@ def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
     model = onnx.helper.make_model(graph, opset_imports=[onnx.helper.make_opsetid("", 17)],
                                    ir_version=9)  # onnx's default is newer than onnxruntime reads
     onnx.save(model, folder / "one_node.onnx")
-    fmu = build_fmu(onnx_system(folder / "one_node.onnx", step, every), folder / "one_node.fmu")
+    fmu = build_fmu(onnx_system(folder / "one_node.onnx", step, every, runtime="onnxruntime"),
+                    folder / "one_node.fmu")
     table = _paced_alone(ResolvedFmu("graph", fmu), {"u[0]": 1.0, "u[1]": 2.0}, seconds, step)
     return {"every_steps": every, "tet_us": table["tet_us"],
             "network_call_us": table["network_call_us"]["graph"]}
@@ -288,7 +290,9 @@ def slow_graph(path: Path, size: int = 256, layers: int = 6) -> Path:
     """A graph made deliberately slow (a network longer than the 1 kHz period): forces = inputs
     (2 columns, exactly, whatever the weights), after `layers` products of a `size` x `size`
     matrix scaled by the inputs' sum, each through tanh (onnxruntime cannot fold them away).
-    At 256 and 6, a call takes about 3 ms on one core of the development machine."""
+    At 256 and 6, a call takes about 3 ms in onnxruntime on one core of the development
+    machine (its matrix-matrix products are blocked and vectorized; as generated C, whose
+    kernels are for the matrix-vector products of one row per call, 50 ms)."""
     rng = np.random.default_rng(0)
     weights = onnx.helper.make_tensor("w", onnx.TensorProto.DOUBLE, [size, size],
                                       (rng.standard_normal((size, size)) / size).ravel())

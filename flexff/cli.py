@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from flexff.fmu.errors import InputError, RunError
+from flexff.fmu.network_runtime import RUNTIMES
 from flexff.plant.variants import VARIANTS
 
 if TYPE_CHECKING:  # the command line loads numpy and the rest only in the command that runs
@@ -97,8 +98,10 @@ def _evaluate_logs(args: argparse.Namespace) -> int:
 def _fmu_build(args: argparse.Namespace) -> int:
     from flexff.fmu.build import build_fmu
 
-    if args.kind == "plant" and args.task:
-        raise InputError("--task runs an embedded network in its own task: the plant has none")
+    if args.kind == "plant" and (args.task or args.runtime is not None):
+        raise InputError("--task and --runtime are about an embedded network: the plant has "
+                         "none")
+    runtime = args.runtime or RUNTIMES[0]
     if args.kind != "onnx" and (args.graph is not None or args.every is not None):
         raise InputError("only fmu build onnx takes a graph file and --every (a learned "
                          "feedforward takes --model M.onnx and runs at the model's rate)")
@@ -109,7 +112,7 @@ def _fmu_build(args: argparse.Namespace) -> int:
             raise InputError("fmu build onnx needs the graph: flexff fmu build onnx MODEL.onnx "
                              "-o M.fmu")
         system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every,
-                             args.task)
+                             args.task, runtime)
     elif args.kind in ("learned-feedforward", "feedforward"):
         from flexff.controllers.learned_feedforward import learned_feedforward_system
 
@@ -125,9 +128,11 @@ def _fmu_build(args: argparse.Namespace) -> int:
         if read_card(args.model).machine is not None:
             from flexff.controllers.machine_feedforward import learned_machine_feedforward_system
 
-            system = learned_machine_feedforward_system(args.model, args.step, args.task)
+            system = learned_machine_feedforward_system(args.model, args.step, args.task,
+                                                        runtime)
         else:
-            system = learned_feedforward_system(args.model, args.step, task=args.task)
+            system = learned_feedforward_system(args.model, args.step, task=args.task,
+                                                runtime=runtime)
     else:
         from flexff.plant.system import plant_system
 
@@ -607,6 +612,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="learned-feedforward, onnx: run the network in its own task (a "
                             "thread of the FMU), its result used one call period later, as "
                             "Simulink Real-Time's multitasking does")
+    build.add_argument("--runtime", choices=RUNTIMES,
+                       help="learned-feedforward, onnx: what computes the network: c (default) "
+                            "compiles it into the FMU as generated C, whose sources then build "
+                            "anywhere alone; onnxruntime bundles the graph and onnxruntime's "
+                            "library")
     build.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     build.set_defaults(handler=_fmu_build)
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")

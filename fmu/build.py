@@ -3,10 +3,13 @@
 The FMU holds modelDescription.xml, binaries/<platform>/<id>.so and sources/ (wrapper, generated
 code, config.h and the FMI headers, listed in the XML's SourceFiles) so it can be rebuilt
 elsewhere with `cc -shared -fPIC -Isources sources/*.c -lm -ldl -lpthread`. A System with an
-embedded network also gets its graph (and precomputation table) in resources/ and onnxruntime's
-library beside its own in binaries/<platform>/. Builds are cached by a hash of all their inputs; the
-GUID is derived from the same hash, so equal inputs give a bit-equal FMU. `$FLEXFF_SANITIZE`
-builds the binaries with sanitizers (fmu.compile.sanitizer_flags), under their own key.
+embedded network has it in sources/ as generated C (flexff_net.c, runtime "c", the default) and
+needs nothing else; with runtime "onnxruntime" the FMU gets the graph in resources/ and
+onnxruntime's library beside its own in binaries/<platform>/, and its sources build only
+against that library. A precomputation table goes to resources/ in either case. Builds are
+cached by a hash of all their inputs; the GUID is derived from the same hash, so equal inputs
+give a bit-equal FMU. `$FLEXFF_SANITIZE` builds the binaries with sanitizers
+(fmu.compile.sanitizer_flags), under their own key.
 """
 
 from __future__ import annotations
@@ -25,15 +28,20 @@ from flexff.fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compil
 from flexff.fmu.layout import make_layout, model_identifier
 from flexff.fmu.model_description import model_description_xml
 from flexff.fmu.network import Network, runtime_library
+from flexff.fmu.network_c import FMU_PREFIX, fmu_network_sources
 from flexff.fmu.system import System
 
 C_DIR = Path(__file__).parent / "c"
 # the generic wrapper (see c/wrapper.h), compiled with the generated model.c of each FMU
 WRAPPER_C_FILES = ("fmi2Functions.c", "wrapper.c", "rng.c")
 WRAPPER_HEADERS = ("wrapper.h", "rng.h")
-NETWORK_C_FILES = ("wrapper_network.c", "onnx_network.c")
+NETWORK_C_FILES = ("wrapper_network.c", "net_times.c")
+NETWORK_HEADERS = ("onnx_network.h", "net_times.h")
+# each runtime's C files and headers (the generated flexff_net.c/h besides, for "c")
+RUNTIME_C_FILES = {"c": ("c_network.c",), "onnxruntime": ("onnx_network.c",)}
+RUNTIME_HEADERS = {"c": ("net_kernels.h",),
+                   "onnxruntime": ("onnxruntime_c_api.h", "onnxruntime_c_api.LICENSE.txt")}
 TASK_C_FILES = ("wrapper_task.c",)  # a network in its own task
-NETWORK_HEADERS = ("onnx_network.h", "onnxruntime_c_api.h", "onnxruntime_c_api.LICENSE.txt")
 GUID_PLACEHOLDER = "{00000000-0000-0000-0000-000000000000}"
 GUID_FILES = ("modelDescription.xml", "sources/config.h")
 ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps keep the archive reproducible
@@ -42,21 +50,27 @@ ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps keep the archive reproducib
 def _source_files(system: System) -> list[str]:
     """The C files compiled into the FMU's library."""
     net = system.network
-    return [*WRAPPER_C_FILES, "model.c", *(NETWORK_C_FILES if net else ()),
-            *(TASK_C_FILES if net and net.task else ())]
+    if net is None:
+        return [*WRAPPER_C_FILES, "model.c"]
+    return [*WRAPPER_C_FILES, "model.c", *NETWORK_C_FILES, *RUNTIME_C_FILES[net.runtime],
+            *([f"{FMU_PREFIX}.c"] if net.runtime == "c" else []),
+            *(TASK_C_FILES if net.task else ())]
 
 
 def _files(system: System, guid: str) -> dict[str, str | bytes]:
     """Every file of the FMU but its compiled library, by archive path."""
     identifier = model_identifier(system)
     layout = make_layout(system)
+    net = system.network
     generic = (*WRAPPER_C_FILES, *WRAPPER_HEADERS,
-               *((*NETWORK_C_FILES, *NETWORK_HEADERS) if system.network else ()),
-               *(TASK_C_FILES if system.network and system.network.task else ()))
+               *((*NETWORK_C_FILES, *NETWORK_HEADERS, *RUNTIME_C_FILES[net.runtime],
+                  *RUNTIME_HEADERS[net.runtime]) if net else ()),
+               *(TASK_C_FILES if net and net.task else ()))
     sources = {
         **{name: (C_DIR / name).read_text() for name in generic},
         "config.h": generate_config_h(system, layout, identifier, guid),
         **generate_model_c(system, identifier),
+        **(fmu_network_sources(net.model) if net and net.runtime == "c" else {}),
         **fmi_headers(),
     }
     files: dict[str, str | bytes] = {f"sources/{name}": text for name, text in sources.items()}
@@ -68,8 +82,8 @@ def _files(system: System, guid: str) -> dict[str, str | bytes]:
 
 
 def _network_files(net: Network, input_names: list[str]) -> dict[str, bytes]:
-    """The graph, the precomputation table and onnxruntime's library."""
-    files = {f"resources/{NET_MODEL_FILE}": net.model.read_bytes()}
+    """The precomputation table; for onnxruntime the graph and the library too."""
+    files: dict[str, bytes] = {}
     if net.table is not None:
         if net.table.shape[1] != 1 + len(input_names):
             raise ValueError(f"the precomputation table needs {1 + len(input_names)} columns "
@@ -77,8 +91,10 @@ def _network_files(net: Network, input_names: list[str]) -> dict[str, bytes]:
         lines = [",".join(["time", *input_names])]
         lines += [",".join(map(repr, map(float, row))) for row in net.table]
         files[f"resources/{NET_TABLE_FILE}"] = ("\n".join(lines) + "\n").encode()
-    library = runtime_library()
-    files[f"binaries/{fmpy.platform}/{library.name}"] = library.read_bytes()
+    if net.runtime == "onnxruntime":
+        library = runtime_library()
+        files[f"resources/{NET_MODEL_FILE}"] = net.model.read_bytes()
+        files[f"binaries/{fmpy.platform}/{library.name}"] = library.read_bytes()
     return files
 
 

@@ -181,7 +181,8 @@ def _network_config(net: Network) -> list[str]:
     dims = [", ".join(map(str, (*s.shape, *[0] * (MAX_RANK - len(s.shape))))) for s in net.states]
     return [
         "",
-        "/* The embedded network (fmu/network.py, c/onnx_network.h). */",
+        "/* The embedded network (fmu/network.py, c/onnx_network.h; NET_RUNTIME_C: generated C,",
+        " * flexff_net.c, else onnxruntime). */",
         f"#define NET_INPUT {_c_string(net.input)}",
         f"#define NET_OUTPUT {_c_string(net.output)}",
         f"#define NET_N_IN {net.n_inputs}",
@@ -190,8 +191,10 @@ def _network_config(net: Network) -> list[str]:
         f"#define NET_PERIOD {net.period}",
         f"#define NET_PRECOMPUTED {int(net.table is not None)}",
         f"#define NET_TASK {int(net.task)}",
-        f"#define NET_RUNTIME_FILE {_c_string(runtime_library().name)}",
-        f"#define NET_MODEL_FILE {_c_string(NET_MODEL_FILE)}",
+        f"#define NET_RUNTIME_C {int(net.runtime == 'c')}",
+        *([] if net.runtime == "c" else [
+            f"#define NET_RUNTIME_FILE {_c_string(runtime_library().name)}",
+            f"#define NET_MODEL_FILE {_c_string(NET_MODEL_FILE)}"]),
         f"#define NET_TABLE_FILE {_c_string(NET_TABLE_FILE)}",
         _c_array("char *const", "NET_STATE_INPUTS", [_c_string(s.name) for s in net.states]),
         _c_array("char *const", "NET_STATE_OUTPUTS", [_c_string(s.output) for s in net.states]),

@@ -7,8 +7,10 @@ NAME_out of the same shape (where the graph leaves a dimension symbolic, the run
 start). The FMU runs it every `period` communication steps on `input_function(x, u, p)` and
 hands the result to the System's output function (see System); `table` switches it to the
 precomputed mode, `task` runs it in its own task (a worker thread of the FMU, its result used
-one period after the call started, c/wrapper_task.c). The FMU bundles the graph (resources/)
-and the libonnxruntime of the installed onnxruntime wheel (binaries/<platform>/).
+one period after the call started, c/wrapper_task.c). `runtime` says what computes the graph:
+"c" (default), the graph generated as C (fmu.network_c) and compiled into the FMU, which then
+needs nothing but its own sources; "onnxruntime", the FMU bundles the graph (resources/) and
+the libonnxruntime of the installed onnxruntime wheel (binaries/<platform>/).
 fmu.onnx_graph brings any graph of fixed-size float tensors to this convention.
 """
 
@@ -23,6 +25,7 @@ import numpy as np
 import onnx
 
 from flexff.fmu.errors import InputError, MissingPackage
+from flexff.fmu.network_runtime import RUNTIMES, check_runtime
 
 MAX_RANK = 4  # of a state tensor (NET_MAX_RANK in onnx_network.h)
 MAX_TENSORS = 64  # inputs, or outputs, of one graph (MAX_TENSORS in onnx_network.c)
@@ -60,8 +63,10 @@ class Network:
     period: int = 1  # communication steps between calls
     table: np.ndarray | None = None  # precomputed mode: rows (time, inputs...) at every step
     task: bool = False  # in its own task: the result of the call at step k used from k + period
+    runtime: str = RUNTIMES[0]  # generated C compiled into the FMU, or onnxruntime
 
     def __post_init__(self) -> None:
+        check_runtime(self.runtime)
         if self.period < 1:
             raise InputError(f"the network's period must be at least one step, got {self.period}")
         if self.task and self.table is not None:

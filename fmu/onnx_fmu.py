@@ -2,8 +2,9 @@
 
 A discrete, stateless System: its inputs are the elements of the graph's input tensors, its
 outputs the elements of its output tensors, as fmu.onnx_graph names them; the network's inputs
-are the FMU's inputs and its result is the FMU's outputs. The graph runs in onnxruntime (the
-library of the installed wheel, bundled) every `every` communication steps of `step` seconds,
+are the FMU's inputs and its result is the FMU's outputs. The graph runs as generated C
+compiled into the FMU (runtime "c", the default; fmu.network_c) or in onnxruntime (the library
+of the installed wheel, bundled) every `every` communication steps of `step` seconds,
 its results extrapolated linearly from the last two calls in between (fmu.system); its
 recurrent state tensors are carried from call to call and in the FMU state. With `task` the
 graph runs in its own task, a worker thread of the FMU (fmu.network.Network): the step never
@@ -18,14 +19,16 @@ from pathlib import Path
 import casadi as ca
 
 from flexff.fmu.errors import InputError
+from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import Port, graph_network, read_graph
 from flexff.fmu.system import System, Variable
 
 
 def onnx_system(model: str | Path, step: float = 1e-3, every: int = 1,
-                task: bool = False) -> System:
-    """The System of the FMU running the ONNX graph in the file `model`; InputError (what is
-    wrong, what to do) if the graph cannot be one (see fmu.onnx_graph.read_graph)."""
+                task: bool = False, runtime: str = RUNTIMES[0]) -> System:
+    """The System of the FMU running the ONNX graph in the file `model` with `runtime` ("c"
+    or "onnxruntime"); InputError (what is wrong, what to do) if the graph cannot be one (see
+    fmu.onnx_graph.read_graph)."""
     if not step > 0:
         raise InputError(f"the communication step must be positive, got {step}")
     graph = read_graph(model)
@@ -33,13 +36,13 @@ def onnx_system(model: str | Path, step: float = 1e-3, every: int = 1,
     u = ca.SX.sym("u", len(graph.input_names))
     r = ca.SX.sym("r", len(graph.output_names))
     network = graph_network(graph, ca.Function("network_input", [x, u, p], [u]), every,
-                            task=task)
+                            task=task, runtime=runtime)
     calls = "every step" if every == 1 else f"every {every} steps, extrapolated in between"
     if task:
         calls += ", in its own task (its result one call later)"
     return System(
         name=graph.path.stem,
-        description=f"ONNX graph {graph.path.name} in onnxruntime, called {calls}",
+        description=f"ONNX graph {graph.path.name} in {runtime_label(runtime)}, called {calls}",
         kind="discrete",
         states=(),
         inputs=_variables(graph.inputs, "input"),

@@ -36,6 +36,8 @@ from onnx import helper as oh
 from flexff.fmu import cache
 from flexff.fmu.errors import InputError
 from flexff.fmu.network import Network, load_model, read_network
+from flexff.fmu.network_c import fmu_network_sources
+from flexff.fmu.network_runtime import RUNTIMES, check_runtime
 
 FLOATS: dict[int, str] = {TensorProto.FLOAT: "float32", TensorProto.DOUBLE: "float64"}
 RESERVED = "flexff/"  # names of the adapter: FMU_INPUTS, FMU_OUTPUTS, the graph's under GRAPH
@@ -98,12 +100,15 @@ def read_graph(model: str | Path, time_axis: bool = False) -> Graph:
 
 
 def graph_network(graph: Graph, input_function: ca.Function, period: int = 1,
-                  table: np.ndarray | None = None, task: bool = False) -> Network:
+                  table: np.ndarray | None = None, task: bool = False,
+                  runtime: str = RUNTIMES[0]) -> Network:
     """The Network running `graph` on `input_function(x, u, p)` (a column of the graph's input
     elements, in the order of `graph.input_names`) every `period` steps, see fmu.network: the
     graph's own file if it follows the wrapper's convention, else its adapter graph, written
     to the build cache. The precomputed mode (`table`) runs all calls in one: it needs the
-    time axis; `task` runs the calls in their own task (fmu.network.Network)."""
+    time axis; `task` runs the calls in their own task (fmu.network.Network); `runtime` computes
+    the graph ("c" or "onnxruntime"), which is checked to be able to now."""
+    check_runtime(runtime)
     if table is not None and not graph.time_axis:
         raise InputError(f"{graph.path}: the precomputed mode needs a graph with a time axis")
     if _follows_convention(graph):
@@ -116,14 +121,26 @@ def graph_network(graph: Graph, input_function: ca.Function, period: int = 1,
             with tempfile.TemporaryDirectory() as tmp:
                 (Path(tmp) / "adapter.onnx").write_bytes(data)
                 cache.store(key, ".onnx", Path(tmp) / "adapter.onnx")
-    try:  # the FMU runs the same onnxruntime: what it cannot load, say so now
+    if runtime == "c":  # what cannot be generated as C, say so now, naming the graph
+        try:
+            fmu_network_sources(file)
+        except InputError as exc:
+            raise InputError(str(exc).replace(str(file), str(graph.path))) from exc
+    else:
+        _check_onnxruntime(graph, file)
+    return replace(read_network(file, input_function, period, table), task=task,
+                   runtime=runtime)
+
+
+def _check_onnxruntime(graph: Graph, file: Path) -> None:
+    """InputError if the onnxruntime the FMU bundles cannot load the graph."""
+    try:
         options = ort.SessionOptions()
         options.intra_op_num_threads = options.inter_op_num_threads = 1
         ort.InferenceSession(str(file), options, providers=["CPUExecutionProvider"])
     except Exception as exc:  # onnxruntime raises its own Fail, InvalidGraph, ...
         raise InputError(f"{graph.path}: onnxruntime {ort.__version__}, which the FMU bundles, "
                          f"cannot load the graph: {exc}") from exc
-    return replace(read_network(file, input_function, period, table), task=task)
 
 
 def _states(path: Path, meta: dict[str, str], inputs: dict[str, onnx.ValueInfoProto],

@@ -10,19 +10,14 @@
 
 #define _GNU_SOURCE /* dladdr */
 #include <dlfcn.h>
-#include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
+#include "net_times.h"
 #include "onnx_network.h"
 #include "onnxruntime_c_api.h"
-
-#define TIME_BINS 180     /* 20 per decade from 100 ns to 100 s */
-#define TIME_FLOOR 1e-7   /* [s] */
-#define BINS_PER_DECADE 20.0
 
 #define ORT_API_VERSION_USED 17 /* onnxruntime 1.17 */
 
@@ -40,9 +35,7 @@ struct Network {
     OrtMemoryInfo *memory;
     char *input_names;           /* the names of the input columns, one after the other ... */
     const char **input_name;     /* ... and where each starts; NULL if the graph has none */
-    long calls;                  /* the graph's calls, and how long they took: */
-    long histogram[TIME_BINS];   /* bin i counts times below TIME_FLOOR * 10^((i + 1) / 20) */
-    double max_time;
+    NetTimes times;              /* the graph's calls and how long they took */
 };
 
 static void set_error(char *error, size_t size, const char *fmt, ...) {
@@ -288,28 +281,7 @@ static int64_t element_count(const int64_t *dims, int rank) {
     return n;
 }
 
-/* One call's duration into the histogram. */
-static void count_time(Network *net, double seconds) {
-    int bin = seconds > TIME_FLOOR ? (int)(BINS_PER_DECADE * log10(seconds / TIME_FLOOR)) : 0;
-    net->histogram[bin < TIME_BINS ? bin : TIME_BINS - 1]++;
-    net->calls++;
-    if (seconds > net->max_time) net->max_time = seconds;
-}
-
-void net_call_times(const Network *net, double times[4]) {
-    const double quantiles[2] = {0.5, 0.99};
-    times[0] = (double)net->calls;
-    for (int q = 0; q < 2; q++) {
-        long seen = 0;
-        int bin = 0;
-        while (bin < TIME_BINS - 1 && (double)(seen + net->histogram[bin]) < quantiles[q] *
-                                          (double)net->calls)
-            seen += net->histogram[bin++];
-        times[1 + q] = net->calls ? fmin(TIME_FLOOR * pow(10.0, (bin + 1) / BINS_PER_DECADE),
-                                         net->max_time) : 0.0;
-    }
-    times[3] = net->max_time;
-}
+void net_call_times(const Network *net, double times[4]) { net_times_get(&net->times, times); }
 
 int net_run(Network *net, const double *inputs, int64_t steps, float *state_in,
             double *outputs, float *state_out, char *error, size_t size) {
@@ -337,15 +309,12 @@ int net_run(Network *net, const double *inputs, int64_t steps, float *state_in,
                    s->state_rank[k], &out_values[1 + k], error, size);
     }
     if (!err) {
-        struct timespec start, end;
-        clock_gettime(CLOCK_MONOTONIC, &start);
+        const double start = net_clock();
         err = check(net, ORT(net, Run)(net->session, NULL, in_names,
                                        (const OrtValue *const *)in_values, (size_t)n, out_names,
                                        (size_t)n, out_values),
                     "running the graph", error, size);
-        clock_gettime(CLOCK_MONOTONIC, &end);
-        count_time(net, (double)(end.tv_sec - start.tv_sec)
-                            + 1e-9 * (double)(end.tv_nsec - start.tv_nsec));
+        net_times_add(&net->times, net_clock() - start);
     }
     for (int k = 0; k < n; k++) {
         if (in_values[k]) ORT(net, ReleaseValue)(in_values[k]);

@@ -1,5 +1,8 @@
 /*
- * onnx_network.h -- one ONNX graph run with onnxruntime's C API, the library loaded at run time.
+ * onnx_network.h -- one ONNX graph run by the FMU, in one of two implementations:
+ * c_network.c (NET_RUNTIME_C), the graph generated as C and compiled into the FMU, which ignores
+ * the library and model paths; onnx_network.c, onnxruntime's C API, the library loaded at run
+ * time, as described here.
  *
  * The FMU ships libonnxruntime next to its own shared library (binaries/<platform>/) and the
  * graph in resources/. The wheel of onnxruntime has no C headers, so onnx_network.c declares

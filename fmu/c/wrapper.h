@@ -22,7 +22,7 @@
 #define FLEXFF_WRAPPER_H
 
 #ifndef _GNU_SOURCE
-#define _GNU_SOURCE /* dladdr, for models with a network */
+#define _GNU_SOURCE /* dladdr, for models with a network in onnxruntime */
 #endif
 #include <math.h>
 #include <stdarg.h>
@@ -34,7 +34,9 @@
 #include "config.h"
 #include "rng.h"
 #if HAS_NETWORK
+#if !NET_RUNTIME_C
 #include <dlfcn.h>
+#endif
 #include <stdlib.h>
 #include "onnx_network.h"
 #if NET_TASK

@@ -1,6 +1,7 @@
 /*
- * wrapper_network.c -- the embedded network of a wrapped model (HAS_NETWORK): an ONNX graph run by
- * onnxruntime (onnx_network.c) every NET_PERIOD communication steps on network_input(x, u, p);
+ * wrapper_network.c -- the embedded network of a wrapped model (HAS_NETWORK): an ONNX graph, as
+ * generated C compiled in (c_network.c, NET_RUNTIME_C) or run by onnxruntime (onnx_network.c),
+ * every NET_PERIOD communication steps on network_input(x, u, p);
  * its result r enters output(), extrapolated linearly from the last two results between
  * calls. With NET_PRECOMPUTED the graph runs once at initialization over a table of the inputs
  * in resources/ (each step's inputs are checked against it), with equal results.
@@ -105,14 +106,15 @@ static int load_table(Instance *c, const char *path, char *error, size_t size) {
     return 0;
 }
 
-/* Open the network (and the table) from the FMU's binaries and resources; NULL error text on
- * success. */
-int net_load(Instance *c, fmi2String resources, char *error, size_t size) {
+#if !NET_RUNTIME_C
+/* onnxruntime: its library from the FMU's binaries (beside the FMU's own), the graph from its
+ * resources. */
+static Network *open_runtime(fmi2String resources, char *error, size_t size) {
     char library[4096], model[4096];
     Dl_info self;
     if (!dladdr(&NET_SPEC, &self) || self.dli_fname == NULL) { /* an address in this library */
         snprintf(error, size, "cannot locate the FMU's own shared library");
-        return -1;
+        return NULL;
     }
     const char *slash = strrchr(self.dli_fname, '/');
     const int dir_len = slash ? (int)(slash - self.dli_fname) : 1;
@@ -121,9 +123,19 @@ int net_load(Instance *c, fmi2String resources, char *error, size_t size) {
     if (resource_path(resources, NET_MODEL_FILE, model, sizeof model) != 0) {
         snprintf(error, size, "fmuResourceLocation '%s' is not a file URI",
                  resources ? resources : "(null)");
-        return -1;
+        return NULL;
     }
-    c->net = net_open(library, model, &NET_SPEC, error, size);
+    return net_open(library, model, &NET_SPEC, error, size);
+}
+#endif
+
+/* Open the network (and the table from the FMU's resources); NULL error text on success. */
+int net_load(Instance *c, fmi2String resources, char *error, size_t size) {
+#if NET_RUNTIME_C
+    c->net = net_open(NULL, NULL, &NET_SPEC, error, size); /* compiled in: nothing to load */
+#else
+    c->net = open_runtime(resources, error, size);
+#endif
     if (c->net == NULL) return -1;
 #if NET_TASK
     if (task_start(c, error, size) != 0) return -1;

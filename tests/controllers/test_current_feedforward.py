@@ -35,6 +35,7 @@ from flexff.learning.train import train
 from flexff.plant.references import thesis_evaluation
 from flexff.plant.signals import CURRENT_FEEDFORWARD, names
 from tests.controllers.test_learned_feedforward import STEPS, independent_forces
+from tests.helpers import NETWORK_RTOL
 from tests.runners import run_fmu
 
 I_FF = names(CURRENT_FEEDFORWARD)
@@ -123,7 +124,7 @@ def test_a_current_level_model_as_an_fmu_equals_onnxruntime(models, kind, tmp_pa
     out = run_fmu(fmu, STEPS, 1e-3, {n: reference[n][:STEPS] for n in REFERENCE_SIGNALS})
     got = np.column_stack([out[n] for n in I_FF])[:STEPS]
     assert expected.shape == got.shape == (STEPS, 3) and np.abs(expected).max() > 0.01
-    assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
+    assert np.abs(got - expected).max() <= NETWORK_RTOL * np.abs(expected).max()
 
 
 def test_the_short_form_wires_a_current_level_model(model):

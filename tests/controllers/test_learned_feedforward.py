@@ -30,6 +30,7 @@ from flexff.learning.train import train
 from flexff.plant.references import thesis_evaluation
 from tests.fmu.test_network import running_sum_graph
 from tests.fmu_toys import LoggedSlave, status_of
+from tests.helpers import NETWORK_RTOL
 from tests.runners import run_fmu, run_fmu_libcosim
 
 STEPS = 600  # 0.6 s of the thesis evaluation reference at 1 kHz
@@ -113,7 +114,7 @@ def test_fmu_forces_equal_an_independent_runner(models, fmus, reference, kind):
     expected = independent_forces(models / f"{kind}.onnx", reference)[:STEPS]
     got = fmu_forces(fmus[kind, "step"], reference)[:STEPS]
     scale = np.abs(expected).max()
-    assert np.abs(got - expected).max() <= 1e-9 * scale
+    assert np.abs(got - expected).max() <= NETWORK_RTOL * scale
 
 
 def test_task_mode_uses_each_call_one_period_later(models, reference, tmp_path):
@@ -121,7 +122,7 @@ def test_task_mode_uses_each_call_one_period_later(models, reference, tmp_path):
                     tmp_path / "lstm-task.fmu")
     expected = independent_forces(models / "lstm.onnx", reference, task=True)[:STEPS]
     got = fmu_forces(fmu, reference)[:STEPS]
-    assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
+    assert np.abs(got - expected).max() <= NETWORK_RTOL * np.abs(expected).max()
 
 
 def test_a_run_configuration_puts_the_network_in_its_own_task(models, tmp_path):

@@ -30,6 +30,7 @@ from flexff.learning.train import train
 from flexff.plant.references import thesis_evaluation
 from tests.controllers.test_learned_feedforward import independent_forces
 from tests.cosim.test_ssp import write_config
+from tests.helpers import NETWORK_RTOL
 from tests.runners import run_fmu
 
 RUN_FILES = ("signals.parquet", "metrics.json", "run.json")  # a plain run: no CSV, no plot
@@ -112,7 +113,7 @@ def test_fmu_build_feedforward(model, tmp_path, capsys):
     out = run_fmu(fmus[0.001], steps, 1e-3, {n: reference[n][:steps] for n in reference})
     fine = np.column_stack([out["Fx_ff"], out["Fy_ff"]])[:steps]
     expected = independent_forces(model, reference)[:steps]
-    assert np.abs(fine - expected).max() <= 1e-9 * np.abs(expected).max()
+    assert np.abs(fine - expected).max() <= NETWORK_RTOL * np.abs(expected).max()
     out = run_fmu(fmus[0.002], steps // 2, 2e-3, {n: reference[n][:steps:2] for n in reference})
     coarse = np.column_stack([out["Fx_ff"], out["Fy_ff"]])[:steps // 2]
     calls = slice(0, None, 10)  # the network's calls: every 10 ms

@@ -2,10 +2,11 @@
 with the build's own flags (so -O2: gcc's flow-sensitive warnings such as -Warray-bounds only
 run when optimizing, which -fsyntax-only skips).
 
-The FMU's generic wrapper is compiled against the config.h of three toy FMUs (continuous,
-discrete without states, with an embedded network), since its code paths depend on the sizes
-there; the engine, the floor and the proxy as they are built. CasADi's generated model.c (the
-toys' and the plant's) is held to the same flags but -Wunused-parameter: its functions take
+The FMU's generic wrapper is compiled against the config.h of the toy FMUs (continuous,
+discrete without states, with an embedded network in each runtime and in its own task), since
+its code paths depend on the sizes there; the network generated as C too; the engine, the
+floor and the proxy as they are built. CasADi's generated model.c (the toys' and the plant's)
+is held to the same flags but -Wunused-parameter: its functions take
 CasADi's fixed calling convention (arg, res, iw, w, mem), used or not.
 """
 
@@ -17,9 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from flexff.fmu.build import NETWORK_C_FILES, TASK_C_FILES, WRAPPER_C_FILES
+from flexff.fmu.build import NETWORK_C_FILES, RUNTIME_C_FILES, TASK_C_FILES, WRAPPER_C_FILES
 from flexff.fmu.codegen import generate_model_c
 from flexff.fmu.compile import CFLAGS, HOST_HEADER, compiler, fmi_headers
+from flexff.fmu.network_c import FMU_PREFIX
 from flexff.plant.system import plant_system
 from tests.fmu.test_network import network_system, running_sum_graph
 from tests.fmu_toys import build_toy, discrete_pi, duffing
@@ -46,7 +48,8 @@ def toy_sources(tmp_path_factory) -> dict[str, Path]:
     folders = {}
     net = network_system(graph)
     task = replace(net, name="toy_task", network=replace(net.network, task=True))
-    for system in (duffing(), discrete_pi(), net, task):
+    runtime = replace(net, name="toy_ort", network=replace(net.network, runtime="onnxruntime"))
+    for system in (duffing(), discrete_pi(), net, task, runtime):
         folder = tmp_path_factory.mktemp(system.name)
         with zipfile.ZipFile(build_toy(system, tmp_path_factory)) as zf:
             zf.extractall(folder)
@@ -56,7 +59,8 @@ def toy_sources(tmp_path_factory) -> dict[str, Path]:
 
 def test_every_fmu_source_is_shipped():
     """The toys below compile what an FMU ships: every C file of fmu/c is one of those."""
-    shipped = WRAPPER_C_FILES + NETWORK_C_FILES + TASK_C_FILES
+    shipped = WRAPPER_C_FILES + NETWORK_C_FILES + TASK_C_FILES + tuple(
+        name for files in RUNTIME_C_FILES.values() for name in files)
     assert sorted(p.name for p in FMU_C.glob("*.c")) == sorted(shipped)
 
 
@@ -65,7 +69,8 @@ def test_the_fmu_sources_compile_without_warnings(toy_sources):
     for toy, sources in toy_sources.items():
         for name in sorted(p.name for p in sources.glob("*.c")):
             generated = name == "model.c"  # CasADi's; the others are fmu/c's own files
-            source = sources / name if generated else FMU_C / name
+            source = (sources / name if generated or name == f"{FMU_PREFIX}.c"  # the network's
+                      else FMU_C / name)
             found[f"{toy}: {name}"] = compile_warnings(source, [sources],
                                                        GENERATED if generated else ())
     assert {f: w for f, w in found.items() if w} == {}

@@ -7,6 +7,7 @@ import shutil
 import struct
 import zipfile
 from ctypes import byref, c_char
+from dataclasses import replace
 
 import casadi as ca
 import fmpy
@@ -68,11 +69,12 @@ def sqrt_graph(path, n: int = 2) -> str:
     return _save(graph, path)
 
 
-def network_system(model, table=None, name="toy_network") -> System:
+def network_system(model, table=None, name="toy_network", runtime="c") -> System:
     """y = r + u, the network fed with 2 u."""
     x, u, p, w = ca.SX.sym("x", 0), ca.SX.sym("u", 2), ca.SX.sym("p", 0), ca.SX.sym("w", 0)
     r = ca.SX.sym("r", 2)
-    net = read_network(model, ca.Function("network_input", [x, u, p], [2 * u]), PERIOD, table)
+    net = replace(read_network(model, ca.Function("network_input", [x, u, p], [2 * u]), PERIOD,
+                               table), runtime=runtime)
     return System(
         name=name, description="running sum network toy", kind="discrete", states=(),
         inputs=(Variable("u1"), Variable("u2")), outputs=(Variable("y1"), Variable("y2")),
@@ -106,6 +108,13 @@ def step_fmu(graph, tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
+def ort_fmu(graph, tmp_path_factory):
+    """The step FMU with the graph in onnxruntime."""
+    return build_toy(network_system(graph, name="toy_network_ort", runtime="onnxruntime"),
+                     tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
 def precomputed_fmu(graph, tmp_path_factory):
     held = np.vstack([INPUTS, INPUTS[-1]])  # run_fmu reads the last sample with the last inputs
     table = np.column_stack([np.arange(STEPS + 1) * H, held])
@@ -125,12 +134,20 @@ def test_precomputed_mode_equals_step_by_step(step_fmu, precomputed_fmu):
     assert np.array_equal(_run(precomputed_fmu), _run(step_fmu))
 
 
-def test_fmus_pass_validation(step_fmu, precomputed_fmu):
+def test_fmus_pass_validation(step_fmu, precomputed_fmu, ort_fmu):
     assert validate_fmu(step_fmu) == []
     assert validate_fmu(precomputed_fmu) == []
-    names = zipfile.ZipFile(step_fmu).namelist()
+    assert validate_fmu(ort_fmu) == []
+    names = zipfile.ZipFile(step_fmu).namelist()  # the graph compiled in as C
+    assert "sources/flexff_net.c" in names
+    assert not any("onnxruntime" in n or n.endswith(".onnx") for n in names)
+    names = zipfile.ZipFile(ort_fmu).namelist()
     assert "resources/model.onnx" in names
     assert any(n.startswith("binaries/") and "libonnxruntime" in n for n in names)
+
+
+def test_both_runtimes_give_the_same_outputs(step_fmu, ort_fmu):
+    assert np.array_equal(_run(step_fmu), _run(ort_fmu))
 
 
 def test_libcosim_gives_the_same_outputs(step_fmu, precomputed_fmu):
@@ -208,20 +225,20 @@ def _unpacked(fmu, folder):
     return folder
 
 
-def test_a_swapped_graph_is_reported(step_fmu, tmp_path):
-    folder = _unpacked(step_fmu, tmp_path / "fmu")
+def test_a_swapped_graph_is_reported(ort_fmu, tmp_path):
+    folder = _unpacked(ort_fmu, tmp_path / "fmu")
     sqrt_graph(folder / "resources" / "model.onnx")
-    assert "state tensors" in _instantiate_log(step_fmu, folder)  # 1 input, 2 expected
+    assert "state tensors" in _instantiate_log(ort_fmu, folder)  # 1 input, 2 expected
     running_sum_graph(folder / "resources" / "model.onnx", n=3)
     assert ("graph tensor 'inputs' has size 3 in dimension 1, expected 2"
-            in _instantiate_log(step_fmu, folder))
+            in _instantiate_log(ort_fmu, folder))
 
 
-def test_a_missing_library_is_reported(step_fmu, tmp_path):
-    folder = _unpacked(step_fmu, tmp_path / "never-loaded")  # a path dlopen has not seen
+def test_a_missing_library_is_reported(ort_fmu, tmp_path):
+    folder = _unpacked(ort_fmu, tmp_path / "never-loaded")  # a path dlopen has not seen
     for library in (folder / "binaries").rglob("libonnxruntime*"):
         library.unlink()
-    assert "cannot load the onnxruntime library" in _instantiate_log(step_fmu, folder)
+    assert "cannot load the onnxruntime library" in _instantiate_log(ort_fmu, folder)
 
 
 def test_inputs_off_the_precomputed_table_are_refused(precomputed_fmu):

@@ -260,7 +260,14 @@ def test_the_command_line_builds_and_refuses(graphs, tmp_path, capsys):
     assert main(["fmu", "build", "onnx", graphs["lstm"], "-o", str(task), "--every", "2",
                  "--task"]) == 0
     assert validate_fmu(task) == [] and "sources/wrapper_task.c" in zipfile.ZipFile(task).namelist()
+    bundled = tmp_path / "lstm-ort.fmu"
+    assert main(["fmu", "build", "onnx", graphs["lstm"], "-o", str(bundled),
+                 "--runtime", "onnxruntime"]) == 0
+    assert "resources/model.onnx" in zipfile.ZipFile(bundled).namelist()
+    assert "sources/flexff_net.c" in zipfile.ZipFile(target).namelist()  # c, the default
     assert main(["fmu", "build", "plant", "-o", str(tmp_path / "p.fmu"), "--task"]) == 2
+    assert "the plant has none" in capsys.readouterr().err
+    assert main(["fmu", "build", "plant", "-o", str(tmp_path / "p.fmu"), "--runtime", "c"]) == 2
     assert "the plant has none" in capsys.readouterr().err
     assert main(["fmu", "build", "onnx", str(tmp_path / "none.onnx"), "-o",
                  str(tmp_path / "none.fmu")]) == 2

@@ -49,9 +49,11 @@ def task_fmu(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def slow_fmu(tmp_path_factory):
-    """A network of about 3 ms (longer than the 1 ms step) called every step, in a task."""
+    """A network of about 3 ms (longer than the 1 ms step; in onnxruntime, see
+    flexff.bench.slow_graph) called every step, in a task."""
     graph = slow_graph(tmp_path_factory.mktemp("slow") / "slow.onnx")
-    return build_toy(onnx_system(graph, H, 1, task=True), tmp_path_factory)
+    return build_toy(onnx_system(graph, H, 1, task=True, runtime="onnxruntime"),
+                     tmp_path_factory)
 
 
 def _run(fmu, runner=run_fmu):
@@ -137,7 +139,8 @@ def test_a_state_saved_with_a_call_pending_continues_exactly(tmp_path_factory, s
     """The slow network every PERIOD steps: right after a call point's step its call is still
     running when the state is saved."""
     graph = slow_graph(tmp_path_factory.mktemp("slow") / "slow.onnx")
-    fmu = build_toy(onnx_system(graph, H, PERIOD, task=True), tmp_path_factory)
+    fmu = build_toy(onnx_system(graph, H, PERIOD, task=True, runtime="onnxruntime"),
+                    tmp_path_factory)
     names = ("inputs[0]", "inputs[1]")
 
     def steps(s, ks):
