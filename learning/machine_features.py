@@ -166,7 +166,7 @@ def lagged(values: np.ndarray, rate_hz: float, lead_s: float) -> np.ndarray:
     """`values` (one per sample) as they were `lead_s` earlier, linearly interpolated (the
     first value held before the start)."""
     t = np.arange(values.size) / rate_hz
-    return np.interp(t - lead_s, t, values)
+    return np.asarray(np.interp(t - lead_s, t, values))
 
 
 def named_motion(moved: np.ndarray, machine: Machine) -> dict[str, np.ndarray]:

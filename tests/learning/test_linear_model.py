@@ -224,3 +224,28 @@ def test_json_casadi_and_numpy_give_the_same_efforts(tmp_path):
         np.testing.assert_allclose(by_casadi[k], model.predict(m)[name], rtol=1e-12,
                                    atol=1e-12)
     assert "coulomb_negative" in model.summary() and "coupling" in again.summary()
+
+
+@pytest.mark.parametrize("lead_s", [None, 0.0])
+def test_held_efforts_pair_with_the_motion_half_a_sample_later(lead_s):
+    """A 2 kg mass under efforts held over each step (a digital controller's zero-order hold):
+    each effort sample acts on the motion half a sample after it. Aligned so (the default
+    lead), the model explains the efforts exactly; paired sample by sample, a residual of
+    the jerk's half-sample term is left."""
+    h, mass = 1 / RATE, 2.0
+    m = exact_motion(("x",), seconds=10.0)
+    held = mass * m["ax"]  # any smooth effort, held over each step
+    x, v = np.zeros(held.size), np.zeros(held.size)
+    for k in range(held.size - 1):  # the exact discretization of a mass under a held effort
+        x[k + 1] = x[k] + h * v[k] + h**2 / 2 * held[k] / mass
+        v[k + 1] = v[k] + h * held[k] / mass
+    drive = machine(terms=["inertia"], width=None)
+    features = MachineFeatures(cutoff_hz=20.0, lead_s=lead_s).resolved(RATE, [], drive)
+    moved, efforts = motion({"x_measured": x, "x_effort": held}, RATE, drive, features)
+    fit = identify_linear(drive, named_motion(moved, drive), {"x": efforts[:, 0]},
+                          parallel_filter(RATE, 20.0), features.lead_s).axes["x"]
+    assert fit.parameters[0] == pytest.approx(mass, rel=1e-4)
+    if lead_s is None:
+        assert fit.relative_error < 2e-4 and features.lead_s == h / 2
+    else:
+        assert fit.relative_error > 1e-3
