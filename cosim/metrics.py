@@ -9,6 +9,10 @@ description's (`machine_axes`: `<axis>_ref` against the true position where the 
 one, else the measured one, each an expression of recorded signals) or, by default, the
 manipulator's x and y (`x_ref` against the plant's true `x`). A streamed run sums the squares
 and keeps the largest error chunk by chunk (Tracking), so it never holds the whole record.
+
+An axis's e2 over a loop whose measurement adds a noise floor (an e2 that no feedforward
+removes, learning.ilc) splits into the floor and the feedforward's own share,
+sqrt(e2^2 - floor^2) (`own_share`), the two errors being uncorrelated.
 """
 
 from __future__ import annotations
@@ -68,6 +72,14 @@ def error_norms(error: np.ndarray, step: float) -> dict[str, float]:
     return {"e2": math.sqrt(float(np.sum(error**2)) * step) / duration,
             "einf": float(np.max(np.abs(error))),
             "rms": math.sqrt(float(np.mean(error**2)))}
+
+
+def own_share(e2: float, floor: float) -> float:
+    """The part of an axis's `e2` that is not the noise `floor`'s: sqrt(e2^2 - floor^2); 0.0
+    where e2 <= floor (the error is the floor's alone: "at the floor"), never NaN."""
+    if not (math.isfinite(e2) and math.isfinite(floor)) or e2 < 0 or floor < 0:
+        raise ValueError(f"e2 {e2} and noise floor {floor} must be finite and not negative")
+    return math.sqrt((e2 - floor) * (e2 + floor)) if e2 > floor else 0.0
 
 
 def tracking_metrics(recording: Recording, axes: Sequence[TrackedAxis] = MANIPULATOR_AXES

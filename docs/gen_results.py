@@ -79,9 +79,37 @@ def readme_table(summary: dict[str, Any]) -> str:
     return "\n".join((head, "|---|" + "---:|" * len(MODELS), flexff, thesis))
 
 
+def own_pair(axes: dict[str, Any]) -> str:
+    """The own share of e2 over the noise floor of the x and y axes, as "x / y", each "at the
+    floor" where its e2 is at or under the floor."""
+    return " / ".join("at the floor" if axes[a]["at_floor"] else figure(axes[a]["own_e2"])
+                      for a in "xy")
+
+
+def own_share_markdown(summary: dict[str, Any]) -> list[str]:
+    """The own share of e2 per scenario, beside e2 and its ratio, headed with the noise floor
+    it was computed against; no lines where the summary has no floor."""
+    floor = summary.get("noise_floor")
+    if not floor:
+        return []
+    out = ["### Own share over the noise floor", "",
+           "Own share: √(e2² − floor²), what a feedforward leaves beside the floor that the "
+           "encoders' noise and counting add (\"at the floor\" where e2 ≤ floor).", "",
+           f"| scenario | e2 x / y [m/√s] | e2 ratio x / y | own share x / y [m/√s] "
+           f"(floor {figure(floor['x'])} / {figure(floor['y'])}) |", "|---|---:|---:|---:|"]
+    for key, s in summary["scenarios"].items():
+        out.append(f"| {SCENARIOS.get(key, key)} | {pair(s, 'e2')} | {pair(s, 'e2_ratio')} | "
+                   f"{own_pair(s)} |")
+    return [*out, ""]
+
+
 def demo_markdown() -> str:
     """The thesis comparison page's tables, from docs/results/demo."""
-    summary, stamp = load("demo")
+    return demo_page(*load("demo"))
+
+
+def demo_page(summary: dict[str, Any], stamp: dict[str, Any]) -> str:
+    """The thesis comparison page's tables from a demo's summary.json and its stamp."""
     scenarios = summary["scenarios"]
     out = [stamp_line(stamp), "", "### On the evaluation reference", "",
            "| scenario | e2 x / y [m/√s] | e2 ratio x / y | einf ratio x / y | e2 / ILC limit |",
@@ -91,7 +119,8 @@ def demo_markdown() -> str:
             s = scenarios[key]
             out.append(f"| {name} | {pair(s, 'e2')} | {pair(s, 'e2_ratio')} | "
                        f"{pair(s, 'einf_ratio')} | {pair(s, 'e2_per_limit')} |")
-    out += ["", "### Beside the thesis's Table 5.2", "", readme_table(summary), ""]
+    out += ["", *own_share_markdown(summary), "### Beside the thesis's Table 5.2", "",
+            readme_table(summary), ""]
     held = summary.get("held_out")
     if held:
         out += [f"### On the {len(held['references'])} held-out references", "",

@@ -5,9 +5,11 @@ reference; this module compares their tracking errors with each other and with t
 published numbers. Into the output folder go
 
   summary.json  rms, e2, einf and the improvement ratios (PID alone / scenario) per scenario
-                and axis (with an ILC limit, also e2 as a multiple of it), with the thesis's
-                table for the same environment, in SI units
-  table.md      the same as a Markdown table, in the thesis's scale (1e-4 or 1e-3)
+                and axis (with an ILC limit, also e2 as a multiple of it; with a noise floor,
+                the feedforward's own share of e2), with the thesis's table for the same
+                environment, in SI units
+  table.md      the same as a Markdown table, in the thesis's scale (1e-4 or 1e-3), and
+                the own share of e2 per scenario and axis against the floor
   paths.png     reference and each scenario's x-y path, with a zoom on where the feedforwards err
                 most
   errors.png    tracking error over time per axis, one line per scenario
@@ -15,6 +17,12 @@ published numbers. Into the output folder go
 
 "sim" compares with Table 5.2 (nominal simulation), "hardware" with Table 6.2 (the real
 machine; flexff's "hardware" is the simulated plant with the real machine's non-ideal effects).
+
+Where the loop's encoders add a noise floor (learning.ilc.noise_floor: the hardware stand-in's
+noise and counting), no feedforward's e2 goes much below it, and e2 alone hides how far apart
+two feedforwards near it are. Each axis then also has its own share, sqrt(e2^2 - floor^2)
+(cosim.metrics.own_share): the error the feedforward itself leaves. Where e2 <= floor (the ILC
+limit can land there) the own share is 0 and the table says "at the floor".
 """
 
 from __future__ import annotations
@@ -30,7 +38,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from flexff.cosim.metrics import AXES, tracking_metrics
+from flexff.cosim.metrics import AXES, own_share, tracking_metrics
 from flexff.cosim.plots import MM, save_figure
 from flexff.cosim.recording import Recording, atomic_write
 from flexff.fmu.errors import InputError
@@ -60,6 +68,8 @@ SCENARIO_LABELS: dict[str, str] = {
 }
 LIMIT = "limit"  # the scenario of iterative learning control's force (learning.ilc)
 PER_LIMIT = "e2_per_limit"  # a scenario's e2 / the limit's
+OWN = "own_e2"  # a scenario's own share of e2 over the noise floor: sqrt(e2^2 - floor^2)
+AT_FLOOR = "at_floor"  # True where a scenario's e2 <= the noise floor (its own share is 0)
 
 
 def _thesis(exponent: int, rows: Mapping[str, tuple[float, float, float, float]]
@@ -100,7 +110,9 @@ _ROWS = (("rms", "x", "‖E_x‖₂ (rms, as the thesis)"),
          ("einf", "x", "‖E_x‖∞"), ("einf", "y", "‖E_y‖∞"))
 UNITS = {"rms": "m", "e2": "m/sqrt(s)", "einf": "m",
          **{f"{norm}_ratio": "PID alone / scenario" for norm in NORMS},
-         PER_LIMIT: "scenario / ILC limit"}
+         PER_LIMIT: "scenario / ILC limit",
+         OWN: "m/sqrt(s): sqrt(e2^2 - noise_floor^2), 0 where e2 <= noise_floor",
+         AT_FLOOR: "e2 <= noise_floor"}
 TRACKING = names(POSITION_REFERENCE, TRUE_POSITION)
 FORCES = names(FEEDBACK_FORCES, FEEDFORWARD_FORCES)
 
@@ -129,13 +141,21 @@ def _pid_first(names: Mapping[str, object]) -> list[str]:
     return ["pid", *(name for name in names if name != "pid")]
 
 
-def summarize(metrics: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+def _own(e2: float, floor: float) -> dict[str, Any]:
+    """An axis's own share of `e2` over the noise `floor` (OWN) and whether it is at the floor."""
+    return {OWN: own_share(e2, floor), AT_FLOOR: e2 <= floor}
+
+
+def summarize(metrics: dict[str, dict[str, Any]],
+              noise_floor: Mapping[str, float] | None = None) -> dict[str, dict[str, Any]]:
     """Per scenario and axis: rms, e2, einf and their improvement ratios rms_ratio (equal to
     e2_ratio on one reference), e2_ratio, einf_ratio (PID alone / scenario, so the PID's are
     1.0 and higher is better), PID alone first.
 
     With a LIMIT scenario (iterative learning control's force), every scenario's axis also
     has e2_per_limit: its e2 as a multiple of the limit's (None where the limit's is zero).
+    With a `noise_floor` (e2 per axis, learning.ilc.noise_floor), every axis also has own_e2,
+    its own share of e2 over the floor (0.0 at or below it), and at_floor.
 
     `metrics` maps a scenario name to a cosim.metrics.tracking_metrics dict
     {"x": {"e2", "einf", "rms"}, "y": {...}}; it must hold "pid", the base of every ratio.
@@ -150,6 +170,8 @@ def summarize(metrics: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
             if LIMIT in metrics:
                 limit = float(metrics[LIMIT][axis]["e2"])
                 summary[name][axis][PER_LIMIT] = norms["e2"] / limit if limit > 0 else None
+            if noise_floor:
+                summary[name][axis].update(_own(norms["e2"], float(noise_floor[axis])))
     return summary
 
 
@@ -169,10 +191,14 @@ def _cell(norms: Mapping[str, float | None], norm: str, scale: float, with_ratio
     text = _number(value / scale)
     if not with_ratio:
         return text
-    ratio = norms[f"{norm}_ratio"]
+    return f"{text} ({_times(norms[f'{norm}_ratio'])})"
+
+
+def _times(ratio: float | None) -> str:
+    """An improvement ratio: "50x", "4.1x"; "n/a" where there is none (a zero error)."""
     if ratio is None:
-        return f"{text} (n/a)"
-    return f"{text} ({ratio:.0f}x)" if ratio >= 10 else f"{text} ({ratio:.2g}x)"
+        return "n/a"
+    return f"{ratio:.0f}x" if ratio >= 10 else f"{ratio:.2g}x"
 
 
 def _multiple(value: float | None) -> str:
@@ -222,11 +248,38 @@ def floor_note(summary: Mapping[str, Mapping[str, Any]], floor: Mapping[str, flo
     as a multiple of it where the summary has the limit."""
     text = (f"Noise floor: e2 x, y = {floor['x']:.3g}, {floor['y']:.3g} m/√s, what the encoders' "
             f"noise and quantization add (the ILC force run with and without them). No "
-            f"feedforward's e2 goes below it")
+            f"feedforward removes it")
     if LIMIT in summary:
         text += ("; the ILC limit's is " + " / ".join(
             f"{summary[LIMIT][a]['e2'] / floor[a]:.3g}x" for a in AXES) + " of it")
     return text + ".\n"
+
+
+NO_FLOOR = ("No noise floor under this table: the loop's encoders measure exactly (as the sim "
+            "environment's do) or its plant is an FMU, whose noise flexff cannot switch off; e2 "
+            "is not split into the floor and the feedforward's own share.\n")
+
+
+def _own_cell(axis: Mapping[str, Any]) -> str:
+    """An axis's own share of e2 in m/√s, or "at the floor"."""
+    return "at the floor" if axis[AT_FLOOR] else f"{axis[OWN]:.3g}"
+
+
+def own_share_table(summary: Mapping[str, Mapping[str, Any]], floor: Mapping[str, float]
+                    ) -> str:
+    """Per scenario and axis of `summary` (summarized with the noise `floor`): e2, its ratio
+    PID alone / scenario, and its own share over the floor, each own-share column headed
+    with the floor it was computed against."""
+    head = " | ".join(f"e2 {a} [m/√s] | ratio {a} | own share {a} (floor {floor[a]:.3g})"
+                      for a in AXES)
+    lines = ["Own share of e2 on the evaluation reference: √(e2² − floor²) in m/√s, what each "
+             "feedforward leaves beside the noise floor; \"at the floor\" where e2 ≤ floor.",
+             "", f"| scenario | {head} |", "|---" + "|---:" * 3 * len(AXES) + "|"]
+    for name, axes in summary.items():
+        cells = " | ".join(f"{axes[a]['e2']:.3g} | {_times(axes[a]['e2_ratio'])} | "
+                           f"{_own_cell(axes[a])}" for a in AXES)
+        lines.append(f"| {SCENARIO_LABELS.get(name, name)} | {cells} |")
+    return "\n".join(lines) + "\n"
 
 
 def held_out_table(held_out: Mapping[str, Any]) -> str:
@@ -371,7 +424,8 @@ def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
     """Write summary.json, table.md, paths.png, errors.png and forces.png into `out`; return
     the summary.json content. `training` (model -> learning.train metrics) adds what each
     model's training cost and reached, in both files; `noise_floor` (e2 per axis that the
-    encoders add, learning.ilc.noise_floor) adds the floor under every feedforward's e2;
+    encoders add, learning.ilc.noise_floor) adds the floor under every feedforward's e2 and
+    each scenario's own share of e2 over it (own_share_table; without one, NO_FLOOR says so);
     `held_out` (learning.held_out.run_held_out) each scenario's ratios on the references of
     the test split.
 
@@ -384,13 +438,17 @@ def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
     _check_env(env)
     _check_recordings(recordings)
     ordered = {name: recordings[name] for name in _pid_first(recordings)}
-    summary = summarize({name: tracking_metrics(rec) for name, rec in ordered.items()})
+    summary = summarize({name: tracking_metrics(rec) for name, rec in ordered.items()},
+                        noise_floor)
     content = {"env": env, "scenarios": summary, "thesis": copy.deepcopy(THESIS_TABLES[env]),
                "units": dict(UNITS)}
     table = markdown_table(summary, env)
     if noise_floor:
         content["noise_floor"] = dict(noise_floor)
-        table += "\n" + floor_note(summary, noise_floor)
+        table += "\n" + floor_note(summary, noise_floor) + "\n" + own_share_table(
+            summary, noise_floor)
+    else:
+        table += "\n" + NO_FLOOR
     if held_out:
         content["held_out"] = dict(held_out)
         table += "\n" + held_out_table(held_out)

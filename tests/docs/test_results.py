@@ -85,6 +85,40 @@ def test_the_thesis_page_shows_the_summary(site):
         for a, shown_mean, shown_worst in zip("xy", mean, worst):
             assert _close(shown_mean, math.exp(sum(map(math.log, ratios[a])) / len(ratios[a])))
             assert _close(shown_worst, min(ratios[a]))
+    own = "Own share over the noise floor" in page.read_text()
+    assert own == ("noise_floor" in summary)  # the sim demo's encoders are exact: no floor
+
+
+def test_the_thesis_page_gives_the_own_share_over_a_floor():
+    """A demo summary with a noise floor (evaluate's summarize: the limit at the floor in x,
+    over it in y) puts each scenario's own share on the page, beside its e2 and ratio, under
+    the floor it was computed against."""
+    import gen_results
+
+    from flexff.learning.report import summarize
+
+    stored, stamp = gen_results.load("demo")
+    metrics = {name: {a: {n: s[a][n] for n in ("e2", "einf", "rms")} for a in "xy"}
+               for name, s in stored["scenarios"].items()}
+    limit = metrics["limit"]
+    floor = {"x": 1.5 * limit["x"]["e2"], "y": 0.5 * limit["y"]["e2"]}
+    summary = {**stored, "scenarios": summarize(metrics, floor), "noise_floor": floor}
+    page = gen_results.demo_page(summary, stamp)
+    assert "\n".join(gen_results.own_share_markdown(summary)) in page
+    head = next(line for line in page.splitlines() if "own share x / y" in line)
+    assert _numbers(head.split("floor")[1]) == [float(gen_results.figure(floor[a]))
+                                                for a in "xy"]
+    rows = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
+            for line in page.split(head)[1].split("\n\n")[0].splitlines()[2:]}
+    assert rows["ILC limit"][2].startswith("at the floor / ")
+    for key, s in summary["scenarios"].items():
+        e2, ratio, own = rows[gen_results.SCENARIOS[key]]
+        assert all(map(_close, _numbers(e2), (s[a]["e2"] for a in "xy"))), key
+        assert all(map(_close, _numbers(ratio), (s[a]["e2_ratio"] for a in "xy"))), key
+        shares = [s[a]["own_e2"] for a in "xy" if not s[a]["at_floor"]]
+        assert shares and all(map(_close, _numbers(own), shares)), key
+        assert all(math.isclose(s[a]["own_e2"]**2 + floor[a]**2, s[a]["e2"]**2, rel_tol=1e-9)
+                   for a in "xy" if not s[a]["at_floor"])
 
 
 

@@ -14,7 +14,9 @@ from flexff.cosim.recording import load_recording
 from flexff.cosim.references import build_reference
 from flexff.learning.dataset import load_dataset
 from flexff.learning.evaluate import ENVIRONMENTS, evaluate, preprocessing, scenario_config
+from flexff.learning.ilc import NOISE_FLOOR, ilc
 from flexff.learning.presets import make_config
+from flexff.learning.report import NO_FLOOR
 from flexff.learning.synthetic import synthetic_dataset
 
 
@@ -34,6 +36,8 @@ def test_every_scenario_is_reported(evaluation):
     assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "pgnn", "limit"]
     assert json.loads((out / "summary.json").read_text()) == summary
     assert "noise_floor" not in summary  # the nominal plant's encoders measure exactly
+    assert "own_e2" not in summary["scenarios"]["pgnn"]["x"]
+    assert NO_FLOOR in (out / "table.md").read_text()
     assert read_identified(out / "identified" / "identified.json")
     assert any(line.startswith("identified: residual") for line in lines)
     assert "| identified rigid-body FF |" in (out / "table.md").read_text()
@@ -132,6 +136,30 @@ def test_an_ensemble_trains_its_members_and_runs_their_mean(evaluation, tmp_path
     assert training["parameters"] == sum(m["parameters"] for m in members)
     assert training["test_mse"] == pytest.approx(np.mean([m["test_mse"] for m in members]))
     assert "| physics-guided FF (2 seeds) | " in (tmp_path / "table.md").read_text()
+
+
+def test_the_ilc_runs_noise_floor_gives_each_scenario_its_own_share(evaluation, tmp_path,
+                                                                    monkeypatch):
+    """The floor the ILC run measured (here set to 1e-5 m/√s, above the limit's e2 after one
+    trial on the nominal plant, far under PID alone's) goes into summary.json with each
+    scenario's own share over it, and into table.md."""
+    out, _, _ = evaluation
+    floor = {"x": 1e-5, "y": 1e-5}
+
+    def ilc_with_a_floor(*args, **kwargs):
+        return {**ilc(*args, **kwargs), NOISE_FLOOR: floor}
+
+    monkeypatch.setattr("flexff.learning.evaluate.ilc", ilc_with_a_floor)
+    summary = evaluate("sim", tmp_path, models=[], data=out / "data", say=lambda _: None,
+                       progress=False, ilc_iterations=1)
+    assert summary["noise_floor"] == floor
+    assert json.loads((tmp_path / "summary.json").read_text()) == summary
+    for axis in ("x", "y"):
+        pid, limit = (summary["scenarios"][name][axis] for name in ("pid", "limit"))
+        assert pid["own_e2"] == pytest.approx(np.sqrt(pid["e2"]**2 - 1e-10), rel=1e-12)
+        assert not pid["at_floor"] and limit["at_floor"] and limit["own_e2"] == 0.0
+    table = (tmp_path / "table.md").read_text()
+    assert "own share x (floor 1e-05)" in table and "at the floor" in table
 
 
 def test_bad_requests_are_refused(tmp_path):

@@ -17,11 +17,13 @@ import pytest
 from flexff.cosim.metrics import tracking_metrics
 from flexff.cosim.recording import Recording
 from flexff.learning.report import (
+    NO_FLOOR,
     SCENARIO_LABELS,
     THESIS_TABLES,
     floor_note,
     held_out_table,
     markdown_table,
+    own_share_table,
     summarize,
     write_report,
 )
@@ -159,7 +161,8 @@ def test_write_report_files(tmp_path):
     assert written["scenarios"]["tcn"]["y"]["einf_ratio"] == pytest.approx(8.0, rel=1e-9)
     assert written["units"]["e2"] == "m/sqrt(s)" and written["units"]["einf"] == "m"
     table = (out / "table.md").read_text(encoding="utf-8")
-    assert table == markdown_table(content["scenarios"], "sim")
+    assert table == markdown_table(content["scenarios"], "sim") + "\n" + NO_FLOOR
+    assert "own_e2" not in written["scenarios"]["lstm"]["x"]  # no floor, no own share
     assert "42.930" in table and "thesis: CNN-LSTM FF" in table
 
 
@@ -235,7 +238,7 @@ def test_the_noise_floor_goes_into_the_summary_and_under_the_table(tmp_path):
     assert json.loads((tmp_path / "summary.json").read_text())["noise_floor"] == floor
     table = (tmp_path / "table.md").read_text(encoding="utf-8")
     assert table == markdown_table(content["scenarios"], "hardware") + "\n" + floor_note(
-        content["scenarios"], floor)
+        content["scenarios"], floor) + "\n" + own_share_table(content["scenarios"], floor)
     assert f"e2 x, y = {floor['x']:.3g}, {floor['y']:.3g} m/√s" in table
     assert "the ILC limit's is 2x / 2x of it." in table
     assert "ILC limit" not in floor_note(summarize({"pid": limit}), floor)
@@ -252,3 +255,48 @@ def test_the_held_out_references_table_gives_each_scenarios_mean_and_worst(tmp_p
     assert table.endswith(held_out_table(held)) and content["held_out"] == held
     assert "On the 2 references of the test split" in table
     assert "| TCN FF | 200 / 100 | 100 / 10 |" in table
+
+
+def test_each_scenarios_own_share_of_e2_over_the_floor(tmp_path):
+    """With the floor at half the limit's e2 (1/400 of PID alone's), each axis's own share is
+    sqrt(e2^2 - floor^2): the limit's sqrt(3)/2 of its e2; summary.json and table.md give it
+    beside e2 and its ratio, each own-share column headed with its floor."""
+    recordings = {**scenarios(), "limit": sines(1 / 200)}
+    limit = tracking_metrics(recordings["limit"])
+    floor = {axis: limit[axis]["e2"] / 2 for axis in ("x", "y")}
+    write_report(recordings, "hardware", tmp_path, noise_floor=floor)
+    written = json.loads((tmp_path / "summary.json").read_text())
+    for axis, a in (("x", PID_X), ("y", PID_Y)):
+        for name, scale in (("pid", 1.0), ("lstm", 1 / 50), ("limit", 1 / 200)):
+            got = written["scenarios"][name][axis]
+            e2 = scale * a / 2
+            assert got["e2"] == pytest.approx(e2, rel=1e-9)
+            assert got["own_e2"] == pytest.approx(math.sqrt(e2**2 - floor[axis]**2), rel=1e-9)
+            assert got["at_floor"] is False and "e2_ratio" in got
+        assert written["scenarios"]["limit"][axis]["own_e2"] == pytest.approx(
+            math.sqrt(3) / 2 * limit[axis]["e2"], rel=1e-9)
+    assert written["units"]["own_e2"].startswith("m/sqrt(s)")
+    table = (tmp_path / "table.md").read_text(encoding="utf-8")
+    assert (f"| scenario | e2 x [m/√s] | ratio x | own share x (floor {floor['x']:.3g}) | "
+            f"e2 y [m/√s] | ratio y | own share y (floor {floor['y']:.3g}) |") in table
+    own = written["scenarios"]["lstm"]
+    assert (f"| LSTM FF | {own['x']['e2']:.3g} | 50x | {own['x']['own_e2']:.3g} | "
+            f"{own['y']['e2']:.3g} | 50x | {own['y']['own_e2']:.3g} |") in table
+
+
+def test_at_or_below_the_floor_the_own_share_is_zero_and_said_so():
+    """A scenario whose e2 is at or under the floor (noise alone) has own share 0.0, never
+    NaN, and the table says "at the floor"; the axis above it keeps its own share."""
+    pid = {"x": {"e2": 1e-3, "einf": 1e-3, "rms": 1e-3}, "y": {"e2": 1e-3, "einf": 1e-3,
+                                                              "rms": 1e-3}}
+    near = {"x": {"e2": 2e-6, "einf": 1e-5, "rms": 1e-5}, "y": {"e2": 5e-6, "einf": 1e-5,
+                                                               "rms": 1e-5}}
+    floor = {"x": 3e-6, "y": 3e-6}
+    summary = summarize({"pid": pid, "limit": near}, floor)
+    assert summary["limit"]["x"]["own_e2"] == 0.0 and summary["limit"]["x"]["at_floor"]
+    assert summary["limit"]["y"]["own_e2"] == pytest.approx(4e-6, rel=1e-9)
+    assert summary["limit"]["y"]["at_floor"] is False
+    assert "| ILC limit | 2e-06 | 500x | at the floor | 5e-06 | 200x | 4e-06 |" in \
+        own_share_table(summary, floor)
+    assert summarize({"pid": pid, "limit": near}, {"x": 2e-6, "y": 0.0})["limit"]["x"][
+        "own_e2"] == 0.0  # e2 exactly on the floor
