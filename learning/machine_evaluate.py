@@ -164,7 +164,7 @@ def _train(job: _Training) -> dict[str, Any]:
     prior = None if job.prior is None else linear_model_from_dict(job.prior, "the prior")
     metrics = fit_machine(make_config(job.kind, job.preset, **job.overrides), data.description,
                           data.sample_rate_hz, data.trajectories, data.digest,
-                          job.out / "runs" / job.kind, progress=False, prior=prior)
+                          job.out / "runs" / job.kind, progress=False, prior=prior, reuse=True)
     export(job.out / "runs" / job.kind, job.out / "models" / f"{job.kind}.onnx")
     return metrics
 

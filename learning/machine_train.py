@@ -35,7 +35,7 @@ from flexff.learning.machine_features import (
 )
 from flexff.learning.models import SequenceNetwork, uses_prior
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig
-from flexff.learning.run_folder import save_run, start_run
+from flexff.learning.run_folder import RUN_FILE, save_run, start_run
 from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.train import (
     Checkpoints,
@@ -63,12 +63,13 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
                 features: MachineFeatures | None = None, progress: bool = True,
                 resume: bool | None = None, force: bool = True,
                 checkpoint_every: int | None = None, on_epoch: EpochReport | None = None,
-                prior: LinearModel | None = None) -> dict[str, Any]:
+                prior: LinearModel | None = None, reuse: bool = False) -> dict[str, Any]:
     """Train `config`'s model on a machine's trajectories (`digest` names the data) with the
     feature settings `features` (default: all derived from the data); write the run folder
     `out`; return the metrics. The physics-guided model learns the residual over `prior`, the
     machine's identified linear model (learning.machine_evaluate.identify_dataset), its efforts
-    through the labels' filter as the labels are."""
+    through the labels' filter as the labels are. With `reuse`, a run finished in `out` with
+    the same settings and data is kept (an interrupted evaluation resumes)."""
     start = time.perf_counter()
     pick_device(config.device)  # before any work: a device that is not there fails now
     if uses_prior(config.model) != (prior is not None):
@@ -87,6 +88,8 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
                            if k not in ("device", "threads")},
                 "features": features_to_dict(resolved), "machine": machine_table(machine),
                 "data": digest, "prior": None if prior is None else prior.to_dict()}
+    if reuse and _finished_alike(out, settings):
+        return {**json.loads((out / "metrics.json").read_text()), "run": str(out)}
     checkpoint = start_run(out, json.loads(json.dumps(settings)), resume, force)
     rng = np.random.default_rng(config.seed)
     train_x, train_f = _prepared(train_set, rate_hz, machine, resolved, rng)
@@ -135,6 +138,20 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
                                                    f"{config.model} ({config.preset}), "
                                                    f"{machine.name}")})
     return {**metrics, "run": str(out)}
+
+
+def _finished_alike(out: Path, settings: Mapping[str, Any]) -> bool:
+    """Whether `out` holds a finished run (run.json, metrics.json) of these settings."""
+    try:
+        info = json.loads((out / RUN_FILE).read_text())
+        json.loads((out / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return False
+    config = {k: v for k, v in info["config"].items() if k not in ("device", "threads")}
+    found = {"config": config, "features": info.get("machine_features"),
+             "machine": info.get("machine"), "data": info.get("data", {}).get("sha256"),
+             "prior": info.get("machine_prior")}
+    return found == json.loads(json.dumps(settings))
 
 
 def prior_efforts(prior: LinearModel | None, trajectories: list[Trajectory],
