@@ -1,8 +1,8 @@
-"""Second-order discrete filters of the loop blocks: notch and low-pass.
+"""Discrete filters of the loop blocks: notch and low-pass (first or second order).
 
 The continuous prototype is mapped by controllers.loop_shaping's Tustin with prewarping at its
 centre frequency (exact response there), as that module does for the manipulator's notch; the
-result is a discrete StateSpace of two states, stepped symbolically in the block's FMU.
+result is a discrete StateSpace of one or two states, stepped symbolically in the block's FMU.
 """
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ import numpy as np
 
 from flexff.controllers.block_options import OptionError
 from flexff.controllers.loop_shaping import StateSpace, from_polynomials, tustin
+
+BUTTERWORTH_ZETA = 1 / math.sqrt(2)
 
 
 def _centre(what: str, hz: float, step: float) -> float:
@@ -35,11 +37,17 @@ def notch(hz: float, zeta: tuple[float, float], step: float) -> StateSpace:
                                    np.array([1.0, 2 * z2 * w, w**2])), step, w)
 
 
-def lowpass(hz: float, zeta: float, step: float) -> StateSpace:
-    """w^2 / (s^2 + 2 zeta w s + w^2): unity gain at rest, -40 dB/decade above `hz`."""
+def lowpass(hz: float, step: float, order: int = 2, zeta: float | None = None) -> StateSpace:
+    """Unity gain at rest: w / (s + w) (order 1, -20 dB/decade above `hz`) or
+    w^2 / (s^2 + 2 zeta w s + w^2) (order 2, -40 dB/decade; zeta None: Butterworth)."""
+    if order not in (1, 2):
+        raise OptionError(f"lowpass_order {order} must be 1 or 2")
+    zeta = BUTTERWORTH_ZETA if zeta is None else zeta
     if not zeta > 0:
         raise OptionError(f"lowpass_zeta {zeta} must be positive")
     w = _centre("low-pass", hz, step)
+    if order == 1:
+        return tustin(from_polynomials(np.array([w]), np.array([1.0, w])), step, w)
     return tustin(from_polynomials(np.array([w**2]), np.array([1.0, 2 * zeta * w, w**2])),
                   step, w)
 
