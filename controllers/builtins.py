@@ -27,7 +27,10 @@ def _pid_options(form: str) -> tuple[str | Option, ...]:
     """The PID block's options, `form` the default form."""
     special = {"form": Option("form", "choice", form, choices=PID_FORMS),
                "anti_windup": Option("anti_windup", "choice", choices=PID_ANTI_WINDUP),
-               "lowpass_order": Option("lowpass_order", "integer", choices=PID_LOWPASS_ORDERS)}
+               "lowpass_order": Option("lowpass_order", "integer", choices=PID_LOWPASS_ORDERS),
+               "lowpass_zeta": Option("lowpass_zeta", "number", positive=True),
+               "effort_unit": Option("effort_unit", default="N"),
+               "position_unit": Option("position_unit", default="m")}
     return tuple(special.get(key, key) for key in PID_OPTIONS)
 
 
@@ -36,7 +39,8 @@ def register() -> None:
                      "flexff.controllers.pid_options:pid_from_options", PID)
     register_builtin("pid-gains", _pid_options("parallel"),
                      "flexff.controllers.pid_options:pid_gains_from_options",
-                     "the same PID block with form = \"parallel\" unless given")
+                     "the PID block of \"pid\" with form = \"parallel\" unless given: "
+                     "tunable gains kp_a, ki_a, kd_a, explicit or loop-shaped")
     register_builtin("sum", SUM_OPTIONS, "flexff.controllers.blocks_signal:sum_from_options",
                      "output = sum of signs[k] * inputs[k]")
     register_builtin("gain", GAIN_OPTIONS, "flexff.controllers.blocks_signal:gain_from_options",

@@ -13,6 +13,7 @@ The form sets the defaults: anti-windup conditional integration (series) or back
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 from typing import Literal
@@ -159,9 +160,7 @@ class AxisPid:
     def series_controller(self, step: float) -> StateSpace:
         """The series form's controller from error to feedback, at unit scale."""
         assert isinstance(self.gains, LoopShape)
-        shape = self.gains
-        controller = design_pid(shape.crossover_hz, step, self.notch_hz, self.notch_zeta,
-                                plant=shape.plant).discrete
+        controller = _series_design(self.gains, self.notch_hz, self.notch_zeta, step)
         if self.lowpass_hz is None:
             return controller
         return series(controller, self._lowpass(self.lowpass_hz, step))
@@ -187,3 +186,10 @@ class AxisPid:
                 raise OptionError("explicit gains have no plant of their own: pass one")
             plant = self.gains.plant
         return loop_margins(self.state_space(step), plant)
+
+
+@functools.lru_cache(maxsize=64)
+def _series_design(shape: LoopShape, notch_hz: float | None, notch_zeta: tuple[float, float],
+                   step: float) -> StateSpace:
+    """design_pid's discrete controller (its margins cost tens of ms: a block asks thrice)."""
+    return design_pid(shape.crossover_hz, step, notch_hz, notch_zeta, plant=shape.plant).discrete
