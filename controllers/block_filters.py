@@ -18,10 +18,10 @@ from flexff.controllers.loop_shaping import StateSpace, from_polynomials, tustin
 BUTTERWORTH_ZETA = 1 / math.sqrt(2)
 
 
-def _centre(what: str, hz: float, step: float) -> float:
+def _centre(key: str, hz: float, step: float) -> float:
     nyquist_hz = 0.5 / step
     if not 0 < hz < nyquist_hz:
-        raise OptionError(f"{what} frequency {hz} Hz must lie in (0, {nyquist_hz:g}) Hz, below "
+        raise OptionError(f"{key} {hz} Hz must lie in (0, {nyquist_hz:g}) Hz, below "
                           f"the Nyquist frequency of the {step} s step")
     return 2 * math.pi * hz
 
@@ -32,7 +32,7 @@ def notch(hz: float, zeta: tuple[float, float], step: float) -> StateSpace:
     if not 0 <= z1 < z2:
         raise OptionError(f"notch_zeta {list(zeta)} must satisfy 0 <= z1 < z2 (numerator, "
                           "denominator damping)")
-    w = _centre("notch", hz, step)
+    w = _centre("notch_hz", hz, step)
     return tustin(from_polynomials(np.array([1.0, 2 * z1 * w, w**2]),
                                    np.array([1.0, 2 * z2 * w, w**2])), step, w)
 
@@ -45,7 +45,7 @@ def lowpass(hz: float, step: float, order: int = 2, zeta: float | None = None) -
     zeta = BUTTERWORTH_ZETA if zeta is None else zeta
     if not zeta > 0:
         raise OptionError(f"lowpass_zeta {zeta} must be positive")
-    w = _centre("low-pass", hz, step)
+    w = _centre("lowpass_hz", hz, step)
     if order == 1:
         return tustin(from_polynomials(np.array([w]), np.array([1.0, w])), step, w)
     return tustin(from_polynomials(np.array([w**2]), np.array([1.0, 2 * zeta * w, w**2])),

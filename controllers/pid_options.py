@@ -20,6 +20,7 @@ from flexff.controllers import block_options as opt
 from flexff.controllers.blocks_pid import pid_system
 from flexff.controllers.loop_shaping import NOTCH_ZETA
 from flexff.controllers.pid_design import AntiWindup, AxisPid, Form, Gains, LoopShape
+from flexff.fmu.errors import InputError
 from flexff.fmu.system import System
 
 POSITIVE = {"crossover_hz", "mass", "derivative_filter_hz", "notch_hz", "lowpass_hz",
@@ -67,7 +68,7 @@ def axes_from_options(options: Mapping[str, Any], step: float, form: Form, block
                 anti_windup=anti_windup, notch_zeta=notch_zeta, lowpass_order=lowpass_order,
                 lowpass_zeta=lowpass_zeta)
             loops[a].state_space(step)  # the filters' and the design's checks, by axis
-        except opt.OptionError as error:
+        except InputError as error:  # an OptionError, or design_pid's own
             raise opt.OptionError(f"axis {a!r}: {error}") from None
     return loops
 
