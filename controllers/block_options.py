@@ -15,11 +15,14 @@ from typing import Any
 
 from flexff.fmu.errors import InputError
 
-PID_PER_AXIS_OPTIONS = ("crossover_hz", "mass", "damping", "kp", "ki", "kd",
+PID_PER_AXIS_OPTIONS = ("crossover_hz", "mass", "damping", "stiffness", "kp", "ki", "kd",
                         "derivative_filter_hz", "notch_hz", "lowpass_hz", "effort_limit",
                         "tracking_gain")
-PID_OPTIONS = ("axes", *PID_PER_AXIS_OPTIONS, "notch_zeta", "lowpass_zeta", "anti_windup",
-               "effort_unit", "position_unit")  # controllers.blocks_pid
+PID_FORMS = ("series", "parallel")
+PID_ANTI_WINDUP = ("conditional", "back-calculation", "clamp")
+PID_LOWPASS_ORDERS = (1, 2)
+PID_OPTIONS = ("axes", *PID_PER_AXIS_OPTIONS, "form", "anti_windup", "notch_zeta",
+               "lowpass_order", "lowpass_zeta", "effort_unit", "position_unit")  # blocks_pid
 SUM_OPTIONS = ("inputs", "output", "signs", "unit")  # controllers.blocks_signal
 GAIN_OPTIONS = ("input", "output", "gain", "unit")  # controllers.blocks_signal
 

@@ -4,7 +4,7 @@ machine: the small blocks that wire a user's loop together.
   sum:  output = sum_k signs[k] * inputs[k]      (options: inputs, output, signs)
   gain: output = gain * input, `gain` tunable    (options: input, output, gain)
 
-They run at the run's step (a discrete system's sample time must equal it); controllers.blocks
+They run at the run's step (a discrete system's sample time must equal it); controllers.builtins
 registers them as the built-ins "sum" and "gain".
 """
 

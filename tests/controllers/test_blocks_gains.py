@@ -1,5 +1,6 @@
-"""The PID with tunable gains (controllers.blocks_pid), sum and gain (blocks_signal) as FMUs:
-validated, run by FMPy, their discrete responses checked against hand computations."""
+"""The PID block in its parallel form (built-in "pid-gains": controllers.blocks_pid), sum and
+gain (blocks_signal) as FMUs: validated, run by FMPy, their discrete responses checked against
+hand computations."""
 
 import math
 
@@ -8,8 +9,10 @@ import pytest
 
 from flexff import api
 from flexff.controllers.block_options import OptionError
-from flexff.controllers.blocks_pid import AxisPid, designed_pid, pid_from_options, pid_system
+from flexff.controllers.blocks_pid import pid_system
 from flexff.controllers.blocks_signal import gain_from_options, sum_from_options
+from flexff.controllers.pid_design import AxisPid, Gains, LoopShape
+from flexff.controllers.pid_options import pid_gains_from_options as pid_from_options
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
 from tests.runners import run_fmu, simulate_with_fmpy
@@ -30,8 +33,9 @@ def fmus(tmp_path_factory):
         "back_calculation": pid_from_options(limited, STEP),
         "clamp": pid_from_options({**limited, "anti_windup": "clamp"}, STEP),
         "unlimited": pid_from_options({"axes": ["x"], "kp": 1.0, "ki": 100.0}, STEP),
-        "filtered": pid_system({"x": AxisPid(kp=1.0, notch_hz=NOTCH_HZ, notch_zeta=NOTCH_ZETA),
-                                "y": AxisPid(kp=1.0, lowpass_hz=LOWPASS_HZ)}, STEP),
+        "filtered": pid_system({"x": AxisPid(Gains(1.0), notch_hz=NOTCH_HZ,
+                                             notch_zeta=NOTCH_ZETA),
+                                "y": AxisPid(Gains(1.0), lowpass_hz=LOWPASS_HZ)}, STEP),
         "sum": sum_from_options({"inputs": ["a", "b"], "output": "c", "signs": [1, -2]}, STEP),
         "gain": gain_from_options({"input": "a", "output": "b", "gain": 3.0}, STEP),
     }
@@ -104,9 +108,9 @@ def test_notch_and_lowpass_attenuate_at_their_frequencies(fmus, hz, notch_gain, 
                 record=["x_fb", "y_fb"])
     r = {name: values[:steps] for name, values in r.items()}
     w = 2 * math.pi * hz
-    for axis, expected, pid in (("x", notch_gain, AxisPid(1.0, notch_hz=NOTCH_HZ,
+    for axis, expected, pid in (("x", notch_gain, AxisPid(Gains(1.0), notch_hz=NOTCH_HZ,
                                                           notch_zeta=NOTCH_ZETA)),
-                                ("y", lowpass_gain, AxisPid(1.0, lowpass_hz=LOWPASS_HZ))):
+                                ("y", lowpass_gain, AxisPid(Gains(1.0), lowpass_hz=LOWPASS_HZ))):
         measured = _amplitude(r, f"{axis}_fb", hz)
         response = abs(pid.state_space(STEP).response(w)[0])
         assert measured == pytest.approx(response, rel=1e-3)
@@ -115,15 +119,15 @@ def test_notch_and_lowpass_attenuate_at_their_frequencies(fmus, hz, notch_gain, 
 
 
 def test_loop_shaped_design_crosses_over_where_asked():
-    pid = designed_pid(30.0, 2.0, STEP, notch_hz=200.0)
-    margins = pid.margins(2.0, 0.0, STEP)
+    pid = AxisPid(LoopShape(30.0, 2.0), notch_hz=200.0)
+    margins = pid.margins(STEP)
     assert margins.crossover_hz == pytest.approx(30.0, rel=1e-6)
     assert margins.phase_margin_deg > 30
     assert margins.gain_margin_db > 6
     from_options = pid_from_options({"axes": ["x"], "crossover_hz": 30.0, "mass": 2.0,
                                      "notch_hz": 200.0}, STEP)
     kp = next(p for p in from_options.parameters if p.name == "kp_x")
-    assert kp.start == pytest.approx(pid.kp)
+    assert kp.start == pytest.approx(pid.parallel_gains(STEP).kp)
 
 
 def test_sum_and_gain(fmus):

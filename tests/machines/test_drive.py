@@ -1,11 +1,13 @@
-"""The 1-axis drive FMU against independent physics, and the generic PID on it in closed loop."""
+"""The 1-axis drive FMU against independent physics, and the generic PID (series form, built-in
+"pid") on it in closed loop."""
 
 import math
 
 import numpy as np
 import pytest
 
-from flexff.controllers.blocks import AxisLoop, pid_system
+from flexff.controllers.blocks_pid import pid_system
+from flexff.controllers.pid_design import AxisPid, LoopShape
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
 from flexff.machines.drive import DRIVE, drive_system
@@ -19,8 +21,13 @@ FRICTIONLESS = {"viscous": 0.0, "coulomb_positive": 0.0, "coulomb_negative": 0.0
 def fmus(tmp_path_factory):
     folder = tmp_path_factory.mktemp("drive")
     return {"drive": build_fmu(drive_system(), folder / "drive.fmu"),
-            "pid": build_fmu(pid_system([AxisLoop("x", DRIVE.mass, 20.0, effort_limit=50.0)],
-                                        1e-3), folder / "pid.fmu")}
+            "pid": build_fmu(pid_system({"x": _loop(DRIVE.mass, effort_limit=50.0)}, 1e-3),
+                             folder / "pid.fmu")}
+
+
+def _loop(mass, **options):
+    """The series-form PID of built-in "pid", loop-shaped at 20 Hz around `mass`."""
+    return AxisPid(LoopShape(20.0, mass), form="series", **options)
 
 
 def test_the_fmus_validate(fmus):
@@ -53,7 +60,7 @@ def test_the_effort_limit_saturates(fmus):
 
 
 def test_the_pid_follows_its_design_and_holds_its_integrator_at_the_limit(fmus):
-    design = AxisLoop("x", DRIVE.mass, 20.0, effort_limit=50.0).controller(1e-3)
+    design = _loop(DRIVE.mass, effort_limit=50.0).state_space(1e-3)
     error = np.full(50, 1e-4)
     out = run_fmu(fmus["pid"], 50, 1e-3, {"x_ref": 1e-4, "x": 0.0, "x_ff": 0.5})
     state, expected = np.zeros(design.A.shape[0]), []
@@ -72,8 +79,8 @@ def test_the_pid_follows_its_design_and_holds_its_integrator_at_the_limit(fmus):
 
 
 def test_a_mass_loop_is_stable_with_its_designed_margins():
-    design = AxisLoop("x", 2.0, 20.0).controller(1e-3)
+    design = _loop(2.0).state_space(1e-3)
     assert np.abs(np.linalg.eigvals(design.A)).max() <= 1.0 + 1e-12
-    notched = AxisLoop("x", 2.0, 20.0, notch_hz=250.0, lowpass_hz=300.0).controller(1e-3)
+    notched = _loop(2.0, notch_hz=250.0, lowpass_hz=300.0).state_space(1e-3)
     w = 2 * math.pi * 250.0
     assert abs(notched.response(w)[0]) < 0.2 * abs(design.response(w)[0])

@@ -13,7 +13,7 @@ from fmpy import simulate_fmu
 from scipy.linalg import expm
 
 from flexff import api
-from flexff.controllers.blocks_pid import pid_from_options
+from flexff.controllers.pid_options import pid_gains_from_options
 from flexff.fmu.build import build_fmu
 from flexff.machines.drive import DRIVE, drive_system
 
@@ -24,7 +24,7 @@ QUIET = {"coulomb_positive": 0.0, "coulomb_negative": 0.0, "cogging": 0.0}
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
     folder = tmp_path_factory.mktemp("drive_physics")
-    pid = pid_from_options({"axes": ["x"], "crossover_hz": 30.0, "mass": DRIVE.mass,
+    pid = pid_gains_from_options({"axes": ["x"], "crossover_hz": 30.0, "mass": DRIVE.mass,
                             "effort_limit": DRIVE.force_limit}, STEP)
     return {"drive": build_fmu(drive_system(), folder / "drive.fmu"),
             "pid": build_fmu(pid, folder / "pid.fmu")}
