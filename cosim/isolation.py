@@ -10,7 +10,8 @@ of a command byte over a pipe, so an isolated FMU costs a few microseconds more 
 gives the same results bit for bit. Everything else (initialization, values of other types,
 the FMU's messages) goes over the same pipes as pickled requests that the child's Python
 answers. A call the child does not answer within the step timeout stops the child (SIGKILL);
-one it dies in is reported with its signal.
+one it dies in is reported with its signal. The child dies with its master, however the master
+ends (fmu.orphans).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from flexff.cosim import engine
 from flexff.fmu import cache
 from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
+from flexff.fmu.orphans import die_with_parent
 
 SOURCE = Path(__file__).parent / "c" / "proxy.c"
 PYTHON, EXIT = b"P", b"X"  # commands proxy_serve hands back (CMD_PYTHON, CMD_EXIT in proxy.c)
@@ -120,7 +122,7 @@ class IsolatedInstance:
         self._process = subprocess.Popen(
             [sys.executable, "-m", "flexff.cosim.isolation", str(info.path), name,
              str(cmd_read), str(ack_write), str(self._memory), str(self._capacity),
-             solver or ""],
+             solver or "", str(os.getpid())],
             pass_fds=(cmd_read, ack_write, self._memory), env=env)
         os.close(cmd_read)
         os.close(ack_write)
@@ -267,7 +269,8 @@ def _answer(instance: FmuInstance, what: str, args: tuple[Any, ...]) -> Any:
 def main(argv: Sequence[str]) -> int:
     """The child: instantiate the FMU, then serve the engine's calls (proxy_serve) and the
     master's Python requests until told to exit or the master is gone."""
-    path, name, cmd, ack, memory, capacity, solver = argv
+    path, name, cmd, ack, memory, capacity, solver, master = argv
+    die_with_parent(int(master))  # a master killed while the FMU hangs takes it along
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle: it closes us
     cmd_fd, ack_fd, capacity_n = int(cmd), int(ack), int(capacity)
     lib = library()

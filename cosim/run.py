@@ -33,7 +33,9 @@ from typing import Any
 import numpy as np
 
 from flexff.cosim.builtins import registered
-from flexff.cosim.config import expanded, load_config
+from flexff.cosim.config import RECORDED, expanded, load_config
+from flexff.cosim.disk import check_disk
+from flexff.cosim.folder_lock import folder_lock
 from flexff.cosim.handover import Worker
 from flexff.cosim.master import CosimError, Master, Streamed
 from flexff.cosim.memory import MemoryNeeded, check_memory
@@ -244,45 +246,66 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
                progress: bool | None = None, pacing: Pacing | None = None,
                cpu: int | None = None) -> dict[str, Any]:
     """Run one configuration (or the TOML / SSP file at that path) into `output_dir`, its
-    record written while it runs; return the metrics written to metrics.json. A paced run
-    (`pacing`) also writes tet.png, and one that its overruns stopped raises OverrunError
-    after writing what it recorded. A run that fails or is interrupted leaves the record up
-    to its last chunk (cosim.recording's signals.parts/)."""
+    record written while it runs; return the metrics written to metrics.json. The run holds
+    the folder's lock while it writes (cosim.folder_lock: a second run into the same folder
+    is refused). A paced run (`pacing`) also writes tet.png, and one that its overruns
+    stopped raises OverrunError after writing what it recorded. A run that fails or is
+    interrupted (Ctrl-C, SIGTERM) keeps its record up to its last chunk, joined, and writes
+    run.json, whose `recorded` says what the record holds."""
     if not isinstance(config, RunConfig):
         config = load_run_config(config)
     _check_source_memory(config)
     out = output_folder(output_dir)
+    with folder_lock(out):
+        return _run_locked(config, out, progress, pacing, cpu)
+
+
+def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pacing | None,
+                cpu: int | None) -> dict[str, Any]:
+    """run_config's run, in the folder `out` it holds the lock of."""
     plot = _manipulator(config) if config.record.plot is None else config.record.plot
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
         scenario = resolve(config, folder)
         with scenario.master() as master:
             recorded = _wanted(scenario, master)
+            check_disk(out, config, len(_kept(recorded, config)))
             sink = RunSink(out, recorded, _kept(recorded, config), config.steps + 1,
                            config.step, plot, config.record.every, tracked_axes(config))
             try:
                 streamed = _stream(master, scenario, sink, recorded, progress, pacing, cpu)
-            except CosimError as error:
+            except (CosimError, KeyboardInterrupt) as error:
                 if sink.last_time is None:
                     raise
-                sink.writer.close(csv=config.record.csv)
-                _write_json(out / "run.json", expanded(config))
-                raise CosimError(f"{error}; the record up to t = {sink.last_time:.9g} s is in "
-                                 f"{out}") from None
+                _close_record(sink, config, out, complete=False)
+                held = sink.writer.held()
+                kept = (f"the record up to t = {held['last_time']:.9g} s "
+                        f"({held['points']} points) is in {out}")
+                if isinstance(error, KeyboardInterrupt):
+                    raise type(error)(kept) from None
+                raise CosimError(f"{error}; {kept}") from None
         duration = (streamed.points - 1) * config.step
         metrics = summary_metrics(sink.tracking.metrics() if sink.tracking else {}, duration,
                                   streamed.wall_s, streamed.timing)
         metrics |= builtin_metrics(scenario)
-    sink.writer.close(csv=config.record.csv)
+    _close_record(sink, config, out, complete=streamed.timing.stopped_at is None)
     if sink.plots is not None:
         sink.plots.write(out)
     if pacing is not None:
         plot_tet(streamed.timing, out / "tet.png")
-    _write_json(out / "run.json", expanded(config))
     _write_json(out / "metrics.json", metrics)
     if streamed.timing.stopped_at is not None:
         raise OverrunError(f"{streamed.timing.stop_message()}; the record up to there is in "
                            f"{out}")
     return metrics
+
+
+def _close_record(sink: RunSink, config: RunConfig, out: Path, complete: bool) -> None:
+    """Join the record and write run.json: the configuration in the general form and, under
+    `recorded`, what the record holds (its points, the times of its first and last, and
+    whether the run reached its end)."""
+    sink.writer.close(csv=config.record.csv)
+    _write_json(out / "run.json", {**expanded(config), RECORDED: {
+        **sink.writer.held(), "every": config.record.every, "complete": complete}})
 
 
 def _stream(master: Master, scenario: Scenario, sink: RunSink, recorded: Sequence[str],
