@@ -12,7 +12,7 @@ from tests.fmu.test_validation import description, edited
 
 FAULTS = {  # case: (edit of VanDerPol's modelDescription.xml, words of the one line)
     "duplicate name": (lambda t: t.replace('name="x1"', 'name="x0"'),
-                       'The variable name "x0" (line 50) is not unique.'),
+                       'The variable name "x0" (line 50) is not unique'),
     "negative value reference": (lambda t: t.replace('valueReference="5"',
                                                      'valueReference="-5"'),
                                  "attribute 'valueReference': '-5' is not a valid value"),
