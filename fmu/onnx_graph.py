@@ -150,7 +150,7 @@ def _states(path: Path, meta: dict[str, str], inputs: dict[str, onnx.ValueInfoPr
             raise InputError(f"{path}: state tensors {name_in!r} and {name_out!r} must both be "
                              f"float32, the input of a fixed shape and the output of the same "
                              f"(the FMU carries its state in float32)")
-        ONNX_ELEMENTS.check(math.prod(shape_in), f"{path}: state {name_in!r}")
+        ONNX_ELEMENTS.check(math.prod(d or 0 for d in shape_in), f"{path}: state {name_in!r}")
     names = [n for pair in pairs for n in pair]
     wrapped = [FMU_INPUTS, FMU_OUTPUTS, *[n for name_in, _ in pairs
                                           for n in (name_in, f"{name_in}_out")]]
