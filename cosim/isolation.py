@@ -22,6 +22,7 @@ import mmap
 import os
 import pickle
 import select
+import shutil
 import signal
 import struct
 import subprocess
@@ -129,8 +130,10 @@ class IsolatedInstance:
         self._proxy = lib.proxy_open(self._cmd, self._ack, ctypes.addressof(self._view),
                                      self._capacity, timeout or 0.0)
         self._timed_out = False
+        self.scratch: Path | None = None  # the folder the child unpacked the FMU into
         try:
-            self._response("instantiating it", max(START_WAIT, timeout or 0.0))
+            self.scratch = Path(self._response("instantiating it",
+                                               max(START_WAIT, timeout or 0.0)))
         except BaseException:
             self.close()
             raise
@@ -191,6 +194,8 @@ class IsolatedInstance:
             except (OSError, subprocess.TimeoutExpired):
                 pass
         self._stop()
+        if self.scratch is not None:  # a child that crashed or was stopped left it
+            shutil.rmtree(self.scratch, ignore_errors=True)
         if self._proxy:
             library().proxy_free(self._proxy)
             self._proxy = None
@@ -271,7 +276,8 @@ def main(argv: Sequence[str]) -> int:
     master's Python requests until told to exit or the master is gone."""
     path, name, cmd, ack, memory, capacity, solver, master = argv
     die_with_parent(int(master))  # a master killed while the FMU hangs takes it along
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle: it closes us
+    for number in (signal.SIGINT, signal.SIGTERM):  # the master's to handle: it closes us
+        signal.signal(number, signal.SIG_IGN)
     cmd_fd, ack_fd, capacity_n = int(cmd), int(ack), int(capacity)
     lib = library()
     shared = mmap.mmap(int(memory), lib.proxy_shared_size(capacity_n))
@@ -281,7 +287,7 @@ def main(argv: Sequence[str]) -> int:
     except FmuError as error:
         _send(ack_fd, ("error", str(error)))
         return 1
-    _send(ack_fd, ("ok", None))
+    _send(ack_fd, ("ok", str(instance.scratch)))
     try:
         while lib.proxy_serve(cmd_fd, ack_fd, address, capacity_n,
                               instance.info.fmi_version == "3.0", instance.component.value,

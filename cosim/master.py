@@ -632,6 +632,10 @@ class Master:
         except OverflowError as error:
             raise CosimError(f"{link} {when}: {error}") from None
 
+    def scratch(self) -> list[Path]:
+        """The temporary folders of the loaded FMUs (each removed when it is closed)."""
+        return [s for i in self._instances if (s := i.scratch) is not None]
+
     def close(self) -> None:
         """Terminate and free every FMU (safe to call twice)."""
         while self._instances:

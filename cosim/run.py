@@ -54,6 +54,7 @@ from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ConfigError, RunConfig
 from flexff.cosim.timing import OverrunError, Pacing
+from flexff.cosim.watchdog import watchdog
 
 
 def load_run_config(path: str | Path) -> RunConfig:
@@ -272,7 +273,9 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
             sink = RunSink(out, recorded, _kept(recorded, config), config.steps + 1,
                            config.step, plot, config.record.every, tracked_axes(config))
             try:
-                streamed = _stream(master, scenario, sink, recorded, progress, pacing, cpu)
+                with watchdog(f"the record up to its last chunk is in {sink.writer.parts}",
+                              lambda: [Path(folder), *master.scratch()]):
+                    streamed = _stream(master, scenario, sink, recorded, progress, pacing, cpu)
             except (CosimError, KeyboardInterrupt) as error:
                 if sink.last_time is None:
                     raise

@@ -315,6 +315,11 @@ class FmuInstance:
                            f"{self._log_text()}") from None
         self.component = c_void_p(self.fmu.component)
 
+    @property
+    def scratch(self) -> Path:
+        """The temporary folder the FMU is unpacked into (removed by `close`)."""
+        return Path(self._unzipdir)
+
     def _library_path(self) -> Path:
         folder = fmpy.platform if self.info.fmi_version == "2.0" else fmpy.platform_tuple
         identifier = self.info.me_identifier if self.model_exchange else self.info.identifier

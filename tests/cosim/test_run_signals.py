@@ -1,7 +1,7 @@
 """Signals end a run cleanly: SIGTERM (as Ctrl-C) stops `flexff run` with exit code 143 and one
 line saying what the record kept, the record joined and described in run.json, and no
-temporary folder left behind; an isolated FMU dies with its master, even a master killed with
-SIGKILL while the FMU hangs."""
+temporary folder left behind, even while an FMU hangs in its call (cosim.watchdog); an isolated
+FMU dies with its master, even a master killed with SIGKILL while the FMU hangs."""
 
 import json
 import os
@@ -13,6 +13,7 @@ import time
 import pytest
 
 from flexff.cosim.recording import PARQUET_NAME, PARTS_NAME, load_recording
+from flexff.cosim.watchdog import GRACE_S
 from tests.cosim.test_streaming import vdp_config
 from tests.helpers import REPOSITORY
 from tests.probe_fmu import build_probe
@@ -55,14 +56,39 @@ def test_sigterm_ends_a_run_cleanly(tmp_path):
     assert list((tmp_path / "tmp").iterdir()) == []
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
-def test_an_isolated_fmu_dies_with_its_killed_master(tmp_path):
+def hanging(tmp_path, isolate):
+    """A run whose probe FMU hangs in fmi2DoStep at t = 0.2 s (in its own process or not)."""
     probe = build_probe(tmp_path / "probe", startTime=0.0, stopTime=1.0, stepSize=0.1)
     config = tmp_path / "hang.toml"
     config.write_text(f'[run]\nstep = 0.1\nstop = 1.0\n[fmu.p]\npath = "{probe}"\n'
-                      f'isolate = true\nparameters = {{ hang_at = 0.2 }}\n'
+                      f'isolate = {str(isolate).lower()}\nparameters = {{ hang_at = 0.2 }}\n'
                       f'[[source]]\nkind = "constant"\nvalues = {{ u = 1.0 }}\n')
-    process = _start(tmp_path, config)
+    return config
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_sigterm_ends_a_run_whose_fmu_hangs(tmp_path, isolate):
+    process = _start(tmp_path, hanging(tmp_path, isolate))
+    try:
+        _wait_for(lambda: (tmp_path / "out" / PARTS_NAME).is_dir(), process)
+        time.sleep(1.0)  # into the hang
+        process.send_signal(signal.SIGTERM)
+        began = time.monotonic()
+        _, err = process.communicate(timeout=60)
+    finally:
+        process.kill()
+    assert process.returncode == 143, err
+    assert time.monotonic() - began < GRACE_S + 10
+    assert err.splitlines()[-1] == (
+        f"flexff: terminated; an FMU did not return from its call within {GRACE_S:g} s, so the "
+        f"run was ended there: the record up to its last chunk is in "
+        f"{tmp_path / 'out' / PARTS_NAME}")
+    assert list((tmp_path / "tmp").iterdir()) == []
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_an_isolated_fmu_dies_with_its_killed_master(tmp_path):
+    process = _start(tmp_path, hanging(tmp_path, isolate=True))
     try:
         children = []
         _wait_for(lambda: children.extend(_children(process.pid)) or children, process)
