@@ -8,16 +8,22 @@ machine packages name (cosim.plugins) under their short names as well; metrics.j
 reference and a true position; and what its built-ins add, cosim.builtins: a learned
 feedforward's `feedforward_range`, where the reference leaves the model's training range);
 the plots (cosim.plots; by default in a manipulator run only, `[record] plot` says
-otherwise); and run.json, the checked configuration in the general form. The built-in FMUs are
-built into the fmu/ cache and loaded from a temporary copy.
+otherwise); and run.json, the checked configuration in the general form with, under
+`recorded`, what the record holds (its points, their first and last times, whether the run
+reached its end). The built-in FMUs are built into the fmu/ cache and loaded from a temporary
+copy. A run holds its folder's lock while it writes there (cosim.folder_lock), so a second
+run into the same folder is refused at once instead of mixing the two records.
 
 The record, the metrics, the plots and the step timing are fed chunk by chunk while the run
 runs (RunSink, cosim.timing.StreamedTiming), paced or not, so the memory a run takes does not
 grow with its length (its sampled sources aside, which the master reads in place). A run that an
 FMU's failure stops (an isolated FMU's crash or hang among them) keeps the record up to its last
 recorded point and writes run.json, then raises CosimError naming the FMU, the call, the time
-and the folder. Before anything runs, the output folder must take a file and what is held in
-memory must fit, so that neither shows only after the simulation.
+and the folder; so does one that an FMU's NaN or infinite output stops. Ctrl-C and SIGTERM
+stop a run the same way (KeyboardInterrupt, saying what was kept), and one whose FMU hangs in
+a call after cosim.watchdog's grace. Before anything runs, the output folder must take a file,
+what is held in memory must fit and the record must fit the free disk (cosim.disk), so that
+none of them shows only after the simulation.
 """
 
 from __future__ import annotations
