@@ -103,8 +103,18 @@ def test_an_isolated_fmu_dies_with_its_killed_master(tmp_path):
 
 
 def _children(pid: int) -> list[int]:
+    """The isolated FMUs' processes among the children of `pid`."""
     path = f"/proc/{pid}/task/{pid}/children"
-    return [int(c) for c in open(path).read().split()] if os.path.exists(path) else []
+    children = [int(c) for c in open(path).read().split()] if os.path.exists(path) else []
+    return [c for c in children if b"flexff.cosim.isolation" in _command(c)]
+
+
+def _command(pid: int) -> bytes:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as command:
+            return command.read()
+    except FileNotFoundError:
+        return b""
 
 
 def _alive(pid: int) -> bool:
