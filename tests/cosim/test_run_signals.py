@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -104,8 +105,8 @@ def test_an_isolated_fmu_dies_with_its_killed_master(tmp_path):
 
 def _children(pid: int) -> list[int]:
     """The isolated FMUs' processes among the children of `pid`."""
-    path = f"/proc/{pid}/task/{pid}/children"
-    children = [int(c) for c in open(path).read().split()] if os.path.exists(path) else []
+    path = Path(f"/proc/{pid}/task/{pid}/children")
+    children = [int(c) for c in path.read_text().split()] if path.exists() else []
     return [c for c in children if b"flexff.cosim.isolation" in _command(c)]
 
 
