@@ -46,7 +46,8 @@ SOURCE = Path(__file__).parent / "c" / "engine.c"
 HEADER = SOURCE.with_suffix(".h")  # its structures, for the programs compiled with it
 TYPED_HOOK = CFUNCTYPE(c_int, c_long, c_int, c_long)  # (fmu, phase, k) -> 0 if ok
 CALLS = {1: "setting its inputs", 2: "getting its outputs", 3: "the step", 4: "getting its "
-         "outputs after the step", 5: "exchanging values of other types"}
+         "outputs after the step", 5: "exchanging values of other types", 6: "getting its "
+         "outputs (one not finite)", 7: "getting its outputs after the step (one not finite)"}
 NONFINITE = (6, 7)  # a non-finite output read before the point's record, after the step
 # calls made after their point was recorded (CALL_STEP, CALL_GET_AFTER, CALL_NONFINITE_AFTER)
 AFTER_RECORD = (3, 4, 7)
