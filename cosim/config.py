@@ -402,7 +402,7 @@ class _Parser(TableChecker):
                          allow_nonfinite=allowed)
 
     def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str,
-                       allowed: bool = False) -> dict[str, Any]:
+                       allowed: bool) -> dict[str, Any]:
         """Start values checked against the FMU's own variables and their types, and finite
         (a Float32 one within its range) unless non-finite values are `allowed`."""
         try:

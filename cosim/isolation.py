@@ -35,6 +35,7 @@ from typing import Any
 
 from flexff.cosim import engine
 from flexff.fmu import cache
+from flexff.fmu.archive import UNPACKED
 from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 from flexff.fmu.orphans import die_with_parent
@@ -132,8 +133,8 @@ class IsolatedInstance:
         self._timed_out = False
         self.scratch: Path | None = None  # the folder the child unpacked the FMU into
         try:
-            self.scratch = Path(self._response("instantiating it",
-                                               max(START_WAIT, timeout or 0.0)))
+            self.scratch = _scratch(self._response("instantiating it",
+                                                   max(START_WAIT, timeout or 0.0)))
         except BaseException:
             self.close()
             raise
@@ -251,6 +252,14 @@ class IsolatedInstance:
                 raise self.fail(what)
             data += chunk
         return data
+
+
+def _scratch(reported: Any) -> Path | None:
+    """The folder a child says it unpacked its FMU into, if it is one the importer makes (a
+    child is never trusted to name another folder for its master to remove)."""
+    path = Path(str(reported))
+    made = path.parent == Path(tempfile.gettempdir()) and path.name.startswith(UNPACKED)
+    return path if made and not path.is_symlink() else None
 
 
 def _read_exactly(fd: int, size: int) -> bytes:

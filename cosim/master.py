@@ -34,12 +34,11 @@ own function pointers: each float64 block costs one set, one get and one step ca
 step, every status is checked, every output read is checked to be finite (a NaN or an infinity
 stops the run naming the FMU, the output and the time, unless the FMU allows them: about 20
 instructions a step for two FMUs of two outputs, 1 % of a Reference-FMU step), and every step
-is timed (cosim.timing). Values of other types
-go through a hook into Python where an FMU has them. Python only sets up, feeds the sources
-and collects the record a chunk at a time (the engine's source rows, record rows and timing
-rows are one chunk long, so the master's memory does not grow with the run's length), and
-shows progress; the garbage collector is kept out of the loop, and the steps may be paced to
-the wall clock (cosim.timing.Pacing).
+is timed (cosim.timing). Values of other types go through a hook into Python where an FMU has
+them. Python only sets up, feeds the sources and collects the record a chunk at a time (the
+engine's source rows, record rows and timing rows are one chunk long, so the master's memory
+does not grow with the run's length), and shows progress; the garbage collector is kept out of
+the loop, and the steps may be paced to the wall clock (cosim.timing.Pacing).
 """
 
 from __future__ import annotations

@@ -8,11 +8,11 @@
  * end of its last), each FMU's share of it, and, when paced, how late the step started
  * against its absolute schedule start + k * period. Where an FMU's plan asks for it (`finite`),
  * every float output read is checked to be finite, and a NaN or an infinity stops the run as a
- * failed call does (CALL_NONFINITE_*). Nothing is allocated here. Every index
- * the plan holds is checked against the sizes it gives before a chunk runs (check_plan), and
- * engine_layout() reports the structures' layout for cosim/engine.py to check its ctypes
- * mirrors against when it loads the library. The structures are declared in engine.h, which
- * the programs compiled with the engine include (cosim/c/floor.c, the speed floor).
+ * failed call does (CALL_NONFINITE_*). Nothing is allocated here. Every index the plan holds
+ * is checked against the sizes it gives before a chunk runs (check_plan), and engine_layout()
+ * reports the structures' layout for cosim/engine.py to check its ctypes mirrors against when
+ * it loads the library. The structures are declared in engine.h, which the programs compiled
+ * with the engine include (cosim/c/floor.c, the speed floor).
  *
  * Values of other types than float64 go through a hook into Python (`typed`), called where
  * such an FMU sets its inputs or reads its outputs.
