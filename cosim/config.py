@@ -227,7 +227,9 @@ class _Parser(TableChecker):
             (read_fmu(f.path).default_start or 0.0 for f in fmus if f.path), 0.0))
         stop = self.stop(run, signal, fmus, step, start_time)
         tolerance = self.tolerance(run, "run")
-        fmus = [replace(f, tolerance=self.fmu_tolerance(f, tolerance)) for f in fmus]
+        fmus = [replace(f, tolerance=self.fmu_tolerance(f, tolerance),
+                        allow_nonfinite=f.allow_nonfinite or self.allow_nonfinite)
+                for f in fmus]  # a short form's FMUs too
         sources += self.sources(data.get("source", []))
         step_timeout = self.step_timeout(run, fmus)
         config = RunConfig(

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from flexff.cli import main
-from flexff.cosim.config import parse_config
+from flexff.cosim.config import expanded, parse_config
 from flexff.cosim.recording import load_recording
 from flexff.cosim.schema import ConfigError
 from tests.helpers import REFERENCE_FMUS
@@ -67,3 +67,12 @@ def test_nonfinite_parameters_are_refused_unless_allowed(fmu, parameters, key):
     assert len(str(refused.value).splitlines()) == 1
     assert config(allow={"allow_nonfinite": True}).fmus[0].allow_nonfinite
     assert config(run={"allow_nonfinite": True}).fmus[0].allow_nonfinite
+
+
+def test_run_allow_nonfinite_reaches_every_fmu_and_is_kept():
+    """[run] allow_nonfinite reaches a short form's FMUs too, and survives the general form."""
+    config = parse_config({"run": {"allow_nonfinite": True, "stop": 0.1},
+                           "reference": {"kind": "circle", "radius": 0.01, "duration": 0.1}})
+    assert config.fmus and all(f.allow_nonfinite for f in config.fmus)
+    again = parse_config(expanded(config))
+    assert all(f.allow_nonfinite for f in again.fmus)
