@@ -38,6 +38,7 @@ when the FMUs are resolved, before anything runs.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
@@ -78,6 +79,9 @@ SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration")
                 "circle": ("kind", "centre", "turns", "duration"),
                 "spline": ("kind", "points", "duration")}
 TABLES = ("run", "reference", "source", "fmu", "connection", "record", "machine")
+RECORDED = "recorded"  # what a run's record holds, in its run.json: read back, it is ignored
+MAX_STEPS = 2**53  # a run's steps: point k's time start + k * step needs k exact in a float
+FLOAT32_MAX = 3.4028234663852886e38
 
 
 def load_config(path: str | Path) -> RunConfig:
@@ -152,6 +156,7 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                                if f.unconnected != "error" else {}),
                             **({"tolerance": f.tolerance} if f.tolerance is not None else {}),
                             **({"isolate": True} if f.isolate else {}),
+                            **({"allow_nonfinite": True} if f.allow_nonfinite else {}),
                             **({"solver": f.solver} if f.solver else {})}
                    for f in config.fmus}
     if config.connections:
@@ -186,8 +191,10 @@ def _plain(value: Any) -> Any:
 class _Parser(TableChecker):
     """Checks one configuration; every error names the file and `table.key`."""
 
+    allow_nonfinite = False  # [run] allow_nonfinite, once read
+
     def parse(self, data: Mapping[str, Any], name: str) -> RunConfig:
-        others = [t for t in data if t not in TABLES]
+        others = [t for t in data if t not in (*TABLES, RECORDED)]
         # a plain general form loads no machine package (cosim.plugins)
         forms = short_forms() if others or "fmu" not in data else ()
         tables = (*TABLES, *(t for form in forms for t in form.tables))
@@ -197,7 +204,8 @@ class _Parser(TableChecker):
         short = self.short_form(data, forms)
         run = self.table(data, "run")
         self.keys(run, "run", ("step", "start", "stop", "tolerance", "step_timeout", "algorithm",
-                               "order"))
+                               "order", "allow_nonfinite"))
+        self.allow_nonfinite = self.flag(run, "run", "allow_nonfinite")
         step = self.number(run, "run", "step", 1e-3, positive=True)
         reference, signal = None, None
         if "reference" in data:
@@ -219,7 +227,9 @@ class _Parser(TableChecker):
             (read_fmu(f.path).default_start or 0.0 for f in fmus if f.path), 0.0))
         stop = self.stop(run, signal, fmus, step, start_time)
         tolerance = self.tolerance(run, "run")
-        fmus = [replace(f, tolerance=self.fmu_tolerance(f, tolerance)) for f in fmus]
+        fmus = [replace(f, tolerance=self.fmu_tolerance(f, tolerance),
+                        allow_nonfinite=f.allow_nonfinite or self.allow_nonfinite)
+                for f in fmus]  # a short form's FMUs too
         sources += self.sources(data.get("source", []))
         step_timeout = self.step_timeout(run, fmus)
         config = RunConfig(
@@ -260,6 +270,12 @@ class _Parser(TableChecker):
         if not stop > start:
             raise self.error("run.stop", f"the end time {stop!r} s must come after the start "
                                          f"time {start!r} s (run.start)")
+        steps = (stop - start) / step
+        if not steps <= MAX_STEPS:  # inf as well
+            raise self.error("run.stop", f"the run's length {stop - start!r} s is {steps:.3g} "
+                                         f"steps of {step!r} s, more than the {MAX_STEPS:.3g} "
+                                         f"a run can count: shorten run.stop or enlarge "
+                                         f"run.step")
         if not whole_steps(stop - start, step):
             raise self.error("run.stop", f"the run's length {stop - start!r} s (run.stop - "
                                          f"run.start) is not a whole number of steps of "
@@ -293,11 +309,28 @@ class _Parser(TableChecker):
                                                 f"to solve: remove the key to co-simulate it")
         return solver
 
-    def isolate(self, t: Mapping[str, Any], where: str) -> bool:
-        value = t.get("isolate", False)
+    def flag(self, t: Mapping[str, Any], where: str, key: str) -> bool:
+        """A true-or-false key, false where it is not given."""
+        value = t.get(key, False)
         if not isinstance(value, bool):
-            raise self.error(f"{where}.isolate", f"expected true or false, got {value!r}")
+            raise self.error(f"{where}.{key}", f"expected true or false, got {value!r}")
         return value
+
+    def isolate(self, t: Mapping[str, Any], where: str) -> bool:
+        return self.flag(t, where, "isolate")
+
+    def nonfinite(self, t: Mapping[str, Any], where: str) -> bool:
+        """Whether the FMU may take and give NaN and infinite values: its own
+        allow_nonfinite, else [run] allow_nonfinite."""
+        return self.flag(t, where, "allow_nonfinite") or self.allow_nonfinite
+
+    def finite_parameters(self, values: Mapping[str, Any], where: str, allowed: bool) -> None:
+        """Refuse a NaN or infinite start value (unless `allowed`), naming its key."""
+        for key, value in values.items():
+            if isinstance(value, float) and not math.isfinite(value) and not allowed:
+                raise self.error(f"{where}.parameters.{key}", f"{value!r} is not a finite "
+                                 f"number: give a finite one, or allow_nonfinite = true in "
+                                 f"[{where}] where it is meant")
 
     def fmu_tolerance(self, f: FmuConfig, run: float | None) -> float | None:
         """An FMU's tolerance: its own key, else [run] tolerance, else its default experiment's
@@ -347,28 +380,33 @@ class _Parser(TableChecker):
         if not isinstance(parameters, dict):
             raise self.error(f"{where}.parameters", f"expected a table {{name = value}}, got "
                                                     f"{parameters!r}")
+        allowed = self.nonfinite(t, where)
         if "path" in t:
             self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate",
-                                 "solver"))
+                                 "solver", "allow_nonfinite"))
             path = self.path(t, where, "path")
             return FmuConfig(name, path=path, parameters=self.fmu_parameters(path, parameters,
-                                                                             where),
+                                                                             where, allowed),
                              unconnected=unconnected, tolerance=self.tolerance(t, where),
-                             isolate=self.isolate(t, where), solver=self.solver(t, where, path))
+                             isolate=self.isolate(t, where), solver=self.solver(t, where, path),
+                             allow_nonfinite=allowed)
         builtins = registered()
         builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
-                             *builtin.keys))
+                             "allow_nonfinite", *builtin.keys))
         options = checked_options(self, builtin, t, where)
         if builtin.parameters is not None:
             parameters = builtin.parameters(self, options, parameters, where, start)
+        self.finite_parameters(parameters, where, allowed)
         return FmuConfig(name, builtin=builtin.name, options=options,
                          parameters=dict(parameters), unconnected=unconnected,
-                         tolerance=self.tolerance(t, where), isolate=self.isolate(t, where))
+                         tolerance=self.tolerance(t, where), isolate=self.isolate(t, where),
+                         allow_nonfinite=allowed)
 
-    def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str
-                       ) -> dict[str, Any]:
-        """Start values checked against the FMU's own variables and their types."""
+    def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str,
+                       allowed: bool) -> dict[str, Any]:
+        """Start values checked against the FMU's own variables and their types, and finite
+        (a Float32 one within its range) unless non-finite values are `allowed`."""
         try:
             info = read_fmu(path)
         except FmuError as error:
@@ -385,6 +423,10 @@ class _Parser(TableChecker):
             except ValueError as error:
                 raise self.error(f"{where}.parameters.{key}", f"{v.type} variable: {error}"
                                  ) from None
+            if v.kind == "float32" and abs(checked[key]) > FLOAT32_MAX and not allowed:
+                raise self.error(f"{where}.parameters.{key}", f"{value!r} overflows the "
+                                 f"{v.type} variable (at most {FLOAT32_MAX:.7g} in magnitude)")
+        self.finite_parameters(checked, where, allowed)
         return checked
 
     # -- connections, sources, record ---------------------------------------------------

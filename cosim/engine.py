@@ -46,8 +46,11 @@ SOURCE = Path(__file__).parent / "c" / "engine.c"
 HEADER = SOURCE.with_suffix(".h")  # its structures, for the programs compiled with it
 TYPED_HOOK = CFUNCTYPE(c_int, c_long, c_int, c_long)  # (fmu, phase, k) -> 0 if ok
 CALLS = {1: "setting its inputs", 2: "getting its outputs", 3: "the step", 4: "getting its "
-         "outputs after the step", 5: "exchanging values of other types"}
-AFTER_RECORD = (3, 4)  # calls made after their point was recorded (CALL_STEP, CALL_GET_AFTER)
+         "outputs after the step", 5: "exchanging values of other types", 6: "getting its "
+         "outputs (one not finite)", 7: "getting its outputs after the step (one not finite)"}
+NONFINITE = (6, 7)  # a non-finite output read before the point's record, after the step
+# calls made after their point was recorded (CALL_STEP, CALL_GET_AFTER, CALL_NONFINITE_AFTER)
+AFTER_RECORD = (3, 4, 7)
 OK, FAILED, OVERRUN, BAD_PLAN = 0, 1, 2, 3  # engine_run's results (RUN_* in engine.c)
 MAX_LISTED_OVERRUNS = 16
 ERROR_SIZE = 256  # Run.error
@@ -76,7 +79,8 @@ class EngineFmuPlan(Structure):
                 ("in_values", POINTER(c_double)), ("n_out", c_long),
                 ("out_vr", POINTER(c_uint)), ("out_values", POINTER(c_double)),
                 ("read_before", c_int), ("read_after", c_int), ("typed_in", c_int),
-                ("typed_out", c_int), ("task_overruns", c_void_p), ("task_seen", c_long)]
+                ("typed_out", c_int), ("task_overruns", c_void_p), ("task_seen", c_long),
+                ("finite", c_int)]
 
 
 class EngineRun(Structure):

@@ -11,10 +11,8 @@ that cannot be reached is a ConnectionError naming it, after SCHEDULER_TIMEOUT.
 
 from __future__ import annotations
 
-import ctypes
 import os
 import signal
-import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -22,12 +20,12 @@ from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from flexff.fmu.errors import MissingPackage
+from flexff.fmu.orphans import die_with_parent
 
 Job = TypeVar("Job")
 Result = TypeVar("Result")
 
 SCHEDULER_TIMEOUT = "10s"  # how long to try to reach a Dask scheduler
-PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent thread dies
 
 
 @dataclass(frozen=True)
@@ -102,16 +100,6 @@ def _on_dask(function: Callable[[Job], Result], jobs: Sequence[Job], scheduler: 
         futures = client.map(function, list(jobs), pure=False)
         yield Execution(dict(zip(futures, range(len(futures)))), dask_completed(futures),
                         lambda: client.cancel([f for f in futures if not f.done()]))
-
-
-def die_with_parent(parent: int) -> None:
-    """Pool initializer: have the kernel kill this worker when the process that started it
-    dies (Linux), even by SIGKILL, instead of leaving it blocked on a queue nobody serves. (The
-    signal follows the thread that started the worker: the pool's user, which outlives it.)"""
-    if sys.platform.startswith("linux"):
-        ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    if os.getppid() != parent:  # it died before that took effect
-        os._exit(1)
 
 
 _worker = {"running": False, "interrupted": False}  # a pool process's state, for Ctrl-C

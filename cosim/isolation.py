@@ -10,7 +10,8 @@ of a command byte over a pipe, so an isolated FMU costs a few microseconds more 
 gives the same results bit for bit. Everything else (initialization, values of other types,
 the FMU's messages) goes over the same pipes as pickled requests that the child's Python
 answers. A call the child does not answer within the step timeout stops the child (SIGKILL);
-one it dies in is reported with its signal.
+one it dies in is reported with its signal. The child dies with its master, however the master
+ends (fmu.orphans).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import mmap
 import os
 import pickle
 import select
+import shutil
 import signal
 import struct
 import subprocess
@@ -33,8 +35,10 @@ from typing import Any
 
 from flexff.cosim import engine
 from flexff.fmu import cache
+from flexff.fmu.archive import UNPACKED
 from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
+from flexff.fmu.orphans import die_with_parent
 
 SOURCE = Path(__file__).parent / "c" / "proxy.c"
 PYTHON, EXIT = b"P", b"X"  # commands proxy_serve hands back (CMD_PYTHON, CMD_EXIT in proxy.c)
@@ -120,15 +124,17 @@ class IsolatedInstance:
         self._process = subprocess.Popen(
             [sys.executable, "-m", "flexff.cosim.isolation", str(info.path), name,
              str(cmd_read), str(ack_write), str(self._memory), str(self._capacity),
-             solver or ""],
+             solver or "", str(os.getpid())],
             pass_fds=(cmd_read, ack_write, self._memory), env=env)
         os.close(cmd_read)
         os.close(ack_write)
         self._proxy = lib.proxy_open(self._cmd, self._ack, ctypes.addressof(self._view),
                                      self._capacity, timeout or 0.0)
         self._timed_out = False
+        self.scratch: Path | None = None  # the folder the child unpacked the FMU into
         try:
-            self._response("instantiating it", max(START_WAIT, timeout or 0.0))
+            self.scratch = _scratch(self._response("instantiating it",
+                                                   max(START_WAIT, timeout or 0.0)))
         except BaseException:
             self.close()
             raise
@@ -189,6 +195,8 @@ class IsolatedInstance:
             except (OSError, subprocess.TimeoutExpired):
                 pass
         self._stop()
+        if self.scratch is not None:  # a child that crashed or was stopped left it
+            shutil.rmtree(self.scratch, ignore_errors=True)
         if self._proxy:
             library().proxy_free(self._proxy)
             self._proxy = None
@@ -246,6 +254,14 @@ class IsolatedInstance:
         return data
 
 
+def _scratch(reported: Any) -> Path | None:
+    """The folder a child says it unpacked its FMU into, if it is one the importer makes (a
+    child is never trusted to name another folder for its master to remove)."""
+    path = Path(str(reported))
+    made = path.parent == Path(tempfile.gettempdir()) and path.name.startswith(UNPACKED)
+    return path if made and not path.is_symlink() else None
+
+
 def _read_exactly(fd: int, size: int) -> bytes:
     data = b""
     while len(data) < size:
@@ -267,8 +283,10 @@ def _answer(instance: FmuInstance, what: str, args: tuple[Any, ...]) -> Any:
 def main(argv: Sequence[str]) -> int:
     """The child: instantiate the FMU, then serve the engine's calls (proxy_serve) and the
     master's Python requests until told to exit or the master is gone."""
-    path, name, cmd, ack, memory, capacity, solver = argv
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle: it closes us
+    path, name, cmd, ack, memory, capacity, solver, master = argv
+    die_with_parent(int(master))  # a master killed while the FMU hangs takes it along
+    for number in (signal.SIGINT, signal.SIGTERM):  # the master's to handle: it closes us
+        signal.signal(number, signal.SIG_IGN)
     cmd_fd, ack_fd, capacity_n = int(cmd), int(ack), int(capacity)
     lib = library()
     shared = mmap.mmap(int(memory), lib.proxy_shared_size(capacity_n))
@@ -278,7 +296,7 @@ def main(argv: Sequence[str]) -> int:
     except FmuError as error:
         _send(ack_fd, ("error", str(error)))
         return 1
-    _send(ack_fd, ("ok", None))
+    _send(ack_fd, ("ok", str(instance.scratch)))
     try:
         while lib.proxy_serve(cmd_fd, ack_fd, address, capacity_n,
                               instance.info.fmi_version == "3.0", instance.component.value,

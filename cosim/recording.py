@@ -121,7 +121,9 @@ class RecordWriter:
         shutil.rmtree(self.parts, ignore_errors=True)  # a killed earlier run's chunks
         (self.folder / PARQUET_NAME).unlink(missing_ok=True)
         self.parts.mkdir(parents=True)
-        self.count = 0
+        self.count = 0  # chunks written
+        self.points = 0  # points written
+        self.times: tuple[float, float] | None = None  # of the first and the last point
 
     def write(self, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
         """Append the points `time` with their values, one array per signal."""
@@ -129,16 +131,29 @@ class RecordWriter:
         import pyarrow.parquet as pq
 
         table = pa.table({"time": time, **columns})
-        atomic_write(self.parts / f"part-{self.count:06d}.parquet",
+        atomic_write(self._part(self.count),
                      lambda tmp: pq.write_table(table, tmp, **PARQUET_OPTIONS))
         self.count += 1
+        if time.size:
+            first = self.times[0] if self.times else float(time[0])
+            self.times = (first, float(time[-1]))
+            self.points += time.size
+
+    def _part(self, k: int) -> Path:
+        return self.parts / f"part-{k:06d}.parquet"
+
+    def held(self) -> dict[str, Any]:
+        """What the record holds, for run.json: its points and the times of its first and
+        last (None in an empty record)."""
+        first, last = self.times or (None, None)
+        return {"points": self.points, "first_time": first, "last_time": last}
 
     def close(self, csv: bool = False) -> list[Path]:
-        """Join the chunks into signals.parquet (and write signals.csv if `csv`); return the
-        files written."""
+        """Join the chunks this writer wrote (never another's) into signals.parquet (and write
+        signals.csv if `csv`); return the files written."""
         import pyarrow.parquet as pq
 
-        parts = sorted(self.parts.glob("part-*.parquet"))
+        parts = [self._part(k) for k in range(self.count)]
         if len(parts) == 1:  # complete as it is
             os.replace(parts[0], self.folder / PARQUET_NAME)
             parts = []

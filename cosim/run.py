@@ -8,16 +8,22 @@ machine packages name (cosim.plugins) under their short names as well; metrics.j
 reference and a true position; and what its built-ins add, cosim.builtins: a learned
 feedforward's `feedforward_range`, where the reference leaves the model's training range);
 the plots (cosim.plots; by default in a manipulator run only, `[record] plot` says
-otherwise); and run.json, the checked configuration in the general form. The built-in FMUs are
-built into the fmu/ cache and loaded from a temporary copy.
+otherwise); and run.json, the checked configuration in the general form with, under
+`recorded`, what the record holds (its points, their first and last times, whether the run
+reached its end). The built-in FMUs are built into the fmu/ cache and loaded from a temporary
+copy. A run holds its folder's lock while it writes there (cosim.folder_lock), so a second
+run into the same folder is refused at once instead of mixing the two records.
 
 The record, the metrics, the plots and the step timing are fed chunk by chunk while the run
 runs (RunSink, cosim.timing.StreamedTiming), paced or not, so the memory a run takes does not
 grow with its length (its sampled sources aside, which the master reads in place). A run that an
 FMU's failure stops (an isolated FMU's crash or hang among them) keeps the record up to its last
 recorded point and writes run.json, then raises CosimError naming the FMU, the call, the time
-and the folder. Before anything runs, the output folder must take a file and what is held in
-memory must fit, so that neither shows only after the simulation.
+and the folder; so does one that an FMU's NaN or infinite output stops. Ctrl-C and SIGTERM
+stop a run the same way (KeyboardInterrupt, saying what was kept), and one whose FMU hangs in
+a call after cosim.watchdog's grace. Before anything runs, the output folder must take a file,
+what is held in memory must fit and the record must fit the free disk (cosim.disk), so that
+none of them shows only after the simulation.
 """
 
 from __future__ import annotations
@@ -33,7 +39,9 @@ from typing import Any
 import numpy as np
 
 from flexff.cosim.builtins import registered
-from flexff.cosim.config import expanded, load_config
+from flexff.cosim.config import RECORDED, expanded, load_config
+from flexff.cosim.disk import check_disk
+from flexff.cosim.folder_lock import folder_lock
 from flexff.cosim.handover import Worker
 from flexff.cosim.master import CosimError, Master, Streamed
 from flexff.cosim.memory import MemoryNeeded, check_memory
@@ -52,6 +60,7 @@ from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ConfigError, RunConfig
 from flexff.cosim.timing import OverrunError, Pacing
+from flexff.cosim.watchdog import watchdog
 
 
 def load_run_config(path: str | Path) -> RunConfig:
@@ -244,45 +253,68 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
                progress: bool | None = None, pacing: Pacing | None = None,
                cpu: int | None = None) -> dict[str, Any]:
     """Run one configuration (or the TOML / SSP file at that path) into `output_dir`, its
-    record written while it runs; return the metrics written to metrics.json. A paced run
-    (`pacing`) also writes tet.png, and one that its overruns stopped raises OverrunError
-    after writing what it recorded. A run that fails or is interrupted leaves the record up
-    to its last chunk (cosim.recording's signals.parts/)."""
+    record written while it runs; return the metrics written to metrics.json. The run holds
+    the folder's lock while it writes (cosim.folder_lock: a second run into the same folder
+    is refused). A paced run (`pacing`) also writes tet.png, and one that its overruns
+    stopped raises OverrunError after writing what it recorded. A run that fails or is
+    interrupted (Ctrl-C, SIGTERM) keeps its record up to its last chunk, joined, and writes
+    run.json, whose `recorded` says what the record holds."""
     if not isinstance(config, RunConfig):
         config = load_run_config(config)
     _check_source_memory(config)
     out = output_folder(output_dir)
+    with folder_lock(out):
+        return _run_locked(config, out, progress, pacing, cpu)
+
+
+def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pacing | None,
+                cpu: int | None) -> dict[str, Any]:
+    """run_config's run, in the folder `out` it holds the lock of."""
     plot = _manipulator(config) if config.record.plot is None else config.record.plot
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
         scenario = resolve(config, folder)
         with scenario.master() as master:
             recorded = _wanted(scenario, master)
+            check_disk(out, config, len(_kept(recorded, config)))
             sink = RunSink(out, recorded, _kept(recorded, config), config.steps + 1,
                            config.step, plot, config.record.every, tracked_axes(config))
             try:
-                streamed = _stream(master, scenario, sink, recorded, progress, pacing, cpu)
-            except CosimError as error:
+                with watchdog(f"the record up to its last chunk is in {sink.writer.parts}",
+                              lambda: [Path(folder), *master.scratch()]):
+                    streamed = _stream(master, scenario, sink, recorded, progress, pacing, cpu)
+            except (CosimError, KeyboardInterrupt) as error:
                 if sink.last_time is None:
                     raise
-                sink.writer.close(csv=config.record.csv)
-                _write_json(out / "run.json", expanded(config))
-                raise CosimError(f"{error}; the record up to t = {sink.last_time:.9g} s is in "
-                                 f"{out}") from None
+                _close_record(sink, config, out, complete=False)
+                held = sink.writer.held()
+                kept = (f"the record up to t = {held['last_time']:.9g} s "
+                        f"({held['points']} points) is in {out}")
+                if isinstance(error, KeyboardInterrupt):
+                    raise type(error)(kept) from None
+                raise CosimError(f"{error}; {kept}") from None
         duration = (streamed.points - 1) * config.step
         metrics = summary_metrics(sink.tracking.metrics() if sink.tracking else {}, duration,
                                   streamed.wall_s, streamed.timing)
         metrics |= builtin_metrics(scenario)
-    sink.writer.close(csv=config.record.csv)
+    _close_record(sink, config, out, complete=streamed.timing.stopped_at is None)
     if sink.plots is not None:
         sink.plots.write(out)
     if pacing is not None:
         plot_tet(streamed.timing, out / "tet.png")
-    _write_json(out / "run.json", expanded(config))
     _write_json(out / "metrics.json", metrics)
     if streamed.timing.stopped_at is not None:
         raise OverrunError(f"{streamed.timing.stop_message()}; the record up to there is in "
                            f"{out}")
     return metrics
+
+
+def _close_record(sink: RunSink, config: RunConfig, out: Path, complete: bool) -> None:
+    """Join the record and write run.json: the configuration in the general form and, under
+    `recorded`, what the record holds (its points, the times of its first and last, and
+    whether the run reached its end)."""
+    sink.writer.close(csv=config.record.csv)
+    _write_json(out / "run.json", {**expanded(config), RECORDED: {
+        **sink.writer.held(), "every": config.record.every, "complete": complete}})
 
 
 def _stream(master: Master, scenario: Scenario, sink: RunSink, recorded: Sequence[str],

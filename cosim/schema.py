@@ -9,8 +9,9 @@ General form (SI units):
                    FMU's default experiment), tolerance (relative, of each FMU's own solver;
                    default: each FMU's default experiment), algorithm = "gauss-seidel"
                    (default) | "jacobi", order = [FMU names] (default: the order of the
-                   [fmu.*] tables). Point k is at t = start + k * step; the reference plays
-                   from the run's start, CSV series are read at the run's times.
+                   [fmu.*] tables), allow_nonfinite = true (every FMU's, below). Point k
+                   is at t = start + k * step; the reference plays from the run's start, CSV
+                   series are read at the run's times.
   [reference]      a reference trajectory, a source of x_ref .. ay_ref (cosim.references;
                    the kinds are listed in cosim.config)
   [[source]]       kind = "constant", values = {name = number, ...}: constant source signals
@@ -31,7 +32,9 @@ General form (SI units):
                    run with an error, and [run] step_timeout (s) bounds each of its calls;
                    solver = "cvode" runs it as model exchange (fmu.model_exchange, with the
                    FMU's tolerance as CVODE's relative one; the default for an FMU with no
-                   co-simulation interface)
+                   co-simulation interface); allow_nonfinite = true lets its
+                   parameters and outputs be NaN or infinite (by default a non-finite
+                   parameter is refused and a non-finite output stops the run)
   [[connection]]   from = "fmu.output" or a source signal, to = "fmu.input", optional gain and
                    offset (SSP's LinearTransformation: to = gain * from + offset)
   [record]         signals = [names] (default: all), csv (bool, default false),
@@ -114,6 +117,7 @@ class FmuConfig:
     tolerance: float | None = None  # None: the FMU's default experiment's, if any
     isolate: bool = False  # run it in its own process (cosim.isolation)
     solver: str | None = None  # model exchange with this solver (None: co-simulation)
+    allow_nonfinite: bool = False  # NaN and infinite values allowed in and out (cosim.finite)
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,9 @@
 main() is the one place that turns a failure into one line on stderr and an exit code: 0 ok,
 1 a run that failed (an FMU error, a full disk, an unreachable Dask scheduler, memory), 2 bad
 input (InputError: a configuration, a path, an option, an unwritable output folder), 130
-interrupted (3 is kept for real-time overruns); any other error is a bug: 1, its type and a hint
-to rerun with `flexff --debug`, which prints the Python traceback.
+interrupted, 143 terminated (SIGTERM, handled as Ctrl-C is; 3 is kept for real-time
+overruns); any other error is a bug: 1, its type and a hint to rerun with `flexff --debug`,
+which prints the Python traceback.
 """
 
 from __future__ import annotations
@@ -13,14 +14,16 @@ import argparse
 import errno
 import json
 import os
+import signal
 import sys
+import threading
 import traceback
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from flexff.fmu.errors import InputError, RunError
+from flexff.fmu.errors import InputError, RunError, Terminated
 from flexff.fmu.network_runtime import RUNTIMES
 from flexff.plant.variants import VARIANTS
 
@@ -38,7 +41,7 @@ INPUT_ERRNOS = (errno.EROFS, errno.ENAMETOOLONG, errno.ELOOP)  # these (others: 
 BUG_HINT = " (rerun with flexff --debug for the traceback)"  # an error that is not documented
 KEPT = {  # what an interrupted command keeps, by command (and subcommand)
     "run": "the runs that finished keep their folders, an interrupted run its record up to "
-           "its last chunk (signals.parts/); no file is left half-written",
+           "where it stopped; no file is left half-written",
     "data collect": "the trajectories collected so far are kept: run the same command again "
                     "to resume",
     "data import": "the dataset folder was left as it was",
@@ -871,8 +874,10 @@ def _failure(error: BaseException, command: str, debug: bool = False) -> tuple[i
     full disk, MemoryError) 1, anything else, a bug, 1 and how to see its traceback."""
     from flexff.cosim.timing import OverrunError
 
-    if isinstance(error, KeyboardInterrupt):
-        kept = KEPT.get(command)
+    if isinstance(error, KeyboardInterrupt):  # the run says what it kept, else KEPT does
+        kept = str(error) or KEPT.get(command)
+        if isinstance(error, Terminated):
+            return 143, "flexff: terminated" + (f"; {kept}" if kept else "")
         return 130, "flexff: interrupted" + (f"; {kept}" if kept else "")
     if isinstance(error, OverrunError):
         return 3, f"flexff: error: {error}"
@@ -905,6 +910,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.debug:
         os.environ["FLEXFF_DEBUG"] = "1"  # worker processes inherit it (cosim.batch)
     handler: Callable[[argparse.Namespace], int] = args.handler
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
         return handler(args)
     except (Exception, KeyboardInterrupt) as error:
@@ -915,6 +922,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         code, line = _failure(error, command, debug)
         print(line, file=sys.stderr)
         return code
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate(number: int, frame: object) -> None:
+    """SIGTERM's handler: end the command as Ctrl-C does (flexff.fmu.errors.Terminated)."""
+    raise Terminated
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ from pathlib import Path, PurePosixPath
 
 from flexff.fmu.errors import InputError
 
+UNPACKED = "flexff-unpacked-"  # the prefix of the temporary folders FMUs are unpacked into
 UNPACK_LIMIT = 1 << 30  # bytes an archive may unpack to, in all (1 GiB)
 UNPACK_LIMIT_ENV = "FLEXFF_UNPACK_LIMIT"
 _UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30}
@@ -77,7 +78,7 @@ def extract_archive(path: str | Path, folder: str | Path | None = None) -> Path:
     member refused (module doc) or damaged; zipfile.BadZipFile for a file that is no zip."""
     path = Path(path)
     limit = unpack_limit()
-    target = Path(tempfile.mkdtemp(prefix="flexff-unpacked-") if folder is None else folder)
+    target = Path(tempfile.mkdtemp(prefix=UNPACKED) if folder is None else folder)
     existed = folder is not None and target.is_dir()
     if existed and any(target.iterdir()):
         raise ValueError(f"{target} is not empty: an archive is unpacked into a folder of its own")

@@ -10,9 +10,10 @@ one method (`fmpy.fmi1._FMU._call`, which the child wraps), and `under_way` name
 that are not FMI calls (loading the binary). So a child that dies of a signal is reported as
 "fmi2DeSerializeFMUstate ... SIGSEGV". The function sends its findings as they come
 (`emit`), so those made before a crash are kept. The files the child unpacks go into a
-temporary folder the parent removes, whatever the end. As with multiprocessing's spawn, a
-script that calls this keeps its top level under `if __name__ == "__main__":` (the child
-imports the script's module).
+temporary folder the parent removes, whatever the end. The child dies with the fork server,
+which ends with the caller, however the caller ends (fmu.orphans). As with multiprocessing's
+spawn, a script that calls this keeps its top level under `if __name__ == "__main__":` (the
+child imports the script's module).
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Any
+
+from flexff.fmu.orphans import die_with_parent
 
 _LABEL_BYTES = 256  # room for the name of the call under way
 _current: Any = None  # the shared label, set in a child process only
@@ -83,6 +86,7 @@ def _child(function: Callable[..., Any], args: tuple[Any, ...], sender: Connecti
     are those of its start), trace, run `function(emit, *args)`, say how it ended."""
     global _current
     _current = label
+    die_with_parent(os.getppid())  # the fork server's child: it ends with the caller
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's: it ends the child
     os.environ.clear()
     os.environ.update(environment)

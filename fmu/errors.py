@@ -2,7 +2,8 @@
 
 InputError: bad input, the user's to fix (exit 2); RunError: a run that failed for a reason
 outside the program, e.g. an FMU or a compiler that failed (exit 1); MissingPackage: an optional
-package to install (exit 1). Anything else is a bug: exit 1 and a hint to rerun with --debug.
+package to install (exit 1). Terminated: SIGTERM, handled as Ctrl-C is (exit 143). Anything else
+is a bug: exit 1 and a hint to rerun with --debug.
 """
 
 
@@ -18,3 +19,8 @@ class RunError(RuntimeError):
 
 class MissingPackage(RunError, ImportError):
     """An optional package is not installed; the message says what to pip install."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread (flexff.cli) so that it ends a command as Ctrl-C
+    does: temporary folders removed, the record kept, one line saying what was kept."""

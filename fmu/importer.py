@@ -37,6 +37,7 @@ from fmpy.fmi2 import (
 )
 from fmpy.fmi3 import FMU3Model, FMU3Slave
 from fmpy.logging import addLoggerProxy
+from fmpy.model_description import ValidationError
 
 from flexff.fmu.archive import extract_archive
 from flexff.fmu.errors import InputError
@@ -130,15 +131,25 @@ def _start_value(v: Any) -> Any:
         return v.start
 
 
-def read_fmu(path: str | Path) -> FmuInfo:
-    """Read the model description of a co-simulation FMU; FmuError if it is none."""
+def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
+    """Read the model description of a co-simulation FMU; FmuError if it is none. `checked`:
+    a description with a structural fault that `flexff fmu validate` finds (fmpy's checks:
+    the XML schema, unique and well-formed variable names, the model structure, required
+    start values, legal causality and variability) is an FmuError naming the first fault,
+    so that no run records one variable's values under another's name."""
     path = Path(path)
     if not path.is_file():
         raise FmuError(f"{path}: no such FMU file")
     if not zipfile.is_zipfile(path):
         raise FmuError(f"{path}: not an FMU (an FMU is a zip archive; this file is not one)")
     try:
-        md = read_model_description(str(path), validate=False)
+        md = read_model_description(str(path), validate=checked, validate_variable_names=True,
+                                    validate_model_structure=True)
+    except ValidationError as error:
+        more = f" (and {len(error.problems) - 1} more)" if len(error.problems) > 1 else ""
+        first = str(error.problems[0]).rstrip(".")
+        raise FmuError(f"{path}: modelDescription.xml: {first}{more}: not a valid "
+                       f"FMU (flexff fmu validate lists every problem)") from None
     except Exception as error:  # fmpy raises plain Exceptions and XML errors
         raise FmuError(f"{path}: cannot read modelDescription.xml: {error}") from None
     if md.fmiVersion not in ("2.0", "3.0"):
@@ -303,6 +314,11 @@ class FmuInstance:
             raise FmuError(f"{info.path}: {name}: cannot instantiate: {error}"
                            f"{self._log_text()}") from None
         self.component = c_void_p(self.fmu.component)
+
+    @property
+    def scratch(self) -> Path:
+        """The temporary folder the FMU is unpacked into (removed by `close`)."""
+        return Path(self._unzipdir)
 
     def _library_path(self) -> Path:
         folder = fmpy.platform if self.info.fmi_version == "2.0" else fmpy.platform_tuple

@@ -35,6 +35,7 @@ from onnx import helper as oh
 
 from flexff.fmu import cache
 from flexff.fmu.errors import InputError
+from flexff.fmu.limits import ONNX_ELEMENTS
 from flexff.fmu.network import Network, load_model, read_network
 from flexff.fmu.network_c import fmu_network_sources
 from flexff.fmu.network_runtime import RUNTIMES, check_runtime
@@ -166,6 +167,7 @@ def _states(path: Path, meta: dict[str, str], inputs: dict[str, onnx.ValueInfoPr
             raise InputError(f"{path}: state tensors {name_in!r} and {name_out!r} must both be "
                              f"float32, the input of a fixed shape and the output of the same "
                              f"(the FMU carries its state in float32)")
+        ONNX_ELEMENTS.check(math.prod(d or 0 for d in shape_in), f"{path}: state {name_in!r}")
     names = [n for pair in pairs for n in pair]
     wrapped = [FMU_INPUTS, FMU_OUTPUTS, *[n for name_in, _ in pairs
                                           for n in (name_in, f"{name_in}_out")]]
@@ -184,9 +186,12 @@ def _ports(path: Path, meta: dict[str, str], role: str, tensors: list[onnx.Value
                          f"needs at least one")
     shapes = [_port_shape(path, role, v, time_axis) for v in tensors]
     sizes = [math.prod(_fixed(shape[1:] if time_axis else shape)) for shape in shapes]
-    names = iter(_element_names(path, meta, f"{role}_signals", [v.name for v in tensors], sizes))
+    names = ", ".join(repr(v.name) for v in tensors)
+    ONNX_ELEMENTS.check(sum(sizes), f"{path}: {role}s {names}")  # before naming each element
+    elements = iter(_element_names(path, meta, f"{role}_signals", [v.name for v in tensors],
+                                   sizes))
     return tuple(Port(v.name, v.type.tensor_type.elem_type, shape,
-                      tuple(next(names) for _ in range(n)))
+                      tuple(next(elements) for _ in range(n)))
                  for v, shape, n in zip(tensors, shapes, sizes))
 
 
@@ -210,6 +215,9 @@ def _port_shape(path: Path, role: str, value: onnx.ValueInfoProto, time_axis: bo
     for dim in shape[1:] if time_axis else shape:
         if not isinstance(dim, int):
             raise InputError(_dynamic(path, role, value.name, shape, dim))
+        if dim < 0:
+            raise InputError(f"{path}: {role} {value.name!r} has the negative dimension {dim} "
+                             f"in its shape {list(shape)}: not a valid ONNX graph")
     return shape
 
 

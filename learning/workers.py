@@ -34,7 +34,8 @@ from typing import Any
 import torch
 from tqdm import tqdm
 
-from flexff.cosim.executor import die_with_parent, execute
+from flexff.cosim.executor import execute
+from flexff.fmu.orphans import die_with_parent
 from flexff.learning.devices import pick_device, training_gpus
 from flexff.learning.threads import granted_cores
 

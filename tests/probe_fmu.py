@@ -68,13 +68,16 @@ def _model_description(experiment: dict[str, float]) -> str:
     outputs = "".join(
         f'<Unknown index="{k + 1}" dependencies="{"4" if name == "y" else ""}"/>'
         for k, (name, _, causality, _, _) in enumerate(VARIABLES) if causality == "output")
+    initials = "".join(f'<Unknown index="{k + 1}"/>' for k, (_, _, causality, _, _)
+                      in enumerate(VARIABLES) if causality == "output")
     attributes = " ".join(f'{key}="{value!r}"' for key, value in experiment.items())
     return (f'<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription fmiVersion="2.0" '
             f'modelName="probe" guid="{{probe}}" variableNamingConvention="flat">'
             f'<CoSimulation modelIdentifier="probe"/>'
             f'<DefaultExperiment {attributes}/>'
             f'<ModelVariables>{"".join(rows)}</ModelVariables>'
-            f'<ModelStructure><Outputs>{outputs}</Outputs></ModelStructure>'
+            f'<ModelStructure><Outputs>{outputs}</Outputs>'
+            f'<InitialUnknowns>{initials}</InitialUnknowns></ModelStructure>'
             f'</fmiModelDescription>\n')
 
 

@@ -6,11 +6,13 @@
  * order cosim/master.py documents (Gauss-Seidel or Jacobi by the read flags), records the bus,
  * and measures each step: its task execution time (TET: the first FMI call of the step to the
  * end of its last), each FMU's share of it, and, when paced, how late the step started
- * against its absolute schedule start + k * period. Nothing is allocated here. Every index
- * the plan holds is checked against the sizes it gives before a chunk runs (check_plan), and
- * engine_layout() reports the structures' layout for cosim/engine.py to check its ctypes
- * mirrors against when it loads the library. The structures are declared in engine.h, which
- * the programs compiled with the engine include (cosim/c/floor.c, the speed floor).
+ * against its absolute schedule start + k * period. Where an FMU's plan asks for it (`finite`),
+ * every float output read is checked to be finite, and a NaN or an infinity stops the run as a
+ * failed call does (CALL_NONFINITE_*). Nothing is allocated here. Every index the plan holds
+ * is checked against the sizes it gives before a chunk runs (check_plan), and engine_layout()
+ * reports the structures' layout for cosim/engine.py to check its ctypes mirrors against when
+ * it loads the library. The structures are declared in engine.h, which the programs compiled
+ * with the engine include (cosim/c/floor.c, the speed floor).
  *
  * Values of other types than float64 go through a hook into Python (`typed`), called where
  * such an FMU sets its inputs or reads its outputs.
@@ -43,6 +45,7 @@ static const Layout LAYOUT[] = {
     FIELD(FmuPlan, n_out), FIELD(FmuPlan, out_vr), FIELD(FmuPlan, out_values),
     FIELD(FmuPlan, read_before), FIELD(FmuPlan, read_after), FIELD(FmuPlan, typed_in),
     FIELD(FmuPlan, typed_out), FIELD(FmuPlan, task_overruns), FIELD(FmuPlan, task_seen),
+    FIELD(FmuPlan, finite),
     SIZE(Run), FIELD(Run, step), FIELD(Run, start_time), FIELD(Run, steps), FIELD(Run, n_fmus),
     FIELD(Run, fmus),
     FIELD(Run, bus), FIELD(Run, n_bus), FIELD(Run, n_sources), FIELD(Run, sources),
@@ -170,6 +173,21 @@ static int get(FmuPlan *s) {
                                                s->out_values);
 }
 
+/* Whether the outputs just read are finite where the plan asks for it: no value has every bit
+ * of its exponent set (NaN and infinity do), tested on the bits, without a dependency between
+ * the values or a call into libm. */
+static bool finite_outputs(const FmuPlan *s) {
+    if (!s->finite) return true;
+    const uint64_t exponent = 0x7ff0000000000000u;
+    uint64_t bad = 0;
+    for (long j = 0; j < s->n_out; j++) {
+        uint64_t bits;
+        memcpy(&bits, &s->out_values[j], sizeof bits);
+        bad |= (bits & exponent) == exponent;
+    }
+    return bad == 0;
+}
+
 static int advance(FmuPlan *s, double t, double h) {
     if (!s->fmi3) return ((step2_t)s->do_step)(s->component, t, h, 1);
     bool event = false, terminate = false, early = false;
@@ -214,6 +232,7 @@ int engine_run(Run *r, long k0, long k1) {
             if (s->typed_in && r->typed(i, 0, k)) return fail(r, i, CALL_TYPED, k);
             if (s->read_before) {
                 if (get(s) > 1) return fail(r, i, CALL_GET_BEFORE, k);
+                if (!finite_outputs(s)) return fail(r, i, CALL_NONFINITE_BEFORE, k);
                 if (s->typed_out && r->typed(i, 1, k)) return fail(r, i, CALL_TYPED, k);
             }
             if (k < r->steps) {
@@ -238,6 +257,7 @@ int engine_run(Run *r, long k0, long k1) {
             if (advance(s, t, h) > 1) return fail(r, i, CALL_STEP, k);
             if (s->read_after) {
                 if (get(s) > 1) return fail(r, i, CALL_GET_AFTER, k);
+                if (!finite_outputs(s)) return fail(r, i, CALL_NONFINITE_AFTER, k);
                 if (s->typed_out && r->typed(i, 1, k + 1)) return fail(r, i, CALL_TYPED, k);
             }
             clock_gettime(CLOCK_MONOTONIC, &b);

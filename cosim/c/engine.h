@@ -22,7 +22,10 @@ typedef int (*step3_t)(void *, double, double, bool, bool *, bool *, bool *, dou
  * (fmu -1) records the typed signals of point k; returns 0 if ok */
 typedef int (*typed_t)(long, int, long);
 
-enum { CALL_SET = 1, CALL_GET_BEFORE = 2, CALL_STEP = 3, CALL_GET_AFTER = 4, CALL_TYPED = 5 };
+/* CALL_NONFINITE_*: an output read before the point was recorded, or after the step, is NaN or
+ * infinite (in an FMU whose plan asks for finite outputs) */
+enum { CALL_SET = 1, CALL_GET_BEFORE = 2, CALL_STEP = 3, CALL_GET_AFTER = 4, CALL_TYPED = 5,
+       CALL_NONFINITE_BEFORE = 6, CALL_NONFINITE_AFTER = 7 };
 enum { RUN_OK = 0, RUN_FAILED = 1, RUN_OVERRUN = 2, RUN_BAD_PLAN = 3 }; /* engine_run's result */
 
 typedef struct {
@@ -43,6 +46,7 @@ typedef struct {
      * ready when due (NULL: none), and the count seen so far */
     const long *task_overruns;
     long task_seen;
+    int finite;               /* 1: a NaN or infinite float output stops the run */
 } FmuPlan;
 
 typedef struct {

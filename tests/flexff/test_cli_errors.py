@@ -148,7 +148,7 @@ def test_an_interrupted_run(capsys, monkeypatch, tmp_path, config):
     assert main(["run", str(config), "-o", str(tmp_path / "out")]) == 130
     assert capsys.readouterr().err == (
         "flexff: interrupted; the runs that finished keep their folders, an interrupted run "
-        "its record up to its last chunk (signals.parts/); no file is left half-written\n")
+        "its record up to where it stopped; no file is left half-written\n")
 
 
 @pytest.mark.parametrize("debug", [False, True])
@@ -211,5 +211,5 @@ def test_an_interrupted_batch(tmp_path):
     assert process.returncode == 130, err
     assert err.splitlines()[-1] == (
         "flexff: interrupted; the runs that finished keep their folders, an interrupted run "
-        "its record up to its last chunk (signals.parts/); no file is left half-written")
+        "its record up to where it stopped; no file is left half-written")
     assert not (out / "c").exists()
