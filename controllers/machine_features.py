@@ -88,7 +88,7 @@ def _feature_function(velocity_limits: tuple[float, ...], motions: tuple[tuple[s
         out += directions
         if terms:
             out += [d**2 for d in directions]
-            out += [to_casadi(expression, symbols, f"machine.prior.extra.{name}")
+            out += [to_casadi(expression, symbols, f"machine.prior.extra.{motions[k][0]}.{name}")
                     for name, expression in extra[k]]
     return ca.Function("machine_features", [u], [ca.vertcat(*out)], ["reference"], ["features"])
 

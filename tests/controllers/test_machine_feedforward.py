@@ -56,3 +56,24 @@ def test_a_model_of_other_sizes_is_refused():
     wrong = ca.Function("wrong", [pos, vel, acc], [pos + vel + acc])
     with pytest.raises(InputError, match="needs positions, velocities, accelerations of its 2"):
         inverse_model_system(stage(), wrong, 1e-3, "wrong")
+
+
+def test_a_lead_evaluates_the_model_that_far_ahead_on_the_reference(tmp_path):
+    """Efforts act half a step after they are commanded (a held effort): with that lead the
+    FMU gives the model's effort on the reference's Taylor series that far ahead."""
+    lead = 5e-4
+    fmu = build_fmu(inverse_model_system(stage(), inverse(), 1e-3, "ahead", lead),
+                    tmp_path / "ff.fmu")
+    t = np.arange(0.0, 0.1, 1e-3)
+    p, v, a, j = 0.01, 0.02, 0.5, 40.0  # constant jerk on x, q at rest
+    columns = {"x_ref": p + 0 * t, "vx_ref": v + 0 * t, "ax_ref": a + 0 * t, "jx_ref": j + 0 * t,
+               "q_ref": 0 * t, "vq_ref": 0 * t, "aq_ref": 0 * t, "jq_ref": 0 * t}
+    signals = np.array([(ti, *(c[k] for c in columns.values())) for k, ti in enumerate(t)],
+                       dtype=[("time", float)] + [(n, float) for n in columns])
+    result = fmpy.simulate_fmu(str(fmu), stop_time=0.09, step_size=1e-3, input=signals,
+                               output=["x_ff"])
+    ahead = (p + v * lead + a * lead**2 / 2 + j * lead**3 / 6, v + a * lead + j * lead**2 / 2,
+             a + j * lead)
+    expected = MASS[0] * ahead[2] + DAMPING[0] * ahead[1] + 0.1 * np.sin(ahead[0])
+    assert result["x_ff"][50] == pytest.approx(expected, rel=1e-12)
+    assert expected != pytest.approx(MASS[0] * a + DAMPING[0] * v + 0.1 * np.sin(p), rel=1e-3)
