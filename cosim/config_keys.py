@@ -43,6 +43,8 @@ KEYS: tuple[Key, ...] = (
         'The master algorithm: "gauss-seidel" or "jacobi".'),
     Key("run", "order", "list of strings", "the order of the [fmu.*] tables", "",
         "Every FMU name once, in stepping order."),
+    Key("run", "allow_nonfinite", "boolean", "false", "",
+        "Let every FMU's NaN or infinite outputs and parameters through."),
     # [reference]
     Key("reference", "kind", "string", "required", "",
         "circle, line-circle, spline, segments, csv, or a kind a machine package registers.",
@@ -102,6 +104,8 @@ KEYS: tuple[Key, ...] = (
         ("path", "builtin")),
     Key("fmu.NAME", "tolerance", "number", "[run] tolerance, else the default experiment",
         "1", "Relative tolerance of this FMU's own solver.", ("path", "builtin")),
+    Key("fmu.NAME", "allow_nonfinite", "boolean", "[run] allow_nonfinite", "",
+        "Let this FMU's NaN or infinite outputs and parameters through."),
     Key("fmu.NAME", "isolate", "boolean", "false", "",
         "Run the FMU in its own process: a crash or hang ends the run with an error.",
         ("path", "builtin")),

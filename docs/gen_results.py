@@ -25,6 +25,7 @@ README = DOCS.parent / "README.md"
 SCENARIOS = {"pid": "PID alone", "rigid-body": "rigid-body FF",
              "identified": "identified rigid-body FF", "lstm": "LSTM", "cnn-lstm": "CNN-LSTM",
              "tcn": "TCN", "pgnn": "physics-guided", "limit": "ILC limit"}
+MACHINE_SCENARIOS = {**SCENARIOS, "identified": "identified linear model", "ilc": "ILC limit"}
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")
 ENGINES = {"master": "flexff master", "libcosim": "libcosim",
            "libcosim_engine": "libcosim, its engine alone", "c": "C floor"}
@@ -48,9 +49,10 @@ def pair(axes: dict[str, Any], key: str) -> str:
 
 
 def load(kind: str) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The JSON of `kind` (demo: summary.json, bench: bench.json) and its stamp."""
+    """The JSON of `kind` (demo, machines/NAME: summary.json, bench: bench.json) and its
+    stamp."""
     folder = RESULTS / kind
-    name = "summary.json" if kind == "demo" else "bench.json"  # bench, processes
+    name = "bench.json" if kind in ("bench", "processes") else "summary.json"
     return (json.loads((folder / name).read_text()),
             json.loads((folder / "stamp.json").read_text()))
 
@@ -136,6 +138,35 @@ def demo_page(summary: dict[str, Any], stamp: dict[str, Any]) -> str:
     for key, t in summary["training"].items():
         out.append(f"| {SCENARIOS.get(key, key)} | {figure(t['seconds'])} | {t['epochs']} "
                    f"({t['best_epoch']}) | {t['parameters']} | {figure(t['test_mse'])} |")
+    return "\n".join(out) + "\n"
+
+
+def machines_markdown() -> str:
+    """The example machines' tables, from docs/results/machines/NAME: `flexff evaluate` on a
+    loop (e2 ratios per axis) or on logs alone (relative force errors per axis)."""
+    out = []
+    for folder in sorted((RESULTS / "machines").iterdir()):
+        summary, stamp = load(f"machines/{folder.name}")
+        out += [f"### {folder.name}", "", stamp_line(stamp), ""]
+        if "scenarios" in summary:
+            names = list(summary["scenarios"])
+            out += ["| e2 ratio PID alone / with FF | " + " | ".join(
+                MACHINE_SCENARIOS[n] for n in names) + " |", "|---|" + "---:|" * len(names)]
+            for axis in summary["axes"]:
+                out.append(f"| {axis} | " + " | ".join(
+                    figure(summary["scenarios"][n][axis]["e2_ratio"]) for n in names) + " |")
+        else:
+            names = list(summary["relative_error"])
+            out += ["| relative force error on the test logs [%] | " + " | ".join(
+                MACHINE_SCENARIOS[n] for n in names) + " |", "|---|" + "---:|" * len(names)]
+            for axis in summary["axes"]:
+                out.append(f"| {axis} | " + " | ".join(
+                    figure(100 * summary["relative_error"][n][axis]) for n in names) + " |")
+        out += ["", "| identified: axis | term | value | std |", "|---|---|---:|---:|"]
+        for axis, fit in summary["identified"].items():
+            for term, value, std in zip(fit["terms"], fit["parameters"], fit["std"]):
+                out.append(f"| {axis} | {term} | {figure(value)} | {figure(std)} |")
+        out.append("")
     return "\n".join(out) + "\n"
 
 
@@ -237,11 +268,17 @@ def rewrite_readme() -> None:
     README.write_text(pattern.sub(lambda _: f"{README_START}\n{table}\n{README_END}", text))
 
 
+def _kind(text: str) -> str:
+    if text in ("demo", "bench", "processes") or re.fullmatch(r"machines/[a-z0-9-]+", text):
+        return text
+    raise argparse.ArgumentTypeError(f"{text!r}: give demo, bench, processes or machines/NAME")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="what", required=True)
     rec = sub.add_parser("record")
-    rec.add_argument("kind", choices=("demo", "bench", "processes"))
+    rec.add_argument("kind", type=_kind, help="demo, bench, processes or machines/NAME")
     rec.add_argument("source", type=Path)
     rec.add_argument("--command", required=True)
     rec.add_argument("--started", required=True)

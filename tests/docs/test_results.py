@@ -154,7 +154,9 @@ def test_the_benchmarks_page_shows_the_bench(site):
 
 
 def test_pages_are_stamped(site):
-    for page, kind in (("thesis", "demo"), ("benchmarks", "bench"), ("benchmarks", "processes")):
+    machines = [("machines", f"machines/{f.name}") for f in (RESULTS / "machines").iterdir()]
+    for page, kind in (("thesis", "demo"), ("benchmarks", "bench"), ("benchmarks", "processes"),
+                       *machines):
         stamp = json.loads((RESULTS / kind / "stamp.json").read_text())
         text = (site / "results" / page / "index.html").read_text()
         assert stamp["commit"][:10] in text and stamp["date"] in text, page
@@ -191,3 +193,29 @@ def test_the_benchmarks_page_shows_the_processes(site):
     startup = _rows(page, "process")
     for name, r in bench["startup"].items():
         assert _close(float(startup[name][0]), r["wall_s"]), name
+
+
+def test_the_machines_page_shows_each_evaluation(site):
+    """Every example machine's table: e2 ratios of a loop's evaluation, relative force errors
+    of a logs' evaluation, and the identified parameters, each as its summary.json holds."""
+    parser = _Tables()
+    parser.feed((site / "results" / "machines" / "index.html").read_text())
+    folders = sorted((RESULTS / "machines").iterdir())
+    assert folders
+    tables = iter(parser.tables)
+    for folder in folders:
+        summary = json.loads((folder / "summary.json").read_text())
+        scores, identified = next(tables), next(tables)
+        key, scale = ("e2_ratio", 1) if "scenarios" in summary else (None, 100)
+        by_scenario = summary.get("scenarios") or summary["relative_error"]
+        for row in scores[1:]:
+            for name, cell in zip(by_scenario, row[1:]):
+                value = by_scenario[name][row[0]]
+                value = value[key] if key else value
+                assert _close(float(cell), scale * value), (folder.name, name, row[0])
+        rows = [(axis, term, value, std) for axis, fit in summary["identified"].items()
+                for term, value, std in zip(fit["terms"], fit["parameters"], fit["std"])]
+        assert len(identified) == len(rows) + 1
+        for (axis, term, value, std), row in zip(rows, identified[1:]):
+            assert row[:2] == [axis, term]
+            assert _close(float(row[2]), value) and _close(float(row[3]), std)
