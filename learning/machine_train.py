@@ -151,7 +151,7 @@ def _finished_alike(out: Path, settings: Mapping[str, Any]) -> bool:
     found = {"config": config, "features": info.get("machine_features"),
              "machine": info.get("machine"), "data": info.get("data", {}).get("sha256"),
              "prior": info.get("machine_prior")}
-    return found == json.loads(json.dumps(settings))
+    return bool(found == json.loads(json.dumps(settings)))
 
 
 def prior_efforts(prior: LinearModel | None, trajectories: list[Trajectory],
