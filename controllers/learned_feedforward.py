@@ -1,26 +1,13 @@
 """The learned feedforward as a System: reference in, an exported ONNX model inside, F_ff out
-(or, for a current-level model, the motor currents i1_ff..i3_ff the controller adds after its
-control allocation).
+(or, for a current-level model, the motor currents i1_ff..i3_ff).
 
-The FMU takes the reference signals (x_ref ... ay_ref) every 1 ms step, computes the model's
-inputs from them in generated C (the 63 features of eq. 2.1 and their derivatives by the
-nominal inverse kinematics, or the reference itself), runs the ONNX graph (as generated C
-compiled into the FMU by default, or with onnxruntime) at the model's own rate (metadata
-`sample_rate_hz`) and extrapolates its forces linearly in between. A physics-guided model's
-graph is a residual: the rigid-body feedforward (eq. 2.4 on the nominal model, with the motor
-friction identified in training) is added in generated C at every step, so friction's steps
-at each reversal come at 1 kHz, not extrapolated.
+The FMU computes the model's inputs from the reference in generated C, runs the graph at the
+model's own rate (as generated C or with onnxruntime) and extrapolates in between. A
+physics-guided model's rigid-body prior is added in generated C at every step. Modes: `step`,
+`precomputed` and `task`. The network part is that of any ONNX graph as an FMU
+(fmu.onnx_graph); only the features and the prior are this module's.
 
-Two modes with equal results: step by step (the graph's recurrent state carried in the FMU
-state) and precomputed (the whole reference given at build time, run through the graph in
-one call at initialization, as the thesis's offline feedforward). A third, `task`, runs the
-graph in its own task as Simulink Real-Time's multitasking does (fmu.network.Network): the
-1 kHz step never waits for it, and the added delay of one model period is made up by
-extrapolating the forces one period further.
-
-The network part is the one of any ONNX graph as an FMU (fmu.onnx_graph, `flexff fmu build
-onnx`), the graph's first dimension being time; only the features and the prior are this
-module's.
+Docs: "The learned feedforward FMU" (docs/explanation/learned-feedforward-fmu.md).
 """
 
 from __future__ import annotations

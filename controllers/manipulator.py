@@ -1,19 +1,14 @@
 """The thesis's manipulator as one machine of cosim, registered like any user's (entry point
-`manipulator` of `flexff.builtins`). Its built-in FMUs, `[fmu.NAME] builtin = ...`:
+`manipulator` of `flexff.builtins`).
 
-  plant                   variant = "nominal" | "hardware", seed (encoder noise); `parameters`:
-                          plant FMU parameters by name (m_up1, noise_std, max_substep, ...),
-                          checked physically; x_start, y_start default to the reference's start
-  controller              variant, crossover_hz, notch (true / false / Hz), encoders (2 or 3),
-                          current_feedforward; defaults follow the variant (feedback.DEFAULTS)
-  rigid-body-feedforward  identified = "file.json" (`flexff identify`'s parameters)
-  learned-feedforward     model = "file.onnx", mode = "step" (default) | "task" |
-                          "precomputed", runtime = "c" (default: the network as generated C) |
-                          "onnxruntime"; metrics.json gains `feedforward_range`
+It registers the built-in FMUs plant, controller, rigid-body-feedforward and
+learned-feedforward with their options, its short form (controllers.short_form), the
+reference kinds thesis-eval and thesis-hardware-eval (plant.references), the nominal
+workspace and its signals' short names. CasADi and onnx load only where a plant, controller
+or model is checked or built.
 
-and its short form (controllers.short_form), the reference kinds thesis-eval and
-thesis-hardware-eval (plant.references), the nominal workspace and its signals' short names.
-CasADi and onnx load only where a plant, controller or model is checked or built.
+Every option: "Run configuration", section Built-in FMUs (docs/reference/configuration.md,
+generated from the registry).
 """
 
 from __future__ import annotations

@@ -1,19 +1,13 @@
 """The manipulator's short form of a run configuration, expanded to the general form's built-in
-FMUs feedforward -> controller -> plant (controllers.manipulator registers it):
+FMUs feedforward -> controller -> plant (controllers.manipulator registers it).
 
-  [plant]        variant = "nominal" | "hardware", seed (encoder noise), and any plant FMU
-                 parameter by name (m_up1 = 0.25, noise_std, max_substep, x_start, ...);
-                 x_start, y_start default to the reference's first point
-  [controller]   crossover_hz, notch (true / false / Hz), encoders (2 or 3); defaults follow
-                 the plant variant (controllers.feedback.DEFAULTS)
-  [feedforward]  kind = "none" | "rigid-body" (optionally with identified = "file.json", the
-                 parameters `flexff identify` found in place of the nominal ones) | "learned"
-                 (with model = "file.onnx", an exported learned model, mode = "step"
-                 (default) | "task" | "precomputed" and runtime = "c" (default) |
-                 "onnxruntime"); a current-level model (its card's outputs
-                 i1_ff..i3_ff) feeds the controller's current feedforward (controller option
-                 current_feedforward = true), and its force feedforward Fx_ff, Fy_ff gets zero
-It needs a [reference]; a configuration without [fmu.*] tables is this loop with its defaults.
+[plant], [controller] and [feedforward] take the options of the built-ins plant, controller
+and rigid-body- or learned-feedforward (`kind` = "none" | "rigid-body" | "learned"). A
+current-level model feeds the controller's current feedforward. It needs a [reference]; a
+configuration without [fmu.*] tables is this loop with its defaults.
+
+Docs: "Run configuration", sections Built-in FMUs and The manipulator's short form
+(docs/reference/configuration.md).
 """
 
 from __future__ import annotations

@@ -1,39 +1,14 @@
 """Run configurations: a TOML file parsed and checked into cosim.schema's plain data before
 anything is built or run, and written back out in the general form (`flexff config expand`).
 
-The tables of the general form are listed in cosim.schema. The reference:
+Short forms, built-in FMUs and reference kinds that machine packages register (cosim.plugins,
+cosim.builtins) are expanded and checked here too. Any problem (unknown table or key, wrong
+type, missing file, an FMU variable that does not exist or has another type, a reference
+outside the workspace, ...) raises ConfigError naming `table.key`; the wiring (cosim.wiring)
+is checked when the FMUs are resolved, before anything runs.
 
-  [reference]    kind = "circle" | "line-circle" | "spline" | "segments" | "csv", or a kind a
-                 machine package registers (cosim.plugins; the manipulator's thesis-eval and
-                 thesis-hardware-eval: plant.references), and its keys:
-                   circle: radius, duration, centre = [x, y] (default [0, 0]), turns (default 1,
-                           negative runs clockwise), start_angle (rad, default 0)
-                   line-circle: a skew-sine line from `start` (default [0, 0]) in line_duration
-                           to the circle's start point, then the circle (keys as for circle,
-                           with circle_duration instead of duration)
-                   spline: points = [[x, y], ...] (closed, periodic), duration
-                   segments: start = [x, y] (default [0, 0]) and segments = a list of tables,
-                           run in order, each from the point where the previous one ended:
-                             {kind = "line", to = [x, y], duration}   skew-sine line
-                             {kind = "hold", duration}                at rest
-                             {kind = "circle", centre = [x, y] (default [0, 0]), turns
-                              (default 1, negative runs clockwise), duration}: radius and start
-                              angle follow from the current point and the centre
-                             {kind = "spline", points = [[x, y], ...], duration}: one lap of
-                              the closed periodic spline through the current point, then the
-                              points (its velocity does not start at zero)
-                           keys are named `reference.segments[k].key` in errors
-                   csv: path (relative to the configuration's folder), smoothing_window (s)
-
-Built-in FMUs, their options and short forms come from machine packages (cosim.builtins,
-cosim.plugins): the manipulator's are documented in controllers.manipulator (its built-ins) and
-controllers.short_form ([plant], [controller], [feedforward]; a configuration without [fmu.*]
-tables is its loop).
-
-Any problem (unknown table or key, wrong type, missing file, an FMU variable that does not
-exist or has another type, a reference outside the workspace, a step that does not divide the
-stop time, ...) raises ConfigError naming `table.key`; the wiring (cosim.wiring) is checked
-when the FMUs are resolved, before anything runs.
+Every key and reference kind: "Run configuration" (docs/reference/configuration.md, generated
+from cosim.config_keys).
 """
 
 from __future__ import annotations

@@ -1,20 +1,15 @@
 """The same co-simulation under libcosim (through libcosimpy), the second FMI importer.
 
 FMUs, parameters and connections are those of cosim.master (connected by name); libcosim's
-own fixed-step master runs them. Source signals that vary are written by an override
+own fixed-step master runs them. Varying source signals are written by an override
 manipulator before each step, constant ones are initial values, and a last-value observer
-reads every FMU's outputs after each step.
+reads every FMU's outputs after each step. libcosim's algorithm is Jacobi-like, so direct
+feedthrough outputs arrive one step after cosim.master's Gauss-Seidel. libcosimpy creates
+every execution at t = 0; one that starts elsewhere goes through libcosim's C call
+(`_execution`).
 
-libcosim's algorithm is Jacobi-like: all FMUs step from t_k with the inputs transferred at the
-end of the previous step, then outputs are read and transferred. The value a connection
-carries into the step from t_k is what its source output read at t_k, after its step, with the
-inputs of that previous step. For outputs with direct feedthrough (the controller's currents,
-the feedforward's forces) that is one step behind cosim.master, which evaluates them at t_k
-with the inputs of t_k: the closed loop is then not the same discrete system, and the two
-masters differ by more than round-off. (libcosim's clock counts integer nanoseconds, so its
-step lengths in seconds differ from `step` by round-off, and its start time too.) libcosimpy
-creates every execution at t = 0; one that starts elsewhere is created through libcosim's own C
-call with its start time (`_execution`). libcosim gives the FMUs no tolerance.
+How the two masters differ: "The master algorithm", section libcosim
+(docs/explanation/master-algorithm.md).
 """
 
 from __future__ import annotations

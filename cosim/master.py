@@ -1,44 +1,15 @@
 """Fixed-step co-simulation master: FMI 2.0 and 3.0 co-simulation FMUs loaded in-process (fmpy
 loads the libraries and declares their functions), stepped by one compiled engine.
 
-FMUs run in a fixed order, wired by cosim.wiring. Float64 signals live in one float64 array,
-the bus: the external source signals first, then each FMU's float64 outputs as one block
-(named `fmu.output`), so that fmi2GetReal / fmi3GetFloat64 write straight into the bus, and
-the set calls read straight from it whenever an FMU's inputs form a block of the bus in order
-with no gain or offset (otherwise they are gathered, scaled and shifted into a buffer first).
-Signals of other types (integers, booleans, strings, ...) go through fmpy's typed calls and a
-small table beside the bus, and so does every connection that is not float64 into float64 (a
-Float32 input, or a Float64 input fed by a Float32 output): its value is converted, with its
-gain and offset, by cosim.wiring's rule (`carried`) in Python. Communication point k
-(t_k = start + k * step, cosim.schema.point_time), for k = 0 .. steps:
+FMUs run in a fixed order, wired by cosim.wiring, Gauss-Seidel (default) or Jacobi. Float64
+signals live in one array, the bus, which the FMUs' get and set calls write and read in place;
+other types and converting connections go through fmpy's typed calls and cosim.wiring's rule.
+The loop runs in compiled code (cosim/engine.py, cosim/c/engine.c), which checks every status
+and every output's finiteness and times every step (cosim.timing). Python sets up, feeds the
+sources and collects the record a chunk at a time, so memory does not grow with the run.
 
-  1. the source signals of point k are copied into the bus;
-  2. in order, each FMU gets its inputs and, if a later FMU or no FMU reads its outputs, gives
-     them: values at t_k with the inputs of t_k, so direct feedthrough takes effect at once;
-  3. the bus is recorded as sample k; after the last point the run ends here;
-  4. each FMU steps to t_{k+1}; an FMU whose outputs are fed back to an earlier one gives them
-     right after its step, values at t_{k+1} (they have no feedthrough, checked by the wiring,
-     so they equal what step 2 of the next point would read). Such outputs are also read once
-     after initialization, for point 0.
-
-That is Gauss-Seidel. With the order feedforward -> controller -> plant, the controller at t_k
-sees the encoders at t_k and the plant holds the currents computed from them over
-[t_k, t_{k+1}], as a zero-order-hold digital controller does, with no extra delay. Under
-Jacobi every output is read after the step and step 2 only sets inputs: every FMU steps from
-t_k on the values the others had at t_k, so an output with direct feedthrough reaches its
-consumers one step late (as in libcosim and FMPy's SSP runs). Before the first step, Jacobi
-carries the initial values through every connection (libcosim's initialization).
-
-The loop runs in compiled code (cosim/engine.py, cosim/c/engine.c), in-process, with each FMU's
-own function pointers: each float64 block costs one set, one get and one step call per FMU and
-step, every status is checked, every output read is checked to be finite (a NaN or an infinity
-stops the run naming the FMU, the output and the time, unless the FMU allows them: about 20
-instructions a step for two FMUs of two outputs, 1 % of a Reference-FMU step), and every step
-is timed (cosim.timing). Values of other types go through a hook into Python where an FMU has
-them. Python only sets up, feeds the sources and collects the record a chunk at a time (the
-engine's source rows, record rows and timing rows are one chunk long, so the master's memory
-does not grow with the run's length), and shows progress; the garbage collector is kept out of
-the loop, and the steps may be paced to the wall clock (cosim.timing.Pacing).
+The step sequence of each algorithm and the engine: "The master algorithm"
+(docs/explanation/master-algorithm.md).
 """
 
 from __future__ import annotations

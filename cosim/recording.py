@@ -1,23 +1,13 @@
 """Recorded signals of a run and their files.
 
-Format: `signals.parquet` (Apache Parquet, through pyarrow) holds `time` [s] and one column per
-recorded signal, by its name (plant.signals for the manipulator's), float64 values exactly as
-the run had them (a reload is bit-equal). Parquet because it is columnar, typed and compact and
-because pandas (`read_parquet`), polars, MATLAB (`parquetread`), R, DuckDB and Spark all read
-it; HDF5 (h5py) would serve MATLAB too, but pandas needs PyTables for it and polars does not read
-it at all.
+`signals.parquet` holds `time` [s] and one float64 column per recorded signal, exactly as the
+run had them. A run writes its record while it runs, one complete Parquet file per chunk in
+`signals.parts/` (RecordWriter), joined into signals.parquet at the end; a killed run keeps
+its chunks, which load_recording reads. `signals.csv` is written on request only. Records of
+earlier versions, `signals.npz`, still load.
 
-A run writes its record while it runs, chunk by chunk (RecordWriter): a Parquet file can be read
-only once its footer is written, so each chunk goes into its own complete file
-`signals.parts/part-NNNNNN.parquet` (written to a temporary name, then renamed). At any moment
-the folder holds every chunk up to the last one, a killed run keeps them (load_recording,
-`pandas.read_parquet("signals.parts")` and polars read the folder), and memory stays flat in
-the run's length. When the run ends, the parts are joined into signals.parquet (one row group
-each) and the folder goes.
-
-`signals.csv`, on request only (`[record] csv = true`, `flexff results export`): a header
-`time,<signal>,...` and one row per communication point, numbers with 17 significant digits
-(exact). Records of earlier versions, `signals.npz`, still load.
+The files: "File formats" (docs/reference/file-formats.md); why Parquet and why chunks: "A
+run's cost and real time" (docs/explanation/run-cost.md).
 """
 
 from __future__ import annotations

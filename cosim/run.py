@@ -1,29 +1,14 @@
 """run_config: one configured run, from TOML (or SSP) to a folder of results.
 
-The folder gets signals.parquet (and signals.csv on request, see cosim.recording), written
-while the run runs, with every recorded signal named `fmu.output` (sources by their own
-names), and in a manipulator run (one with a reference or a built-in FMU) the signals the
-machine packages name (cosim.plugins) under their short names as well; metrics.json
-(cosim.metrics: wall time and real-time factor, and the tracking errors where the run has a
-reference and a true position; and what its built-ins add, cosim.builtins: a learned
-feedforward's `feedforward_range`, where the reference leaves the model's training range);
-the plots (cosim.plots; by default in a manipulator run only, `[record] plot` says
-otherwise); and run.json, the checked configuration in the general form with, under
-`recorded`, what the record holds (its points, their first and last times, whether the run
-reached its end). The built-in FMUs are built into the fmu/ cache and loaded from a temporary
-copy. A run holds its folder's lock while it writes there (cosim.folder_lock), so a second
-run into the same folder is refused at once instead of mixing the two records.
+The folder gets the record (cosim.recording), metrics.json (cosim.metrics and what built-ins
+add), the plots (cosim.plots) and run.json (the checked configuration in the general form and
+what the record holds). Record, metrics, plots and timing are fed chunk by chunk (RunSink), so
+memory does not grow with the run. A run holds its folder's lock (cosim.folder_lock), checks
+folder, memory and disk (cosim.disk) before it starts, and, when an FMU fails, Ctrl-C or
+SIGTERM stops it, keeps the record so far and writes run.json before raising.
 
-The record, the metrics, the plots and the step timing are fed chunk by chunk while the run
-runs (RunSink, cosim.timing.StreamedTiming), paced or not, so the memory a run takes does not
-grow with its length (its sampled sources aside, which the master reads in place). A run that an
-FMU's failure stops (an isolated FMU's crash or hang among them) keeps the record up to its last
-recorded point and writes run.json, then raises CosimError naming the FMU, the call, the time
-and the folder; so does one that an FMU's NaN or infinite output stops. Ctrl-C and SIGTERM
-stop a run the same way (KeyboardInterrupt, saying what was kept), and one whose FMU hangs in
-a call after cosim.watchdog's grace. Before anything runs, the output folder must take a file,
-what is held in memory must fit and the record must fit the free disk (cosim.disk), so that
-none of them shows only after the simulation.
+The run folder: "File formats" (docs/reference/file-formats.md); errors and exit codes: "Exit
+codes and errors" (docs/reference/exit-codes.md).
 """
 
 from __future__ import annotations

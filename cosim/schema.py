@@ -1,52 +1,10 @@
 """The run configuration as plain data: what cosim.config parses a TOML file (or cosim.ssp an SSP
 file) into, before anything is built or run.
 
-General form (SI units):
-
-  [run]            step (s, default 0.001), start (s; default: the first FMU's default
-                   experiment, else 0), stop (s, the end time as in FMI: the run lasts
-                   stop - start; default: start plus the reference's duration, else the first
-                   FMU's default experiment), tolerance (relative, of each FMU's own solver;
-                   default: each FMU's default experiment), algorithm = "gauss-seidel"
-                   (default) | "jacobi", order = [FMU names] (default: the order of the
-                   [fmu.*] tables), allow_nonfinite = true (every FMU's, below). Point k
-                   is at t = start + k * step; the reference plays from the run's start, CSV
-                   series are read at the run's times.
-  [reference]      a reference trajectory, a source of x_ref .. ay_ref (cosim.references;
-                   the kinds are listed in cosim.config)
-  [[source]]       kind = "constant", values = {name = number, ...}: constant source signals
-                   kind = "csv", path = "file.csv": a header `time,<name>,...`, one source
-                   signal per column, linearly interpolated onto the step (held after its end)
-  [fmu.NAME]       path = "file.fmu" (any FMI 2.0 or 3.0 co-simulation FMU, relative to the
-                   configuration) or builtin = a registered built-in's name with its options
-                   (cosim.builtins; the manipulator's plant, controller,
-                   rigid-body-feedforward and learned-feedforward are documented in
-                   controllers.manipulator); parameters = {variable =
-                   value} (start values of parameters or inputs, checked against the FMU's
-                   variables and types);
-                   unconnected = "error" (default) | "start" (inputs left unconnected keep
-                   their start values); tolerance (relative: given to the FMU's
-                   fmi2SetupExperiment / fmi3EnterInitializationMode; default: [run]
-                   tolerance, else the FMU's default experiment, else none); isolate = true
-                   runs it in its own process (cosim.isolation): a crash or a hang ends the
-                   run with an error, and [run] step_timeout (s) bounds each of its calls;
-                   solver = "cvode" runs it as model exchange (fmu.model_exchange, with the
-                   FMU's tolerance as CVODE's relative one; the default for an FMU with no
-                   co-simulation interface); allow_nonfinite = true lets its
-                   parameters and outputs be NaN or infinite (by default a non-finite
-                   parameter is refused and a non-finite output stops the run)
-  [[connection]]   from = "fmu.output" or a source signal, to = "fmu.input", optional gain and
-                   offset (SSP's LinearTransformation: to = gain * from + offset)
-  [record]         signals = [names] (default: all), csv (bool, default false),
-                   plot (bool, default: in a manipulator run), every (int, default 1)
-  [machine]        the machine's description (cosim.machine), or machine = "FILE.toml": its
-                   axes' signals are checked against the loop, and the tracking metrics are
-                   its axes'
-
-Inputs without a [[connection]] take, by name, the output of the same name of another FMU or
-the source signal of that name (cosim.wiring). A machine package may register a short form
-(cosim.plugins): the manipulator's ([plant], [controller], [feedforward],
-controllers.short_form) is shorthand for the FMUs feedforward -> controller -> plant.
+RunConfig holds the general form's tables ([run], [reference], [[source]], [fmu.NAME],
+[[connection]], [record], [machine]) as frozen dataclasses; `point_time` gives point k's time.
+Every key, its type, default and unit is in the generated reference "Run configuration"
+(docs/reference/configuration.md, from cosim.config_keys).
 """
 
 from __future__ import annotations

@@ -1,45 +1,15 @@
 """A run configuration as an SSP 1.0 system (.ssp), and back: the exchange format that libcosim,
 FMPy and OMSimulator read.
 
-export_ssp writes one ssd:Component per FMU (the FMU in resources/), every Link of the resolved
-wiring as an ssd:Connection (the by-name ones too, so the SSD is complete) with an
-ssc:LinearTransformation where gain or offset is not 1 or 0, the FMUs' start values as an inline
-ssv:ParameterSet, and the run's times in ssd:DefaultExperiment. SSP 1.0 has no step size there:
-it goes into two annotations, libcosim's own ("com.opensimulationplatform": osp:FixedStepAlgorithm
-baseStepSize, which CosimExecution.from_ssp_file uses) and ours ("org.flexff": step and
-algorithm). An SSP 1.0 system has no time-varying sources: inputs fed by a constant source get
-the constant (with gain and offset applied and converted to the input's type, as the run does:
-cosim.wiring.carried) as their start value, inputs fed by the [reference] its value at t = 0
-(other tools hold the loop at rest at the reference's start), and a configuration with a CSV
-series feeding an input cannot be exported. Our annotation also carries the whole configuration
-in the general form (flexff:Configuration: built-ins with their options, the [reference],
-[record]), FMUs by path named by their member of the archive.
+export_ssp writes one component per FMU, every link of the resolved wiring as a connection
+(with its linear transformation), the start values and the run's times, plus flexff's
+annotation carrying the whole configuration. load_ssp reads such a file back as that
+configuration, or a flat system of FMUs from another tool as a general-form RunConfig. Every
+problem is a ConfigError naming the SSD element at fault. The XML is checked against the SSP
+1.0 schema that pyssp_standard ships.
 
-Connectors (SSP requires only those that connections use): every connected variable, and the
-other outputs and parameters of type Real, Integer or Boolean. Unconnected inputs get none: FMPy
-(0.3.32) wires an unconnected input connector to the source of the input before it, or fails
-where there is none. String, Enumeration and Binary connectors only where a connection needs
-them: libcosim aborts the process on reading an ssc:Enumeration connector, and FMPy cannot get
-or set a String. Units are left to the FMUs (SSP 1.0 would need ssd:Units definitions for them).
-FMI 3.0 Float32 and Float64 variables are both ssc:Real connectors, and a connection between
-them converts as in a run from TOML; a LinearTransformation is only ever written on Real
-connectors, and one read on others is refused by the wiring (cosim.wiring's rule, which SSP
-1.0's "valid for parameters of a continuous type" agrees with).
-
-load_ssp reads such a file, or a flat system of FMU components from another tool, into a
-general-form RunConfig: FMUs from the archive (extracted once into the FMU cache, under the
-archive's sha256), start values from the parameter bindings, connections with their linear
-transformations, every FMU with unconnected = "start" (an SSP system leaves unconnected inputs
-at their start values), and the Jacobi algorithm unless our annotation says otherwise (SSP tools
-run Jacobi). Every problem is a ConfigError naming the SSD element at fault. A file that carries
-flexff:Configuration reads back as that configuration (the same RunConfig as the TOML it was
-exported from: built-ins, reference and all) when the SSD and FMUs are still what that
-configuration exports; changed by another tool since, it is read as the plain system above,
-with a warning.
-
-The XML is written and read with lxml and checked against the SSP 1.0 schema that
-pyssp_standard ships; its own classes (0.9.1) drop ssc:LinearTransformation on reading and
-writing.
+What is exported, which connectors and why: "The master algorithm", section SSP
+(docs/explanation/master-algorithm.md).
 """
 
 from __future__ import annotations

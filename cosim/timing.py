@@ -2,20 +2,12 @@
 every step, each FMU's share of it, and, when the run is paced to the wall clock, how late each
 step started and which steps overran their period.
 
-TET of step k: from the first FMI call of communication point k to the end of the step to
-t_{k+1} (cosim/c/engine.c). Lateness: the step's start after its due time on the absolute
-schedule start + k * period (period = step / real-time factor). An overrun: a step whose TET
-plus lateness passes its period, so that it ends after the next step was due.
+Runs count these in histograms chunk by chunk (StreamedTiming, Histogram) and draw tet.png
+from a bounded trace (TetTrace), so memory stays flat in the run's length. A network in its
+own task (fmu/c/wrapper_task.c) adds its call times and rate-transition overruns.
 
-A run that streams its record (cosim.run), paced or not, keeps no per-step array either: its
-TET, each FMU's share and the lateness go into Histograms chunk by chunk (StreamedTiming), whose
-percentiles are within RESOLUTION of the exact ones (the maximum is exact), and tet.png is drawn
-from a bounded trace (TetTrace: per block of steps the least and the largest values), so that
-memory stays flat in the run's length. Both kinds build their tables with one code (_Timing).
-
-Slower tasks, as Simulink Real-Time's multitasking runs them: a flexff network in its own task
-(fmu/c/wrapper_task.c) reports its call times and its rate-transition overruns (a result not
-ready at the step it is due), which --max-overruns counts with the steps' own.
+Definitions of TET, lateness and overrun: "A run's cost and real time"
+(docs/explanation/run-cost.md); the "Real time" tutorial shows them.
 """
 
 from __future__ import annotations

@@ -2,31 +2,13 @@
 where the configuration gives them, names everywhere else, and the result kept as data (a list
 of Links) that can be printed and checked.
 
-Every input of every FMU gets one Link: from an explicit [[connection]] ("fmu.output" or a
-source signal, with an optional gain and offset), else by name from the one source signal or
-FMU output of the same name. An input with no producer is an error, unless its FMU keeps the
-start values of unconnected inputs or the configuration gives it a value. Units must agree
-where both sides declare one.
+Every input gets one Link, from a [[connection]] or by name; an input with no producer, a
+mismatch of units or types, and a feedthrough output fed back against the stepping order are
+errors. What a Link does with each pair of types is one rule (`refusal`, `carried`): float64
+and float32 feed each other with gain and offset; every other type feeds its own, unchanged.
 
-What a Link does with each pair of kinds (fmu.importer.TYPE_KINDS: an FMI 2.0 Real and an FMI
-3.0 Float64 are both float64, an FMI 2.0 Integer and an FMI 3.0 Int32 both int32; source
-signals are float64), one rule, `refusal` and `carried`:
-  - float64 and float32 feed each other: gain * value + offset is computed in float64 (a
-    float32 value widens exactly), then converted to the input's kind. Into float32 that is
-    rounding to the nearest float32, ties to even (numpy.float32); a finite value beyond
-    float32's range stops the run with an error naming the connection and the time, rather
-    than giving the input an infinity.
-  - every other kind (int8 .. uint64, boolean, string, binary, enumeration, clock) feeds the
-    same kind only, unchanged, with no gain or offset; anything else is refused when the run
-    is wired, naming the connection. For integers that is a choice: SSP 1.0 defines its
-    LinearTransformation for continuous (Real) connectors only, float64 arithmetic would
-    silently change int64 and uint64 values beyond 2**53, and how to round (nearest, floor,
-    toward zero) or to narrow a width is a modelling decision that belongs in an FMU.
-
-Order (Gauss-Seidel): a Link whose producer steps at or after its consumer is `feedback`: it
-carries the producer's value from the end of its previous step. Such an output must not depend
-directly on its FMU's inputs, or the order would hide an algebraic loop. Under Jacobi every
-Link carries the value read after the previous step, so there is no loop to hide.
+The rules and why: "The master algorithm", section Connections and types
+(docs/explanation/master-algorithm.md).
 """
 
 from __future__ import annotations

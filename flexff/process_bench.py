@@ -1,20 +1,13 @@
 """`flexff bench --processes`: a run's whole cost, as a user times it: whole processes side by
 side on one third-party FMU and step, each tool writing its default record.
 
-  flexff   `python -m flexff run` (signals.parquet, metrics.json, run.json)
-  fmpy     `fmpy.simulate_fmu` then `fmpy.util.write_csv`
-  ecos     Ecos (PyPI `ecospy`, a C++ co-simulation engine) with its CSV writer, where an
-           interpreter with ecospy is at hand (`ecos_python`; its `tbb` package's libtbb is
-           loaded from that interpreter's lib/ folder, where pip puts it)
+flexff (`python -m flexff run`), fmpy (`simulate_fmu` and `write_csv`) and Ecos (`ecospy`,
+where an interpreter with it is at hand) run in turn `repeats` times after one uncounted run;
+each figure is the median wall time and peak resident memory (os.wait4). `flexff --help`, a
+bare `python -c pass` and `import flexff.cosim.run` are timed as whole processes too. Python's
+bytecode cache is used as on a user's machine (PYTHONDONTWRITEBYTECODE is not passed on).
 
-The tools run in turn (flexff, fmpy, ecos, flexff, ...) `repeats` times, after one run of each
-that is not counted; each figure is the median over its runs of the process's wall time and
-its peak resident memory (the kernel's accounting of that one child, os.wait4). Beside them:
-`flexff --help`, a bare `python -c pass`, and the import of a plain run (`import
-flexff.cosim.run`), as whole processes too. Every process runs as on a user's machine, with
-Python's bytecode cache (pip compiles an installed package's modules, and Python caches an
-editable one's at first import): PYTHONDONTWRITEBYTECODE, where this process has it, is not
-passed on, since it makes every run compile flexff's modules anew (about 50 ms of a 0.35 s run).
+Docs: "Benchmarks" (docs/results/benchmarks.md).
 """
 
 from __future__ import annotations

@@ -1,19 +1,14 @@
 """run_in_child: a function that calls into an FMU, run in a child process of its own, so that
-an FMU that crashes (a segmentation fault in its own code) or hangs cannot take the caller
-with it.
+an FMU that crashes or hangs cannot take the caller with it.
 
-The child is forked from multiprocessing's fork server, a clean process started once that has
-imported this module and the function's: a child starts in milliseconds, yet inherits nothing
-of the caller's loaded FMUs or threads. While it runs, the name of the FMI function under way
-is kept in memory shared with the parent: every call fmpy makes into an FMU passes through
-one method (`fmpy.fmi1._FMU._call`, which the child wraps), and `under_way` names the steps
-that are not FMI calls (loading the binary). So a child that dies of a signal is reported as
-"fmi2DeSerializeFMUstate ... SIGSEGV". The function sends its findings as they come
-(`emit`), so those made before a crash are kept. The files the child unpacks go into a
-temporary folder the parent removes, whatever the end. The child dies with the fork server,
-which ends with the caller, however the caller ends (fmu.orphans). As with multiprocessing's
-spawn, a script that calls this keeps its top level under `if __name__ == "__main__":` (the
-child imports the script's module).
+The child is forked from multiprocessing's fork server: it starts in milliseconds yet inherits
+none of the caller's FMUs or threads. The FMI call under way is kept in shared memory, so a
+child that dies is reported as, e.g., "fmi2DeSerializeFMUstate ... SIGSEGV"; findings sent
+before a crash (`emit`) are kept, and the child's files are removed whatever the end. The
+child dies with the caller (fmu.orphans). A script that calls this keeps its top level under
+`if __name__ == "__main__":`.
+
+Docs: "Isolate an FMU" (docs/how-to/isolate-fmu.md).
 """
 
 from __future__ import annotations

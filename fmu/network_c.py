@@ -1,22 +1,14 @@
 """An ONNX graph as plain C99: the network of an FMU without onnxruntime.
 
 `generate_network_c(model, prefix)` writes `<prefix>.c` and `<prefix>.h`: the weights as
-`static const` arrays, the graph's nodes as fixed-size loops and calls of the kernels in
-c/net_kernels.h (which the .c includes), and one entry
+`static const` arrays, the nodes as fixed-size loops and calls of c/net_kernels.h, and one
+entry `int <prefix>_run(void *work, const void *const inputs[], void *const outputs[])` that
+computes the graph once in a work area of `<prefix>_work_size()` bytes the caller allocates
+(no allocation, threads or global state in the call). Shapes are fixed (fmu.network_plan);
+operators are those of fmu.network_c_ops.OPERATORS, and any other node is refused naming it.
 
-    int <prefix>_run(void *work, const void *const inputs[], void *const outputs[]);
-
-that computes the graph once: `inputs` and `outputs` point to the graph's inputs and outputs in
-graph order, each of the element type and size that `<prefix>_input_types` / `_sizes` (and the
-outputs' arrays) give (ONNX element type numbers: 1 float32, 11 float64); `work` is memory of
-`<prefix>_work_size()` bytes the caller allocates once, which keeps everything the graph
-computes (no allocation, no threads, no blocking call, no global state in the call: one work
-area per instance, any number of instances). It returns 0.
-
-Shapes are fixed (fmu.network_plan): a dynamic first axis, the time axis of flexff's exports, is
-one row per call; a sequence runs as one call per row, its state tensors carried from each call
-to the next. The operators are those of fmu.network_c_ops.OPERATORS; a node of any other
-kind, or with attributes it does not handle, is refused with one line naming node and operator.
+Docs: "The learned feedforward FMU", section The network as C
+(docs/explanation/learned-feedforward-fmu.md).
 """
 
 from __future__ import annotations

@@ -1,21 +1,14 @@
 """Any ONNX graph of fixed-size float tensors as the network of a System's FMU.
 
-fmu.network runs graphs of one convention: one float64 input (T, n_in), one float64 output
-(T, n_out) and float32 state tensors NAME -> NAME_out. `read_graph` reads any graph whose inputs
-and outputs are float32 or float64 tensors of a fixed size, tells state tensors from the others
-(metadata) and names every element; `graph_network` wraps a graph that does not follow the
-convention in an adapter graph that does, so that it runs in the same C wrapper: the FMU's row
-of inputs is cut, cast and reshaped into the graph's input tensors, its outputs are cast,
-flattened and concatenated, its state outputs renamed NAME_out; its metadata
-`input_signals` / `output_signals` name the columns.
+`read_graph` reads a graph whose inputs and outputs are float32 or float64 tensors of fixed
+size, tells state tensors from the others and names every element; `graph_network` wraps a
+graph that does not follow fmu.network's convention (one float64 input and output, float32
+state NAME -> NAME_out) in an adapter graph that does. Optional metadata (JSON in
+metadata_props): `state`, the recurrent state tensors; `input_signals` / `output_signals`,
+the names of the elements in graph order (default `u[k]`).
 
-Metadata (onnx metadata_props, JSON; the keys flexff's own export writes, all optional):
-  - `state`: [{"input": NAME, "output": NAME}, ...] the recurrent state tensors (float32, fixed
-    shape): zero at the start, each call fed the state output of the previous one, carried in
-    the FMU state;
-  - `input_signals` / `output_signals`: the names of all elements of the other inputs /
-    outputs, in graph order, each tensor flattened row-major. Without them, element k of a
-    tensor `u` is `u[k]`, and a tensor of one element is `u`.
+Docs: "Bring your own network" (docs/how-to/own-network.md) and "File formats", section An
+exported model (docs/reference/file-formats.md).
 """
 
 from __future__ import annotations

@@ -1,22 +1,13 @@
 """validate_fmu: fmpy's static checks of an FMU plus a short run of our own, graded.
 
-Our checks, on any FMI 2.0 or 3.0 co-simulation FMU read through fmu.importer: the binary
-loads, instantiates and exports every co-simulation function of its FMI version; with default
-values the FMU initializes, steps and gives finite float outputs; restoring a saved FMU state
-(directly, and through serialization) reproduces the outputs of the uninterrupted run, where
-the model description says the FMU can do so. An FMU built for one input table (a network in
-the precomputed mode) runs on the inputs of that table.
+Our checks, on any FMI 2.0 or 3.0 co-simulation FMU: the binary loads, instantiates and
+exports its functions; with default values it initializes, steps and gives finite outputs;
+restoring a saved state (directly and serialized) reproduces the uninterrupted run. Every
+call into the FMU runs in a child process (fmu.child), so a crash or hang becomes a problem
+naming the call. Each problem is a sentence with a severity; a state restore that differs by
+at most the FMU's tolerance is a warning. Problems are returned, never raised.
 
-Every check that calls into the FMU runs in a child process (fmu.child): an FMU that crashes
-or hangs becomes a problem naming the call ("fmi2DeSerializeFMUstate: the FMU crashed
-(SIGSEGV)"), never the end of the validator. Each problem is a sentence (a `Problem`, a str as
-fmpy's are) with a severity: an error, or a warning where the FMU works as its model
-description promises within a tolerance. A state restore whose outputs differ from the
-uninterrupted run's by at most the FMU's default-experiment tolerance (TOLERANCE where it
-gives none), relative to each output's magnitude, is a warning carrying that size: FMUs that
-integrate with a variable step and a tolerance do not repeat bit for bit. Beyond it, or with
-`strict`, it is an error. Problems are returned, never raised: `flexff fmu validate` prints
-them.
+Docs: "Validate and compare third-party FMUs" (docs/how-to/validate-compare.md).
 """
 
 from __future__ import annotations

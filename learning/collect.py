@@ -1,37 +1,15 @@
 """Data collection: every trajectory of a set as a PID-only closed-loop co-simulation, written
 in the dataset format of learning.dataset.
 
-The loop is flexff's own (the set's built-in plant under PID) or any run configuration with
-flexff's controller (learning.loop): the built-in plant with other parameters, or a plant FMU
-by path wired by name or by [[connection]] tables. Each trajectory replaces the loop's
-reference, run.stop, start values and plant seed; the dataset's signals are read where the
-loop's controller sees them (learning.loop.dataset_taps), and a loop that lacks one is refused
-before anything runs. The sim set collected on a loop whose encoders count or are noisy is
-warned of (learning.encoders): flexff evaluate --env sim preprocesses it for ideal ones.
+The loop is flexff's own or any run configuration with flexff's controller (learning.loop);
+each trajectory replaces its reference, stop time, start values and seed. Files are written
+atomically and the manifest last; running again into the same folder resumes, and a folder of
+another set, format or loop is refused before anything runs. A failed trajectory does not stop
+the others; an error that would fail all cancels the rest. Runs go to local processes or a
+Dask scheduler (cosim.executor).
 
-The folder gets one NAME.npz per trajectory (float64 arrays of equal length: `time`, the six
-reference signals, the encoders `theta_s1..3`, the true position `x, y`, and the force the
-controller applied to the wrist, Fx = Fx_fb + Fx_ff, likewise Fy, and the motor currents
-`i1..3` it commanded, the plant's inputs) and, last, `manifest.json`
-(set, sample rate, plant variant and parameters, the loop: its configuration in the general
-form and the sha256 of every FMU, every trajectory's reference table and seed). A set saved at
-a lower rate than the run (hardware: 100 Hz) keeps every n-th sample of the run: plain
-decimation, no anti-alias filter (the preprocessing low-pass filters at 1.8 Hz; encoder noise
-above the new Nyquist frequency folds into the band).
-
-Every file is written to a temporary name and renamed, so a folder never holds half a file.
-Running again into the same folder resumes: a trajectory whose file loads and holds exactly its
-reference (and, where the folder's manifest lists it, has the sha256 listed there) is skipped,
-a missing, unreadable or changed one is run, and leftover temporary files of an interrupted run
-are deleted (so one collection per folder at a time). A folder of another set, another dataset
-format or version, another loop (`collection.json`, written before the first trajectory runs
-and removed with the manifest's writing, or the manifest's `loop`; a folder that records none
-was collected on the set's own loop), or with files of other trajectories is refused before
-anything runs. A failed trajectory does not stop the others, but an error that would fail every
-one alike (a full disk, a read-only or inaccessible folder, a broken process pool) cancels the
-trajectories not yet started; the manifest is only written once every trajectory has its file.
-Runs go to local processes, which end with the collecting process even when it is killed
-(Linux), or to a Dask scheduler whose workers see the same file system as this process.
+Docs: "Learning", section The data (docs/explanation/learning.md); the folder: "File formats"
+(docs/reference/file-formats.md); "Run on a Dask cluster" (docs/how-to/dask-cluster.md).
 """
 
 from __future__ import annotations
@@ -85,7 +63,7 @@ from flexff.learning.loop import (
 from flexff.learning.trajectories import TrajectorySet, TrajectorySpec, trajectory_set
 from flexff.plant.signals import CURRENTS, FEEDBACK_FORCES, FEEDFORWARD_FORCES, names
 
-PROGRESS = "collection.json"  # the loop of a collection under way (see the module docstring)
+PROGRESS = "collection.json"  # the loop of a collection under way, until the manifest is written
 STOPPING = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES)  # fail every trajectory
 
 

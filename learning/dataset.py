@@ -1,23 +1,12 @@
 """Datasets on disk: a folder with `manifest.json` and one `.npz` of signals per trajectory.
 
-The format is the contract between data collection (co-simulation or hardware logs) and
-training. Reading checks everything a training run relies on, so that a bad folder fails at
-once with a message naming the file and the signal, and saying what to do about it.
+The format is the contract between data collection (co-simulation or logs) and training.
+Reading checks everything training relies on, so a bad folder fails at once naming the file
+and the signal. The manifest holds each file's sha256 and its own; version 3 adds the motor
+currents; an entry's `derived` names signals computed rather than measured, which training
+refuses for the signals it reads (TRAINED).
 
-Version 2 guards the data against silent change: every trajectory entry holds the sha256 of
-its file, and the manifest holds a sha256 of itself (all but the trajectories' splits, which
-may be edited by hand), so a truncated or swapped file, or an edited `set` or `plant`, is
-refused instead of trained on.
-
-Version 3 adds the motor currents i1..i3 [A] the plant was given (CURRENT_SIGNALS), the labels
-of a current-level model: a collected set holds them, imported logs and version 2 folders need
-not (all three or none). Version 2 folders are still read; only current-level training refuses
-them.
-
-A trajectory entry's optional `derived` maps a signal to how it was computed, where its source
-did not hold it (imported logs: the true position from the encoders). Training reads the
-encoders and the forces (TRAINED), which must be measured: an entry marking one of them derived
-is refused.
+Docs: "File formats", section A dataset folder (docs/reference/file-formats.md).
 """
 
 from __future__ import annotations

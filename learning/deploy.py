@@ -1,27 +1,13 @@
 """A trained run as a model in SI units: what the exported ONNX graph computes.
 
-Scaling and unscaling live inside the module, so it takes features in SI units and returns
-forces in newtons; for the pgnn it adds the network's residual to its prior, the rigid-body
-force of the identified rigid-body model (or, with `prior=False`, returns the residual alone:
-the feedforward FMU adds the prior from generated C). With
-`inputs="reference"` it also computes the features from the six reference signals
-x_ref ... ay_ref in the graph (the nominal kinematics replayed in torch), so a runner only
-needs the reference.
+Scaling and unscaling live inside the module: features in SI units in, forces in newtons out.
+For the pgnn it adds the residual to its rigid-body prior (or, with `prior=False`, returns the
+residual alone). With `inputs="reference"` it computes the features from the reference in the
+graph. A machine's linear skip is exported beside the graph as `linear_map`
+(`skip_outside`), for the feedforward FMU to add at the loop's rate. The pgnn's residual fades
+to zero beyond the training range (TRUST_FADE), so there the model falls back on its prior.
 
-A machine's network with a linear skip (learning.models.LinearSkip) is exported without it
-(`skip_outside`): its skip becomes `linear_map`, the same map in SI units, which the
-feedforward FMU evaluates at every step of the loop while the graph runs at the model's rate
-(on the drive example the whole network at 167 Hz missed each friction step by up to 1.2 N).
-
-The pgnn's residual is trusted only where its network has seen data: it fades linearly from
-the edge of the features' training range to zero TRUST_FADE training spans beyond it (the
-farthest feature counts), so that outside the data the model falls back on its prior instead
-of extrapolating. Measured on the hardware set's ten held-out test references (five
-members): where a reference left the range (up to 2.9 spans in joint accelerations, on a
-0.28 Hz circle of 25 mm) the residual added up to 55 mN rms and e2 fell to 7 / 9x PID alone,
-against the prior's 40 / 44x; faded, 41 / 44x. The geometric mean over the ten went from
-149 / 124 to 225 / 221 (the prior: 194 / 199); the evaluation reference, inside the range,
-kept its 397 / 189.
+Docs: "The learned feedforward FMU" (docs/explanation/learned-feedforward-fmu.md).
 """
 
 from __future__ import annotations

@@ -1,47 +1,14 @@
 """`flexff evaluate`: the thesis's Table 5.2 (sim) or 6.2 (hardware) for flexff, end to end.
 
-1. collect the environment's trajectory set under PID (resumes what is there);
-2. train the models side by side, one process per core, on CUDA one per GPU (learning.workers,
-   learning.devices; a finished run with the same settings is reused), and export each to
-   ONNX (an ensemble's members, where the environment asks for one, as one graph of their
-   mean); `currents` adds, per kind named, the same model trained on the motor currents
-   (scenario KIND-currents);
-3. identify the rigid-body model's parameters on the training set, preprocessed as the
-   networks' data (learning.identify);
-4. run iterative learning control (learning.ilc) on the environment's evaluation reference,
-   into ilc/ (resumes what is there): the best feedforward force for that one reference, which
-   the networks, knowing no reference in advance, can approach but hardly beat, and the
-   loop's noise floor, what its encoders add to every feedforward's e2;
-5. co-simulate the environment's evaluation reference on its plant: PID alone, with the
-   rigid-body feedforward (nominal, then identified parameters), with each learned model as an
-   ONNX feedforward FMU, and with the ILC's force table ("limit"). As in the thesis, "sim" runs
-   the 15 s reference of sec. 5.7 on the nominal plant and "hardware" the 100 s reference of
-   sec. 6.6 (a 0.12 Hz circle, inside the hardware set's 0.01-0.29 Hz circles) on the hardware
-   plant;
-6. run every scenario but the limit on the references of the set's test split, which no model
-   trained on (learning.held_out);
-7. write the report (learning.report): summary.json, table.md (with what each model's training
-   cost, each scenario's e2 as a multiple of the limit's, the noise floor and the held-out
-   references' ratios) and the figures.
+It collects the environment's set under PID, trains and exports the models side by side
+(learning.workers), identifies the rigid-body model (learning.identify), runs ILC for the limit
+and the noise floor (learning.ilc), co-simulates every scenario on the evaluation reference and
+on the held-out test references (learning.held_out), and writes the report (learning.report).
+Each step resumes what is already there. Given a run configuration (`loop`), collection, ILC
+and the scenarios run on that loop. ENVIRONMENTS holds each environment's preprocessing.
 
-Given a run configuration (`loop`, learning.loop), steps 1, 4 and 5 run on that loop instead
-of the environment's plant: the set is collected on it under PID alone, and every scenario is
-that loop on the environment's evaluation reference with its feedforward replaced (PID alone,
-rigid-body, identified rigid-body, the learned one stepped right before the controller, or the
-ILC's table). A loop (or a --data set) whose encoders count or are noisy, given the sim
-environment's preprocessing for ideal encoders, is warned of before any work
-(learning.encoders).
-
-Preprocessing beyond the thesis (Environment.features): the thesis low-passes the measured motion
-and forces at 1.8 Hz and re-quantizes its ideal simulated encoders. The sim evaluation
-reference's circle runs at up to 1.8 Hz, where that filter halves the signals and the training
-forces differ from the inverse dynamics of the filtered motion by about 1 %; with a 5 Hz corner
-and the simulated encoders left ideal, the residual of the nominal model falls to 0.2 % and the
-feedforward error with it. The hardware environment keeps the thesis's encoder counting but
-low-passes at 1 Hz: the reference is slow (circles up to 0.29 Hz), and between 1 and 2 Hz the
-labels hold mostly the loop's reaction to the encoders' noise; its black-box networks also see
-each motor's direction of motion (the `directions` feature set), on which its Coulomb
-friction flips, and the wrist position from all three encoders (ENVIRONMENTS).
+Docs: "The thesis's learned feedforward" (docs/tutorials/thesis-feedforward.md), "Learning"
+(docs/explanation/learning.md), and "Design decisions" (docs/explanation/design-decisions.md).
 """
 
 from __future__ import annotations

@@ -1,42 +1,14 @@
 """ONNX export of a training run: SI signals in, forces in newtons out (a current-level run:
-motor currents in amperes, the output `currents` instead of `forces`, the card's output signals
-i1_ff..i3_ff), state explicit.
+motor currents in amperes), state explicit.
 
-One graph serves both ways of running the model (`inputs` and `forces` are float64, the state
-tensors float32):
+One graph serves the sequence form (the whole input, state at zero) and the single-step form
+(one row per call, each fed the previous call's state outputs). The model runs at its own
+rate (`sample_rate_hz`); a faster runner extrapolates between calls. The pgnn is exported as
+its residual over the identified rigid-body feedforward. The metadata is the model card
+(controllers.model_card). The graph is checked against the network and written atomically.
 
-- sequence form: `inputs` (T, n_inputs) for any T with the state inputs at zero gives the
-  forces (T, 2) for the whole sequence;
-- single-step form: T = 1 per call, each call fed the state outputs of the previous one
-  (zeros at the first call).
-
-State tensors (batch size 1): LSTM `h`, `c` (layers, 1, hidden); TCN and pgnn one buffer
-per level, `level0_buffer` ... (1, channels in, (kernel - 1) * dilation), holding that level's
-last inputs (learning.models.StreamingTCN: a call costs one output per level, not the whole
-receptive field); CNN-LSTM `input_buffer` (1, n_features, history) holding the last scaled
-inputs, then `h`, `c`. Each state input `NAME` has the output `NAME_out`. The graph is checked
-against the network as trained, sequence and steps.
-
-The model runs at its own sample rate (metadata `sample_rate_hz`, e.g. 100 Hz when trained
-down-sampled): a runner at a higher rate, such as the feedforward FMU at 1 kHz, calls it once
-every 1/sample_rate_hz seconds with the current inputs and extrapolates the forces linearly
-from the last two calls in between (holding them instead would lag by half a model period).
-
-A machine's network with a linear skip is exported without it: the card's `linear_inputs`
-holds the skip in SI units, for the runner to add at each of its steps (learning.deploy).
-
-The physics-guided model is exported as its residual: the graph's forces plus the rigid-body
-feedforward of the nominal model (eq. 2.4, controllers.feedforward) on the same reference,
-with the parameters identified in training, are the model's forces; the metadata says so
-(`prior` = "rigid-body", else "none"; `prior_parameters`: the nominal-model parameters
-replaced, as flat plant parameter names and SI values).
-
-The graph is written to a temporary file beside `out` and renamed only once onnx's checker and
-the comparison with PyTorch pass, so a failed export leaves no file, and an existing one as it
-was.
-
-The metadata is the model's card (controllers.model_card.ModelCard): everything a runner needs,
-from the signals and the state tensors to the range of every feature in the training data.
+Docs: "File formats", section An exported model (docs/reference/file-formats.md), and "The
+learned feedforward FMU" (docs/explanation/learned-feedforward-fmu.md).
 """
 
 from __future__ import annotations

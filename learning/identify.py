@@ -1,36 +1,14 @@
 """The rigid-body model identified from a dataset: what an engineer would deploy instead of
 a learned feedforward.
 
-The inverse dynamics of eq. (2.4) with the motors' friction (plant.model.inverse_dynamics) are
-linear in the inertias, the flexures' stiffness and damping and the friction torques
-(controllers.identified.RIGID_BODY_FIELDS and FRICTION_FIELDS, 41 flat parameters) for given
-geometry, centres of mass and tanh width of the Coulomb friction: F = W(pos, vel, acc) theta,
-the regressor W the CasADi Jacobian of the force with respect to theta (which does not depend
-on theta). Not all 41 are identifiable: an upper arm's mass, inertia and the rotor inertia
-only act together, as one inertia about the shoulder; a motor's viscous friction and its
-shoulder flexure's damping are one torque on the shoulder's speed. The base parameters are
-found once, from the regressor at random samples of the workspace (STRUCTURE_SAMPLES,
-columns scaled to unit norm), by QR without pivoting of its columns in a fixed order of
-preference (the order of the fields above): a column is independent where the diagonal of R
-keeps more than RANK_TOLERANCE of the column's norm (measured: 29 independent columns above
-7e-3, the 12 others below 1e-15), and each dependent column is the least-squares combination
-of the independent ones. Each base parameter is then an independent parameter plus its
-combination of dependent ones, and the dataset's samples determine it by ordinary least
-squares, once per candidate tanh width (WIDTHS), the width with the smallest
-residual kept; a base parameter whose whole share of the forces lies below the residual keeps
-its nominal value (`_essential`: the data cannot tell it from what the model misses).
+The inverse dynamics with motor friction are linear in 41 parameters: F = W(pos, vel, acc)
+theta. QR of the regressor's columns (STRUCTURE_SAMPLES, RANK_TOLERANCE) finds the identifiable
+base parameters; ordinary least squares fits them once per tanh width (WIDTHS), with standard
+uncertainties. The deployed parameter vector is the physical one nearest the nominal with
+exactly those base parameters, or, where none exists, the nearest in force (bounded least
+squares), and the report says by how much it differs.
 
-The standard uncertainty of each base parameter is the square root of the diagonal of
-s^2 (W1^T W1)^-1, s^2 the residual variance over both axes: it supposes independent residuals,
-which filtered samples are not, so it is a lower bound (samples are thinned to MAX_SAMPLES,
-evenly spaced, which helps a little). To deploy, the parameter vector with exactly the
-identified base parameters nearest to the nominal one (each change relative to its nominal
-value) is fed to the same rigid-body feedforward as the nominal one
-(controllers.feedforward.rigid_body_force): any vector with those base parameters gives the
-same forces, and the nearest keeps the physical ones positive (an upper arm's inertia alone
-would turn negative if it took up the change of its group). Where no physical vector has them
-(few, short trajectories: a negative damping), the physical one whose forces on the samples
-come nearest is deployed (bounded least squares), and the report says by how much it differs.
+Docs: "Learning", section The identified rigid-body model (docs/explanation/learning.md).
 """
 
 from __future__ import annotations

@@ -1,34 +1,14 @@
 """`flexff ilc`: iterative learning control on a loop's one reference, the best feedforward
 force for that reference and so the limit a learned feedforward can be measured against.
 
-Trial 0 runs the loop under PID alone; after each trial the learning filter (learning.
-ilc_filter) turns the force the plant received and the tracking error into the next trial's
-feedforward force Fx_ff, Fy_ff, which the next trial reads as a CSV time table (a [[source]]
-of kind "csv" feeding the controller's Fx_ff, Fy_ff; the loop's own feedforward, if any, is
-replaced). Every trial runs the one run path (cosim.scenario, cosim.run) in this process.
+Trial 0 runs the loop under PID alone; after each trial the learning filter (learning.ilc_filter)
+gives the next trial's feedforward force, read as a CSV [[source]]. Every trial runs the one
+run path (cosim.scenario, cosim.run), with a fresh noise seed. The folder gets each trial's
+table, feedforward.csv (the best trial's force), ilc.json and e2.png, written as each trial
+ends, so an interrupted iteration continues. ilc.json's `noise_floor` is the part of e2 that
+the loop's encoders cause (learning.ilc_loops).
 
-A built-in plant with encoder noise gets a fresh noise seed in every trial (the loop's seed
-+ 1 + trial), so that the iteration learns what repeats, not one noise sequence; a run of the
-result with the loop's own seed is one the iteration never saw.
-
-The output folder holds
-  tables/trial-NNN.csv  the feedforward force trial NNN ran with (trial-000: zero)
-  feedforward.csv       the force of the best trial (lowest e2 over both axes): a table any
-                        run can use (learning.loop.with_feedforward_table)
-  ilc.json              the loop, the filter's cutoff, and each trial's seed, e2, einf, rms
-                        and ratio PID alone / trial per axis, the best trial, and the loop's
-                        noise floor (noise_floor)
-  e2.png                e2 per axis against trial, with the noise floor
-The noise floor is the part of e2 that the built-in plant's encoder noise and quantization
-cause: the best force run on the loop (its own seed) with them and without, the e2 of the
-difference of the two errors. No feedforward removes it, for the noise does not depend on the
-reference: a feedforward's e2 is about the root of its own error's square plus the floor's
-(hardware stand-in, evaluation reference: the ILC force gives e2 x 0.94e-6 with the noise,
-0.064e-6 without, the floor is 0.93e-6; the identified model's 2.69e-6 is 2.55e-6 without).
-When the limit lies on the floor, the encoders, not the feedforward, bound the tracking.
-
-Each is written as its trial ends: an interrupted iteration keeps every finished trial, and
-the same command again continues after the last one.
+Docs: "ILC and the noise floor" (docs/explanation/ilc-noise-floor.md).
 """
 
 from __future__ import annotations

@@ -1,34 +1,13 @@
 """The learning filter of iterative learning control (learning.ilc): from one trial's force and
 error to the next trial's feedforward force.
 
-The update is f_{j+1} = Q (f_j + L e_j), with e_j = reference - true position of trial j and
-L = C + P^-1 the inverse of the loop's process sensitivity J = P / (1 + P C):
+The update is f_{j+1} = Q (u_j + P^-1 e_j): u_j the force the plant received (feedforward plus
+the controller's recorded feedback), P^-1 e_j the rigid-body inverse dynamics along the
+reference less along the trial's path, and Q a zero-phase Butterworth low-pass (filtfilt) that
+keeps the iteration away from what the rigid model misses. The iteration converges in the
+2-norm where |Q S (1 - P / P_model)| < 1 at every frequency.
 
-- C e_j is the loop's own controller acting on the error: its recorded feedback force F_fb of
-  trial j (exactly what it computed, notch, gains and all);
-- P^-1 e_j is the rigid-body model of the loop's plant (its built-in plant's parameters and
-  friction, the tool's mass at the wrist; the nominal model for a plant FMU by path): the
-  force its inverse dynamics F(pos, vel, acc) needs along the reference less the force it
-  needs along the trial's path, F(r, r', r'') - F(r - e, r' - e', r'' - e''). For a small
-  error that is the model linearised along the reference, the 2x2 time-varying operator
-  M(t) e'' + D(t) e' + K(t) e, so the position-dependent mass and stiffness and the coupling
-  between x and y are in it; the difference itself keeps the motor friction right where a
-  linearisation fails: at a reversal the friction's slope is steep, and a trial's speed error
-  of a few mrad/s would turn it into a spike of force that the next trial pays for.
-
-So f_{j+1} = Q (u_j + P^-1 e_j), with u_j = f_j + F_fb the force the plant received: the force
-that would have moved it along the reference, estimated from the one that moved it. In the
-linear picture 1 - L J = S (1 - P / P_model): the error shrinks each trial where the model
-is good or the loop gain high, and the iteration converges monotonically in the 2-norm where
-|Q(w) S(w) (1 - P(w) / P_model(w))| < 1 at every frequency.
-
-Q is a zero-phase low-pass: a 4th-order Butterworth filter run forward and backward
-(scipy.signal.filtfilt), |Q| = 1 / (1 + (f / fc)^8) with no phase lag, so it never shifts the
-learned force in time. It keeps the iteration away from what the rigid model misses: at the
-hardware plant's tool mode near 40 Hz, |1 - P / P_model| reaches about 6 (a 50 g tool on a
-2 % damped mount, a fifth of the wrist's effective mass), and the default fc = 20 Hz cuts it
-to |Q| = 0.004, while the references' content (their circles at 2 Hz and below) passes with
-|1 - Q| < 1e-7: the converged error is not limited by Q there.
+Docs: "ILC and the noise floor" (docs/explanation/ilc-noise-floor.md).
 """
 
 from __future__ import annotations

@@ -1,34 +1,12 @@
 """`flexff data import`: logs of a real machine (CSV or MATLAB .mat) as a dataset folder.
 
-Each file is one trajectory, named by its file name without suffix. Columns (CSV: a header row
-naming them; .mat: variables of those names, vectors): `time` [s], `theta_s1..3` [rad, the
-shoulder angles as flexff's plant gives them: the wrist at the centre at the home angles],
-`Fx`, `Fy` [N] (the force applied to the wrist) are required; the reference `x_ref .. ay_ref`
-is optional; other columns are ignored. MATLAB v4/v5/v7 files are read by scipy, v7.3 files
-(HDF5) by h5py where it is installed.
+Each file is one trajectory. Everything is checked before anything is written, and an error
+names the file, the column and the row. Logs are resampled to the dataset's rate (kept, plain
+decimation, or linear interpolation). What the format needs and the logs lack (the true
+position, a missing reference signal) is derived and marked `derived`; training never reads a
+derived signal. The folder is written under a temporary name and renamed at the end.
 
-Everything is checked before anything is written, and an error names the file, the column and
-the row (`data row N`: 1-based, the CSV header not counted; a CSV error names its line too): a
-missing column, NaN or Inf, time not strictly increasing, a sample interval more than 1 % off
-the file's median, fewer samples than one training window (learning.presets), encoder angles
-that no wrist position fits.
-
-Time is counted from each log's first sample (its own first time is kept in the manifest).
-The dataset's rate is `rate` or the logs' own (which must agree to 1 %; rounded to a whole
-number of Hz where that changes it by at most 0.1 %). A log already sampled
-at that rate (to the dataset loader's 1e-6) is kept bit for bit; one at a whole multiple keeps
-every n-th sample (plain decimation, as data collection); any other is interpolated linearly
-onto a uniform grid from its first time.
-
-What the format needs and the logs do not hold is derived, and marked so in the trajectory's
-manifest entry (`derived`): the true position x, y from the encoders by the nominal forward
-kinematics (three encoders, least squares), and a missing reference signal: a position from
-the derived position, a velocity or acceleration by a cubic Savitzky-Golay filter over
-log_files.SMOOTHING_S of the reference position, as cosim.references.read_csv derives them. Training
-reads only the encoders and the forces (learning.dataset.TRAINED), never a derived signal.
-
-The folder is written under a temporary name beside `out` and renamed at the end, so an error
-leaves `out` as it was.
+Docs: "Import a machine's logs" (docs/how-to/import-logs.md).
 """
 
 from __future__ import annotations

@@ -3,24 +3,11 @@ optionally jerk) and its directions of motion, from one CasADi function that tra
 evaluates on the filtered measured motion and the feedforward FMU generates into C on the
 reference.
 
-Preprocessing, every choice a setting (MachineFeatures) whose default comes from the data: the
-measured positions, optionally counted in steps of `quantization` and given white noise
-(training only), pass a zero-phase Butterworth low-pass at MOTION_PER_CUTOFF times the
-labels' corner, velocity, acceleration and jerk come by central differences, and the features
-of that motion then pass the labels' own low-pass with the efforts (`cutoff_hz`; default
-`data_cutoff`: twice the frequency under which 99 % of the references' velocity energy lies,
-Hann windowed, at most a twentieth of the rate; parallel filtering, as robot identification
-filters its regressor); both are decimated to the model rate (default: the data rate divided
-down to at least MODEL_RATE_PER_CUTOFF times the corner). A direction of motion is tanh(v / w)
-for widths w that are fractions of the axis's velocity limit: Coulomb friction steps with it,
-which no smooth function of the motion holds (controllers.machine_features defines them).
+Every preprocessing choice is a setting of MachineFeatures whose default comes from the data:
+the low-pass corners (`cutoff_hz`, `data_cutoff`), the model rate, the direction widths and
+`lead_s`, the zero-order hold's half-sample lead between effort and motion.
 
-A digital controller holds each effort over the step after its sample, so the effort sampled
-at t acts on the motion at t + lead (`lead_s`, default half a sample: a zero-order hold). The
-labels pair each sample of the motion with the effort commanded `lead_s` before it, and the
-feedforward evaluates its model that far ahead on the reference. Measured on the drive example
-(identified model, a reference at the loop's rate, a 7.5 Hz corner): e2 128x PID alone
-without, 255x with.
+Docs: "Learning", section Any other machine (docs/explanation/learning.md).
 """
 
 from __future__ import annotations

@@ -1,28 +1,13 @@
 """The networks: LSTM, CNN-LSTM and TCN as in the thesis, and the residual net of the pgnn.
 
-Every network maps scaled features (batch, time, n_features) to scaled outputs
-(batch, time, n_outputs: 2 forces, or 3 currents) and is causal. Each one takes and returns
-an explicit state, a tuple of tensors, so that the same forward serves training (truncated
-backpropagation through time carries the state from one chunk to the next), whole sequences
-(zero initial state) and the step-by-step form exported to ONNX (one sample per call):
+Every network maps scaled features (batch, time, n_features) to scaled outputs and is causal.
+Each takes and returns an explicit state (LSTM (h, c); TCN an input buffer; CNN-LSTM both),
+so one forward serves truncated backpropagation, whole sequences and the step form exported
+to ONNX. Causal padding is done once, at the input (`CausalHistory`). A TCN of kernel k and L
+levels sees R = 1 + (k - 1) (2^L - 1) samples; the thesis's eq. (3.4) counts one more.
+Initialization follows Keras's defaults.
 
-- LSTM: (h, c), each (layers, batch, hidden);
-- TCN: a buffer of the last `history` = receptive field - 1 inputs, (batch, features, history);
-- CNN-LSTM: the convolutions' input buffer, then the LSTM's (h, c).
-
-Causal padding is done once, at the input (`CausalHistory`): the buffer (zeros at the start)
-is put in front of the new samples, and every convolution after it is unpadded ("valid"), so
-an output never sees a later input and nothing needs chomping.
-
-TCN receptive field (samples of input one output depends on, the current one included), for
-kernel size k and one dilated convolution per level with dilations d_i = 1, 2, 4, ...:
-    R = 1 + (k - 1) * sum_i d_i = 1 + (k - 1) * (2^L - 1)
-The thesis preset (k = 3, L = 6, dilations 1 ... 32) gives R = 127. The thesis's eq. (3.4),
-R = 2^L (k - 1) = 128, counts one sample more than the network can see.
-
-Initialization as Keras (the thesis's framework) does by default: Glorot-uniform input weights
-(convolutions, dense layers, LSTM input kernels), orthogonal recurrent kernels, zero biases
-and a unit forget-gate bias.
+Docs: "Learning", section The models (docs/explanation/learning.md).
 """
 
 from __future__ import annotations

@@ -1,45 +1,12 @@
 """Training configurations: the thesis's settings (`thesis`) and a CPU-friendly one (`fast`).
 
-`thesis` takes the thesis's sizes, learning rates and epoch counts (sections 5.3-5.5): data at
-its own rate, Adam at a constant 2e-5 for 1000 epochs (LSTM, CNN-LSTM) or 2e-4 for 1500 epochs
-(TCN); the thesis does not give batch sizes, so Keras's default of 32 is used. It is meant for a
-GPU.
+`thesis` takes the thesis's sizes, learning rates and epoch counts (sections 5.3-5.5), with
+Keras's default batch size; it is meant for a GPU. `fast` trains the same kinds of network on
+a 2-core CPU in one to two minutes each: a 100 Hz model rate, filter edges left out of the
+loss, a linear skip started at least squares, smaller networks, and Adam on a one-cycle
+schedule with early stopping. The slow demo test checks the outcome.
 
-`fast` trains the same kinds of network on a 2-core CPU in one to two minutes each, the four
-models of an evaluation side by side (learning.workers). Each choice, and what it was measured
-to do (closed-loop e2 ratio PID alone / feedforward, x / y, on the sim evaluation reference,
-with a 0.03 m circle and a spline beside it as references nobody trained for; the slow demo
-test, tests/flexff/test_cli.py, checks the outcome):
-
-- 100 Hz model rate (sim; the hardware environment's slow data 25 Hz, learning.evaluate):
-  the filtered data hold nothing above 5 Hz, and the feedforward FMU extrapolates linearly
-  between calls, which costs 2e-4 N rms on the sim reference at 100 Hz and 9e-4 N at 50 Hz.
-- Filter edges out of every loss (`edge_periods` = 2 corner periods at each end): the
-  zero-phase filter's start and end transients made motion and force disagree by up to
-  0.44 N where the rest of a trajectory agrees to 1e-4 N, and those few samples dominated the
-  loss. LSTM alone: test MSE 4.6e-6 -> 2.5e-7, e2 68 / 91 -> 146 / 287.
-- A linear skip (`linear_skip`, learning.models.LinearSkip): the full features' inverse
-  dynamics is nearly linear, but their covariance spans 16 decades, and gradient descent does
-  not reach in minutes what least squares solves at once. The skip starts from the
-  least-squares fit and the network learns the rest. On the nominal sim plant the rest is
-  small: the least-squares fit alone reaches a test MSE of 1.95e-8 and each network 1.96e-8
-  to 2.01e-8, and the closed-loop figures of the LSTM and CNN-LSTM agree to three digits. On
-  the hardware stand-in (friction, a tool mode, noisy encoders) the network part matters: on
-  the 63 full features the linear fit alone gave e2 11 / 11 there, the TCN with it 31 / 38,
-  the LSTM 27 / 31 (10 / 12 without the skip, after 60 epochs); with the motors' directions
-  among the features, which let the linear fit hold the Coulomb friction, the TCN 132 / 63
-  (wrist position from two encoders; learning.evaluate).
-- Smaller recurrent networks (one LSTM layer of 64 instead of two of 100): 0.8 s per epoch
-  against 2.3 s, and e2 68 / 91 against 48 / 56 after the same 120 epochs without skip.
-- TCN of 4 levels of 64 channels, batches of 16 windows: 0.9 s per epoch (128 channels:
-  2.3 s).
-- Adam with a one-cycle schedule peaking at 3e-3 (1e-2 was worse: 34 / 61), early stopping on
-  the validation loss (the best epoch is kept), batches of 4 trajectories for the recurrent
-  networks: at 100 Hz an epoch holds few windows, and the number of updates limits the
-  accuracy (all 44 trajectories per batch: 1.4 s per epoch and a validation loss 15 times
-  higher after 100 epochs).
-
-The pgnn is not in the thesis: a small TCN learning the residual over the rigid-body model.
+Why each choice: "Learning", section The fast preset (docs/explanation/learning.md).
 """
 
 from __future__ import annotations

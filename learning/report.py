@@ -1,28 +1,12 @@
 """The evaluation report of `flexff evaluate`: flexff's version of the thesis's Tables 5.2 / 6.2.
 
-Every scenario (PID alone, then PID with each feedforward) runs the thesis's evaluation
-reference; this module compares their tracking errors with each other and with the thesis's
-published numbers. Into the output folder go
+It compares the scenarios' tracking errors with each other, with the ILC limit and with the
+thesis's published numbers, and writes summary.json, table.md, paths.png, errors.png and
+forces.png. Where the loop has a noise floor, each axis also gets the feedforward's own share
+of e2 (cosim.metrics.own_share).
 
-  summary.json  rms, e2, einf and the improvement ratios (PID alone / scenario) per scenario
-                and axis (with an ILC limit, also e2 as a multiple of it; with a noise floor,
-                the feedforward's own share of e2), with the thesis's table for the same
-                environment, in SI units
-  table.md      the same as a Markdown table, in the thesis's scale (1e-4 or 1e-3), and
-                the own share of e2 per scenario and axis against the floor
-  paths.png     reference and each scenario's x-y path, with a zoom on where the feedforwards err
-                most
-  errors.png    tracking error over time per axis, one line per scenario
-  forces.png    feedback, feedforward and total force per axis of each feedforward scenario
-
-"sim" compares with Table 5.2 (nominal simulation), "hardware" with Table 6.2 (the real
-machine; flexff's "hardware" is the simulated plant with the real machine's non-ideal effects).
-
-Where the loop's encoders add a noise floor (learning.ilc.noise_floor: the hardware stand-in's
-noise and counting), no feedforward's e2 goes much below it, and e2 alone hides how far apart
-two feedforwards near it are. Each axis then also has its own share, sqrt(e2^2 - floor^2)
-(cosim.metrics.own_share): the error the feedforward itself leaves. Where e2 <= floor (the ILC
-limit can land there) the own share is 0 and the table says "at the floor".
+Docs: "File formats", section An evaluation folder (docs/reference/file-formats.md), and "ILC
+and the noise floor", section The own share (docs/explanation/ilc-noise-floor.md).
 """
 
 from __future__ import annotations

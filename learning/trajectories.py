@@ -1,45 +1,13 @@
 """The trajectory sets that data collection runs (thesis, sec. 4.3), as plain data.
 
-Each trajectory is a name, a split, a [reference] table that cosim.config.parse_config accepts
-(JSON-ready: numbers and lists only), the plant variant and the seed of its encoder noise.
-The sets are drawn from seeded numpy Generators, so they are the same on every machine.
+Each trajectory is a name, a split, a [reference] table that cosim.config.parse_config
+accepts, the plant variant and its noise seed, drawn from seeded numpy Generators so the sets
+are the same on every machine. `sim`: 44 training circles and splines and the thesis's 4 test
+trajectories on the nominal plant. `hardware`: the thesis's sec. 4.3.3 protocol, 60 training
+and 10 test trajectories. R_MAX stays inside the workspace to keep the currents clear of
+their limit. `draws` repeats the training protocol for more data; the test split stays.
 
-`sim` (nominal plant, 15 s each, recorded at 1 kHz):
-  - 30 training circles (eq. 4.1, about the centre): 20 start at rest on the circle, 10 start at
-    the centre and reach it by a skew-sine line (2.5 s), rest 0.5 s, then circle for 12 s, as
-    the thesis's figure 4.3c. Mean frequency (turns / circle time) and radius are stratified over
-    [1/15, 1] Hz and [R_MIN, R_MAX] (each stratum used once), start angles are multiples of
-    pi/4, half run clockwise;
-  - 14 training splines: closed periodic cubic splines through 4-6 random points, 1-3 laps;
-    the plant starts at rest on the first point, the reference moves off at once;
-  - 4 test trajectories of the thesis's sec. 4.3.2: circles of 0.01 m at 0.93 Hz, 0.043 m at
-    0.367 Hz and 0.02761 m at 0.632 Hz (start angles and directions are ours: the thesis gives
-    none), and one spline.
-`hardware` (hardware plant, 100 s each, recorded at 1 kHz and saved at 100 Hz): the thesis's
-sec. 4.3.3 protocol, every run from the centre: a 21 s line to the start point, 1 s at rest, 75 s
-of circle (1-22 turns) or of spline laps (1-10), 3 s at rest. 60 training trajectories (39
-circles, 21 splines) and the 10 test ones the thesis lists: circles at 0.066, 0.08, 0.09, 0.106,
-0.265 and 0.28 Hz (radii inside the training range, start angles between the training ones)
-and 4 splines.
-
-Why R_MAX = 0.045 m and not the whole 0.05 m disc: the flexures pull the wrist back to the
-centre, and holding it at rest at radius r takes a current that grows about linearly with r, to
-8.1 A at the 0.05 m edge in its weakest direction (limit: i_max = 10 A). Every skew-sine circle
-and every line comes to rest on its path, so the margin below the edge keeps the motion's own
-current on top of the holding current clear of the limit; a saturated run's recorded controller
-force would no longer be the force acting on the plant. Spline points are drawn within
-SPLINE_POINT_RADIUS and a spline is drawn again if its overshoot leaves R_MAX.
-
-More draws of a set's training protocol (`draws`, `flexff data collect --draws N`) give more
-data of the same kind; the test split and the first draw stay the set itself, so figures stay
-comparable and a folder of fewer draws is completed rather than collected again. Why: the
-hardware set leaves the black-box networks short of data. With 8 draws (480 training
-trajectories; `flexff evaluate --env hardware --models lstm cnn-lstm tcn --epochs 30`) e2
-ratios x / y on the evaluation reference went LSTM 114 / 121 -> 134 / 157, CNN-LSTM
-104 / 61 -> 65 / 97, TCN 83 / 71 -> 140 / 145, on the test split (geometric means) from 40-43
-/ 47-53 to 52-61 / 56-64, while the identified rigid-body model, whose 41 columns already fit,
-stayed at 218 / 163 -> 220 / 168 and 194 / 199 -> 199 / 205. Sixteen draws at the same
-number of training steps (15 epochs) gave no more: LSTM 165 / 148, TCN 111 / 134.
+Docs: "Learning", section The data (docs/explanation/learning.md).
 """
 
 from __future__ import annotations
@@ -57,7 +25,7 @@ from flexff.learning.dataset import SETS
 
 STEP = 1e-3  # s: the co-simulation step of every run
 R_MIN = 0.007  # m: smallest circle radius (seed)
-R_MAX = 0.045  # m: largest radius any training trajectory reaches (see the module docstring)
+R_MAX = 0.045  # m: largest radius any training trajectory reaches (docs: Learning, The data)
 SPLINE_POINT_RADIUS = 0.04  # m: spline points are drawn inside this disc
 MIN_CHORD = 0.006  # m: consecutive spline points (and the last and first) at least this apart
 ANGLES = 8  # training start angles: multiples of 2 pi / ANGLES
@@ -115,7 +83,7 @@ def trajectory_set(name: str, draws: int = 1) -> TrajectorySet:
 
     `draws` > 1 draws the set's training protocol that many times: the first draw and the
     test split are the set itself, draw j adds training trajectories named '<name>-draw<j>'
-    from generators of their own (more data of the same kind: see the module docstring).
+    from generators of their own (more data of the same kind).
     """
     builders = {"sim": _sim_set, "hardware": _hardware_set}
     if name not in builders:

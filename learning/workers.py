@@ -1,23 +1,13 @@
 """Training several models side by side, one process per core (per GPU on CUDA), with a
 progress bar each.
 
-The networks' operations are small, so one model gains little from a second thread (and loses
-much when that thread waits for a busy core, learning.threads); the models of an evaluation
-are independent, so they train in parallel processes instead, one thread each, the most
-expensive first so that the cores finish together. Measured on the 2-core machine: the demo's
-four models took 265 s one after the other on two threads and about 130 s side by side.
+The models of an evaluation are independent, so they train in parallel processes, one thread
+each, the most expensive first. Workers report each epoch through a queue, die with this
+process, and leave run folders that resume from their last checkpoint. On a Dask cluster the
+runs go through cosim.executor to workers that see the same file system.
 
-A worker reports each epoch through a queue; this process draws the bars.
-
-On CUDA the runs take one process per GPU instead (learning.devices), each worker bound to its
-own GPU before it trains, and the cores divided among those processes. Workers die with
-this process (even by SIGKILL), and what they finished is kept: every run folder resumes from
-its last checkpoint (learning.train).
-
-On a Dask cluster (`scheduler`) the runs go to its workers through cosim.executor, the one
-executor of runs and collection; the workers must see the same file system (the dataset and
-run folders). A run's result depends on its settings, data and thread count only, so the same
-jobs on the same number of threads give the same weights here and there.
+Docs: "Learning", section Training side by side (docs/explanation/learning.md), and "Use a
+GPU" (docs/how-to/gpu.md).
 """
 
 from __future__ import annotations

@@ -1,0 +1,34 @@
+"""Every module of the package has a docstring of at most 15 lines: what the module is for and
+which docs page holds the detail (issue 42). The detail lives in docs/, not in the code."""
+
+import ast
+
+from tests.helpers import REPOSITORY
+
+MAX_LINES = 15
+PACKAGES = ("fmu", "cosim", "learning", "controllers", "plant", "machines")
+
+
+def _modules():
+    for package in PACKAGES:
+        yield from sorted((REPOSITORY / package).rglob("*.py"))
+    yield from sorted((REPOSITORY / "flexff").glob("*.py"))
+
+
+def test_the_walk_finds_the_package():
+    names = {p.relative_to(REPOSITORY).as_posix() for p in _modules()}
+    assert {"cosim/master.py", "learning/evaluate.py", "flexff/cli.py",
+            "machines/__init__.py"} <= names
+
+
+def test_every_module_docstring_is_present_and_short():
+    missing, long = [], []
+    for path in _modules():
+        name = path.relative_to(REPOSITORY).as_posix()
+        docstring = ast.get_docstring(ast.parse(path.read_text(), filename=name))
+        if not docstring:
+            missing.append(name)
+        elif len(docstring.splitlines()) > MAX_LINES:
+            long.append(f"{name}: {len(docstring.splitlines())} lines")
+    assert not missing, "modules without a docstring: " + ", ".join(missing)
+    assert not long, f"module docstrings over {MAX_LINES} lines: " + ", ".join(long)
