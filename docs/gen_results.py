@@ -194,6 +194,7 @@ def bench_markdown() -> str:
         if isinstance(f, dict):
             out.append(f"| {name} | {figure(f['us_per_step'])} | "
                        f"{figure(f['ratio_over_without_feedforward'])} |")
+    out += network_call_markdown(bench.get("network_call"))
     rt = bench["realtime"]
     out += ["", f"### Paced at 1 kHz on one core ({rt['reference']})", "",
             "| loop | 1 kHz task TET p50 / p99 / max [µs] | overruns | network call p50 / p99 "
@@ -206,6 +207,34 @@ def bench_markdown() -> str:
         call = f"{figure(calls['p50'])} / {figure(calls['p99'])}" if calls else "–"
         out.append(f"| {name} | {tet} | {r['overruns']} | {call} |")
     return "\n".join(out) + "\n"
+
+
+RUNTIME_NAMES = {"c": "generated C", "onnxruntime": "onnxruntime"}
+
+
+def network_call_markdown(network: dict[str, Any] | None) -> list[str]:
+    """The network's time per call p50 / p99 and the FMU's size zipped, per model and runtime,
+    and C over onnxruntime (no lines for a bench without them)."""
+    if not network:
+        return []
+    runtimes = [r for r in RUNTIME_NAMES if any(r in m for m in network["models"].values())]
+    both = len(runtimes) == len(RUNTIME_NAMES)
+    head = ["model", *(f"{RUNTIME_NAMES[r]}: p50 / p99 [µs]" for r in runtimes),
+            *(f"{RUNTIME_NAMES[r]}: FMU zipped [MB]" for r in runtimes),
+            *(["C over onnxruntime, p50 / p99"] if both else [])]
+    out = ["", f"### The network's time per call ({network['reference']}, {network['mode']} "
+           f"mode, untrained models)", "", "| " + " | ".join(head) + " |",
+           "|---|" + "---:|" * (len(head) - 1)]
+    for kind, model in network["models"].items():
+        cells = [SCENARIOS.get(kind, kind),
+                 *(f"{figure(model[r]['p50_us'])} / {figure(model[r]['p99_us'])}"
+                   for r in runtimes),
+                 *(figure(model[r]["fmu_bytes"] / 1e6) for r in runtimes)]
+        if both:
+            ratio = model["ratio_c_over_onnxruntime"]
+            cells.append(f"{figure(ratio['p50'])} / {figure(ratio['p99'])}")
+        out.append("| " + " | ".join(cells) + " |")
+    return out
 
 
 def processes_markdown() -> str:

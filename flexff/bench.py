@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import onnx
 
+from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.cosim.config import parse_config
 from flexff.cosim.engine import idle_timing
 from flexff.cosim.floor import run_c_loop
@@ -20,11 +21,12 @@ from flexff.cosim.metrics import tracking_metrics
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import Recording
 from flexff.cosim.run import run_config, simulate
-from flexff.cosim.scenario import Scenario, resolve
+from flexff.cosim.scenario import Scenario, reference_signals, resolve
 from flexff.cosim.schema import RunConfig
 from flexff.cosim.timing import Pacing
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
+from flexff.fmu.network_runtime import RUNTIMES
 from flexff.fmu.onnx_fmu import onnx_system
 from flexff.fmu_bench import bench_fmu
 from flexff.plant.system import plant_system
@@ -124,6 +126,70 @@ def learned_feedforward_benchmark(folder: Path, models: dict[str, Path],
                 "real_time_factor": stop / wall,
                 "ratio_over_without_feedforward": wall / base}
     return results
+
+
+def network_call_benchmark(folder: Path, models: dict[str, Path],
+                           runtimes: tuple[str, ...] = RUNTIMES,
+                           repeats: int = 3) -> dict[str, Any]:
+    """The network's time per call in the learned feedforward FMU (step mode, 1 ms) with each
+    model, its network computed by each of `runtimes` (generated C, onnxruntime): the FMU
+    alone, unpaced, fed the thesis's evaluation reference (15 s: a call at initialization,
+    then one per model period), its call times read from the FMU's own histogram
+    (`flexff_network_times`: p50 and p99 are the upper edges of its bins, 20 per decade); of
+    `repeats` runs, the runtimes alternated, the one with the lowest p99 (a shared machine's
+    other work lands in a run's tail); each FMU's size zipped; per model, C over onnxruntime
+    of p50 and p99."""
+    config = parse_config({"reference": {"kind": CLOSED_LOOP_REFERENCE}}, name="bench")
+    sources, steps, step = reference_signals(config), config.steps, config.step
+    results: dict[str, Any] = {"reference": CLOSED_LOOP_REFERENCE, "steps": steps,
+                               "mode": "step", "repeats": repeats, "models": {}}
+    for kind, model in models.items():
+        fmus = {runtime: build_fmu(learned_feedforward_system(model, step, runtime=runtime),
+                                   folder / f"network-{kind}-{runtime}.fmu")
+                for runtime in runtimes}
+        runs: dict[str, list[dict[str, float]]] = {runtime: [] for runtime in runtimes}
+        for _ in range(repeats):
+            for runtime, fmu in fmus.items():
+                with Master([ResolvedFmu("feedforward", fmu)], list(sources), step) as master:
+                    timing = master.run(sources, steps, progress=False).timing
+                runs[runtime].append(timing.network_calls["feedforward"])
+        figures: dict[str, Any] = {}
+        for runtime, fmu in fmus.items():
+            times = min(runs[runtime], key=lambda t: (t["p99"], t["p50"]))
+            figures[runtime] = {"calls": int(times["calls"]), "p50_us": times["p50"],
+                                "p99_us": times["p99"], "max_us": times["max"],
+                                "fmu_bytes": fmu.stat().st_size}
+        if {"c", "onnxruntime"} <= set(figures):
+            figures["ratio_c_over_onnxruntime"] = {
+                q: figures["c"][f"{q}_us"] / figures["onnxruntime"][f"{q}_us"]
+                for q in ("p50", "p99")}
+        results["models"][kind] = figures
+    return results
+
+
+def network_call_table(figures: dict[str, Any]) -> str:
+    """network_call_benchmark's figures as text: per model and runtime the time per call p50 /
+    p99 [µs] and the FMU's size zipped [MB], and C over onnxruntime."""
+    runtimes = [r for r in RUNTIMES if any(r in m for m in figures["models"].values())]
+    both = len(runtimes) == 2
+    label = {"c": "C", "onnxruntime": "onnxruntime"}
+    rows = [["model", *(f"{label[r]} {what}" for r in runtimes
+                        for what in ("p50 / p99 [µs]", "FMU [MB]")),
+             *(["C / onnxruntime p50 / p99"] if both else [])]]
+    for kind, model in figures["models"].items():
+        row = [kind]
+        for r in runtimes:
+            row += [f"{model[r]['p50_us']:.3g} / {model[r]['p99_us']:.3g}",
+                    f"{model[r]['fmu_bytes'] / 1e6:.3g}"]
+        if both:
+            ratio = model["ratio_c_over_onnxruntime"]
+            row.append(f"{ratio['p50']:.3g} / {ratio['p99']:.3g}")
+        rows.append(row)
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(cell.ljust(w) if i == 0 else cell.rjust(w)
+                       for i, (cell, w) in enumerate(zip(row, widths))) for row in rows]
+    return "\n".join([f"network time per call ({figures['reference']}, {figures['mode']} mode)",
+                      *lines])
 
 
 HARDWARE_REFERENCE = "thesis-hardware-eval"  # the paced loops' reference, 100 s
@@ -321,7 +387,8 @@ def run_benchmarks(steps: int = 20000, repeats: int = 5,
                    realtime_seconds: float | None = None) -> dict[str, Any]:
     """Cost of a 1 ms plant step through fmpy's low-level API and in plain C, per variant, of
     the closed loop through our master, libcosim and C, of the closed loop with each learned
-    feedforward FMU (`models`: kind -> .onnx; default: untrained exports), the paced
+    feedforward FMU (`models`: kind -> .onnx; default: untrained exports) and the time per
+    call of each model's network in generated C and in onnxruntime, the paced
     hardware evaluation loop with the TCN and LSTM feedforward (`realtime_seconds` of its
     100 s; default all) with its floors, and that loop without feedforward paced with its
     record written and with the least record (recording_benchmark)."""
@@ -339,6 +406,7 @@ def run_benchmarks(steps: int = 20000, repeats: int = 5,
         results["closed_loop"] = closed_loop_benchmark(Path(tmp))
         models = models or untrained_models(Path(tmp))
         results["learned_feedforward"] = learned_feedforward_benchmark(Path(tmp), models)
+        results["network_call"] = network_call_benchmark(Path(tmp), models)
         results["realtime"] = realtime_benchmark(Path(tmp), models, realtime_seconds)
         results["realtime"]["recording"] = recording_benchmark(Path(tmp), realtime_seconds)
     return results

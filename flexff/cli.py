@@ -213,15 +213,19 @@ def _bench(args: argparse.Namespace) -> int:
         return _print_json(process_benchmark(Path(args.processes).resolve(), steps,
                                              repeats=args.process_repeats,
                                              ecos_python=args.ecos_python), args.output)
-    from flexff.bench import run_benchmarks
+    from flexff.bench import network_call_table, run_benchmarks
 
     models = None
     if args.models:
         models = {p.stem: p for p in sorted(Path(args.models).glob("*.onnx"))}
         if not models:
             raise InputError(f"no .onnx files in {args.models}")
-    return _print_json(run_benchmarks(steps=args.steps, models=models,
-                                      realtime_seconds=args.realtime_seconds), args.output)
+    figures = run_benchmarks(steps=args.steps, models=models,
+                             realtime_seconds=args.realtime_seconds)
+    status = _print_json(figures, args.output)
+    # the JSON is stdout's (for a pipe); the table is for whoever reads along
+    print(network_call_table(figures["network_call"]), file=sys.stderr, flush=True)
+    return status
 
 
 def _print_json(data: dict[str, Any], output: str | None) -> int:
@@ -794,7 +798,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      "measured or noisy encoders) or sim (ideal encoders)")
     identification.set_defaults(handler=_identify)
 
-    bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON")
+    bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON (the "
+                                "network's time per call also as a table, on stderr)")
     bench.add_argument("--steps", type=int, default=20000, help="steps per timed loop")
     bench.add_argument("-o", "--output", help="also write the JSON to this file")
     bench.add_argument("--processes", metavar="FILE.fmu",

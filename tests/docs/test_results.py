@@ -144,6 +144,18 @@ def test_the_benchmarks_page_shows_the_bench(site):
             shown = [_numbers(c)[0] for c in rows[name]]
             assert _close(shown[0], f["us_per_step"]), name
             assert _close(shown[1], f["ratio_over_without_feedforward"]), name
+    network = bench["network_call"]
+    rows = _rows(page, "model", "generated C: p50 / p99 [µs]")
+    assert set(rows) == {gen_results.SCENARIOS[kind] for kind in network["models"]}
+    for kind, model in network["models"].items():
+        c_times, ort_times, c_size, ort_size, ratios = rows[gen_results.SCENARIOS[kind]]
+        for shown, figures, unit in ((c_times, model["c"], "_us"),
+                                     (ort_times, model["onnxruntime"], "_us"),
+                                     (ratios, model["ratio_c_over_onnxruntime"], "")):
+            p50, p99 = _numbers(shown)
+            assert _close(p50, figures[f"p50{unit}"]) and _close(p99, figures[f"p99{unit}"]), kind
+        assert _close(float(c_size), model["c"]["fmu_bytes"] / 1e6), kind
+        assert _close(float(ort_size), model["onnxruntime"]["fmu_bytes"] / 1e6), kind
     rows = _rows(page, "loop")
     for name in ("tcn", "lstm", "idle"):
         r = bench["realtime"][name]

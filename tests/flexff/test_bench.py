@@ -3,7 +3,7 @@ tests/flexff/test_cli.py)."""
 
 import pyarrow.parquet as pq
 
-from flexff.bench import recording_benchmark
+from flexff.bench import network_call_table, recording_benchmark
 
 
 def test_the_recording_benchmark_runs_the_loop_with_its_record_on_and_off(tmp_path):
@@ -23,3 +23,23 @@ def test_the_recording_benchmark_runs_the_loop_with_its_record_on_and_off(tmp_pa
     assert kept["off"] == ["time"] and len(kept["on"]) > 30
     assert (tmp_path / "recording-on-0" / "path.png").is_file()
     assert not (tmp_path / "recording-off-0" / "path.png").exists()
+
+
+def test_the_network_call_table_lines_up_each_model_and_runtime():
+    """The bench's text table of the network's time per call: a row per model, with p50 / p99
+    and the FMU's size in each runtime, and C over onnxruntime."""
+    figures = {"reference": "thesis-eval", "mode": "step", "models": {
+        kind: {"c": {"p50_us": 7.94, "p99_us": 12.6, "fmu_bytes": 558255},
+               "onnxruntime": {"p50_us": 39.8, "p99_us": 79.4, "fmu_bytes": 13492110},
+               "ratio_c_over_onnxruntime": {"p50": 0.2, "p99": 0.158}}
+        for kind in ("lstm", "tcn")}}
+    title, head, *rows = network_call_table(figures).splitlines()
+    assert title == "network time per call (thesis-eval, step mode)"
+    assert head.split("  ")[0] == "model" and head.endswith("C / onnxruntime p50 / p99")
+    assert len({len(line) for line in (head, *rows)}) == 1  # columns aligned
+    for kind, row in zip(("lstm", "tcn"), rows):
+        assert row.split() == [kind, "7.94", "/", "12.6", "0.558", "39.8", "/", "79.4", "13.5",
+                               "0.2", "/", "0.158"]
+    only_c = {**figures, "models": {"lstm": {"c": figures["models"]["lstm"]["c"]}}}
+    head, row = network_call_table(only_c).splitlines()[1:]
+    assert "onnxruntime" not in head and row.split() == ["lstm", "7.94", "/", "12.6", "0.558"]

@@ -77,6 +77,18 @@ def test_bench_prints_json(tmp_path):
     for kind in ("lstm", "cnn-lstm", "tcn", "pgnn"):
         for mode in ("step", "precomputed"):
             assert learned[f"{kind}_{mode}"]["ratio_over_without_feedforward"] > 0
+    network = figures["network_call"]  # per model, its network in C and in onnxruntime
+    assert network["reference"] == "thesis-eval" and network["steps"] == 15000
+    for kind in ("lstm", "cnn-lstm", "tcn", "pgnn"):
+        model = network["models"][kind]
+        assert model["c"]["calls"] == model["onnxruntime"]["calls"] > 1500  # 15 s at 100 Hz
+        for runtime in ("c", "onnxruntime"):
+            assert 0 < model[runtime]["p50_us"] <= model[runtime]["p99_us"]
+        assert model["c"]["fmu_bytes"] < 1e6 < model["onnxruntime"]["fmu_bytes"]
+        assert model["ratio_c_over_onnxruntime"] == {  # speed is the bench's figure
+            q: model["c"][f"{q}_us"] / model["onnxruntime"][f"{q}_us"] for q in ("p50", "p99")}
+        assert f"\n{kind} " in result.stderr  # its row of the table
+    assert "network time per call (thesis-eval, step mode)" in result.stderr
     for kind in ("tcn", "lstm"):  # the paced hardware loop: 0.5 s at 1 kHz
         paced = figures["realtime"][kind]
         assert paced["period_us"] == 1000.0 and paced["overruns"] >= 0
