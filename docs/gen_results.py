@@ -273,7 +273,7 @@ def record(kind: str, source: Path, command: str, started: str, ended: str,
         data["ecos"] = data["ecos"].split(" for /")[0]
     (folder / source.name).write_text(json.dumps(data, indent=2) + "\n")
     plot = source.parent / "errors.png"
-    if kind == "demo" and plot.is_file():  # the run's picture, in 256 colours (a quarter)
+    if (kind == "demo" or kind.startswith("machines/")) and plot.is_file():  # in 256 colours
         from PIL import Image
 
         Image.open(plot).convert("RGB").quantize(256, Image.Quantize.MAXCOVERAGE).save(

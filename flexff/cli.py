@@ -80,8 +80,8 @@ def _evaluate_machine(args: argparse.Namespace, loop: Any) -> int:
     evaluate_machine(loop, args.output, args.models, args.preset, train, test, args.duration,
                      device=args.device, **({"epochs": args.epochs} if args.epochs else {}))
     print((Path(args.output) / "table.md").read_text())
-    print(f"results in {args.output}/ (summary.json, table.md, identified.json, data/, runs/, "
-          f"models/, fmus/, ilc/ for the limit)")
+    print(f"results in {args.output}/ (summary.json, table.md, errors.png, identified.json, "
+          f"data/, runs/, models/, fmus/, ilc/ for the limit)")
     return 0
 
 

@@ -8,7 +8,8 @@ exported and built into its feedforward FMU; then, on the loop's own
 reference (its sources), the loop runs under PID alone, with the identified model's
 feedforward, with each learned one, and iterative learning control finds the best
 feedforward for that one reference (the limit; learning.ilc). summary.json holds every run's
-e2, einf, rms per axis and its e2 ratio PID alone / scenario; table.md the ratios.
+e2, einf, rms per axis and its e2 ratio PID alone / scenario; table.md the ratios; errors.png
+each run's tracking error per axis.
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ from flexff.learning.machine_loop import loop_machine, with_feedforward, with_fe
 from flexff.learning.machine_train import fit_machine
 from flexff.learning.models import uses_prior
 from flexff.learning.presets import make_config
+from flexff.learning.report import plot_tracking_errors
 from flexff.learning.workers import worker_count
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")
@@ -101,8 +103,13 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     axes = machine_axes(machine)
     runs = {"pid": with_feedforward(loop),
             **{name: with_feedforward_fmu(loop, path) for name, path in fmus.items()}}
-    metrics = {name: tracking_metrics(simulate_config(run, progress=False), axes)
-               for name, run in runs.items()}
+    recordings = {name: simulate_config(run, progress=False) for name, run in runs.items()}
+    metrics = {name: tracking_metrics(rec, axes) for name, rec in recordings.items()}
+    plot_tracking_errors(
+        {name: rec.time for name, rec in recordings.items()},
+        {a.name: {name: a.error(rec.signals, a.columns(rec.signals))
+                  for name, rec in recordings.items()} for a in axes},
+        {a.name: a.unit for a in machine.axes}, out / "errors.png")
     limit = ilc(loop, out / "ilc", ilc_iterations, progress=progress, say=lambda _: None,
                 model=lambda _machine, _recording: identified.casadi_function())
     best = next(t for t in limit["trials"] if t["trial"] == limit["best"])

@@ -337,25 +337,38 @@ def plot_paths(recordings: Mapping[str, Recording], path: Path) -> Path:
 
 
 def plot_errors(recordings: Mapping[str, Recording], path: Path) -> Path:
-    """Tracking error per axis over time, one line per scenario. The scale is symmetric log
-    (linear up to the power of ten at or above the smallest scenario's peak error, logarithmic
-    beyond) so a feedforward that cuts the error fifty-fold is still readable next to PID
-    alone; lines with smaller errors are drawn on top."""
-    colors = _colors(recordings)
-    figure = Figure(figsize=(9, 6))
-    axes = figure.subplots(2, 1, sharex=True)
-    for ax, axis in zip(axes, AXES):
-        errors = {name: (rec[f"{axis}_ref"] - rec[axis]) * MM for name, rec in recordings.items()}
-        peaks = {name: float(np.max(np.abs(e))) for name, e in errors.items()}
-        for name, error in errors.items():
-            ax.plot(recordings[name].time, error, color=colors[name], lw=0.8,
-                    zorder=-peaks[name], label=SCENARIO_LABELS.get(name, name))
+    """The manipulator's tracking error per axis over time, one line per scenario
+    (plot_tracking_errors)."""
+    return plot_tracking_errors(
+        {name: rec.time for name, rec in recordings.items()},
+        {axis: {name: (rec[f"{axis}_ref"] - rec[axis]) * MM for name, rec in recordings.items()}
+         for axis in AXES}, dict.fromkeys(AXES, "mm"), path, SCENARIO_LABELS)
+
+
+def plot_tracking_errors(times: Mapping[str, np.ndarray],
+                         errors: Mapping[str, Mapping[str, np.ndarray]],
+                         units: Mapping[str, str], path: Path,
+                         labels: Mapping[str, str] | None = None) -> Path:
+    """Tracking error per axis (`errors`: axis -> scenario -> samples at `times[scenario]`, in
+    `units[axis]`) over time, one line per scenario. The scale is symmetric log (linear up to the
+    power of ten at or above the smallest scenario's peak error, logarithmic beyond) so a
+    feedforward that cuts the error fifty-fold is still readable next to PID alone; lines with
+    smaller errors are drawn on top."""
+    colors = {name: f"C{k}" for k, name in enumerate(times)}
+    labels = labels or {}
+    figure = Figure(figsize=(9, 1.2 + 2.4 * len(errors)))
+    axes = figure.subplots(len(errors), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (axis, by_scenario) in zip(axes, errors.items()):
+        peaks = {name: float(np.max(np.abs(e))) for name, e in by_scenario.items()}
+        for name, error in by_scenario.items():
+            ax.plot(times[name], error, color=colors[name], lw=0.8, zorder=-peaks[name],
+                    label=labels.get(name, name))
         smallest, largest = min(peaks.values()), max(peaks.values())
         if smallest > 0:
             ax.set_yscale("symlog", linthresh=10.0 ** math.ceil(math.log10(smallest)))
         if largest > 0:
             ax.set_ylim(-1.1 * largest, 1.1 * largest)
-        ax.set(ylabel=f"e_{axis} [mm]")
+        ax.set(ylabel=f"e_{axis} [{units[axis]}]")
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
     axes[0].set_title("tracking error (reference - true position)")

@@ -57,6 +57,7 @@ def test_a_3_axis_machine_runs_the_whole_workflow(tmp_path):
         assert summary["scenarios"]["identified"][axis]["e2_ratio"] > 5
         assert summary["scenarios"]["ilc"][axis]["e2_ratio"] > 5
     assert (tmp_path / "out" / "table.md").read_text().startswith("| axis | pid |")
+    assert (tmp_path / "out" / "errors.png").stat().st_size > 10_000  # a panel per axis
 
 
 def test_the_drive_example_through_the_command_line(tmp_path):
