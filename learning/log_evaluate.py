@@ -23,15 +23,13 @@ from flexff.controllers.linear_prior import LinearModel
 from flexff.cosim.recording import atomic_write
 from flexff.learning.dataset_files import Trajectory
 from flexff.learning.deploy import SIModel
-from flexff.learning.linear_model import write_linear_model
+from flexff.learning.linear_model import EDGE_PERIODS, write_linear_model
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
 from flexff.learning.machine_evaluate import MODELS, SUMMARY, identify_dataset, train_models
 from flexff.learning.machine_features import MachineFeatures, prepare
 from flexff.learning.machine_train import features_from_dict, prior_efforts
 from flexff.learning.run_folder import Run, load_run
 from flexff.learning.threads import torch_threads
-
-EDGE_PERIODS = 2.0  # corner periods left out at each end of a log (the filter's transients)
 
 
 def evaluate_logs(data_path: str | Path, out: str | Path, models: Sequence[str] = MODELS,
@@ -42,11 +40,14 @@ def evaluate_logs(data_path: str | Path, out: str | Path, models: Sequence[str] 
     data = load_machine_dataset(data_path)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    identified = identify_dataset(data)
+    features = MachineFeatures().resolved(data.sample_rate_hz,
+                                          [t.signals for t in data.split("train")],
+                                          data.description)
+    identified = identify_dataset(data, features)
     write_linear_model(identified, out / "identified.json")
     train_models(data, identified, out, models, preset, workers, progress, **overrides)
     test = data.split("test")
-    errors = {"identified": _identified_errors(data, identified, test)}
+    errors = {"identified": _identified_errors(data, identified, test, features)}
     for kind in models:
         errors[kind] = _network_errors(data, load_run(out / "runs" / kind), identified, test)
     axes = [a.name for a in data.description.axes]
@@ -70,11 +71,8 @@ def error_table(summary: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _identified_errors(data: MachineDataset, model: LinearModel, test: list[Trajectory]
-                       ) -> dict[str, float]:
-    features = MachineFeatures().resolved(data.sample_rate_hz,
-                                          [t.signals for t in data.split("train")],
-                                          data.description)
+def _identified_errors(data: MachineDataset, model: LinearModel, test: list[Trajectory],
+                       features: MachineFeatures) -> dict[str, float]:
     predicted = prior_efforts(model, test, data.sample_rate_hz, data.description, features)
     assert predicted is not None
     labels = [prepare(t.signals, data.sample_rate_hz, data.description, features)[1]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import copy
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -299,9 +299,9 @@ def _check_recordings(recordings: Mapping[str, Recording]) -> None:
                              f"run every scenario with the same communication step")
 
 
-def _colors(recordings: Mapping[str, Recording]) -> dict[str, str]:
+def _colors(scenarios: Iterable[str]) -> dict[str, str]:
     """One colour per scenario, the same in every figure."""
-    return {name: f"C{k}" for k, name in enumerate(recordings)}
+    return {name: f"C{k}" for k, name in enumerate(scenarios)}
 
 
 def plot_paths(recordings: Mapping[str, Recording], path: Path) -> Path:
@@ -354,7 +354,7 @@ def plot_tracking_errors(times: Mapping[str, np.ndarray],
     power of ten at or above the smallest scenario's peak error, logarithmic beyond) so a
     feedforward that cuts the error fifty-fold is still readable next to PID alone; lines with
     smaller errors are drawn on top."""
-    colors = {name: f"C{k}" for k, name in enumerate(times)}
+    colors = _colors(times)
     labels = labels or {}
     figure = Figure(figsize=(9, 1.2 + 2.4 * len(errors)))
     axes = figure.subplots(len(errors), 1, sharex=True, squeeze=False)[:, 0]
