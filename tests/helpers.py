@@ -16,6 +16,24 @@ REFERENCE_FMUS = REPOSITORY / "cosim" / "examples" / "reference-fmus"
 NETWORK_RTOL = 1e-6
 
 
+def train_tiny_models(folder: Path, sizes: dict, seed: int) -> Path:
+    """Small networks of each kind in `sizes` (kind -> architecture overrides), one epoch on a
+    small synthetic set, exported as `folder`/<kind>.onnx beside their run folders."""
+    from flexff.learning.export import export
+    from flexff.learning.synthetic import synthetic_dataset
+    from flexff.learning.threads import torch_threads
+    from flexff.learning.train import train
+
+    data = synthetic_dataset(folder / "data", n_train=3, n_test=1, duration=3.0, rate_hz=100.0,
+                             seed=seed)
+    with torch_threads():
+        for kind, architecture in sizes.items():
+            train(kind, "fast", data, folder / kind, progress=False, epochs=1, val_fraction=0.2,
+                  **architecture)
+            export(folder / kind, folder / f"{kind}.onnx")
+    return folder
+
+
 def workspace_points(rng: np.random.Generator, n: int, radius: float = 0.05) -> np.ndarray:
     """n points spread over the workspace disc, its boundary included (2 x n)."""
     r = radius * np.sqrt(rng.uniform(0, 1, n))

@@ -22,15 +22,12 @@ from flexff.cosim.scenario import resolve
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
 from flexff.learning.dataset import REFERENCE_SIGNALS
-from flexff.learning.export import export, session
+from flexff.learning.export import session
 from flexff.learning.rigid import rigid_forces
-from flexff.learning.synthetic import synthetic_dataset
-from flexff.learning.threads import torch_threads
-from flexff.learning.train import train
 from flexff.plant.references import thesis_evaluation
 from tests.fmu.test_network import running_sum_graph
 from tests.fmu_toys import LoggedSlave, status_of
-from tests.helpers import NETWORK_RTOL
+from tests.helpers import NETWORK_RTOL, train_tiny_models
 from tests.runners import run_fmu, run_fmu_libcosim
 
 STEPS = 600  # 0.6 s of the thesis evaluation reference at 1 kHz
@@ -42,15 +39,7 @@ TINY = {"lstm": {"hidden": 12}, "tcn": {"channels": 8, "levels": 2, "feature_set
 
 @pytest.fixture(scope="module")
 def models(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("learned")
-    data = synthetic_dataset(folder / "data", n_train=3, n_test=1, duration=3.0, rate_hz=100.0,
-                             seed=5)
-    with torch_threads():
-        for kind, sizes in TINY.items():
-            train(kind, "fast", data, folder / kind, progress=False, epochs=1, val_fraction=0.2,
-                  **sizes)
-            export(folder / kind, folder / f"{kind}.onnx")
-    return folder
+    return train_tiny_models(tmp_path_factory.mktemp("learned"), TINY, seed=5)
 
 
 @pytest.fixture(scope="module")

@@ -28,11 +28,9 @@ from flexff.fmu.onnx_fmu import onnx_system
 from flexff.fmu.validation import validate_fmu
 from flexff.learning.dataset import REFERENCE_SIGNALS
 from flexff.learning.export import export, run_steps, session
-from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.threads import torch_threads
-from flexff.learning.train import train
 from flexff.plant.references import thesis_evaluation
-from tests.helpers import REPOSITORY
+from tests.helpers import REPOSITORY, train_tiny_models
 from tests.runners import run_fmu
 
 TOLERANCE = 1e-5  # float32: |C - onnxruntime| relative to the largest |force|
@@ -49,14 +47,8 @@ KERNELS = REPOSITORY / "fmu" / "c"
 
 @pytest.fixture(scope="module")
 def models(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("cnet")
-    data = synthetic_dataset(folder / "data", n_train=3, n_test=1, duration=3.0, rate_hz=100.0,
-                             seed=7)
+    folder = train_tiny_models(tmp_path_factory.mktemp("cnet"), TINY, seed=7)
     with torch_threads():
-        for kind, sizes in TINY.items():
-            train(kind, "fast", data, folder / kind, progress=False, epochs=1, val_fraction=0.2,
-                  **sizes)
-            export(folder / kind, folder / f"{kind}.onnx")
         export(folder / "tcn", folder / "tcn-reference.onnx", inputs="reference")
     return folder
 
