@@ -128,6 +128,10 @@ KEYS: tuple[Key, ...] = (
         "The identified model's terms ([machine.prior])."),
     Key("machine", "log", "table", "the dataset's own names", "",
         "How the machine's logs name its signals ([machine.log])."),
+    Key("machine", "exact", "table", "{}", "",
+        'Start values ("instance.parameter" = number) with which the loop measures exactly, '
+        "such as an encoder's resolution at 0: ILC and evaluate measure the noise floor with "
+        "them."),
     Key("machine.axis", "name", "string", "required", "",
         "A letter, then letters or digits; names <axis>_ref, v<axis>_ref, ..."),
     Key("machine.axis", "unit", "string", '"m"', "", "The axis's position unit."),

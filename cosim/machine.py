@@ -11,6 +11,8 @@ the effort the loop commands (the labels), units, and the excitation limits (`ra
 `<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
 terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
 `[machine.log]` says how the machine's logs name these signals (LogMap: `flexff data import`).
+`exact` gives the start values (`"instance.parameter" = number`) with which a simulated loop
+measures exactly, such as an encoder's resolution at 0: the noise floor is measured with them.
 Every key is listed in KEYS; every error is a ConfigError naming `machine.key`.
 """
 
@@ -38,7 +40,7 @@ SCALAR_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 PRIOR_TERMS = ("inertia", "viscous", "coulomb", "coulomb_asymmetric", "offset")
 DEFAULT_PRIOR_TERMS = ("inertia", "viscous", "coulomb", "offset")
 KEYS = {
-    "machine": ("name", "axis", "prior", "log"),
+    "machine": ("name", "axis", "prior", "log", "exact"),
     "axis": ("name", "unit", "measured", "true", "feedforward", "effort", "effort_unit",
              "range", "velocity", "acceleration", "jerk"),
     "prior": ("terms", "extra", "coulomb_width"),
@@ -134,6 +136,7 @@ class Machine:
     axes: tuple[Axis, ...]
     prior: Prior = Prior()
     log: LogMap = LogMap()
+    exact: Mapping[str, float] = field(default_factory=dict)  # "instance.parameter" -> value
 
     def axis(self, name: str) -> Axis:
         return next(a for a in self.axes if a.name == name)
@@ -188,7 +191,7 @@ def parse_machine(table: Any, origin: str, base: Path = Path(".")) -> Machine:
         raise check.error("machine.name", f"expected a non-empty string, got {name!r}")
     prior = check.prior(table.get("prior", {}), axes)
     log = check.log(table.get("log", {}), Machine(name, axes).signals)
-    return Machine(name, axes, prior, log)
+    return Machine(name, axes, prior, log, check.exact(table.get("exact", {})))
 
 
 def machine_table(machine: Machine) -> dict[str, Any]:
@@ -208,7 +211,8 @@ def machine_table(machine: Machine) -> dict[str, Any]:
                 if machine.prior.coulomb_width is not None else {})}
     log = {"time": machine.log.time, "scalars": dict(machine.log.scalars),
            "columns": {n: e.text for n, e in machine.log.columns.items()}}
-    return {"name": machine.name, "axis": axes, "prior": prior, "log": log}
+    return {"name": machine.name, "axis": axes, "prior": prior, "log": log,
+            **({"exact": dict(machine.exact)} if machine.exact else {})}
 
 
 def check_signals(machine: Machine, outputs: Iterable[str], inputs: Iterable[str],
@@ -322,6 +326,16 @@ class _Check:
         velocity, acceleration = bounds["velocity"], bounds["acceleration"]
         assert velocity is not None and acceleration is not None
         return Limits(float(span[0]), float(span[1]), velocity, acceleration, bounds["jerk"])
+
+    def exact(self, table: Any) -> dict[str, float]:
+        if not isinstance(table, Mapping):
+            raise self.error("machine.exact", "expected a table of \"instance.parameter\" = "
+                             "number: the start values with which the loop measures exactly")
+        for name in table:
+            if not re.fullmatch(r"[^.\s]+\.\S+", name):
+                raise self.error(f"machine.exact.{name}", "expected 'instance.parameter'")
+            self.number(table, "machine.exact", name, positive=False)
+        return {name: float(value) for name, value in table.items()}
 
     def prior(self, table: Any, axes: tuple[Axis, ...]) -> Prior:
         self.table(table, "machine.prior", "prior")

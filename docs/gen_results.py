@@ -155,6 +155,9 @@ def machines_markdown() -> str:
             for axis in summary["axes"]:
                 out.append(f"| {axis} | " + " | ".join(
                     figure(summary["scenarios"][n][axis]["e2_ratio"]) for n in names) + " |")
+            for axis, floor in summary.get("noise_floor", {}).items():
+                out.append(f"| {axis}: e2 / noise floor (e2 {figure(floor)}) | " + " | ".join(
+                    figure(summary["scenarios"][n][axis]["e2"] / floor) for n in names) + " |")
         else:
             names = list(summary["relative_error"])
             out += ["| relative force error on the test logs [%] | " + " | ".join(

@@ -211,13 +211,18 @@ class MachineLoop:
                                      default=str))
 
     def trial(self, table: Path, trial: int) -> Trial:
-        recording, _ = run_trial(machine_loop.with_feedforward(self.config, table))
+        recording, applied, error = self._run(machine_loop.with_feedforward(self.config, table))
+        return Trial(recording, applied, error, None)
+
+    def _run(self, config: RunConfig) -> tuple[Recording, np.ndarray, np.ndarray]:
+        """The recording, the efforts (n, axes) and the tracking errors (n, axes)."""
+        recording, _ = run_trial(config)
         applied = np.column_stack([recording[a.effort] for a in self.machine.axes])
         error = np.column_stack([
             recording[a.reference] - evaluate(a.evaluated, {
                 n: recording[n] for n in a.evaluated.names}, f"machine.axis[{k}]")
             for k, a in enumerate(self.machine.axes)])
-        return Trial(recording, applied, error, None)
+        return recording, applied, error
 
     def learning_filter(self, recording: Recording, cutoff_hz: float) -> LearningFilter:
         motion = tuple(np.column_stack([recording[n] for n in names])
@@ -230,5 +235,13 @@ class MachineLoop:
         return tracking_metrics(recording, machine_axes(self.machine))
 
     def noise_floor(self, table: Path) -> dict[str, float] | None:
-        """Unknown: a plant FMU's noise cannot be switched off."""
-        return None
+        """The e2 per axis that the loop's measurement causes with the feedforward `table`:
+        the e2 of the difference of its tracking errors as it is and with the description's
+        `exact` start values. None where the description gives none (unknown)."""
+        if not self.machine.exact:
+            return None
+        exact = machine_loop.with_start_values(self.config, self.machine.exact, "machine.exact")
+        noisy, clean = (self._run(machine_loop.with_feedforward(c, table))[2]
+                        for c in (self.config, exact))
+        return {a: error_norms(noisy[:, k] - clean[:, k], self.config.step)["e2"]
+                for k, a in enumerate(self.axes)}

@@ -8,8 +8,9 @@ exported and built into its feedforward FMU; then, on the loop's own
 reference (its sources), the loop runs under PID alone, with the identified model's
 feedforward, with each learned one, and iterative learning control finds the best
 feedforward for that one reference (the limit; learning.ilc). summary.json holds every run's
-e2, einf, rms per axis and its e2 ratio PID alone / scenario; table.md the ratios; errors.png
-each run's tracking error per axis.
+e2, einf, rms per axis and its e2 ratio PID alone / scenario, and where the description says how
+the loop measures exactly (`[machine] exact`) the noise floor and each run's own share over it;
+table.md the ratios; errors.png each run's tracking error per axis.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import RunError
 from flexff.learning.devices import pick_device, training_gpus
 from flexff.learning.export import export
-from flexff.learning.ilc import ilc
+from flexff.learning.ilc import NOISE_FLOOR, ilc
 from flexff.learning.linear_model import identify_linear, parallel_filter, write_linear_model
 from flexff.learning.machine_collect import collect_machine
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
@@ -49,7 +50,7 @@ from flexff.learning.machine_loop import loop_machine, with_feedforward, with_fe
 from flexff.learning.machine_train import fit_machine
 from flexff.learning.models import uses_prior
 from flexff.learning.presets import make_config
-from flexff.learning.report import plot_tracking_errors
+from flexff.learning.report import own_fields, plot_tracking_errors
 from flexff.learning.workers import worker_count
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")
@@ -115,8 +116,11 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     best = next(t for t in limit["trials"] if t["trial"] == limit["best"])
     metrics["ilc"] = {a.name: {k: best[a.name][k] for k in ("e2", "einf", "rms")}
                       for a in machine.axes}
+    floor = limit.get(NOISE_FLOOR)
     summary = {"machine": machine.name, "axes": [a.name for a in machine.axes],
-               "scenarios": {name: {a: {**m, "e2_ratio": metrics["pid"][a]["e2"] / m["e2"]}
+               **({NOISE_FLOOR: floor} if floor else {}),
+               "scenarios": {name: {a: {**m, "e2_ratio": metrics["pid"][a]["e2"] / m["e2"],
+                                        **(own_fields(m["e2"], floor[a]) if floor else {})}
                                     for a, m in per_axis.items()}
                              for name, per_axis in metrics.items()},
                "training": {k: {"seconds": v["seconds"], "test_mse": v["test_mse"]}
@@ -177,12 +181,16 @@ def _train(job: _Training) -> dict[str, Any]:
 
 
 def ratio_table(summary: dict[str, Any]) -> str:
-    """The e2 ratios PID alone / scenario per axis as a Markdown table."""
+    """The e2 ratios PID alone / scenario per axis as a Markdown table; where the loop's
+    noise floor is known, a row per axis of each scenario's e2 over it."""
     scenarios = list(summary["scenarios"])
     lines = ["| axis | " + " | ".join(scenarios) + " |",
              "|---|" + "---:|" * len(scenarios)]
     for axis in summary["axes"]:
         lines.append(f"| {axis} | " + " | ".join(
             f"{summary['scenarios'][s][axis]['e2_ratio']:.3g}" for s in scenarios) + " |")
+    for axis, floor in summary.get(NOISE_FLOOR, {}).items():
+        lines.append(f"| {axis}: e2 / noise floor ({floor:.3g}) | " + " | ".join(
+            f"{summary['scenarios'][s][axis]['e2'] / floor:.3g}" for s in scenarios) + " |")
     return "\n".join(lines) + "\n"
 

@@ -78,6 +78,22 @@ def with_feedforward(loop: RunConfig, feedforward: Path | None = None) -> RunCon
     return checked(replace(loop, sources=tuple(sources), connections=connections))
 
 
+def with_start_values(loop: RunConfig, values: Mapping[str, float], key: str) -> RunConfig:
+    """`loop` with the start values `values` ("instance.parameter" -> value) over its FMUs'
+    own; a ConfigError naming `key`.NAME for an instance the loop lacks."""
+    names = {f.name for f in loop.fmus}
+    given: dict[str, dict[str, float]] = {}
+    for name, value in values.items():
+        instance, parameter = name.split(".", 1)
+        if instance not in names:
+            raise ConfigError(loop.origin, f"{key}.{name}", f"the loop has no FMU {instance!r} "
+                              f"(it has {', '.join(sorted(names))})")
+        given.setdefault(instance, {})[parameter] = value
+    return checked(replace(loop, fmus=tuple(
+        replace(f, parameters={**f.parameters, **given[f.name]}) if f.name in given else f
+        for f in loop.fmus)))
+
+
 def with_feedforward_fmu(loop: RunConfig, fmu: Path, name: str = "feedforward") -> RunConfig:
     """`loop` with the FMU `fmu` (inputs: the reference signals, by name; outputs `<axis>_ff`)
     feeding each axis's feedforward input, stepped first; whatever fed those inputs before

@@ -125,7 +125,7 @@ def _pid_first(names: Mapping[str, object]) -> list[str]:
     return ["pid", *(name for name in names if name != "pid")]
 
 
-def _own(e2: float, floor: float) -> dict[str, Any]:
+def own_fields(e2: float, floor: float) -> dict[str, Any]:
     """An axis's own share of `e2` over the noise `floor` (OWN) and whether it is at the floor."""
     return {OWN: own_share(e2, floor), AT_FLOOR: e2 <= floor}
 
@@ -155,7 +155,7 @@ def summarize(metrics: dict[str, dict[str, Any]],
                 limit = float(metrics[LIMIT][axis]["e2"])
                 summary[name][axis][PER_LIMIT] = norms["e2"] / limit if limit > 0 else None
             if noise_floor:
-                summary[name][axis].update(_own(norms["e2"], float(noise_floor[axis])))
+                summary[name][axis].update(own_fields(norms["e2"], float(noise_floor[axis])))
     return summary
 
 

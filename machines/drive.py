@@ -20,6 +20,7 @@ import casadi as ca
 
 from flexff.fmu.errors import InputError
 from flexff.fmu.system import Parameter, System, Variable
+from flexff.machines.effects import encoder
 
 
 @dataclass(frozen=True)
@@ -86,8 +87,7 @@ def drive_system(parameters: DriveParameters = DRIVE, x_start: float = 0.0) -> S
     cogging = q.cogging * ca.sin(2 * math.pi * position / q.pitch)
     acceleration = (applied - friction - cogging - mount) / q.m_motor
     dx = ca.vertcat(velocity, acceleration, load_velocity, mount / q.m_load)
-    read = position + q.noise_std * w
-    measured = ca.if_else(q.encoder > 0, q.encoder * ca.floor(read / q.encoder + 0.5), read)
+    measured = encoder(position, q.encoder, q.noise_std, w)
     return System(
         name="drive",
         description="1-axis linear drive: mass, viscous and one-sided Coulomb friction, "

@@ -22,5 +22,6 @@ def saturated(effort: Any, limit: Any) -> Any:
 
 def encoder(position: Any, resolution: Any, noise_std: Any, noise: Any) -> Any:
     """An incremental encoder: the position plus noise_std * noise (a standard normal sample),
-    rounded to whole counts of `resolution`."""
-    return resolution * ca.floor((position + noise_std * noise) / resolution + 0.5)
+    rounded to whole counts of `resolution`; a resolution of 0 reads it exactly."""
+    read = position + noise_std * noise
+    return ca.if_else(resolution > 0, resolution * ca.floor(read / resolution + 0.5), read)

@@ -46,7 +46,7 @@ def parameters(axes: Sequence[str] = AXES) -> tuple[Parameter, ...]:
         *per_axis,
         Parameter("coulomb_width", "m/s", "velocity over which Coulomb friction turns", 1e-3,
                   True),
-        Parameter("encoder", "m", "encoder resolution (both axes)", 1e-6, True),
+        Parameter("encoder", "m", "encoder resolution (both axes); 0: exact", 1e-6),
         Parameter("noise_std", "m", "encoder noise standard deviation", 0.0),
         Parameter(f"{gantry}_start", "m", f"initial {gantry} (at rest)", 0.0, fixed=True),
         Parameter(f"{cross}_start", "m", f"initial {cross} (at rest)", 0.0, fixed=True),

@@ -21,6 +21,9 @@ def test_an_axis_gets_its_reference_and_derived_names():
     assert drive.signals == ("x_ref", "vx_ref", "ax_ref", "jx_ref", "x_measured", "x_effort")
     assert (x.limits.low, x.limits.high, x.limits.jerk) == (-0.05, 0.05, None)
     assert drive.prior.terms == ("inertia", "viscous", "coulomb", "offset")
+    assert drive.exact == {}
+    assert parse_machine({**machine(), "exact": {"plant.encoder": 0}}, "d").exact == {
+        "plant.encoder": 0.0}
 
 
 def test_three_axes_with_a_kinematic_map_and_user_terms():
@@ -61,6 +64,9 @@ def test_a_description_from_its_own_file(tmp_path):
     ({"axis": [AXIS], "prior": {"extra": {"x": {"g": "sin(y)"}}}},
      r"machine\.prior\.extra\.x\.g"),
     ({"axis": [AXIS], "prior": {"extra": {"y": {"g": "x"}}}}, r"machine\.prior\.extra\.y"),
+    ({"axis": [AXIS], "exact": {"encoder": 0.0}}, r"machine\.exact\.encoder"),
+    ({"axis": [AXIS], "exact": {"plant.encoder": "0"}}, r"machine\.exact\.plant\.encoder"),
+    ({"axis": [AXIS], "exact": 0.0}, r"machine\.exact"),
 ])
 def test_bad_descriptions_are_refused_naming_the_key(table, key):
     with pytest.raises(ConfigError, match=rf"^run\.toml: {key}: "):
