@@ -105,7 +105,8 @@ def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
     features = feature_function(machine, inputs)(looked_ahead)
     network = graph_network(read_graph(model, time_axis=True),
                             ca.Function("network_input", [x, reference, p], [features]),
-                            model_period(card, step, model), None, task, runtime)
+                            model_period(card, step, model), None, task, runtime,
+                            primed=True)
     if network.n_outputs != len(machine.axes):
         raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
                          f"machine {machine.name!r} has {len(machine.axes)} axes")

@@ -191,6 +191,7 @@ def _network_config(net: Network) -> list[str]:
         f"#define NET_PERIOD {net.period}",
         f"#define NET_PRECOMPUTED {int(net.table is not None)}",
         f"#define NET_TASK {int(net.task)}",
+        f"#define NET_PRIMED {int(net.primed)}",
         f"#define NET_RUNTIME_C {int(net.runtime == 'c')}",
         *([] if net.runtime == "c" else [
             f"#define NET_RUNTIME_FILE {_c_string(runtime_library().name)}",

@@ -64,6 +64,8 @@ class Network:
     table: np.ndarray | None = None  # precomputed mode: rows (time, inputs...) at every step
     task: bool = False  # in its own task: the result of the call at step k used from k + period
     runtime: str = RUNTIMES[0]  # generated C compiled into the FMU, or onnxruntime
+    primed: bool = False  # the first call starts from the state of a network at rest on its
+    # inputs since ever (run on them until the state stops changing), else from zero
 
     def __post_init__(self) -> None:
         check_runtime(self.runtime)

@@ -95,13 +95,14 @@ def read_graph(model: str | Path, time_axis: bool = False) -> Graph:
 
 def graph_network(graph: Graph, input_function: ca.Function, period: int = 1,
                   table: np.ndarray | None = None, task: bool = False,
-                  runtime: str = RUNTIMES[0]) -> Network:
+                  runtime: str = RUNTIMES[0], primed: bool = False) -> Network:
     """The Network running `graph` on `input_function(x, u, p)` (a column of the graph's input
     elements, in the order of `graph.input_names`) every `period` steps, see fmu.network: the
     graph's own file if it follows the wrapper's convention, else its adapter graph, written
     to the build cache. The precomputed mode (`table`) runs all calls in one: it needs the
     time axis; `task` runs the calls in their own task (fmu.network.Network); `runtime` computes
-    the graph ("c" or "onnxruntime"), which is checked to be able to now."""
+    the graph ("c" or "onnxruntime"), which is checked to be able to now; `primed` starts it
+    at rest on its first inputs (Network.primed)."""
     check_runtime(runtime)
     if table is not None and not graph.time_axis:
         raise InputError(f"{graph.path}: the precomputed mode needs a graph with a time axis")
@@ -123,7 +124,7 @@ def graph_network(graph: Graph, input_function: ca.Function, period: int = 1,
     else:
         _check_onnxruntime(graph, file)
     return replace(read_network(file, input_function, period, table), task=task,
-                   runtime=runtime)
+                   runtime=runtime, primed=primed)
 
 
 def _check_onnxruntime(graph: Graph, file: Path) -> None:

@@ -10,6 +10,10 @@
  * k on the inputs of step k gives its result at k + NET_PERIOD, and the results are extrapolated
  * one period further to make up for that delay. Until the first result, r is zero (the initial
  * output of a rate transition, as in Simulink): the step never runs the network itself.
+ *
+ * With NET_PRIMED the first call starts from the state of a network that has rested on its
+ * first inputs since ever (a machine at rest before the run): the graph runs on them until its
+ * state stops changing (net_prime), where the zero state would start it with a transient.
  */
 
 #include "wrapper.h"
@@ -197,6 +201,31 @@ fmi2Status check_table_start(Instance *c) {
     return fmi2OK;
 }
 
+#define PRIME_CALLS 5000   /* at most this many calls to settle the state on the first inputs */
+#define PRIME_SETTLED 1e-7 /* settled: no state element moved by more than this in a call (the
+                            * same as learning/export.py's run_steps(primed=True)) */
+
+/* NET_PRIMED: `state` (zero on entry) becomes that of the graph at rest on `features`: it runs
+ * on them until its state stops moving (a history of samples fills after as many calls, a
+ * recurrent state converges), at most PRIME_CALLS times. 0 on success, else -1 with the reason
+ * in `error`. */
+static int net_prime(Instance *c, const double *features, float *state, char *error,
+                     size_t error_size) {
+    if (!NET_PRIMED) return 0;
+    float next[DIM(NET_STATE_SIZE)];
+    double result[DIM(N_R)];
+    for (int call = 0; call < PRIME_CALLS; call++) {
+        if (net_run(c->net, features, 1, state, result, next, error, error_size) != 0) return -1;
+        float moved = 0.0f;
+        for (int i = 0; i < NET_STATE_SIZE; i++) {
+            moved = fmaxf(moved, fabsf(next[i] - state[i]));
+            state[i] = next[i];
+        }
+        if (moved <= PRIME_SETTLED) break;
+    }
+    return 0;
+}
+
 static long table_calls(const Instance *c) { return (c->table_rows + NET_PERIOD - 1) / NET_PERIOD; }
 
 double table_time(const Instance *c, long row) { return c->table[row * (1 + N_U)]; }
@@ -221,8 +250,9 @@ fmi2Status net_precompute(Instance *c, const fmi2Real *x0) {
             else
                 status = check_network_inputs(c, features + k * NET_N_IN, row + 1, row[0]);
         }
-        if (status == fmi2OK && net_run(c->net, features, calls, state, c->precomputed,
-                                        state + DIM(NET_STATE_SIZE), error, sizeof error) != 0)
+        if (status == fmi2OK && (net_prime(c, features, state, error, sizeof error) != 0 ||
+                                 net_run(c->net, features, calls, state, c->precomputed,
+                                         state + DIM(NET_STATE_SIZE), error, sizeof error) != 0))
             status = fail(c, "%s", error);
         for (long k = 0; k < calls && status == fmi2OK; k++)
             status = check_finite_result(c, c->precomputed + k * N_R,
@@ -287,6 +317,11 @@ static fmi2Status net_call(Instance *c) {
         if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
             return fail(c, "Evaluating the network's inputs failed.");
         if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
+        if (c->d.net_step == 0) { /* the first call: from zero, or primed on its inputs */
+            memset(c->d.net_state, 0, sizeof c->d.net_state);
+            if (net_prime(c, c->features, c->d.net_state, error, sizeof error) != 0)
+                return fail(c, "%s", error);
+        }
         if (net_run(c->net, c->features, 1, c->d.net_state, c->d.net_new, c->d.net_state_new,
                     error, sizeof error) != 0)
             return fail(c, "%s", error);
@@ -314,6 +349,12 @@ static fmi2Status task_prepare(Instance *c, long phase) {
         if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
             return fail(c, "Evaluating the network's inputs failed.");
         if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
+        char error[1024];
+        if (c->d.net_step == 0) { /* the first call: from zero, or primed on its inputs */
+            memset(c->d.net_state, 0, sizeof c->d.net_state);
+            if (net_prime(c, c->features, c->d.net_state, error, sizeof error) != 0)
+                return fail(c, "%s", error);
+        }
     }
     if (c->d.net_step < NET_PERIOD) {
         memset(c->r, 0, sizeof c->r);

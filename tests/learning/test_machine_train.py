@@ -79,7 +79,7 @@ def test_the_physics_guided_model_asks_for_its_prior(tmp_path):
 def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
     """Export the run, build the FMU: at each of the model's calls the FMU gives what
     onnxruntime gives on the features of the reference half a sample ahead (the labels'
-    lead), plus the linear skip the card holds."""
+    lead), from the state at rest on the first ones, plus the linear skip the card holds."""
     names = ("x",)
     data = [trajectory(names, k, "train") for k in range(4)] + [trajectory(names, 9, "test")]
     fit_machine(make_config("lstm", "fast", epochs=1), machine(names), RATE, data, "d",
@@ -101,6 +101,17 @@ def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
     assert card.linear_inputs is not None  # the fast LSTM's skip, outside the graph
     skip = features[calls] @ np.asarray(card.linear_inputs["weights"]).T \
         + np.asarray(card.linear_inputs["bias"])
-    expected = run_steps(session(model), features[calls])[:, 0] + skip[:, 0]
+    expected = run_steps(session(model), features[calls], primed=True)[:, 0] + skip[:, 0]
     np.testing.assert_allclose(result["x_ff"][calls], expected,
                                rtol=1e-5, atol=1e-5 * np.abs(expected).max())
+    # at rest on the first reference since ever: a constant output, no start-up transient
+    rest = run_fmu(fmu, 200, 1e-3, {n: np.full(200, reference[n][0]) for n in inputs},
+                   record=["x_ff"])["x_ff"]
+    np.testing.assert_allclose(rest, rest[0], rtol=1e-6, atol=1e-9)
+    task = build_fmu(learned_machine_feedforward_system(model, 1e-3, task=True),
+                     tmp_path / "task.fmu")  # primed too: its first result, a period late
+    late = run_fmu(task, 200, 1e-3, {n: np.full(200, reference[n][0]) for n in inputs},
+                   record=["x_ff"])["x_ff"]
+    np.testing.assert_allclose(late[2 * period:], rest[0], rtol=1e-6, atol=1e-9)
+    assert not np.allclose(run_steps(session(model), np.repeat(features[:1], 40, axis=0)),
+                           rest[0] - skip[0, 0], rtol=1e-4)  # from zero it would not be
