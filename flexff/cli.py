@@ -473,9 +473,10 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _train_machine(args: argparse.Namespace) -> int:
-    """train on a machine's dataset: one seed, its prior identified on it for pgnn."""
+    """train on a machine's dataset: one seed, on features with the friction widths of its
+    prior identified on it (the prior itself for pgnn)."""
     from flexff.learning.machine_dataset import load_machine_dataset
-    from flexff.learning.machine_evaluate import identify_dataset
+    from flexff.learning.machine_evaluate import identify_dataset, learned_features
     from flexff.learning.machine_train import fit_machine
     from flexff.learning.presets import make_config
 
@@ -484,10 +485,12 @@ def _train_machine(args: argparse.Namespace) -> int:
     data = load_machine_dataset(args.data)
     config = make_config(args.model, args.preset, seed=(args.seed or [0])[0],
                          device=args.device, **({"epochs": args.epochs} if args.epochs else {}))
+    identified = identify_dataset(data)
     metrics = fit_machine(config, data.description, data.sample_rate_hz, data.trajectories,
-                          data.digest, Path(args.output), resume=args.resume, force=args.force,
+                          data.digest, Path(args.output), learned_features(identified),
+                          resume=args.resume, force=args.force,
                           checkpoint_every=args.checkpoint_every,
-                          prior=identify_dataset(data) if args.model == "pgnn" else None)
+                          prior=identified if args.model == "pgnn" else None)
     print(json.dumps(metrics, indent=2, default=str))
     return 0
 

@@ -25,7 +25,13 @@ from flexff.learning.dataset_files import Trajectory
 from flexff.learning.deploy import SIModel
 from flexff.learning.linear_model import EDGE_PERIODS, write_linear_model
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
-from flexff.learning.machine_evaluate import MODELS, SUMMARY, identify_dataset, train_models
+from flexff.learning.machine_evaluate import (
+    MODELS,
+    SUMMARY,
+    identify_dataset,
+    learned_features,
+    train_models,
+)
 from flexff.learning.machine_features import MachineFeatures, prepare
 from flexff.learning.machine_train import features_from_dict, prior_efforts
 from flexff.learning.run_folder import Run, load_run
@@ -45,7 +51,8 @@ def evaluate_logs(data_path: str | Path, out: str | Path, models: Sequence[str] 
                                           data.description)
     identified = identify_dataset(data, features)
     write_linear_model(identified, out / "identified.json")
-    train_models(data, identified, out, models, preset, workers, progress, **overrides)
+    train_models(data, identified, out, models, preset, workers, progress,
+                 learned_features(identified), **overrides)
     test = data.split("test")
     errors = {"identified": _identified_errors(data, identified, test, features)}
     for kind in models:

@@ -2,7 +2,8 @@
 comparison an engineer would make, per axis.
 
 The loop's dataset is collected (learning.machine_collect), the linear model of its prior
-identified on the training trajectories (learning.linear_model), each model trained
+identified on the training trajectories (learning.linear_model), each model trained on features
+with the machine's identified friction widths
 (learning.machine_train, the models side by side in worker processes, one per core or GPU),
 exported and built into its feedforward FMU; then, on the loop's own
 reference (its sources), the loop runs under PID alone, with the identified model's
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +44,7 @@ from flexff.learning.machine_collect import collect_machine
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
 from flexff.learning.machine_features import (
     MachineFeatures,
+    friction_widths,
     motion,
     named_motion,
 )
@@ -97,7 +99,7 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
         f"identified linear model of {machine.name}", identified.lead_s),
         out / "fmus" / "identified.fmu")}
     training = train_models(data, identified, out, models, preset, workers, progress,
-                            **overrides)
+                            learned_features(identified), **overrides)
     for kind in models:
         fmus[kind] = build_fmu(learned_machine_feedforward_system(
             out / "models" / f"{kind}.onnx", loop.step), out / "fmus" / f"{kind}.fmu")
@@ -132,14 +134,22 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     return summary
 
 
+def learned_features(identified: LinearModel,
+                     base: MachineFeatures | None = None) -> MachineFeatures:
+    """The feature settings `base` (default: all derived from the data) with the direction
+    widths of the machine's identified Coulomb friction (machine_features.friction_widths)."""
+    return replace(base or MachineFeatures(), direction_widths=friction_widths(identified))
+
+
 def train_models(data: MachineDataset, identified: LinearModel, out: Path,
                  models: Sequence[str], preset: str, workers: int | None, progress: bool,
-                 **overrides: Any) -> dict[str, dict[str, Any]]:
-    """Train and export each of `models` on `data` side by side in worker processes (one per
-    core, or per GPU), the physics-guided one over `identified`, into `out`/runs/<kind> and
-    `out`/models/<kind>.onnx; each one's metrics."""
+                 features: MachineFeatures, **overrides: Any) -> dict[str, dict[str, Any]]:
+    """Train and export each of `models` on `data` with the feature settings `features`
+    side by side in worker processes (one per core, or per GPU), the physics-guided one over
+    `identified`, into `out`/runs/<kind> and `out`/models/<kind>.onnx; each one's metrics."""
     jobs = [_Training(kind, preset, overrides, data.path, out,
-                      identified.to_dict() if uses_prior(kind) else None) for kind in models]
+                      identified.to_dict() if uses_prior(kind) else None, features)
+            for kind in models]
     gpus = len(training_gpus(pick_device(overrides.get("device", "auto"))))
     training, failed = {}, []
     with tqdm(total=len(jobs), unit="model", desc="train", disable=not progress) as bar, \
@@ -167,6 +177,7 @@ class _Training:
     data: Path
     out: Path
     prior: dict[str, Any] | None  # the identified model (controllers.linear_prior), for pgnn
+    features: MachineFeatures
 
 
 def _train(job: _Training) -> dict[str, Any]:
@@ -175,7 +186,8 @@ def _train(job: _Training) -> dict[str, Any]:
     prior = None if job.prior is None else linear_model_from_dict(job.prior, "the prior")
     metrics = fit_machine(make_config(job.kind, job.preset, **job.overrides), data.description,
                           data.sample_rate_hz, data.trajectories, data.digest,
-                          job.out / "runs" / job.kind, progress=False, prior=prior, reuse=True)
+                          job.out / "runs" / job.kind, job.features, progress=False,
+                          prior=prior, reuse=True)
     export(job.out / "runs" / job.kind, job.out / "models" / f"{job.kind}.onnx")
     return metrics
 

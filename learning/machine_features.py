@@ -4,8 +4,9 @@ evaluates on the filtered measured motion and the feedforward FMU generates into
 reference.
 
 Every preprocessing choice is a setting of MachineFeatures whose default comes from the data:
-the low-pass corners (`cutoff_hz`, `data_cutoff`), the model rate, the direction widths and
-`lead_s`, the zero-order hold's half-sample lead between effort and motion.
+the low-pass corners (`cutoff_hz`, `data_cutoff`), the model rate, `lead_s` (the zero-order
+hold's half-sample lead between effort and motion), and the direction widths, the Coulomb
+widths that the identification finds (`friction_widths`) where a prior is identified.
 
 Docs: "Learning", section Any other machine (docs/explanation/learning.md).
 """
@@ -19,6 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from flexff.controllers.features import evaluate_samples
+from flexff.controllers.linear_prior import LinearModel
 from flexff.controllers.machine_features import (
     DIRECTION_WIDTHS,
     FeatureInputs,
@@ -95,6 +97,20 @@ class MachineFeatures:
             raise InputError(f"model_rate_hz {self.model_rate_hz:g} must divide the data rate "
                              f"{rate_hz:g} Hz by a whole number")
         return round(factor)
+
+
+def friction_widths(model: LinearModel) -> tuple[float, ...]:
+    """The direction features' tanh widths for a machine whose prior `model` identified: each
+    axis's Coulomb width as a fraction of its velocity limit (3 significant digits, each once),
+    or DIRECTION_WIDTHS where the prior has no Coulomb friction. At the machine's own width
+    a network's linear skip takes the friction step at the loop's rate (the drive example's
+    LSTM: 330x -> 726x PID alone); fixed widths around it are nearly collinear once the labels'
+    filter smooths them, and their least-squares mix turns each step into spikes."""
+    machine = model.machine
+    if not any(t.startswith("coulomb") for t in machine.prior.terms):
+        return DIRECTION_WIDTHS
+    return tuple(sorted({float(f"{model.axes[a.name].width / a.limits.velocity:.3g}")
+                         for a in machine.axes}))
 
 
 def data_cutoff(references: list[Mapping[str, np.ndarray]], machine: Machine,

@@ -96,3 +96,24 @@ def test_bad_settings_are_refused(settings, words):
     with pytest.raises(InputError, match=words):
         config = MachineFeatures(**settings).resolved(RATE, [sine({"x": 0.5})], machine())
         config.decimation(RATE)
+
+
+def test_the_direction_widths_are_the_identified_friction_widths():
+    """Each axis's identified Coulomb width over its velocity limit, each once; the fixed
+    widths for a prior without Coulomb friction."""
+    from dataclasses import replace
+
+    from flexff.controllers.linear_prior import AxisFit, LinearModel
+    from flexff.controllers.machine_features import DIRECTION_WIDTHS
+    from flexff.learning.machine_features import friction_widths
+
+    two = machine(("x", "y"))  # velocity limits 0.5 (default prior: Coulomb friction)
+
+    def fit(width):
+        return AxisFit(["coulomb"], [1.0], [0.0], width, 1.0, 0.0, 0.0)
+    model = LinearModel(two, {"x": fit(2e-3), "y": fit(1e-3)})
+    assert friction_widths(model) == (0.002, 0.004)
+    assert friction_widths(LinearModel(two, {"x": fit(2e-3), "y": fit(2.0000001e-3)})) == (
+        0.004,)
+    viscous = replace(two, prior=replace(two.prior, terms=("inertia", "viscous")))
+    assert friction_widths(LinearModel(viscous, model.axes)) == DIRECTION_WIDTHS
