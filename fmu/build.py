@@ -30,7 +30,7 @@ import fmpy
 from flexff.fmu import cache
 from flexff.fmu.codegen import NET_MODEL_FILE, NET_TABLE_FILE, generate_config_h, generate_model_c
 from flexff.fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler, sanitizer_flags
-from flexff.fmu.errors import InputError
+from flexff.fmu.fmi_version import check_fmi_version
 from flexff.fmu.layout import make_layout, model_identifier
 from flexff.fmu.model_description import model_description_xml
 from flexff.fmu.model_description3 import build_description_xml, model_description3_xml
@@ -44,7 +44,6 @@ WRAPPER_C_FILES = ("fmi2Functions.c", "wrapper.c", "rng.c")
 WRAPPER_HEADERS = ("wrapper.h", "rng.h")
 FMI3_C_FILES = ("fmi3Functions.c",)  # an FMI 3.0 FMU's API, over the FMI 2.0 core
 FMI3_HEADERS = ("fmi2_core.h",)
-FMI_VERSIONS = (2, 3)
 NETWORK_C_FILES = ("wrapper_network.c", "net_times.c")
 NETWORK_HEADERS = ("onnx_network.h", "net_times.h")
 # each runtime's C files and headers (the generated flexff_net.c/h besides, for "c")
@@ -57,17 +56,9 @@ GUID_FILES = ("modelDescription.xml", "sources/config.h")
 ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps keep the archive reproducible
 
 
-def check_fmi_version(fmi_version: int) -> int:
-    """`fmi_version` if it is one the builder writes (2 or 3), else InputError."""
-    if fmi_version not in FMI_VERSIONS:
-        raise InputError(f"FMI version {fmi_version!r}: flexff builds FMI 2.0 and 3.0 FMUs "
-                         f"(2 or 3)")
-    return fmi_version
-
-
 def platform_folder(fmi_version: int) -> str:
     """The binaries/ folder of this platform as FMI `fmi_version` names it."""
-    return fmpy.platform if fmi_version == 2 else fmpy.platform_tuple
+    return str(fmpy.platform if fmi_version == 2 else fmpy.platform_tuple)
 
 
 def _source_files(system: System, fmi_version: int) -> list[str]:
