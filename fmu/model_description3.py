@@ -75,11 +75,6 @@ def model_description3_xml(system: System, layout: Layout, identifier: str, toke
                                                "description": text.replace("fmi2", "fmi3")})
     ET.SubElement(root, "DefaultExperiment", {"startTime": "0.0",
                                               "stepSize": repr(default_step(system))})
-    if system.extra:
-        tool = ET.SubElement(ET.SubElement(root, "Annotations"), "Annotation", {"type": "flexff"})
-        for key in sorted(system.extra):
-            ET.SubElement(tool, "Annotation", {"name": key, "value": system.extra[key]})
-
     model_vars = ET.SubElement(root, "ModelVariables")
     ET.SubElement(model_vars, "Float64", {
         "name": "time", "valueReference": str(time_value_reference(layout)),
@@ -97,6 +92,10 @@ def model_description3_xml(system: System, layout: Layout, identifier: str, toke
             "dependencies": " ".join(str(inputs[j].value_reference) for j in deps)})
     for y in outputs:
         ET.SubElement(structure, "InitialUnknown", {"valueReference": str(y.value_reference)})
+    if system.extra:  # FMI 3.0 puts them last, in an Annotation of flexff's
+        tool = ET.SubElement(ET.SubElement(root, "Annotations"), "Annotation", {"type": "flexff"})
+        for key in sorted(system.extra):
+            ET.SubElement(tool, "Annotation", {"name": key, "value": system.extra[key]})
     return _xml(root)
 
 
