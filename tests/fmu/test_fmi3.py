@@ -81,10 +81,14 @@ def test_the_plant_validates_and_equals_its_fmi2_twin_under_fmpy(tmp_path):
     assert_bit_equal(fmpy_run(fmus[2]), fmpy_run(fmus[3]))
 
 
-@pytest.mark.parametrize("task", [False, True], ids=["step", "task"])
+@pytest.mark.parametrize("mode", ["step", "task", "precomputed"])
 def test_the_learned_feedforward_validates_and_equals_its_fmi2_twin_under_fmpy(
-        models, reference, task, tmp_path):
-    fmus = twins(learned_feedforward_system(models / "pgnn.onnx", 1e-3, task=task), tmp_path)
+        models, reference, mode, tmp_path):
+    """In its own task, and precomputed from a table in resources/ (where the FMI 3.0 FMU
+    finds it from its resource path)."""
+    table = reference if mode == "precomputed" else None
+    fmus = twins(learned_feedforward_system(models / "pgnn.onnx", 1e-3, table,
+                                            task=mode == "task"), tmp_path)
     assert fmpy.validation.validate_fmu(str(fmus[3])) == []
     a, b = (fmpy_run(fmus[v], reference) for v in (2, 3))
     assert_bit_equal(a, b)
