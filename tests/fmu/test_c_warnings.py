@@ -4,10 +4,11 @@ run when optimizing, which -fsyntax-only skips).
 
 The FMU's generic wrapper is compiled against the config.h of the toy FMUs (continuous,
 discrete without states, with an embedded network in each runtime and in its own task; the
-continuous one and the task one as FMI 3.0 too), since its code paths depend on the sizes there; the network generated as C too; the engine, the
-floor and the proxy as they are built. CasADi's generated model.c (the toys' and the plant's)
-is held to the same flags but -Wunused-parameter: its functions take
-CasADi's fixed calling convention (arg, res, iw, w, mem), used or not.
+continuous one and the task one as FMI 3.0 too), since its code paths depend on the sizes
+there; the network generated as C too; the engine, the floor and the proxy as they are built.
+CasADi's generated model.c (the toys' and the plant's) is held to the same flags but
+-Wunused-parameter: its functions take CasADi's fixed calling convention (arg, res, iw, w,
+mem), used or not.
 """
 
 import os
