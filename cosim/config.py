@@ -47,6 +47,7 @@ from flexff.cosim.schema import (
     SourceConfig,
     whole_steps,
 )
+from flexff.fmu.fmi_version import FMI_VERSIONS
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
 from flexff.fmu.model_exchange import SOLVERS
 
@@ -132,6 +133,7 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                             **({"tolerance": f.tolerance} if f.tolerance is not None else {}),
                             **({"isolate": True} if f.isolate else {}),
                             **({"allow_nonfinite": True} if f.allow_nonfinite else {}),
+                            **({"fmi": f.fmi} if f.fmi != FMI_VERSIONS[0] else {}),
                             **({"solver": f.solver} if f.solver else {})}
                    for f in config.fmus}
     if config.connections:
@@ -291,6 +293,13 @@ class _Parser(TableChecker):
             raise self.error(f"{where}.{key}", f"expected true or false, got {value!r}")
         return value
 
+    def fmi_version(self, t: Mapping[str, Any], where: str) -> int:
+        """The FMI version a built-in is built in: 2 (default) or 3."""
+        value: int = self.integer(t, where, "fmi", FMI_VERSIONS[0])
+        if value not in FMI_VERSIONS:
+            raise self.error(f"{where}.fmi", f"FMI {value}: built-ins are built as FMI 2 or 3")
+        return value
+
     def isolate(self, t: Mapping[str, Any], where: str) -> bool:
         return self.flag(t, where, "isolate")
 
@@ -368,7 +377,7 @@ class _Parser(TableChecker):
         builtins = registered()
         builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
-                             "allow_nonfinite", *builtin.keys))
+                             "allow_nonfinite", "fmi", *builtin.keys))
         options = checked_options(self, builtin, t, where)
         if builtin.parameters is not None:
             parameters = builtin.parameters(self, options, parameters, where, start)
@@ -376,7 +385,7 @@ class _Parser(TableChecker):
         return FmuConfig(name, builtin=builtin.name, options=options,
                          parameters=dict(parameters), unconnected=unconnected,
                          tolerance=self.tolerance(t, where), isolate=self.isolate(t, where),
-                         allow_nonfinite=allowed)
+                         allow_nonfinite=allowed, fmi=self.fmi_version(t, where))
 
     def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str,
                        allowed: bool) -> dict[str, Any]:

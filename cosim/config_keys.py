@@ -109,6 +109,9 @@ KEYS: tuple[Key, ...] = (
     Key("fmu.NAME", "isolate", "boolean", "false", "",
         "Run the FMU in its own process: a crash or hang ends the run with an error.",
         ("path", "builtin")),
+    Key("fmu.NAME", "fmi", "integer", "2", "",
+        "The FMI version a built-in is built in: 2 or 3 (3.0, bit-equal to 2.0).",
+        ("builtin",)),
     Key("fmu.NAME", "solver", "string", "none (co-simulation)", "",
         '"cvode": run the FMU as model exchange.', ("path",)),
     # [[connection]]

@@ -170,7 +170,7 @@ def _fmu_file(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any], folde
         return f.path
     from flexff.fmu.build import build_fmu  # the builder and CasADi: built-in FMUs only
 
-    return build_fmu(_builtin_system(f, config, sources), folder / f"{f.name}.fmu")
+    return build_fmu(_builtin_system(f, config, sources), folder / f"{f.name}.fmu", f.fmi)
 
 
 def _builtin_system(f: FmuConfig, config: RunConfig, sources: Mapping[str, Any]) -> System:

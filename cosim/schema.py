@@ -76,6 +76,7 @@ class FmuConfig:
     isolate: bool = False  # run it in its own process (cosim.isolation)
     solver: str | None = None  # model exchange with this solver (None: co-simulation)
     allow_nonfinite: bool = False  # NaN and infinite values allowed in and out (cosim.finite)
+    fmi: int = 2  # the FMI version a built-in is built in (2 or 3)
 
 
 @dataclass(frozen=True)

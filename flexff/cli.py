@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from flexff.fmu.errors import InputError, RunError, Terminated
+from flexff.fmu.fmi_version import FMI_VERSIONS
 from flexff.fmu.network_runtime import RUNTIMES
 from flexff.plant.variants import VARIANTS
 
@@ -141,7 +142,7 @@ def _fmu_build(args: argparse.Namespace) -> int:
 
         system = plant_system(args.variant)
     _output_file(args.output)
-    print(f"wrote {build_fmu(system, args.output)}")
+    print(f"wrote {build_fmu(system, args.output, args.fmi)}")
     return 0
 
 
@@ -627,6 +628,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "compiles it into the FMU as generated C, whose sources then build "
                             "anywhere alone; onnxruntime bundles the graph and onnxruntime's "
                             "library")
+    build.add_argument("--fmi", type=int, choices=FMI_VERSIONS, default=FMI_VERSIONS[0],
+                       help="the FMI version of the co-simulation FMU: 2 (default) or 3 (3.0, "
+                            "computing bit for bit what the 2.0 FMU does)")
     build.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     build.set_defaults(handler=_fmu_build)
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")

@@ -1,15 +1,20 @@
-"""build_fmu: System -> FMI 2.0 co-simulation FMU (generated C + generic wrapper, compiled, zipped).
+"""build_fmu: System -> FMI 2.0 or 3.0 co-simulation FMU (generated C + generic wrapper,
+compiled, zipped).
 
 The FMU holds modelDescription.xml, binaries/<platform>/<id>.so and sources/ (wrapper, generated
-code, config.h and the FMI headers, listed in the XML's SourceFiles) so it can be rebuilt
-elsewhere with `cc -shared -fPIC -Isources sources/*.c -lm -ldl -lpthread`. A System with an
-embedded network has it in sources/ as generated C (flexff_net.c, runtime "c", the default) and
-needs nothing else; with runtime "onnxruntime" the FMU gets the graph in resources/ and
-onnxruntime's library beside its own in binaries/<platform>/, and its sources build only
-against that library. A precomputation table goes to resources/ in either case. Builds are
-cached by a hash of all their inputs; the GUID is derived from the same hash, so equal inputs
-give a bit-equal FMU. `$FLEXFF_SANITIZE` builds the binaries with sanitizers
-(fmu.compile.sanitizer_flags), under their own key.
+code, config.h and the FMI headers, listed in the XML's SourceFiles for FMI 2.0, in
+sources/buildDescription.xml for FMI 3.0) so it can be rebuilt elsewhere with
+`cc -shared -fPIC -Isources sources/*.c -lm -ldl -lpthread`. <platform> is FMI 2.0's name
+(linux64) or FMI 3.0's tuple (x86_64-linux). An FMI 3.0 FMU's library adds c/fmi3Functions.c
+over the same core as FMI 2.0's: it computes bit for bit what its FMI 2.0 twin does.
+
+A System with an embedded network has it in sources/ as generated C (flexff_net.c, runtime "c",
+the default) and needs nothing else; with runtime "onnxruntime" the FMU gets the graph in
+resources/ and onnxruntime's library beside its own in binaries/<platform>/, and its sources
+build only against that library. A precomputation table goes to resources/ in either case.
+Builds are cached by a hash of all their inputs; the GUID (FMI 3.0: instantiation token) is
+derived from the same hash, so equal inputs give a bit-equal FMU. `$FLEXFF_SANITIZE` builds the
+binaries with sanitizers (fmu.compile.sanitizer_flags), under their own key.
 """
 
 from __future__ import annotations
@@ -25,8 +30,10 @@ import fmpy
 from flexff.fmu import cache
 from flexff.fmu.codegen import NET_MODEL_FILE, NET_TABLE_FILE, generate_config_h, generate_model_c
 from flexff.fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler, sanitizer_flags
+from flexff.fmu.fmi_version import check_fmi_version
 from flexff.fmu.layout import make_layout, model_identifier
 from flexff.fmu.model_description import model_description_xml
+from flexff.fmu.model_description3 import build_description_xml, model_description3_xml
 from flexff.fmu.network import Network, runtime_library
 from flexff.fmu.network_c import FMU_PREFIX, fmu_network_sources
 from flexff.fmu.system import System
@@ -35,6 +42,8 @@ C_DIR = Path(__file__).parent / "c"
 # the generic wrapper (see c/wrapper.h), compiled with the generated model.c of each FMU
 WRAPPER_C_FILES = ("fmi2Functions.c", "wrapper.c", "rng.c")
 WRAPPER_HEADERS = ("wrapper.h", "rng.h")
+FMI3_C_FILES = ("fmi3Functions.c",)  # an FMI 3.0 FMU's API, over the FMI 2.0 core
+FMI3_HEADERS = ("fmi2_core.h",)
 NETWORK_C_FILES = ("wrapper_network.c", "net_times.c")
 NETWORK_HEADERS = ("onnx_network.h", "net_times.h")
 # each runtime's C files and headers (the generated flexff_net.c/h besides, for "c")
@@ -47,41 +56,54 @@ GUID_FILES = ("modelDescription.xml", "sources/config.h")
 ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps keep the archive reproducible
 
 
-def _source_files(system: System) -> list[str]:
+def platform_folder(fmi_version: int) -> str:
+    """The binaries/ folder of this platform as FMI `fmi_version` names it."""
+    return str(fmpy.platform if fmi_version == 2 else fmpy.platform_tuple)
+
+
+def _source_files(system: System, fmi_version: int) -> list[str]:
     """The C files compiled into the FMU's library."""
     net = system.network
+    api = FMI3_C_FILES if fmi_version == 3 else ()
     if net is None:
-        return [*WRAPPER_C_FILES, "model.c"]
-    return [*WRAPPER_C_FILES, "model.c", *NETWORK_C_FILES, *RUNTIME_C_FILES[net.runtime],
+        return [*WRAPPER_C_FILES, *api, "model.c"]
+    return [*WRAPPER_C_FILES, *api, "model.c", *NETWORK_C_FILES, *RUNTIME_C_FILES[net.runtime],
             *([f"{FMU_PREFIX}.c"] if net.runtime == "c" else []),
             *(TASK_C_FILES if net.task else ())]
 
 
-def _files(system: System, guid: str) -> dict[str, str | bytes]:
+def _files(system: System, guid: str, fmi_version: int) -> dict[str, str | bytes]:
     """Every file of the FMU but its compiled library, by archive path."""
     identifier = model_identifier(system)
     layout = make_layout(system)
     net = system.network
     generic = (*WRAPPER_C_FILES, *WRAPPER_HEADERS,
+               *((*FMI3_C_FILES, *FMI3_HEADERS) if fmi_version == 3 else ()),
                *((*NETWORK_C_FILES, *NETWORK_HEADERS, *RUNTIME_C_FILES[net.runtime],
                   *RUNTIME_HEADERS[net.runtime]) if net else ()),
                *(TASK_C_FILES if net and net.task else ()))
     sources = {
         **{name: (C_DIR / name).read_text() for name in generic},
-        "config.h": generate_config_h(system, layout, identifier, guid),
+        "config.h": generate_config_h(system, layout, identifier, guid, fmi_version),
         **generate_model_c(system, identifier),
         **(fmu_network_sources(net.model) if net and net.runtime == "c" else {}),
-        **fmi_headers(),
+        **fmi_headers(fmi_version),
     }
     files: dict[str, str | bytes] = {f"sources/{name}": text for name, text in sources.items()}
-    files["modelDescription.xml"] = model_description_xml(system, layout, identifier, guid,
-                                                          _source_files(system))
+    if fmi_version == 3:
+        files["modelDescription.xml"] = model_description3_xml(system, layout, identifier, guid)
+        files["sources/buildDescription.xml"] = build_description_xml(
+            identifier, _source_files(system, fmi_version))
+    else:
+        files["modelDescription.xml"] = model_description_xml(
+            system, layout, identifier, guid, _source_files(system, fmi_version))
     if system.network:
-        files.update(_network_files(system.network, [u.name for u in system.inputs]))
+        files.update(_network_files(system.network, [u.name for u in system.inputs],
+                                    platform_folder(fmi_version)))
     return files
 
 
-def _network_files(net: Network, input_names: list[str]) -> dict[str, bytes]:
+def _network_files(net: Network, input_names: list[str], platform: str) -> dict[str, bytes]:
     """The precomputation table; for onnxruntime the graph and the library too."""
     files: dict[str, bytes] = {}
     if net.table is not None:
@@ -94,7 +116,7 @@ def _network_files(net: Network, input_names: list[str]) -> dict[str, bytes]:
     if net.runtime == "onnxruntime":
         library = runtime_library()
         files[f"resources/{NET_MODEL_FILE}"] = net.model.read_bytes()
-        files[f"binaries/{fmpy.platform}/{library.name}"] = library.read_bytes()
+        files[f"binaries/{platform}/{library.name}"] = library.read_bytes()
     return files
 
 
@@ -106,9 +128,10 @@ def _key(files: dict[str, str | bytes]) -> str:
     return cache.digest(parts)
 
 
-def fmu_key(system: System) -> str:
-    """sha256 of everything that goes into the build of `system` (its GUID derives from it)."""
-    return _key(_files(system, GUID_PLACEHOLDER))
+def fmu_key(system: System, fmi_version: int = 2) -> str:
+    """sha256 of everything that goes into the build of `system` as an FMI `fmi_version` FMU
+    (its GUID derives from it)."""
+    return _key(_files(system, GUID_PLACEHOLDER, check_fmi_version(fmi_version)))
 
 
 def _with_guid(files: dict[str, str | bytes], key: str) -> dict[str, str | bytes]:
@@ -120,7 +143,7 @@ def _with_guid(files: dict[str, str | bytes], key: str) -> dict[str, str | bytes
 
 
 def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: str,
-               target: Path) -> None:
+               platform: str, target: Path) -> None:
     """Compile the sources and zip the FMU into `target`."""
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "sources"
@@ -136,7 +159,7 @@ def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: st
         run_compiler([src / name for name in sources], library, [src],
                      extra_flags=("-shared", *sanitizer_flags()),
                      libraries=("-lm", "-ldl", "-lpthread"))
-        files = {**files, f"binaries/{fmpy.platform}/{library.name}": library.read_bytes()}
+        files = {**files, f"binaries/{platform}/{library.name}": library.read_bytes()}
         with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as zf:
             for name in sorted(files):
                 info = zipfile.ZipInfo(name, ZIP_DATE)
@@ -145,17 +168,18 @@ def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: st
                 zf.writestr(info, files[name], zipfile.ZIP_DEFLATED)
 
 
-def build_fmu(system: System, path: str | Path) -> Path:
-    """Build (or fetch from the cache) the FMU of `system` and copy it to `path`."""
+def build_fmu(system: System, path: str | Path, fmi_version: int = 2) -> Path:
+    """Build (or fetch from the cache) the FMI `fmi_version` (2 or 3) FMU of `system` and copy
+    it to `path`."""
     path = Path(path)
-    files = _files(system, GUID_PLACEHOLDER)
+    files = _files(system, GUID_PLACEHOLDER, check_fmi_version(fmi_version))
     key = _key(files)
     cached = cache.cached_path(key, ".fmu")
     if not cached.exists():
         with tempfile.TemporaryDirectory() as tmp:
             fresh = Path(tmp) / "model.fmu"
-            _write_fmu(_with_guid(files, key), _source_files(system), model_identifier(system),
-                       fresh)
+            _write_fmu(_with_guid(files, key), _source_files(system, fmi_version),
+                       model_identifier(system), platform_folder(fmi_version), fresh)
             cache.store(key, ".fmu", fresh)
     path.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(cached, path)

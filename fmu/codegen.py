@@ -15,7 +15,7 @@ from typing import TypeVar
 import casadi as ca
 import numpy as np
 
-from flexff.fmu.layout import Layout
+from flexff.fmu.layout import Layout, time_value_reference
 from flexff.fmu.network import MAX_RANK, Network, runtime_library
 from flexff.fmu.system import System
 
@@ -116,8 +116,10 @@ def _c_array(ctype: str, name: str, values: list[str]) -> str:
     return f"static const {ctype} {name}[{max(len(values), 1)}] = {{{body}}};"
 
 
-def generate_config_h(system: System, layout: Layout, identifier: str, guid: str) -> str:
-    """Sizes, value references, names, start values and flags of one model, for the wrapper."""
+def generate_config_h(system: System, layout: Layout, identifier: str, guid: str,
+                      fmi_version: int = 2) -> str:
+    """Sizes, value references, names, start values and flags of one model, for the wrapper
+    (the API of FMI `fmi_version`, 2 or 3)."""
     discrete = system.kind == "discrete"
     step = system.sample_time if discrete else 0.0
     if step is None:
@@ -126,6 +128,7 @@ def generate_config_h(system: System, layout: Layout, identifier: str, guid: str
     inputs = layout.block("input")
     reals = [v for v in layout.variables if v.type == "Real"]
     defines = {
+        "FMI_VERSION": fmi_version,
         "MODEL_GUID": _c_string(guid),
         "IS_DISCRETE": int(discrete),
         "SAMPLE_TIME": repr(float(step)),
@@ -144,6 +147,7 @@ def generate_config_h(system: System, layout: Layout, identifier: str, guid: str
         "VR_X": layout.first_vr("state"),
         "N_REAL": layout.n_real,
         "VR_SEED": layout.block("seed")[0].value_reference,
+        "VR_TIME": time_value_reference(layout),
         "N_R": system.network.n_outputs if system.network else 0,
         "HAS_NETWORK": int(system.network is not None),
     }

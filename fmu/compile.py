@@ -1,6 +1,6 @@
 """The C compiler step: FMI headers from fmpy, flags, and one gcc call per shared library.
 
-`-fvisibility=hidden` keeps everything but the fmi2 functions private, so two FMUs loaded in one
+`-fvisibility=hidden` keeps everything but the FMI functions private, so two FMUs loaded in one
 process cannot bind to each other's CasADi symbols; `-ffp-contract=off` keeps floating point
 results identical to CasADi's own evaluation on machines with fused multiply-add.
 """
@@ -21,7 +21,11 @@ import fmpy
 from flexff.fmu import cache
 from flexff.fmu.errors import InputError, RunError
 
-FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+# the FMI headers of each version's FMU sources, as fmpy ships them; an FMI 3.0 FMU has the FMI
+# 2.0 types too, for the core its FMI 3.0 functions call (c/fmi3Functions.c)
+FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
+               3: ("fmi2FunctionTypes.h", "fmi2TypesPlatform.h", "fmi3Functions.h",
+                   "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
 CFLAGS = ("-O2", "-std=c99", "-fPIC", "-fvisibility=hidden", "-ffp-contract=off")
 
 
@@ -73,10 +77,11 @@ def compiler_version() -> str:
     return version
 
 
-def fmi_headers() -> dict[str, str]:
-    """The FMI 2.0 headers shipped with fmpy, by file name."""
+def fmi_headers(fmi_version: int = 2) -> dict[str, str]:
+    """The headers of an FMI `fmi_version` (2 or 3) FMU's sources, shipped with fmpy, by file
+    name."""
     folder = Path(fmpy.__file__).parent / "c-code"
-    return {name: (folder / name).read_text() for name in FMI_HEADERS}
+    return {name: (folder / name).read_text() for name in FMI_HEADERS[fmi_version]}
 
 
 def run_compiler(sources: list[Path], output: Path, include_dirs: list[Path],

@@ -3,8 +3,8 @@
 The layout is decided here once, so that the generated config.h (C side) and
 modelDescription.xml (importer side) cannot disagree. Real value references come in contiguous
 blocks, in this order: parameters, `max_substep` (continuous systems only), inputs, outputs,
-states; the Integer `seed` follows the last Real. Importers should still look variables up by
-name in modelDescription.xml.
+states; the Integer `seed` follows the last Real, and FMI 3.0's `time` the seed. Importers
+should still look variables up by name in modelDescription.xml.
 """
 
 from __future__ import annotations
@@ -61,6 +61,11 @@ class Layout:
     @property
     def n_real(self) -> int:
         return sum(v.type == "Real" for v in self.variables)
+
+
+def time_value_reference(layout: Layout) -> int:
+    """The value reference of FMI 3.0's independent variable `time`, after the `seed`."""
+    return layout.block("seed")[0].value_reference + 1
 
 
 def model_identifier(system: System) -> str:

@@ -1,4 +1,5 @@
-"""modelDescription.xml (FMI 2.0, co-simulation) of a System's FMU.
+"""modelDescription.xml (FMI 2.0, co-simulation) of a System's FMU, and what the FMI 3.0 one
+(fmu.model_description3) shares with it.
 
 Output dependencies come from the structural sparsity of d output / d u, so a master can tell
 direct feedthrough (an algebraic path from inputs to outputs) from outputs that only depend on
@@ -11,7 +12,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from flexff.fmu.layout import Layout
+from flexff.fmu.layout import Layout, ScalarVariable
 from flexff.fmu.system import System
 
 LOG_CATEGORIES = {
@@ -39,8 +40,32 @@ def output_dependencies(system: System) -> list[list[int]]:
     return [np.flatnonzero(row).tolist() for row in direct]
 
 
-def _fmt(value: float | int) -> str:
+def format_value(value: float | int) -> str:
+    """A start value as the XML writes it (floats round-trip exactly)."""
     return repr(value) if isinstance(value, float) else str(value)
+
+
+def unit_names(layout: Layout) -> list[str]:
+    """The units the variables use, sorted (each needs a UnitDefinitions entry)."""
+    return sorted({v.unit for v in layout.variables if v.unit})
+
+
+def default_step(system: System) -> float:
+    """The default experiment's step: the sample time of a discrete system, else 1 ms."""
+    step = system.sample_time if system.kind == "discrete" else 1e-3
+    if step is None:
+        raise ValueError("a discrete system needs a positive sample_time")
+    return float(step)
+
+
+def initial_attribute(v: ScalarVariable) -> str | None:
+    """The `initial` attribute of a variable: exact for what is set, calculated for what the
+    FMU computes, None (the default) for inputs."""
+    if v.role in ("parameter", "max_substep", "seed"):
+        return "exact"
+    if v.role in ("output", "state"):
+        return "calculated"
+    return None
 
 
 def model_description_xml(system: System, layout: Layout, identifier: str, guid: str,
@@ -73,7 +98,7 @@ def model_description_xml(system: System, layout: Layout, identifier: str, guid:
     for name in source_files:
         ET.SubElement(files, "File", {"name": name})
 
-    units = sorted({v.unit for v in layout.variables if v.unit})
+    units = unit_names(layout)
     if units:
         unit_defs = ET.SubElement(root, "UnitDefinitions")
         for unit in units:
@@ -83,10 +108,8 @@ def model_description_xml(system: System, layout: Layout, identifier: str, guid:
     for name, text in LOG_CATEGORIES.items():
         ET.SubElement(categories, "Category", {"name": name, "description": text})
 
-    step = system.sample_time if discrete else 1e-3
-    if step is None:
-        raise ValueError("a discrete system needs a positive sample_time")
-    ET.SubElement(root, "DefaultExperiment", {"startTime": "0.0", "stepSize": repr(float(step))})
+    ET.SubElement(root, "DefaultExperiment", {"startTime": "0.0",
+                                              "stepSize": repr(default_step(system))})
 
     if system.extra:
         # the FMI 2.0 schema allows one element inside <Tool>: wrap the entries in it
@@ -104,16 +127,15 @@ def model_description_xml(system: System, layout: Layout, identifier: str, guid:
             attrs["description"] = v.description
         attrs["causality"] = v.causality
         attrs["variability"] = v.variability
-        if v.role in ("parameter", "max_substep", "seed"):
-            attrs["initial"] = "exact"
-        elif v.role in ("output", "state"):
-            attrs["initial"] = "calculated"
+        how = initial_attribute(v)
+        if how is not None:
+            attrs["initial"] = how
         sv = ET.SubElement(model_vars, "ScalarVariable", attrs)
         type_attrs = {}
         if v.unit:
             type_attrs["unit"] = v.unit
         if v.start is not None:
-            type_attrs["start"] = _fmt(v.start)
+            type_attrs["start"] = format_value(v.start)
         ET.SubElement(sv, v.type, type_attrs)
 
     structure = ET.SubElement(root, "ModelStructure")

@@ -217,11 +217,13 @@ class LoggedSlave:
             shutil.rmtree(self.unzipdir, ignore_errors=True)
 
 
-def build_toy(system: System, tmp_path_factory) -> Path:
-    """Build a toy FMU into the session's temporary folder, with a session-wide build cache."""
+def build_toy(system: System, tmp_path_factory, fmi_version: int = 2) -> Path:
+    """Build a toy FMU (FMI `fmi_version`) into the session's temporary folder, with a
+    session-wide build cache."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("FLEXFF_CACHE", str(tmp_path_factory.getbasetemp() / "flexff-cache"))
-        return build_fmu(system, tmp_path_factory.mktemp("fmu") / f"{system.name}.fmu")
+        return build_fmu(system, tmp_path_factory.mktemp("fmu") / f"{system.name}.fmu",
+                         fmi_version)
 
 
 def status_of(call, *args, **kwargs) -> int:

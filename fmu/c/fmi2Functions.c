@@ -3,6 +3,11 @@
  */
 
 #include "wrapper.h"
+#if FMI_VERSION == 3
+#include "fmi2_core.h" /* the core of fmi3Functions.c, under private names */
+#else
+#include "fmi2Functions.h"
+#endif
 
 /* The machine states each function is allowed in, one line per function (as the Modelica
  * Reference-FMUs keep them); ENTER(f) checks the instance and its state before anything else. */
@@ -409,7 +414,9 @@ static fmi2Status no_variables(Instance *c, const char *fname, const fmi2ValueRe
     return fmi2OK;
 }
 
-#define NO_VARIABLES(f, type) no_variables(ENTER(f), #f, vr, nvr, value, type)
+/* (enter() directly: FMI 3.0 builds rename the fmi2 functions, which ENTER would expand) */
+#define NO_VARIABLES(f, type) \
+    no_variables(enter(comp, #f, ALLOWED_##f), #f, vr, nvr, value, type)
 
 fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
                           fmi2Boolean value[]) {

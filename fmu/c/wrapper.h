@@ -1,6 +1,7 @@
 /*
- * wrapper.h -- the core of flexff's generic FMI 2.0 co-simulation wrapper, shared by its parts:
- *   - fmi2Functions.c: the FMI API, each function with the machine states it is allowed in;
+ * wrapper.h -- the core of flexff's generic FMI co-simulation wrapper, shared by its parts:
+ *   - fmi2Functions.c: the FMI 2.0 API, each function with the machine states it is allowed in;
+ *   - fmi3Functions.c (FMI 3.0 builds): the FMI 3.0 API over the FMI 2.0 functions;
  *   - wrapper.c: instance data, logging, live instances, model evaluation, RK4, variables;
  *   - wrapper_network.c (models with an embedded network, HAS_NETWORK): the network and the
  *     precomputation table;
@@ -15,7 +16,11 @@
  *
  * Everything an instance computes with lives in one plain struct (Data) so that FMU states are
  * a copy of it and serialization is a header plus its bytes. Built with -fvisibility=hidden,
- * only the fmi2 functions leave the library.
+ * only the FMI functions leave the library.
+ *
+ * An FMI 3.0 build (config.h: FMI_VERSION 3) adds fmi3Functions.c, the FMI 3.0 co-simulation API
+ * as a layer over the FMI 2.0 functions, which it keeps private (fmi2_core.h): one core steps
+ * both, so an FMI 3.0 FMU computes exactly what its FMI 2.0 twin does.
  */
 
 #ifndef FLEXFF_WRAPPER_H
@@ -30,7 +35,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "fmi2Functions.h"
+#include "fmi2FunctionTypes.h" /* the types; the API is in fmi2Functions.c, fmi3Functions.c */
 #include "config.h"
 #include "rng.h"
 #if HAS_NETWORK

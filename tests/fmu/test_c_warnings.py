@@ -3,11 +3,12 @@ with the build's own flags (so -O2: gcc's flow-sensitive warnings such as -Warra
 run when optimizing, which -fsyntax-only skips).
 
 The FMU's generic wrapper is compiled against the config.h of the toy FMUs (continuous,
-discrete without states, with an embedded network in each runtime and in its own task), since
-its code paths depend on the sizes there; the network generated as C too; the engine, the
-floor and the proxy as they are built. CasADi's generated model.c (the toys' and the plant's)
-is held to the same flags but -Wunused-parameter: its functions take
-CasADi's fixed calling convention (arg, res, iw, w, mem), used or not.
+discrete without states, with an embedded network in each runtime and in its own task; the
+continuous one and the task one as FMI 3.0 too), since its code paths depend on the sizes
+there; the network generated as C too; the engine, the floor and the proxy as they are built.
+CasADi's generated model.c (the toys' and the plant's) is held to the same flags but
+-Wunused-parameter: its functions take CasADi's fixed calling convention (arg, res, iw, w,
+mem), used or not.
 """
 
 import os
@@ -18,7 +19,13 @@ from pathlib import Path
 
 import pytest
 
-from flexff.fmu.build import NETWORK_C_FILES, RUNTIME_C_FILES, TASK_C_FILES, WRAPPER_C_FILES
+from flexff.fmu.build import (
+    FMI3_C_FILES,
+    NETWORK_C_FILES,
+    RUNTIME_C_FILES,
+    TASK_C_FILES,
+    WRAPPER_C_FILES,
+)
 from flexff.fmu.codegen import generate_model_c
 from flexff.fmu.compile import CFLAGS, HOST_HEADER, compiler, fmi_headers
 from flexff.fmu.network_c import FMU_PREFIX
@@ -49,17 +56,19 @@ def toy_sources(tmp_path_factory) -> dict[str, Path]:
     net = network_system(graph)
     task = replace(net, name="toy_task", network=replace(net.network, task=True))
     runtime = replace(net, name="toy_ort", network=replace(net.network, runtime="onnxruntime"))
-    for system in (duffing(), discrete_pi(), net, task, runtime):
-        folder = tmp_path_factory.mktemp(system.name)
-        with zipfile.ZipFile(build_toy(system, tmp_path_factory)) as zf:
+    builds = [(s, 2) for s in (duffing(), discrete_pi(), net, task, runtime)]
+    for system, fmi_version in [*builds, (duffing(), 3), (task, 3)]:
+        name = system.name if fmi_version == 2 else f"{system.name}-fmi3"
+        folder = tmp_path_factory.mktemp(name)
+        with zipfile.ZipFile(build_toy(system, tmp_path_factory, fmi_version)) as zf:
             zf.extractall(folder)
-        folders[system.name] = folder / "sources"
+        folders[name] = folder / "sources"
     return folders
 
 
 def test_every_fmu_source_is_shipped():
     """The toys below compile what an FMU ships: every C file of fmu/c is one of those."""
-    shipped = WRAPPER_C_FILES + NETWORK_C_FILES + TASK_C_FILES + tuple(
+    shipped = WRAPPER_C_FILES + FMI3_C_FILES + NETWORK_C_FILES + TASK_C_FILES + tuple(
         name for files in RUNTIME_C_FILES.values() for name in files)
     assert sorted(p.name for p in FMU_C.glob("*.c")) == sorted(shipped)
 
