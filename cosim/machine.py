@@ -10,9 +10,8 @@ the effort the loop commands (the labels), units, and the excitation limits (`ra
 `velocity`, `acceleration`, optional `jerk`); records and datasets name the measured position
 `<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
 terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
-`[machine.log]` says how the machine's logs name these signals (LogMap: `flexff data import`).
-`exact` gives the start values (`"instance.parameter" = number`) with which a simulated loop
-measures exactly, such as an encoder's resolution at 0: the noise floor is measured with them.
+`[machine.log]` says how the machine's logs name these signals (LogMap: `flexff data import`);
+`exact` the start values with which the loop measures exactly (its noise floor's measure).
 Every key is listed in KEYS; every error is a ConfigError naming `machine.key`.
 """
 

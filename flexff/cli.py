@@ -576,8 +576,9 @@ def _ilc(args: argparse.Namespace) -> int:
     print(f"best: trial {state['best']}; its feedforward force -> {args.output}/{RESULT} "
           f"(ilc.json, e2.png beside it)")
     if floor := state[NOISE_FLOOR]:
-        print(f"noise floor: e2 = ({floor['x']:.4g}, {floor['y']:.4g}) m/sqrt(s), what the "
-              f"encoders' noise and quantization add; no feedforward goes below it")
+        print(f"noise floor: e2 = ({', '.join(f'{v:.4g}' for v in floor.values())}) "
+              f"({', '.join(floor)}), what the measurement's noise and quantization add; no "
+              f"feedforward goes below it")
     return 0
 
 

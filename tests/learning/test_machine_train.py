@@ -115,3 +115,23 @@ def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
     np.testing.assert_allclose(late[2 * period:], rest[0], rtol=1e-6, atol=1e-9)
     assert not np.allclose(run_steps(session(model), np.repeat(features[:1], 40, axis=0)),
                            rest[0] - skip[0, 0], rtol=1e-4)  # from zero it would not be
+
+
+def test_the_prior_is_trusted_where_every_reference_rests():
+    """The physics-guided model's residual is trained to zero where every axis's reference
+    rests (the loop settling its last move there), not where one still moves, nor on logs
+    without references."""
+    from flexff.learning.machine_train import resting
+
+    two = machine(("x", "y"))
+    still = trajectory(("x", "y"), 0, "train", seconds=3.0)
+    signals = dict(still.signals)
+    signals["vx_ref"] = np.where(np.arange(3000) < 2000, 0.0, signals["vx_ref"])
+    signals["vy_ref"] = np.where(np.arange(3000) < 1000, 0.0, signals["vy_ref"])
+    features = MachineFeatures(cutoff_hz=5.0).resolved(RATE, [], two)
+    step = features.decimation(RATE)
+    rests = resting(MachineTrajectory("t", "train", signals), RATE, two, features)
+    assert rests.shape == (len(range(0, 3000, step)),)
+    np.testing.assert_array_equal(rests, np.arange(0, 3000, step) < 1000)
+    logs = {k: v for k, v in signals.items() if not k.startswith("v")}
+    assert not resting(MachineTrajectory("t", "train", logs), RATE, two, features).any()
