@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from flexff.fmu.errors import InputError, RunError, Terminated
 from flexff.fmu.network_runtime import RUNTIMES
+from flexff.fmu.platforms import ALL, PLATFORMS
 from flexff.plant.variants import VARIANTS
 
 if TYPE_CHECKING:  # the command line loads numpy and the rest only in the command that runs
@@ -140,8 +141,11 @@ def _fmu_build(args: argparse.Namespace) -> int:
         from flexff.plant.system import plant_system
 
         system = plant_system(args.variant)
+    if args.source_only and args.platform:
+        raise InputError("--source-only builds no binaries: it takes no --platform")
+    platforms = () if args.source_only else args.platform
     _output_file(args.output)
-    print(f"wrote {build_fmu(system, args.output)}")
+    print(f"wrote {build_fmu(system, args.output, platforms)}")
     return 0
 
 
@@ -624,6 +628,12 @@ def build_parser() -> argparse.ArgumentParser:
                             "compiles it into the FMU as generated C, whose sources then build "
                             "anywhere alone; onnxruntime bundles the graph and onnxruntime's "
                             "library")
+    build.add_argument("--platform", action="append", choices=[*PLATFORMS, ALL],
+                       help="build the binaries for this platform, by its cross-compiler where "
+                            "it is not this machine's (repeat it for several; all: every one; "
+                            "default: this machine's)")
+    build.add_argument("--source-only", action="store_true",
+                       help="no binaries: the sources alone, for the importer to compile")
     build.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     build.set_defaults(handler=_fmu_build)
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")

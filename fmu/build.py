@@ -10,6 +10,12 @@ against that library. A precomputation table goes to resources/ in either case. 
 cached by a hash of all their inputs; the GUID is derived from the same hash, so equal inputs
 give a bit-equal FMU. `$FLEXFF_SANITIZE` builds the binaries with sanitizers
 (fmu.compile.sanitizer_flags), under their own key.
+
+By default the library is built for the host's platform alone; `platforms` names others
+(fmu.platforms: linux64, aarch64-linux, win64, each by its cross-compiler) or none, for a
+source-only FMU that an importer compiles itself. onnxruntime's library exists for the host
+alone, and a network's own task needs Linux threads, so those FMUs refuse the platforms they
+cannot run on.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import shutil
 import tempfile
 import uuid
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import fmpy
@@ -25,10 +32,12 @@ import fmpy
 from flexff.fmu import cache
 from flexff.fmu.codegen import NET_MODEL_FILE, NET_TABLE_FILE, generate_config_h, generate_model_c
 from flexff.fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler, sanitizer_flags
+from flexff.fmu.errors import InputError
 from flexff.fmu.layout import make_layout, model_identifier
 from flexff.fmu.model_description import model_description_xml
 from flexff.fmu.network import Network, runtime_library
 from flexff.fmu.network_c import FMU_PREFIX, fmu_network_sources
+from flexff.fmu.platforms import PLATFORMS, host, resolve
 from flexff.fmu.system import System
 
 C_DIR = Path(__file__).parent / "c"
@@ -98,17 +107,34 @@ def _network_files(net: Network, input_names: list[str]) -> dict[str, bytes]:
     return files
 
 
-def _key(files: dict[str, str | bytes]) -> str:
+def _key(files: dict[str, str | bytes], platforms: tuple[str, ...]) -> str:
     parts = {name: (f"{len(data)} bytes" if name.startswith("binaries/") else data)
              for name, data in files.items()}  # the runtime library is named by its version
     parts["cflags"] = " ".join(CFLAGS + sanitizer_flags())
     parts["compiler"] = compiler_version()
+    if platforms != (host(),):  # the host's alone: the key as before platforms existed
+        parts["platforms"] = " ".join(platforms)
+        for name in platforms:
+            parts[f"compiler {name}"] = compiler_version(PLATFORMS[name].compiler())
     return cache.digest(parts)
 
 
-def fmu_key(system: System) -> str:
-    """sha256 of everything that goes into the build of `system` (its GUID derives from it)."""
-    return _key(_files(system, GUID_PLACEHOLDER))
+def _check_platforms(system: System, platforms: tuple[str, ...]) -> None:
+    """InputError for a platform the system's network cannot run on."""
+    net = system.network
+    if net is not None and net.runtime == "onnxruntime" and platforms != (host(),):
+        raise InputError(f"a network in onnxruntime runs on {host()} alone (the library "
+                         f"bundled is this machine's): build it with --runtime c for other "
+                         f"platforms or for sources alone")
+    if net is not None and net.task and "win64" in platforms:
+        raise InputError("a network in its own task (--task) needs Linux threads: build it "
+                         "for linux64 and aarch64-linux, not win64")
+
+
+def fmu_key(system: System, platforms: Sequence[str] | None = None) -> str:
+    """sha256 of everything that goes into the build of `system` for `platforms` (as
+    build_fmu takes them); its GUID derives from it."""
+    return _key(_files(system, GUID_PLACEHOLDER), resolve(platforms))
 
 
 def _with_guid(files: dict[str, str | bytes], key: str) -> dict[str, str | bytes]:
@@ -120,8 +146,8 @@ def _with_guid(files: dict[str, str | bytes], key: str) -> dict[str, str | bytes
 
 
 def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: str,
-               target: Path) -> None:
-    """Compile the sources and zip the FMU into `target`."""
+               platforms: tuple[str, ...], target: Path) -> None:
+    """Compile the sources for each platform and zip the FMU into `target`."""
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
@@ -132,11 +158,16 @@ def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: st
                     target_file.write_text(text)
                 else:
                     target_file.write_bytes(text)
-        library = Path(tmp) / f"{identifier}{fmpy.sharedLibraryExtension}"
-        run_compiler([src / name for name in sources], library, [src],
-                     extra_flags=("-shared", *sanitizer_flags()),
-                     libraries=("-lm", "-ldl", "-lpthread"))
-        files = {**files, f"binaries/{fmpy.platform}/{library.name}": library.read_bytes()}
+        files = dict(files)
+        for name in platforms:
+            platform = PLATFORMS[name]
+            library = Path(tmp) / name / f"{identifier}{platform.extension}"
+            library.parent.mkdir()
+            sanitizers = sanitizer_flags() if name == host() else ()  # the host runs those
+            run_compiler([src / source for source in sources], library, [src],
+                         extra_flags=("-shared", *sanitizers), libraries=platform.libraries,
+                         command=platform.compiler())
+            files[f"binaries/{name}/{library.name}"] = library.read_bytes()
         with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as zf:
             for name in sorted(files):
                 info = zipfile.ZipInfo(name, ZIP_DATE)
@@ -145,17 +176,21 @@ def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: st
                 zf.writestr(info, files[name], zipfile.ZIP_DEFLATED)
 
 
-def build_fmu(system: System, path: str | Path) -> Path:
-    """Build (or fetch from the cache) the FMU of `system` and copy it to `path`."""
+def build_fmu(system: System, path: str | Path, platforms: Sequence[str] | None = None) -> Path:
+    """Build (or fetch from the cache) the FMU of `system` and copy it to `path`. `platforms`:
+    the binaries/ folders to build (fmu.platforms.resolve: None the host's, "all", or () for
+    a source-only FMU)."""
     path = Path(path)
+    chosen = resolve(platforms)
+    _check_platforms(system, chosen)
     files = _files(system, GUID_PLACEHOLDER)
-    key = _key(files)
+    key = _key(files, chosen)
     cached = cache.cached_path(key, ".fmu")
     if not cached.exists():
         with tempfile.TemporaryDirectory() as tmp:
             fresh = Path(tmp) / "model.fmu"
             _write_fmu(_with_guid(files, key), _source_files(system), model_identifier(system),
-                       fresh)
+                       chosen, fresh)
             cache.store(key, ".fmu", fresh)
     path.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(cached, path)
