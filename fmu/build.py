@@ -9,13 +9,9 @@ onnxruntime's library beside its own in binaries/<platform>/, and its sources bu
 against that library. A precomputation table goes to resources/ in either case. Builds are
 cached by a hash of all their inputs; the GUID is derived from the same hash, so equal inputs
 give a bit-equal FMU. `$FLEXFF_SANITIZE` builds the binaries with sanitizers
-(fmu.compile.sanitizer_flags), under their own key.
-
-By default the library is built for the host's platform alone; `platforms` names others
-(fmu.platforms: linux64, aarch64-linux, win64, each by its cross-compiler) or none, for a
-source-only FMU that an importer compiles itself. onnxruntime's library exists for the host
-alone, and a network's own task needs Linux threads, so those FMUs refuse the platforms they
-cannot run on.
+(fmu.compile.sanitizer_flags), under their own key. The library is built for the host alone
+unless `platforms` (fmu.platforms) names others, or none for a source-only FMU; onnxruntime and
+a network's own task refuse the platforms they cannot run on.
 """
 
 from __future__ import annotations

@@ -120,27 +120,32 @@ def test_the_learned_feedforward_gives_the_linux64_outputs(learned_fmu, runners,
                         NETWORK_RTOL if platform == "win64" else RTOL[platform])
 
 
-def fmpy_compile(unpacked: Path) -> None:
-    """FMPy compiles the FMU's sources into its binaries/ (fmpy.build.build_platform_binary,
-    by CMake; fmpy.util.compile_platform_binary before FMPy 0.3.21)."""
+def fmpy_compiled(source_only: Path, folder: Path) -> Path:
+    """The source-only FMU compiled by FMPy and unpacked into `folder`: by
+    fmpy.build.build_platform_binary (CMake) on the unpacked FMU, or by an older FMPy's
+    fmpy.util.compile_platform_binary into the .fmu itself."""
     try:
         from fmpy.build import build_platform_binary
     except ImportError:
-        from fmpy.util import compile_platform_binary as build_platform_binary
+        from fmpy.util import compile_platform_binary
+
+        compile_platform_binary(str(source_only))
+        return Path(fmpy.extract(str(source_only), str(folder)))
+    if shutil.which("cmake") is None:
+        pytest.skip("FMPy compiles sources with CMake, not installed here")
+    unpacked = Path(fmpy.extract(str(source_only), str(folder)))
     build_platform_binary(str(unpacked))
+    return unpacked
 
 
 @pytest.mark.parametrize("name", ["plant", "network"])
 def test_fmpy_compiles_the_source_only_fmu_with_equal_results(fmus, folder, name):
-    if shutil.which("cmake") is None:
-        pytest.skip("FMPy compiles sources with CMake, not installed here")
     description = fmpy.read_model_description(str(fmus[name]))
     source_only = folder / f"{name}-sources.fmu"
     build_fmu(_system(name, folder), source_only, platforms=())
     with zipfile.ZipFile(source_only) as zf:
         assert not [n for n in zf.namelist() if n.startswith("binaries/")]
-    unpacked = fmpy.extract(str(source_only), str(folder / f"{name}-fmpy"))
-    fmpy_compile(Path(unpacked))
+    unpacked = fmpy_compiled(source_only, folder / f"{name}-fmpy")
     inputs = sine_inputs(fmus[name])
     names = [v.name for v in description.modelVariables
              if v.causality == "input" and v.type == "Real"]
