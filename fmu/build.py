@@ -112,6 +112,7 @@ def _key(files: dict[str, str | bytes], platforms: tuple[str, ...]) -> str:
         parts["platforms"] = " ".join(platforms)
         for name in platforms:
             parts[f"compiler {name}"] = compiler_version(PLATFORMS[name].compiler())
+            parts[f"libraries {name}"] = " ".join(PLATFORMS[name].libraries)
     return cache.digest(parts)
 
 
