@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 from flexff.fmu.errors import InputError, RunError, Terminated
 from flexff.fmu.fmi_version import FMI_VERSIONS
 from flexff.fmu.network_runtime import RUNTIMES
+from flexff.fmu.platforms import ALL, PLATFORMS
 from flexff.plant.variants import VARIANTS
 
 if TYPE_CHECKING:  # the command line loads numpy and the rest only in the command that runs
@@ -141,8 +142,11 @@ def _fmu_build(args: argparse.Namespace) -> int:
         from flexff.plant.system import plant_system
 
         system = plant_system(args.variant)
+    if args.source_only and args.platform:
+        raise InputError("--source-only builds no binaries: it takes no --platform")
+    platforms = () if args.source_only else args.platform
     _output_file(args.output)
-    print(f"wrote {build_fmu(system, args.output, args.fmi)}")
+    print(f"wrote {build_fmu(system, args.output, args.fmi, platforms)}")
     return 0
 
 
@@ -632,6 +636,12 @@ def build_parser() -> argparse.ArgumentParser:
     build.add_argument("--fmi", type=int, choices=FMI_VERSIONS, default=FMI_VERSIONS[0],
                        help="the FMI version of the co-simulation FMU: 2 (default) or 3 (3.0, "
                             "computing bit for bit what the 2.0 FMU does)")
+    build.add_argument("--platform", action="append", choices=[*PLATFORMS, ALL],
+                       help="build the binaries for this platform, by its cross-compiler where "
+                            "it is not this machine's (repeat it for several; all: every one; "
+                            "default: this machine's)")
+    build.add_argument("--source-only", action="store_true",
+                       help="no binaries: the sources alone, for the importer to compile")
     build.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     build.set_defaults(handler=_fmu_build)
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")

@@ -1,20 +1,16 @@
 """build_fmu: System -> FMI 2.0 or 3.0 co-simulation FMU (generated C + generic wrapper,
 compiled, zipped).
 
-The FMU holds modelDescription.xml, binaries/<platform>/<id>.so and sources/ (wrapper, generated
-code, config.h and the FMI headers, listed in the XML's SourceFiles for FMI 2.0, in
-sources/buildDescription.xml for FMI 3.0) so it can be rebuilt elsewhere with
-`cc -shared -fPIC -Isources sources/*.c -lm -ldl -lpthread`. <platform> is FMI 2.0's name
-(linux64) or FMI 3.0's tuple (x86_64-linux). An FMI 3.0 FMU's library adds c/fmi3Functions.c
-over the same core as FMI 2.0's: it computes bit for bit what its FMI 2.0 twin does.
-
-A System with an embedded network has it in sources/ as generated C (flexff_net.c, runtime "c",
-the default) and needs nothing else; with runtime "onnxruntime" the FMU gets the graph in
-resources/ and onnxruntime's library beside its own in binaries/<platform>/, and its sources
-build only against that library. A precomputation table goes to resources/ in either case.
+The FMU holds modelDescription.xml, binaries/<platform>/ and sources/ (wrapper, generated code,
+config.h, the FMI headers; listed in the XML's SourceFiles for FMI 2.0, in buildDescription.xml
+for 3.0, whose library adds c/fmi3Functions.c over the same core: bit for bit its 2.0 twin), so
+it can be rebuilt with `cc -shared -fPIC -Isources sources/*.c -lm -ldl -lpthread`. A network
+is in sources/ as generated C (runtime "c", the default); with "onnxruntime" the graph goes to
+resources/ and onnxruntime's library beside the FMU's own, for the host alone. The library is
+built for the host unless `platforms` (fmu.platforms) names others, or none (sources alone).
 Builds are cached by a hash of all their inputs; the GUID (FMI 3.0: instantiation token) is
-derived from the same hash, so equal inputs give a bit-equal FMU. `$FLEXFF_SANITIZE` builds the
-binaries with sanitizers (fmu.compile.sanitizer_flags), under their own key.
+derived from it, so equal inputs give a bit-equal FMU. `$FLEXFF_SANITIZE` builds the host's
+library with sanitizers (fmu.compile.sanitizer_flags), under its own key.
 """
 
 from __future__ import annotations
@@ -23,19 +19,20 @@ import shutil
 import tempfile
 import uuid
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
-
-import fmpy
 
 from flexff.fmu import cache
 from flexff.fmu.codegen import NET_MODEL_FILE, NET_TABLE_FILE, generate_config_h, generate_model_c
 from flexff.fmu.compile import CFLAGS, compiler_version, fmi_headers, run_compiler, sanitizer_flags
+from flexff.fmu.errors import InputError
 from flexff.fmu.fmi_version import check_fmi_version
 from flexff.fmu.layout import make_layout, model_identifier
 from flexff.fmu.model_description import model_description_xml
 from flexff.fmu.model_description3 import build_description_xml, model_description3_xml
 from flexff.fmu.network import Network, runtime_library
 from flexff.fmu.network_c import FMU_PREFIX, fmu_network_sources
+from flexff.fmu.platforms import PLATFORMS, host, resolve
 from flexff.fmu.system import System
 
 C_DIR = Path(__file__).parent / "c"
@@ -56,9 +53,10 @@ GUID_FILES = ("modelDescription.xml", "sources/config.h")
 ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps keep the archive reproducible
 
 
-def platform_folder(fmi_version: int) -> str:
-    """The binaries/ folder of this platform as FMI `fmi_version` names it."""
-    return str(fmpy.platform if fmi_version == 2 else fmpy.platform_tuple)
+def platform_folder(fmi_version: int, platform: str | None = None) -> str:
+    """The binaries/ folder of `platform` (default: the host's) as FMI `fmi_version` names it."""
+    chosen = PLATFORMS[platform or host()]
+    return chosen.name if fmi_version == 2 else chosen.fmi3
 
 
 def _source_files(system: System, fmi_version: int) -> list[str]:
@@ -120,18 +118,37 @@ def _network_files(net: Network, input_names: list[str], platform: str) -> dict[
     return files
 
 
-def _key(files: dict[str, str | bytes]) -> str:
+def _key(files: dict[str, str | bytes], platforms: tuple[str, ...]) -> str:
     parts = {name: (f"{len(data)} bytes" if name.startswith("binaries/") else data)
              for name, data in files.items()}  # the runtime library is named by its version
     parts["cflags"] = " ".join(CFLAGS + sanitizer_flags())
     parts["compiler"] = compiler_version()
+    if platforms != (host(),):  # the host's alone: the key as before platforms existed
+        parts["platforms"] = " ".join(platforms)
+        for name in platforms:
+            parts[f"compiler {name}"] = compiler_version(PLATFORMS[name].compiler())
+            parts[f"libraries {name}"] = " ".join(PLATFORMS[name].libraries)
     return cache.digest(parts)
 
 
-def fmu_key(system: System, fmi_version: int = 2) -> str:
+def _check_platforms(system: System, platforms: tuple[str, ...]) -> None:
+    """InputError for a platform the system's network cannot run on."""
+    net = system.network
+    if net is not None and net.runtime == "onnxruntime" and platforms != (host(),):
+        raise InputError(f"a network in onnxruntime runs on {host()} alone (the library "
+                         f"bundled is this machine's): build it with --runtime c for other "
+                         f"platforms or for sources alone")
+    if net is not None and net.task and "win64" in platforms:
+        raise InputError("a network in its own task (--task) needs Linux threads: build it "
+                         "for linux64 and aarch64-linux, not win64")
+
+
+def fmu_key(system: System, fmi_version: int = 2, platforms: Sequence[str] | None = None
+            ) -> str:
     """sha256 of everything that goes into the build of `system` as an FMI `fmi_version` FMU
-    (its GUID derives from it)."""
-    return _key(_files(system, GUID_PLACEHOLDER, check_fmi_version(fmi_version)))
+    for `platforms` (as build_fmu takes them); its GUID derives from it."""
+    return _key(_files(system, GUID_PLACEHOLDER, check_fmi_version(fmi_version)),
+                resolve(platforms))
 
 
 def _with_guid(files: dict[str, str | bytes], key: str) -> dict[str, str | bytes]:
@@ -143,8 +160,8 @@ def _with_guid(files: dict[str, str | bytes], key: str) -> dict[str, str | bytes
 
 
 def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: str,
-               platform: str, target: Path) -> None:
-    """Compile the sources and zip the FMU into `target`."""
+               platforms: tuple[str, ...], fmi_version: int, target: Path) -> None:
+    """Compile the sources for each platform and zip the FMU into `target`."""
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
@@ -155,11 +172,17 @@ def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: st
                     target_file.write_text(text)
                 else:
                     target_file.write_bytes(text)
-        library = Path(tmp) / f"{identifier}{fmpy.sharedLibraryExtension}"
-        run_compiler([src / name for name in sources], library, [src],
-                     extra_flags=("-shared", *sanitizer_flags()),
-                     libraries=("-lm", "-ldl", "-lpthread"))
-        files = {**files, f"binaries/{platform}/{library.name}": library.read_bytes()}
+        files = dict(files)
+        for name in platforms:
+            platform = PLATFORMS[name]
+            library = Path(tmp) / name / f"{identifier}{platform.extension}"
+            library.parent.mkdir()
+            sanitizers = sanitizer_flags() if name == host() else ()  # the host runs those
+            run_compiler([src / source for source in sources], library, [src],
+                         extra_flags=("-shared", *sanitizers), libraries=platform.libraries,
+                         command=platform.compiler())
+            files[f"binaries/{platform_folder(fmi_version, name)}/{library.name}"] = \
+                library.read_bytes()
         with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as zf:
             for name in sorted(files):
                 info = zipfile.ZipInfo(name, ZIP_DATE)
@@ -168,18 +191,22 @@ def _write_fmu(files: dict[str, str | bytes], sources: list[str], identifier: st
                 zf.writestr(info, files[name], zipfile.ZIP_DEFLATED)
 
 
-def build_fmu(system: System, path: str | Path, fmi_version: int = 2) -> Path:
+def build_fmu(system: System, path: str | Path, fmi_version: int = 2,
+              platforms: Sequence[str] | None = None) -> Path:
     """Build (or fetch from the cache) the FMI `fmi_version` (2 or 3) FMU of `system` and copy
-    it to `path`."""
+    it to `path`. `platforms`: the binaries/ folders to build (fmu.platforms.resolve: None the
+    host's, "all", or () for a source-only FMU)."""
     path = Path(path)
+    chosen = resolve(platforms)
+    _check_platforms(system, chosen)
     files = _files(system, GUID_PLACEHOLDER, check_fmi_version(fmi_version))
-    key = _key(files)
+    key = _key(files, chosen)
     cached = cache.cached_path(key, ".fmu")
     if not cached.exists():
         with tempfile.TemporaryDirectory() as tmp:
             fresh = Path(tmp) / "model.fmu"
             _write_fmu(_with_guid(files, key), _source_files(system, fmi_version),
-                       model_identifier(system), platform_folder(fmi_version), fresh)
+                       model_identifier(system), chosen, fmi_version, fresh)
             cache.store(key, ".fmu", fresh)
     path.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(cached, path)

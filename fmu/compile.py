@@ -54,11 +54,12 @@ def compiler() -> str:
 
 
 @functools.cache
-def compiler_version() -> str:
-    """First line of `$CC --version`, part of every cache key; remembered in the cache per
-    compiler binary (its path, size and time), so that a run of cached FMUs starts no
-    compiler."""
-    binary = shutil.which(compiler())
+def compiler_version(command: str | None = None) -> str:
+    """First line of `command --version` (default: compiler()), part of every cache key;
+    remembered in the cache per compiler binary (its path, size and time), so that a run of
+    cached FMUs starts no compiler."""
+    command = command or compiler()
+    binary = shutil.which(command)
     remembered = None
     if binary is not None:
         stat = os.stat(binary)
@@ -67,7 +68,7 @@ def compiler_version() -> str:
             ".compiler-version")
         if remembered.is_file():
             return remembered.read_text()
-    out = subprocess.run([compiler(), "--version"], capture_output=True, text=True, check=True)
+    out = subprocess.run([command, "--version"], capture_output=True, text=True, check=True)
     version = out.stdout.splitlines()[0]
     if remembered is not None:
         with tempfile.TemporaryDirectory() as tmp:
@@ -86,9 +87,10 @@ def fmi_headers(fmi_version: int = 2) -> dict[str, str]:
 
 def run_compiler(sources: list[Path], output: Path, include_dirs: list[Path],
                  extra_flags: tuple[str, ...] = ("-shared",),
-                 libraries: tuple[str, ...] = ("-lm",)) -> None:
-    """Compile `sources` into `output` (a shared library by default); raise with gcc's messages."""
-    cmd = [compiler(), *CFLAGS, *extra_flags, *(f"-I{d}" for d in include_dirs),
+                 libraries: tuple[str, ...] = ("-lm",), command: str | None = None) -> None:
+    """Compile `sources` into `output` (a shared library by default) with `command` (default:
+    compiler()); raise with gcc's messages."""
+    cmd = [command or compiler(), *CFLAGS, *extra_flags, *(f"-I{d}" for d in include_dirs),
            *map(str, sources), "-o", str(output), *libraries]
     result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:

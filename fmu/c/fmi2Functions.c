@@ -278,8 +278,7 @@ fmi2Status fmi2Terminate(fmi2Component comp) {
 /* flexff's own entry, not part of FMI: the network's call times so far (calls, p50, p99 and
  * max in seconds), which flexff's master puts in its real-time report after a run. 0, or -1
  * for a component that is not a live instance with a network. */
-__attribute__((visibility("default"))) int flexff_network_times(fmi2Component comp,
-                                                                double times[4]) {
+FLEXFF_EXPORT int flexff_network_times(fmi2Component comp, double times[4]) {
     Instance *c = (Instance *)comp;
     if (registry_find(comp) < 0 || c->magic != INSTANCE_MAGIC || c->net == NULL) return -1;
 #if NET_TASK
@@ -294,8 +293,8 @@ __attribute__((visibility("default"))) int flexff_network_times(fmi2Component co
  * communication steps; *overruns: NULL if it runs in the step, else the instance's count of
  * rate-transition overruns (valid until fmi2FreeInstance; written by the thread that steps the
  * instance, which a master watches after each step). 0, or -1 as flexff_network_times. */
-__attribute__((visibility("default"))) int flexff_network_task(fmi2Component comp, long *period,
-                                                               const long **overruns) {
+FLEXFF_EXPORT int flexff_network_task(fmi2Component comp, long *period,
+                                      const long **overruns) {
     Instance *c = (Instance *)comp;
     if (registry_find(comp) < 0 || c->magic != INSTANCE_MAGIC || c->net == NULL ||
         period == NULL || overruns == NULL)
@@ -474,9 +473,9 @@ static int data_problem(const Instance *c, const Data *d, char *why, size_t size
         PROBLEM("state '%s' = %g", real_name(VR_X + bad), d->x[bad]);
 #if HAS_NETWORK
     if (d->net_step < 0 || d->net_step > NET_STEP_MAX)
-        PROBLEM("network step counter %ld", d->net_step);
+        PROBLEM("network step counter %lld", d->net_step);
     if (!initialized && d->net_step != 0)
-        PROBLEM("network step counter %ld before initialization", d->net_step);
+        PROBLEM("network step counter %lld before initialization", d->net_step);
     if (d->net_pending != 0 && d->net_pending != 1) PROBLEM("network flag %d", d->net_pending);
     if (d->net_pending && (first_nonfinite(d->net_new, N_R) >= 0 ||
                            first_nonfinite(d->net_u, N_U) >= 0))
@@ -484,16 +483,16 @@ static int data_problem(const Instance *c, const Data *d, char *why, size_t size
     if (first_nonfinite(d->net_last, N_R) >= 0 || first_nonfinite(d->net_before, N_R) >= 0)
         PROBLEM("last network results");
     if ((d->net_job != 0 && d->net_job != 1) || (d->net_job && (!NET_TASK || d->net_step < 1)))
-        PROBLEM("network task flag %d at step %ld", d->net_job, d->net_step);
+        PROBLEM("network task flag %d at step %lld", d->net_job, d->net_step);
     if (d->net_job && first_nonfinite(d->net_job_r, N_R) >= 0)
         PROBLEM("network task result");
     if (NET_PRECOMPUTED && initialized) {
         /* Row net_step of the table is the current communication point. */
         if (d->net_step >= c->table_rows)
-            PROBLEM("network step counter %ld past the precomputation table (%ld rows)",
+            PROBLEM("network step counter %lld past the precomputation table (%ld rows)",
                     d->net_step, c->table_rows);
         if (!(fabs(d->time - table_time(c, d->net_step)) <= 0.5 * SAMPLE_TIME))
-            PROBLEM("time %.17g is not the time %.17g of row %ld of the precomputation table",
+            PROBLEM("time %.17g is not the time %.17g of row %lld of the precomputation table",
                     d->time, table_time(c, d->net_step), d->net_step);
     }
 #endif

@@ -5,6 +5,9 @@
 #define _POSIX_C_SOURCE 199309L /* clock_gettime */
 #include <math.h>
 #include <time.h>
+#ifdef _WIN32
+#include <windows.h> /* QueryPerformanceCounter: Windows has no clock_gettime */
+#endif
 
 #include "net_times.h"
 
@@ -12,9 +15,16 @@
 #define BINS_PER_DECADE 20.0
 
 double net_clock(void) {
+#ifdef _WIN32
+    LARGE_INTEGER now, frequency;
+    QueryPerformanceCounter(&now);
+    QueryPerformanceFrequency(&frequency);
+    return (double)now.QuadPart / (double)frequency.QuadPart;
+#else
     struct timespec now;
     clock_gettime(CLOCK_MONOTONIC, &now);
     return (double)now.tv_sec + 1e-9 * (double)now.tv_nsec;
+#endif
 }
 
 void net_times_add(NetTimes *times, double seconds) {

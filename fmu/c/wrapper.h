@@ -49,6 +49,13 @@
 #endif
 #endif
 
+/* flexff's own entries beside the fmi2 functions (fmi2Functions.c), exported as those are. */
+#ifdef _WIN32
+#define FLEXFF_EXPORT __declspec(dllexport)
+#else
+#define FLEXFF_EXPORT __attribute__((visibility("default")))
+#endif
+
 /* C99 has no zero-length arrays: size buffers of empty blocks as one element. */
 #define DIM(n) ((n) > 0 ? (n) : 1)
 #define MAX2(a, b) ((a) > (b) ? (a) : (b))
@@ -74,7 +81,7 @@ typedef char assert_sz_arg[SZ_ARG >= 5 ? 1 : -1];
                                     * (10^6 already take seconds; a typo in max_substep or in
                                     * the step must not block the caller for hours) */
 #define REGISTRY_SIZE 4096         /* live instances of one FMU in one process (a power of 2) */
-#define NET_STEP_MAX (1L << 53)    /* communication points of a run (285,000 years at 1 kHz): a
+#define NET_STEP_MAX (1LL << 53)    /* communication points of a run (285,000 years at 1 kHz): a
                                     * serialized step counter beyond is corrupt, and counting on
                                     * from near LONG_MAX would overflow */
 
@@ -122,7 +129,8 @@ typedef struct {
     fmi2Real w[DIM(N_W)];
     Rng rng;
 #if HAS_NETWORK
-    long net_step;                /* communication points since initialization */
+    long long net_step;           /* communication points since initialization (64 bits
+                                   * where long has 32, as on win64) */
     int net_pending;              /* the network ran at this call point; committed by DoStep */
     fmi2Real net_u[DIM(N_U)];     /* the inputs it ran with */
     fmi2Real net_new[N_R];        /* its result at this call point */

@@ -36,6 +36,7 @@ static int resource_path(const char *uri, const char *name, char *path, size_t s
     s += 5;
     if (strncmp(s, "///", 3) == 0) s += 2;
     else if (strncmp(s, "//localhost/", 12) == 0) s += 11;
+    if (s[0] == '/' && s[1] && s[2] == ':') s++; /* file:///C:/x is the Windows path C:/x */
     for (; *s && j + 1 < size; s++) { /* percent-decode */
         unsigned int byte;
         if (s[0] == '%' && s[1] && s[2] && sscanf(s + 1, "%2x", &byte) == 1) {
@@ -298,10 +299,10 @@ fmi2Status check_table_inputs(Instance *c) {
 
 /* The precomputed result of call point `call` into net_new; the bound is checked here too, so
  * no sequence of calls can read past the table. */
-static fmi2Status net_lookup(Instance *c, long call) {
+static fmi2Status net_lookup(Instance *c, long long call) {
     if (net_ensure_precomputed(c) != fmi2OK) return fmi2Error;
     if (call < 0 || call >= table_calls(c))
-        return fail(c, "Communication point %ld is outside the precomputation table (%ld rows).",
+        return fail(c, "Communication point %lld is outside the precomputation table (%ld rows).",
                     c->d.net_step, c->table_rows);
     memcpy(c->d.net_new, c->precomputed + call * N_R, sizeof c->d.net_new);
     return fmi2OK;
@@ -309,7 +310,7 @@ static fmi2Status net_lookup(Instance *c, long call) {
 
 /* The network's result for the call point at the current time, into net_new. */
 static fmi2Status net_call(Instance *c) {
-    const long call = c->d.net_step / NET_PERIOD;
+    const long long call = c->d.net_step / NET_PERIOD;
     char error[1024];
     if (NET_PRECOMPUTED && c->d.mode != MODE_INIT) {
         if (net_lookup(c, call) != fmi2OK) return fmi2Error;
@@ -370,7 +371,7 @@ static fmi2Status task_prepare(Instance *c, long phase) {
 /* c->r at the current point: at a call point the network runs on the current inputs (again
  * only if they changed since), in between its last two results are extrapolated. */
 fmi2Status net_prepare(Instance *c) {
-    const long phase = c->d.net_step % NET_PERIOD;
+    const long phase = (long)(c->d.net_step % NET_PERIOD);
 #if NET_TASK
     return task_prepare(c, phase);
 #endif
