@@ -50,6 +50,23 @@ def unit_names(layout: Layout) -> list[str]:
     return sorted({v.unit for v in layout.variables if v.unit})
 
 
+def add_units_logs_experiment(root: ET.Element, system: System, layout: Layout,
+                              api: str = "fmi2") -> None:
+    """UnitDefinitions, LogCategories (their texts naming the `api`'s functions) and the
+    DefaultExperiment, alike in FMI 2.0 and 3.0."""
+    units = unit_names(layout)
+    if units:
+        unit_defs = ET.SubElement(root, "UnitDefinitions")
+        for unit in units:
+            ET.SubElement(unit_defs, "Unit", {"name": unit})
+    categories = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES.items():
+        ET.SubElement(categories, "Category", {"name": name,
+                                               "description": text.replace("fmi2", api)})
+    ET.SubElement(root, "DefaultExperiment", {"startTime": "0.0",
+                                              "stepSize": repr(default_step(system))})
+
+
 def default_step(system: System) -> float:
     """The default experiment's step: the sample time of a discrete system, else 1 ms."""
     step = system.sample_time if system.kind == "discrete" else 1e-3
@@ -98,18 +115,7 @@ def model_description_xml(system: System, layout: Layout, identifier: str, guid:
     for name in source_files:
         ET.SubElement(files, "File", {"name": name})
 
-    units = unit_names(layout)
-    if units:
-        unit_defs = ET.SubElement(root, "UnitDefinitions")
-        for unit in units:
-            ET.SubElement(unit_defs, "Unit", {"name": unit})
-
-    categories = ET.SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES.items():
-        ET.SubElement(categories, "Category", {"name": name, "description": text})
-
-    ET.SubElement(root, "DefaultExperiment", {"startTime": "0.0",
-                                              "stepSize": repr(default_step(system))})
+    add_units_logs_experiment(root, system, layout)
 
     if system.extra:
         # the FMI 2.0 schema allows one element inside <Tool>: wrap the entries in it

@@ -13,12 +13,10 @@ import xml.etree.ElementTree as ET
 
 from flexff.fmu.layout import Layout, ScalarVariable, time_value_reference
 from flexff.fmu.model_description import (
-    LOG_CATEGORIES,
-    default_step,
+    add_units_logs_experiment,
     format_value,
     initial_attribute,
     output_dependencies,
-    unit_names,
 )
 from flexff.fmu.system import System
 
@@ -64,17 +62,7 @@ def model_description3_xml(system: System, layout: Layout, identifier: str, toke
         "canHandleVariableCommunicationStepSize": "false" if discrete else "true",
         "hasEventMode": "false",
     })
-    units = unit_names(layout)
-    if units:
-        unit_defs = ET.SubElement(root, "UnitDefinitions")
-        for unit in units:
-            ET.SubElement(unit_defs, "Unit", {"name": unit})
-    categories = ET.SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES.items():
-        ET.SubElement(categories, "Category", {"name": name,
-                                               "description": text.replace("fmi2", "fmi3")})
-    ET.SubElement(root, "DefaultExperiment", {"startTime": "0.0",
-                                              "stepSize": repr(default_step(system))})
+    add_units_logs_experiment(root, system, layout, "fmi3")
     model_vars = ET.SubElement(root, "ModelVariables")
     ET.SubElement(model_vars, "Float64", {
         "name": "time", "valueReference": str(time_value_reference(layout)),
