@@ -29,6 +29,7 @@ from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.memory import check_memory
 from flexff.cosim.plugins import check_workspace, reference_kinds
 from flexff.fmu.errors import InputError
+from flexff.fmu.limits import SMOOTHING_SAMPLES
 
 if TYPE_CHECKING:  # SciPy and CasADi load with the references that use them
     from scipy.interpolate import CubicSpline
@@ -262,6 +263,11 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
 
     _positive("step", step, "s")
     _positive("smoothing_window", smoothing_window, "s")
+    # an odd number of samples, at least SAVGOL_ORDER + 2: the cubic fit needs more points
+    # than coefficients, which a window of a few coarse steps would not give
+    window = max(2 * round(smoothing_window / step / 2) + 1, SAVGOL_ORDER + 2)
+    SMOOTHING_SAMPLES.check(window, f"{path}: the {smoothing_window:g} s smoothing window at "
+                                    f"the {step:g} s step (a larger step or a shorter window)")
     table = read_time_table(Path(path), ("x_ref", "y_ref"), Reference.SIGNALS[2:])
     columns, t = table.columns, table.time
     check_workspace(columns["x_ref"], columns["y_ref"], f"{path}: point")
@@ -269,9 +275,6 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
     check_memory(SAMPLED_ARRAYS * n, f"{path}: resampling the {t[-1] - t[0]:g} s table every "
                                      f"{step:g} s")
     grid = t[0] + np.arange(n) * step
-    # an odd number of samples, at least SAVGOL_ORDER + 2: the cubic fit needs more points
-    # than coefficients, which a window of a few coarse steps would not give
-    window = max(2 * round(smoothing_window / step / 2) + 1, SAVGOL_ORDER + 2)
     if grid.size < window:
         raise InputError(f"{path}: the table spans {t[-1] - t[0]:.6g} s, too short for the "
                          f"{smoothing_window} s smoothing window at the {step} s step")
