@@ -79,7 +79,7 @@ def check(parse: Callable[[], Any]) -> Any:
     except OWN_ERRORS as error:
         message = str(error)
         assert message.strip(), f"{type(error).__name__} without a message"
-        assert "\n" not in message and "\r" not in message, \
+        assert message.splitlines() == [message], \
             f"{type(error).__name__} over several lines: {message!r}"
         return None
     finally:
