@@ -102,7 +102,10 @@ class Segment:
     def _validate(self) -> None:
         """Positive finite duration and, on a dense grid, the whole path in the workspace."""
         _positive("duration", self.duration, "s")
-        dense = self.evaluate(np.linspace(0.0, self.duration, max(2001, int(self.duration * 2000))))
+        n = max(2001, int(self.duration * 2000))
+        check_memory(SAMPLED_ARRAYS * n, f"checking the {self.duration:g} s "
+                                         f"{type(self).__name__.lower()} on a grid of 0.5 ms")
+        dense = self.evaluate(np.linspace(0.0, self.duration, n))
         check_workspace(dense[0], dense[1], f"{type(self).__name__} point")
 
 

@@ -77,6 +77,7 @@ def mutated_tables(draw: st.DrawFn, tables: dict[str, Any]) -> dict[str, Any]:
     return data
 
 
+CIRCLE = {"reference": {"kind": "circle", "radius": 0.02, "duration": 8.0}}
 chosen = st.sampled_from(EXAMPLES)
 configs = st.one_of(
     chosen.flatmap(lambda e: st.tuples(mutated_tables(e[0]), st.just(e[2]))),
@@ -93,6 +94,11 @@ def fuzz_config(data: dict[str, Any] | str, base: Path) -> None:
 @given(config=configs)
 # found by the fuzzer: a table named "\r" made a message of two lines (fmu.errors.one_line)
 @example(config=({"run": {"step": 0.001}, "\r": "N"}, REPOSITORY))
+# found by the fuzzer: a list as [feedforward] kind was a TypeError (unhashable)
+@example(config=({**CIRCLE, "feedforward": {"kind": [1]}}, REPOSITORY))
+# found by the fuzzer: a line of 2^31 s was checked on a grid of 31 TiB (a MemoryError)
+@example(config=({"reference": {"kind": "line-circle", "radius": 0.02, "line_duration": 2**31,
+                                "circle_duration": 8.0}}, REPOSITORY))
 def test_config_fast(config: tuple[dict[str, Any] | str, Path]) -> None:
     fuzz_config(*config)
 
