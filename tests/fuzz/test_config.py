@@ -99,6 +99,8 @@ def fuzz_config(data: dict[str, Any] | str, base: Path) -> None:
 # found by the fuzzer: a line of 2^31 s was checked on a grid of 31 TiB (a MemoryError)
 @example(config=({"reference": {"kind": "line-circle", "radius": 0.02, "line_duration": 2**31,
                                 "circle_duration": 8.0}}, REPOSITORY))
+# found by the fuzzer: a step of 5e-324 s made infinitely many samples (an OverflowError)
+@example(config=({**CIRCLE, "run": {"step": 5e-324}}, REPOSITORY))
 def test_config_fast(config: tuple[dict[str, Any] | str, Path]) -> None:
     fuzz_config(*config)
 

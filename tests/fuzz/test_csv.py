@@ -63,7 +63,7 @@ def fuzz_tables(folder: Path, data: bytes, required: tuple[str, ...], everything
 
 
 examples = dict(data=contents, required=st.sampled_from(COLUMNS), everything=st.booleans(),
-                step=st.sampled_from([1e-3, 0.01, 1e-9, 7.0]))
+                step=st.sampled_from([1e-3, 0.01, 1e-9, 7.0, 5e-324]))
 
 
 @fast()
@@ -90,3 +90,6 @@ def test_smoothing_window_bounded(tmp_path: Path) -> None:
     path = _file(tmp_path, REFERENCE)
     with pytest.raises(InputError, match=r"smoothing window .* FLEXFF_MAX_SMOOTHING_SAMPLES"):
         read_csv(path, 1e-9)
+    # and a step of 5e-324 s made it infinite (an OverflowError)
+    with pytest.raises(InputError, match="smoothing window"):
+        read_csv(path, 5e-324)
