@@ -4,10 +4,13 @@ right one."""
 
 from __future__ import annotations
 
+import copy
 import math
+from collections.abc import Sequence
 from typing import Any
 
 from hypothesis import strategies as st
+from lxml import etree
 
 # the values that break parsers most often: empty, huge, non-finite, odd types and characters
 ODD_NUMBERS = [0, -1, 1, 2**31, 2**63 - 1, -(2**63), 1e-300, 1e300, 1e308, -0.0, 5e-324,
@@ -15,6 +18,7 @@ ODD_NUMBERS = [0, -1, 1, 2**31, 2**63 - 1, -(2**63), 1e-300, 1e300, 1e308, -0.0,
 ODD_TEXTS = ["", " ", "0", "-1", "1e309", "nan", "inf", "-inf", "true", "0x10", "1_000", "١",
              "a.b", ".", "..", "/", "\x00", "\n", "line\nbreak", "é", "\u202e", "NaN",
              "1" * 400, "../../etc/passwd", "/dev/null", "/dev/zero", "C:\\x"]
+XML_TEXTS = [t for t in ODD_TEXTS if t.isprintable() or t == "line\nbreak"]  # lxml takes these
 
 
 def odd_scalars() -> st.SearchStrategy[Any]:
@@ -60,3 +64,30 @@ def mutated_text(valid: str) -> st.SearchStrategy[str]:
 def garbage() -> st.SearchStrategy[bytes]:
     """Structural garbage: random bytes, or random text."""
     return st.one_of(st.binary(max_size=512), st.text(max_size=512).map(str.encode))
+
+
+@st.composite
+def mutated_xml(draw: st.DrawFn, tree: etree._Element, tags: Sequence[str],
+                attributes: Sequence[str], values: Sequence[str]) -> bytes:
+    """The XML document `tree` with one to four edits: an element removed, repeated or given
+    another of `tags`, one of `attributes` set to one of `values` or to odd text, or an
+    attribute removed."""
+    root = copy.deepcopy(tree)
+    text = st.text(st.characters(min_codepoint=32, max_codepoint=0xFFFD,
+                                 exclude_categories=["Cs"]), max_size=12)  # XML's characters
+    for _ in range(draw(st.integers(1, 4))):
+        element = draw(st.sampled_from([e for e in root.iter() if isinstance(e.tag, str)]))
+        edit = draw(st.sampled_from(["remove", "repeat", "rename", "set", "unset"]))
+        parent = element.getparent()
+        if edit == "remove" and parent is not None:
+            parent.remove(element)
+        elif edit == "repeat" and parent is not None:
+            parent.append(copy.deepcopy(element))
+        elif edit == "rename":
+            element.tag = draw(st.sampled_from(tags))
+        elif edit == "set":
+            element.set(draw(st.sampled_from(attributes)),
+                        draw(st.one_of(st.sampled_from(values), text)))
+        elif element.attrib:
+            del element.attrib[draw(st.sampled_from(sorted(element.attrib)))]
+    return bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8"))

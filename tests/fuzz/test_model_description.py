@@ -5,7 +5,6 @@ odd values, their XML text mutated, damaged archives and garbage (tests/fuzz/har
 
 from __future__ import annotations
 
-import copy
 import io
 import itertools
 import zipfile
@@ -19,7 +18,7 @@ from lxml import etree
 from flexff.cosim.config import parse_config
 from flexff.fmu.importer import read_fmu
 from tests.fuzz.harness import check, fast, fuzz_seconds, run_for, slow
-from tests.fuzz.mutations import ODD_TEXTS, garbage, mutated_bytes, mutated_text
+from tests.fuzz.mutations import XML_TEXTS, garbage, mutated_bytes, mutated_text, mutated_xml
 from tests.helpers import REFERENCE_FMUS
 
 DESCRIPTIONS = [zipfile.ZipFile(path).read("modelDescription.xml").decode()
@@ -28,35 +27,10 @@ TREES = [etree.fromstring(text.encode()) for text in DESCRIPTIONS]
 TAGS = sorted({e.tag for tree in TREES for e in tree.iter() if isinstance(e.tag, str)})
 ATTRIBUTES = sorted({a for tree in TREES for e in tree.iter() for a in e.attrib})
 # odd attribute values, and the ones FMI gives meaning to
-VALUES = [*(t for t in ODD_TEXTS if t.isprintable() or t in "\n"), "2.0", "3.0", "1.0", "input", "output", "parameter", "local",
+VALUES = [*XML_TEXTS, "2.0", "3.0", "1.0", "input", "output", "parameter", "local",
           "independent", "fixed", "tunable", "discrete", "continuous", "exact", "calculated",
           "approx", "1 2 3", "0", "4294967296", "-5", "1e-2", "{00000000}"]
 _files = itertools.count()
-
-
-@st.composite
-def mutated_tree(draw: st.DrawFn, tree: etree._Element) -> bytes:
-    """A description with one to four edits of its elements and attributes."""
-    root = copy.deepcopy(tree)
-    for _ in range(draw(st.integers(1, 4))):
-        elements = [e for e in root.iter() if isinstance(e.tag, str)]
-        element = draw(st.sampled_from(elements))
-        edit = draw(st.sampled_from(["remove", "repeat", "rename", "set", "unset"]))
-        parent = element.getparent()
-        if edit == "remove" and parent is not None:
-            parent.remove(element)
-        elif edit == "repeat" and parent is not None:
-            parent.append(copy.deepcopy(element))
-        elif edit == "rename":
-            element.tag = draw(st.sampled_from(TAGS))
-        elif edit == "set":
-            name = draw(st.sampled_from(ATTRIBUTES))
-            element.set(name, draw(st.one_of(st.sampled_from(VALUES), st.text(
-                st.characters(min_codepoint=32, max_codepoint=0xFFFD, exclude_categories=["Cs"]),
-                max_size=12))))
-        elif element.attrib:
-            del element.attrib[draw(st.sampled_from(sorted(element.attrib)))]
-    return bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8"))
 
 
 def _archive(description: bytes) -> bytes:
@@ -68,7 +42,7 @@ def _archive(description: bytes) -> bytes:
 
 
 descriptions = st.one_of(
-    st.sampled_from(TREES).flatmap(mutated_tree),
+    st.sampled_from(TREES).flatmap(lambda tree: mutated_xml(tree, TAGS, ATTRIBUTES, VALUES)),
     st.sampled_from(DESCRIPTIONS).flatmap(mutated_text).map(str.encode),
     garbage())
 archives = st.one_of(
