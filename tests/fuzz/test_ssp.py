@@ -19,6 +19,7 @@ from lxml import etree
 
 from flexff.cosim.config import load_config
 from flexff.cosim.ssp import NS, SSD, export_ssp, load_ssp
+from flexff.fmu.errors import InputError
 from tests.fuzz.harness import check, fast, fuzz_seconds, run_for, slow
 from tests.fuzz.mutations import XML_TEXTS, garbage, mutated_bytes, mutated_text, mutated_xml
 from tests.helpers import REFERENCE_FMUS
@@ -121,3 +122,13 @@ def test_ssp_slow(cache: Path, members: dict[str, bytes]) -> None:
         fuzz_ssp(cache, archive)
 
     run_for(fuzz_seconds(), fuzz_round)
+
+
+def test_archive_without_its_first_byte(cache: Path, members: dict[str, bytes]) -> None:
+    """Found by the fuzzer: an archive cut by its first byte made zipfile seek before the
+    file's start, an OSError (EINVAL) out of fmu.archive.extract_archive; now one line
+    naming the damaged member."""
+    path = cache / "cut.ssp"
+    path.write_bytes(_zip(members)[1:])
+    with pytest.raises(InputError, match=r"member 'SystemStructure\.ssd' is damaged"):
+        load_ssp(path)
