@@ -94,6 +94,10 @@ def plan_graph(model: onnx.ModelProto, name: str) -> Plan:
             nodes.append(node)
     used = {n for node in nodes for n in [*node.input, *node.output] if n}
     used |= {v.name for v in [*inputs, *graph.output]}
+    missing = sorted(used - set(values))  # e.g. an output that no node computes
+    if missing:
+        raise InputError(f"{name}: tensor {missing[0]!r} is neither an input, an initializer "
+                         f"nor computed by a node: not a valid ONNX graph")
     tensors = {n: _tensor(n, values[n], n in constants, name) for n in sorted(used)}
     return Plan(name, tuple(tensors[v.name] for v in inputs),
                 tuple(tensors[v.name] for v in graph.output), tuple(nodes), tensors,
