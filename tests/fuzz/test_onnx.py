@@ -169,3 +169,20 @@ def test_output_no_node_computes(cache: Path) -> None:
     path.write_bytes(model.SerializeToString())
     with pytest.raises(InputError, match="tensor 'h' is neither an input"):
         onnx_system(path, runtime="c")
+
+
+def test_metadata_key_not_utf8(cache: Path) -> None:
+    """Found by the fuzzer: a metadata key of bytes that are not UTF-8 (protobuf reads them
+    as bytes) was a UnicodeDecodeError while wrapping the graph; now one line."""
+    model = oh.make_model(oh.make_graph(
+        [oh.make_node("Relu", ["x"], ["y"])], "fuzz",
+        [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 1])],
+        [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 1])]),
+        opset_imports=[oh.make_opsetid("", 13)])
+    model.ir_version = 8
+    oh.set_model_props(model, {"output_signals": '["out0"]'})
+    data = model.SerializeToString().replace(b"output_signals", b"\x80utput_signals")
+    path = cache / "bytes.onnx"
+    path.write_bytes(data)
+    with pytest.raises(InputError, match=r"StringStringEntryProto\.key is not UTF-8 text"):
+        onnx_system(path, runtime="c")
