@@ -1,6 +1,7 @@
-"""Fuzzing run configurations (cosim.config.parse_config, what `flexff run` and every command
-taking a configuration read): the repository's example configurations with keys removed, added
-and given odd values, their TOML text mutated, and garbage (tests/fuzz/harness.py)."""
+"""Fuzzing run configurations (cosim.config.load_config and parse_config, what `flexff run` and
+every command taking a configuration read): the repository's example configurations with keys
+removed, added and given odd values, their files' bytes mutated, and garbage
+(tests/fuzz/harness.py)."""
 
 from __future__ import annotations
 
@@ -12,9 +13,9 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from flexff.cosim.config import parse_config, read_tables
+from flexff.cosim.config import load_config, parse_config, read_tables
 from tests.fuzz.harness import check, fast, fuzz_seconds, run_for, slow
-from tests.fuzz.mutations import garbage, mutated_text, odd_values
+from tests.fuzz.mutations import garbage, mutated_bytes, odd_values
 from tests.helpers import REPOSITORY
 
 FILES = sorted([*(REPOSITORY / "cosim" / "examples").glob("*.toml"),
@@ -81,13 +82,34 @@ CIRCLE = {"reference": {"kind": "circle", "radius": 0.02, "duration": 8.0}}
 chosen = st.sampled_from(EXAMPLES)
 configs = st.one_of(
     chosen.flatmap(lambda e: st.tuples(mutated_tables(e[0]), st.just(e[2]))),
-    chosen.flatmap(lambda e: st.tuples(mutated_text(e[1]), st.just(e[2]))),
-    st.tuples(garbage().map(lambda b: b.decode("utf-8", "replace")), st.just(REPOSITORY)))
+    chosen.flatmap(lambda e: st.tuples(mutated_bytes(e[1].encode()), st.just(e[2]))),
+    st.tuples(garbage(), st.just(REPOSITORY)))
+Config = tuple[dict[str, Any] | bytes, Path]
 
 
-def fuzz_config(data: dict[str, Any] | str, base: Path) -> None:
-    """The property for one configuration (tables or TOML text) read against `base`."""
-    check(lambda: parse_config(data, base=base, origin="fuzz.toml"))
+@pytest.fixture(scope="module")
+def mirrors(tmp_path_factory: pytest.TempPathFactory) -> dict[Path, Path]:
+    """For each examples folder, a folder of links to its files, where a mutated file is
+    written: its relative paths find the example's files."""
+    out = {}
+    for folder in {*(e[2] for e in EXAMPLES), REPOSITORY}:
+        mirror = tmp_path_factory.mktemp(folder.name)
+        for path in folder.iterdir():
+            (mirror / path.name).symlink_to(path)
+        out[folder] = mirror
+    return out
+
+
+def fuzz_config(config: Config, mirrors: dict[Path, Path]) -> None:
+    """The property for one configuration: tables checked against their folder, or a file's
+    bytes read from it (load_config)."""
+    data, base = config
+    if isinstance(data, dict):
+        check(lambda: parse_config(data, base=base, origin="fuzz.toml"))
+        return
+    path = mirrors[base] / "fuzz.toml"
+    path.write_bytes(data)
+    check(lambda: load_config(path))
 
 
 @fast()
@@ -101,15 +123,15 @@ def fuzz_config(data: dict[str, Any] | str, base: Path) -> None:
                                 "circle_duration": 8.0}}, REPOSITORY))
 # found by the fuzzer: a step of 5e-324 s made infinitely many samples (an OverflowError)
 @example(config=({**CIRCLE, "run": {"step": 5e-324}}, REPOSITORY))
-def test_config_fast(config: tuple[dict[str, Any] | str, Path]) -> None:
-    fuzz_config(*config)
+def test_config_fast(mirrors: dict[Path, Path], config: Config) -> None:
+    fuzz_config(config, mirrors)
 
 
 @pytest.mark.slow
-def test_config_slow() -> None:
+def test_config_slow(mirrors: dict[Path, Path]) -> None:
     @slow()
     @given(config=configs)
-    def fuzz_round(config: tuple[dict[str, Any] | str, Path]) -> None:
-        fuzz_config(*config)
+    def fuzz_round(config: Config) -> None:
+        fuzz_config(config, mirrors)
 
     run_for(fuzz_seconds(), fuzz_round)
