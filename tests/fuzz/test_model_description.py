@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from lxml import etree
 
 from flexff.cosim.config import parse_config
-from flexff.fmu.importer import read_fmu
+from flexff.fmu.importer import FmuError, read_fmu
 from tests.fuzz.harness import check, fast, fuzz_seconds, run_for, slow
 from tests.fuzz.mutations import XML_TEXTS, garbage, mutated_bytes, mutated_text, mutated_xml
 from tests.helpers import REFERENCE_FMUS
@@ -75,3 +75,14 @@ def test_model_description_slow(tmp_path: Path) -> None:
         fuzz_fmu(tmp_path, archive)
 
     run_for(fuzz_seconds(), fuzz_round)
+
+
+def test_experiment_time_not_a_number(tmp_path: Path) -> None:
+    """Found by the fuzzer: a DefaultExperiment startTime of " ", read unchecked (as `flexff
+    fmu validate` reads), was a ValueError from float(); now one line naming the attribute."""
+    description = DESCRIPTIONS[0].replace('startTime="0"', 'startTime=" "')
+    assert description != DESCRIPTIONS[0]
+    path = tmp_path / "blank.fmu"
+    path.write_bytes(_archive(description.encode()))
+    with pytest.raises(FmuError, match="DefaultExperiment startTime = ' ' is not a number"):
+        read_fmu(path, checked=False)
