@@ -47,7 +47,8 @@ contents = st.one_of(st.sampled_from(VALID).flatmap(mutated_bytes), tables(), ga
 
 
 def _file(folder: Path, data: bytes) -> Path:
-    """`data` in a file of its own (the reference cache keys on the file's time and size)."""
+    """`data` in a new file in `folder` (its name numbered: a failing example's file is
+    left behind under its own name)."""
     path = folder / f"table-{next(_files)}.csv"
     path.write_bytes(data)
     return path
