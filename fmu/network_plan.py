@@ -126,7 +126,11 @@ def _input_shape(value: onnx.ValueInfoProto, name: str) -> list[int]:
             or not tensor.HasField("shape"):
         raise InputError(f"{name}: input {value.name!r} must be a tensor of a known shape and "
                          f"one of the types {_type_names()}")
-    return [d.dim_value for d in tensor.shape.dim]
+    shape = [d.dim_value for d in tensor.shape.dim]
+    if any(d < 0 for d in shape):
+        raise InputError(f"{name}: input {value.name!r} has a negative dimension in its shape "
+                         f"{shape}: not a valid ONNX graph")
+    return shape
 
 
 def _tensor(tensor: str, value: object, constant: bool, name: str) -> Tensor:

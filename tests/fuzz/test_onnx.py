@@ -186,3 +186,21 @@ def test_metadata_key_not_utf8(cache: Path) -> None:
     path.write_bytes(data)
     with pytest.raises(InputError, match=r"StringStringEntryProto\.key is not UTF-8 text"):
         onnx_system(path, runtime="c")
+
+
+def test_state_of_negative_size(cache: Path) -> None:
+    """Found by the fuzzer: a state input of dimension -1 was a ValueError from numpy in the
+    C network's plan; now one line naming the input."""
+    model = oh.make_model(oh.make_graph(
+        [oh.make_node("Identity", ["x"], ["y"]), oh.make_node("Tanh", ["h"], ["h_out"])], "fuzz",
+        [oh.make_tensor_value_info("x", TensorProto.DOUBLE, [1, 1]),
+         oh.make_tensor_value_info("h", TensorProto.FLOAT, [-1, 2])],
+        [oh.make_tensor_value_info("y", TensorProto.DOUBLE, [1, 1]),
+         oh.make_tensor_value_info("h_out", TensorProto.FLOAT, [-1, 2])]),
+        opset_imports=[oh.make_opsetid("", 13)])
+    model.ir_version = 8
+    oh.set_model_props(model, {"state": json.dumps([{"input": "h", "output": "h_out"}])})
+    path = cache / "negative.onnx"
+    path.write_bytes(model.SerializeToString())
+    with pytest.raises(InputError, match="input 'h' has a negative dimension"):
+        onnx_system(path, runtime="c")
