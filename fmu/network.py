@@ -169,12 +169,21 @@ def runtime_library() -> Path:
     return found[0]
 
 
+def type_name(elem_type: int) -> str:
+    """An ONNX element type's name (FLOAT, INT64, ...), also for a number ONNX does not
+    define (a damaged file's)."""
+    try:
+        return str(onnx.TensorProto.DataType.Name(elem_type))
+    except ValueError:
+        return f"the undefined element type {elem_type}"
+
+
 def _tensor(value: onnx.ValueInfoProto, path: Path) -> tuple[str, tuple[int | str, ...]]:
     tensor = value.type.tensor_type
     kind = ELEMENT_TYPES.get(tensor.elem_type)
     if kind is None:
         raise InputError(f"{path}: tensor {value.name!r} has element type "
-                         f"{onnx.TensorProto.DataType.Name(tensor.elem_type)}; only float32 "
+                         f"{type_name(tensor.elem_type)}; only float32 "
                          f"(state) and float64 (input, output) are supported")
     shape = tuple(d.dim_value if d.HasField("dim_value") else (d.dim_param or "?")
                   for d in tensor.shape.dim)

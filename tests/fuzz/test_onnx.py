@@ -204,3 +204,19 @@ def test_state_of_negative_size(cache: Path) -> None:
     path.write_bytes(model.SerializeToString())
     with pytest.raises(InputError, match="input 'h' has a negative dimension"):
         onnx_system(path, runtime="c")
+
+
+def test_undefined_element_type(cache: Path) -> None:
+    """Found by the fuzzer: an input of element type 29, which ONNX does not define, was a
+    ValueError from protobuf while naming the type; now one line naming the input."""
+    model = oh.make_model(oh.make_graph(
+        [oh.make_node("Identity", ["x"], ["y"])], "fuzz",
+        [oh.make_tensor_value_info("x", TensorProto.DOUBLE, [1, 1])],
+        [oh.make_tensor_value_info("y", TensorProto.DOUBLE, [1, 1])]),
+        opset_imports=[oh.make_opsetid("", 13)])
+    model.ir_version = 8
+    model.graph.input[0].type.tensor_type.elem_type = 29
+    path = cache / "undefined.onnx"
+    path.write_bytes(model.SerializeToString())
+    with pytest.raises(InputError, match="input 'x' holds the undefined element type 29"):
+        onnx_system(path, runtime="c")
