@@ -40,7 +40,7 @@ def expand(checker: TableChecker, data: Mapping[str, Any], start: tuple[float, f
     fmus: list[FmuConfig] = []
     sources: list[SourceConfig] = []
     ff = checker.table(data, "feedforward")
-    if ff.get("kind") in RENAMED_KINDS:
+    if isinstance(ff.get("kind"), str) and ff["kind"] in RENAMED_KINDS:
         new = RENAMED_KINDS[ff["kind"]]
         warnings.warn(f"{checker.origin}: [feedforward] kind = {ff['kind']!r} is deprecated, "
                       f"write kind = {new!r} (the same feedforward: the built-in "

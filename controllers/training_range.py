@@ -17,9 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
-from flexff.controllers.features import feature_units, reference_features
+from flexff.controllers.features import (
+    FEATURE_SETS,
+    feature_names,
+    feature_units,
+    reference_features,
+)
 from flexff.controllers.learned_feedforward import model_period
-from flexff.controllers.model_card import read_card
+from flexff.controllers.model_card import ModelCard, read_card
+from flexff.fmu.errors import InputError
 from flexff.plant.signals import REFERENCE, names
 
 MARGIN = 0.1  # of a feature's training span: how far beyond it counts as extrapolating
@@ -53,16 +59,40 @@ def training_range_excess(model: str | Path, reference: Mapping[str, np.ndarray]
     if card.feature_range is None:
         return None
     every = model_period(card, step, model)  # the FMU runs the network on every n-th sample
+    signals, low, high = _trained_range(card, model)
     seen = {n: np.asarray(reference[n], dtype=float).ravel()[::every] for n in names(REFERENCE)}
-    trained = card.feature_range
-    low, high = np.asarray(trained["low"]), np.asarray(trained["high"])
     span = np.where(high > low, high - low, 1.0)
     features = reference_features(seen, card.feature_set)
     below, above = features.min(axis=0), features.max(axis=0)
     spans = np.maximum(low - below, above - high) / span
     outside = ((features < low) | (features > high)).mean(axis=0)
     units = feature_units(card.feature_set)
-    found = [RangeExcess(trained["signals"][k], units[k], float(low[k]), float(high[k]),
+    found = [RangeExcess(signals[k], units[k], float(low[k]), float(high[k]),
                          float(below[k]), float(above[k]), float(spans[k]), float(outside[k]))
              for k in np.flatnonzero(spans > MARGIN)]
     return sorted(found, key=lambda e: -e.spans)
+
+
+def _trained_range(card: ModelCard, model: str | Path) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """The signals, lows and highs of the card's feature_range, one per feature of its set;
+    InputError where the metadata does not hold that (it is not checked when the card is read:
+    the range is this module's alone)."""
+    if card.feature_set not in FEATURE_SETS:
+        raise InputError(f"{model}: metadata feature_set {card.feature_set!r} is not one of "
+                         f"{', '.join(FEATURE_SETS)}; export the model again with `flexff "
+                         f"export`")
+    n = len(feature_names(card.feature_set))
+    trained = card.feature_range
+    signals: list[str] = []
+    low = high = np.zeros(0)
+    if isinstance(trained, dict):
+        try:
+            signals = [str(s) for s in trained["signals"]]
+            low, high = (np.asarray(trained[k], dtype=float) for k in ("low", "high"))
+        except (KeyError, TypeError, ValueError):
+            pass  # refused below
+    if not len(signals) == n or low.shape != (n,) or high.shape != (n,):
+        raise InputError(f"{model}: metadata feature_range is not the range of the {n} features "
+                         f"of the set {card.feature_set!r} ({{\"signals\", \"low\", \"high\"}}, "
+                         f"{n} each); export the model again with `flexff export`")
+    return signals, low, high

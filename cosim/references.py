@@ -29,6 +29,7 @@ from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.memory import check_memory
 from flexff.cosim.plugins import check_workspace, reference_kinds
 from flexff.fmu.errors import InputError
+from flexff.fmu.limits import SMOOTHING_SAMPLES
 
 if TYPE_CHECKING:  # SciPy and CasADi load with the references that use them
     from scipy.interpolate import CubicSpline
@@ -101,7 +102,10 @@ class Segment:
     def _validate(self) -> None:
         """Positive finite duration and, on a dense grid, the whole path in the workspace."""
         _positive("duration", self.duration, "s")
-        dense = self.evaluate(np.linspace(0.0, self.duration, max(2001, int(self.duration * 2000))))
+        n = max(2001, int(self.duration * 2000))
+        check_memory(SAMPLED_ARRAYS * n, f"checking the {self.duration:g} s "
+                                         f"{type(self).__name__.lower()} on a grid of 0.5 ms")
+        dense = self.evaluate(np.linspace(0.0, self.duration, n))
         check_workspace(dense[0], dense[1], f"{type(self).__name__} point")
 
 
@@ -242,11 +246,19 @@ class Chain(Segment):
 def sample(path: Segment, step: float = 1e-3) -> Reference:
     """`path` on the grid 0, step, 2 step, ... up to its duration."""
     _positive("step", step, "s")
-    n = math.floor(path.duration / step + 1e-9) + 1
-    check_memory(SAMPLED_ARRAYS * n, f"sampling the {path.duration:g} s reference every "
-                                     f"{step:g} s")
+    n = _grid_points(path.duration, step, f"sampling the {path.duration:g} s reference every "
+                                          f"{step:g} s")
     t = np.arange(n) * step
     return Reference(t, *path.evaluate(t))
+
+
+def _grid_points(duration: float, step: float, what: str) -> int:
+    """The points of the grid 0, step, ... up to `duration`, checked to fit into memory as a
+    sampled reference (check_memory; `what` names them). Capped before rounding: a step of
+    5e-324 s makes infinitely many, which math.floor cannot count."""
+    n = math.floor(min(duration / step + 1e-9, 2.0**62)) + 1
+    check_memory(SAMPLED_ARRAYS * n, what)
+    return n
 
 
 def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.025) -> Reference:
@@ -262,16 +274,18 @@ def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.0
 
     _positive("step", step, "s")
     _positive("smoothing_window", smoothing_window, "s")
+    # an odd number of samples, at least SAVGOL_ORDER + 2: the cubic fit needs more points
+    # than coefficients, which a window of a few coarse steps would not give (capped, as
+    # _grid_points: round cannot count the infinitely many of a 5e-324 s step)
+    window = max(2 * round(min(smoothing_window / step, 2.0**62) / 2) + 1, SAVGOL_ORDER + 2)
+    SMOOTHING_SAMPLES.check(window, f"{path}: the {smoothing_window:g} s smoothing window at "
+                                    f"the {step:g} s step (a larger step or a shorter window)")
     table = read_time_table(Path(path), ("x_ref", "y_ref"), Reference.SIGNALS[2:])
     columns, t = table.columns, table.time
     check_workspace(columns["x_ref"], columns["y_ref"], f"{path}: point")
-    n = math.floor((t[-1] - t[0]) / step + 1e-9) + 1
-    check_memory(SAMPLED_ARRAYS * n, f"{path}: resampling the {t[-1] - t[0]:g} s table every "
-                                     f"{step:g} s")
+    n = _grid_points(t[-1] - t[0], step, f"{path}: resampling the {t[-1] - t[0]:g} s table "
+                                         f"every {step:g} s")
     grid = t[0] + np.arange(n) * step
-    # an odd number of samples, at least SAVGOL_ORDER + 2: the cubic fit needs more points
-    # than coefficients, which a window of a few coarse steps would not give
-    window = max(2 * round(smoothing_window / step / 2) + 1, SAVGOL_ORDER + 2)
     if grid.size < window:
         raise InputError(f"{path}: the table spans {t[-1] - t[0]:.6g} s, too short for the "
                          f"{smoothing_window} s smoothing window at the {step} s step")

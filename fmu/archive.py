@@ -95,7 +95,13 @@ def extract_archive(path: str | Path, folder: str | Path | None = None) -> Path:
                     continue
                 destination.parent.mkdir(parents=True, exist_ok=True)
                 try:
-                    with zf.open(item) as source, open(destination, "wb") as sink:
+                    source = zf.open(item)
+                except (zipfile.BadZipFile, OSError) as error:  # OSError: a member's header
+                    # offset before the file's start (a byte cut from the archive's head)
+                    raise _refusal(path, item.filename, f"is damaged ({error}: its header is "
+                                   f"not where the archive's directory says)") from None
+                try:
+                    with source, open(destination, "wb") as sink:
                         # zipfile stops at the declared size (a member inflating past it
                         # fails its CRC); counting here keeps the bound independent of that
                         while chunk := source.read(_CHUNK):

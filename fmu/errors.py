@@ -7,9 +7,23 @@ is a bug: exit 1 and a hint to rerun with --debug.
 """
 
 
+# what str.splitlines breaks lines at, each written as its escape (\n, \x85, \u2028)
+_LINE_BREAKS = str.maketrans({c: repr(c)[1:-1] for c in "\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029"})
+
+
+def one_line(text: str) -> str:
+    """`text` with its line breaks written as escapes: a message that quotes a name from the
+    input (a TOML key, a CSV column, an XML attribute) stays the one line the CLI prints."""
+    return text.translate(_LINE_BREAKS)
+
+
 class InputError(ValueError):
     """Bad input: a configuration, a path, an option, a file's contents (an FMU, an ONNX model,
-    a dataset); the message says what is wrong and where. The CLI exits 2 with its message."""
+    a dataset); the message says what is wrong and where, on one line (one_line: whatever
+    names it quotes). The CLI exits 2 with its message."""
+
+    def __str__(self) -> str:
+        return one_line(super().__str__())
 
 
 class RunError(RuntimeError):

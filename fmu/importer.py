@@ -131,6 +131,19 @@ def _start_value(v: Any) -> Any:
         return v.start
 
 
+def _experiment_value(path: Path, experiment: Any, name: str) -> float | None:
+    """The DefaultExperiment's attribute `name` as a number, None where it is not given;
+    FmuError where it is no number (a description read unchecked keeps fmpy's text)."""
+    text = getattr(experiment, name, None) if experiment else None
+    if not text:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise FmuError(f"{path}: modelDescription.xml: DefaultExperiment {name} = {text!r} is "
+                       f"not a number") from None
+
+
 def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
     """Read the model description of a co-simulation FMU; FmuError if it is none. `checked`:
     a description with a structural fault that `flexff fmu validate` finds (fmpy's checks:
@@ -177,12 +190,9 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
         if unknown.variable is not None and unknown.dependencies is not None:
             dependencies[unknown.variable.name] = frozenset(
                 d.name for d in unknown.dependencies if d.name in inputs)
-    experiment = md.defaultExperiment
-    step = float(experiment.stepSize) if experiment and experiment.stepSize else None
-    stop = float(experiment.stopTime) if experiment and experiment.stopTime else None
-    start = float(experiment.startTime) if experiment and experiment.startTime else None
-    tolerance = (float(experiment.tolerance) if experiment and experiment.tolerance
-                 else None)
+    step, stop, start, tolerance = (_experiment_value(path, md.defaultExperiment, name)
+                                    for name in ("stepSize", "stopTime", "startTime",
+                                                 "tolerance"))
     token = md.guid if md.fmiVersion == "2.0" else md.instantiationToken
     return FmuInfo(path, md.fmiVersion, md.modelName or path.stem,
                    interface.modelIdentifier, token or "", variables, inputs, outputs,

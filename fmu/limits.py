@@ -41,3 +41,6 @@ class Limit:
 ONNX_ELEMENTS = Limit("FLEXFF_MAX_ONNX_ELEMENTS", 100_000,
                       "tensor elements (each an FMU variable)")
 CSV_COLUMNS = Limit("FLEXFF_MAX_CSV_COLUMNS", 100_000, "columns")
+# a CSV reference's smoothing window in samples: its filter costs a window's products per
+# sample (a 10^-9 s step made 25 * 10^6, which crashed scipy)
+SMOOTHING_SAMPLES = Limit("FLEXFF_MAX_SMOOTHING_SAMPLES", 10_001, "samples")

@@ -19,6 +19,7 @@ from __future__ import annotations
 import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -133,7 +134,25 @@ def load_model(model: str | Path) -> onnx.ModelProto:
     if loaded.ir_version < 1 or not loaded.graph.output:  # protobuf reads some junk as empty
         raise InputError(f"{path} is not a readable ONNX model: it has no IR version or no "
                          f"graph outputs")
+    field = _not_text(loaded)
+    if field is not None:
+        raise InputError(f"{path} is not a readable ONNX model: a {field} is not UTF-8 text")
     return loaded
+
+
+def _not_text(message: Any) -> str | None:
+    """The name of the first string field in `message` (nested messages too) that holds bytes
+    that are not UTF-8: protobuf reads them (ONNX's proto2 does not check) as bytes where text
+    is expected, which breaks any use as a name."""
+    for field, value in message.ListFields():
+        values = value if field.is_repeated else [value]
+        if field.type == field.TYPE_STRING and any(isinstance(v, bytes) for v in values):
+            return f"{message.DESCRIPTOR.name}.{field.name}"
+        if field.type == field.TYPE_MESSAGE:
+            found = next((f for v in values if (f := _not_text(v)) is not None), None)
+            if found is not None:
+                return found
+    return None
 
 
 def runtime_library() -> Path:
@@ -150,12 +169,21 @@ def runtime_library() -> Path:
     return found[0]
 
 
+def type_name(elem_type: int) -> str:
+    """An ONNX element type's name (FLOAT, INT64, ...), also for a number ONNX does not
+    define (a damaged file's)."""
+    try:
+        return str(onnx.TensorProto.DataType.Name(elem_type))
+    except ValueError:
+        return f"the undefined element type {elem_type}"
+
+
 def _tensor(value: onnx.ValueInfoProto, path: Path) -> tuple[str, tuple[int | str, ...]]:
     tensor = value.type.tensor_type
     kind = ELEMENT_TYPES.get(tensor.elem_type)
     if kind is None:
         raise InputError(f"{path}: tensor {value.name!r} has element type "
-                         f"{onnx.TensorProto.DataType.Name(tensor.elem_type)}; only float32 "
+                         f"{type_name(tensor.elem_type)}; only float32 "
                          f"(state) and float64 (input, output) are supported")
     shape = tuple(d.dim_value if d.HasField("dim_value") else (d.dim_param or "?")
                   for d in tensor.shape.dim)

@@ -94,6 +94,10 @@ def plan_graph(model: onnx.ModelProto, name: str) -> Plan:
             nodes.append(node)
     used = {n for node in nodes for n in [*node.input, *node.output] if n}
     used |= {v.name for v in [*inputs, *graph.output]}
+    missing = sorted(used - set(values))  # e.g. an output that no node computes
+    if missing:
+        raise InputError(f"{name}: tensor {missing[0]!r} is neither an input, an initializer "
+                         f"nor computed by a node: not a valid ONNX graph")
     tensors = {n: _tensor(n, values[n], n in constants, name) for n in sorted(used)}
     return Plan(name, tuple(tensors[v.name] for v in inputs),
                 tuple(tensors[v.name] for v in graph.output), tuple(nodes), tensors,
@@ -122,7 +126,11 @@ def _input_shape(value: onnx.ValueInfoProto, name: str) -> list[int]:
             or not tensor.HasField("shape"):
         raise InputError(f"{name}: input {value.name!r} must be a tensor of a known shape and "
                          f"one of the types {_type_names()}")
-    return [d.dim_value for d in tensor.shape.dim]
+    shape = [d.dim_value for d in tensor.shape.dim]
+    if any(d < 0 for d in shape):
+        raise InputError(f"{name}: input {value.name!r} has a negative dimension in its shape "
+                         f"{shape}: not a valid ONNX graph")
+    return shape
 
 
 def _tensor(tensor: str, value: object, constant: bool, name: str) -> Tensor:

@@ -29,7 +29,7 @@ from onnx import helper as oh
 from flexff.fmu import cache
 from flexff.fmu.errors import InputError
 from flexff.fmu.limits import ONNX_ELEMENTS
-from flexff.fmu.network import Network, load_model, read_network
+from flexff.fmu.network import Network, load_model, read_network, type_name
 from flexff.fmu.network_c import fmu_network_sources
 from flexff.fmu.network_runtime import RUNTIMES, check_runtime
 
@@ -194,7 +194,7 @@ def _port_shape(path: Path, role: str, value: onnx.ValueInfoProto, time_axis: bo
     """The shape of an input or output, checked: float32/float64 and a fixed size."""
     tensor = value.type.tensor_type
     if not value.type.HasField("tensor_type") or tensor.elem_type not in FLOATS:
-        kind = (TensorProto.DataType.Name(tensor.elem_type) if value.type.HasField("tensor_type")
+        kind = (type_name(tensor.elem_type) if value.type.HasField("tensor_type")
                 else value.type.WhichOneof("value"))
         raise InputError(f"{path}: {role} {value.name!r} holds {kind}; FMU variables are reals, "
                          f"so every input and output must be a float32 or float64 tensor")
