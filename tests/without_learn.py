@@ -1,7 +1,8 @@
 """A pytest plugin (tests/conftest.py loads it): where the extra "learn" is not installed (no
 PyTorch, e.g. CI's Python 3.12 and 3.13), a test module or test that needs it is skipped, with
 the reason, instead of failing. Where PyTorch is installed it does nothing, so a test that
-imports it by mistake still fails there."""
+imports it by mistake still fails there. A test whose child process or CLI call needs PyTorch
+says so with the marker `learn`."""
 
 from __future__ import annotations
 
@@ -16,6 +17,12 @@ LEARN = ("torch", "onnxscript")  # the extra "learn" (pyproject.toml)
 INSTALLED = importlib.util.find_spec("torch") is not None
 REASON = "needs PyTorch: pip install 'flexff[learn]'"
 MISSING = re.compile(r"No module named '(" + "|".join(LEARN) + r")[.']")  # in a collect report
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """A test marked `learn` (PyTorch in a child process, or behind the CLI's one line): skipped."""
+    if not INSTALLED and item.get_closest_marker("learn"):
+        pytest.skip(REASON)
 
 
 def _needs_learn(error: BaseException | None) -> bool:
