@@ -19,10 +19,12 @@ REASON = "needs PyTorch: pip install 'flexff[learn]'"
 MISSING = re.compile(r"No module named '(" + "|".join(LEARN) + r")[.']")  # in a collect report
 
 
-def pytest_runtest_setup(item: pytest.Item) -> None:
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """A test marked `learn` (PyTorch in a child process, or behind the CLI's one line): skipped."""
-    if not INSTALLED and item.get_closest_marker("learn"):
-        pytest.skip(REASON)
+    if not INSTALLED:
+        for item in items:
+            if item.get_closest_marker("learn"):
+                item.add_marker(pytest.mark.skip(reason=REASON))
 
 
 def _needs_learn(error: BaseException | None) -> bool:
