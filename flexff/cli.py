@@ -40,6 +40,7 @@ ITERATIONS, CUTOFF_HZ = 10, 20.0  # learning.ilc's defaults, named here to keep 
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
                 PermissionError)  # OSErrors about paths the user gave: exit code 2, as are
 INPUT_ERRNOS = (errno.EROFS, errno.ENAMETOOLONG, errno.ELOOP)  # these (others: 1)
+LEARN = {"torch": "PyTorch", "onnxscript": "onnxscript"}  # the extra "learn" (pyproject.toml)
 BUG_HINT = " (rerun with flexff --debug for the traceback)"  # an error that is not documented
 KEPT = {  # what an interrupted command keeps, by command (and subcommand)
     "run": "the runs that finished keep their folders, an interrupted run its record up to "
@@ -894,7 +895,8 @@ def _device_option(command: argparse.ArgumentParser, what: str) -> None:
 def _failure(error: BaseException, command: str, debug: bool = False) -> tuple[int, str]:
     """The exit code and the line on stderr for an error that stopped `command`: bad input
     (InputError, an OSError about a path) 2, a run that failed (RunError, an OSError such as a
-    full disk, MemoryError) 1, anything else, a bug, 1 and how to see its traceback."""
+    full disk, MemoryError) 1, a package of the extra "learn" missing (training, export) 1 and
+    what to install, anything else, a bug, 1 and how to see its traceback."""
     from flexff.cosim.timing import OverrunError
 
     if isinstance(error, KeyboardInterrupt):  # the run says what it kept, else KEPT does
@@ -914,6 +916,10 @@ def _failure(error: BaseException, command: str, debug: bool = False) -> tuple[i
         return code, f"flexff: error: {message}"
     if isinstance(error, (InputError, RunError)):
         return (2 if isinstance(error, InputError) else 1), f"flexff: error: {error}"
+    missing = (error.name or "").split(".")[0] if isinstance(error, ModuleNotFoundError) else ""
+    if missing in LEARN:
+        return 1, (f"flexff: error: flexff {command} needs {LEARN[missing]}: "
+                   "pip install 'flexff[learn]'")
     return 1, f"flexff: error: {type(error).__name__}: {error}{'' if debug else BUG_HINT}"
 
 

@@ -89,8 +89,10 @@ class PiecewiseJerk:
         out = np.zeros((4, t.size))
         start, x, v = 0.0, 0.0, 0.0
         for k, (length, a, j) in enumerate(self.segments):
+            # the last segment takes the rest: from Python 3.12, sum() in duration rounds
+            # otherwise than `start` adds up, so the end may lie an ulp past start + length
             last = k == len(self.segments) - 1
-            mine = (t >= start) & ((t <= start + length) if last else (t < start + length))
+            mine = (t >= start) if last else (t >= start) & (t < start + length)
             u = t[mine] - start
             out[:, mine] = [x + v * u + a * u**2 / 2 + j * u**3 / 6, v + a * u + j * u**2 / 2,
                             a + j * u, np.full(u.size, j)]

@@ -8,6 +8,8 @@ from flexff.fmu.build import build_fmu
 from flexff.plant.model import PlantModel
 from tests.loops import loop_systems
 
+pytest_plugins = ["tests.without_learn"]  # tests that need PyTorch skip where it is missing
+
 
 @pytest.fixture(scope="session")
 def nominal() -> PlantModel:

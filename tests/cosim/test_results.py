@@ -131,6 +131,7 @@ def test_plots_are_written(tmp_path):
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
 
 
+@pytest.mark.learn
 def test_importing_flexff_leaves_matplotlib_backend_alone():
     """A notebook's backend stays what it was: flexff draws on Figure objects, never pyplot."""
     code = ("import matplotlib; import flexff.cosim.run, flexff.learning.report, "

@@ -11,7 +11,8 @@ import pytest
 from tests.helpers import REPOSITORY
 
 STEP = re.compile(r"<!-- (run|save: (\S+)) -->\n```\w*\n(.*?)```", re.DOTALL)
-TUTORIALS = ["first-cosimulation", "thesis-feedforward", "own-machine", "real-time"]
+TUTORIALS = ["first-cosimulation", "thesis-feedforward",
+             pytest.param("own-machine", marks=pytest.mark.learn), "real-time"]
 
 
 def steps(page: str) -> list[tuple[str | None, str]]:

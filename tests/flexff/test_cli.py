@@ -60,6 +60,7 @@ def test_fmu_validate_exit_codes(tmp_path):
     assert "is not an FMU" in result.stdout and f"{good}: OK" in result.stdout
 
 
+@pytest.mark.learn
 def test_bench_prints_json(tmp_path):
     result = flexff("bench", "--steps", "200", "--realtime-seconds", "0.5", "-o",
                     str(tmp_path / "bench.json"))
@@ -158,6 +159,7 @@ def test_feedforward_fmu_build_needs_a_flexff_model(tmp_path):
     assert not (tmp_path / "ff.fmu").exists()
 
 
+@pytest.mark.learn
 def test_train_and_export_from_the_command_line(tmp_path):
     from flexff.learning.synthetic import synthetic_dataset
 
@@ -187,6 +189,7 @@ def test_train_and_export_from_the_command_line(tmp_path):
     assert result.returncode == 2 and "each seed once" in result.stderr
 
 
+@pytest.mark.learn
 def test_train_refuses_a_folder_that_is_not_a_dataset(tmp_path):
     result = flexff("train", "--model", "lstm", "--data", str(tmp_path), "-o", str(tmp_path / "r"))
     assert result.returncode == 2

@@ -25,6 +25,8 @@ WRITERS = {
     "ssp export": ["ssp", "export", "{config}", "-o", "{out}/system.ssp"],
     "identify": ["identify", "{tmp}/no-data", "-o", "{out}"],
 }
+COMMANDS = [pytest.param(c, marks=pytest.mark.learn) if c in ("export", "identify") else c
+            for c in WRITERS]  # those two need PyTorch (the extra learn)
 
 
 @pytest.fixture
@@ -69,7 +71,7 @@ def fails(capsys, args: list, **fields) -> tuple[int, str]:
     return code, err.strip()
 
 
-@pytest.mark.parametrize("command", WRITERS)
+@pytest.mark.parametrize("command", COMMANDS)
 def test_an_output_under_a_file(capsys, tmp_path, config, command):
     blocker = tmp_path / "file"
     blocker.write_text("")
@@ -85,7 +87,7 @@ def test_run_into_an_existing_file(capsys, tmp_path, config):
                                f"folder")
 
 
-@pytest.mark.parametrize("command", WRITERS)
+@pytest.mark.parametrize("command", COMMANDS)
 @pytest.mark.parametrize("existing", [True, False])
 def test_an_output_on_a_read_only_file_system(capsys, tmp_path, config, read_only, command,
                                               existing):

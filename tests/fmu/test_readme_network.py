@@ -9,6 +9,8 @@ import pytest
 from tests.helpers import NETWORK_RTOL, run_readme_snippet
 from tests.runners import run_fmu
 
+pytestmark = pytest.mark.learn  # the how-to exports its network with PyTorch
+
 
 def test_readme_own_network_snippet_runs_as_written(tmp_path):
     assert "own.fmu: OK" in run_readme_snippet(tmp_path, "own-network")

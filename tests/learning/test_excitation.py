@@ -2,6 +2,7 @@
 agree with the position, the same set for the same seed, a test split drawn apart, limits no
 move fits refused by key, the table read back by a run's CSV source, and its plot."""
 
+import math
 import re
 import shutil
 
@@ -15,6 +16,7 @@ from flexff.cosim.scenario import source_signals
 from flexff.cosim.schema import ConfigError, RunConfig, SourceConfig
 from flexff.learning.excitation import CLASSES, EVERY_CLASS, excitation_set, write_table
 from flexff.learning.excitation_plot import plot_excitation
+from flexff.learning.excitation_shapes import PiecewiseJerk
 from flexff.learning.machine_loop import loop_machine, on_references, record_signals
 from tests.learning.test_machine_loop import EXAMPLES, LOOP
 
@@ -212,3 +214,14 @@ def test_the_plot_is_a_png(tmp_path):
     excitation = excitation_set(machine(400.0), 2, 0, 3.0, RATE, seed=6)[1]
     path = plot_excitation(excitation, tmp_path / "bang-bang.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 20_000
+
+
+def test_a_move_ends_at_its_end_where_duration_rounds_past_its_segments(monkeypatch):
+    """From Python 3.12 sum() adds floats exactly rounded: a move's duration (0.1 + 0.4 + 0.1:
+    0.6000000000000001) may lie an ulp past where its segments add up (0.6). Its last
+    segment still holds the end, at rest at the full distance (not a sample of zeros)."""
+    move = PiecewiseJerk(((0.1, 10.0, 0.0), (0.4, 0.0, 0.0), (0.1, -10.0, 0.0)))
+    monkeypatch.setattr(PiecewiseJerk, "duration", property(
+        lambda shape: math.fsum(s[0] for s in shape.segments)))  # Python 3.12's sum()
+    x, v, a, _ = move(np.array([move.duration]))[:, 0]
+    assert x == pytest.approx(0.5) and v == pytest.approx(0.0, abs=1e-12) and a == -10.0
