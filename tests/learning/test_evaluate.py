@@ -119,6 +119,7 @@ def test_a_run_with_other_settings_is_trained_again(evaluation, tmp_path):
     assert json.loads((copy / "runs" / "pgnn" / "run.json").read_text())["config"]["epochs"] == 2
 
 
+@pytest.mark.slow  # 24 s; ensembles' fast test: tests/learning/test_train.py
 def test_an_ensemble_trains_its_members_and_runs_their_mean(evaluation, tmp_path, monkeypatch):
     out, _, _ = evaluation
     environment = replace(ENVIRONMENTS["sim"], ensembles={"pgnn": 2})
@@ -223,6 +224,7 @@ def test_hardware_physics_guided_feedforward_beats_the_rigid_body_one(tmp_path):
         assert summary["noise_floor"][axis] < summary["scenarios"]["limit"][axis]["e2"] * 1.2
 
 
+@pytest.mark.slow  # 33 s; current-level models' fast tests: tests/controllers/test_current_*
 def test_a_current_level_model_is_its_own_scenario(evaluation, tmp_path):
     out, _, _ = evaluation
     lines = []
