@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -134,11 +134,10 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     return summary
 
 
-def learned_features(identified: LinearModel,
-                     base: MachineFeatures | None = None) -> MachineFeatures:
-    """The feature settings `base` (default: all derived from the data) with the direction
-    widths of the machine's identified Coulomb friction (machine_features.friction_widths)."""
-    return replace(base or MachineFeatures(), direction_widths=friction_widths(identified))
+def learned_features(identified: LinearModel) -> MachineFeatures:
+    """The feature settings, all derived from the data, with the direction widths of the
+    machine's identified Coulomb friction (machine_features.friction_widths)."""
+    return MachineFeatures(direction_widths=friction_widths(identified))
 
 
 def train_models(data: MachineDataset, identified: LinearModel, out: Path,

@@ -34,6 +34,16 @@ def train_tiny_models(folder: Path, sizes: dict, seed: int) -> Path:
     return folder
 
 
+def thesis_reference_window(steps: int) -> dict:
+    """steps + 1 samples of the thesis evaluation reference's signals, from its 5 s mark:
+    the learned feedforwards' test input."""
+    from flexff.learning.dataset import REFERENCE_SIGNALS
+    from flexff.plant.references import thesis_evaluation
+
+    signals = thesis_evaluation().signals()
+    return {name: signals[name][5000:5000 + steps + 1] for name in REFERENCE_SIGNALS}
+
+
 def workspace_points(rng: np.random.Generator, n: int, radius: float = 0.05) -> np.ndarray:
     """n points spread over the workspace disc, its boundary included (2 x n)."""
     r = radius * np.sqrt(rng.uniform(0, 1, n))

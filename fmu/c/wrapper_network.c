@@ -227,6 +227,15 @@ static int net_prime(Instance *c, const double *features, float *state, char *er
     return 0;
 }
 
+/* The state of the first call: zero, or primed on its inputs (c->features). */
+static fmi2Status net_start(Instance *c) {
+    char error[1024];
+    memset(c->d.net_state, 0, sizeof c->d.net_state);
+    if (net_prime(c, c->features, c->d.net_state, error, sizeof error) != 0)
+        return fail(c, "%s", error);
+    return fmi2OK;
+}
+
 static long table_calls(const Instance *c) { return (c->table_rows + NET_PERIOD - 1) / NET_PERIOD; }
 
 double table_time(const Instance *c, long row) { return c->table[row * (1 + N_U)]; }
@@ -318,11 +327,7 @@ static fmi2Status net_call(Instance *c) {
         if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
             return fail(c, "Evaluating the network's inputs failed.");
         if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
-        if (c->d.net_step == 0) { /* the first call: from zero, or primed on its inputs */
-            memset(c->d.net_state, 0, sizeof c->d.net_state);
-            if (net_prime(c, c->features, c->d.net_state, error, sizeof error) != 0)
-                return fail(c, "%s", error);
-        }
+        if (c->d.net_step == 0 && net_start(c) != fmi2OK) return fmi2Error;
         if (net_run(c->net, c->features, 1, c->d.net_state, c->d.net_new, c->d.net_state_new,
                     error, sizeof error) != 0)
             return fail(c, "%s", error);
@@ -350,12 +355,7 @@ static fmi2Status task_prepare(Instance *c, long phase) {
         if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
             return fail(c, "Evaluating the network's inputs failed.");
         if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
-        char error[1024];
-        if (c->d.net_step == 0) { /* the first call: from zero, or primed on its inputs */
-            memset(c->d.net_state, 0, sizeof c->d.net_state);
-            if (net_prime(c, c->features, c->d.net_state, error, sizeof error) != 0)
-                return fail(c, "%s", error);
-        }
+        if (c->d.net_step == 0 && net_start(c) != fmi2OK) return fmi2Error;
     }
     if (c->d.net_step < NET_PERIOD) {
         memset(c->r, 0, sizeof c->r);

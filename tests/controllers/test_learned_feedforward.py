@@ -24,10 +24,9 @@ from flexff.fmu.validation import validate_fmu
 from flexff.learning.dataset import REFERENCE_SIGNALS
 from flexff.learning.export import session
 from flexff.learning.rigid import rigid_forces
-from flexff.plant.references import thesis_evaluation
 from tests.fmu.test_network import running_sum_graph
 from tests.fmu_toys import LoggedSlave, status_of
-from tests.helpers import NETWORK_RTOL, train_tiny_models
+from tests.helpers import NETWORK_RTOL, thesis_reference_window, train_tiny_models
 from tests.runners import run_fmu, run_fmu_libcosim
 
 STEPS = 600  # 0.6 s of the thesis evaluation reference at 1 kHz
@@ -44,8 +43,7 @@ def models(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def reference():
-    signals = thesis_evaluation().signals()
-    return {name: signals[name][5000:5000 + STEPS + 1] for name in REFERENCE_SIGNALS}
+    return thesis_reference_window(STEPS)
 
 
 def metadata(model) -> dict[str, str]:

@@ -20,11 +20,9 @@ from flexff.cosim.run import simulate_config
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
 from flexff.fmu.validation import validate_fmu
-from flexff.learning.dataset import REFERENCE_SIGNALS
-from flexff.plant.references import thesis_evaluation
 from flexff.plant.system import plant_system
 from tests.fmu_toys import discrete_pi, duffing, extract
-from tests.helpers import REPOSITORY, train_tiny_models
+from tests.helpers import REPOSITORY, thesis_reference_window, train_tiny_models
 
 STEPS = 300
 TINY = {"pgnn": {"channels": 8, "levels": 2}}
@@ -37,8 +35,7 @@ def models(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def reference():
-    signals = thesis_evaluation().signals()
-    return {name: signals[name][5000:5000 + STEPS + 1] for name in REFERENCE_SIGNALS}
+    return thesis_reference_window(STEPS)
 
 
 def twins(system, folder):
