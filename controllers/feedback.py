@@ -1,7 +1,9 @@
 """The feedback controller as a discrete System: encoders -> position error -> PID (+ notch) per
 axis -> end-effector force (+ feedforward) -> control allocation -> motor currents (+ current
 feedforward, with `current_feedforward`: a current-level learned model's i1_ff..i3_ff, added
-after the allocation; without it the controller has no such inputs).
+after the allocation; without it the controller has no such inputs). It outputs the currents,
+the feedback force and the force it commands (Fx, Fy: feedback plus feedforward, the
+effort of the manipulator's machine description and the learned models' labels).
 
 Outputs depend directly on the inputs: the master sets the inputs of step k, reads the currents
 and then steps, which advances the PID states with the same error. The filter shapes are fixed
@@ -32,6 +34,7 @@ from flexff.plant.signals import (
     ENCODERS,
     FEEDBACK_FORCES,
     FEEDFORWARD_FORCES,
+    FORCES,
     POSITION_REFERENCE,
     pick,
 )
@@ -57,7 +60,7 @@ DEFAULTS = {
 HOME_ANGLES = tuple(float(a) for a in shoulder_angles(NOMINAL, 0.0, 0.0))
 ENCODER_INPUTS = tuple(replace(v, start=a) for v, a in zip(ENCODERS, HOME_ANGLES))
 INPUTS = (*POSITION_REFERENCE, *ENCODER_INPUTS, *FEEDFORWARD_FORCES)
-OUTPUTS = (*CURRENTS, *FEEDBACK_FORCES)
+OUTPUTS = (*CURRENTS, *FEEDBACK_FORCES, *FORCES)  # FORCES: the effort, the labels
 
 
 def parasitic_mode_hz() -> float:
@@ -100,7 +103,8 @@ def controller_system(variant: str = "nominal", crossover_hz: float | None = Non
     states = [x[k * n:(k + 1) * n] for k in range(len(AXES))]
     force_fb = ca.vertcat(*[p[k] / design.kp * _output(ss, states[k], error[k])
                             for k in range(len(AXES))])
-    currents = motor_currents(force_fb + force_ff, pos)
+    force = force_fb + force_ff
+    currents = motor_currents(force, pos)
     if current_feedforward:
         currents = currents + pick(u, inputs, CURRENT_FEEDFORWARD)
     x_next = ca.vertcat(*[_update(ss, states[k], error[k]) for k in range(len(AXES))])
@@ -123,7 +127,7 @@ def controller_system(variant: str = "nominal", crossover_hz: float | None = Non
                                    start=design.kp, positive=True) for axis in AXES),
         initial_state=ca.Function("initial_state", [p], [ca.SX.zeros(2 * n, 1)]),
         dynamics=ca.Function("dynamics", [x, u, p], [x_next]),
-        output=ca.Function("output", [x, u, p, w], [ca.vertcat(currents, force_fb)]),
+        output=ca.Function("output", [x, u, p, w], [ca.vertcat(currents, force_fb, force)]),
         sample_time=step,
         extra={"design": json.dumps(design_numbers)},
     )

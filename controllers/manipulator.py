@@ -2,7 +2,8 @@
 `manipulator` of `flexff.builtins`).
 
 It registers the built-in FMUs plant, controller, rigid-body-feedforward and
-learned-feedforward with their options, its short form (controllers.short_form), the
+learned-feedforward with their options, its short form (controllers.short_form) with its
+machine description (controllers.manipulator_machine), the
 reference kinds thesis-eval and thesis-hardware-eval (plant.references), the nominal
 workspace and its signals' short names. CasADi and onnx load only where a plant, controller
 or model is checked or built.
@@ -32,6 +33,7 @@ from flexff.plant.signals import (
     ENCODERS,
     FEEDBACK_FORCES,
     FEEDFORWARD_FORCES,
+    FORCES,
     REFERENCE,
     TORQUES,
     TRUE_POSITION,
@@ -51,13 +53,14 @@ FEEDFORWARD_MODES = ("step", "task", "precomputed")
 PLANT_EXTRA = ("max_substep",)  # plant FMU parameters beyond the System's own
 START_PARAMETERS = ("x_start", "y_start")
 # the manipulator's signals, kept under their short names in recordings (cosim.run)
-SHORT_NAMES = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, ENCODERS,
+SHORT_NAMES = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, FORCES, ENCODERS,
                     TRUE_POSITION, TRUE_VELOCITY, TORQUES)
 
 
 def register() -> None:
     """Register the manipulator's built-ins, short form, reference kinds, workspace and
     signals (cosim.builtins, cosim.plugins)."""
+    from flexff.controllers.manipulator_machine import manipulator_description
     from flexff.controllers.short_form import SHORT_FORM_TABLES, expand
     from flexff.plant.references import thesis_evaluation, thesis_hardware_evaluation
 
@@ -79,7 +82,8 @@ def register() -> None:
         "an exported learned model, its network as generated C or in onnxruntime",
         reads_sources=True,
         metrics=feedforward_range)
-    register_short_form("manipulator", SHORT_FORM_TABLES, expand, default=True)
+    register_short_form("manipulator", SHORT_FORM_TABLES, expand, default=True,
+                        describe=manipulator_description)
     register_reference_kind(ReferenceKind("thesis-eval", lambda _, step: thesis_evaluation(step)))
     register_reference_kind(ReferenceKind(
         "thesis-hardware-eval", lambda _, step: thesis_hardware_evaluation(step)))

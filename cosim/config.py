@@ -25,7 +25,7 @@ import tomli_w
 from flexff.cosim.builtins import checked_options, registered
 from flexff.cosim.checks import TableChecker
 from flexff.cosim.example_configs import config_examples as config_examples  # public API
-from flexff.cosim.machine import machine_table, parse_machine
+from flexff.cosim.machine import Machine, machine_table, parse_machine
 from flexff.cosim.memory import MemoryNeeded
 from flexff.cosim.plugins import ShortForm, check_workspace, reference_kinds, short_forms
 from flexff.cosim.references import (
@@ -217,8 +217,7 @@ class _Parser(TableChecker):
                                                                  fmus),
             algorithm=self.choice(run, "run", "algorithm", ALGORITHMS, "gauss-seidel"),
             record=self.record(self.table(data, "record")), origin=self.origin,
-            machine=parse_machine(data["machine"], self.origin, self.base)
-            if "machine" in data else None)
+            machine=self.machine(data, short))
         object.__setattr__(config, "checked", True)  # frozen; see RunConfig
         return config
 
@@ -334,6 +333,13 @@ class _Parser(TableChecker):
             raise self.error("run.order", f"expected every FMU name once, in stepping order "
                                           f"(the FMUs: {', '.join(names)}), got {order!r}")
         return tuple(next(f for f in fmus if f.name == n) for n in order)
+
+    def machine(self, data: Mapping[str, Any], short: ShortForm | None) -> Machine | None:
+        """The [machine] table's description, else the short form's, else None."""
+        table = data.get("machine")
+        if table is None and short is not None and short.describe is not None:
+            table = short.describe()
+        return None if table is None else parse_machine(table, self.origin, self.base)
 
     # -- a machine's short form ----------------------------------------------------------
     def short_form(self, data: Mapping[str, Any], forms: tuple[ShortForm, ...]

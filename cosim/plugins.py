@@ -27,18 +27,21 @@ GROUP = "flexff.builtins"
 # (checker, the configuration's tables, the reference's first point or None) -> FMUs, sources
 Expander = Callable[["TableChecker", Mapping[str, Any], "tuple[float, float] | None"],
                     "tuple[list[FmuConfig], list[SourceConfig]]"]
+Describer = Callable[[], dict[str, Any]]  # -> the machine's [machine] table (cosim.machine)
 WorkspaceCheck = Callable[[Any, Any, str], None]  # (x, y, what the points are)
 
 
 @dataclass(frozen=True)
 class ShortForm:
     """A machine's tables and their expansion; `default`: it also expands a configuration
-    without [fmu.*] tables."""
+    without [fmu.*] tables; `describe`: the machine description of the FMUs it expands to
+    (a configuration's own [machine] table takes its place)."""
 
     name: str
     tables: tuple[str, ...]
     expand: Expander
     default: bool = False
+    describe: Describer | None = None
 
 
 @dataclass(frozen=True)
@@ -68,9 +71,10 @@ def loaded() -> None:
 
 
 def register_short_form(name: str, tables: tuple[str, ...], expand: Expander,
-                        default: bool = False) -> None:
-    """Let the tables `tables` of a configuration expand (`expand`) to the general form."""
-    _SHORT_FORMS[name] = ShortForm(name, tables, expand, default)
+                        default: bool = False, describe: Describer | None = None) -> None:
+    """Let the tables `tables` of a configuration expand (`expand`) to the general form, with
+    the machine description `describe` gives."""
+    _SHORT_FORMS[name] = ShortForm(name, tables, expand, default, describe)
 
 
 def register_reference_kind(kind: ReferenceKind) -> None:

@@ -107,7 +107,7 @@ def _least_signals(config: RunConfig) -> int:
 
 def _wanted(scenario: Scenario, master: Master) -> list[str]:
     """The signals a run records: its [record] signals (all by default) plus those the
-    metrics and plots need."""
+    metrics (its tracked axes) and plots need."""
     wanted = scenario.config.record.signals
     if wanted is None:
         return [*master.signals, *master.typed_signals]
@@ -116,7 +116,10 @@ def _wanted(scenario: Scenario, master: Master) -> list[str]:
             master.resolve(name)
         except ValueError as error:
             raise ConfigError(scenario.config.origin, "record.signals", str(error)) from None
-    return [*wanted, *(n for n in PLOT_SIGNALS if n not in wanted and _known(master, n))]
+    tracked = sorted({n for a in tracked_axes(scenario.config)
+                      for n in a.reference.names | a.position.names})
+    return [*wanted, *(n for n in dict.fromkeys((*PLOT_SIGNALS, *tracked))
+                       if n not in wanted and _known(master, n))]
 
 
 def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | None = None,

@@ -396,13 +396,14 @@ def _ssp_export(args: argparse.Namespace) -> int:
 
 def _data_collect(args: argparse.Namespace) -> int:
     from flexff.learning.collect import run_collection
+    from flexff.learning.loop import is_manipulator_loop
 
     config = None
     if args.config is not None:
         from flexff.cosim.run import load_run_config
 
         config = load_run_config(args.config)
-        if config.machine is not None:
+        if not is_manipulator_loop(config):
             from flexff.learning.machine_collect import collect_machine
 
             train, test = args.trajectories
@@ -548,10 +549,11 @@ def _identify(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     from flexff.cosim.run import load_run_config, output_folder
     from flexff.learning.evaluate import evaluate
+    from flexff.learning.loop import is_manipulator_loop
 
     loop = None if args.config is None else load_run_config(args.config)
     output_folder(args.output)
-    if loop is not None and loop.machine is not None:
+    if loop is not None and not is_manipulator_loop(loop):
         return _evaluate_machine(args, loop)
     if loop is None and args.data is not None:
         from flexff.learning.machine_dataset import is_machine_dataset

@@ -39,6 +39,7 @@ from flexff.learning.ilc_loops import (
     ManipulatorLoop,
     identified_on_trial,
 )
+from flexff.learning.loop import is_manipulator_loop
 
 ITERATIONS = 10  # learning trials after PID alone
 RESULT = "feedforward.csv"
@@ -55,17 +56,18 @@ def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
     `out` where one with the same loop and cutoff is there); return the content of ilc.json.
     A loop with a [machine] description learns each of its axes' feedforward inputs
     (learning.ilc_loops.MachineLoop; the filter's model is `model`, by default the linear
-    model identified on trial 0), any other is the manipulator's (ManipulatorLoop). Q's corner
-    `cutoff_hz` defaults to CUTOFF_HZ on the manipulator, to MACHINE_CUTOFF of the rate on a
+    model identified on trial 0), the manipulator's (learning.loop.is_manipulator_loop) is
+    its own (ManipulatorLoop). Q's corner `cutoff_hz` defaults to CUTOFF_HZ on the manipulator, to MACHINE_CUTOFF of the rate on a
     machine (measured on the drive example, 12 trials: 35x PID alone at 20 Hz, 48x at 60 Hz,
     163x at 150 Hz, where the rigid model still holds below its 250 Hz mount)."""
     if iterations < 1:
         raise InputError(f"--iterations must be at least 1, got {iterations}")
     plain = replace(config, record=RecordConfig(csv=False))
-    loop: IlcLoop = (ManipulatorLoop(plain) if config.machine is None
+    manipulator = is_manipulator_loop(config)
+    loop: IlcLoop = (ManipulatorLoop(plain) if manipulator
                      else MachineLoop(plain, model or identified_on_trial))
     if cutoff_hz is None:
-        cutoff_hz = CUTOFF_HZ if config.machine is None else MACHINE_CUTOFF / config.step
+        cutoff_hz = CUTOFF_HZ if manipulator else MACHINE_CUTOFF / config.step
     check_cutoff(cutoff_hz, config.step)
     out = output_folder(out)
     (out / "tables").mkdir(exist_ok=True)

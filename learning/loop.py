@@ -69,6 +69,14 @@ OWN_TAPS = {n: Tap(n) for n in (*REFERENCE_SIGNALS, *ENCODER_SIGNALS, *POSITION_
                                 *names(FEEDBACK_FORCES, FEEDFORWARD_FORCES, CURRENTS))}
 
 
+def is_manipulator_loop(loop: RunConfig) -> bool:
+    """Whether the manipulator's own tools (its collection, ILC and evaluation) take `loop`:
+    one with flexff's manipulator controller (its short form's machine description or an
+    explicit one alike: the same run), or one without a machine description; any other goes
+    the machine's way (learning.machine_loop)."""
+    return loop.machine is None or loop.builtin("controller") is not None
+
+
 def default_loop(variant: str) -> RunConfig:
     """flexff's own loop: PID alone on the built-in plant `variant` (the short form; its
     reference is a placeholder that `on_reference` replaces)."""

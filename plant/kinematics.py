@@ -146,6 +146,20 @@ def forward_kinematics_2(p: PlantParameters, theta_s1: Any, theta_s2: Any) -> tu
     return _intersection(p, theta_s1, theta_s2, _branch_sign())
 
 
+def forward_kinematics_2_text(p: PlantParameters, theta_s1: str, theta_s2: str) -> tuple[str, str]:
+    """forward_kinematics_2 as the text of two expressions (fmu.expressions) of the signals
+    named `theta_s1`, `theta_s2`: a machine description's kinematic map."""
+    (m1x, m1y), (m2x, m2y) = mount(p, 0), mount(p, 1)
+    ax, ay = f"({m1x!r} + {p.l_up!r} * cos({theta_s1}))", f"({m1y!r} + {p.l_up!r} * sin({theta_s1}))"
+    bx, by = f"({m2x!r} + {p.l_up!r} * cos({theta_s2}))", f"({m2y!r} + {p.l_up!r} * sin({theta_s2}))"
+    dx, dy = f"({bx} - {ax})", f"({by} - {ay})"
+    dist = f"sqrt({dx} ** 2 + {dy} ** 2)"
+    height = f"sqrt({p.l_low!r} ** 2 - ({dist} / 2) ** 2)"
+    minus, plus = ("-", "+") if _branch_sign() > 0 else ("+", "-")
+    return (f"({ax} + {bx}) / 2 {minus} {height} * {dy} / {dist}",
+            f"({ay} + {by}) / 2 {plus} {height} * {dx} / {dist}")
+
+
 def forward_kinematics_3(p: PlantParameters, thetas: Any, iterations: int = 4) -> tuple[Any, Any]:
     """Least-squares wrist position from all three encoders (CasADi SX in and out).
 

@@ -87,7 +87,8 @@ def test_controller_system_signals(variant, n_states):
     assert system.kind == "discrete" and system.sample_time == 1e-3 and system.n_noise == 0
     assert [v.name for v in system.inputs] == ["x_ref", "y_ref", "theta_s1", "theta_s2",
                                                "theta_s3", "Fx_ff", "Fy_ff"]
-    assert [v.name for v in system.outputs] == ["i1", "i2", "i3", "Fx_fb", "Fy_fb"]
+    assert [v.name for v in system.outputs] == ["i1", "i2", "i3", "Fx_fb", "Fy_fb", "Fx",
+                                                "Fy"]
     assert len(system.states) == 2 * n_states
     assert [v.name for v in system.parameters] == ["kp_x", "kp_y"]
     assert system.parameters[0].start == pytest.approx(controller_design(variant).kp)
@@ -98,7 +99,8 @@ def test_controller_system_signals(variant, n_states):
     x0 = np.array(system.initial_state(kp)).ravel()
     force_ff = np.array([0.3, -0.2])
     out = np.array(system.output(x0, np.r_[0, 0, HOME_ANGLES, force_ff], kp, [])).ravel()
-    assert np.allclose(out[3:], 0, atol=1e-12)
+    assert np.allclose(out[3:5], 0, atol=1e-12)  # no feedback
+    assert np.allclose(out[5:], force_ff, rtol=1e-12)  # the commanded force: F_ff alone
     expected = np.array(ALLOCATION([0, 0], force_ff)[2]).ravel()
     assert np.allclose(out[:3], expected, rtol=1e-12)
 

@@ -1,0 +1,39 @@
+"""The manipulator's machine description (cosim.machine), as its short form gives it: the axes x
+and y of the loop that controllers.short_form expands to, described as any user's machine is.
+
+Each axis's measured position is the controller's kinematic map, the 2-encoder forward
+kinematics of the plant's encoder outputs (plant.kinematics, as an expression); its true
+position the plant's; its feedforward input the controller's F<axis>_ff and its effort the
+force the controller commands, F<axis> (feedback plus feedforward: the learned models' labels).
+The excitation limits are the square inside the workspace disc and the thesis's fastest
+training circle (radius R_MAX, one turn a second). `flexff config expand` writes it out.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from flexff.plant.kinematics import forward_kinematics_2_text
+from flexff.plant.parameters import NOMINAL
+from flexff.plant.signals import ENCODERS, FEEDFORWARD_FORCES, FORCES, TRUE_POSITION, names
+
+PLANT, CONTROLLER = "plant", "controller"  # the short form's instance names
+CIRCLE_RADIUS = 0.045  # m: learning.trajectories.R_MAX, the largest training circle
+CIRCLE_HZ = 1.0  # the fastest training circle's turns per second (learning.trajectories)
+
+
+def manipulator_description() -> dict[str, Any]:
+    """The [machine] table of the manipulator's short form."""
+    theta_s1, theta_s2 = (f"{PLANT}.{n}" for n in names(ENCODERS)[:2])
+    measured = forward_kinematics_2_text(NOMINAL, theta_s1, theta_s2)
+    half_side = NOMINAL.workspace_radius / math.sqrt(2.0)
+    omega = 2.0 * math.pi * CIRCLE_HZ
+    axes = [{"name": axis, "unit": "m", "measured": position,
+             "true": f"{PLANT}.{true}", "feedforward": f"{CONTROLLER}.{feedforward}",
+             "effort": f"{CONTROLLER}.{effort}", "effort_unit": "N",
+             "range": [-half_side, half_side], "velocity": omega * CIRCLE_RADIUS,
+             "acceleration": omega**2 * CIRCLE_RADIUS}
+            for axis, position, true, feedforward, effort in zip(
+                "xy", measured, names(TRUE_POSITION), names(FEEDFORWARD_FORCES), names(FORCES))]
+    return {"name": "manipulator", "axis": axes}
