@@ -483,7 +483,8 @@ def _train_machine(args: argparse.Namespace) -> int:
     """train on a machine's dataset: one seed, on features with the friction widths of its
     prior identified on it (the prior itself for pgnn)."""
     from flexff.learning.machine_dataset import load_machine_dataset
-    from flexff.learning.machine_evaluate import identify_dataset, learned_features
+    from flexff.learning.machine_evaluate import learned_features
+    from flexff.learning.machine_identify import identify_dataset
     from flexff.learning.machine_train import fit_machine
     from flexff.learning.presets import make_config
 
@@ -519,7 +520,7 @@ def _identify(args: argparse.Namespace) -> int:
     if is_machine_dataset(args.data):
         from flexff.learning.linear_model import write_linear_model
         from flexff.learning.machine_dataset import load_machine_dataset
-        from flexff.learning.machine_evaluate import identify_dataset
+        from flexff.learning.machine_identify import identify_dataset
 
         model = identify_dataset(load_machine_dataset(args.data))
         print(model.summary())

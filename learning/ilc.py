@@ -57,9 +57,10 @@ def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
     A loop with a [machine] description learns each of its axes' feedforward inputs
     (learning.ilc_loops.MachineLoop; the filter's model is `model`, by default the linear
     model identified on trial 0), the manipulator's (learning.loop.is_manipulator_loop) is
-    its own (ManipulatorLoop). Q's corner `cutoff_hz` defaults to CUTOFF_HZ on the manipulator, to MACHINE_CUTOFF of the rate on a
-    machine (measured on the drive example, 12 trials: 35x PID alone at 20 Hz, 48x at 60 Hz,
-    163x at 150 Hz, where the rigid model still holds below its 250 Hz mount)."""
+    its own (ManipulatorLoop). Q's corner `cutoff_hz` defaults to CUTOFF_HZ on the
+    manipulator, to MACHINE_CUTOFF of the rate on a machine (measured on the drive example,
+    12 trials: 35x PID alone at 20 Hz, 48x at 60 Hz, 163x at 150 Hz, where the rigid model
+    still holds below its 250 Hz mount)."""
     if iterations < 1:
         raise InputError(f"--iterations must be at least 1, got {iterations}")
     plain = replace(config, record=RecordConfig(csv=False))

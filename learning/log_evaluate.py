@@ -25,14 +25,9 @@ from flexff.learning.dataset_files import Trajectory
 from flexff.learning.deploy import SIModel
 from flexff.learning.linear_model import EDGE_PERIODS, write_linear_model
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
-from flexff.learning.machine_evaluate import (
-    MODELS,
-    SUMMARY,
-    identify_dataset,
-    learned_features,
-    train_models,
-)
+from flexff.learning.machine_evaluate import MODELS, SUMMARY, learned_features, train_models
 from flexff.learning.machine_features import MachineFeatures, prepare
+from flexff.learning.machine_identify import identify_dataset
 from flexff.learning.machine_train import features_from_dict, prior_efforts
 from flexff.learning.run_folder import Run, load_run
 from flexff.learning.threads import torch_threads

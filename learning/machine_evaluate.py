@@ -39,15 +39,11 @@ from flexff.fmu.errors import RunError
 from flexff.learning.devices import pick_device, training_gpus
 from flexff.learning.export import export
 from flexff.learning.ilc import NOISE_FLOOR, ilc
-from flexff.learning.linear_model import identify_linear, parallel_filter, write_linear_model
+from flexff.learning.linear_model import write_linear_model
 from flexff.learning.machine_collect import collect_machine
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
-from flexff.learning.machine_features import (
-    MachineFeatures,
-    friction_widths,
-    motion,
-    named_motion,
-)
+from flexff.learning.machine_features import MachineFeatures, friction_widths
+from flexff.learning.machine_identify import identify_dataset
 from flexff.learning.machine_loop import loop_machine, with_feedforward, with_feedforward_fmu
 from flexff.learning.machine_train import fit_machine
 from flexff.learning.models import uses_prior
@@ -57,28 +53,6 @@ from flexff.learning.workers import worker_count
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")
 SUMMARY = "summary.json"
-
-
-def identify_dataset(data: MachineDataset, features: MachineFeatures | None = None
-                     ) -> LinearModel:
-    """The prior's linear model identified on the training trajectories: the regressor of
-    their measured motion and their efforts through the labels' low-pass alike, decimated to
-    two samples a corner period (learning.linear_model.parallel_filter: its standard
-    deviations then hold), the filter's ends left out."""
-    machine = data.description
-    rate = data.sample_rate_hz
-    train = [t for t in data.trajectories if t.split == "train"]
-    resolved = (features or MachineFeatures()).resolved(rate, [t.signals for t in train],
-                                                        machine)
-    motions, efforts = [], []
-    for trajectory in train:
-        moved, effort = motion(trajectory.signals, rate, machine, resolved)
-        motions.append(named_motion(moved, machine))
-        efforts.append({a.name: effort[:, k] for k, a in enumerate(machine.axes)})
-    assert resolved.cutoff_hz is not None and resolved.lead_s is not None
-    return identify_linear(machine, motions, efforts,
-                           parallel_filter(rate, resolved.cutoff_hz, resolved.filter_order),
-                           resolved.lead_s)
 
 
 def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = MODELS,

@@ -53,8 +53,7 @@ def on_references(loop: RunConfig, table: Path, stop: float, name: str,
     axis's feedforward from the CSV table `feedforward` (columns `<axis>_ff`) or zero."""
     machine = loop_machine(loop)
     given = set(machine.reference_signals)
-    reference = None if loop.reference is None or given.isdisjoint(Reference.SIGNALS) \
-        else loop.reference
+    reference = loop.reference if given.isdisjoint(Reference.SIGNALS) else None
     sources = (*_other_sources(loop, given), SourceConfig("csv", path=Path(table)))
     return with_feedforward(replace(loop, name=name, start=0.0, stop=stop, reference=reference,
                                     sources=sources), feedforward)

@@ -67,7 +67,7 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
     """Train `config`'s model on a machine's trajectories (`digest` names the data) with the
     feature settings `features` (default: all derived from the data); write the run folder
     `out`; return the metrics. The physics-guided model learns the residual over `prior`, the
-    machine's identified linear model (learning.machine_evaluate.identify_dataset), its efforts
+    machine's identified linear model (learning.machine_identify.identify_dataset), its efforts
     through the labels' filter as the labels are. With `reuse`, a run finished in `out` with
     the same settings and data is kept (an interrupted evaluation resumes)."""
     start = time.perf_counter()

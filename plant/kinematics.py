@@ -149,9 +149,11 @@ def forward_kinematics_2(p: PlantParameters, theta_s1: Any, theta_s2: Any) -> tu
 def forward_kinematics_2_text(p: PlantParameters, theta_s1: str, theta_s2: str) -> tuple[str, str]:
     """forward_kinematics_2 as the text of two expressions (fmu.expressions) of the signals
     named `theta_s1`, `theta_s2`: a machine description's kinematic map."""
-    (m1x, m1y), (m2x, m2y) = mount(p, 0), mount(p, 1)
-    ax, ay = f"({m1x!r} + {p.l_up!r} * cos({theta_s1}))", f"({m1y!r} + {p.l_up!r} * sin({theta_s1}))"
-    bx, by = f"({m2x!r} + {p.l_up!r} * cos({theta_s2}))", f"({m2y!r} + {p.l_up!r} * sin({theta_s2}))"
+    def elbow(chain: int, theta: str) -> tuple[str, str]:  # _elbow's
+        mx, my = mount(p, chain)
+        return f"({mx!r} + {p.l_up!r} * cos({theta}))", f"({my!r} + {p.l_up!r} * sin({theta}))"
+
+    (ax, ay), (bx, by) = elbow(0, theta_s1), elbow(1, theta_s2)
     dx, dy = f"({bx} - {ax})", f"({by} - {ay})"
     dist = f"sqrt({dx} ** 2 + {dy} ** 2)"
     height = f"sqrt({p.l_low!r} ** 2 - ({dist} / 2) ** 2)"

@@ -1,15 +1,22 @@
 """The thesis's manipulator described as any machine: its short form's [machine] description
-(controllers.manipulator_machine), written out by `flexff config expand`, is the same run, and
-its entries say what the loop does (the kinematic map, the commanded force)."""
+(controllers.manipulator_machine), written out by `flexff config expand`, is the same run, its
+entries say what the loop does (the kinematic map, the commanded force), and any machine's
+tools identify the manipulator from it."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import pytest
 
 from flexff.cosim.config import config_examples, expanded, expanded_text, parse_config
 from flexff.cosim.run import simulate_config
 from flexff.fmu.expressions import evaluate
 from flexff.learning.loop import is_manipulator_loop
+from flexff.learning.machine_collect import collect_machine
+from flexff.learning.machine_identify import identify_dataset
+from flexff.plant.analysis import plant_info
 from flexff.plant.kinematics import forward_kinematics_2
 from flexff.plant.parameters import NOMINAL
 
@@ -33,7 +40,7 @@ def test_the_short_form_describes_its_machine():
     # either way the manipulator's own tools take it; a [machine] of the user's overrides
     assert is_manipulator_loop(short) and is_manipulator_loop(explicit)
     table = expanded(short)
-    table["machine"]["axis"] = table["machine"]["axis"][:1]
+    table["machine"] = {"axis": table["machine"]["axis"][:1]}
     assert [a.name for a in parse_config(table).machine.axes] == ["x"]
 
 
@@ -62,3 +69,18 @@ def test_its_entries_are_what_the_loop_measures_and_commands():
         commanded = recording[axis.effort]
         feedback = recording[f"controller.F{axis.name}_fb"]
         np.testing.assert_array_equal(commanded, feedback + recording[f"F{axis.name}_ff"])
+
+
+def test_the_machine_tools_identify_the_manipulator_from_its_description(tmp_path):
+    """Any machine's collection and identification, on the manipulator's description: the
+    identified inertia and flexure stiffness per axis give the plant's first modes at the
+    centre (its linearization, plant.analysis), the commanded force explained to 3 %."""
+    short, _ = _short_and_explicit()
+    data = collect_machine(short, tmp_path / "data", 8, 2, 10.0, workers=1, progress=False)
+    identified = identify_dataset(data).to_dict()["axes"]
+    first_mode_hz = plant_info("nominal")["natural_frequencies_hz"][0]
+    for axis, fitted in identified.items():
+        values = dict(zip(fitted["terms"], fitted["parameters"]))
+        mode_hz = math.sqrt(values["stiffness"] / values["inertia"]) / (2 * math.pi)
+        assert mode_hz == pytest.approx(first_mode_hz, rel=0.01), axis
+        assert fitted["relative_error"] < 0.03, axis

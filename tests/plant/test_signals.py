@@ -10,6 +10,7 @@ from flexff.plant.signals import (
     ENCODERS,
     FEEDBACK_FORCES,
     FEEDFORWARD_FORCES,
+    FORCES,
     REFERENCE,
     TRUE_POSITION,
     TRUE_VELOCITY,
@@ -38,7 +39,7 @@ def test_the_fmus_take_their_signals_from_there():
                                     "tau1", "tau2", "tau3")
     assert names(INPUTS) == names(REFERENCE[:2], ENCODERS, FEEDFORWARD_FORCES)
     assert [v.unit for v in INPUTS] == [*units(REFERENCE[:2], ENCODERS, FEEDFORWARD_FORCES)]
-    assert (*CURRENTS, *FEEDBACK_FORCES) == OUTPUTS
+    assert (*CURRENTS, *FEEDBACK_FORCES, *FORCES) == OUTPUTS
     feedforward = rigid_body_feedforward_system()
     assert feedforward.inputs == REFERENCE and feedforward.outputs == FEEDFORWARD_FORCES
 
