@@ -48,7 +48,7 @@ from flexff.learning.machine_loop import loop_machine, with_feedforward, with_fe
 from flexff.learning.machine_train import fit_machine
 from flexff.learning.models import uses_prior
 from flexff.learning.presets import make_config
-from flexff.learning.report import own_fields, plot_tracking_errors
+from flexff.learning.report import own_fields, plot_tracking_errors, ratio_table
 from flexff.learning.workers import worker_count
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")
@@ -163,19 +163,3 @@ def _train(job: _Training) -> dict[str, Any]:
                           prior=prior, reuse=True)
     export(job.out / "runs" / job.kind, job.out / "models" / f"{job.kind}.onnx")
     return metrics
-
-
-def ratio_table(summary: dict[str, Any]) -> str:
-    """The e2 ratios PID alone / scenario per axis as a Markdown table; where the loop's
-    noise floor is known, a row per axis of each scenario's e2 over it."""
-    scenarios = list(summary["scenarios"])
-    lines = ["| axis | " + " | ".join(scenarios) + " |",
-             "|---|" + "---:|" * len(scenarios)]
-    for axis in summary["axes"]:
-        lines.append(f"| {axis} | " + " | ".join(
-            f"{summary['scenarios'][s][axis]['e2_ratio']:.3g}" for s in scenarios) + " |")
-    for axis, floor in summary.get(NOISE_FLOOR, {}).items():
-        lines.append(f"| {axis}: e2 / noise floor ({floor:.3g}) | " + " | ".join(
-            f"{summary['scenarios'][s][axis]['e2'] / floor:.3g}" for s in scenarios) + " |")
-    return "\n".join(lines) + "\n"
-

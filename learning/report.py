@@ -14,7 +14,7 @@ from __future__ import annotations
 import copy
 import json
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -464,3 +464,21 @@ def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
     if feedforward:
         plot_force_split(feedforward, out / "forces.png")
     return content
+
+
+def ratio_table(summary: Mapping[str, Any], labels: Mapping[str, str] | None = None,
+                number: Callable[[float], str] = lambda value: f"{value:.3g}",
+                corner: str = "axis") -> str:
+    """A machine evaluation's e2 ratios PID alone / scenario per axis as a Markdown table
+    (scenarios headed by `labels`, numbers written by `number`); where the loop's noise floor
+    is known, a row per axis of each scenario's e2 over it."""
+    scenarios = list(summary["scenarios"])
+    lines = [f"| {corner} | " + " | ".join((labels or {}).get(s, s) for s in scenarios) + " |",
+             "|---|" + "---:|" * len(scenarios)]
+    for axis in summary["axes"]:
+        lines.append(f"| {axis} | " + " | ".join(
+            number(summary["scenarios"][s][axis]["e2_ratio"]) for s in scenarios) + " |")
+    for axis, floor in summary.get("noise_floor", {}).items():
+        lines.append(f"| {axis}: e2 / noise floor ({number(floor)}) | " + " | ".join(
+            number(summary["scenarios"][s][axis]["e2"] / floor) for s in scenarios) + " |")
+    return "\n".join(lines) + "\n"

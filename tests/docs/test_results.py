@@ -187,6 +187,23 @@ def test_the_readme_table_is_generated_from_the_summary():
     assert len(shown) == len(expected) and all(map(_close, shown, expected))
 
 
+def test_the_readme_machines_table_is_generated_from_the_summaries():
+    import gen_results
+
+    readme = (REPOSITORY / "README.md").read_text()
+    table = gen_results.readme_machines_table()
+    assert f"{gen_results.README_MACHINES}\n{table}\n{gen_results.README_END}" in readme
+    for folder in ("drive", "stage"):
+        summary = json.loads((RESULTS / "machines" / folder / "summary.json").read_text())
+        for axis in summary["axes"]:
+            row = next(line for line in table.splitlines()
+                       if f"machines/examples/{folder}.toml`, {axis} |" in line)
+            shown = _numbers(row.split("|", 2)[2])
+            expected = [s[axis]["e2_ratio"] for name, s in summary["scenarios"].items()
+                        if name != "pid"]
+            assert len(shown) == len(expected) and all(map(_close, shown, expected))
+
+
 def test_the_benchmarks_page_shows_the_processes(site):
     bench = json.loads((RESULTS / "processes" / "bench.json").read_text())
     page = site / "results" / "benchmarks" / "index.html"
