@@ -240,7 +240,7 @@ def test_the_machines_page_shows_each_evaluation(site):
         floors = summary.get("noise_floor", {})
         assert len(scores) == 1 + len(summary["axes"]) + len(floors)
         for row in scores[1:]:
-            axis, _, floor = row[0].partition(": e2 / noise floor (e2 ")
+            axis, _, floor = row[0].partition(": e2 / noise floor (")
             for name, cell in zip(by_scenario, row[1:]):
                 value = by_scenario[name][axis]
                 if floor:  # a row of each run's e2 over the axis's noise floor
