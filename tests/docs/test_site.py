@@ -1,5 +1,5 @@
 """The site builds without a warning (strict mode also checks internal links and anchors),
-and every page links only to pages and anchors that exist."""
+and every page links only to pages, anchors and images that exist."""
 
 import posixpath
 import re
@@ -20,6 +20,8 @@ class _Links(HTMLParser):
             self.ids.add(values["id"])
         if tag == "a" and values.get("href"):
             self.links.append(values["href"])
+        if tag == "img" and values.get("src"):  # an image is a link to its file
+            self.links.append(values["src"])
 
 
 def _parsed(path: Path) -> _Links:
