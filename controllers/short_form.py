@@ -2,7 +2,8 @@
 FMUs feedforward -> controller -> plant (controllers.manipulator registers it).
 
 [plant], [controller] and [feedforward] take the options of the built-ins plant, controller
-and rigid-body- or learned-feedforward (`kind` = "none" | "rigid-body" | "learned"). A
+and rigid-body- or learned-feedforward (`kind` = "none" | "rigid-body" | "learned"), and
+`fmi` (2 or 3: the FMI version it is built in). A
 current-level model feeds the controller's current feedforward. It needs a [reference]; a
 configuration without [fmu.*] tables is this loop with its defaults.
 
@@ -50,31 +51,36 @@ def expand(checker: TableChecker, data: Mapping[str, Any], start: tuple[float, f
     given: tuple[str, ...] = ()  # the controller's feedforward inputs a feedforward FMU feeds
     if kind != "none":
         feedforward = builtins[f"{kind}-feedforward"]
-        checker.keys(ff, "feedforward", ("kind", *feedforward.keys))
-        options = checked_options(checker, feedforward, ff, "feedforward")
-        fmus.append(FmuConfig("feedforward", builtin=feedforward.name, options=options))
+        checker.keys(ff, "feedforward", ("kind", "fmi", *feedforward.keys))
+        options = checked_options(checker, feedforward, {k: v for k, v in ff.items()
+                                                         if k != "fmi"}, "feedforward")
+        fmus.append(FmuConfig("feedforward", builtin=feedforward.name, options=options,
+                              fmi=checker.fmi_version(ff, "feedforward")))
         given = names(FEEDFORWARD_FORCES)
         if "model" in options:  # a learned model's card says what it feeds
             from flexff.controllers.model_card import read_card  # onnx: learned runs only
 
             given = tuple(read_card(options["model"]).output_signals)
     else:
-        checker.keys(ff, "feedforward", ("kind",))
+        checker.keys(ff, "feedforward", ("kind", "fmi"))
     currents = given == names(CURRENT_FEEDFORWARD)  # a current-level model (model_card)
     zeros = [n for n in names(FEEDFORWARD_FORCES, CURRENT_FEEDFORWARD if currents else ())
              if n not in given]
     if zeros:
         sources.append(SourceConfig("constant", dict.fromkeys(zeros, 0.0)))
     controller = checker.table(data, "controller")
-    checker.keys(controller, "controller", ("crossover_hz", "notch", "encoders"))
+    checker.keys(controller, "controller", ("crossover_hz", "notch", "encoders", "fmi"))
     fmus.append(FmuConfig("controller", builtin="controller", options={
-        **checked_options(checker, builtins["controller"], {**controller, "variant": variant},
-                          "controller"),
-        **({"current_feedforward": True} if currents else {})}))
-    checker.keys(plant, "plant", ("variant", "seed", *plant_parameter_names(variant)))
-    values = {k: v for k, v in plant.items() if k not in ("variant", "seed")}
+        **checked_options(checker, builtins["controller"], {
+            **{k: v for k, v in controller.items() if k != "fmi"}, "variant": variant},
+            "controller"),
+        **({"current_feedforward": True} if currents else {})},
+        fmi=checker.fmi_version(controller, "controller")))
+    checker.keys(plant, "plant", ("variant", "seed", "fmi", *plant_parameter_names(variant)))
+    values = {k: v for k, v in plant.items() if k not in ("variant", "seed", "fmi")}
     fmus.append(FmuConfig("plant", builtin="plant", options=checked_options(
         checker, builtins["plant"], {k: plant[k] for k in ("seed",) if k in plant} | {
             "variant": variant}, "plant"),
-        parameters=checked_plant_parameters(checker, values, variant, "plant", start)))
+        parameters=checked_plant_parameters(checker, values, variant, "plant", start),
+        fmi=checker.fmi_version(plant, "plant")))
     return fmus, sources

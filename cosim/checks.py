@@ -1,5 +1,5 @@
 """The value checks every table of a run configuration shares (tables, known keys, numbers,
-integers, choices, files relative to the configuration, points), each failing with a
+integers, choices, files relative to the configuration, points, FMI versions), each failing with a
 ConfigError naming the file and `table.key`. cosim.config's parser is one; a machine package's
 hooks (cosim.builtins, cosim.plugins) get one to check their own tables the same way.
 """
@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from flexff.cosim.schema import ConfigError
+from flexff.fmu.fmi_version import FMI_VERSIONS
 
 
 class TableChecker:
@@ -49,6 +50,13 @@ class TableChecker:
             raise self.error(f"{table}.{key}", f"must be {'positive and ' if positive else ''}"
                                                f"finite, got {value!r}")
         return float(value)
+
+    def fmi_version(self, t: Mapping[str, Any], where: str) -> int:
+        """The FMI version a built-in is built in: 2 (default) or 3."""
+        value: int = self.integer(t, where, "fmi", FMI_VERSIONS[0])
+        if value not in FMI_VERSIONS:
+            raise self.error(f"{where}.fmi", f"FMI {value}: built-ins are built as FMI 2 or 3")
+        return value
 
     def integer(self, t: Mapping[str, Any], table: str, key: str, default: int | None) -> Any:
         value = t.get(key, default)

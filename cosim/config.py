@@ -292,13 +292,6 @@ class _Parser(TableChecker):
             raise self.error(f"{where}.{key}", f"expected true or false, got {value!r}")
         return value
 
-    def fmi_version(self, t: Mapping[str, Any], where: str) -> int:
-        """The FMI version a built-in is built in: 2 (default) or 3."""
-        value: int = self.integer(t, where, "fmi", FMI_VERSIONS[0])
-        if value not in FMI_VERSIONS:
-            raise self.error(f"{where}.fmi", f"FMI {value}: built-ins are built as FMI 2 or 3")
-        return value
-
     def isolate(self, t: Mapping[str, Any], where: str) -> bool:
         return self.flag(t, where, "isolate")
 

@@ -2,7 +2,6 @@
 each validates under FMPy and computes bit for bit what its FMI 2.0 twin does, under FMPy and
 in flexff's closed loop of plant, controller and learned feedforward."""
 
-import dataclasses
 import subprocess
 import sys
 import zipfile
@@ -94,14 +93,16 @@ def test_the_learned_feedforward_validates_and_equals_its_fmi2_twin_under_fmpy(
 
 def closed_loop(models, fmi):
     """The thesis evaluation's PID loop with the tiny learned feedforward for 0.5 s, every
-    built-in (plant, controller, feedforward) built as FMI `fmi`."""
+    built-in (plant, controller, feedforward) built as FMI `fmi` (the short form's `fmi`)."""
     text = config_examples()["thesis-eval-pid"].replace(
         'kind = "none"', f'kind = "learned"\nmodel = "{models / "pgnn.onnx"}"\nmode = "task"'
     ).replace("stop = 15.0", "stop = 0.5")
+    for table in ("[plant]", "[controller]", "[feedforward]"):
+        text = text.replace(table, f"{table}\nfmi = {fmi}")
     config = parse_config(text, name="fmi3")
-    fmus = tuple(dataclasses.replace(f, fmi=fmi) for f in config.fmus)
-    assert {f.builtin for f in fmus} >= {"plant", "controller", "learned-feedforward"}
-    return simulate_config(dataclasses.replace(config, fmus=fmus))
+    assert {f.builtin: f.fmi for f in config.fmus} == {
+        "plant": fmi, "controller": fmi, "learned-feedforward": fmi}
+    return simulate_config(config)
 
 
 def test_a_closed_loop_of_fmi3_builtins_equals_the_fmi2_loop_bit_for_bit(models):
@@ -175,3 +176,6 @@ def test_an_fmi_version_other_than_2_or_3_is_refused(tmp_path):
     with pytest.raises(ConfigError, match=r"fmu\.plant\.fmi.*FMI 4: built-ins are built as "
                                           r"FMI 2 or 3"):
         parse_config(text)
+    short = config_examples()["thesis-eval-pid"].replace("[plant]", "[plant]\nfmi = 4")
+    with pytest.raises(ConfigError, match=r"plant\.fmi: FMI 4: built-ins are built as FMI 2"):
+        parse_config(short)
