@@ -39,7 +39,7 @@ def manipulator_description() -> dict[str, Any]:
             for axis, position, true, feedforward, effort in zip(
                 "xy", measured, names(TRUE_POSITION), names(FEEDFORWARD_FORCES), names(FORCES))]
     # the flexure joints pull the wrist back to the centre: a stiffness term per axis beside
-    # the default terms (without it a linear model explains 1 % of the commanded force)
+    # the default terms (without it a linear model explains almost none of the commanded force)
     prior = {"terms": list(DEFAULT_PRIOR_TERMS), "extra": {axis: {"stiffness": axis}
                                                           for axis in "xy"}}
     return {"name": "manipulator", "axis": axes, "prior": prior}

@@ -52,8 +52,7 @@ def expand(checker: TableChecker, data: Mapping[str, Any], start: tuple[float, f
     if kind != "none":
         feedforward = builtins[f"{kind}-feedforward"]
         checker.keys(ff, "feedforward", ("kind", "fmi", *feedforward.keys))
-        options = checked_options(checker, feedforward, {k: v for k, v in ff.items()
-                                                         if k != "fmi"}, "feedforward")
+        options = checked_options(checker, feedforward, _options(ff), "feedforward")
         fmus.append(FmuConfig("feedforward", builtin=feedforward.name, options=options,
                               fmi=checker.fmi_version(ff, "feedforward")))
         given = names(FEEDFORWARD_FORCES)
@@ -71,16 +70,20 @@ def expand(checker: TableChecker, data: Mapping[str, Any], start: tuple[float, f
     controller = checker.table(data, "controller")
     checker.keys(controller, "controller", ("crossover_hz", "notch", "encoders", "fmi"))
     fmus.append(FmuConfig("controller", builtin="controller", options={
-        **checked_options(checker, builtins["controller"], {
-            **{k: v for k, v in controller.items() if k != "fmi"}, "variant": variant},
-            "controller"),
+        **checked_options(checker, builtins["controller"],
+                          {**_options(controller), "variant": variant}, "controller"),
         **({"current_feedforward": True} if currents else {})},
         fmi=checker.fmi_version(controller, "controller")))
     checker.keys(plant, "plant", ("variant", "seed", "fmi", *plant_parameter_names(variant)))
-    values = {k: v for k, v in plant.items() if k not in ("variant", "seed", "fmi")}
+    values = {k: v for k, v in _options(plant).items() if k not in ("variant", "seed")}
     fmus.append(FmuConfig("plant", builtin="plant", options=checked_options(
         checker, builtins["plant"], {k: plant[k] for k in ("seed",) if k in plant} | {
             "variant": variant}, "plant"),
         parameters=checked_plant_parameters(checker, values, variant, "plant", start),
         fmi=checker.fmi_version(plant, "plant")))
     return fmus, sources
+
+
+def _options(table: Mapping[str, Any]) -> dict[str, Any]:
+    """A short-form table's built-in options: all but `fmi`, the FMI version it is built in."""
+    return {k: v for k, v in table.items() if k != "fmi"}
