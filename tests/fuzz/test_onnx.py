@@ -155,68 +155,66 @@ def test_onnx_slow(cache: Path) -> None:
     run_for(fuzz_seconds(), fuzz_round)
 
 
+def _model(nodes: list[onnx.NodeProto], inputs: list[onnx.ValueInfoProto],
+           outputs: list[onnx.ValueInfoProto], meta: dict[str, str] | None = None
+           ) -> onnx.ModelProto:
+    """A regression case's graph: opset 13, IR version 8, its metadata `meta`."""
+    model = oh.make_model(oh.make_graph(nodes, "fuzz", inputs, outputs),
+                          opset_imports=[oh.make_opsetid("", 13)])
+    model.ir_version = 8
+    oh.set_model_props(model, meta or {})
+    return model
+
+
+def _refused(path: Path, data: bytes, message: str) -> None:
+    """The ONNX file of bytes `data` at `path` is refused by onnx_system with `message`."""
+    path.write_bytes(data)
+    with pytest.raises(InputError, match=message):
+        onnx_system(path, runtime="c")
+
+
 def test_output_no_node_computes(cache: Path) -> None:
     """Found by the fuzzer: a graph output that no node computes (here one of the wrapper's
     convention, read as it is) was a KeyError in the C network's plan (fmu.network_plan);
     now one line naming the tensor."""
-    model = oh.make_model(oh.make_graph(
-        [oh.make_node("Identity", ["x"], ["y"])], "fuzz",
-        [oh.make_tensor_value_info("x", TensorProto.DOUBLE, [1, 1])],
-        [oh.make_tensor_value_info("h", TensorProto.DOUBLE, [1, 1])]),
-        opset_imports=[oh.make_opsetid("", 13)])
-    model.ir_version = 8
-    path = cache / "orphan.onnx"
-    path.write_bytes(model.SerializeToString())
-    with pytest.raises(InputError, match="tensor 'h' is neither an input"):
-        onnx_system(path, runtime="c")
+    model = _model([oh.make_node("Identity", ["x"], ["y"])],
+                   [oh.make_tensor_value_info("x", TensorProto.DOUBLE, [1, 1])],
+                   [oh.make_tensor_value_info("h", TensorProto.DOUBLE, [1, 1])])
+    _refused(cache / "orphan.onnx", model.SerializeToString(),
+             "tensor 'h' is neither an input")
 
 
 def test_metadata_key_not_utf8(cache: Path) -> None:
     """Found by the fuzzer: a metadata key of bytes that are not UTF-8 (protobuf reads them
     as bytes) was a UnicodeDecodeError while wrapping the graph; now one line."""
-    model = oh.make_model(oh.make_graph(
-        [oh.make_node("Relu", ["x"], ["y"])], "fuzz",
-        [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 1])],
-        [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 1])]),
-        opset_imports=[oh.make_opsetid("", 13)])
-    model.ir_version = 8
-    oh.set_model_props(model, {"output_signals": '["out0"]'})
+    model = _model([oh.make_node("Relu", ["x"], ["y"])],
+                   [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 1])],
+                   [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 1])],
+                   {"output_signals": '["out0"]'})
     data = model.SerializeToString().replace(b"output_signals", b"\x80utput_signals")
-    path = cache / "bytes.onnx"
-    path.write_bytes(data)
-    with pytest.raises(InputError, match=r"StringStringEntryProto\.key is not UTF-8 text"):
-        onnx_system(path, runtime="c")
+    _refused(cache / "bytes.onnx", data, r"StringStringEntryProto\.key is not UTF-8 text")
 
 
 def test_state_of_negative_size(cache: Path) -> None:
     """Found by the fuzzer: a state input of dimension -1 was a ValueError from numpy in the
     C network's plan; now one line naming the input."""
-    model = oh.make_model(oh.make_graph(
-        [oh.make_node("Identity", ["x"], ["y"]), oh.make_node("Tanh", ["h"], ["h_out"])], "fuzz",
+    model = _model(
+        [oh.make_node("Identity", ["x"], ["y"]), oh.make_node("Tanh", ["h"], ["h_out"])],
         [oh.make_tensor_value_info("x", TensorProto.DOUBLE, [1, 1]),
          oh.make_tensor_value_info("h", TensorProto.FLOAT, [-1, 2])],
         [oh.make_tensor_value_info("y", TensorProto.DOUBLE, [1, 1]),
-         oh.make_tensor_value_info("h_out", TensorProto.FLOAT, [-1, 2])]),
-        opset_imports=[oh.make_opsetid("", 13)])
-    model.ir_version = 8
-    oh.set_model_props(model, {"state": json.dumps([{"input": "h", "output": "h_out"}])})
-    path = cache / "negative.onnx"
-    path.write_bytes(model.SerializeToString())
-    with pytest.raises(InputError, match="input 'h' has a negative dimension"):
-        onnx_system(path, runtime="c")
+         oh.make_tensor_value_info("h_out", TensorProto.FLOAT, [-1, 2])],
+        {"state": json.dumps([{"input": "h", "output": "h_out"}])})
+    _refused(cache / "negative.onnx", model.SerializeToString(),
+             "input 'h' has a negative dimension")
 
 
 def test_undefined_element_type(cache: Path) -> None:
     """Found by the fuzzer: an input of element type 29, which ONNX does not define, was a
     ValueError from protobuf while naming the type; now one line naming the input."""
-    model = oh.make_model(oh.make_graph(
-        [oh.make_node("Identity", ["x"], ["y"])], "fuzz",
-        [oh.make_tensor_value_info("x", TensorProto.DOUBLE, [1, 1])],
-        [oh.make_tensor_value_info("y", TensorProto.DOUBLE, [1, 1])]),
-        opset_imports=[oh.make_opsetid("", 13)])
-    model.ir_version = 8
+    model = _model([oh.make_node("Identity", ["x"], ["y"])],
+                   [oh.make_tensor_value_info("x", TensorProto.DOUBLE, [1, 1])],
+                   [oh.make_tensor_value_info("y", TensorProto.DOUBLE, [1, 1])])
     model.graph.input[0].type.tensor_type.elem_type = 29
-    path = cache / "undefined.onnx"
-    path.write_bytes(model.SerializeToString())
-    with pytest.raises(InputError, match="input 'x' holds the undefined element type 29"):
-        onnx_system(path, runtime="c")
+    _refused(cache / "undefined.onnx", model.SerializeToString(),
+             "input 'x' holds the undefined element type 29")
