@@ -13,7 +13,8 @@ from typing import Any
 
 import pytest
 
-LEARN = ("torch", "onnxscript")  # the extra "learn" (pyproject.toml)
+from flexff.cli import LEARN  # the extra "learn"'s packages, as the command line names them
+
 INSTALLED = importlib.util.find_spec("torch") is not None
 REASON = "needs PyTorch: pip install 'flexff[learn]'"
 MISSING = re.compile(r"No module named '(" + "|".join(LEARN) + r")[.']")  # in a collect report
