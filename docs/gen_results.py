@@ -291,17 +291,19 @@ def record(kind: str, source: Path, command: str, started: str, ended: str,
 
 def readme_machines_table() -> str:
     """README's table of the example machines: per loop and axis, the e2 ratio of each
-    feedforward and the ILC limit (docs/results/machines)."""
+    feedforward and the ILC limit (docs/results/machines; "–" where a loop ran no such)."""
+    loops = [load(f"machines/{folder.name}")
+             for folder in sorted((RESULTS / "machines").iterdir())]
+    loops = [(summary, stamp) for summary, stamp in loops if "scenarios" in summary]
+    names = [n for n in MACHINE_SCENARIOS if n != "pid"
+             and any(n in summary["scenarios"] for summary, _ in loops)]
     rows = []
-    for folder in sorted((RESULTS / "machines").iterdir()):
-        summary, stamp = load(f"machines/{folder.name}")
-        if "scenarios" not in summary:
-            continue
-        names = [n for n in summary["scenarios"] if n != "pid"]
+    for summary, stamp in loops:
         command = stamp["command"].replace(" -o DIR", "")
+        scenarios = summary["scenarios"]
         rows += [f"| `{command}`, {axis} | " + " | ".join(
-            figure(summary["scenarios"][n][axis]["e2_ratio"]) for n in names) + " |"
-            for axis in summary["axes"]]
+            figure(scenarios[n][axis]["e2_ratio"]) if n in scenarios else "–" for n in names)
+            + " |" for axis in summary["axes"]]
     head = "| e2 ratio PID alone / with FF | " + " | ".join(
         MACHINE_SCENARIOS[n] for n in names) + " |"
     return "\n".join((head, "|---|" + "---:|" * len(names), *rows))
