@@ -34,6 +34,8 @@ from flexff.cosim.references import (
     build_reference,
     reference_kind_names,
 )
+from flexff.cosim.sandbox import KEYS as SANDBOX_KEYS
+from flexff.cosim.sandbox import MEMORY_MB, Sandbox
 from flexff.cosim.schema import (
     ALGORITHMS,
     SOURCE_KINDS,
@@ -80,13 +82,23 @@ def checked(config: RunConfig) -> RunConfig:
     return again
 
 
-def with_isolation(config: RunConfig, isolate: bool, step_timeout: float | None
-                   ) -> RunConfig:
-    """`config` with every FMU in its own process (`isolate`, as `flexff run --isolate`) and
-    its calls bounded by `step_timeout` (s; None: as configured), checked again."""
-    fmus = tuple(replace(f, isolate=f.isolate or isolate) for f in config.fmus)
+def with_isolation(config: RunConfig, isolate: bool, step_timeout: float | None,
+                   sandbox: bool = True) -> RunConfig:
+    """`config` with every FMU in its own process (`isolate`, as `flexff run --isolate`), its
+    calls bounded by `step_timeout` (s; None: as configured) and, unless `sandbox` is false
+    (`--no-sandbox`), in its sandbox; checked again."""
+    fmus = tuple(replace(f, isolate=f.isolate or isolate, sandbox=f.sandbox if sandbox else None)
+                 for f in config.fmus)
     timeout = config.step_timeout if step_timeout is None else step_timeout
     return checked(replace(config, fmus=fmus, step_timeout=timeout))
+
+
+def _sandbox_keys(sandbox: Sandbox | None) -> dict[str, Any]:
+    """An isolated FMU's sandbox keys, where they differ from the defaults."""
+    if sandbox is None:
+        return {"sandbox": False}
+    return {**({"sandbox_memory": sandbox.memory_mb} if sandbox.memory_mb != MEMORY_MB else {}),
+            **({"sandbox_cpu": sandbox.cpu_s} if sandbox.cpu_s is not None else {})}
 
 
 def read_tables(path: Path) -> dict[str, Any]:
@@ -132,6 +144,7 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                                if f.unconnected != "error" else {}),
                             **({"tolerance": f.tolerance} if f.tolerance is not None else {}),
                             **({"isolate": True} if f.isolate else {}),
+                            **(_sandbox_keys(f.sandbox) if f.isolate else {}),
                             **({"allow_nonfinite": True} if f.allow_nonfinite else {}),
                             **({"fmi": f.fmi} if f.fmi != FMI_VERSIONS[0] else {}),
                             **({"solver": f.solver} if f.solver else {})}
@@ -295,6 +308,21 @@ class _Parser(TableChecker):
     def isolate(self, t: Mapping[str, Any], where: str) -> bool:
         return self.flag(t, where, "isolate")
 
+    def sandbox(self, t: Mapping[str, Any], where: str) -> Sandbox | None:
+        """The sandbox of an isolated FMU (None: sandbox = false), with its limits."""
+        given = [k for k in SANDBOX_KEYS if k in t]
+        if given and not self.isolate(t, where):
+            raise self.error(f"{where}.{given[0]}", "applies to an FMU in its own process: set "
+                                                   "isolate = true (or run with --isolate)")
+        if not self.flag({"sandbox": True, **t}, where, "sandbox"):
+            if len(given) > 1:
+                raise self.error(f"{where}.{given[-1]}", "is a limit of the sandbox, which "
+                                                         "sandbox = false turns off")
+            return None
+        cpu = "sandbox_cpu" in t and self.number(t, where, "sandbox_cpu", None, positive=True)
+        return Sandbox(self.number(t, where, "sandbox_memory", MEMORY_MB, positive=True),
+                       cpu or None)
+
     def nonfinite(self, t: Mapping[str, Any], where: str) -> bool:
         """Whether the FMU may take and give NaN and infinite values: its own
         allow_nonfinite, else [run] allow_nonfinite."""
@@ -366,17 +394,17 @@ class _Parser(TableChecker):
         allowed = self.nonfinite(t, where)
         if "path" in t:
             self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate",
-                                 "solver", "allow_nonfinite"))
+                                 "solver", "allow_nonfinite", *SANDBOX_KEYS))
             path = self.path(t, where, "path")
             return FmuConfig(name, path=path, parameters=self.fmu_parameters(path, parameters,
                                                                              where, allowed),
                              unconnected=unconnected, tolerance=self.tolerance(t, where),
-                             isolate=self.isolate(t, where), solver=self.solver(t, where, path),
-                             allow_nonfinite=allowed)
+                             isolate=self.isolate(t, where), sandbox=self.sandbox(t, where),
+                             solver=self.solver(t, where, path), allow_nonfinite=allowed)
         builtins = registered()
         builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
-                             "allow_nonfinite", "fmi", *builtin.keys))
+                             "allow_nonfinite", "fmi", *SANDBOX_KEYS, *builtin.keys))
         options = checked_options(self, builtin, t, where)
         if builtin.parameters is not None:
             parameters = builtin.parameters(self, options, parameters, where, start)
@@ -384,7 +412,8 @@ class _Parser(TableChecker):
         return FmuConfig(name, builtin=builtin.name, options=options,
                          parameters=dict(parameters), unconnected=unconnected,
                          tolerance=self.tolerance(t, where), isolate=self.isolate(t, where),
-                         allow_nonfinite=allowed, fmi=self.fmi_version(t, where))
+                         sandbox=self.sandbox(t, where), allow_nonfinite=allowed,
+                         fmi=self.fmi_version(t, where))
 
     def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str,
                        allowed: bool) -> dict[str, Any]:

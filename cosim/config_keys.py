@@ -109,6 +109,13 @@ KEYS: tuple[Key, ...] = (
     Key("fmu.NAME", "isolate", "boolean", "false", "",
         "Run the FMU in its own process: a crash or hang ends the run with an error.",
         ("path", "builtin")),
+    Key("fmu.NAME", "sandbox", "boolean", "true", "",
+        "An isolated FMU runs in a sandbox: no network, no new process, writes only to its "
+        "scratch folder (needs isolate).", ("path", "builtin")),
+    Key("fmu.NAME", "sandbox_memory", "number", "4096", "MB",
+        "The sandboxed FMU's private writable memory (needs isolate).", ("path", "builtin")),
+    Key("fmu.NAME", "sandbox_cpu", "number", "none", "s",
+        "The sandboxed FMU's CPU time (needs isolate).", ("path", "builtin")),
     Key("fmu.NAME", "fmi", "integer", "2", "",
         "The FMI version a built-in is built in: 2 or 3 (3.0, bit-equal to 2.0).",
         ("builtin",)),

@@ -2,25 +2,22 @@
 FMU, the call and the time, instead of taking the master with it (as libcosim's proxyfmu does).
 
 IsolatedInstance stands where an FmuInstance does (cosim.master): the child process (`python -m
-flexff.cosim.isolation`, this module's `main`) loads the FMU with the same importer
-(fmu.importer.FmuInstance) and serves the engine's calls. The engine calls the proxy's
-functions (cosim/c/proxy.c) through the FMU's plan as it calls an in-process FMU's own: each
-call copies values through shared memory (a memfd both processes map) and makes one round trip
-of a command byte over a pipe, so an isolated FMU costs a few microseconds more per call and
-gives the same results bit for bit. Everything else (initialization, values of other types,
-the FMU's messages) goes over the same pipes as pickled requests that the child's Python
-answers. A call the child does not answer within the step timeout stops the child (SIGKILL);
-one it dies in is reported with its signal. The child dies with its master, however the master
-ends (fmu.orphans).
+flexff.cosim.isolation`, this module's `main`) loads the FMU with the same importer and, unless
+told otherwise, inside a sandbox (cosim.sandbox). The engine calls the proxy's functions
+(cosim/c/proxy.c), which pass values and commands through shared memory without a system
+call while both sides are busy; an isolated FMU gives the same results bit for bit.
+Everything else goes over pipes as length-prefixed JSON, bounded in size and checked in shape:
+nothing the child sends can run code in the master. The child dies with its master, however
+the master ends (fmu.orphans). Reference: docs/how-to/isolate-fmu.md.
 """
 
 from __future__ import annotations
 
 import ctypes
 import functools
+import json
 import mmap
 import os
-import pickle
 import select
 import shutil
 import signal
@@ -33,43 +30,47 @@ from ctypes import c_char, c_double, c_int, c_long, c_size_t, c_void_p
 from pathlib import Path
 from typing import Any
 
-from flexff.cosim import engine
+from flexff.cosim import engine, sandbox
+from flexff.cosim.sandbox import Sandbox
 from flexff.fmu import cache
-from flexff.fmu.archive import UNPACKED
 from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 from flexff.fmu.orphans import die_with_parent
 
-SOURCE = Path(__file__).parent / "c" / "proxy.c"
-PYTHON, EXIT = b"P", b"X"  # commands proxy_serve hands back (CMD_PYTHON, CMD_EXIT in proxy.c)
+SOURCES = (Path(__file__).parent / "c" / "proxy.c", Path(__file__).parent / "c" / "sandbox.c")
+PYTHON, EXIT = ord("P"), ord("X")  # commands proxy_serve hands back (CMD_PYTHON, CMD_EXIT)
 SERVE_PYTHON = 1  # proxy_serve's result for a Python request
 DIED, TIMED_OUT = 1, 2  # proxy_failure
 CLOSE_WAIT = 10.0  # seconds a child has to terminate its FMU and exit after the run
 START_WAIT = 60.0  # seconds at least that a child has to start Python and instantiate the FMU
 REQUESTS = ("initialize", "set", "get", "fail", "network_times")  # what the child's Python does
-LENGTH = struct.Struct("<Q")  # a pickled message's length prefix
+LENGTH = struct.Struct("<Q")  # a message's length prefix
+MESSAGE_LIMIT = 64 << 20  # bytes a message may have: a child claiming more is stopped
+FOLDER = "flexff-isolated-"  # the prefix of an isolated FMU's folder (its FMU and scratch)
+BYTES = "\x00bytes"  # the key of a JSON object that stands for bytes (hexadecimal)
 
 
 @functools.cache
 def library() -> ctypes.CDLL:
     """The compiled proxy, from the cache when its source and the compiler are unchanged."""
-    key = cache.digest({SOURCE.name: SOURCE.read_text(),
+    key = cache.digest({**{source.name: source.read_text() for source in SOURCES},
                         engine.HEADER.name: engine.HEADER.read_text(),
                         "cflags": " ".join(CFLAGS), "compiler": compiler_version()})
     path = cache.cached_path(key, ".proxy.so")
     if not path.exists():
         with tempfile.TemporaryDirectory() as tmp:
             built = Path(tmp) / "proxy.so"
-            run_compiler([SOURCE], built, [engine.HEADER.parent])
+            run_compiler(list(SOURCES), built, [engine.HEADER.parent])
             cache.store(key, ".proxy.so", built)
     lib = ctypes.CDLL(str(path))
     lib.proxy_shared_size.argtypes, lib.proxy_shared_size.restype = [c_long], c_size_t
-    lib.proxy_open.argtypes = [c_int, c_int, c_void_p, c_long, c_double]
+    lib.proxy_open.argtypes = [c_int, c_void_p, c_long, c_double]
     lib.proxy_open.restype = c_void_p
+    lib.proxy_post.argtypes, lib.proxy_post.restype = [c_void_p, c_int], None
     lib.proxy_free.argtypes, lib.proxy_free.restype = [c_void_p], None
     lib.proxy_failure.argtypes, lib.proxy_failure.restype = [c_void_p], c_int
-    lib.proxy_serve.argtypes = [c_int, c_int, c_void_p, c_long, c_int, c_void_p, c_void_p,
-                                c_void_p, c_void_p]
+    lib.proxy_serve.argtypes = [c_void_p, c_long, c_int, c_void_p, c_void_p, c_void_p,
+                                c_void_p]
     lib.proxy_serve.restype = c_int
     return lib
 
@@ -88,9 +89,29 @@ def _functions(instance: FmuInstance) -> list[int]:
     return [*functions, engine.function_address(dll, "fmi3DoStep" if fmi3 else "fmi2DoStep")]
 
 
+def _plain(value: Any) -> Any:
+    """What JSON cannot hold as it is: bytes (tagged), numpy's scalars."""
+    if isinstance(value, bytes):
+        return {BYTES: value.hex()}
+    if hasattr(value, "item"):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} cannot cross to an isolated FMU")
+
+
+def _encoded(message: Any) -> bytes:
+    """A message as JSON, with its length before it."""
+    data = json.dumps(message, default=_plain).encode()
+    return LENGTH.pack(len(data)) + data
+
+
+def _decoded(data: bytes) -> Any:
+    return json.loads(data, object_hook=lambda o: bytes.fromhex(o[BYTES]) if BYTES in o else o)
+
+
 def _send(fd: int, message: Any) -> None:
-    data = pickle.dumps(message)
-    os.write(fd, LENGTH.pack(len(data)) + data)
+    data = _encoded(message)
+    while data:
+        data = data[os.write(fd, data):]
 
 
 def _signal_name(number: int) -> str:
@@ -103,38 +124,47 @@ def _signal_name(number: int) -> str:
 class IsolatedInstance:
     """An FMU instantiated in a child process, with FmuInstance's interface for the master;
     `timeout` (s, None: none) bounds every call the child answers (its start, which includes
-    starting Python, at least START_WAIT)."""
+    starting Python, at least START_WAIT); `confined` (None: not) sandboxes the child."""
 
     def __init__(self, info: FmuInfo, name: str, timeout: float | None = None,
-                 solver: str | None = None) -> None:
-        self.info, self.name, self.timeout = info, name, timeout
+                 solver: str | None = None, confined: Sandbox | None = sandbox.DEFAULT) -> None:
+        self.info, self.name, self.timeout, self.confined = info, name, timeout, confined
         self.library = info.path
         self.initialized = False
+        self.held: list[str] = []  # the sandbox's layers that hold in the child
         lib = library()
         self._capacity = max(1, len(info.variables))
         self._memory = os.memfd_create(f"flexff-{name}")
         os.ftruncate(self._memory, lib.proxy_shared_size(self._capacity))
         self._shared = mmap.mmap(self._memory, lib.proxy_shared_size(self._capacity))
         self._view = c_char.from_buffer(self._shared)
+        self.scratch = Path(tempfile.mkdtemp(prefix=FOLDER))  # the FMU, and its work folder
+        (self.scratch / "work").mkdir()
         cmd_read, self._cmd = os.pipe()
         self._ack, ack_write = os.pipe()
+        self._report, report_write = os.pipe()
         root = str(Path(sys.modules["flexff"].__file__ or ".").resolve().parent.parent)
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-            [root, *filter(None, [os.environ.get("PYTHONPATH")])])}
+        python_path = os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH")])])
+        env = ({**os.environ, "PYTHONPATH": python_path} if confined is None
+               else sandbox.environment(self.scratch / "work", python_path))
+        limits = None if confined is None else [confined.memory_mb, confined.cpu_s]
         self._process = subprocess.Popen(
             [sys.executable, "-m", "flexff.cosim.isolation", str(info.path), name,
              str(cmd_read), str(ack_write), str(self._memory), str(self._capacity),
-             solver or "", str(os.getpid())],
-            pass_fds=(cmd_read, ack_write, self._memory), env=env)
-        os.close(cmd_read)
-        os.close(ack_write)
-        self._proxy = lib.proxy_open(self._cmd, self._ack, ctypes.addressof(self._view),
-                                     self._capacity, timeout or 0.0)
+             solver or "", str(os.getpid()), str(self.scratch), str(report_write),
+             json.dumps(limits)],
+            pass_fds=(cmd_read, ack_write, self._memory, report_write), env=env,
+            cwd=self.scratch / "work")
+        for fd in (cmd_read, ack_write, report_write):
+            os.close(fd)
+        self._proxy = lib.proxy_open(self._ack, ctypes.addressof(self._view), self._capacity,
+                                     timeout or 0.0)
         self._timed_out = False
-        self.scratch: Path | None = None  # the folder the child unpacked the FMU into
         try:
-            self.scratch = _scratch(self._response("instantiating it",
-                                                   max(START_WAIT, timeout or 0.0)))
+            held = self._response("instantiating it", max(START_WAIT, timeout or 0.0))
+            if not (isinstance(held, list) and all(isinstance(h, str) for h in held)):
+                raise self._refused("instantiating it", "an answer that is no list of layers")
+            self.held = held
         except BaseException:
             self.close()
             raise
@@ -158,13 +188,18 @@ class IsolatedInstance:
         self._request("set", dict(values))
 
     def get(self, names: Sequence[str]) -> list[Any]:
-        result: list[Any] = self._request("get", list(names))
+        result = self._request("get", list(names))
+        if not (isinstance(result, list) and len(result) == len(names)):
+            raise self._refused("get", f"an answer that is no list of {len(names)} values")
         return result
 
     def network_times(self) -> dict[str, float] | None:
         if self._gone():
             return None
-        times: dict[str, float] | None = self._request("network_times")
+        times = self._request("network_times")
+        if times is not None and not (isinstance(times, dict) and all(
+                isinstance(v, (int, float)) for v in times.values())):
+            raise self._refused("network_times", "an answer that is no table of times")
         return times
 
     def network_task(self) -> tuple[int, int] | None:
@@ -173,37 +208,44 @@ class IsolatedInstance:
         return None
 
     def fail(self, what: str) -> FmuError:
-        """The error for a failed call: the child's signal, the timeout, or the FMU's
-        messages."""
+        """The error for a failed call: the sandbox's report, the child's signal, the
+        timeout, or the FMU's messages."""
         if self._timed_out or library().proxy_failure(self._proxy) == TIMED_OUT:
             self._stop()
             return FmuError(f"{self.name}: {what} did not end within the step timeout of "
                             f"{self.timeout:g} s; its process was stopped")
         if self._gone():
             code = self._process.wait(CLOSE_WAIT)
+            stopped = sandbox.report(self._report) if code == sandbox.STOPPED else ""
+            if stopped:
+                return FmuError(f"{self.name}: {what} failed: the sandbox stopped its process: "
+                                f"{stopped}")
+            if code == -signal.SIGXCPU and self.confined is not None:
+                return FmuError(f"{self.name}: {what} failed: its process used up its CPU time "
+                                f"({self.confined.cpu_s:g} s, sandbox_cpu)")
             how = (f"ended with {_signal_name(-code)}" if code < 0 else
                    f"exited with status {code}")
             return FmuError(f"{self.name}: {what} failed: its process {how}")
-        return FmuError(self._request("fail", what))
+        message = self._request("fail", what)
+        return FmuError(message if isinstance(message, str) else f"{self.name}: {what} failed")
 
     def close(self) -> None:
         """Let the child terminate and free the FMU, then release everything (safe twice)."""
-        if self._process.poll() is None and not self._timed_out:
+        if self._process.poll() is None and not self._timed_out and self._proxy:
+            library().proxy_post(self._proxy, EXIT)
             try:
-                os.write(self._cmd, EXIT)
                 self._process.wait(CLOSE_WAIT)
-            except (OSError, subprocess.TimeoutExpired):
+            except subprocess.TimeoutExpired:
                 pass
         self._stop()
-        if self.scratch is not None:  # a child that crashed or was stopped left it
-            shutil.rmtree(self.scratch, ignore_errors=True)
+        shutil.rmtree(self.scratch, ignore_errors=True)
         if self._proxy:
             library().proxy_free(self._proxy)
             self._proxy = None
-        for fd in (self._cmd, self._ack, self._memory):
+        for fd in (self._cmd, self._ack, self._report, self._memory):
             if fd >= 0:
                 os.close(fd)
-        self._cmd = self._ack = self._memory = -1
+        self._cmd = self._ack = self._report = self._memory = -1
         del self._view
         self._shared.close()
 
@@ -224,20 +266,34 @@ class IsolatedInstance:
             self._process.kill()
         self._process.wait()
 
+    def _refused(self, what: str, why: str) -> FmuError:
+        """A child that broke the protocol: stopped, and named."""
+        self._stop()
+        return FmuError(f"{self.name}: {what} failed: its process sent {why}; it was stopped")
+
     def _request(self, what: str, *args: Any) -> Any:
-        data = pickle.dumps((what, args))
+        library().proxy_post(self._proxy, PYTHON)
         try:
-            os.write(self._cmd, PYTHON + LENGTH.pack(len(data)) + data)
+            _send(self._cmd, [what, args])
         except OSError:
             raise self.fail(what) from None
         return self._response(what)
 
     def _response(self, what: str, timeout: float | None = None) -> Any:
+        """The child's answer: its value, or its error raised; a message over MESSAGE_LIMIT or
+        not of the protocol's shape stops the child."""
         timeout = timeout or self.timeout
         length = LENGTH.unpack(self._read(LENGTH.size, what, timeout))[0]
-        status, value = pickle.loads(self._read(length, what, timeout))
-        if status == "error":
-            raise FmuError(value)
+        if length > MESSAGE_LIMIT:
+            raise self._refused(what, f"a message of {length} bytes (at most {MESSAGE_LIMIT})")
+        try:
+            status, value = _decoded(self._read(length, what, timeout))
+        except (ValueError, TypeError):
+            raise self._refused(what, "a message that is not the protocol's") from None
+        if status == "error" and isinstance(value, str):
+            raise FmuError(value[:MESSAGE_LIMIT])
+        if status != "ok":
+            raise self._refused(what, "a message that is not the protocol's")
         return value
 
     def _read(self, size: int, what: str, timeout: float | None) -> bytes:
@@ -247,19 +303,11 @@ class IsolatedInstance:
             if not ready:
                 self._timed_out = True
                 raise self.fail(what)
-            chunk = os.read(self._ack, size - len(data))
+            chunk = os.read(self._ack, min(size - len(data), 1 << 20))
             if not chunk:
                 raise self.fail(what)
             data += chunk
         return data
-
-
-def _scratch(reported: Any) -> Path | None:
-    """The folder a child says it unpacked its FMU into, if it is one the importer makes (a
-    child is never trusted to name another folder for its master to remove)."""
-    path = Path(str(reported))
-    made = path.parent == Path(tempfile.gettempdir()) and path.name.startswith(UNPACKED)
-    return path if made and not path.is_symlink() else None
 
 
 def _read_exactly(fd: int, size: int) -> bytes:
@@ -272,7 +320,7 @@ def _read_exactly(fd: int, size: int) -> bytes:
     return data
 
 
-def _answer(instance: FmuInstance, what: str, args: tuple[Any, ...]) -> Any:
+def _answer(instance: FmuInstance, what: str, args: list[Any]) -> Any:
     if what not in REQUESTS:
         raise FmuError(f"unknown request {what!r}")
     if what == "fail":
@@ -281,9 +329,10 @@ def _answer(instance: FmuInstance, what: str, args: tuple[Any, ...]) -> Any:
 
 
 def main(argv: Sequence[str]) -> int:
-    """The child: instantiate the FMU, then serve the engine's calls (proxy_serve) and the
-    master's Python requests until told to exit or the master is gone."""
-    path, name, cmd, ack, memory, capacity, solver, master = argv
+    """The child: unpack the FMU, enter the sandbox (if asked), load and instantiate the FMU,
+    then serve the engine's calls (proxy_serve) and the master's requests until told to exit
+    or the master is gone."""
+    path, name, cmd, ack, memory, capacity, solver, master, folder, report, limits = argv
     die_with_parent(int(master))  # a master killed while the FMU hangs takes it along
     for number in (signal.SIGINT, signal.SIGTERM):  # the master's to handle: it closes us
         signal.signal(number, signal.SIG_IGN)
@@ -291,22 +340,28 @@ def main(argv: Sequence[str]) -> int:
     lib = library()
     shared = mmap.mmap(int(memory), lib.proxy_shared_size(capacity_n))
     address = ctypes.addressof(c_char.from_buffer(shared))
+    bounds = json.loads(limits)
+    held: list[str] = []
+
+    def confine() -> None:
+        held.extend(sandbox.enter(lib, Path(folder, "work"), Sandbox(*bounds), int(report)))
+
     try:
-        instance = FmuInstance(read_fmu(path), name, solver or None)
+        instance = FmuInstance(read_fmu(path), name, solver or None, Path(folder, "fmu"),
+                               None if bounds is None else confine)
     except FmuError as error:
-        _send(ack_fd, ("error", str(error)))
+        _send(ack_fd, ["error", str(error)])
         return 1
-    _send(ack_fd, ("ok", str(instance.scratch)))
+    _send(ack_fd, ["ok", held])
     try:
-        while lib.proxy_serve(cmd_fd, ack_fd, address, capacity_n,
-                              instance.info.fmi_version == "3.0", instance.component.value,
-                              *_functions(instance)) == SERVE_PYTHON:
-            what, args = pickle.loads(_read_exactly(
+        while lib.proxy_serve(address, capacity_n, instance.info.fmi_version == "3.0",
+                              instance.component.value, *_functions(instance)) == SERVE_PYTHON:
+            what, args = _decoded(_read_exactly(
                 cmd_fd, LENGTH.unpack(_read_exactly(cmd_fd, LENGTH.size))[0]))
             try:
-                _send(ack_fd, ("ok", _answer(instance, what, args)))
+                _send(ack_fd, ["ok", _answer(instance, what, args)])
             except Exception as error:  # the master raises it as the FMU's error
-                _send(ack_fd, ("error", str(error)))
+                _send(ack_fd, ["error", str(error)])
     except (EOFError, BrokenPipeError):
         pass  # the master is gone
     finally:

@@ -46,6 +46,7 @@ from flexff.cosim.engine import (
 from flexff.cosim.handover import ChunkBuffers, Handover, StepTimes, Worker
 from flexff.cosim.isolation import IsolatedInstance
 from flexff.cosim.recording import CHUNK_MIN_ROWS, Recording, chunk_rows
+from flexff.cosim.sandbox import DEFAULT, Sandbox
 from flexff.cosim.schema import ALGORITHMS, point_time
 from flexff.cosim.timing import Pacing, StepTiming, StreamedTiming
 from flexff.cosim.wiring import SOURCE, Link, Port, carried, wire
@@ -133,6 +134,7 @@ class ResolvedFmu:
     isolate: bool = False  # run it in its own process (cosim.isolation)
     solver: str | None = None  # run it as model exchange with this solver (fmu.model_exchange)
     allow_nonfinite: bool = False  # NaN and infinite outputs go on (else they stop the run)
+    sandbox: Sandbox | None = DEFAULT  # an isolated FMU's sandbox (None: none)
 
     def described(self) -> FmuInfo:
         """The model description: the one carried, else read and the start values checked."""
@@ -266,7 +268,8 @@ class Master:
         try:
             for fmu, info in zip(fmus, infos):
                 self._instances.append(
-                    IsolatedInstance(info, fmu.name, step_timeout, fmu.solver) if fmu.isolate
+                    IsolatedInstance(info, fmu.name, step_timeout, fmu.solver, fmu.sandbox)
+                    if fmu.isolate
                     else FmuInstance(info, fmu.name, fmu.solver))
             self._layout(infos)
         except BaseException:

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from flexff.cosim.sandbox import DEFAULT, Sandbox
 from flexff.fmu.errors import InputError
 
 if TYPE_CHECKING:  # cosim.machine reads ConfigError from here
@@ -74,6 +75,7 @@ class FmuConfig:
     unconnected: str = "error"
     tolerance: float | None = None  # None: the FMU's default experiment's, if any
     isolate: bool = False  # run it in its own process (cosim.isolation)
+    sandbox: Sandbox | None = DEFAULT  # an isolated FMU's sandbox (None: none; cosim.sandbox)
     solver: str | None = None  # model exchange with this solver (None: co-simulation)
     allow_nonfinite: bool = False  # NaN and infinite values allowed in and out (cosim.finite)
     fmi: int = 2  # the FMI version a built-in is built in (2 or 3)

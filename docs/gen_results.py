@@ -259,7 +259,30 @@ def processes_markdown() -> str:
             "|---|---:|---:|"]
     for name, r in bench["startup"].items():
         out.append(f"| {name} | {figure(r['wall_s'])} | {figure(r['peak_mib'])} |")
+    if "isolation" in bench:
+        out += ["", *isolation_table(bench["isolation"])]
     return "\n".join(out) + "\n"
+
+
+ISOLATION = (("in_process", "flexff, in-process"), ("isolated", "flexff, isolated"),
+             ("sandboxed", "flexff, isolated and sandboxed"),
+             ("ecos_in_process", "Ecos, in-process"), ("ecos_proxyfmu", "Ecos, proxyfmu"))
+
+
+def isolation_table(figures: dict[str, Any]) -> list[str]:
+    """The FMU in its own process (flexff.isolation_bench): µs per step of each variant."""
+    out = [f"### One FMU in its own process (best of {figures['repeats']} rounds of "
+           f"{figures['steps']} steps)", "", "| variant | µs per step | over Ecos's proxyfmu |",
+           "|---|---:|---:|"]
+    proxy = figures.get("ecos_proxyfmu_us_per_step")
+    for key, label in ISOLATION:
+        us = figures.get(f"{key}_us_per_step")
+        if us is not None:
+            ratio = figure(us / proxy) if proxy else ""
+            out.append(f"| {label} | {figure(us)} | {ratio} |")
+        elif isinstance(figures.get(key), str):
+            out.append(f"| {label} | did not run: {figures[key]} | |")
+    return out
 
 
 def record(kind: str, source: Path, command: str, started: str, ended: str,

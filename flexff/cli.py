@@ -262,9 +262,10 @@ def _run(args: argparse.Namespace) -> int:
                 raise InputError(f"--sweep {key} is given twice: list its values once")
             axes[key] = values
         configs = sweep(configs[0], axes)
-    if args.isolate or args.step_timeout is not None:
+    if args.isolate or args.step_timeout is not None or args.no_sandbox:
         configs = [with_isolation(c if isinstance(c, RunConfig) else load_run_config(c),
-                                  args.isolate, args.step_timeout) for c in configs]
+                                  args.isolate, args.step_timeout, not args.no_sandbox)
+                   for c in configs]
     if len(configs) == 1 and not args.sweep and args.scheduler is None:
         metrics = run_config(configs[0], args.output, pacing=_pacing(args), cpu=args.cpu)
         _print_result(args.configs[0], metrics, args.output)
@@ -683,8 +684,11 @@ def build_parser() -> argparse.ArgumentParser:
                           "(TET) and overruns, as Simulink Real-Time does (tet.png, "
                           "metrics.json 'realtime')")
     run.add_argument("--isolate", action="store_true",
-                     help="run every FMU in its own process: a crash or a hang of an FMU ends "
-                          "the run with an error (exit code 1) and the record up to there")
+                     help="run every FMU in its own process, in a sandbox: a crash or a hang of "
+                          "an FMU, or an attempt the sandbox stops, ends the run with an error "
+                          "(exit code 1) and the record up to there")
+    run.add_argument("--no-sandbox", action="store_true",
+                     help="run isolated FMUs without their sandbox ([fmu.NAME] sandbox = false)")
     run.add_argument("--step-timeout", type=float, metavar="S",
                      help="stop a run whose isolated FMU takes longer than S seconds in one "
                           "call ([run] step_timeout)")

@@ -6,6 +6,8 @@ where an interpreter with it is at hand) run in turn `repeats` times after one u
 each figure is the median wall time and peak resident memory (os.wait4). `flexff --help`, a
 bare `python -c pass` and `import flexff.cosim.run` are timed as whole processes too. Python's
 bytecode cache is used as on a user's machine (PYTHONDONTWRITEBYTECODE is not passed on).
+`isolation` gives the cost per step of the FMU in its own process, beside Ecos's proxyfmu
+(flexff.isolation_bench).
 
 Docs: "Benchmarks" (docs/results/benchmarks.md).
 """
@@ -22,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from flexff.fmu.errors import InputError
+from flexff.isolation_bench import isolation_benchmark
 
 FMPY = """import sys
 from fmpy import simulate_fmu
@@ -42,6 +45,7 @@ with EcosSimulation(structure=structure, step_size=step) as simulation:
     simulation.init()
     simulation.step_until(stop)
 """
+ISOLATION_STEPS = 20_000  # steps of the isolation benchmark (flexff.isolation_bench)
 CONFIG = '[fmu.fmu]\npath = "{fmu}"\n\n[run]\nstep = {step!r}\nstop = {stop!r}\n'
 
 
@@ -126,4 +130,6 @@ def process_benchmark(fmu: Path, steps: Sequence[int] = (200_000, 2_000_000),
                     figures[f"speedup_vs_{tool}"] = statistics.median(
                         p[0] / f[0] for p, f in zip(runs[tool], runs["flexff"]))
             results[f"{n}_steps"] = figures
+    results["isolation"] = isolation_benchmark(fmu, ISOLATION_STEPS, step, repeats,
+                                               python if ecos else None)
     return results

@@ -4,15 +4,17 @@ an FMU that crashes or hangs cannot take the caller with it.
 The child is forked from multiprocessing's fork server: it starts in milliseconds yet inherits
 none of the caller's FMUs or threads. The FMI call under way is kept in shared memory, so a
 child that dies is reported as, e.g., "fmi2DeSerializeFMUstate ... SIGSEGV"; findings sent
-before a crash (`emit`) are kept, and the child's files are removed whatever the end. The
-child dies with the caller (fmu.orphans). A script that calls this keeps its top level under
-`if __name__ == "__main__":`.
+before a crash (`emit`) are kept, and the child's files are removed whatever the end. What
+the child sends is JSON of a bounded length, never unpickled: an FMU that writes to the pipe
+cannot run code in the caller. The child dies with the caller (fmu.orphans). A script that
+calls this keeps its top level under `if __name__ == "__main__":`.
 
 Docs: "Isolate an FMU" (docs/how-to/isolate-fmu.md).
 """
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import os
 import shutil
@@ -27,6 +29,7 @@ from typing import Any
 from flexff.fmu.orphans import die_with_parent
 
 _LABEL_BYTES = 256  # room for the name of the call under way
+MESSAGE_LIMIT = 1 << 20  # bytes one message from the child may have
 _current: Any = None  # the shared label, set in a child process only
 
 
@@ -88,20 +91,32 @@ def _child(function: Callable[..., Any], args: tuple[Any, ...], sender: Connecti
     os.chdir(cwd)
     tempfile.tempdir = folder
     _trace_fmi_calls()
+    def send(kind: str, message: Any) -> None:
+        sender.send_bytes(json.dumps([kind, message]).encode()[:MESSAGE_LIMIT])
+
     try:
-        function(lambda message: sender.send(("emit", message)), *args)
+        function(lambda message: send("emit", message), *args)
     except Exception as error:  # the function's own failure, sent as text
-        sender.send(("raised", str(error) or type(error).__name__))
+        send("raised", str(error) or type(error).__name__)
     else:
-        sender.send(("returned", None))
+        send("returned", None)
     sender.close()
+
+
+def _checked(data: bytes) -> tuple[str, Any]:
+    """A message from the child: [kind, message] with a kind of the protocol's."""
+    kind, message = json.loads(data)
+    if kind not in ("emit", "raised", "returned") or (kind == "raised"
+                                                      and not isinstance(message, str)):
+        raise ValueError(kind)
+    return kind, message
 
 
 def run_in_child(function: Callable[..., Any], args: tuple[Any, ...], timeout: float
                  ) -> ChildEnd:
     """Run `function(emit, *args)` in a child process (module doc), `emit(message)` sending a
-    picklable message back; kill it after `timeout` seconds. `function` must be importable
-    by name."""
+    message of JSON's types back (tuples come back as lists); kill it after `timeout` seconds.
+    `function` must be importable by name."""
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload([__name__, function.__module__])
     receiver, sender = context.Pipe(duplex=False)
@@ -122,8 +137,12 @@ def run_in_child(function: Callable[..., Any], args: tuple[Any, ...], timeout: f
                 timed_out = True
                 break
             try:
-                kind, message = receiver.recv()
+                kind, message = _checked(receiver.recv_bytes(MESSAGE_LIMIT))
             except EOFError:  # the child is gone without saying how it ended
+                break
+            except (OSError, ValueError):  # too long, or not the protocol's
+                end = ("raised", "the FMU's process sent a message that is not the protocol's")
+                process.kill()
                 break
             if kind == "emit":
                 messages.append(message)

@@ -290,9 +290,13 @@ def _message(status: int, message: bytes | None) -> str:
 class FmuInstance:
     """One instantiated FMU (FMI 2.0 or 3.0) with its own message log: a co-simulation one, or
     a model-exchange one (`solver`, fmu.model_exchange.SOLVERS; an FMU without co-simulation
-    needs one), stepped by `stepper` once initialized."""
+    needs one), stepped by `stepper` once initialized. It is unpacked into `folder` (default: a
+    new temporary one); `confine`, if given, is called between unpacking and loading the
+    binary (cosim.sandbox)."""
 
-    def __init__(self, info: FmuInfo, name: str, solver: str | None = None) -> None:
+    def __init__(self, info: FmuInfo, name: str, solver: str | None = None,
+                 folder: Path | None = None, confine: Callable[[], None] | None = None
+                 ) -> None:
         self.info, self.name = info, name
         self.messages: list[str] = []
         self.initialized = False
@@ -302,10 +306,12 @@ class FmuInstance:
             raise FmuError(f"{info.path}: {name}: the FMU has no model-exchange interface for "
                            f"a solver")
         identifier = info.me_identifier if self.model_exchange else info.identifier
-        self._unzipdir = str(extract_archive(info.path))
+        self._unzipdir = str(extract_archive(info.path, folder))
         cwd = os.getcwd()
         try:
             self.library = self._library_path()
+            if confine is not None:
+                confine()
             kwargs = {"guid": info.token, "unzipDirectory": self._unzipdir,
                       "modelIdentifier": identifier, "instanceName": name}
             if info.fmi_version == "2.0":

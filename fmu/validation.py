@@ -116,6 +116,12 @@ class Problem(str):
         return problem
 
 
+def _is_finding(message: Any) -> bool:
+    """Whether a message from the checks' process is a finding: [text, severity, size]."""
+    return (isinstance(message, list) and len(message) == 3 and isinstance(message[0], str)
+            and message[1] in SEVERITIES and isinstance(message[2], (int, float, type(None))))
+
+
 def _tolerance(info: FmuInfo) -> float:
     """The FMU's default-experiment tolerance, else TOLERANCE."""
     experiment = info.model_description.defaultExperiment
@@ -247,7 +253,7 @@ def validate_fmu(path: str | Path, strict: bool = False, timeout: float = TIMEOU
     if problems:
         return problems
     end = run_in_child(_checks, (str(path), strict), timeout)
-    problems = [Problem(*finding) for finding in end.messages]
+    problems = [Problem(*finding) for finding in end.messages if _is_finding(finding)]
     failure = end.failure(timeout)
     if failure is not None:
         problems.append(Problem(failure))

@@ -8,16 +8,26 @@
  *   u -> y          y = 2 u, direct feedthrough (input, output)
  *   crash_at        fmi2DoStep from t >= crash_at raises SIGSEGV (parameter, -1: never)
  *   hang_at         fmi2DoStep from t >= hang_at never returns (parameter, -1: never)
+ *   attempt         what fmi2DoStep tries once, from t >= attempt_at (parameters; what a
+ *                   sandbox must stop, and an honest twin): 0 nothing, 1 open a network
+ *                   socket, 2 write to ESCAPE, 3 allocate 10 GB, 4 start 64 processes, 5 run
+ *                   /bin/true, 6 write and read back a file in its working directory
  */
 
+#include <netinet/in.h>
 #include <signal.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include "fmi2Functions.h"
 
-enum { START, TOLERANCE, CLOCK, U, Y, CRASH_AT, HANG_AT, N };
+enum { START, TOLERANCE, CLOCK, U, Y, CRASH_AT, HANG_AT, ATTEMPT, ATTEMPT_AT, N };
+enum { NOTHING, SOCKET, ESCAPE_WRITE, ALLOCATE, PROCESSES, PROGRAM, SCRATCH_WRITE };
+#define ESCAPE "/tmp/flexff-probe-escape.txt"
 
 typedef struct {
     fmi2Real v[N];
@@ -68,7 +78,8 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                        const fmi2Real value[]) {
     Probe *p = c;
     for (size_t i = 0; i < n; i++) {
-        if (vr[i] != U && vr[i] != CRASH_AT && vr[i] != HANG_AT) return fmi2Error;
+        if (vr[i] != U && vr[i] < CRASH_AT) return fmi2Error;
+        if (vr[i] >= N) return fmi2Error;
         p->v[vr[i]] = value[i];
     }
     return fmi2OK;
@@ -87,9 +98,54 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     return fmi2Error;
 }
 
+/* The attempt `what`; fmi2Error where the FMU itself sees it fail. */
+static fmi2Status attempt(int what) {
+    if (what == SOCKET) {
+        int s = socket(AF_INET, SOCK_STREAM, 0);
+        if (s < 0) return fmi2Error;
+        close(s);
+    } else if (what == ESCAPE_WRITE || what == SCRATCH_WRITE) {
+        const char *path = what == ESCAPE_WRITE ? ESCAPE : "probe-note.txt";
+        FILE *f = fopen(path, "w");
+        if (f == NULL) return fmi2Error;
+        fputs("probe", f);
+        fclose(f);
+        char back[8] = {0};
+        f = fopen(path, "r");
+        if (f == NULL || fread(back, 1, 5, f) != 5 || strcmp(back, "probe") != 0) return fmi2Error;
+        fclose(f);
+    } else if (what == ALLOCATE) {
+        char *memory = malloc((size_t)10 << 30);
+        if (memory == NULL) return fmi2Error;
+        memset(memory, 1, 1 << 20);
+        free(memory);
+    } else if (what == PROCESSES) {
+        for (int k = 0; k < 64; k++) {
+            pid_t child = fork();
+            if (child == 0) _exit(0);
+            if (child < 0) return fmi2Error;
+            waitpid(child, NULL, 0);
+        }
+    } else if (what == PROGRAM) {
+        pid_t child = fork();
+        if (child == 0) {
+            execl("/bin/true", "true", (char *)NULL);
+            _exit(1);
+        }
+        if (child < 0) return fmi2Error;
+        waitpid(child, NULL, 0);
+    }
+    return fmi2OK;
+}
+
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior) {
     Probe *p = c;
     (void)no_prior;
+    if (p->v[ATTEMPT] != NOTHING && t >= p->v[ATTEMPT_AT]) {
+        int what = (int)p->v[ATTEMPT];
+        p->v[ATTEMPT] = NOTHING;
+        if (attempt(what) != fmi2OK) return fmi2Error;
+    }
     if (p->v[CRASH_AT] >= 0.0 && t >= p->v[CRASH_AT]) raise(SIGSEGV);
     while (p->v[HANG_AT] >= 0.0 && t >= p->v[HANG_AT]) pause();
     p->v[CLOCK] = t + h;

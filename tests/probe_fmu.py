@@ -1,6 +1,7 @@
 """Tiny FMI 2.0 FMUs compiled in the tests: the probe (tests/probe_fmu.c), a co-simulation FMU
 that records the start time and tolerance it was given and crashes or hangs in fmi2DoStep on
-request (parameters crash_at, hang_at); the bouncing ball (tests/bouncing_ball.c), a
+request (parameters crash_at, hang_at), or tries what a sandbox must stop (attempt, ATTEMPTS);
+the bouncing ball (tests/bouncing_ball.c), a
 model-exchange FMU with state and time events."""
 
 from __future__ import annotations
@@ -44,7 +45,11 @@ VARIABLES = (  # name, value reference, causality, variability, start (None: non
     ("tolerance_seen", 1, "output", "discrete", None),
     ("clock", 2, "output", "discrete", None), ("u", 3, "input", "continuous", 0.0),
     ("y", 4, "output", "continuous", None), ("crash_at", 5, "parameter", "fixed", -1.0),
-    ("hang_at", 6, "parameter", "fixed", -1.0))
+    ("hang_at", 6, "parameter", "fixed", -1.0), ("attempt", 7, "parameter", "fixed", 0.0),
+    ("attempt_at", 8, "parameter", "fixed", 0.0))
+ATTEMPTS = {"socket": 1, "escape": 2, "allocate": 3, "processes": 4, "program": 5,
+            "scratch": 6}  # the probe's `attempt` values (tests/probe_fmu.c)
+ESCAPE = "/tmp/flexff-probe-escape.txt"  # where attempt "escape" writes
 
 
 def _library(folder: Path, source: Path = SOURCE, name: str = "probe") -> Path:

@@ -205,6 +205,8 @@ def test_the_readme_machines_table_is_generated_from_the_summaries():
 
 
 def test_the_benchmarks_page_shows_the_processes(site):
+    import gen_results
+
     bench = json.loads((RESULTS / "processes" / "bench.json").read_text())
     page = site / "results" / "benchmarks" / "index.html"
     parser = _Tables()
@@ -222,6 +224,10 @@ def test_the_benchmarks_page_shows_the_processes(site):
     startup = _rows(page, "process")
     for name, r in bench["startup"].items():
         assert _close(float(startup[name][0]), r["wall_s"]), name
+    isolation = _rows(page, "variant")
+    for key, label in gen_results.ISOLATION:
+        if f"{key}_us_per_step" in bench["isolation"]:
+            assert _close(float(isolation[label][0]), bench["isolation"][f"{key}_us_per_step"])
 
 
 def test_the_machines_page_shows_each_evaluation(site):

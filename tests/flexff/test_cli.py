@@ -124,6 +124,9 @@ def test_bench_processes_times_whole_runs(tmp_path):
             assert figures[steps][tool]["wall_s"] > 0 and figures[steps][tool]["peak_mib"] > 0
         assert figures[steps]["speedup_vs_fmpy"] > 0
     assert "not installed" in figures["ecos"] or "speedup_vs_ecos" in figures["500_steps"]
+    isolation = figures["isolation"]  # 20 000 steps in-process, isolated and sandboxed
+    assert isolation["same_outputs"]
+    assert isolation["sandboxed_us_per_step"] > isolation["in_process_us_per_step"] > 0
 
 
 @pytest.mark.slow

@@ -91,11 +91,11 @@ def test_the_plant_model_compiles_without_warnings(tmp_path):
     assert compile_warnings(tmp_path / "model.c", [tmp_path], GENERATED) == ""
 
 
-def test_the_engine_floor_and_proxy_compile_without_warnings(tmp_path):
+def test_the_engine_floor_proxy_and_sandbox_compile_without_warnings(tmp_path):
     for name, text in fmi_headers().items():
         (tmp_path / name).write_text(text)
     sources = sorted(ENGINE_C.glob("*.c"))
-    assert [p.name for p in sources] == ["engine.c", "floor.c", "proxy.c"]
+    assert [p.name for p in sources] == ["engine.c", "floor.c", "proxy.c", "sandbox.c"]
     found = {str(p.relative_to(REPOSITORY)): compile_warnings(p, [tmp_path, HOST_HEADER.parent])
              for p in sources}
     assert {f: w for f, w in found.items() if w} == {}
