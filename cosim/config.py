@@ -147,7 +147,8 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                             **(_sandbox_keys(f.sandbox) if f.isolate else {}),
                             **({"allow_nonfinite": True} if f.allow_nonfinite else {}),
                             **({"fmi": f.fmi} if f.fmi != FMI_VERSIONS[0] else {}),
-                            **({"solver": f.solver} if f.solver else {})}
+                            **({"solver": f.solver} if f.solver else {}),
+                            **({"scheduled": True} if f.scheduled else {})}
                    for f in config.fmus}
     if config.connections:
         data["connection"] = [{"from": c.from_name, "to": c.to_name,
@@ -291,12 +292,27 @@ class _Parser(TableChecker):
         co-simulation interface, None (co-simulation) for one that has."""
         info = read_fmu(path)
         if "solver" not in t:
-            return None if info.co_simulation else SOLVERS[0]
+            return None if info.co_simulation or info.me_identifier is None else SOLVERS[0]
         solver = self.choice(t, where, "solver", SOLVERS, None)
         if info.me_identifier is None:
             raise self.error(f"{where}.solver", f"{path.name} has no model-exchange interface "
                                                 f"to solve: remove the key to co-simulate it")
         return solver
+
+    def scheduled(self, t: Mapping[str, Any], where: str, path: Path) -> bool:
+        """fmu.NAME.scheduled: through the FMU's scheduled-execution interface (fmu.scheduled);
+        an FMU with that interface alone is run so without the key."""
+        info = read_fmu(path)
+        alone = not info.co_simulation and info.me_identifier is None
+        if not self.flag(t, where, "scheduled"):
+            return alone
+        if info.se_identifier is None:
+            raise self.error(f"{where}.scheduled", f"{path.name} has no scheduled-execution "
+                                                   f"interface: remove the key to co-simulate it")
+        if "solver" in t:
+            raise self.error(f"{where}.scheduled", "an FMU runs either with a solver (model "
+                                                   "exchange) or scheduled: give one of the keys")
+        return True
 
     def flag(self, t: Mapping[str, Any], where: str, key: str) -> bool:
         """A true-or-false key, false where it is not given."""
@@ -394,13 +410,14 @@ class _Parser(TableChecker):
         allowed = self.nonfinite(t, where)
         if "path" in t:
             self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate",
-                                 "solver", "allow_nonfinite", *SANDBOX_KEYS))
+                                 "solver", "scheduled", "allow_nonfinite", *SANDBOX_KEYS))
             path = self.path(t, where, "path")
             return FmuConfig(name, path=path, parameters=self.fmu_parameters(path, parameters,
                                                                              where, allowed),
                              unconnected=unconnected, tolerance=self.tolerance(t, where),
                              isolate=self.isolate(t, where), sandbox=self.sandbox(t, where),
-                             solver=self.solver(t, where, path), allow_nonfinite=allowed)
+                             solver=self.solver(t, where, path),
+                             scheduled=self.scheduled(t, where, path), allow_nonfinite=allowed)
         builtins = registered()
         builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",

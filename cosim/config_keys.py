@@ -121,6 +121,9 @@ KEYS: tuple[Key, ...] = (
         ("builtin",)),
     Key("fmu.NAME", "solver", "string", "none (co-simulation)", "",
         '"cvode": run the FMU as model exchange.', ("path",)),
+    Key("fmu.NAME", "scheduled", "boolean", "false (true for an FMU with that interface alone)",
+        "", "Run an FMI 3.0 FMU through scheduled execution: each step, the partitions of its "
+        "periodic input clocks that tick, in priority order.", ("path",)),
     # [[connection]]
     Key("connection", "from", "string", "required", "", '"fmu.output" or a source signal.'),
     Key("connection", "to", "string", "required", "", '"fmu.input".'),

@@ -84,7 +84,7 @@ def _functions(instance: FmuInstance) -> list[int]:
                  engine.function_address(dll, "fmi3GetFloat64" if fmi3 else "fmi2GetReal")]
     if instance.stepper is not None:
         return [*functions, instance.stepper.address]
-    if instance.model_exchange:
+    if instance.model_exchange or instance.scheduled:
         return [*functions, 0]
     return [*functions, engine.function_address(dll, "fmi3DoStep" if fmi3 else "fmi2DoStep")]
 
@@ -127,7 +127,8 @@ class IsolatedInstance:
     starting Python, at least START_WAIT); `confined` (None: not) sandboxes the child."""
 
     def __init__(self, info: FmuInfo, name: str, timeout: float | None = None,
-                 solver: str | None = None, confined: Sandbox | None = sandbox.DEFAULT) -> None:
+                 solver: str | None = None, confined: Sandbox | None = sandbox.DEFAULT,
+                 scheduled: bool = False) -> None:
         self.info, self.name, self.timeout, self.confined = info, name, timeout, confined
         self.library = info.path
         self.initialized = False
@@ -147,12 +148,12 @@ class IsolatedInstance:
         python_path = os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH")])])
         env = ({**os.environ, "PYTHONPATH": python_path} if confined is None
                else sandbox.environment(self.scratch / "work", python_path))
-        limits = None if confined is None else [confined.memory_mb, confined.cpu_s]
+        options = {"solver": solver, "scheduled": scheduled,
+                   "limits": None if confined is None else [confined.memory_mb, confined.cpu_s]}
         self._process = subprocess.Popen(
             [sys.executable, "-m", "flexff.cosim.isolation", str(info.path), name,
              str(cmd_read), str(ack_write), str(self._memory), str(self._capacity),
-             solver or "", str(os.getpid()), str(self.scratch), str(report_write),
-             json.dumps(limits)],
+             str(os.getpid()), str(self.scratch), str(report_write), json.dumps(options)],
             pass_fds=(cmd_read, ack_write, self._memory, report_write), env=env,
             cwd=self.scratch / "work")
         for fd in (cmd_read, ack_write, report_write):
@@ -332,7 +333,7 @@ def main(argv: Sequence[str]) -> int:
     """The child: unpack the FMU, enter the sandbox (if asked), load and instantiate the FMU,
     then serve the engine's calls (proxy_serve) and the master's requests until told to exit
     or the master is gone."""
-    path, name, cmd, ack, memory, capacity, solver, master, folder, report, limits = argv
+    path, name, cmd, ack, memory, capacity, master, folder, report, options = argv
     die_with_parent(int(master))  # a master killed while the FMU hangs takes it along
     for number in (signal.SIGINT, signal.SIGTERM):  # the master's to handle: it closes us
         signal.signal(number, signal.SIG_IGN)
@@ -340,15 +341,16 @@ def main(argv: Sequence[str]) -> int:
     lib = library()
     shared = mmap.mmap(int(memory), lib.proxy_shared_size(capacity_n))
     address = ctypes.addressof(c_char.from_buffer(shared))
-    bounds = json.loads(limits)
+    given = json.loads(options)
+    bounds = given["limits"]
     held: list[str] = []
 
     def confine() -> None:
         held.extend(sandbox.enter(lib, Path(folder, "work"), Sandbox(*bounds), int(report)))
 
     try:
-        instance = FmuInstance(read_fmu(path), name, solver or None, Path(folder, "fmu"),
-                               None if bounds is None else confine)
+        instance = FmuInstance(read_fmu(path), name, given["solver"], Path(folder, "fmu"),
+                               None if bounds is None else confine, given["scheduled"])
     except FmuError as error:
         _send(ack_fd, ["error", str(error)])
         return 1

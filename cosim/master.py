@@ -135,6 +135,7 @@ class ResolvedFmu:
     solver: str | None = None  # run it as model exchange with this solver (fmu.model_exchange)
     allow_nonfinite: bool = False  # NaN and infinite outputs go on (else they stop the run)
     sandbox: Sandbox | None = DEFAULT  # an isolated FMU's sandbox (None: none)
+    scheduled: bool = False  # run it through scheduled execution (fmu.scheduled)
 
     def described(self) -> FmuInfo:
         """The model description: the one carried, else read and the start values checked."""
@@ -268,9 +269,9 @@ class Master:
         try:
             for fmu, info in zip(fmus, infos):
                 self._instances.append(
-                    IsolatedInstance(info, fmu.name, step_timeout, fmu.solver, fmu.sandbox)
-                    if fmu.isolate
-                    else FmuInstance(info, fmu.name, fmu.solver))
+                    IsolatedInstance(info, fmu.name, step_timeout, fmu.solver, fmu.sandbox,
+                                     fmu.scheduled) if fmu.isolate
+                    else FmuInstance(info, fmu.name, fmu.solver, scheduled=fmu.scheduled))
             self._layout(infos)
         except BaseException:
             self.close()

@@ -74,7 +74,7 @@ def resolve(config: RunConfig, folder: str | Path) -> Scenario:
             raise ConfigError(config.origin, f"fmu.{f.name}", str(error)) from None
         tolerance = f.tolerance if f.tolerance is not None else info.default_tolerance
         fmus.append(ResolvedFmu(f.name, path, _start_values(f), info, tolerance, f.isolate,
-                                f.solver, f.allow_nonfinite, f.sandbox))
+                                f.solver, f.allow_nonfinite, f.sandbox, f.scheduled))
         ports.append(Port(f.name, info, f.unconnected,
                           frozenset(n for n in f.parameters if n in info.inputs)))
     try:

@@ -77,6 +77,7 @@ class FmuConfig:
     isolate: bool = False  # run it in its own process (cosim.isolation)
     sandbox: Sandbox | None = DEFAULT  # an isolated FMU's sandbox (None: none; cosim.sandbox)
     solver: str | None = None  # model exchange with this solver (None: co-simulation)
+    scheduled: bool = False  # through the FMU's scheduled-execution interface (fmu.scheduled)
     allow_nonfinite: bool = False  # NaN and infinite values allowed in and out (cosim.finite)
     fmi: int = 2  # the FMI version a built-in is built in (2 or 3)
 

@@ -15,7 +15,7 @@ from typing import TypeVar
 import casadi as ca
 import numpy as np
 
-from flexff.fmu.layout import Layout, time_value_reference
+from flexff.fmu.layout import Layout, clock_value_references, time_value_reference
 from flexff.fmu.network import MAX_RANK, Network, runtime_library
 from flexff.fmu.system import System
 
@@ -148,6 +148,8 @@ def generate_config_h(system: System, layout: Layout, identifier: str, guid: str
         "N_REAL": layout.n_real,
         "VR_SEED": layout.block("seed")[0].value_reference,
         "VR_TIME": time_value_reference(layout),
+        "VR_CLOCK_STEP": clock_value_references(layout)[0],
+        "VR_CLOCK_NETWORK": clock_value_references(layout)[1],
         "N_R": system.network.n_outputs if system.network else 0,
         "HAS_NETWORK": int(system.network is not None),
     }

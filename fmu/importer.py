@@ -1,6 +1,7 @@
 """The FMU importer: any FMI 2.0 or 3.0 FMU read into its ports and typed start values, and
-instantiated with a log of its own: as a co-simulation FMU, or through its model-exchange
-interface with a solver (fmu.model_exchange), which an FMU without co-simulation needs.
+instantiated with a log of its own: as a co-simulation FMU, through its model-exchange
+interface with a solver (fmu.model_exchange), which an FMU without co-simulation needs, or
+through its scheduled-execution interface (fmu.scheduled).
 
 One layer for everything that loads FMUs (the co-simulation master, the libcosim runner,
 validation, the bench), in FMPy's way: each FMI call is declared once (by fmpy), values of every
@@ -35,13 +36,15 @@ from fmpy.fmi2 import (
     fmi2CallbackFunctions,
     fmi2CallbackLoggerTYPE,
 )
-from fmpy.fmi3 import FMU3Model, FMU3Slave
+from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
 from fmpy.logging import addLoggerProxy
 from fmpy.model_description import ValidationError
 
 from flexff.fmu.archive import extract_archive
 from flexff.fmu.errors import InputError
 from flexff.fmu.model_exchange import ModelExchangeStepper
+from flexff.fmu.scheduled import ScheduledStepper, periodic_clocks
+from flexff.fmu.stepper import Stepper
 
 TYPE_KINDS = {
     "Real": "float64", "Float64": "float64", "Float32": "float32",
@@ -110,6 +113,7 @@ class FmuInfo:
     default_tolerance: float | None = None  # DefaultExperiment tolerance (relative)
     co_simulation: bool = True  # whether it has the co-simulation interface
     me_identifier: str | None = None  # the model-exchange interface's identifier, if it has one
+    se_identifier: str | None = None  # the scheduled-execution interface's, if it has one
     model_description: Any = field(default=None, compare=False, repr=False)
 
     @property
@@ -167,10 +171,11 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
         raise FmuError(f"{path}: cannot read modelDescription.xml: {error}") from None
     if md.fmiVersion not in ("2.0", "3.0"):
         raise FmuError(f"{path}: FMI {md.fmiVersion} is not supported (FMI 2.0 and 3.0 are)")
-    if md.coSimulation is None and md.modelExchange is None:
-        raise FmuError(f"{path}: the FMU has neither a co-simulation nor a model-exchange "
-                       f"interface")
-    interface = md.coSimulation or md.modelExchange
+    scheduled: Any = getattr(md, "scheduledExecution", None)
+    if md.coSimulation is None and md.modelExchange is None and scheduled is None:
+        raise FmuError(f"{path}: the FMU has no co-simulation, model-exchange or "
+                       f"scheduled-execution interface")
+    interface = md.coSimulation or md.modelExchange or scheduled
     variables = {}
     for v in md.modelVariables:
         if v.type not in TYPE_KINDS:
@@ -181,8 +186,9 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
             v.name, int(v.valueReference), v.type, v.causality or "local",
             v.variability or "continuous", unit or None, _start_value(v), v.description or "",
             not v.dimensions)
-    inputs = tuple(n for n, v in variables.items() if v.causality == "input")
-    outputs = tuple(n for n, v in variables.items() if v.causality == "output")
+    data = {n: v for n, v in variables.items() if v.type != "Clock"}  # clocks: its schedule
+    inputs = tuple(n for n, v in data.items() if v.causality == "input")
+    outputs = tuple(n for n, v in data.items() if v.causality == "output")
     parameters = tuple(n for n, v in variables.items()
                        if v.causality in ("parameter", "structuralParameter"))
     dependencies = {n: frozenset(inputs) for n in outputs}  # absent: depends on all (FMI)
@@ -198,7 +204,8 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
                    interface.modelIdentifier, token or "", variables, inputs, outputs,
                    parameters, dependencies, step, stop, start, tolerance,
                    md.coSimulation is not None,
-                   md.modelExchange.modelIdentifier if md.modelExchange else None, md)
+                   md.modelExchange.modelIdentifier if md.modelExchange else None,
+                   scheduled.modelIdentifier if scheduled else None, md)
 
 
 def typed_value(kind: str, value: Any) -> Any:
@@ -290,22 +297,27 @@ def _message(status: int, message: bytes | None) -> str:
 class FmuInstance:
     """One instantiated FMU (FMI 2.0 or 3.0) with its own message log: a co-simulation one, or
     a model-exchange one (`solver`, fmu.model_exchange.SOLVERS; an FMU without co-simulation
-    needs one), stepped by `stepper` once initialized. It is unpacked into `folder` (default: a
-    new temporary one); `confine`, if given, is called between unpacking and loading the
-    binary (cosim.sandbox)."""
+    needs one) or a scheduled-execution one (`scheduled`; an FMU with that interface alone
+    needs it), the last two stepped by `stepper` once initialized. It is unpacked into
+    `folder` (default: a new temporary one); `confine`, if given, is called between unpacking
+    and loading the binary (cosim.sandbox)."""
 
     def __init__(self, info: FmuInfo, name: str, solver: str | None = None,
-                 folder: Path | None = None, confine: Callable[[], None] | None = None
-                 ) -> None:
+                 folder: Path | None = None, confine: Callable[[], None] | None = None,
+                 scheduled: bool = False) -> None:
         self.info, self.name = info, name
         self.messages: list[str] = []
         self.initialized = False
-        self.model_exchange = solver is not None or not info.co_simulation
-        self.stepper: ModelExchangeStepper | None = None
+        self.scheduled = scheduled or (not info.co_simulation and info.me_identifier is None)
+        self.model_exchange = not self.scheduled and (solver is not None
+                                                      or not info.co_simulation)
+        self.stepper: Stepper | None = None
         if self.model_exchange and info.me_identifier is None:
             raise FmuError(f"{info.path}: {name}: the FMU has no model-exchange interface for "
                            f"a solver")
-        identifier = info.me_identifier if self.model_exchange else info.identifier
+        if self.scheduled and info.se_identifier is None:
+            raise FmuError(f"{info.path}: {name}: the FMU has no scheduled-execution interface")
+        identifier = self._identifier()
         self._unzipdir = str(extract_archive(info.path, folder))
         cwd = os.getcwd()
         try:
@@ -318,6 +330,9 @@ class FmuInstance:
                 self.fmu = (FMU2Model if self.model_exchange else FMU2Slave)(**kwargs)
                 self._callbacks, self._log_key = _FMI2_LOG.callbacks(self.messages)
                 self.fmu.instantiate(callbacks=self._callbacks)
+            elif self.scheduled:
+                self.fmu = FMU3ScheduledExecution(**kwargs)
+                self.fmu.instantiate(logMessage=self._log3)
             else:
                 self.fmu = (FMU3Model if self.model_exchange else FMU3Slave)(**kwargs)
                 self.fmu.instantiate(logMessage=self._log3)
@@ -338,13 +353,19 @@ class FmuInstance:
 
     def _library_path(self) -> Path:
         folder = fmpy.platform if self.info.fmi_version == "2.0" else fmpy.platform_tuple
-        identifier = self.info.me_identifier if self.model_exchange else self.info.identifier
+        identifier = self._identifier()
         path = Path(self._unzipdir, "binaries", folder,
                     f"{identifier}{fmpy.sharedLibraryExtension}")
         if not path.is_file():
             raise FmuError(f"{self.info.path}: no binary for this platform "
                            f"(binaries/{folder}/{path.name} is missing)")
         return path
+
+    def _identifier(self) -> str | None:
+        """The model identifier of the interface it is instantiated through."""
+        if self.scheduled:
+            return self.info.se_identifier
+        return self.info.me_identifier if self.model_exchange else self.info.identifier
 
     def _log3(self, env: int | None, status: int, category: bytes | None,
               message: bytes | None) -> None:
@@ -430,13 +451,20 @@ class FmuInstance:
                 fmu, self.info.fmi_version == "3.0", start_time, stop_time, tolerance,
                 md.numberOfContinuousStates, md.numberOfEventIndicators,
                 bool(md.modelExchange.needsCompletedIntegratorStep)))
+        elif self.scheduled:
+            try:
+                clocks = periodic_clocks(self.info.path)
+            except InputError as error:
+                raise FmuError(f"{self.info.path}: {self.name}: {error}") from None
+            self.stepper = ScheduledStepper(fmu, clocks, start_time)
 
     def do_step(self, time: float, step: float) -> None:
         """One communication step through fmpy (FastCalls for the hot loop); a model-exchange
         FMU's through its solver."""
         if self.stepper is not None:
             if self.stepper.step(step) > 1:
-                raise self.fail(f"the solver's step from t = {time:.9g} s")
+                what = "partitions" if self.scheduled else "solver's step"
+                raise self.fail(f"the {what} from t = {time:.9g} s")
             return
         self.call(f"fmi{self.info.fmi_version[0]}DoStep from t = {time:.9g} s",
                   lambda: self.fmu.doStep(currentCommunicationPoint=time,

@@ -68,6 +68,13 @@ def time_value_reference(layout: Layout) -> int:
     return layout.block("seed")[0].value_reference + 1
 
 
+def clock_value_references(layout: Layout) -> tuple[int, int]:
+    """The value references of an FMI 3.0 network task's clocks, the step's and the network's
+    (fmu.model_description3), after `time`."""
+    time = time_value_reference(layout)
+    return time + 1, time + 2
+
+
 def model_identifier(system: System) -> str:
     """A C identifier (and file name) derived from the system's name."""
     ident = re.sub(r"\W", "_", system.name, flags=re.ASCII)

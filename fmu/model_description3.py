@@ -4,14 +4,21 @@ FMU.
 The variables, value references, start values and output dependencies are those of the FMI 2.0
 description (fmu.model_description): Reals become Float64, the Integer `seed` an Int32, and the
 independent variable `time` that FMI 3.0 requires follows them (VR_TIME of config.h). FMI 3.0
-lists the model structure by value reference and the sources in buildDescription.xml.
+lists the model structure by value reference and the sources in buildDescription.xml. A network
+in its own task is offered as scheduled execution too: two periodic input clocks after `time`,
+the step's and the network's (fmu/c/fmi3Functions.c).
 """
 
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
-from flexff.fmu.layout import Layout, ScalarVariable, time_value_reference
+from flexff.fmu.layout import (
+    Layout,
+    ScalarVariable,
+    clock_value_references,
+    time_value_reference,
+)
 from flexff.fmu.model_description import (
     add_units_logs_experiment,
     format_value,
@@ -44,6 +51,22 @@ def _variable(parent: ET.Element, v: ScalarVariable) -> None:
     ET.SubElement(parent, TYPES[v.type], attrs)
 
 
+def _clocks(parent: ET.Element, system: System, layout: Layout) -> None:
+    """The scheduled-execution clocks: the step's partition, and the network's call, every
+    `period` steps, at a lower priority (its result is used one period later)."""
+    assert system.network is not None and system.sample_time is not None
+    step, period = system.sample_time, system.network.period
+    for (name, interval, description), vr in zip((
+            ("step_clock", step, "each step: the outputs from the inputs"),
+            ("network_clock", step * period,
+             f"the network's call on the inputs of the step it ticks with, used {period} steps "
+             f"later")), clock_value_references(layout), strict=True):
+        ET.SubElement(parent, "Clock", {
+            "name": name, "valueReference": str(vr), "description": description,
+            "causality": "input", "variability": "discrete", "intervalVariability": "constant",
+            "intervalDecimal": format_value(interval), "priority": str(int(name != "step_clock"))})
+
+
 def model_description3_xml(system: System, layout: Layout, identifier: str, token: str) -> str:
     """The XML text; `token` (the instantiationToken) ties it to the binary."""
     discrete = system.kind == "discrete"
@@ -62,6 +85,9 @@ def model_description3_xml(system: System, layout: Layout, identifier: str, toke
         "canHandleVariableCommunicationStepSize": "false" if discrete else "true",
         "hasEventMode": "false",
     })
+    scheduled = system.network is not None and system.network.task
+    if scheduled:
+        ET.SubElement(root, "ScheduledExecution", {"modelIdentifier": identifier})
     add_units_logs_experiment(root, system, layout, "fmi3")
     model_vars = ET.SubElement(root, "ModelVariables")
     ET.SubElement(model_vars, "Float64", {
@@ -70,6 +96,8 @@ def model_description3_xml(system: System, layout: Layout, identifier: str, toke
         "description": "simulation time"})
     for v in layout.variables:
         _variable(model_vars, v)
+    if scheduled:
+        _clocks(model_vars, system, layout)
 
     structure = ET.SubElement(root, "ModelStructure")
     inputs = layout.block("input")

@@ -11,23 +11,19 @@ for a step event; at any event the FMU enters event mode, iterates its discrete 
 returns to continuous-time mode, and the solver restarts from there. Inputs are held over the
 step (set before it, as for a co-simulation FMU).
 
-The step is a C callback (ctypes) with fmi2DoStep's or fmi3DoStep's signature, so the engine
-calls it through the FMU's plan as it calls a co-simulation FMU's own fmi*DoStep.
+It is a stepper (fmu.stepper): the engine calls its step as a co-simulation FMU's fmi*DoStep.
 """
 
 from __future__ import annotations
 
 import math
-from ctypes import CFUNCTYPE, POINTER, c_bool, c_double, c_int, c_void_p, cast
 from typing import Any
+
+from flexff.fmu.stepper import ERROR, OK, Stepper
 
 SOLVERS = ("cvode",)
 DEFAULT_TOLERANCE = 1e-5  # CVODE's relative tolerance where neither the run nor the FMU gives one
 MAX_STEP_FRACTION = 50  # the solver's largest step: the run's length / this (as FMPy)
-STEP2 = CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_int)
-STEP3 = CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_bool, POINTER(c_bool), POINTER(c_bool),
-                  POINTER(c_bool), POINTER(c_double))
-OK, ERROR, FATAL = 0, 3, 4  # fmi*Status: the engine fails a step above 1
 
 
 class _NoInput:
@@ -41,19 +37,18 @@ def _close(a: float, b: float) -> bool:
     return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)  # fmpy.simulation's isclose
 
 
-class ModelExchangeStepper:
-    """Communication steps of an initialized model-exchange FMU (fmpy FMU2Model / FMU3Model);
-    `error` keeps the exception of a failed step (it cannot cross the engine's C frames)."""
+class ModelExchangeStepper(Stepper):
+    """Communication steps of an initialized model-exchange FMU (fmpy FMU2Model / FMU3Model)."""
 
     def __init__(self, fmu: Any, fmi3: bool, start: float, stop: float | None,
                  tolerance: float | None, n_states: int, n_indicators: int,
                  completed_step_needed: bool, step: float | None = None) -> None:
         from fmpy.sundials import CVodeSolver
 
+        super().__init__(fmi3, start)
         self.fmu, self.fmi3, self.start = fmu, fmi3, start
         self.completed_step_needed = completed_step_needed
-        self.time, self.points = start, 0
-        self.error: Exception | None = None
+        self.points = 0
         self.next_event: float | None = None
         self._iterate()
         fmu.enterContinuousTimeMode()
@@ -66,14 +61,6 @@ class ModelExchangeStepper:
             set_time=fmu.setTime, input=_NoInput(), startTime=start,
             maxStep=length / MAX_STEP_FRACTION if length else float("inf"),
             relativeTolerance=tolerance or DEFAULT_TOLERANCE)
-        self.callback = (STEP3(self._step3) if fmi3 else STEP2(self._step2))
-
-    @property
-    def address(self) -> int:
-        """The step callback's address, for the engine's plan."""
-        address = cast(self.callback, c_void_p).value
-        assert address is not None
-        return address
 
     def _iterate(self) -> bool:
         """The event iteration; whether the FMU asked to terminate. Keeps its next time
@@ -110,19 +97,3 @@ class ModelExchangeStepper:
                 self.solver.reset(self.time)
         self.points += 1
         return OK
-
-    def _guarded(self, h: float) -> int:
-        try:
-            return self.step(h)
-        except Exception as error:  # fmpy raises on an error status; CVODE on a failure
-            self.error = error
-            return FATAL
-
-    def _step2(self, component: int | None, t: float, h: float, no_prior: int) -> int:
-        return self._guarded(h)
-
-    def _step3(self, component: int | None, t: float, h: float, no_prior: bool,
-               event: Any, terminate: Any, early: Any, last: Any) -> int:
-        status = self._guarded(h)
-        last[0] = self.time
-        return status

@@ -90,6 +90,13 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               const fmi2CallbackFunctions *functions, fmi2Boolean visible,
                               fmi2Boolean loggingOn) {
     (void)visible;
+    return instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions, loggingOn,
+                       0);
+}
+
+fmi2Component instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                          fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                          fmi2Boolean loggingOn, int scheduled) {
     if (functions == NULL) return NULL;
     if (functions->allocateMemory == NULL || functions->freeMemory == NULL) {
         log_early(functions, instanceName, "fmi2Instantiate(): allocateMemory and freeMemory are required.");
@@ -128,6 +135,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     c->magic = INSTANCE_MAGIC;
     c->cb = *functions;
     c->name = name;
+    c->scheduled = scheduled;
     c->log_on[LOG_ERROR] = 1; /* errors are reported unless switched off explicitly */
     c->log_on[LOG_NETWORK] = 1; /* as are the network's call times, once, at fmi2Terminate */
     c->log_on[LOG_WARNING] = loggingOn != fmi2False;

@@ -7,10 +7,13 @@
  * one core steps both versions, so an FMI 3.0 FMU computes bit for bit what its FMI 2.0 twin
  * does. The functions with no FMI 2.0 counterpart have their machine states in the table below.
  * The core's messages reach the FMI 3.0 logger with the FMI 3.0 names of the functions they
- * name (fmi2GetReal() as fmi3GetFloat64(), ...). Model exchange and scheduled execution are not
- * offered (modelDescription.xml declares co-simulation only), nor event mode or clocks; their
- * functions are exported all the same (importers such as FMPy load every FMI 3.0 function)
- * and refuse.
+ * name (fmi2GetReal() as fmi3GetFloat64(), ...). A network in its own task (NET_TASK) is also
+ * offered as scheduled execution: two periodic input clocks, the step's (VR_CLOCK_STEP, every
+ * SAMPLE_TIME, priority 0) and the network's (VR_CLOCK_NETWORK, every NET_PERIOD steps,
+ * priority 1), whose partitions are a step of the core and the network's call, which the
+ * importer's scheduler runs in tasks of its own (wrapper_task.c). Model exchange, event mode
+ * and the other clock functions are not offered; their functions are exported all the same
+ * (importers such as FMPy load every FMI 3.0 function) and refuse.
  */
 
 #include <ctype.h>
@@ -44,6 +47,7 @@
 #define ALLOWED_fmi3EvaluateDiscreteStates      ANY_MODE
 #define ALLOWED_fmi3UpdateDiscreteStates        ANY_MODE
 #define ALLOWED_fmi3DoStep                      MODE_STEPPING
+#define ALLOWED_fmi3ActivateModelPartition      MODE_STEPPING
 #define NOT_OFFERED                             ANY_MODE /* model exchange, scheduled execution */
 
 /* An error for a function this FMU does not offer: `why` completes "fname(): ". */
@@ -55,7 +59,12 @@ static fmi3Status unsupported(fmi3Instance instance, const char *fname, int allo
 }
 
 #define UNSUPPORTED(f, why) unsupported(instance, #f, ALLOWED_##f, why)
+#if HAS_NETWORK && NET_TASK
+#define NO_CLOCKS(f) UNSUPPORTED(f, "not needed: this FMU's clocks are periodic input clocks, " \
+                                    "activated by fmi3ActivateModelPartition")
+#else
 #define NO_CLOCKS(f) UNSUPPORTED(f, "this FMU has no clocks")
+#endif
 
 /* ---------------------------------------------------------------------------------------- */
 /* The host: the FMI 3.0 logger behind the FMI 2.0 callbacks the core logs through           */
@@ -147,6 +156,26 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, siz
 /* ---------------------------------------------------------------------------------------- */
 /* Creation and destruction                                                                  */
 
+/* An instance on the core, its messages to `logMessage` (`scheduled`: scheduled execution). */
+static fmi3Instance instantiate3(fmi3String instanceName, fmi3String instantiationToken,
+                                 fmi3String resourcePath, fmi3Boolean loggingOn,
+                                 fmi3InstanceEnvironment instanceEnvironment,
+                                 fmi3LogMessageCallback logMessage, int scheduled) {
+    Host *host = (Host *)calloc(1, sizeof *host);
+    if (host == NULL) return NULL;
+    host->environment = instanceEnvironment;
+    host->log = logMessage;
+    const fmi2CallbackFunctions callbacks = {.logger = host_logger, .allocateMemory = calloc,
+                                             .freeMemory = free, .stepFinished = NULL,
+                                             .componentEnvironment = host};
+    char uri[3 * 4096 + 8];
+    fmi2Component c = instantiate(instanceName, fmi2CoSimulation, instantiationToken,
+                                  resource_uri(resourcePath, uri, sizeof uri), &callbacks,
+                                  loggingOn, scheduled);
+    if (c == NULL) free(host);
+    return c;
+}
+
 fmi3Instance fmi3InstantiateCoSimulation(
     fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
     fmi3Boolean visible, fmi3Boolean loggingOn, fmi3Boolean eventModeUsed,
@@ -154,28 +183,17 @@ fmi3Instance fmi3InstantiateCoSimulation(
     size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
     fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate) {
     /* no early return and no intermediate update: each step runs to its end */
-    (void)earlyReturnAllowed, (void)requiredIntermediateVariables;
+    (void)visible, (void)earlyReturnAllowed, (void)requiredIntermediateVariables;
     (void)nRequiredIntermediateVariables, (void)intermediateUpdate;
-    Host *host = (Host *)calloc(1, sizeof *host);
-    if (host == NULL) return NULL;
-    host->environment = instanceEnvironment;
-    host->log = logMessage;
     if (eventModeUsed) {
-        host_logger(host, instanceName, fmi2Error, "logStatusError",
-                    "fmi3InstantiateCoSimulation(): this FMU has no event mode (hasEventMode = "
-                    "false).");
-        free(host);
+        if (logMessage != NULL)
+            logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                       "fmi3InstantiateCoSimulation(): this FMU has no event mode "
+                       "(hasEventMode = false).");
         return NULL;
     }
-    const fmi2CallbackFunctions callbacks = {.logger = host_logger, .allocateMemory = calloc,
-                                             .freeMemory = free, .stepFinished = NULL,
-                                             .componentEnvironment = host};
-    char uri[3 * 4096 + 8];
-    fmi2Component c = fmi2Instantiate(instanceName, fmi2CoSimulation, instantiationToken,
-                                      resource_uri(resourcePath, uri, sizeof uri), &callbacks,
-                                      visible, loggingOn);
-    if (c == NULL) free(host);
-    return c;
+    return instantiate3(instanceName, instantiationToken, resourcePath, loggingOn,
+                        instanceEnvironment, logMessage, 0);
 }
 
 void fmi3FreeInstance(fmi3Instance instance) {
@@ -413,8 +431,21 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference vr[],
                                   size_t nvr, fmi3Float64 intervals[],
                                   fmi3IntervalQualifier qualifiers[]) {
+#if HAS_NETWORK && NET_TASK
+    Instance *c = enter(instance, "fmi3GetIntervalDecimal", ANY_MODE);
+    if (!c) return fmi3Error;
+    for (size_t i = 0; i < nvr; i++) {
+        if (vr[i] != VR_CLOCK_STEP && vr[i] != VR_CLOCK_NETWORK)
+            return (fmi3Status)fail(c, "fmi3GetIntervalDecimal(): value reference %u is no "
+                                       "clock of this FMU.", vr[i]);
+        intervals[i] = SAMPLE_TIME * (vr[i] == VR_CLOCK_STEP ? 1 : NET_PERIOD);
+        qualifiers[i] = fmi3IntervalUnchanged;
+    }
+    return fmi3OK;
+#else
     (void)vr, (void)nvr, (void)intervals, (void)qualifiers;
     return NO_CLOCKS(fmi3GetIntervalDecimal);
+#endif
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference vr[],
@@ -530,17 +561,26 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
     return NULL;
 }
 
+/* The network's clock: the partitions share only the task's job buffers, which its mutex
+ * guards, so the preemption callbacks are not needed; no clock is an output, so clockUpdate
+ * is never called. */
 fmi3Instance fmi3InstantiateScheduledExecution(
     fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
     fmi3Boolean visible, fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment,
     fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
     fmi3LockPreemptionCallback lockPreemption, fmi3UnlockPreemptionCallback unlockPreemption) {
-    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible;
-    (void)loggingOn, (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
+    (void)visible, (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
+#if HAS_NETWORK && NET_TASK
+    return instantiate3(instanceName, instantiationToken, resourcePath, loggingOn,
+                        instanceEnvironment, logMessage, 1);
+#else
+    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)loggingOn;
     if (logMessage != NULL)
         logMessage(instanceEnvironment, fmi3Error, "logStatusError",
-                   "fmi3InstantiateScheduledExecution(): this FMU offers co-simulation only.");
+                   "fmi3InstantiateScheduledExecution(): this FMU offers co-simulation only "
+                   "(scheduled execution: a network in its own task).");
     return NULL;
+#endif
 }
 
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
@@ -600,8 +640,22 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nConti
     return CS_ONLY(fmi3GetNumberOfContinuousStates);
 }
 
+/* The step's partition is the core's step from activationTime; the network's, its call. */
 fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
                                       fmi3Float64 activationTime) {
+#if HAS_NETWORK && NET_TASK
+    Instance *c = enter(instance, "fmi3ActivateModelPartition", ALLOWED_fmi3ActivateModelPartition);
+    if (!c) return fmi3Error;
+    if (!c->scheduled)
+        return (fmi3Status)fail(c, "fmi3ActivateModelPartition(): this instance was instantiated "
+                                   "for co-simulation.");
+    if (clockReference == VR_CLOCK_STEP)
+        return (fmi3Status)fmi2DoStep(instance, activationTime, SAMPLE_TIME, fmi2True);
+    if (clockReference == VR_CLOCK_NETWORK) return (fmi3Status)task_run(c);
+    return (fmi3Status)fail(c, "fmi3ActivateModelPartition(): value reference %u is no clock of "
+                               "this FMU.", clockReference);
+#else
     (void)clockReference, (void)activationTime;
     return CS_ONLY(fmi3ActivateModelPartition);
+#endif
 }

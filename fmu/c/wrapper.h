@@ -156,6 +156,7 @@ typedef struct {
     Data d;
     fmi2CallbackFunctions cb;
     char *name;
+    int scheduled; /* FMI 3.0 scheduled execution: the importer runs the network's partition */
     int log_on[N_CATEGORIES];
     int mem[4]; /* CasADi memory of initial_state, dynamics, output, network_input */
     /* scratch: CasADi work arrays, RK4 stages, step result, outputs */
@@ -224,6 +225,14 @@ fmi2Status check_arrays(Instance *c, const char *fname, const void *vr, size_t n
 void set_defaults(Instance *c);
 uint64_t model_hash(void);
 
+/* ---------------------------------------------------------------------------------------- */
+/* fmi2Functions.c                                                                             */
+
+/* fmi2Instantiate's work; `scheduled`: for FMI 3.0 scheduled execution (Instance.scheduled). */
+fmi2Component instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                          fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                          fmi2Boolean loggingOn, int scheduled);
+
 #if HAS_NETWORK
 /* ---------------------------------------------------------------------------------------- */
 /* wrapper_network.c                                                                           */
@@ -247,6 +256,7 @@ fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t);
 
 int task_start(Instance *c, char *error, size_t size);
 void task_stop(Instance *c);
+fmi2Status task_run(Instance *c);
 void task_post(Instance *c, const fmi2Real *features, const float *state);
 fmi2Status task_settle(Instance *c, int due);
 long task_overruns(const Instance *c);

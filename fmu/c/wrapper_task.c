@@ -20,6 +20,11 @@
  * One mutex guards the hand-over; the worker touches only the job buffers below and the network
  * (whose call times it records), never the instance's Data, which the calling thread alone
  * reads and writes.
+ *
+ * Under FMI 3.0 scheduled execution (Instance.scheduled) there is no worker: the importer's
+ * scheduler runs the posted call in the network clock's partition (task_run), in a task of its
+ * own at its own priority; a result due before that partition ran is computed then and counted
+ * as an overrun, so the outputs are again the same whatever the schedule.
  */
 
 #include "wrapper.h"
@@ -36,6 +41,7 @@ struct Task {
     Network *net;
     int posted, finished, quit;
     int busy;            /* a job is out for the current Data (calling thread only) */
+    int external;        /* no worker: the importer runs each job (task_run) */
     int policy, priority; /* the caller's scheduling the worker's was last set from */
     cpu_set_t cpus;       /* the caller's CPUs the worker's were last set from */
     long overruns;       /* results not ready when due (calling thread only) */
@@ -47,23 +53,37 @@ struct Task {
     char error[512];
 };
 
+/* The posted job, run with the lock held on entry and exit (released while it runs). */
+static void run_posted(Task *t) {
+    t->posted = 0;
+    pthread_mutex_unlock(&t->lock);
+    const int failed = net_run(t->net, t->in, 1, t->state_in, t->r, t->state_out, t->error,
+                               sizeof t->error) != 0;
+    pthread_mutex_lock(&t->lock);
+    t->failed = failed;
+    t->finished = 1;
+    pthread_cond_signal(&t->done);
+}
+
 static void *work(void *arg) {
     Task *t = (Task *)arg;
     pthread_mutex_lock(&t->lock);
     for (;;) {
         while (!t->posted && !t->quit) pthread_cond_wait(&t->wake, &t->lock);
         if (!t->posted) break; /* quit, with nothing left to run */
-        t->posted = 0;
-        pthread_mutex_unlock(&t->lock);
-        const int failed = net_run(t->net, t->in, 1, t->state_in, t->r, t->state_out, t->error,
-                                   sizeof t->error) != 0;
-        pthread_mutex_lock(&t->lock);
-        t->failed = failed;
-        t->finished = 1;
-        pthread_cond_signal(&t->done);
+        run_posted(t);
     }
     pthread_mutex_unlock(&t->lock);
     return NULL;
+}
+
+/* The network clock's partition (scheduled execution): the posted job, if any, run here. */
+fmi2Status task_run(Instance *c) {
+    Task *t = c->task;
+    pthread_mutex_lock(&t->lock);
+    if (t->posted) run_posted(t);
+    pthread_mutex_unlock(&t->lock);
+    return fmi2OK; /* a failed call is the step's to report, when its result is due */
 }
 
 /* The worker of instance c (its network loaded): 0, or -1 with the reason in error. */
@@ -79,6 +99,11 @@ int task_start(Instance *c, char *error, size_t size) {
     pthread_mutex_init(&t->lock, NULL);
     pthread_cond_init(&t->wake, NULL);
     pthread_cond_init(&t->done, NULL);
+    t->external = c->scheduled;
+    if (t->external) {
+        c->task = t;
+        return 0;
+    }
     const int err = pthread_create(&t->thread, NULL, work, t);
     if (err != 0) {
         snprintf(error, size, "cannot start the network's task thread (%s)", strerror(err));
@@ -101,7 +126,7 @@ void task_stop(Instance *c) {
     t->quit = 1;
     pthread_cond_signal(&t->wake);
     pthread_mutex_unlock(&t->lock);
-    pthread_join(t->thread, NULL);
+    if (!t->external) pthread_join(t->thread, NULL);
     pthread_cond_destroy(&t->done);
     pthread_cond_destroy(&t->wake);
     pthread_mutex_destroy(&t->lock);
@@ -141,7 +166,7 @@ static void follow_caller(Task *t) {
  * is settled before the next is posted). */
 void task_post(Instance *c, const fmi2Real *features, const float *state) {
     Task *t = c->task;
-    follow_caller(t);
+    if (!t->external) follow_caller(t);
     pthread_mutex_lock(&t->lock);
     memcpy(t->in, features, sizeof t->in);
     memcpy(t->state_in, state, sizeof t->state_in);
@@ -160,6 +185,7 @@ fmi2Status task_settle(Instance *c, int due) {
     if (t == NULL || !t->busy) return fmi2OK;
     pthread_mutex_lock(&t->lock);
     if (!t->finished && due) t->overruns++;
+    if (t->external && t->posted) run_posted(t); /* its partition did not run in time */
     while (!t->finished) pthread_cond_wait(&t->done, &t->lock);
     pthread_mutex_unlock(&t->lock);
     t->busy = 0;

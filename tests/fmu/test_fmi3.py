@@ -49,7 +49,7 @@ def fmpy_run(fmu, inputs=None):
     md = read_model_description(fmu)
     step = float(md.defaultExperiment.stepSize)
     time = np.arange(STEPS + 1) * step
-    names = [v.name for v in md.modelVariables if v.causality == "input"]
+    names = [v.name for v in md.modelVariables if v.causality == "input" and v.type != "Clock"]
     signals = np.zeros(STEPS + 1, dtype=[("time", float)] + [(n, float) for n in names])
     signals["time"] = time
     for i, name in enumerate(names):
