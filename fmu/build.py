@@ -138,9 +138,6 @@ def _check_platforms(system: System, platforms: tuple[str, ...]) -> None:
         raise InputError(f"a network in onnxruntime runs on {host()} alone (the library "
                          f"bundled is this machine's): build it with --runtime c for other "
                          f"platforms or for sources alone")
-    if net is not None and net.task and "win64" in platforms:
-        raise InputError("a network in its own task (--task) needs Linux threads: build it "
-                         "for linux64 and aarch64-linux, not win64")
 
 
 def fmu_key(system: System, fmi_version: int = 2, platforms: Sequence[str] | None = None

@@ -44,10 +44,11 @@ PLATFORMS = {p.name: p for p in (
     Platform("aarch64-linux", "aarch64-linux", ".so", "aarch64-linux-gnu-gcc",
              "gcc-aarch64-linux-gnu",
              ("-lm", "-ldl", "-lpthread")),
-    # mingw's own runtime (libgcc) linked in, so the DLL needs only what Windows ships; -s drops
-    # the debugging sections mingw's start-up objects bring (306 KB -> 106 KB for the plant)
+    # mingw's own runtime (libgcc, and winpthreads for a network's task) linked in, so the DLL
+    # needs only what Windows ships; -s drops the debugging sections mingw's start-up objects
+    # bring (306 KB -> 106 KB for the plant)
     Platform("win64", "x86_64-windows", ".dll", "x86_64-w64-mingw32-gcc", "gcc-mingw-w64-x86-64",
-             ("-lm", "-static-libgcc", "-s")),
+             ("-lm", "-static-libgcc", "-Wl,-Bstatic", "-lpthread", "-Wl,-Bdynamic", "-s")),
 )}
 
 

@@ -21,6 +21,9 @@
  * (whose call times it records), never the instance's Data, which the calling thread alone
  * reads and writes.
  *
+ * On Windows (mingw-w64's winpthreads) the worker is an ordinary thread of the caller's
+ * priority, on any CPU: the priority and CPUs above are Linux's.
+ *
  * Under FMI 3.0 scheduled execution (Instance.scheduled) there is no worker: the importer's
  * scheduler runs the posted call in the network clock's partition (task_run), in a task of its
  * own at its own priority; a result due before that partition ran is computed then and counted
@@ -42,8 +45,10 @@ struct Task {
     int posted, finished, quit;
     int busy;            /* a job is out for the current Data (calling thread only) */
     int external;        /* no worker: the importer runs each job (task_run) */
+#if defined(__linux__)
     int policy, priority; /* the caller's scheduling the worker's was last set from */
     cpu_set_t cpus;       /* the caller's CPUs the worker's were last set from */
+#endif
     long overruns;       /* results not ready when due (calling thread only) */
     fmi2Real in[NET_N_IN];
     float state_in[DIM(NET_STATE_SIZE)];
@@ -94,8 +99,10 @@ int task_start(Instance *c, char *error, size_t size) {
         return -1;
     }
     t->net = c->net;
+#if defined(__linux__)
     t->policy = SCHED_OTHER; /* as a thread is created */
     pthread_getaffinity_np(pthread_self(), sizeof t->cpus, &t->cpus); /* inherited */
+#endif
     pthread_mutex_init(&t->lock, NULL);
     pthread_cond_init(&t->wake, NULL);
     pthread_cond_init(&t->done, NULL);
@@ -113,7 +120,9 @@ int task_start(Instance *c, char *error, size_t size) {
         free(t);
         return -1;
     }
+#if defined(__linux__)
     pthread_setname_np(t->thread, TASK_THREAD_NAME); /* as top -H and ps list it */
+#endif
     c->task = t;
     return 0;
 }
@@ -139,6 +148,7 @@ void task_stop(Instance *c) {
  * the last call. What the system refuses leaves the worker as it was (it still runs, only
  * less promptly). */
 static void follow_caller(Task *t) {
+#if defined(__linux__)
     struct sched_param caller, worker;
     cpu_set_t cpus;
     int policy;
@@ -160,6 +170,9 @@ static void follow_caller(Task *t) {
         policy = SCHED_OTHER;
     }
     pthread_setschedparam(t->thread, policy, &worker);
+#else
+    (void)t;
+#endif
 }
 
 /* Start a call on `features` from the recurrent state `state` (the worker is idle: every job

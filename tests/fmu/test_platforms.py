@@ -1,15 +1,17 @@
 """FMUs for several platforms from one build (fmu.platforms), each platform's library run here.
 
-The plant, the feedback controller and a network FMU (the toy running sum as generated C; the
-learned feedforward of a tiny trained TCN in the slow run) are built for every platform whose
-cross-compiler is installed. The same small importer (tests/fmu/fmu_runner.c) runs each
-platform's library natively (linux64), under qemu-user (aarch64-linux) and under Wine (win64)
-on the same inputs: their outputs must equal the linux64 library's. A source-only FMU, compiled
-by FMPy itself, must give the outputs of flexff's own build under fmpy.simulate_fmu.
+The plant, the feedback controller and a network FMU (the toy running sum as generated C, also
+in its own task, a thread of the FMU; the learned feedforward of a tiny trained TCN in the slow
+run) are built for every platform whose cross-compiler is installed. The same small importer
+(tests/fmu/fmu_runner.c) runs each platform's library natively (linux64), under qemu-user
+(aarch64-linux) and under Wine (win64) on the same inputs: their outputs must equal the linux64
+library's. A source-only FMU, compiled by FMPy itself, must give the outputs of flexff's own
+build under fmpy.simulate_fmu.
 """
 
 import shutil
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 
 import fmpy
@@ -48,8 +50,10 @@ def folder(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def fmus(folder) -> dict[str, Path]:
     """The plant, the controller and the toy network FMU, for every platform available."""
+    toy = network_system(running_sum_graph(folder / "sum.onnx"))
     systems = {"plant": plant_system(), "controller": controller_system("nominal", step=1e-3),
-               "network": network_system(running_sum_graph(folder / "sum.onnx"))}
+               "network": toy,
+               "network_task": replace(toy, network=replace(toy.network, task=True))}
     return {name: build_fmu(system, folder / f"{name}.fmu", platforms=available_platforms())
             for name, system in systems.items()}
 
@@ -96,7 +100,7 @@ def assert_same_outputs(fmu: Path, platform: str, runners, folder: Path, rtol: f
 
 
 @pytest.mark.parametrize("platform", OTHERS)
-@pytest.mark.parametrize("name", ["plant", "controller", "network"])
+@pytest.mark.parametrize("name", ["plant", "controller", "network", "network_task"])
 def test_each_platform_gives_the_linux64_outputs(fmus, runners, folder, name, platform):
     assert_same_outputs(fmus[name], platform, runners, folder, RTOL[platform])
 
@@ -182,14 +186,9 @@ def test_platforms_resolve_and_name_a_missing_compiler(monkeypatch):
 
 
 def test_platforms_the_network_cannot_run_on_are_refused(tmp_path, monkeypatch):
-    from dataclasses import replace
-
     monkeypatch.setattr(shutil, "which", lambda command: f"/usr/bin/{command}")
     toy = network_system(running_sum_graph(tmp_path / "sum.onnx"))
-    task = replace(toy, network=replace(toy.network, task=True))
     runtime = replace(toy, network=replace(toy.network, runtime="onnxruntime"))
-    with pytest.raises(InputError, match="needs Linux threads"):
-        build_fmu(task, tmp_path / "task.fmu", platforms=["win64"])
     for platforms in (["aarch64-linux"], ()):
         with pytest.raises(InputError, match="onnxruntime runs on linux64 alone"):
             build_fmu(runtime, tmp_path / "ort.fmu", platforms=platforms)

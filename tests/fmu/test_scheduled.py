@@ -126,8 +126,8 @@ def test_a_clock_flexff_cannot_schedule_is_refused(fmus, tmp_path):
 
 
 @pytest.mark.parametrize("extra, message", [
-    ({"scheduled": 1}, "fmu.ff.scheduled: expected true or false"),
-    ({"scheduled": True, "solver": "cvode"}, "fmu.ff.solver"),
+    ({"scheduled": 1}, r"fmu\.ff\.scheduled: expected true or false"),
+    ({"scheduled": True, "solver": "cvode"}, r"fmu\.ff\.solver"),
 ])
 def test_bad_keys_name_themselves(fmus, extra, message):
     with pytest.raises(ConfigError, match=message):
@@ -136,8 +136,8 @@ def test_bad_keys_name_themselves(fmus, extra, message):
 
 
 def test_scheduled_needs_the_interface(fmus):
-    with pytest.raises(ConfigError, match="fmu.ff.scheduled: ff2.fmu has no scheduled-execution "
-                                          "interface"):
+    with pytest.raises(ConfigError, match=r"fmu\.ff\.scheduled: ff2\.fmu has no "
+                                          r"scheduled-execution interface"):
         parse_config({"run": {"step": STEP, "stop": 0.01},
                       "fmu": {"ff": {"path": str(fmus[2]), "unconnected": "start",
                                      "scheduled": True}}})
