@@ -95,7 +95,7 @@ def _prior(reference: ca.SX, card: ModelCard) -> ca.SX:
 def model_period(card: ModelCard, step: float, model: str | Path) -> int:
     """Communication steps per model call: the step must divide the model's sample period."""
     rate = card.sample_rate_hz
-    if not (step > 0 and rate > 0):
+    if not (step > 0 and rate * step > 0):  # a product that underflows to 0 too
         raise InputError(f"step ({step}) and the model's sample rate ({rate}) must be positive")
     ratio = 1.0 / (rate * step)
     if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:

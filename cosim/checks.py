@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from flexff.cosim.schema import ConfigError
+from flexff.fmu.errors import not_a_file
 from flexff.fmu.fmi_version import FMI_VERSIONS
 
 
@@ -80,8 +81,9 @@ class TableChecker:
         if not isinstance(value, str) or not value:
             raise self.error(f"{table}.{key}", f"expected a file path, got {value!r}")
         path = (self.base / value).resolve()
-        if not path.is_file():
-            raise self.error(f"{table}.{key}", f"no such file: {path}")
+        why = not_a_file(path)
+        if why is not None:
+            raise self.error(f"{table}.{key}", f"{why}: {path}")
         return path
 
     def point(self, t: Mapping[str, Any], table: str, key: str,

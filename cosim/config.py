@@ -49,6 +49,7 @@ from flexff.cosim.schema import (
     SourceConfig,
     whole_steps,
 )
+from flexff.fmu.errors import not_a_file
 from flexff.fmu.fmi_version import FMI_VERSIONS
 from flexff.fmu.importer import FmuError, read_fmu, typed_value
 from flexff.fmu.model_exchange import SOLVERS
@@ -104,8 +105,9 @@ def _sandbox_keys(sandbox: Sandbox | None) -> dict[str, Any]:
 def read_tables(path: Path) -> dict[str, Any]:
     """The tables of the TOML file at `path`, unchecked; ConfigError naming the file when it
     is missing or not TOML."""
-    if not path.is_file():
-        raise ConfigError(str(path), "file", "no such configuration file")
+    why = not_a_file(path, "configuration file")
+    if why is not None:
+        raise ConfigError(str(path), "file", why)
     try:
         return tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:

@@ -48,7 +48,7 @@ from flexff.cosim.schema import (
 from flexff.cosim.wiring import SOURCE, Link, carried
 from flexff.fmu.archive import extract_archive
 from flexff.fmu.cache import cache_dir, file_sha256
-from flexff.fmu.errors import InputError
+from flexff.fmu.errors import InputError, not_a_file
 from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
 
 NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -231,8 +231,9 @@ def load_ssp(path: str | Path) -> RunConfig:
     def error(key: str, message: str) -> ConfigError:
         return ConfigError(origin, key, message)
 
-    if not path.is_file():
-        raise error("file", "no such SSP file")
+    why = not_a_file(path, "SSP file")
+    if why is not None:
+        raise error("file", why)
     try:
         folder = _extracted(path).resolve()
     except (zipfile.BadZipFile, zlib.error, EOFError) as exc:  # not a zip, or a damaged one
@@ -297,7 +298,7 @@ def _annotated(root: etree._Element, folder: Path, plain: RunConfig) -> RunConfi
             same = (_without_configuration(_ssd(scenario)) == _without_configuration(root)
                     and all(_member_sha256(folder, s.name) == file_sha256(s.path)
                             for s in scenario.fmus))
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, etree.Error) as exc:  # etree: C14N refuses the SSD
         same, reason = False, f": {exc}"
     else:
         reason = ""

@@ -6,6 +6,7 @@ package to install (exit 1). Terminated: SIGTERM, handled as Ctrl-C is (exit 143
 is a bug: exit 1 and a hint to rerun with --debug.
 """
 
+from pathlib import Path
 
 # what str.splitlines breaks lines at, each written as its escape (\n, \x85, \u2028)
 _LINE_BREAKS = str.maketrans({c: repr(c)[1:-1] for c in "\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029"})
@@ -15,6 +16,15 @@ def one_line(text: str) -> str:
     """`text` with its line breaks written as escapes: a message that quotes a name from the
     input (a TOML key, a CSV column, an XML attribute) stays the one line the CLI prints."""
     return text.translate(_LINE_BREAKS)
+
+
+def not_a_file(path: Path, what: str = "file") -> str | None:
+    """Why `path` is no file ("no such <what>", or the system's reason for a path it cannot
+    look up, such as a name too long), None where it is one."""
+    try:
+        return None if path.is_file() else f"no such {what}"
+    except OSError as error:
+        return f"cannot look up the {what}: {error.strerror or error}"
 
 
 class InputError(ValueError):

@@ -41,7 +41,7 @@ from fmpy.logging import addLoggerProxy
 from fmpy.model_description import ValidationError
 
 from flexff.fmu.archive import extract_archive
-from flexff.fmu.errors import InputError
+from flexff.fmu.errors import InputError, not_a_file
 from flexff.fmu.model_exchange import ModelExchangeStepper
 from flexff.fmu.scheduled import ScheduledStepper, periodic_clocks
 from flexff.fmu.stepper import Stepper
@@ -155,8 +155,9 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
     start values, legal causality and variability) is an FmuError naming the first fault,
     so that no run records one variable's values under another's name."""
     path = Path(path)
-    if not path.is_file():
-        raise FmuError(f"{path}: no such FMU file")
+    why = not_a_file(path, "FMU file")
+    if why is not None:
+        raise FmuError(f"{path}: {why}")
     if not zipfile.is_zipfile(path):
         raise FmuError(f"{path}: not an FMU (an FMU is a zip archive; this file is not one)")
     try:

@@ -123,6 +123,8 @@ def fuzz_config(config: Config, mirrors: dict[Path, Path]) -> None:
                                 "circle_duration": 8.0}}, REPOSITORY))
 # found by the fuzzer: a step of 5e-324 s made infinitely many samples (an OverflowError)
 @example(config=({**CIRCLE, "run": {"step": 5e-324}}, REPOSITORY))
+# found by the fuzzer: a path with a name over 255 bytes was an OSError (ENAMETOOLONG)
+@example(config=({"fmu": {"vdp": {"path": "x" * 300 + ".fmu"}}}, REPOSITORY))
 def test_config_fast(mirrors: dict[Path, Path], config: Config) -> None:
     fuzz_config(config, mirrors)
 

@@ -124,6 +124,21 @@ def test_ssp_slow(cache: Path, members: dict[str, bytes]) -> None:
     run_for(fuzz_seconds(), fuzz_round)
 
 
+def test_a_relative_namespace_reads_as_a_plain_system(cache: Path,
+                                                       members: dict[str, bytes]) -> None:
+    """Found by the fuzzer: an SSD whose namespace URI is relative could not be canonicalized
+    (lxml's C14NError) when it was compared with the configuration it carries; now the
+    annotation is ignored with a warning and the system read as plain SSP."""
+    ssd = members[SSD].replace(b'xmlns:ssv="http://ssp-standard.org',
+                               b'xmlns:ssv="//ssp-standard.org')
+    assert ssd != members[SSD]
+    path = cache / "relative.ssp"
+    path.write_bytes(_zip({**members, SSD: ssd}))
+    with pytest.warns(UserWarning, match="no longer the flexff configuration it carries"):
+        config = load_ssp(path)
+    assert config.fmus
+
+
 def test_archive_without_its_first_byte(cache: Path, members: dict[str, bytes]) -> None:
     """Found by the fuzzer: an archive cut by its first byte made zipfile seek before the
     file's start, an OSError (EINVAL) out of fmu.archive.extract_archive; now one line
