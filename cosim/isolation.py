@@ -289,7 +289,7 @@ class IsolatedInstance:
             raise self._refused(what, f"a message of {length} bytes (at most {MESSAGE_LIMIT})")
         try:
             status, value = _decoded(self._read(length, what, timeout))
-        except (ValueError, TypeError):
+        except (ValueError, TypeError, RecursionError):  # RecursionError: nested too deep
             raise self._refused(what, "a message that is not the protocol's") from None
         if status == "error" and isinstance(value, str):
             raise FmuError(value[:MESSAGE_LIMIT])

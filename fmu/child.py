@@ -140,7 +140,7 @@ def run_in_child(function: Callable[..., Any], args: tuple[Any, ...], timeout: f
                 kind, message = _checked(receiver.recv_bytes(MESSAGE_LIMIT))
             except EOFError:  # the child is gone without saying how it ended
                 break
-            except (OSError, ValueError):  # too long, or not the protocol's
+            except (OSError, ValueError, TypeError, RecursionError):  # too long, not the protocol
                 end = ("raised", "the FMU's process sent a message that is not the protocol's")
                 process.kill()
                 break

@@ -125,9 +125,9 @@ def test_a_reference_fmu_system_is_bit_equal_sandboxed_and_not():
 def _fake_child(tmp_path, reply: bytes) -> IsolatedInstance:
     """An IsolatedInstance whose child (a sleeping process) has sent `reply`."""
     instance = IsolatedInstance.__new__(IsolatedInstance)
-    read, write = os.pipe()
-    os.write(write, reply)
-    os.close(write)
+    sent = tmp_path / "sent"  # a file: the reply may be longer than a pipe holds
+    sent.write_bytes(reply)
+    read = os.open(sent, os.O_RDONLY)
     instance.name, instance.timeout, instance._ack, instance._timed_out = "p", 5.0, read, False
     instance._process = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     return instance
@@ -137,7 +137,8 @@ def _fake_child(tmp_path, reply: bytes) -> IsolatedInstance:
     (LENGTH.pack(MESSAGE_LIMIT + 1), f"a message of {MESSAGE_LIMIT + 1} bytes"),
     (LENGTH.pack(9) + b"cos\nsystem", "a message that is not the protocol's"),
     (LENGTH.pack(4) + b"[1 ]", "a message that is not the protocol's"),
-])
+    (LENGTH.pack(200_000) + b"[" * 200_000, "a message that is not the protocol's"),
+], ids=["too long", "pickle", "wrong shape", "nested too deep"])
 def test_a_child_that_breaks_the_protocol_is_stopped(tmp_path, reply, why):
     instance = _fake_child(tmp_path, reply)
     with pytest.raises(FmuError, match=f"p: get failed: its process sent {why}"):
