@@ -102,9 +102,9 @@ BROKEN = {  # case: (source FMU, change, words the problem must contain)
     "instantiate returns NULL, FMI 3.0": ("fmi3/Dahlquist.fmu", description(zero_token),
                                           "Wrong instantiationToken"),
     "no interface, FMI 2.0": ("fmi2/VanDerPol.fmu", description(without_interfaces),
-                              "neither a co-simulation nor a model-exchange interface"),
+                              "no co-simulation, model-exchange or scheduled-execution interface"),
     "no interface, FMI 3.0": ("fmi3/VanDerPol.fmu", description(without_interfaces),
-                              "neither a co-simulation nor a model-exchange interface"),
+                              "no co-simulation, model-exchange or scheduled-execution interface"),
 }
 
 
