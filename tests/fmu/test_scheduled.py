@@ -8,7 +8,8 @@ fmi3Functions.c, fmu.model_description3) and flexff's scheduler for such FMUs (f
   FMPy's FMU3ScheduledExecution, it gives its co-simulation twin's outputs bit for bit; a
   scheduler that never runs the network's partition gets the same outputs, each result then
   computed when due and counted as an overrun;
-- a clock flexff cannot schedule (triggered) and a wrong key are refused, naming them.
+- a clock flexff cannot schedule (triggered, or off the run's steps) and a wrong key are refused,
+  naming them.
 """
 
 from __future__ import annotations
@@ -159,3 +160,11 @@ def test_isolated_and_scheduled_equals_in_process(fmus, reference, tmp_path):
     inside, alone = run(False), run(True)
     assert np.array_equal(inside["ff.Fx_ff"], alone["ff.Fx_ff"])
     assert np.abs(alone["ff.Fx_ff"]).max() > 0
+
+
+def test_a_clock_off_the_run_s_steps_is_refused(fmus, reference):
+    names = list(read_fmu(fmus[3]).inputs)
+    with Master([ResolvedFmu("ff", fmus[3], scheduled=True)], names, 3 * STEP) as master:
+        with pytest.raises(CosimError, match=r"clock 'step_clock' ticks every 0\.001 s, not a "
+                                             r"whole number of the run's 0\.003 s steps"):
+            master.run({n: np.asarray(reference[n][:11], float) for n in names}, 10)
