@@ -51,7 +51,7 @@ from flexff.cosim.schema import (
 )
 from flexff.fmu.errors import not_a_file
 from flexff.fmu.fmi_version import FMI_VERSIONS
-from flexff.fmu.importer import FmuError, read_fmu, typed_value
+from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
 from flexff.fmu.model_exchange import SOLVERS
 
 SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
@@ -289,28 +289,34 @@ class _Parser(TableChecker):
                                                  "(or run with --isolate)")
         return self.number(run, "run", "step_timeout", None, positive=True)
 
-    def solver(self, t: Mapping[str, Any], where: str, path: Path) -> str | None:
+    def fmu_info(self, path: Path, where: str) -> FmuInfo:
+        """The FMU's model description, read once for all of its table's keys."""
+        try:
+            return read_fmu(path)
+        except FmuError as error:
+            raise self.error(f"{where}.path", str(error)) from None
+
+    def solver(self, t: Mapping[str, Any], where: str, info: FmuInfo) -> str | None:
         """fmu.NAME.solver: model exchange with a solver; "cvode" for an FMU that has no
         co-simulation interface, None (co-simulation) for one that has."""
-        info = read_fmu(path)
         if "solver" not in t:
-            return None if info.co_simulation or info.me_identifier is None else SOLVERS[0]
+            return None if info.co_simulation or info.scheduled_only else SOLVERS[0]
         solver = self.choice(t, where, "solver", SOLVERS, None)
         if info.me_identifier is None:
-            raise self.error(f"{where}.solver", f"{path.name} has no model-exchange interface "
-                                                f"to solve: remove the key to co-simulate it")
+            raise self.error(f"{where}.solver", f"{info.path.name} has no model-exchange "
+                                                f"interface to solve: remove the key to "
+                                                f"co-simulate it")
         return solver
 
-    def scheduled(self, t: Mapping[str, Any], where: str, path: Path) -> bool:
+    def scheduled(self, t: Mapping[str, Any], where: str, info: FmuInfo) -> bool:
         """fmu.NAME.scheduled: through the FMU's scheduled-execution interface (fmu.scheduled);
         an FMU with that interface alone is run so without the key."""
-        info = read_fmu(path)
-        alone = not info.co_simulation and info.me_identifier is None
         if not self.flag(t, where, "scheduled"):
-            return alone
+            return info.scheduled_only
         if info.se_identifier is None:
-            raise self.error(f"{where}.scheduled", f"{path.name} has no scheduled-execution "
-                                                   f"interface: remove the key to co-simulate it")
+            raise self.error(f"{where}.scheduled", f"{info.path.name} has no "
+                                                   f"scheduled-execution interface: remove the "
+                                                   f"key to co-simulate it")
         if "solver" in t:
             raise self.error(f"{where}.scheduled", "an FMU runs either with a solver (model "
                                                    "exchange) or scheduled: give one of the keys")
@@ -337,9 +343,9 @@ class _Parser(TableChecker):
                 raise self.error(f"{where}.{given[-1]}", "is a limit of the sandbox, which "
                                                          "sandbox = false turns off")
             return None
-        cpu = "sandbox_cpu" in t and self.number(t, where, "sandbox_cpu", None, positive=True)
-        return Sandbox(self.number(t, where, "sandbox_memory", MEMORY_MB, positive=True),
-                       cpu or None)
+        cpu = (self.number(t, where, "sandbox_cpu", None, positive=True) if "sandbox_cpu" in t
+               else None)
+        return Sandbox(self.number(t, where, "sandbox_memory", MEMORY_MB, positive=True), cpu)
 
     def nonfinite(self, t: Mapping[str, Any], where: str) -> bool:
         """Whether the FMU may take and give NaN and infinite values: its own
@@ -414,12 +420,13 @@ class _Parser(TableChecker):
             self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate",
                                  "solver", "scheduled", "allow_nonfinite", *SANDBOX_KEYS))
             path = self.path(t, where, "path")
-            return FmuConfig(name, path=path, parameters=self.fmu_parameters(path, parameters,
+            info = self.fmu_info(path, where)
+            return FmuConfig(name, path=path, parameters=self.fmu_parameters(info, parameters,
                                                                              where, allowed),
                              unconnected=unconnected, tolerance=self.tolerance(t, where),
                              isolate=self.isolate(t, where), sandbox=self.sandbox(t, where),
-                             solver=self.solver(t, where, path),
-                             scheduled=self.scheduled(t, where, path), allow_nonfinite=allowed)
+                             solver=self.solver(t, where, info),
+                             scheduled=self.scheduled(t, where, info), allow_nonfinite=allowed)
         builtins = registered()
         builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",
@@ -434,21 +441,18 @@ class _Parser(TableChecker):
                          sandbox=self.sandbox(t, where), allow_nonfinite=allowed,
                          fmi=self.fmi_version(t, where))
 
-    def fmu_parameters(self, path: Path, values: Mapping[str, Any], where: str,
+    def fmu_parameters(self, info: FmuInfo, values: Mapping[str, Any], where: str,
                        allowed: bool) -> dict[str, Any]:
         """Start values checked against the FMU's own variables and their types, and finite
         (a Float32 one within its range) unless non-finite values are `allowed`."""
-        try:
-            info = read_fmu(path)
-        except FmuError as error:
-            raise self.error(f"{where}.path", str(error)) from None
         checked = {}
         for key, value in values.items():
             v = info.variables.get(key)
             if v is None or not v.settable:
                 settable = [n for n, w in info.variables.items() if w.settable]
-                raise self.error(f"{where}.parameters.{key}", f"{path.name} has no parameter or "
-                                 f"input {key!r} (known: {', '.join(settable) or 'none'})")
+                raise self.error(f"{where}.parameters.{key}", f"{info.path.name} has no "
+                                 f"parameter or input {key!r} (known: "
+                                 f"{', '.join(settable) or 'none'})")
             try:
                 checked[key] = typed_value(v.kind, value)
             except ValueError as error:

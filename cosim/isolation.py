@@ -26,7 +26,7 @@ import subprocess
 import sys
 import tempfile
 from collections.abc import Mapping, Sequence
-from ctypes import c_char, c_double, c_int, c_long, c_size_t, c_void_p
+from ctypes import c_char, c_char_p, c_double, c_int, c_long, c_longlong, c_size_t, c_void_p
 from pathlib import Path
 from typing import Any
 
@@ -72,6 +72,8 @@ def library() -> ctypes.CDLL:
     lib.proxy_serve.argtypes = [c_void_p, c_long, c_int, c_void_p, c_void_p, c_void_p,
                                 c_void_p]
     lib.proxy_serve.restype = c_int
+    lib.sandbox_enter.argtypes = [c_char_p, c_longlong, c_double, c_int]
+    lib.sandbox_enter.restype = c_int
     return lib
 
 

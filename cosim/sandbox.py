@@ -50,10 +50,8 @@ def environment(scratch: Path, python_path: str) -> dict[str, str]:
 
 
 def enter(library: ctypes.CDLL, scratch: Path, sandbox: Sandbox, report: int) -> list[str]:
-    """Confine this process (for good); the layers that hold."""
-    library.sandbox_enter.argtypes = [ctypes.c_char_p, ctypes.c_longlong, ctypes.c_double,
-                                      ctypes.c_int]
-    library.sandbox_enter.restype = ctypes.c_int
+    """Confine this process (for good) by the proxy `library`'s sandbox_enter (cosim.isolation
+    declares it); the layers that hold."""
     held = library.sandbox_enter(os.fsencode(scratch), int(sandbox.memory_mb * (1 << 20)),
                                  sandbox.cpu_s or 0.0, report)
     return [name for k, name in enumerate(LAYERS) if held & (1 << k)]

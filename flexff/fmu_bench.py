@@ -23,6 +23,7 @@ import numpy as np
 from flexff.cosim.floor import run_c_loop
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.recording import Recording
+from flexff.cosim.sandbox import DEFAULT, Sandbox
 from flexff.fmu.fmpy_instance import FmpyInstance, bare_calls
 
 
@@ -71,13 +72,16 @@ def _python_loop(s: FmpyInstance, steps: int, step: float, repeats: int
     return {name: seconds / steps for name, seconds in best.items()}, record[:steps]
 
 
-def _master_loop(path: Path, starts: dict[str, float], steps: int, step: float, repeats: int,
-                 isolate: bool) -> tuple[float, Recording]:
+def master_us_per_step(path: Path, starts: dict[str, float], steps: int, step: float,
+                       repeats: int, isolate: bool, sandbox: Sandbox | None = DEFAULT
+                       ) -> tuple[float, Recording]:
     """Best microseconds per step of the master's engine loop on this FMU alone (in-process or
-    isolated), and the record of the last run."""
+    isolated, in `sandbox` or none), its inputs held at `starts`, and the record of the last
+    run."""
     best = float("inf")
+    fmu = ResolvedFmu("fmu", path, isolate=isolate, sandbox=sandbox)
     for _ in range(repeats):
-        with Master([ResolvedFmu("fmu", path, isolate=isolate)], list(starts), step) as master:
+        with Master([fmu], list(starts), step) as master:
             recording = master.run(starts, steps)
         best = min(best, recording.wall_s)
     return 1e6 * best / steps, recording
@@ -103,8 +107,8 @@ def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
         names = s.names("output")
     with Master([ResolvedFmu("fmu", Path(path))], list(starts), step) as master:
         floor, c_us = run_c_loop(master, starts, steps, repeats)
-    master_us, inside = _master_loop(Path(path), starts, steps, step, repeats, False)
-    isolated_us, alone = _master_loop(Path(path), starts, steps, step, repeats, True)
+    master_us, inside = master_us_per_step(Path(path), starts, steps, step, repeats, False)
+    isolated_us, alone = master_us_per_step(Path(path), starts, steps, step, repeats, True)
     python_us = 1e6 * python["cycle"]
     return {
         "steps": steps,

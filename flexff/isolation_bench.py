@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.recording import Recording
 from flexff.cosim.sandbox import DEFAULT, Sandbox
+from flexff.fmu_bench import master_us_per_step
 
 ECOS_STEPS = """import ctypes, os, sys, time
 tbb = os.path.join(sys.prefix, "lib", "libtbb.so.12")
@@ -35,16 +35,6 @@ with EcosSimulation(structure=structure, step_size=step) as simulation:
 """
 FLEXFF: dict[str, tuple[bool, Sandbox | None]] = {  # variant: (isolated, its sandbox)
     "in_process": (False, None), "isolated": (True, None), "sandboxed": (True, DEFAULT)}
-
-
-def _master_us_per_step(path: Path, steps: int, step: float, isolate: bool,
-                       sandbox: Sandbox | None = None) -> tuple[float, Recording]:
-    """Microseconds per step of the master's engine loop on the FMU alone (no inputs set),
-    and its record."""
-    fmu = ResolvedFmu("fmu", path, isolate=isolate, sandbox=sandbox)
-    with Master([fmu], [], step) as master:
-        recording = master.run({}, steps)
-    return 1e6 * recording.wall_s / steps, recording
 
 
 def _ecos_us_per_step(python: str, fmu: Path, steps: int, step: float, proxy: bool
@@ -68,7 +58,7 @@ def isolation_benchmark(fmu: Path, steps: int = 20_000, step: float = 1e-3, repe
     records: dict[str, Recording] = {}
     for _ in range(repeats):
         for name, (isolate, sandbox) in FLEXFF.items():
-            us, records[name] = _master_us_per_step(fmu, steps, step, isolate, sandbox)
+            us, records[name] = master_us_per_step(fmu, {}, steps, step, 1, isolate, sandbox)
             best[name] = min(best.get(name, us), us)
         for name, proxy in (("ecos_in_process", False), ("ecos_proxyfmu", True)):
             if ecos_python is not None and not isinstance(ecos.get(name, 0.0), str):

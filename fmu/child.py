@@ -91,8 +91,9 @@ def _child(function: Callable[..., Any], args: tuple[Any, ...], sender: Connecti
     os.chdir(cwd)
     tempfile.tempdir = folder
     _trace_fmi_calls()
+
     def send(kind: str, message: Any) -> None:
-        sender.send_bytes(json.dumps([kind, message]).encode()[:MESSAGE_LIMIT])
+        sender.send_bytes(json.dumps([kind, message]).encode())
 
     try:
         function(lambda message: send("emit", message), *args)

@@ -117,6 +117,11 @@ class FmuInfo:
     model_description: Any = field(default=None, compare=False, repr=False)
 
     @property
+    def scheduled_only(self) -> bool:
+        """Whether scheduled execution is its only interface (it runs no other way)."""
+        return not self.co_simulation and self.me_identifier is None
+
+    @property
     def feedthrough(self) -> frozenset[str]:
         """Outputs that depend directly on an input."""
         return frozenset(n for n, deps in self.dependencies.items() if deps)
@@ -309,7 +314,7 @@ class FmuInstance:
         self.info, self.name = info, name
         self.messages: list[str] = []
         self.initialized = False
-        self.scheduled = scheduled or (not info.co_simulation and info.me_identifier is None)
+        self.scheduled = scheduled or info.scheduled_only
         self.model_exchange = not self.scheduled and (solver is not None
                                                       or not info.co_simulation)
         self.stepper: Stepper | None = None

@@ -56,15 +56,15 @@ def _clocks(parent: ET.Element, system: System, layout: Layout) -> None:
     `period` steps, at a lower priority (its result is used one period later)."""
     assert system.network is not None and system.sample_time is not None
     step, period = system.sample_time, system.network.period
-    for (name, interval, description), vr in zip((
-            ("step_clock", step, "each step: the outputs from the inputs"),
-            ("network_clock", step * period,
+    for (name, interval, priority, description), vr in zip((
+            ("step_clock", step, 0, "each step: the outputs from the inputs"),
+            ("network_clock", step * period, 1,
              f"the network's call on the inputs of the step it ticks with, used {period} steps "
              f"later")), clock_value_references(layout), strict=True):
         ET.SubElement(parent, "Clock", {
             "name": name, "valueReference": str(vr), "description": description,
             "causality": "input", "variability": "discrete", "intervalVariability": "constant",
-            "intervalDecimal": format_value(interval), "priority": str(int(name != "step_clock"))})
+            "intervalDecimal": format_value(interval), "priority": str(priority)})
 
 
 def model_description3_xml(system: System, layout: Layout, identifier: str, token: str) -> str:

@@ -44,7 +44,6 @@ struct Task {
     Network *net;
     int posted, finished, quit;
     int busy;            /* a job is out for the current Data (calling thread only) */
-    int external;        /* no worker: the importer runs each job (task_run) */
 #if defined(__linux__)
     int policy, priority; /* the caller's scheduling the worker's was last set from */
     cpu_set_t cpus;       /* the caller's CPUs the worker's were last set from */
@@ -106,8 +105,7 @@ int task_start(Instance *c, char *error, size_t size) {
     pthread_mutex_init(&t->lock, NULL);
     pthread_cond_init(&t->wake, NULL);
     pthread_cond_init(&t->done, NULL);
-    t->external = c->scheduled;
-    if (t->external) {
+    if (c->scheduled) { /* no worker: the importer runs each job (task_run) */
         c->task = t;
         return 0;
     }
@@ -135,7 +133,7 @@ void task_stop(Instance *c) {
     t->quit = 1;
     pthread_cond_signal(&t->wake);
     pthread_mutex_unlock(&t->lock);
-    if (!t->external) pthread_join(t->thread, NULL);
+    if (!c->scheduled) pthread_join(t->thread, NULL);
     pthread_cond_destroy(&t->done);
     pthread_cond_destroy(&t->wake);
     pthread_mutex_destroy(&t->lock);
@@ -179,7 +177,7 @@ static void follow_caller(Task *t) {
  * is settled before the next is posted). */
 void task_post(Instance *c, const fmi2Real *features, const float *state) {
     Task *t = c->task;
-    if (!t->external) follow_caller(t);
+    if (!c->scheduled) follow_caller(t);
     pthread_mutex_lock(&t->lock);
     memcpy(t->in, features, sizeof t->in);
     memcpy(t->state_in, state, sizeof t->state_in);
@@ -198,7 +196,7 @@ fmi2Status task_settle(Instance *c, int due) {
     if (t == NULL || !t->busy) return fmi2OK;
     pthread_mutex_lock(&t->lock);
     if (!t->finished && due) t->overruns++;
-    if (t->external && t->posted) run_posted(t); /* its partition did not run in time */
+    if (c->scheduled && t->posted) run_posted(t); /* its partition did not run in time */
     while (!t->finished) pthread_cond_wait(&t->done, &t->lock);
     pthread_mutex_unlock(&t->lock);
     t->busy = 0;
