@@ -28,6 +28,12 @@ Result = TypeVar("Result")
 SCHEDULER_TIMEOUT = "10s"  # how long to try to reach a Dask scheduler
 
 
+def granted_cores() -> int:
+    """The cores this process may run on (its CPU affinity), at least one."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, cores or 1)
+
+
 @dataclass(frozen=True)
 class Finished(Generic[Result]):
     """How one job ended: its result, the error it raised, or cancelled before it started."""
@@ -65,13 +71,13 @@ class Execution(Generic[Result]):
 def execute(function: Callable[[Job], Result], jobs: Sequence[Job], workers: int | None = None,
             scheduler: str | None = None) -> Iterator[Execution[Result]]:
     """Run `function(job)` for every job: in up to `workers` local processes (default: one
-    per CPU), or on the Dask scheduler at `scheduler` (dask.distributed, imported only then)."""
+    per core granted), or on the Dask scheduler at `scheduler` (dask.distributed, imported
+    only then)."""
     if scheduler is not None:
         with _on_dask(function, jobs, scheduler) as execution:
             yield execution
         return
-    pool = ProcessPoolExecutor(max_workers=max(1, min(workers or os.cpu_count() or 1,
-                                                      len(jobs) or 1)),
+    pool = ProcessPoolExecutor(max_workers=max(1, min(workers or granted_cores(), len(jobs) or 1)),
                                initializer=_start_worker, initargs=(os.getpid(),))
     try:
         futures: dict[Future[Result], int] = {pool.submit(_guarded, function, job): k

@@ -18,6 +18,7 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "results-demo": gen_results.demo_markdown,
     "results-bench": gen_results.bench_markdown,
     "results-processes": gen_results.processes_markdown,
+    "results-training": gen_results.training_markdown,
     "results-machines": gen_results.machines_markdown,
 }
 MARKER = re.compile(r"<!-- generated: ([a-z-]+) -->")

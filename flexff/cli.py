@@ -206,6 +206,13 @@ def _fmu_compare(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     if args.output:
         _output_file(args.output)
+    if args.training:
+        from flexff.training_bench import training_benchmark
+
+        save = (lambda figures: Path(args.output).write_text(json.dumps(figures, indent=2))) \
+            if args.output else None
+        return _print_json(training_benchmark(Path(args.training).resolve(),
+                                              bf16=not args.no_bf16, save=save), args.output)
     if args.processes:
         from flexff.process_bench import process_benchmark
 
@@ -832,6 +839,12 @@ def build_parser() -> argparse.ArgumentParser:
                        help="instead: whole processes side by side on this FMU (flexff run, "
                             "fmpy.simulate_fmu, Ecos where installed), each writing its "
                             "default record")
+    bench.add_argument("--training", metavar="DATA",
+                       help="instead: the trainings' start-up and seconds per epoch on this "
+                            "dataset folder (a sim or hardware set), each model of both "
+                            "presets, on CUDA where available and on the CPU")
+    bench.add_argument("--no-bf16", action="store_true",
+                       help="with --training: leave out the bf16 autocast runs on CUDA")
     bench.add_argument("--process-steps", default="200000,2000000", metavar="N,N",
                        help="with --processes: the run lengths in steps (of 1 ms)")
     bench.add_argument("--process-repeats", type=int, default=3, metavar="R",
@@ -896,7 +909,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _device_option(command: argparse.ArgumentParser, what: str) -> None:
     command.add_argument("--device", default="auto", choices=DEVICES,
                          help=f"where to {what}: auto (CUDA when available, default), cpu or "
-                              f"cuda (one training process per GPU)")
+                              f"cuda (four training processes share each GPU)")
 
 
 def _failure(error: BaseException, command: str, debug: bool = False) -> tuple[int, str]:

@@ -84,11 +84,14 @@ class SequenceSet:
     def __len__(self) -> int:
         return self.x.shape[0]
 
-    def groups(self, batch_size: int, rng: np.random.Generator) -> list[torch.Tensor]:
-        """The trajectory indices in shuffled groups of at most batch_size, on the data's
-        device (one copy per call, none per group)."""
-        order = torch.as_tensor(rng.permutation(len(self)), device=self.x.device)
-        return list(order.split(batch_size))
+    def groups(self, batch_size: int, rng: np.random.Generator
+               ) -> list[tuple[np.ndarray, torch.Tensor]]:
+        """The trajectory indices in shuffled groups of at most batch_size, each on the host
+        and on the data's device (one copy per call, none per group)."""
+        order = rng.permutation(len(self))
+        on_device = torch.as_tensor(order, device=self.x.device)
+        return list(zip(np.array_split(order, range(batch_size, len(order), batch_size)),
+                        on_device.split(batch_size)))
 
 
 class WindowSampler:

@@ -1,9 +1,10 @@
 """Which torch device training runs on, and how many trainings share the machine.
 
-A network of the fast preset is small: on a GPU one training keeps its device busy, and
-several processes each starting CUDA on the same GPU only contend for it (and for its
-memory). So trainings side by side get one process per GPU there, one per core on the CPU
-(learning.workers); data collection and co-simulation use every core either way.
+A network of either preset is small: on an H200 one training kept the GPU busy 10 to 30 % of
+the time (flexff bench --training, docs/results/training), the rest going to the host's
+launches. So trainings side by side share each GPU, TRAININGS_PER_GPU processes of them
+(learning.workers), and take one process per core on the CPU; data collection and
+co-simulation use every core either way.
 """
 
 from __future__ import annotations

@@ -3,9 +3,9 @@ comparison an engineer would make, per axis.
 
 The loop's dataset is collected (learning.machine_collect), the linear model of its prior
 identified on the training trajectories (learning.linear_model), each model trained on features
-with the machine's identified friction widths
-(learning.machine_train, the models side by side in worker processes, one per core or GPU),
-exported and built into its feedforward FMU; then, on the loop's own
+with the machine's identified friction widths (learning.machine_train, the models side by side
+in worker processes, one per core or shared GPUs), exported and built into its feedforward
+FMU; then, on the loop's own
 reference (its sources), the loop runs under PID alone, with the identified model's
 feedforward, with each learned one, and iterative learning control finds the best
 feedforward for that one reference (the limit; learning.ilc). summary.json holds every run's
@@ -121,7 +121,7 @@ def train_models(data: MachineDataset, identified: LinearModel, out: Path,
                  models: Sequence[str], preset: str, workers: int | None, progress: bool,
                  features: MachineFeatures, **overrides: Any) -> dict[str, dict[str, Any]]:
     """Train and export each of `models` on `data` with the feature settings `features`
-    side by side in worker processes (one per core, or per GPU), the physics-guided one over
+    side by side in worker processes (one per core, or shared GPUs), the physics-guided one over
     `identified`, into `out`/runs/<kind> and `out`/models/<kind>.onnx; each one's metrics."""
     jobs = [_Training(kind, preset, overrides, data.path, out,
                       identified.to_dict() if uses_prior(kind) else None, features)

@@ -9,17 +9,12 @@ more only pay where the cores are free, and `threads` in the training configurat
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 import torch
 
-
-def granted_cores() -> int:
-    """The cores this process may run on (its CPU affinity), at least one."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, cores or 1)
+from flexff.cosim.executor import granted_cores
 
 
 def cpu_threads(requested: int = 0) -> int:

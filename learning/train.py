@@ -19,6 +19,7 @@ import copy
 import functools
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -28,7 +29,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from flexff.controllers.features import feature_names
@@ -73,6 +73,10 @@ from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.threads import torch_threads
 
 EpochReport = Callable[[dict[str, Any]], None]
+# trajectories run whole side by side in one pass of role_mse: a recurrent network's pass is
+# as long as the trajectory, so on a GPU, where a wider pass costs about the same, the
+# validation of every epoch runs the training trajectories in one pass instead of eight
+EVALUATION_GROUP = {"cpu": 8, "cuda": 64}
 MSE_UNITS = ("MSE of min-max scaled labels, Fx, Fy or i1..i3 (run.json label_names; the "
              "thesis's normalized units)")
 
@@ -378,11 +382,15 @@ def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
 def _recurrent_epoch(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
                      optimizer: torch.optim.Optimizer, rng: np.random.Generator,
                      epoch: int) -> float:
-    """One TBPTT pass: each group of trajectories chunk by chunk, the state carried on."""
+    """One TBPTT pass: each group of trajectories chunk by chunk, the state carried on.
+
+    Which chunks hold training samples, and how many, is read from a host copy of the roles,
+    and the loss is summed on the device: on a GPU no chunk waits for the one before."""
+    roles = data.role.cpu().numpy() == TRAIN
     groups = data.groups(config.batch_size, rng)
     chunks = range(0, data.x.shape[1], config.window)
-    total, count, k = 0.0, 0, 0
-    for group in groups:
+    total, count, k = torch.zeros((), device=data.x.device), 0, 0
+    for on_host, group in groups:
         x, y, role = data.x[group], data.y[group], data.role[group]
         state = None
         for start in chunks:
@@ -391,36 +399,39 @@ def _recurrent_epoch(network: SequenceNetwork, config: TrainConfig, data: Sequen
             part = slice(start, start + config.window)
             pred, state = network(x[:, part], state)
             state = tuple(s.detach() for s in state)
-            mask = role[:, part] == TRAIN
-            if mask.any():
-                loss = _step(optimizer, network, config, pred, y[:, part], mask)
-                total, count = total + loss * int(mask.sum()), count + int(mask.sum())
-    return total / count
+            samples = int(roles[on_host, part].sum())
+            if samples:
+                loss = _step(optimizer, network, config, pred, y[:, part], role[:, part] == TRAIN)
+                total, count = total + loss * samples, count + samples
+    return float(total) / count
 
 
 def _window_epoch(network: SequenceNetwork, config: TrainConfig, sampler: WindowSampler,
                   optimizer: torch.optim.Optimizer, rng: np.random.Generator,
                   epoch: int) -> float:
-    """One pass over random training windows, each with its history as the initial buffer."""
+    """One pass over random training windows, each with its history as the initial buffer;
+    the loss summed on the device (no batch waits for the one before)."""
     n_batches = math.ceil(len(sampler) / config.batch_size)
-    total, count = 0.0, 0
+    total = count = torch.zeros((), device=sampler.data.x.device)
     for k, (hist, x, y, mask) in enumerate(sampler.batches(config.batch_size, rng)):
         _set_learning_rate(optimizer, config, epoch + k / n_batches)
         pred, _ = network(x, (hist.transpose(1, 2),))
         loss = _step(optimizer, network, config, pred, y, mask)
-        total, count = total + loss * int(mask.sum()), count + int(mask.sum())
-    return total / count
+        samples = mask.sum()
+        total, count = total + loss * samples, count + samples
+    return float(total / count)
 
 
 def _step(optimizer: torch.optim.Optimizer, network: SequenceNetwork, config: TrainConfig,
-          pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
+          pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """One optimizer step on the masked MSE; the loss, detached, where it was computed."""
     loss = masked_mse(pred, target, mask)
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
     if config.grad_clip:
         torch.nn.utils.clip_grad_norm_(network.parameters(), config.grad_clip)
     optimizer.step()
-    return loss.item()
+    return loss.detach()
 
 
 def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -456,9 +467,11 @@ def learning_rate(config: TrainConfig, fraction: float) -> float:
 
 @torch.no_grad()
 def role_mse(network: SequenceNetwork, data: SequenceSet, role: int,
-             only: list[int] | None = None, batch: int = 8) -> float:
-    """MSE over the samples of `role`, each trajectory run whole from the zero state."""
+             only: list[int] | None = None) -> float:
+    """MSE over the samples of `role`, each trajectory run whole from the zero state, a
+    group of them per pass (EVALUATION_GROUP)."""
     network.eval()
+    batch = EVALUATION_GROUP["cuda" if data.x.is_cuda else "cpu"]
     indices = list(range(len(data))) if only is None else only
     total, count = 0.0, 0
     for k in range(0, len(indices), batch):
@@ -474,19 +487,27 @@ def role_mse(network: SequenceNetwork, data: SequenceSet, role: int,
 @contextmanager
 def reproducible(seed: int, threads: int = 0) -> Iterator[None]:
     """Seed torch, prefer deterministic kernels, set the CPU threads (learning.threads);
-    restore after."""
+    restore after.
+
+    The switch is torch's own, without `torch.use_deterministic_algorithms`' import of the
+    compiler's settings (1.8 s of a training's start, for a compiler flexff does not use).
+    cuBLAS is deterministic only with a fixed workspace, set before its first call."""
+    os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
     deterministic = torch.are_deterministic_algorithms_enabled()
+    warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
     torch.manual_seed(seed)
-    torch.use_deterministic_algorithms(True, warn_only=True)
+    torch._C._set_deterministic_algorithms(True, warn_only=True)
     try:
         with torch_threads(threads):
             yield
     finally:
-        torch.use_deterministic_algorithms(deterministic)
+        torch._C._set_deterministic_algorithms(deterministic, warn_only=warn_only)
 
 
 def plot_losses(history: dict[str, Any], path: Path, title: str) -> None:
     """Training and validation loss per epoch on a log scale, the kept epoch marked."""
+    from matplotlib.figure import Figure  # imported here: 0.4 s of every training's start
+
     figure = Figure(figsize=(6, 4), tight_layout=True)
     axes = figure.subplots()
     epochs = np.arange(1, len(history["train"]) + 1)

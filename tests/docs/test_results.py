@@ -168,7 +168,7 @@ def test_the_benchmarks_page_shows_the_bench(site):
 def test_pages_are_stamped(site):
     machines = [("machines", f"machines/{f.name}") for f in (RESULTS / "machines").iterdir()]
     for page, kind in (("thesis", "demo"), ("benchmarks", "bench"), ("benchmarks", "processes"),
-                       *machines):
+                       ("benchmarks", "training"), *machines):
         stamp = json.loads((RESULTS / kind / "stamp.json").read_text())
         text = (site / "results" / page / "index.html").read_text()
         assert stamp["commit"][:10] in text and stamp["date"] in text, page
@@ -261,3 +261,23 @@ def test_the_machines_page_shows_each_evaluation(site):
         for (axis, term, value, std), row in zip(rows, identified[1:]):
             assert row[:2] == [axis, term]
             assert _close(float(row[2]), value) and _close(float(row[3]), std)
+
+
+def test_the_benchmarks_page_shows_the_trainings(site):
+    bench = json.loads((RESULTS / "training" / "bench.json").read_text())
+    parser = _Tables()
+    parser.feed((site / "results" / "benchmarks" / "index.html").read_text())
+    tables = [t for t in parser.tables if t[0][:3] == ["model", "epochs", "CPU [s/epoch]"]]
+    assert len(tables) == len(bench["presets"])
+    for table, entries in zip(tables, bench["presets"].values()):
+        rows = {row[0]: row[1:] for row in table[1:]}
+        assert set(rows) == set(entries)
+        for kind, entry in entries.items():
+            epochs, cpu, cuda, speedup = rows[kind][:4]
+            assert int(epochs) == entry["epochs"]
+            for shown, device in ((cpu, "cpu"), (cuda, "cuda")):
+                value = entry.get(device, {}).get("epoch_s")
+                assert shown == "–" if value is None else _close(float(shown), value), kind
+            assert speedup == "–" if "speedup" not in entry else \
+                _close(float(speedup), entry["speedup"])
+

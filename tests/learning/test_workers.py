@@ -65,11 +65,12 @@ def test_training_on_a_dask_cluster_equals_training_here(data, tmp_path):
         assert all(torch.equal(weights[0][name], weights[1][name]) for name in weights[0])
 
 
-def test_on_cuda_the_trainings_take_one_process_per_gpu(monkeypatch):
+def test_on_cuda_the_trainings_share_each_gpu(monkeypatch):
     monkeypatch.setattr(flexff.learning.workers, "granted_cores", lambda: 16)
+    monkeypatch.setattr(flexff.learning.workers, "TRAININGS_PER_GPU", 3)
     assert worker_count(jobs=8, requested=None, gpus=0) == 8  # the CPU: one per core
     assert worker_count(jobs=30, requested=None, gpus=0) == 16
-    assert worker_count(jobs=8, requested=None, gpus=1) == 1  # one GPU: one process
-    assert worker_count(jobs=8, requested=None, gpus=2) == 2
-    assert worker_count(jobs=8, requested=4, gpus=1) == 1
-    assert worker_count(jobs=1, requested=None, gpus=2) == 1
+    assert worker_count(jobs=8, requested=None, gpus=1) == 3  # one GPU: three processes
+    assert worker_count(jobs=8, requested=None, gpus=2) == 6
+    assert worker_count(jobs=8, requested=1, gpus=1) == 1  # as asked
+    assert worker_count(jobs=2, requested=None, gpus=2) == 2  # at most one per job

@@ -1,0 +1,197 @@
+"""`flexff bench --training DATA`: how fast the networks train here, on each device.
+
+Each model kind of each preset trains a few epochs in a process of its own, with the settings
+`flexff evaluate --env ENV` gives it, on CUDA (where there is one) and on the CPU with every
+core. Per run: the seconds from the process's start to its first epoch (imports, CUDA, data
+preparation), the median seconds per epoch after the first, and on CUDA the GPU's busy share
+during the epochs and its peak memory. On CUDA the thesis preset also runs under bf16
+autocast (the mixed-precision candidate) and as several trainings sharing the GPU
+(learning.workers.TRAININGS_PER_GPU). The estimate of a whole evaluation's training
+multiplies each run's epochs and members by its seconds per epoch, and divides by the
+trainings that share the GPU. A run that fails is a figure too (its error); the others go on.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from contextlib import nullcontext
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from flexff.cosim.executor import granted_cores
+from flexff.fmu.errors import InputError
+
+# epochs per run on CUDA (the first is a warm-up, left out) and on the CPU (no warm-up to
+# speak of; an epoch of the thesis preset takes 7 to 23 s on 16 cores)
+EPOCHS = {"cuda": {"fast": 4, "thesis": 3}, "cpu": {"fast": 2, "thesis": 1}}
+SHARING_EPOCHS = 4  # epochs of each run when several share the GPU
+UTILISATION_S = 0.05  # how often the GPU's busy share is read during a run
+
+
+def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis"),
+                       models: tuple[str, ...] | None = None, bf16: bool = True,
+                       sharing: tuple[int, ...] = (1, 4),
+                       save: Callable[[dict[str, Any]], object] | None = None
+                       ) -> dict[str, Any]:
+    """Time the trainings of `presets` x `models` (default: all) on the dataset folder
+    `data` with the settings of the evaluation of its set (sim or hardware), on CUDA and the
+    CPU; on CUDA the thesis preset (the one meant for a GPU) with bf16 autocast too, and its
+    runs by `sharing` processes side by side; JSON-ready figures, also given to `save` as
+    they grow (nothing measured is lost when the bench is stopped)."""
+    import torch
+
+    from flexff.learning.dataset import load_dataset
+    from flexff.learning.evaluate import ENVIRONMENTS
+    from flexff.learning.models import NETWORKS
+
+    env = load_dataset(data).set
+    if env not in ENVIRONMENTS:
+        raise InputError(f"{data}: a {env!r} set; the training bench takes a set of "
+                         f"{' or '.join(ENVIRONMENTS)} (flexff data collect --set)")
+    environment = ENVIRONMENTS[env]
+    cuda = torch.cuda.is_available()
+    devices = ["cuda", "cpu"] if cuda else ["cpu"]
+    kinds = models or tuple(NETWORKS)
+    runs = [(preset, kind, device, precision) for preset in presets for kind in kinds
+            for device in devices
+            for precision in (("float32", "bf16") if bf16 and device == "cuda" and
+                              preset == "thesis" else ("float32",))]
+    figures: dict[str, Any] = {"data": str(data), "env": env, "cores": granted_cores(),
+                               "gpu": torch.cuda.get_device_name() if cuda else None,
+                               "torch": torch.__version__, "presets": {}}
+    with tempfile.TemporaryDirectory(prefix="flexff-bench-") as scratch:
+        for preset, kind, device, precision in tqdm(runs, desc="training bench", unit="run"):
+            overrides = environment.overrides(preset, kind)
+            epochs = EPOCHS[device][preset]
+            run = _timed_run(kind, preset, data, Path(scratch) / f"{preset}-{kind}-{device}",
+                             device, precision, epochs, overrides)
+            entry = figures["presets"].setdefault(preset, {}).setdefault(kind, {
+                "epochs": _preset_epochs(kind, preset, overrides),
+                "members": environment.members(preset, kind)})
+            entry[device if precision == "float32" else f"{device}_{precision}"] = run
+            if save is not None:
+                save(figures)
+        if cuda and len(sharing) > 1 and "thesis" in presets:
+            figures["sharing"] = _sharing(data, environment, kinds, sharing, Path(scratch))
+    for preset, entries in figures["presets"].items():
+        for entry in entries.values():
+            if "epoch_s" in entry.get("cuda", {}) and "epoch_s" in entry["cpu"]:
+                entry["speedup"] = entry["cpu"]["epoch_s"] / entry["cuda"]["epoch_s"]
+        figures.setdefault("estimate_s", {})[preset] = _estimate(
+            entries, figures.get("sharing") if preset == "thesis" else None)
+    return figures
+
+
+def _preset_epochs(kind: str, preset: str, overrides: dict[str, Any]) -> int:
+    from flexff.learning.presets import make_config
+
+    return make_config(kind, preset, **overrides).epochs
+
+
+def _estimate(entries: dict[str, Any], sharing: dict[str, Any] | None) -> dict[str, float]:
+    """Seconds of a whole evaluation's training: on the CPU, each run on its own cores; on
+    CUDA, one after another, and shared as the sharing figures measured."""
+    def total(device: str) -> float:
+        return float(sum(e["members"] * (e[device]["start_s"] + e["epochs"] * e[device]["epoch_s"])
+                         for e in entries.values()))
+
+    if not all("epoch_s" in e["cpu"] for e in entries.values()):
+        return {}
+    estimate = {"cpu_one_after_another": total("cpu")}
+    if all("epoch_s" in e.get("cuda", {}) for e in entries.values()):
+        estimate["cuda_one_after_another"] = total("cuda")
+        if sharing:
+            best = max(sharing["speedup"].values())
+            estimate["cuda_shared"] = total("cuda") / best
+    return estimate
+
+
+def _sharing(data: Path, environment: Any, kinds: tuple[str, ...], counts: tuple[int, ...],
+             scratch: Path) -> dict[str, Any]:
+    """The thesis preset's runs of `kinds`, SHARING_EPOCHS each, trained by each of
+    `counts` processes side by side on the one GPU: the wall time of each count and its
+    speedup over the first."""
+    from flexff.learning.workers import TrainJob, train_parallel
+
+    walls = {}
+    for count in counts:
+        jobs = [TrainJob(kind, "thesis", data, scratch / f"share{count}" / kind,
+                         {**environment.overrides("thesis", kind), "epochs": SHARING_EPOCHS})
+                for kind in kinds]
+        start = time.perf_counter()
+        train_parallel(jobs, workers=count, progress=False, device="cuda")
+        walls[str(count)] = time.perf_counter() - start
+    first = walls[str(counts[0])]
+    return {"runs": len(kinds), "epochs": SHARING_EPOCHS, "wall_s": walls,
+            "speedup": {count: first / wall for count, wall in walls.items()}}
+
+
+def _timed_run(kind: str, preset: str, data: Path, out: Path, device: str, precision: str,
+               epochs: int, overrides: dict[str, Any]) -> dict[str, Any]:
+    """One training in a fresh process; its start-up, seconds per epoch, GPU figures."""
+    request = {"kind": kind, "preset": preset, "data": str(data), "out": str(out),
+               "device": device, "precision": precision,
+               "overrides": {**overrides, "epochs": epochs,
+                             **({"threads": granted_cores()} if device == "cpu" else {})}}
+    spawned = time.time()
+    done = subprocess.run([sys.executable, "-m", "flexff.training_bench", json.dumps(request)],
+                          capture_output=True, text=True, check=False)
+    if done.returncode:  # kept as a figure: the other runs go on
+        return {"error": done.stderr.strip().splitlines()[-1] if done.stderr.strip() else
+                f"exit code {done.returncode}"}
+    child = json.loads(done.stdout.strip().splitlines()[-1])
+    seconds = child["seconds"]
+    timed = seconds[1:] or seconds
+    return {"start_s": child["first_epoch_start"] - spawned,
+            "epoch_s": statistics.median(timed), "epochs_timed": len(seconds),
+            **{k: child[k] for k in ("gpu_busy", "gpu_memory_gb", "val")}}
+
+
+def _child(request: dict[str, Any]) -> dict[str, Any]:
+    """In the bench's child process: train as asked; the epochs' timing and what it used."""
+    import torch
+
+    from flexff.learning.train import train
+
+    ends: list[float] = []
+    busy: list[tuple[float, int]] = []
+    stop = threading.Event()
+    cuda = request["device"] == "cuda"
+
+    def sample() -> None:
+        while not stop.wait(UTILISATION_S):
+            try:
+                busy.append((time.time(), torch.cuda.utilization()))
+            except Exception:  # no NVML here (nvidia-ml-py): no busy share
+                return
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    if cuda:
+        sampler.start()
+    autocast = torch.autocast("cuda", dtype=torch.bfloat16) \
+        if request["precision"] == "bf16" else nullcontext()
+    with autocast:
+        metrics = train(request["kind"], request["preset"], request["data"], request["out"],
+                        progress=False, on_epoch=lambda _: ends.append(time.time()),
+                        **request["overrides"])
+    stop.set()
+    seconds = metrics["history"]["seconds"]
+    first_start = ends[0] - seconds[0]
+    during = [share for when, share in busy if first_start <= when <= ends[-1]]
+    return {"first_epoch_start": first_start, "seconds": seconds,
+            "val": metrics["history"]["val"][-1],
+            "gpu_busy": statistics.mean(during) / 100 if during else None,
+            "gpu_memory_gb": torch.cuda.max_memory_allocated() / 1e9 if cuda else None}
+
+
+if __name__ == "__main__":
+    print(json.dumps(_child(json.loads(sys.argv[1]))), flush=True)

@@ -1,0 +1,47 @@
+"""flexff bench --training: one timed run in a process of its own, a failed run kept as its
+error, the estimate of a whole evaluation's training (the GPU figures themselves come from a
+GPU machine: docs/results/training)."""
+
+import pytest
+
+from flexff.learning.synthetic import synthetic_dataset
+from flexff.training_bench import _estimate, _timed_run
+
+pytestmark = pytest.mark.learn
+TINY = {"channels": 8, "levels": 2}
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return synthetic_dataset(tmp_path_factory.mktemp("tiny") / "data", n_train=3, n_test=1,
+                             duration=4.0, rate_hz=100.0, seed=3)
+
+
+def test_a_timed_run_gives_its_start_and_seconds_per_epoch(data, tmp_path):
+    run = _timed_run("tcn", "fast", data, tmp_path / "run", "cpu", "float32", 3, TINY)
+    assert run["epochs_timed"] == 3
+    assert 0 < run["epoch_s"] < run["start_s"] < 60  # the start holds imports and data
+    assert run["gpu_busy"] is None and run["gpu_memory_gb"] is None
+    assert run["val"] > 0
+
+
+def test_a_failed_run_is_kept_as_its_error(data, tmp_path):
+    run = _timed_run("tcn", "fast", data, tmp_path / "run", "cpu", "float32", 1,
+                     {**TINY, "channels": -1})
+    assert set(run) == {"error"} and run["error"]
+
+
+def test_the_estimate_adds_each_runs_epochs_and_members_and_divides_by_sharing():
+    entries = {"tcn": {"epochs": 100, "members": 1,
+                       "cpu": {"start_s": 5.0, "epoch_s": 2.0},
+                       "cuda": {"start_s": 3.0, "epoch_s": 0.1}},
+               "pgnn": {"epochs": 10, "members": 5,
+                        "cpu": {"start_s": 5.0, "epoch_s": 1.0},
+                        "cuda": {"start_s": 3.0, "epoch_s": 0.5}}}
+    sharing = {"speedup": {"1": 1.0, "4": 2.5}}
+    assert _estimate(entries, sharing) == {
+        "cpu_one_after_another": 205.0 + 5 * 15.0,
+        "cuda_one_after_another": 13.0 + 5 * 8.0,
+        "cuda_shared": (13.0 + 5 * 8.0) / 2.5}
+    entries["tcn"]["cuda"] = {"error": "out of memory"}
+    assert "cuda_one_after_another" not in _estimate(entries, sharing)
