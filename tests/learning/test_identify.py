@@ -151,6 +151,34 @@ def test_parameters_the_data_cannot_tell_stay_nominal():
     assert rows["k_e2"]["estimated"] and rows["tau_coulomb1"]["estimated"]
 
 
+def _estimated_besides_dampings(found) -> int:
+    """How many base parameters other than the flexure dampings the data told."""
+    return sum(row["estimated"] for row in found.rows() if not row["name"].startswith("d_"))
+
+
+@pytest.mark.parametrize("noise", [3e-4, 1e-3])
+def test_dampings_the_data_cannot_tell_apart_come_back_as_one_scale(noise):
+    """Three times the nominal flexure dampings and 7 mNm of Coulomb friction on slow circles
+    (the hardware stand-in's): one by one the dampings drop under the noise, or the few kept
+    take up the others' force; as one scale of their nominal values, fitted jointly with the
+    friction (which on a circle pushes as a damping does), they come back."""
+    true = replace(NOMINAL.scaled(d_s=3.0, d_e=3.0, d_w=3.0), tau_coulomb=HARDWARE.tau_coulomb)
+    t = np.arange(3000) / 100.0
+    circles = [(0.03, 4.0, 0.0), (0.045, 3.0, 1.0), (0.02, 5.0, 2.0)]
+    motion = np.concatenate([skew_sine_circle(t, 30.0, *c) for c in circles], axis=1)
+    pos, vel, acc = motion[0:2].T, motion[2:4].T, motion[4:6].T
+    forces = np.asarray(nominal_model().inverse_dynamics.map(len(pos))(
+        pos.T, vel.T, acc.T, np.array(true.vector()))).T
+    found = identify_motion(pos, vel, acc,
+                            forces + np.random.default_rng(1).normal(0.0, noise, forces.shape))
+    for row in found.rows():
+        if row["name"].startswith("d_"):
+            assert row["estimated"] and row["value"] == pytest.approx(3 * NOMINAL.d_s[0],
+                                                                      rel=0.02), row
+        elif row["name"].startswith("tau_coulomb"):
+            assert row["value"] == pytest.approx(7e-3, rel=0.01), row
+
+
 def test_a_dataset_is_identified_and_written(tmp_path):
     """On a synthetic set (nominal inverse dynamics plus the hardware variant's friction,
     filtered as training filters it): the nominal stiffnesses and the friction come back."""
@@ -191,7 +219,7 @@ def test_the_regressor_is_filtered_as_the_labels():
 
     filtered, plain = identified(True), identified(False)
     assert max(filtered.residual_rms) < 1e-5 and sum(filtered.estimated) >= 27
-    assert min(plain.residual_rms) > 1e-3 and sum(plain.estimated) < 20
+    assert min(plain.residual_rms) > 1e-3 and _estimated_besides_dampings(plain) < 14
     for chain in (1, 2, 3):
         assert filtered.parameters()[f"tau_coulomb{chain}"] == pytest.approx(7e-3, rel=1e-3)
 
@@ -304,9 +332,11 @@ def test_on_the_hardware_set(tmp_path):
     nominal flexure stiffnesses are 9 % off there, its motors have 7 mNm of Coulomb friction
     and their torque constants are 2 to 4 % low, which the force labels (the commanded force)
     do not know. Measured (the environment's 1 Hz corner): stiffnesses within 20 % (the
-    shoulder's and the wrist's are hard to tell apart over a 5 cm workspace), Coulomb 7.2 to
-    7.3 mNm, the inertias and dampings kept nominal (under the 1 % residual); the identified
-    feedforward's e2 ratio 218 / 163 against the nominal one's 7.0 / 7.9."""
+    shoulder's and the wrist's are hard to tell apart over a 5 cm workspace), Coulomb 7.1 to
+    7.2 mNm, the inertias kept nominal (under the 1 % residual), the flexure dampings as one
+    scale, 3.0 +- 0.13 times the nominal (the stand-in's: 3.0, the shoulders' 3.3 with the
+    motors' viscous friction); the identified feedforward's e2 ratio 218 / 163 against the
+    nominal one's 7.0 / 7.9 with nominal dampings."""
     data = collect("hardware", tmp_path / "data", progress=False)
     found = identify(data, preprocessing("hardware"))
     rows = {row["name"]: row for row in found.rows()}
@@ -316,6 +346,8 @@ def test_on_the_hardware_set(tmp_path):
             assert row["value"] == pytest.approx(true[name], rel=0.25), name
         elif name.startswith("tau_coulomb"):
             assert row["value"] == pytest.approx(true[name], rel=0.1), name
+        elif name.startswith("d_"):
+            assert row["value"] == pytest.approx(3 * NOMINAL.d_s[0], rel=0.15), name
         else:
             assert not row["estimated"], name
     assert max(found.residual_rms) < 0.5 * min(found.nominal_rms)
