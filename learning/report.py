@@ -26,6 +26,7 @@ from flexff.cosim.metrics import AXES, own_share, tracking_metrics
 from flexff.cosim.plots import MM, save_figure
 from flexff.cosim.recording import Recording, atomic_write
 from flexff.fmu.errors import InputError
+from flexff.learning.force_gap import band_names, force_gap
 from flexff.plant.signals import (
     FEEDBACK_FORCES,
     FEEDFORWARD_FORCES,
@@ -96,7 +97,8 @@ UNITS = {"rms": "m", "e2": "m/sqrt(s)", "einf": "m",
          **{f"{norm}_ratio": "PID alone / scenario" for norm in NORMS},
          PER_LIMIT: "scenario / ILC limit",
          OWN: "m/sqrt(s): sqrt(e2^2 - noise_floor^2), 0 where e2 <= noise_floor",
-         AT_FLOOR: "e2 <= noise_floor"}
+         AT_FLOOR: "e2 <= noise_floor",
+         "force_gap": "N and s: the ILC limit's force minus the scenario's (learning.force_gap)"}
 TRACKING = names(POSITION_REFERENCE, TRUE_POSITION)
 FORCES = names(FEEDBACK_FORCES, FEEDFORWARD_FORCES)
 
@@ -398,6 +400,36 @@ TRAINING_KEYS = ("seconds", "epochs", "best_epoch", "parameters", "test_mse", "v
                  "rigid_body_test_mse", "model_rate_hz", "threads", "members")
 
 
+def force_gaps(recordings: Mapping[str, Recording]) -> dict[str, dict[str, Any]]:
+    """Per feedforward scenario and axis, what its force misses against the LIMIT
+    scenario's (learning.force_gap); empty without a LIMIT."""
+    if LIMIT not in recordings:
+        return {}
+    ideal = recordings[LIMIT]
+    return {name: {axis: force_gap(rec.signals[signal], ideal.signals[signal], rec.step)
+                   for axis, signal in zip(AXES, names(FEEDFORWARD_FORCES))}
+            for name, rec in recordings.items() if name not in ("pid", LIMIT)}
+
+
+def force_gap_table(gaps: Mapping[str, Mapping[str, Any]]) -> str:
+    """force_gaps as Markdown: a row per scenario and axis."""
+    lines = ["Each feedforward's force against the ILC limit's (the best for this reference): "
+             "the difference's rms, its power per band, and the shift of the feedforward "
+             "that matches best (a shift that helps means a phase error, such as a missing "
+             "damping).", "",
+             "| scenario | axis | rms [mN] | " + " | ".join(band_names()) +
+             " | best shift [ms] | rms there [mN] |",
+             "|---|---|---:|" + "---:|" * len(band_names()) + "---:|---:|"]
+    for name, axes in gaps.items():
+        for axis, gap in axes.items():
+            shares = " | ".join(f"{100 * share:.0f} %" for share in gap["band_share"].values())
+            lines.append(f"| {SCENARIO_LABELS.get(name, name)} | {axis} | "
+                         f"{1e3 * gap['rms_n']:.3g} | {shares} | "
+                         f"{1e3 * gap['best_shift_s']:+.0f} | "
+                         f"{1e3 * gap['rms_at_best_shift_n']:.3g} |")
+    return "\n".join(lines) + "\n"
+
+
 def training_table(training: Mapping[str, Mapping[str, Any]]) -> str:
     """The cost and fit of each trained model as Markdown: wall time of its training, epochs
     run and the one kept (lowest validation loss), parameters and test MSE (an ensemble's:
@@ -424,7 +456,8 @@ def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
     encoders add, learning.ilc.noise_floor) adds the floor under every feedforward's e2 and
     each scenario's own share of e2 over it (own_share_table; without one, NO_FLOOR says so);
     `held_out` (learning.held_out.run_held_out) each scenario's ratios on the references of
-    the test split.
+    the test split. With a LIMIT scenario, each feedforward's force is compared with its
+    force (force_gaps).
 
     `recordings` maps a scenario name ("pid" required; see SCENARIO_LABELS) to the Recording
     of its run on the thesis's evaluation reference, in display order: x_ref, y_ref, x, y for
@@ -446,6 +479,9 @@ def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
             summary, noise_floor)
     else:
         table += "\n" + NO_FLOOR
+    if gaps := force_gaps(ordered):
+        content["force_gap"] = gaps
+        table += "\n" + force_gap_table(gaps)
     if held_out:
         content["held_out"] = dict(held_out)
         table += "\n" + held_out_table(held_out)

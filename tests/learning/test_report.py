@@ -21,6 +21,7 @@ from flexff.learning.report import (
     SCENARIO_LABELS,
     THESIS_TABLES,
     floor_note,
+    force_gap_table,
     held_out_table,
     markdown_table,
     own_share_table,
@@ -238,7 +239,9 @@ def test_the_noise_floor_goes_into_the_summary_and_under_the_table(tmp_path):
     assert json.loads((tmp_path / "summary.json").read_text())["noise_floor"] == floor
     table = (tmp_path / "table.md").read_text(encoding="utf-8")
     assert table == markdown_table(content["scenarios"], "hardware") + "\n" + floor_note(
-        content["scenarios"], floor) + "\n" + own_share_table(content["scenarios"], floor)
+        content["scenarios"], floor) + "\n" + own_share_table(content["scenarios"], floor) + \
+        "\n" + force_gap_table(content["force_gap"])
+    assert set(content["force_gap"]) == set(recordings) - {"pid", "limit"}
     assert f"e2 x, y = {floor['x']:.3g}, {floor['y']:.3g} m/√s" in table
     assert "the ILC limit's is 2x / 2x of it." in table
     assert "ILC limit" not in floor_note(summarize({"pid": limit}), floor)
