@@ -8,7 +8,8 @@ during the epochs and its peak memory. On CUDA the thesis preset also runs under
 autocast (the mixed-precision candidate) and as several trainings sharing the GPU
 (learning.workers.TRAININGS_PER_GPU). The estimate of a whole evaluation's training
 multiplies each run's epochs and members by its seconds per epoch, and divides by the
-trainings that share the GPU. A run that fails is a figure too (its error); the others go on.
+trainings that share the GPU. A run that fails is a figure too (its error); the others go on,
+and when every one fails the bench stops with the first one's error.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from typing import Any
 from tqdm import tqdm
 
 from flexff.cosim.executor import granted_cores
-from flexff.fmu.errors import InputError
+from flexff.fmu.errors import InputError, RunError
 
 # epochs per run on CUDA (the first is a warm-up, left out) and on the CPU (no warm-up to
 # speak of; an epoch of the thesis preset takes 7 to 23 s on 16 cores)
@@ -80,6 +81,10 @@ def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis")
             entry[device if precision == "float32" else f"{device}_{precision}"] = run
             if save is not None:
                 save(figures)
+        failed = [run[device].get("error") for entries in figures["presets"].values()
+                  for run in entries.values() for device in devices]
+        if all(failed):
+            raise InputError(f"{data}: no training ran here: {failed[0]}")
         if cuda and len(sharing) > 1 and "thesis" in presets:
             figures["sharing"] = _sharing(data, environment, kinds, sharing, Path(scratch))
     for preset, entries in figures["presets"].items():
@@ -149,6 +154,8 @@ def _timed_run(kind: str, preset: str, data: Path, out: Path, device: str, preci
         return {"error": done.stderr.strip().splitlines()[-1] if done.stderr.strip() else
                 f"exit code {done.returncode}"}
     child = json.loads(done.stdout.strip().splitlines()[-1])
+    if "error" in child:
+        return {"error": child["error"]}
     seconds = child["seconds"]
     timed = seconds[1:] or seconds
     return {"start_s": child["first_epoch_start"] - spawned,
@@ -194,4 +201,8 @@ def _child(request: dict[str, Any]) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    print(json.dumps(_child(json.loads(sys.argv[1]))), flush=True)
+    try:
+        outcome = _child(json.loads(sys.argv[1]))
+    except (InputError, RunError) as error:  # what the run says is wrong, in its words
+        outcome = {"error": str(error)}
+    print(json.dumps(outcome), flush=True)

@@ -45,3 +45,14 @@ def test_the_estimate_adds_each_runs_epochs_and_members_and_divides_by_sharing()
         "cuda_shared": (13.0 + 5 * 8.0) / 2.5}
     entries["tcn"]["cuda"] = {"error": "out of memory"}
     assert "cuda_one_after_another" not in _estimate(entries, sharing)
+
+
+def test_a_set_no_training_can_run_on_is_one_line_and_exit_code_2(tmp_path, capsys):
+    from flexff.cli import main
+
+    tiny = synthetic_dataset(tmp_path / "tiny", n_train=2, n_test=1, duration=2.0,
+                             rate_hz=100.0)  # too short to hold out validation windows
+    assert main(["bench", "--training", str(tiny), "-o", str(tmp_path / "bench.json")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[-1].startswith(f"flexff: error: {tiny}: no training ran here: ")
+    assert "too few to hold out" in lines[-1]
