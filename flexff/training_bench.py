@@ -72,13 +72,13 @@ def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis")
     with tempfile.TemporaryDirectory(prefix="flexff-bench-") as scratch:
         for preset, kind, device, precision in tqdm(runs, desc="training bench", unit="run"):
             overrides = environment.overrides(preset, kind)
-            epochs = EPOCHS[device][preset]
-            run = _timed_run(kind, preset, data, Path(scratch) / f"{preset}-{kind}-{device}",
-                             device, precision, epochs, overrides)
+            variant = device if precision == "float32" else f"{device}_{precision}"
+            run = _timed_run(kind, preset, data, Path(scratch) / f"{preset}-{kind}-{variant}",
+                             device, precision, EPOCHS[device][preset], overrides)
             entry = figures["presets"].setdefault(preset, {}).setdefault(kind, {
                 "epochs": _preset_epochs(kind, preset, overrides),
                 "members": environment.members(preset, kind)})
-            entry[device if precision == "float32" else f"{device}_{precision}"] = run
+            entry[variant] = run
             if save is not None:
                 save(figures)
         failed = [run[device].get("error") for entries in figures["presets"].values()
