@@ -197,7 +197,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     training = {name: m for name, job in jobs.items() if (m := _finished(job))}
     if todo := [name for name in jobs if name not in training]:
         where = f"on {scheduler}" if scheduler else \
-            f"{f'{TRAININGS_PER_GPU} processes per GPU' if on_gpu else 'one process per core'}"
+            f"{TRAININGS_PER_GPU} processes per GPU" if on_gpu else "one process per core"
         say(f"training {', '.join(todo)} ({preset} preset), {where}")
     training.update(train_parallel([jobs[name] for name in todo], progress=progress,
                                    scheduler=scheduler, device=device))

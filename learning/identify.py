@@ -298,9 +298,9 @@ def _least_squares(regressor_at: Callable[[float], np.ndarray],
 
     # min over a generator holds two regressors (2n x 41) at most, not one per width
     _, width, full = min((fit(width) for width in WIDTHS), key=lambda f: f[0])
+    regressor_base, nominal = full[:, independent], base.of(_nominal_theta())
     beta, free, residual, covariance = _common_damping(
-        full[:, independent], labels, base.of(_nominal_theta()),
-        *_essential(full[:, independent], labels, base.of(_nominal_theta())))
+        regressor_base, labels, nominal, *_essential(regressor_base, labels, nominal))
     std = np.zeros(len(beta))
     std[free] = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     return Identification(
@@ -367,8 +367,9 @@ def _common_damping(w: np.ndarray, labels: np.ndarray, nominal: np.ndarray, beta
     kept = ~free & ~damping
     shape = w[:, damping] @ nominal[damping]  # the nominal dampings' force
     x = np.column_stack([w[:, estimated], shape])
-    solution, *_ = np.linalg.lstsq(x, labels - w[:, kept] @ nominal[kept], rcond=None)
-    joint_residual = labels - w[:, kept] @ nominal[kept] - x @ solution
+    target = labels - w[:, kept] @ nominal[kept]  # what the kept ones leave
+    solution, *_ = np.linalg.lstsq(x, target, rcond=None)
+    joint_residual = target - x @ solution
     variance = float(joint_residual @ joint_residual) / max(len(labels) - x.shape[1], 1)
     joint = variance * np.linalg.pinv(x.T @ x)
     scale, spread = solution[-1], float(np.sqrt(joint[-1, -1]))
