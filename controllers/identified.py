@@ -23,11 +23,12 @@ FORMAT = "flexff-identified-parameters"
 VERSION = 1
 # the fields whose flat parameters the identification estimates, in the order in which they
 # lead a base parameter (learning.identify): the inertias, flexure stiffness and damping, and
-# the motor friction; the geometry and the centres of mass stay nominal
+# the motor friction; then the motors' torque constants relative to one another; the geometry
+# and the centres of mass stay nominal
 RIGID_BODY_FIELDS = ("j_up", "m_up", "j_rotor", "j_low", "m_low", "m_ee", "j_ee",
                      "k_s", "k_e", "k_w", "d_s", "d_e", "d_w")
 FRICTION_FIELDS = ("tau_coulomb", "b_viscous")
-IDENTIFIED_FIELDS = (*RIGID_BODY_FIELDS, *FRICTION_FIELDS, "w_stribeck")
+IDENTIFIED_FIELDS = (*RIGID_BODY_FIELDS, *FRICTION_FIELDS, "w_stribeck", "k_t")
 REDO = "write it again with flexff identify DATA -o DIR"
 
 

@@ -522,7 +522,7 @@ def _export(args: argparse.Namespace) -> int:
 def _identify(args: argparse.Namespace) -> int:
     from flexff.cosim.run import output_folder
     from flexff.learning.evaluate import preprocessing
-    from flexff.learning.identify import identify, write_identification
+    from flexff.learning.identify import identify, relative_gains, write_identification
     from flexff.learning.machine_dataset import is_machine_dataset
 
     if is_machine_dataset(args.data):
@@ -546,6 +546,8 @@ def _identify(args: argparse.Namespace) -> int:
         print(f"{row['base']:<{width}} {row['value']:12.5g} {std}  {row['unit']}")
     print(f"motor friction tanh width w_stribeck: {identification.w_stribeck:g} rad/s; "
           f"{identification.samples} samples")
+    relative = " / ".join(f"{k:.4f}" for k in relative_gains(identification.gains))
+    print(f"torque constants relative to one another (motors 1 / 2 / 3): {relative}")
     for label, (x, y) in (("residual", identification.residual_rms),
                           ("nominal model's error", identification.nominal_rms),
                           ("forces", identification.label_rms)):
@@ -559,18 +561,22 @@ def _evaluate(args: argparse.Namespace) -> int:
     from flexff.cosim.run import load_run_config, output_folder
     from flexff.learning.evaluate import evaluate
     from flexff.learning.loop import is_manipulator_loop
+    from flexff.learning.machine_dataset import is_machine_dataset
 
     loop = None if args.config is None else load_run_config(args.config)
+    machine = loop is not None and not is_manipulator_loop(loop)
+    logs = loop is None and args.data is not None and is_machine_dataset(args.data)
+    if (machine or logs) and (args.currents or args.ilc_labels):
+        raise InputError("--currents and --ilc-labels are for the manipulator's environments: "
+                         f"leave them out for {'a machine' if machine else 'imported logs'}")
     output_folder(args.output)
-    if loop is not None and not is_manipulator_loop(loop):
+    if machine:
         return _evaluate_machine(args, loop)
-    if loop is None and args.data is not None:
-        from flexff.learning.machine_dataset import is_machine_dataset
-
-        if is_machine_dataset(args.data):
-            return _evaluate_logs(args)
+    if logs:
+        return _evaluate_logs(args)
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
-             scheduler=args.scheduler, currents=args.currents, device=args.device)
+             scheduler=args.scheduler, currents=args.currents, device=args.device,
+             ilc_labels=args.ilc_labels)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
           f"forces.png, the .onnx models, ilc/ for the limit, held-out/ for the test split's "
@@ -874,6 +880,10 @@ def build_parser() -> argparse.ArgumentParser:
                             choices=MODELS,
                             help="also the current-level model of these kinds: labels i1..i3, "
                                  "fed forward after the control allocation")
+    evaluation.add_argument("--ilc-labels", nargs="+", default=[], metavar="KIND",
+                            choices=MODELS,
+                            help="also these kinds trained on the force iterative learning "
+                                 "control learns on each training reference (2 trials each)")
     evaluation.add_argument("--data", help="a collected dataset folder to use; a machine's "
                                            "imported logs alone: each model's force "
                                            "prediction on the test logs")

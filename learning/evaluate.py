@@ -35,6 +35,8 @@ from flexff.learning.features import FeatureConfig
 from flexff.learning.held_out import BASE, FOLDER, references_held_out, run_held_out
 from flexff.learning.identify import REPORT, identified_on, identify, write_identification
 from flexff.learning.ilc import ITERATIONS, NOISE_FLOOR, RESULT, ilc
+from flexff.learning.ilc_labels import PREPROCESSING as ILC_PREPROCESSING
+from flexff.learning.ilc_labels import ilc_labelled_set
 from flexff.learning.loop import (
     default_loop,
     on_reference,
@@ -118,6 +120,7 @@ ENVIRONMENTS = {
 }
 MODELS = tuple(NETWORKS)
 IDENTIFIED = "identified"  # the scenario of the rigid-body feedforward with identified parameters
+IDENTIFIED_ILC = "identified-ilc"  # ... identified on the ILC-labelled set (learning.ilc_labels)
 
 
 def scenario_config(env: str, name: str, model: Path | None = None, mode: str = "step",
@@ -125,9 +128,9 @@ def scenario_config(env: str, name: str, model: Path | None = None, mode: str = 
                     reference: Mapping[str, Any] | None = None) -> RunConfig:
     """The environment's evaluation reference (or the [reference] table `reference`) on `loop`
     (default: its plant under PID), with the feedforward of scenario `name`: "pid" (none),
-    "rigid-body", "identified" (the rigid-body one with the parameters of the file `model`,
-    learning.identify), LIMIT (the force table `table` that learning.ilc wrote), or a learned
-    model (the ONNX file `model`); every signal recorded."""
+    "rigid-body", "identified" or "identified-ilc" (the rigid-body one with the parameters of
+    the file `model`, learning.identify), LIMIT (the force table `table` that learning.ilc
+    wrote), or a learned model (the ONNX file `model`); every signal recorded."""
     environment = ENVIRONMENTS[env]
     base = loop or default_loop(environment.plant)
     if name == LIMIT:
@@ -138,7 +141,7 @@ def scenario_config(env: str, name: str, model: Path | None = None, mode: str = 
         builtin, options = None, dict[str, Any]()
         if name == "rigid-body":
             builtin = "rigid-body-feedforward"
-        elif name == IDENTIFIED:
+        elif name in (IDENTIFIED, IDENTIFIED_ILC):
             if model is None:
                 raise InputError(f"scenario {name!r} needs a file of identified parameters")
             builtin, options = "rigid-body-feedforward", {"identified": Path(model).resolve()}
@@ -158,19 +161,22 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
              progress: bool = True, scheduler: str | None = None,
              ilc_iterations: int = ITERATIONS, currents: Sequence[str] = (),
-             device: str = "auto") -> dict[str, Any]:
+             device: str = "auto", ilc_labels: Sequence[str] = ()) -> dict[str, Any]:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
     collects and evaluates on that run configuration instead of the environment's plant;
     `scheduler` collects and trains on that Dask cluster (learning.workers); `ilc_iterations`
     are the learning trials of the limit (learning.ilc); `currents` adds the current-level
     model of each kind named (scenario KIND-currents, the same settings with labels =
-    "currents", learning.features); `device` ('auto', 'cpu', 'cuda') is where the networks
-    train (learning.devices), checked before any work."""
+    "currents", learning.features); `ilc_labels` adds the model of each kind named trained on
+    the force ILC learns on each training reference (scenario KIND-ilc, on the set
+    learning.ilc_labels writes beside the collected one) and the rigid-body model identified
+    there (IDENTIFIED_ILC); `device` ('auto', 'cpu', 'cuda') is
+    where the networks train (learning.devices), checked before any work."""
     on_gpu = bool(training_gpus(pick_device(device)))
     if env not in ENVIRONMENTS:
         raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
-    for kind in (*models, *currents):
+    for kind in (*models, *currents, *ilc_labels):
         check_kind(kind)
     out = Path(out)
     environment = ENVIRONMENTS[env]
@@ -187,12 +193,20 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         data = collect(set_name, out / f"data-{set_name}", scheduler=scheduler,
                        config=None if loop is None else with_feedforward(loop))
     extra = {"epochs": epochs} if epochs else {}
-    levels: list[tuple[str, str, dict[str, Any]]] = [(kind, kind, {}) for kind in models] + [
-        (f"{kind}-currents", kind, {"labels": "currents"}) for kind in currents]
+    levels: list[tuple[str, str, dict[str, Any], Path]] = [
+        *((kind, kind, {}, Path(data)) for kind in models),
+        *((f"{kind}-currents", kind, {"labels": "currents"}, Path(data)) for kind in currents)]
+    labelled = None
+    if ilc_labels:
+        labelled = ilc_labelled_set(data, out / f"data-{set_name}-ilc",
+                                    loop or default_loop(environment.plant), progress=progress,
+                                    say=say)
+        levels += [(f"{kind}-ilc", kind, ILC_PREPROCESSING, labelled) for kind in ilc_labels]
     groups = {name: _member_jobs(kind, preset, {**environment.overrides(preset, kind), **extra,
                                                 **labels},
-                                 environment.members(preset, kind), Path(data), out / "runs", name)
-              for name, kind, labels in levels}  # scenario -> its training runs
+                                 environment.members(preset, kind), trained_on, out / "runs",
+                                 name)
+              for name, kind, labels, trained_on in levels}  # scenario -> its training runs
     jobs = {job.name: job for group in groups.values() for job in group}
     training = {name: m for name, job in jobs.items() if (m := _finished(job))}
     if todo := [name for name in jobs if name not in training]:
@@ -208,12 +222,16 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         say(f"{kind}: test MSE {metrics['test_mse']:.3g} ({metrics['parameters']} parameters, "
             f"{metrics['epochs']} epochs in {metrics['seconds']:.0f} s) -> {onnx_files[kind]}")
     files: dict[str, Path] = {**onnx_files,
-                              IDENTIFIED: _identified(Path(data), preset, env, out, say)}
+                              IDENTIFIED: _identified(Path(data), features, out / IDENTIFIED, say)}
+    if labelled is not None:  # the identified model too, on the ILC labels
+        files[IDENTIFIED_ILC] = _identified(labelled, replace(features, **ILC_PREPROCESSING),
+                                            out / IDENTIFIED_ILC, say)
     say(f"iterative learning control on the evaluation reference into {out / 'ilc'} (the limit)")
     limit = ilc(scenario_config(env, "pid", loop=loop), out / "ilc", ilc_iterations,
                 progress=progress, say=say)
     recordings: dict[str, Recording] = {}
-    feedforwards = [BASE, "rigid-body", IDENTIFIED, *groups]  # each on any reference
+    feedforwards = [BASE, "rigid-body", *(n for n in (IDENTIFIED, IDENTIFIED_ILC) if n in files),
+                    *groups]  # each on any reference
     for name in [*feedforwards, LIMIT]:
         folder = out / "cosim" / name
         metrics = run_config(scenario_config(env, name, files.get(name), loop=loop,
@@ -252,13 +270,12 @@ def preprocessing(env: str, preset: str = "fast") -> FeatureConfig:
     return make_config("pgnn", preset, **ENVIRONMENTS[env].overrides(preset, "pgnn")).features
 
 
-def _identified(data: Path, preset: str, env: str, out: Path,
+def _identified(data: Path, features: FeatureConfig, folder: Path,
                 say: Callable[[str], None]) -> Path:
-    """The rigid-body parameters identified on the training set `data`, preprocessed as the
-    networks are, in out/identified/identified.json (an identification of the same data and
-    preprocessing there is reused)."""
-    features = preprocessing(env, preset)
-    path = out / IDENTIFIED / REPORT
+    """The rigid-body parameters identified on the training set `data`, preprocessed by
+    `features` as the networks are, in folder/identified.json (an identification of the same
+    data and preprocessing there is reused)."""
+    path = folder / REPORT
     wanted = identified_on(load_dataset(data), features)
     try:
         if json.loads(path.read_text())["data"] == wanted:
@@ -268,8 +285,8 @@ def _identified(data: Path, preset: str, env: str, out: Path,
     say(f"identifying the rigid-body parameters on {data}")
     identification = identify(data, features)
     rms = identification.residual_rms
-    say(f"{IDENTIFIED}: residual ({rms[0]:.3g}, {rms[1]:.3g}) N rms -> {path}")
-    return write_identification(identification, out / IDENTIFIED)
+    say(f"{folder.name}: residual ({rms[0]:.3g}, {rms[1]:.3g}) N rms -> {path}")
+    return write_identification(identification, folder)
 
 
 def _member_jobs(kind: str, preset: str, overrides: dict[str, Any], members: int, data: Path,

@@ -4,7 +4,8 @@ a learned feedforward.
 The inverse dynamics with motor friction are linear in 41 parameters: F = W(pos, vel, acc)
 theta. QR of the regressor's columns (STRUCTURE_SAMPLES, RANK_TOLERANCE) finds the identifiable
 base parameters; ordinary least squares fits them once per tanh width (WIDTHS), with standard
-uncertainties, the flexure dampings as one common scale where they cannot be told apart. The
+uncertainties, the flexure dampings as one common scale where they cannot be told apart, and
+jointly the motors' torque constants relative to one another (`gain_columns`). The
 deployed parameter vector is the physical one nearest the nominal with exactly those base
 parameters, or, where none exists, the nearest in force (bounded least squares), and the
 report says by how much it differs.
@@ -45,6 +46,7 @@ from flexff.plant.parameters import NOMINAL
 STRUCTURE_SAMPLES = 500  # random workspace samples that reveal the base parameters
 RANK_TOLERANCE = 1e-8  # |R_kk| below this (columns of unit norm): a dependent column
 WIDTHS = (1e-3, 3e-3, 1e-2, 3e-2, 1e-1)  # candidate tanh widths w_stribeck [rad/s]
+GAIN_PASSES = 3  # fits with the torque constants' columns at the last fit's force
 MAX_SAMPLES = 100_000  # more are taken evenly spaced: 29 base parameters need no more
 REPORT = "identified.json"
 
@@ -58,14 +60,15 @@ def linear_names() -> tuple[str, ...]:
 @functools.cache
 def _regressor_function(columns: tuple[int, ...]) -> ca.Function:
     """(pos, vel, acc, w_stribeck) -> vec(dF/dtheta[columns]) (2 x len(columns), flattened),
-    the other parameters nominal; the force is linear in theta, so this is its theta part."""
+    F the force the motors must give (plant.model's `required_force`), the other parameters
+    nominal; F is linear in theta, so this is its theta part."""
     model = nominal_model()
     names = NOMINAL.names()
     linear = linear_names()
     theta = ca.vertcat(*[model.p[names.index(linear[k])] for k in columns])
     width = model.p[names.index("w_stribeck")]
     pos, vel, acc = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2), ca.SX.sym("acc", 2)
-    jacobian = ca.jacobian(model.inverse_dynamics(pos, vel, acc, model.p), theta)
+    jacobian = ca.jacobian(model.required_force(pos, vel, acc, model.p), theta)
     fixed = [n for n in names if n not in (*linear, "w_stribeck")]
     values = dict(zip(names, model.parameter_values()))
     jacobian = ca.substitute(jacobian, ca.vertcat(*[model.p[names.index(n)] for n in fixed]),
@@ -113,6 +116,45 @@ def _by_width(rows: Callable[[float, tuple[int, ...]], np.ndarray]
         full[:, list(varying)] = rows(width, varying)
         return full
     return at
+
+
+@functools.cache
+def _gain_function() -> ca.Function:
+    """(pos, F) -> vec(dF_commanded / d(g1, g2)) (2 x 2, flattened) at the nominal
+    parameters and commanded force F: the change of the force to command (plant.model's
+    `commanded`) per relative change g of motor 1's and motor 2's torque constants, motor 3's
+    changing by -(g1 + g2)."""
+    model = nominal_model()
+    names = NOMINAL.names()
+    constants = [model.p[names.index(n)] for n in NOMINAL.flat_values("k_t")]
+    pos, force = ca.SX.sym("pos", 2), ca.SX.sym("F", 2)
+    jacobian = ca.jacobian(model.commanded(pos, force, model.p), ca.vertcat(*constants))
+    jacobian = ca.substitute(jacobian, model.p, ca.DM(model.parameter_values()))
+    relative = jacobian @ ca.diag(ca.DM(NOMINAL.k_t))
+    columns = ca.horzcat(relative[:, 0] - relative[:, 2], relative[:, 1] - relative[:, 2])
+    return ca.Function("gain_columns", [pos, force], [ca.vec(columns)], ["pos", "F"], ["G"])
+
+
+def gain_columns(pos: np.ndarray, forces: np.ndarray) -> np.ndarray:
+    """The regressor's columns (2n, 2) of the motors' relative torque constants at n samples
+    of position and commanded force (n, 2 each), rows as `regressor`'s.
+
+    The controller shares a force among the motors by their nominal torque constants; a
+    motor a few percent weaker gives a few percent less of its share, which depends on the
+    position. The force the motors give is linear in the constants at a given commanded
+    force, so with G taken at the commanded force (the labels) F_commanded = W theta + G g
+    holds exactly. The changes' sum is fixed at zero: a change of all three alike scales
+    every force, and so is one of the inertias and frictions. On the
+    hardware stand-in (torque constants 3, 2 and 4 % low) the ILC forces of its training
+    references less the true rigid-body model's left 11 / 16 mN rms; these columns took that
+    to 2.5 / 2.6 mN, with changes of -2.8, -1.8 and -3.7 %."""
+    values = evaluate_samples(_gain_function(), pos, forces)
+    return values.reshape(len(pos), 2, 2).transpose(0, 2, 1).reshape(2 * len(pos), 2)
+
+
+def relative_gains(changes: np.ndarray) -> np.ndarray:
+    """The three motors' torque constants over the nominal ones from the changes (g1, g2)."""
+    return 1.0 + np.array([changes[0], changes[1], -changes[0] - changes[1]])
 
 
 @dataclass(frozen=True)
@@ -228,6 +270,9 @@ class Identification:
     samples: int
     metric: np.ndarray  # R of the QR of the base regressor / sqrt(rows): |metric @ d_beta|
     # is the rms force (both axes) that a change d_beta of the base parameters makes
+    gains: np.ndarray = field(default_factory=lambda: np.zeros(2))  # changes (g1, g2) of the
+    # motors' torque constants (gain_columns; 0 where not estimated)
+    gains_std: np.ndarray = field(default_factory=lambda: np.zeros(2))
     data: Mapping[str, Any] = field(default_factory=dict)  # what it was identified on
 
     def parameters(self) -> dict[str, float]:
@@ -235,7 +280,9 @@ class Identification:
         identified base parameters, or, where those are not physical, the physical ones
         nearest to them (BaseParameters.physical)."""
         theta = base_parameters().physical(self.values, _nominal_theta(), self.metric)
-        return {**dict(zip(linear_names(), theta.tolist())), "w_stribeck": self.w_stribeck}
+        constants = np.asarray(NOMINAL.k_t) * relative_gains(self.gains)
+        return {**dict(zip(linear_names(), theta.tolist())), "w_stribeck": self.w_stribeck,
+                **dict(zip(NOMINAL.flat_values("k_t"), constants.tolist()))}
 
     def rows(self) -> list[dict[str, Any]]:
         """One row per base parameter: its formula, unit, value, standard uncertainty."""
@@ -261,6 +308,8 @@ class Identification:
         deployable parameters)."""
         return {"data": dict(self.data), "base_parameters": self.rows(),
                 "w_stribeck": self.w_stribeck,
+                "torque_constants_relative": relative_gains(self.gains).tolist(),
+                "torque_constant_changes_std": self.gains_std.tolist(),  # of g1, g2
                 "samples": self.samples,
                 "residual_rms_n": dict(zip("xy", self.residual_rms)),
                 "label_rms_n": dict(zip("xy", self.label_rms)),
@@ -281,16 +330,21 @@ def identify_motion(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,
         raise InputError(f"{len(pos)} samples cannot determine {len(linear_names())} "
                          f"parameters: give more data")
     return _least_squares(_by_width(lambda width, columns: regressor(pos, vel, acc, width,
-                                                                    columns)), forces)
+                                                                    columns)), forces,
+                          lambda force: gain_columns(pos, force))
 
 
-def _least_squares(regressor_at: Callable[[float], np.ndarray],
-                   forces: np.ndarray) -> Identification:
+def _least_squares(regressor_at: Callable[[float], np.ndarray], forces: np.ndarray,
+                   gains_at: Callable[[np.ndarray], np.ndarray]) -> Identification:
     """identify_motion on the regressor `regressor_at(width)` (2n, 41) of n samples whose
-    forces (n, 2) are given."""
+    forces (n, 2) are given, with the torque constants' columns `gains_at(force)` (2n, 2) at
+    the model's force, GAIN_PASSES times: taken at the labels, whose noise they would share,
+    they explained the noise (hardware stand-in's collected set: motor 2 12 % strong, its
+    true 1 %)."""
     base = base_parameters()
     labels = np.asarray(forces, dtype=float).reshape(-1)
     independent = list(base.independent)
+    count = len(independent)
 
     def fit(width: float) -> tuple[float, float, np.ndarray]:
         w = regressor_at(width)
@@ -298,16 +352,22 @@ def _least_squares(regressor_at: Callable[[float], np.ndarray],
 
     # min over a generator holds two regressors (2n x 41) at most, not one per width
     _, width, full = min((fit(width) for width in WIDTHS), key=lambda f: f[0])
-    regressor_base, nominal = full[:, independent], base.of(_nominal_theta())
-    beta, free, residual, covariance = _common_damping(
-        regressor_base, labels, nominal, *_essential(regressor_base, labels, nominal))
+    rigid = full[:, independent]
+    nominal = np.concatenate([base.of(_nominal_theta()), np.zeros(2)])
+    model = rigid @ np.linalg.lstsq(rigid, labels, rcond=None)[0]
+    for _ in range(GAIN_PASSES):
+        columns = np.hstack([rigid, gains_at(model.reshape(-1, 2))])
+        beta, free, residual, covariance = _common_damping(
+            columns, labels, nominal, *_essential(columns, labels, nominal))
+        model = labels - residual
     std = np.zeros(len(beta))
     std[free] = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     return Identification(
-        values=beta, std=std, estimated=tuple(bool(k) for k in free), w_stribeck=width,
-        residual_rms=_axis_rms(residual), label_rms=_axis_rms(labels),
+        values=beta[:count], std=std[:count], estimated=tuple(bool(k) for k in free[:count]),
+        w_stribeck=width, residual_rms=_axis_rms(residual), label_rms=_axis_rms(labels),
         nominal_rms=_axis_rms(labels - full @ _nominal_theta()), samples=len(labels) // 2,
-        metric=np.linalg.qr(full[:, independent], mode="r") / np.sqrt(len(labels)))
+        metric=np.linalg.qr(rigid, mode="r") / np.sqrt(len(labels)),
+        gains=beta[count:], gains_std=std[count:])
 
 
 def _residual_norm(w: np.ndarray, labels: np.ndarray) -> float:
@@ -360,7 +420,9 @@ def _common_damping(w: np.ndarray, labels: np.ndarray, nominal: np.ndarray, beta
     the scale came out 1.35 +- 0.05, jointly 3.0 +- 0.13, the Coulomb torques 7.2 mNm instead
     of 7.3 (the stand-in's 7.0), and the identified feedforward's e2 on the evaluation
     reference 2.7 / 3.6 um/sqrt(s) with nominal dampings, 2.2 / 2.8 with the stand-in's."""
-    damping = np.array([label.startswith("d_") for label in base_parameters().labels()])
+    labels_of = base_parameters().labels()  # the torque constants' columns follow them
+    damping = np.array([k < len(labels_of) and labels_of[k].startswith("d_")
+                        for k in range(len(beta))])
     if free[damping].all():
         return beta, free, residual, covariance
     estimated = np.flatnonzero(free & ~damping)
@@ -454,8 +516,9 @@ def identify_samples(features: list[np.ndarray], forces: list[np.ndarray],
             taken_rows.append(w[samples].reshape(-1, len(columns)))
         return np.concatenate(taken_rows)
 
-    return _least_squares(_by_width(rows),
-                          np.concatenate([f[k] for f, k in zip(forces, taken)]))
+    positions = np.concatenate([x[k][:, pos] for x, k in zip(features, taken)])
+    return _least_squares(_by_width(rows), np.concatenate([f[k] for f, k in zip(forces, taken)]),
+                          lambda force: gain_columns(positions, force))
 
 
 def identified_on(dataset: Dataset, features: FeatureConfig) -> dict[str, Any]:

@@ -50,8 +50,8 @@ MACHINE_CUTOFF = 0.15  # Q's default corner on a machine's loop, a share of the 
 
 def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
         cutoff_hz: float | None = None, progress: bool = True,
-        say: Callable[[str], None] = print, model: InverseModel | None = None
-        ) -> dict[str, Any]:
+        say: Callable[[str], None] = print, model: InverseModel | None = None,
+        floor: bool = True) -> dict[str, Any]:
     """Run PID alone and `iterations` learning trials of `config` (continuing the iteration in
     `out` where one with the same loop and cutoff is there); return the content of ilc.json.
     A loop with a [machine] description learns each of its axes' feedforward inputs
@@ -60,7 +60,8 @@ def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
     its own (ManipulatorLoop). Q's corner `cutoff_hz` defaults to CUTOFF_HZ on the
     manipulator, to MACHINE_CUTOFF of the rate on a machine (measured on the drive example,
     12 trials: 35x PID alone at 20 Hz, 48x at 60 Hz, 163x at 150 Hz, where the rigid model
-    still holds below its 250 Hz mount)."""
+    still holds below its 250 Hz mount). `floor` measures the noise floor after the last
+    trial (two more runs; learning.ilc_labels, which wants only the force, leaves it out)."""
     if iterations < 1:
         raise InputError(f"--iterations must be at least 1, got {iterations}")
     plain = replace(config, record=RecordConfig(csv=False))
@@ -97,7 +98,7 @@ def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
             bar.update()
             bar.set_postfix_str(", ".join(f"e2 {a} {state['trials'][-1][a]['e2']:.3g}"
                                           for a in loop.axes))
-    if ran or NOISE_FLOOR not in state:
+    if floor and (ran or NOISE_FLOOR not in state):
         state[NOISE_FLOOR] = loop.noise_floor(out / RESULT)
         _finish(out, state, loop)
     return state

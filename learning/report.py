@@ -39,6 +39,7 @@ SCENARIO_LABELS: dict[str, str] = {
     "pid": "PID alone",
     "rigid-body": "rigid-body FF",
     "identified": "identified rigid-body FF",
+    "identified-ilc": "identified rigid-body FF (ILC labels)",
     "lstm": "LSTM FF",
     "cnn-lstm": "CNN-LSTM FF",
     "tcn": "TCN FF",
@@ -50,6 +51,11 @@ SCENARIO_LABELS: dict[str, str] = {
     "cnn-lstm-currents": "CNN-LSTM current FF",
     "tcn-currents": "TCN current FF",
     "pgnn-currents": "physics-guided current FF",
+    # models trained on the force ILC learned on each training reference (KIND-ilc)
+    "lstm-ilc": "LSTM FF (ILC labels)",
+    "cnn-lstm-ilc": "CNN-LSTM FF (ILC labels)",
+    "tcn-ilc": "TCN FF (ILC labels)",
+    "pgnn-ilc": "physics-guided FF (ILC labels)",
 }
 LIMIT = "limit"  # the scenario of iterative learning control's force (learning.ilc)
 PER_LIMIT = "e2_per_limit"  # a scenario's e2 / the limit's

@@ -24,7 +24,7 @@ from flexff.plant.kinematics import (
     generalized_coordinates,
     shoulder_angles,
 )
-from flexff.plant.parameters import PlantParameters
+from flexff.plant.parameters import NOMINAL, PlantParameters
 from flexff.plant.signals import CURRENTS, ENCODERS, TORQUES, TRUE_POSITION, TRUE_VELOCITY
 from flexff.plant.variants import Variant, get_variant
 
@@ -121,13 +121,38 @@ class PlantModel:
 
     @cached_property
     def inverse_dynamics(self) -> ca.Function:
+        """(pos, vel, acc, p) -> the end-effector force [N] to command for that motion: the
+        force the motors must give (`required_force`) as the controller must command it
+        (`commanded`)."""
+        dyn, acc = self.rigid, ca.SX.sym("acc", 2)
+        force = self.required_force(dyn.pos, dyn.vel, acc, self.p)
+        return ca.Function("inverse_dynamics", [dyn.pos, dyn.vel, acc, self.p],
+                           [self.commanded(dyn.pos, force, self.p)],
+                           ["pos", "vel", "acc", "p"], ["F"])
+
+    @cached_property
+    def required_force(self) -> ca.Function:
         """Eq. (2.4) plus motor friction: the end-effector force [N] the motors must give for
-        position, velocity, acceleration (rigid model). The motors' own friction torque is
-        mapped through A^T, as in `forward_dynamics`; the nominal parameters have none."""
+        position, velocity, acceleration (rigid model), linear in the inertias, flexures and
+        frictions. The motors' own friction torque is mapped through A^T, as in
+        `forward_dynamics`; the nominal parameters have none."""
         pp, dyn, acc = self.params, self.rigid, ca.SX.sym("acc", 2)
         force = dyn.inverse(acc) - dyn.A.T @ friction_torque(pp, dyn.A @ dyn.vel)
-        return ca.Function("inverse_dynamics", [dyn.pos, dyn.vel, acc, self.p],
-                           [force], ["pos", "vel", "acc", "p"], ["F"])
+        return ca.Function("required_force", [dyn.pos, dyn.vel, acc, self.p], [force],
+                           ["pos", "vel", "acc", "p"], ["F"])
+
+    @cached_property
+    def commanded(self) -> ca.Function:
+        """(pos, F, p) -> the force to command [N] for the motors to give F at pos. The
+        controller shares a commanded force among the motors by the nominal torque constants
+        (controllers.allocation), so the motors give A^T G A (A^T A)^-1 times it, G the
+        torque constants over the nominal ones: the force to command is (A^T A)
+        (A^T G A)^-1 F, F itself where G = I."""
+        dyn, force = self.rigid, ca.SX.sym("F", 2)
+        a, gain = dyn.A, ca.diag(ca.vertcat(*self.params.k_t) / ca.DM(NOMINAL.k_t))
+        return ca.Function("commanded", [dyn.pos, force, self.p],
+                           [a.T @ a @ _inverse_2x2(a.T @ gain @ a) @ force],
+                           ["pos", "F", "p"], ["F_commanded"])
 
     @cached_property
     def terms(self) -> ca.Function:
@@ -166,3 +191,13 @@ class PlantModel:
         theta = ca.SX.sym("theta", 3)
         pos = ca.vertcat(*forward_kinematics_3(self.params, theta))
         return ca.Function("fk3", [theta, self.p], [pos], ["theta", "p"], ["pos"])
+
+
+def _inverse_2x2(m: ca.SX) -> ca.SX:
+    """The inverse of a 2x2 matrix by its adjugate: plain arithmetic, which every target of
+    the generated model (C, PyTorch) evaluates alike."""
+    determinant = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+    inverse: ca.SX = ca.vertcat(ca.horzcat(m[1, 1], -m[0, 1]),
+                                ca.horzcat(-m[1, 0], m[0, 0])) / determinant
+    return inverse
+

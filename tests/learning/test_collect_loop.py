@@ -236,17 +236,19 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
     seen = {}
 
     def fake(env, out, preset, models, data, epochs, loop, scheduler, currents=(),
-             device="auto"):
-        seen.update(env=env, loop=loop, scheduler=scheduler, device=device)
+             device="auto", ilc_labels=()):
+        seen.update(env=env, loop=loop, scheduler=scheduler, device=device,
+                    ilc_labels=ilc_labels)
         (Path(out) / "table.md").write_text("| table |\n")
 
     monkeypatch.setattr("flexff.learning.evaluate.evaluate", fake)
     config = tmp_path / "heavy.toml"
     config.write_text('[reference]\nkind = "thesis-eval"\n[plant]\nm_up1 = 0.13\n')
     assert main(["evaluate", "--config", str(config), "--env", "hardware", "-o",
-                 str(tmp_path / "eval"), "--scheduler", "tcp://cluster:8786"]) == 0
+                 str(tmp_path / "eval"), "--scheduler", "tcp://cluster:8786",
+                 "--ilc-labels", "pgnn"]) == 0
     assert seen["env"] == "hardware" and seen["loop"].builtin("plant").parameters["m_up1"] == 0.13
-    assert seen["scheduler"] == "tcp://cluster:8786"
+    assert seen["scheduler"] == "tcp://cluster:8786" and seen["ilc_labels"] == ["pgnn"]
     assert "| table |" in capsys.readouterr().out
 
 
@@ -348,3 +350,14 @@ def test_the_loops_edits_are_checked_as_a_file_is():
     with pytest.raises(ConfigError, match=r"under PID, circle: reference\.duration: required"):
         on_reference(loop, {"kind": "circle", "radius": 0.005}, "circle", seed=1)
     assert with_feedforward(loop, "rigid-body-feedforward", {}).checked
+
+
+def test_cli_evaluate_refuses_ilc_labels_for_a_machine(tmp_path, capsys):
+    from flexff.cli import main
+
+    drive = Path(__file__).parents[2] / "machines" / "examples" / "drive.toml"
+    assert main(["evaluate", "--config", str(drive), "-o", str(tmp_path / "eval"),
+                 "--ilc-labels", "pgnn"]) == 2
+    assert "--currents and --ilc-labels are for the manipulator's environments: leave them " \
+           "out for a machine" in capsys.readouterr().err
+    assert not (tmp_path / "eval").exists()

@@ -239,3 +239,21 @@ def test_a_current_level_model_is_its_own_scenario(evaluation, tmp_path):
     assert not np.any(signals["Fx_ff"]) and np.abs(signals["feedforward.i1_ff"]).max() > 0.01
     assert any(line.startswith("tcn-currents: e2 = ") for line in lines)
     assert "| TCN current FF |" in (tmp_path / "table.md").read_text()
+
+
+def test_a_model_trained_on_ilc_labels_is_its_own_scenario(tmp_path):
+    data = synthetic_dataset(tmp_path / "data", n_train=3, n_test=1, duration=3.0,
+                             rate_hz=100.0, seed=6)  # three circles to train on
+    out, lines = tmp_path / "out", []
+    summary = evaluate("sim", out, models=[], ilc_labels=["pgnn"], data=data, epochs=1,
+                       say=lines.append, progress=False, ilc_iterations=1)
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "identified-ilc",
+                                          "pgnn-ilc", "limit"]
+    run = json.loads((out / "runs" / "pgnn-ilc" / "run.json").read_text())
+    assert run["data"]["path"] == str((out / "data-sim-ilc").resolve())
+    assert run["config"]["features"]["quantize_encoders"] is False  # the reference, exact
+    identified = json.loads((out / "identified-ilc" / "identified.json").read_text())
+    assert identified["data"]["path"] == run["data"]["path"]
+    assert len(list((out / "data-sim-ilc" / "ilc").iterdir())) == 3
+    assert any(line.startswith("pgnn-ilc: e2 = ") for line in lines)
+    assert "| physics-guided FF (ILC labels) |" in (out / "table.md").read_text()
