@@ -79,14 +79,17 @@ def hardware_iteration(tmp_path_factory):
     return loop, out, ilc(loop, out, iterations=3, progress=False, say=lambda _: None)
 
 
-def test_ilc_falls_monotonically_on_the_hardware_plant_too(hardware_iteration):
-    """A 10 s circle with encoder noise (a new seed each trial), motor friction and the 40 Hz
-    tool mode: e2 falls at each of three trials, below 1 % of PID alone's (measured (x, y):
-    53x and 34x, 990x and 550x, 1230x and 640x); beyond that, the noise sets the floor."""
+def test_ilc_reaches_the_noise_floor_on_the_hardware_plant_in_one_trial(hardware_iteration):
+    """A 10 s circle with encoder noise (a new seed each trial), motor friction, torque
+    constants 2 to 4 % low and the 40 Hz tool mode: the learning filter's model knows the
+    plant's parameters, so one trial takes e2 below 1 % of PID alone's (measured (x, y):
+    1080x and 550x; 53x and 34x when the model left out the torque constants), and every
+    trial after stays within 1.5 times the noise floor (measured: 1.2 to 1.4 and 0.9 to 1.1)."""
     _, _, state = hardware_iteration
     errors = np.array([e2(t) for t in state["trials"]])
-    assert np.all(errors[1:] < errors[:-1])
-    assert np.all(errors[3] < 0.01 * errors[0])
+    floor = np.array([state[NOISE_FLOOR]["x"], state[NOISE_FLOOR]["y"]])
+    assert np.all(errors[1:] < 0.01 * errors[0])
+    assert np.all(errors[1:] < 1.5 * floor)
 
 
 def test_the_noise_floor_and_the_noiseless_error_add_in_squares(hardware_iteration):
