@@ -47,6 +47,7 @@ STRUCTURE_SAMPLES = 500  # random workspace samples that reveal the base paramet
 RANK_TOLERANCE = 1e-8  # |R_kk| below this (columns of unit norm): a dependent column
 WIDTHS = (1e-3, 3e-3, 1e-2, 3e-2, 1e-1)  # candidate tanh widths w_stribeck [rad/s]
 GAIN_PASSES = 3  # fits with the torque constants' columns at the last fit's force
+CHANGES = 2  # the torque constants' changes estimated: motor 1's and 2's (gain_columns)
 MAX_SAMPLES = 100_000  # more are taken evenly spaced: 29 base parameters need no more
 REPORT = "identified.json"
 
@@ -142,12 +143,13 @@ def gain_columns(pos: np.ndarray, forces: np.ndarray) -> np.ndarray:
     The controller shares a force among the motors by their nominal torque constants; a
     motor a few percent weaker gives a few percent less of its share, which depends on the
     position. The force the motors give is linear in the constants at a given commanded
-    force, so with G taken at the commanded force (the labels) F_commanded = W theta + G g
-    holds exactly. The changes' sum is fixed at zero: a change of all three alike scales
-    every force, and so is one of the inertias and frictions. On the
-    hardware stand-in (torque constants 3, 2 and 4 % low) the ILC forces of its training
-    references less the true rigid-body model's left 11 / 16 mN rms; these columns took that
-    to 2.5 / 2.6 mN, with changes of -2.8, -1.8 and -3.7 %."""
+    force, so with G taken at the commanded force F_commanded = W theta + G g holds exactly
+    (`_least_squares` takes it at the model's own). The changes' sum is fixed at zero: a
+    change of all three alike scales every force, and so is one of the inertias and
+    frictions. On the hardware stand-in (torque constants 3, 2 and 4 % low) the ILC forces of
+    its training references less the true rigid-body model's (its tool's mass left out) left
+    11 / 16 mN rms; these columns took that to 2.5 / 2.6 mN, with changes of -2.8, -1.8 and
+    -3.7 %."""
     values = evaluate_samples(_gain_function(), pos, forces)
     return values.reshape(len(pos), 2, 2).transpose(0, 2, 1).reshape(2 * len(pos), 2)
 
@@ -270,9 +272,9 @@ class Identification:
     samples: int
     metric: np.ndarray  # R of the QR of the base regressor / sqrt(rows): |metric @ d_beta|
     # is the rms force (both axes) that a change d_beta of the base parameters makes
-    gains: np.ndarray = field(default_factory=lambda: np.zeros(2))  # changes (g1, g2) of the
-    # motors' torque constants (gain_columns; 0 where not estimated)
-    gains_std: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    gains: np.ndarray = field(default_factory=lambda: np.zeros(CHANGES))  # changes (g1, g2)
+    # of the motors' torque constants (gain_columns; 0 where not estimated)
+    gains_std: np.ndarray = field(default_factory=lambda: np.zeros(CHANGES))
     data: Mapping[str, Any] = field(default_factory=dict)  # what it was identified on
 
     def parameters(self) -> dict[str, float]:
@@ -353,7 +355,7 @@ def _least_squares(regressor_at: Callable[[float], np.ndarray], forces: np.ndarr
     # min over a generator holds two regressors (2n x 41) at most, not one per width
     _, width, full = min((fit(width) for width in WIDTHS), key=lambda f: f[0])
     rigid = full[:, independent]
-    nominal = np.concatenate([base.of(_nominal_theta()), np.zeros(2)])
+    nominal = np.concatenate([base.of(_nominal_theta()), np.zeros(CHANGES)])
     model = rigid @ np.linalg.lstsq(rigid, labels, rcond=None)[0]
     for _ in range(GAIN_PASSES):
         columns = np.hstack([rigid, gains_at(model.reshape(-1, 2))])
