@@ -22,7 +22,8 @@ def rigid_body_force(reference: ca.SX, parameters: Mapping[str, float] | None = 
     """F = M a + C v + Q + D of the nominal model along the reference (x, y, vx, vy, ax, ay).
 
     `parameters` (flat plant parameter names, SI values) replace nominal values: a
-    physics-guided model's identified motor friction adds its A^T tau_friction."""
+    physics-guided model's identified motor friction adds its A^T tau_friction, its motors'
+    identified torque constants scale each one's share (plant.model's `commanded`)."""
     model = nominal_model()
     return model.inverse_dynamics(*reference_motion(reference),
                                   model.parameter_values(**(parameters or {})))
