@@ -46,8 +46,8 @@ from flexff.plant.kinematics import SHOULDER_INDEX
 from flexff.plant.signals import FEEDFORWARD_FORCES, names
 
 ITERATIONS = 2  # learning trials per reference: the evaluation reference's ILC reaches the
-# noise floor at its second (e2 x / y 1.17e-5 / 1.70e-5 m/√s after one, 1.00e-6 / 1.87e-6
-# after two, the floor 0.93e-6 / 1.75e-6)
+# noise floor at its second (e2 x / y 1.17e-5 / 1.70e-5 m/sqrt(s) after one, 1.00e-6 /
+# 1.87e-6 after two, the floor 0.93e-6 / 1.75e-6)
 FOLDER = "ilc"  # beside the set: one ILC folder per training reference
 # how models train on such a set: its motion is the reference, exact, so its angles are not
 # counted in encoder counts; its forces hold no reaction to encoder noise, so the low-pass
