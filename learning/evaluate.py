@@ -171,8 +171,8 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     "currents", learning.features); `ilc_labels` adds the model of each kind named trained on
     the force ILC learns on each training reference (scenario KIND-ilc, on the set
     learning.ilc_labels writes beside the collected one) and the rigid-body model identified
-    there (IDENTIFIED_ILC); `device` ('auto', 'cpu', 'cuda') is
-    where the networks train (learning.devices), checked before any work."""
+    there (IDENTIFIED_ILC); `device` ('auto', 'cpu', 'cuda') is where the networks train
+    (learning.devices), checked before any work."""
     on_gpu = bool(training_gpus(pick_device(device)))
     if env not in ENVIRONMENTS:
         raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")

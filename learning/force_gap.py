@@ -20,11 +20,16 @@ BANDS_HZ = (0.3, 1.0, 5.0)  # edges: the references' band, up to the crossover, 
 MAX_SHIFT_S = 0.02  # the feedforward shifted by up to this, either way
 
 
+def _bands() -> list[tuple[str, float, float]]:
+    """Each band's name (force_gap's band_share key) and edges [Hz]."""
+    edges = [0.0, *BANDS_HZ, np.inf]
+    return [(f"{low:g}-{high:g} Hz" if np.isfinite(high) else f"above {low:g} Hz", low, high)
+            for low, high in pairwise(edges)]
+
+
 def band_names() -> list[str]:
     """The bands' names, as force_gap's band_share keys."""
-    edges = [0.0, *BANDS_HZ]
-    return [f"{low:g}-{high:g} Hz" for low, high in pairwise(edges)] + [
-        f"above {BANDS_HZ[-1]:g} Hz"]
+    return [name for name, _, _ in _bands()]
 
 
 def force_gap(feedforward: np.ndarray, ideal: np.ndarray, step_s: float) -> dict[str, Any]:
@@ -37,11 +42,9 @@ def force_gap(feedforward: np.ndarray, ideal: np.ndarray, step_s: float) -> dict
     gap = ideal - feedforward
     power = np.abs(np.fft.rfft(gap - gap.mean())) ** 2
     frequency = np.fft.rfftfreq(len(gap), step_s)
-    edges = [0.0, *BANDS_HZ, np.inf]
     total = power.sum()
     shares = {name: float(power[(frequency >= low) & (frequency < high)].sum() / total)
-              if total > 0 else 0.0
-              for name, (low, high) in zip(band_names(), pairwise(edges))}
+              if total > 0 else 0.0 for name, low, high in _bands()}
     reach = min(round(MAX_SHIFT_S / step_s), (len(gap) - 1) // 4)
     inner = slice(reach, len(gap) - reach)  # the samples every shift compares
 

@@ -39,7 +39,6 @@ SCENARIO_LABELS: dict[str, str] = {
     "pid": "PID alone",
     "rigid-body": "rigid-body FF",
     "identified": "identified rigid-body FF",
-    "identified-ilc": "identified rigid-body FF (ILC labels)",
     "lstm": "LSTM FF",
     "cnn-lstm": "CNN-LSTM FF",
     "tcn": "TCN FF",
@@ -51,12 +50,11 @@ SCENARIO_LABELS: dict[str, str] = {
     "cnn-lstm-currents": "CNN-LSTM current FF",
     "tcn-currents": "TCN current FF",
     "pgnn-currents": "physics-guided current FF",
-    # models trained on the force ILC learned on each training reference (KIND-ilc)
-    "lstm-ilc": "LSTM FF (ILC labels)",
-    "cnn-lstm-ilc": "CNN-LSTM FF (ILC labels)",
-    "tcn-ilc": "TCN FF (ILC labels)",
-    "pgnn-ilc": "physics-guided FF (ILC labels)",
 }
+# models trained on the force ILC learned on each training reference (learning.evaluate's
+# KIND-ilc, and its identified-ilc)
+SCENARIO_LABELS.update({f"{name}-ilc": f"{SCENARIO_LABELS[name]} (ILC labels)"
+                        for name in ("identified", "lstm", "cnn-lstm", "tcn", "pgnn")})
 LIMIT = "limit"  # the scenario of iterative learning control's force (learning.ilc)
 PER_LIMIT = "e2_per_limit"  # a scenario's e2 / the limit's
 OWN = "own_e2"  # a scenario's own share of e2 over the noise floor: sqrt(e2^2 - floor^2)
