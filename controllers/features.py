@@ -2,28 +2,28 @@
 
 A function of (position, velocity, acceleration) only, the same for training data (the
 filtered measured motion) and for deployment (the reference x_ref ... ay_ref). The full set
-is the 21 coordinates of eq. (2.1) and their first and second time derivatives, obtained
-exactly by the chain rule (qd = J v, qdd = J a + (dJ/dt) v, with J = dq/dpos) rather than by
-differentiating 21 noisy signals; the compact set is (x, y, vx, vy, ax, ay). The directions set
-is the full set and each motor's direction of motion, tanh(theta_si_dot / w) at the velocity
-scales DIRECTION_WIDTHS: a motor's Coulomb friction flips with its direction, a step no smooth
-function of the 63 full features holds and one a network learns poorly from them (the hardware
-stand-in's TCN, trained on the identified rigid-body model's own forces as noise-free labels,
-missed them by up to 13 mN at each motor reversal of its evaluation reference: e2 50 / 49x
-PID alone; with these features 169 / 138x). Kinematics are
-the nominal model's: the feedforward knows nothing better. As a CasADi Function it is both
-evaluated in numpy (learning/) and generated into C inside the feedforward FMU.
+is the 21 coordinates of eq. (2.1) and their first and second time derivatives, exact by the
+chain rule (qd = J v, qdd = J a + (dJ/dt) v, J = dq/dpos) rather than differentiated; the
+compact set is (x, y, vx, vy, ax, ay). The directions set adds each motor's direction of
+motion, tanh(theta_si_dot / w) at the velocity scales DIRECTION_WIDTHS, for its Coulomb
+friction. Kinematics are the nominal model's: the feedforward knows nothing better. A
+black-box network may take the identified rigid-body model's force along the motion as two
+more inputs (FORCE_INPUTS, learning.features.FeatureConfig.force_input): the physics as an
+input rather than as a prior. As a CasADi Function it is both evaluated in numpy (learning/)
+and generated into C inside the feedforward FMU.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from flexff.cosim.executor import granted_cores
+from flexff.fmu.compiled_function import compiled
 from flexff.fmu.errors import InputError
 from flexff.plant.kinematics import COORDINATE_NAMES, EE_INDEX, SHOULDER_INDEX
 from flexff.plant.model import PlantModel
@@ -33,31 +33,46 @@ FEATURE_SETS = ("full", "compact", "directions")
 # velocity scales of the motors' direction features [rad/s]: a basis that a network's linear
 # part combines into the friction's own transition, whatever its width (the hardware
 # stand-in's is 0.01 rad/s: least squares on these features alone misses its friction force,
-# 23 mN rms along its evaluation reference, by under 0.33 mN)
+# 23 mN rms along its evaluation reference, by under 0.33 mN). A step no smooth function of
+# the full features holds: the hardware stand-in's TCN, trained on the identified model's own
+# forces as noise-free labels, missed them by up to 13 mN at each motor reversal of its
+# evaluation reference (e2 50 / 49x PID alone; with these features 169 / 138x)
 DIRECTION_WIDTHS = (0.003, 0.01, 0.03)
 COMPACT_NAMES = ("x", "y", "vx", "vy", "ax", "ay")  # the wrist's motion, in REFERENCE's units
 MAP_CHUNK = 4096  # samples per call of a mapped Function (evaluate_samples)
+# once a process has evaluated a Function on this many samples, evaluate_samples runs it
+# compiled (fmu.compiled_function): compiling the hardware plant's inverse dynamics took 0.8 s
+# once per machine, and saved 1.4 s on 1e5 samples (1.65 s interpreted, 0.21 s compiled; the
+# directions features 1.31 s and 0.44 s); a test's few hundred samples stay interpreted
+COMPILED_FROM = 20_000
+_evaluated: dict[ca.Function, int] = {}  # samples each Function has been evaluated on
+# the identified rigid-body model's force (eq. 2.4, learning.identify's parameters) [N]: the
+# last two inputs of a network with force inputs
+FORCE_INPUTS = ("Fx_id", "Fy_id")
+ForceParameters = Mapping[str, float]  # flat nominal-model parameters of the force inputs
 
 
-def feature_names(feature_set: str) -> list[str]:
-    """Signal names of the features, in column order."""
+def feature_names(feature_set: str, force_input: bool = False) -> list[str]:
+    """Signal names of the features (and the FORCE_INPUTS after them), in column order."""
+    force = list(FORCE_INPUTS) if force_input else []
     if feature_set == "compact":
-        return list(COMPACT_NAMES)
+        return list(COMPACT_NAMES) + force
     if feature_set in ("full", "directions"):
         full = (list(COORDINATE_NAMES) + [f"{n}_dot" for n in COORDINATE_NAMES]
                 + [f"{n}_ddot" for n in COORDINATE_NAMES])
-        return full + (_direction_names() if feature_set == "directions" else [])
+        return full + (_direction_names() if feature_set == "directions" else []) + force
     raise InputError(f"unknown feature set {feature_set!r}: choose one of "
                      f"{', '.join(FEATURE_SETS)}")
 
 
-def feature_units(feature_set: str) -> list[str]:
-    """SI units of the features, in column order."""
+def feature_units(feature_set: str, force_input: bool = False) -> list[str]:
+    """SI units of the features (and the FORCE_INPUTS after them), in column order."""
+    force = ["N"] * len(FORCE_INPUTS) if force_input else []
     if feature_set == "compact":
-        return list(units(REFERENCE))
+        return list(units(REFERENCE)) + force
     base = ["rad" if n.startswith("theta") else "m" for n in COORDINATE_NAMES]
     directions = ["1"] * len(_direction_names()) if feature_set == "directions" else []
-    return base + [f"{u}/s" for u in base] + [f"{u}/s2" for u in base] + directions
+    return base + [f"{u}/s" for u in base] + [f"{u}/s2" for u in base] + directions + force
 
 
 def _direction_names() -> list[str]:
@@ -102,12 +117,25 @@ def motion_function(feature_set: str) -> ca.Function:
                        ["pos", "vel", "acc"], ["features"])
 
 
+def reference_feature_function(feature_set: str, force: ForceParameters | None = None
+                               ) -> ca.Function:
+    """CasADi Function (the REFERENCE signals x_ref ... ay_ref, one sample) -> features, and
+    with `force` the FORCE_INPUTS of the model with those parameters after them: what a
+    learned feedforward computes from its inputs."""
+    return _reference_function(feature_set,
+                               None if force is None else tuple(sorted(force.items())))
+
+
 @functools.cache
-def reference_feature_function(feature_set: str) -> ca.Function:
-    """CasADi Function (the REFERENCE signals x_ref ... ay_ref, one sample) -> features: what
-    a learned feedforward computes from its inputs."""
+def _reference_function(feature_set: str, force: tuple[tuple[str, float], ...] | None
+                        ) -> ca.Function:
     reference = ca.SX.sym("reference", len(REFERENCE))
-    features = motion_function(feature_set)(*reference_motion(reference))
+    motion = reference_motion(reference)
+    features = motion_function(feature_set)(*motion)
+    if force is not None:
+        model = nominal_model()
+        features = ca.vertcat(features, model.inverse_dynamics(
+            *motion, model.parameter_values(**dict(force))))
     return ca.Function(f"reference_features_{feature_set}", [reference], [features],
                        ["reference"], ["features"])
 
@@ -118,11 +146,13 @@ def motion_features(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,
     return evaluate_samples(motion_function(feature_set), pos, vel, acc)
 
 
-def reference_features(signals: dict[str, np.ndarray], feature_set: str) -> np.ndarray:
-    """Features computed from the reference x_ref ... ay_ref: what the feedforward sees."""
+def reference_features(signals: Mapping[str, np.ndarray], feature_set: str,
+                       force: ForceParameters | None = None) -> np.ndarray:
+    """Features (with `force`, and the FORCE_INPUTS) computed from the reference x_ref ...
+    ay_ref: what the feedforward sees."""
     reference = np.column_stack([np.asarray(signals[s], dtype=float).ravel()
                                  for s in names(REFERENCE)])
-    return evaluate_samples(reference_feature_function(feature_set), reference)
+    return evaluate_samples(reference_feature_function(feature_set, force), reference)
 
 
 def evaluate_samples(function: ca.Function, *columns: np.ndarray) -> np.ndarray:
@@ -134,10 +164,14 @@ def evaluate_samples(function: ca.Function, *columns: np.ndarray) -> np.ndarray:
     samples of the full features: 1.87 s with a map of their own, 1.07 s in chunks). The map
     runs on every core granted and reads and writes numpy's memory in place (CasADi's
     buffer): converting its matrices to and from numpy took longer than the evaluation (1e5
-    samples of the directions features: 0.93 s, 0.36 s in place, on two cores)."""
+    samples of the directions features: 0.93 s, 0.36 s in place, on two cores). From
+    COMPILED_FROM samples evaluated in this process on, the Function runs compiled, with the
+    same results."""
     n = columns[0].shape[0]
     inputs = [np.asarray(c, dtype=float).reshape(n, -1) for c in columns]
-    buffer, evaluate = _chunk_map(function, granted_cores()).buffer()
+    _evaluated[function] = _evaluated.get(function, 0) + n
+    buffer, evaluate = _chunk_map(function, granted_cores(),
+                                  _evaluated[function] >= COMPILED_FROM).buffer()
     chunk = [np.empty((MAP_CHUNK, c.shape[1])) for c in inputs]  # column-major (k, chunk)
     result = np.empty((MAP_CHUNK, function.size1_out(0)))
     # the buffer's size comes with the memoryview (CasADi's stubs ask for it separately)
@@ -156,11 +190,11 @@ def evaluate_samples(function: ca.Function, *columns: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=64)
-def _chunk_map(function: ca.Function, threads: int) -> ca.Function:
-    """`function`, its output made dense (the buffer holds the nonzeros only), mapped over
-    MAP_CHUNK samples on `threads` threads."""
+def _chunk_map(function: ca.Function, threads: int, compile_it: bool) -> ca.Function:
+    """`function`, its output made dense (the buffer holds the nonzeros only) and, with
+    `compile_it`, compiled, mapped over MAP_CHUNK samples on `threads` threads."""
     if not function.sparsity_out(0).is_dense():
         inputs: list[Any] = function.sx_in() if function.is_a("SXFunction") else \
             function.mx_in()
         function = ca.Function(function.name(), inputs, [ca.densify(function.call(inputs)[0])])
-    return function.map(MAP_CHUNK, "thread", threads)
+    return (compiled(function) if compile_it else function).map(MAP_CHUNK, "thread", threads)

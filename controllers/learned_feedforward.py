@@ -3,7 +3,9 @@
 
 The FMU computes the model's inputs from the reference in generated C, runs the graph at the
 model's own rate (as generated C or with onnxruntime) and extrapolates in between. A
-physics-guided model's rigid-body prior is added in generated C at every step. Modes: `step`,
+physics-guided model's rigid-body prior is added in generated C at every step; a black-box
+network's force inputs (controllers.features.FORCE_INPUTS) are computed there too, and its
+linear skip on them (the card's linear_inputs) added at every step. Modes: `step`,
 `precomputed` and `task`. The network part is that of any ONNX graph as an FMU
 (fmu.onnx_graph); only the features and the prior are this module's.
 
@@ -45,8 +47,8 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     if card.input_kind == "reference":
         expected, inputs = REFERENCE_NAMES, u
     else:
-        expected = feature_names(card.feature_set)
-        inputs = reference_feature_function(card.feature_set)(u)
+        expected = feature_names(card.feature_set, card.force_input is not None)
+        inputs = reference_feature_function(card.feature_set, card.force_input)(u)
     if card.input_signals != expected:
         raise InputError(f"{model}: its input signals {card.input_signals} are not the "
                          f"{card.input_kind} signals {expected} the FMU computes")
@@ -62,8 +64,12 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     r = ca.SX.sym("r", network.n_outputs)
     with_prior = card.prior == "rigid-body"
     force = r + _prior(u, card) if with_prior else r
+    if card.linear_inputs is not None:  # the network's skip, at every step of the loop
+        force = force + ca.mtimes(ca.DM(card.linear_inputs["weights"]), inputs) \
+            + ca.DM(card.linear_inputs["bias"])
     mode = "precomputed" if reference is not None else "task" if task else "step"
-    added = ""
+    added = (", the identified rigid-body force among its inputs"
+             if card.force_input is not None else "")
     if with_prior:
         added = " plus the rigid-body feedforward" + (
             f" with identified {', '.join(card.prior_parameters)}"
@@ -76,6 +82,7 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
         extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": card.prior,
                "flexff.network.runtime": runtime,
                "flexff.feedforward.prior_parameters": json.dumps(card.prior_parameters),
+               "flexff.feedforward.force_input": json.dumps(card.force_input),
                **{f"flexff.model.{k}": str(getattr(card, k))
                   for k in ("model_kind", "preset", "feature_set", "input_kind",
                             "sample_rate_hz", "labels")}},

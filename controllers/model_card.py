@@ -35,13 +35,15 @@ REQUIRED = ("input_kind", "feature_set", "input_signals", "sample_rate_hz")
 USAGE = ("inputs (T, n_inputs) float64 in SI units -> outputs (T, n_outputs) float64, the "
          "output_signals in output_units: forces [N] or motor currents [A] (plus the "
          "nominal inverse dynamics, prior_parameters in place, when prior = rigid-body; for "
-         "currents allocated at x_ref, y_ref as the controller allocates); state "
+         "currents allocated at x_ref, y_ref as the controller allocates); with force_input, "
+         "the last two inputs are that force with force_input's parameters (Fx_id, Fy_id); "
+         "with linear_inputs, plus weights @ inputs + bias at every step of the runner; state "
          "tensors float32. Whole sequence: T samples, state inputs zero. Step by step: T = 1 "
          "every 1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
          "extrapolate the outputs from the last two calls when the host runs faster.")
 _JSON = ("input_signals", "input_units", "output_signals", "output_units", "state",
-         "prior_parameters", "feature_range", "machine", "machine_features", "machine_prior",
-         "linear_inputs")
+         "prior_parameters", "force_input", "feature_range", "machine", "machine_features",
+         "machine_prior", "linear_inputs")
 _NUMBERS = {"sample_rate_hz": float, "history_samples": int, "ensemble_members": int}
 
 
@@ -51,7 +53,9 @@ class ModelCard:
 
     `state`: one {"input", "output", "shape", "initial"} per state tensor (fmu.onnx_graph reads
     the pairs); `prior_parameters`: the nominal-model parameters the prior replaces (flat plant
-    parameter names, SI values); `feature_range`: {"signals", "low", "high"} of the training
+    parameter names, SI values); `force_input`: those of the rigid-body model whose force along
+    the reference a black-box network takes as its last two inputs (Fx_id, Fy_id), None for
+    none; `feature_range`: {"signals", "low", "high"} of the training
     data, None for a model exported without it. Another machine's model carries its
     description (`machine`, cosim.machine's table) and the settings of its features
     (`machine_features`: jerk, direction_widths; controllers.machine_features), and outputs
@@ -74,6 +78,7 @@ class ModelCard:
     history_samples: int = 0
     prior: str = "none"
     prior_parameters: dict[str, float] = field(default_factory=dict)
+    force_input: dict[str, float] | None = None
     feature_range: dict[str, Any] | None = None
     ensemble_members: int = 1
     flexff_version: str = "unknown"
@@ -140,13 +145,20 @@ class ModelCard:
                              f"{', '.join(INPUT_KINDS)})")
         if self.prior not in PRIORS:
             raise InputError(f"{where}: unknown prior {self.prior!r} (known: {', '.join(PRIORS)})")
-        try:
-            NOMINAL.with_values(**self.prior_parameters)  # names and values
-        except (TypeError, ValueError) as error:
-            raise InputError(f"{where}: metadata prior_parameters "
-                             f"{json.dumps(self.prior_parameters)} are not nominal-model "
-                             f"parameters ({error}); export the model again with "
-                             f"`flexff export`") from None
+        for key in ("prior_parameters", "force_input"):
+            parameters = getattr(self, key)
+            try:
+                NOMINAL.with_values(**(parameters or {}))  # names and values
+            except (TypeError, ValueError) as error:
+                raise InputError(f"{where}: metadata {key} {json.dumps(parameters)} are not "
+                                 f"nominal-model parameters ({error}); export the model again "
+                                 f"with `flexff export`") from None
+        if not _linear_map_fits(self.linear_inputs, len(self.output_signals),
+                                len(self.input_signals)):
+            raise InputError(f"{where}: metadata linear_inputs is not a linear map of the "
+                             f"{len(self.input_signals)} inputs to the "
+                             f"{len(self.output_signals)} outputs; export the model again with "
+                             f"`flexff export`")
 
 
     def _check_machine(self, where: str | Path) -> None:

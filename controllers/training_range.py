@@ -62,11 +62,11 @@ def training_range_excess(model: str | Path, reference: Mapping[str, np.ndarray]
     signals, low, high = _trained_range(card, model)
     seen = {n: np.asarray(reference[n], dtype=float).ravel()[::every] for n in names(REFERENCE)}
     span = np.where(high > low, high - low, 1.0)
-    features = reference_features(seen, card.feature_set)
+    features = reference_features(seen, card.feature_set, card.force_input)
     below, above = features.min(axis=0), features.max(axis=0)
     spans = np.maximum(low - below, above - high) / span
     outside = ((features < low) | (features > high)).mean(axis=0)
-    units = feature_units(card.feature_set)
+    units = feature_units(card.feature_set, card.force_input is not None)
     found = [RangeExcess(signals[k], units[k], float(low[k]), float(high[k]),
                          float(below[k]), float(above[k]), float(spans[k]), float(outside[k]))
              for k in np.flatnonzero(spans > MARGIN)]
@@ -81,7 +81,7 @@ def _trained_range(card: ModelCard, model: str | Path) -> tuple[list[str], np.nd
         raise InputError(f"{model}: metadata feature_set {card.feature_set!r} is not one of "
                          f"{', '.join(FEATURE_SETS)}; export the model again with `flexff "
                          f"export`")
-    n = len(feature_names(card.feature_set))
+    n = len(feature_names(card.feature_set, card.force_input is not None))
     trained = card.feature_range
     signals: list[str] = []
     low = high = np.zeros(0)

@@ -463,7 +463,8 @@ def _train(args: argparse.Namespace) -> int:
 
     if is_machine_dataset(args.data):
         return _train_machine(args)
-    overrides = {"labels": args.labels, **({"epochs": args.epochs} if args.epochs else {})}
+    overrides = {"labels": args.labels, **({"epochs": args.epochs} if args.epochs else {}),
+                 **({"force_input": True} if args.force_input else {})}
     seeds = args.seed or [0]
     if len(seeds) == 1 and args.scheduler is None:
         from flexff.learning.train import train
@@ -496,8 +497,10 @@ def _train_machine(args: argparse.Namespace) -> int:
     from flexff.learning.machine_train import fit_machine
     from flexff.learning.presets import make_config
 
-    if len(args.seed or [0]) > 1 or args.scheduler is not None or args.labels != "forces":
-        raise InputError("a machine's dataset trains one seed here, on its efforts")
+    if len(args.seed or [0]) > 1 or args.scheduler is not None or args.labels != "forces" \
+            or args.force_input:
+        raise InputError("a machine's dataset trains one seed here, on its efforts, without "
+                         "--force-input (its physics is the pgnn's prior)")
     data = load_machine_dataset(args.data)
     config = make_config(args.model, args.preset, seed=(args.seed or [0])[0],
                          device=args.device, **({"epochs": args.epochs} if args.epochs else {}))
@@ -566,9 +569,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     loop = None if args.config is None else load_run_config(args.config)
     machine = loop is not None and not is_manipulator_loop(loop)
     logs = loop is None and args.data is not None and is_machine_dataset(args.data)
-    if (machine or logs) and (args.currents or args.ilc_labels):
-        raise InputError("--currents and --ilc-labels are for the manipulator's environments: "
-                         f"leave them out for {'a machine' if machine else 'imported logs'}")
+    if (machine or logs) and (args.currents or args.ilc_labels or args.force_input):
+        raise InputError("--currents, --ilc-labels and --force-input are for the manipulator's "
+                         f"environments: leave them out for "
+                         f"{'a machine' if machine else 'imported logs'}")
     output_folder(args.output)
     if machine:
         return _evaluate_machine(args, loop)
@@ -576,7 +580,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         return _evaluate_logs(args)
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
              scheduler=args.scheduler, currents=args.currents, device=args.device,
-             ilc_labels=args.ilc_labels)
+             ilc_labels=args.ilc_labels, force_input=args.force_input)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
           f"forces.png, the .onnx models, ilc/ for the limit, held-out/ for the test split's "
@@ -797,6 +801,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="what the model learns and feeds forward: the wrist force Fx, Fy "
                             "(default), or the motor currents i1..i3, added after the control "
                             "allocation")
+    train.add_argument("--force-input", action="store_true",
+                       help="give a black-box network the force of the rigid-body model "
+                            "identified on the training split as two more inputs")
     existing = train.add_mutually_exclusive_group()
     existing.add_argument("--resume", action="store_true",
                           help="continue the unfinished run in the run folder from its last "
@@ -884,6 +891,11 @@ def build_parser() -> argparse.ArgumentParser:
                             choices=MODELS,
                             help="also these kinds trained on the force iterative learning "
                                  "control learns on each training reference (2 trials each)")
+    evaluation.add_argument("--force-input", nargs="+", default=[], metavar="KIND",
+                            choices=[m for m in MODELS if m != "pgnn"],
+                            help="also these black-box kinds with the identified rigid-body "
+                                 "force as two more inputs (on the ILC labels too where "
+                                 "--ilc-labels names the kind)")
     evaluation.add_argument("--data", help="a collected dataset folder to use; a machine's "
                                            "imported logs alone: each model's force "
                                            "prediction on the test logs")

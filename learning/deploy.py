@@ -2,9 +2,10 @@
 
 Scaling and unscaling live inside the module: features in SI units in, forces in newtons out.
 For the pgnn it adds the residual to its rigid-body prior (or, with `prior=False`, returns the
-residual alone). With `inputs="reference"` it computes the features from the reference in the
-graph. A machine's linear skip is exported beside the graph as `linear_map`
-(`skip_outside`), for the feedforward FMU to add at the loop's rate. The pgnn's residual fades
+residual alone). With `inputs="reference"` it computes the features (and a black-box
+network's force inputs) from the reference in the graph. A machine's linear skip, and that of
+a network with force inputs, is exported beside the graph as `linear_map` (`skip_outside`),
+for the feedforward FMU to add at the loop's rate. The pgnn's residual fades
 to zero beyond the training range (TRUST_FADE), so there the model falls back on its prior.
 
 Docs: "The learned feedforward FMU" (docs/explanation/learned-feedforward-fmu.md).
@@ -72,11 +73,13 @@ class SIModel(nn.Module):
         if machine is not None and by_reference:
             raise InputError(f"{run.path}: a machine's model takes its features; the "
                              f"feedforward FMU computes them from the reference")
+        self.force_input = run.force_input
         self.input_names = list(names(REFERENCE)) if by_reference else run.feature_names
         self.input_units = (list(units(REFERENCE)) if by_reference else
-                            feature_units(feature_set) if machine is None else
+                            feature_units(feature_set, self.force_input is not None)
+                            if machine is None else
                             machine_feature_units(machine, run.feature_inputs))
-        self.reference = (TorchFunction(reference_feature_function(feature_set))
+        self.reference = (TorchFunction(reference_feature_function(feature_set, self.force_input))
                           if by_reference else None)
         self.residual = uses_prior(run.config.model)
         # what it outputs: forces or currents, or another machine's efforts
@@ -138,6 +141,7 @@ class EnsembleSIModel(nn.Module):
         self.members = nn.ModuleList(members)
         self.input_names, self.input_units = first.input_names, first.input_units
         self.residual, self.prior_parameters = first.residual, first.prior_parameters
+        self.force_input = first.force_input
         self.labels = first.labels
         self.counts = [len(member.initial_state()) for member in members]
         maps = [m.linear_map for m in members]

@@ -43,7 +43,13 @@ from flexff.learning.loop import (
     with_feedforward,
     with_feedforward_table,
 )
-from flexff.learning.models import NETWORKS, build_network, check_kind, parameter_count
+from flexff.learning.models import (
+    NETWORKS,
+    build_network,
+    check_kind,
+    parameter_count,
+    uses_prior,
+)
 from flexff.learning.presets import TrainConfig, make_config
 from flexff.learning.report import LIMIT, write_report
 from flexff.learning.workers import TRAININGS_PER_GPU, TrainJob, train_parallel
@@ -161,7 +167,8 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
              progress: bool = True, scheduler: str | None = None,
              ilc_iterations: int = ITERATIONS, currents: Sequence[str] = (),
-             device: str = "auto", ilc_labels: Sequence[str] = ()) -> dict[str, Any]:
+             device: str = "auto", ilc_labels: Sequence[str] = (),
+             force_input: Sequence[str] = ()) -> dict[str, Any]:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
     collects and evaluates on that run configuration instead of the environment's plant;
@@ -171,13 +178,18 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     "currents", learning.features); `ilc_labels` adds the model of each kind named trained on
     the force ILC learns on each training reference (scenario KIND-ilc, on the set
     learning.ilc_labels writes beside the collected one) and the rigid-body model identified
-    there (IDENTIFIED_ILC); `device` ('auto', 'cpu', 'cuda') is where the networks train
-    (learning.devices), checked before any work."""
+    there (IDENTIFIED_ILC); `force_input` adds the black-box model of each kind named with the
+    identified rigid-body force as two more inputs (scenario KIND-force, and KIND-force-ilc on
+    the ILC labels where `ilc_labels` names the kind too); `device` ('auto', 'cpu', 'cuda') is
+    where the networks train (learning.devices), checked before any work."""
     on_gpu = bool(training_gpus(pick_device(device)))
     if env not in ENVIRONMENTS:
         raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
-    for kind in (*models, *currents, *ilc_labels):
+    for kind in (*models, *currents, *ilc_labels, *force_input):
         check_kind(kind)
+    if physics := [kind for kind in force_input if uses_prior(kind)]:
+        raise InputError(f"force inputs are for the black-box networks: {', '.join(physics)} "
+                         f"has the identified rigid-body force as its prior already")
     out = Path(out)
     environment = ENVIRONMENTS[env]
     set_name = environment.trajectory_set
@@ -193,15 +205,19 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         data = collect(set_name, out / f"data-{set_name}", scheduler=scheduler,
                        config=None if loop is None else with_feedforward(loop))
     extra = {"epochs": epochs} if epochs else {}
+    forced = {"force_input": True}
     levels: list[tuple[str, str, dict[str, Any], Path]] = [
         *((kind, kind, {}, Path(data)) for kind in models),
-        *((f"{kind}-currents", kind, {"labels": "currents"}, Path(data)) for kind in currents)]
+        *((f"{kind}-currents", kind, {"labels": "currents"}, Path(data)) for kind in currents),
+        *((f"{kind}-force", kind, forced, Path(data)) for kind in force_input)]
     labelled = None
     if ilc_labels:
         labelled = ilc_labelled_set(data, out / f"data-{set_name}-ilc",
                                     loop or default_loop(environment.plant), progress=progress,
                                     say=say)
         levels += [(f"{kind}-ilc", kind, ILC_PREPROCESSING, labelled) for kind in ilc_labels]
+        levels += [(f"{kind}-force-ilc", kind, {**ILC_PREPROCESSING, **forced}, labelled)
+                   for kind in ilc_labels if kind in force_input]
     groups = {name: _member_jobs(kind, preset, {**environment.overrides(preset, kind), **extra,
                                                 **labels},
                                  environment.members(preset, kind), trained_on, out / "runs",
@@ -317,7 +333,7 @@ def _cost(config: TrainConfig) -> float:
     """A training run's expected cost, to start the largest first: epochs times parameters
     times the model rate (each parameter is used about once per sample and epoch, in every
     kind of network; the data rate when the model keeps it)."""
-    n_features = len(feature_names(config.features.feature_set))
+    n_features = len(feature_names(config.features.feature_set, config.features.force_input))
     network = build_network(config.model, n_features, **config.architecture)
     return config.epochs * parameter_count(network) * (config.features.model_rate_hz or 1.0)
 

@@ -74,8 +74,15 @@ class FeatureConfig:
     # of every loss (`edge_samples`); 0 as in the thesis
     # the rigid-body model's forces pass the labels' filter (`filter_labels`) before they are
     # compared with the labels: the pgnn's prior in its residual labels (learning.train), the
-    # regressor in the identification (learning.identify)
+    # regressor in the identification (learning.identify), a black-box network's force inputs
+    # in training (learning.train.with_force_inputs)
     filtered_prior: bool = True
+    # the rigid-body model identified on the training split (learning.identify, without the
+    # training noise) gives its force along the motion as two more inputs
+    # (controllers.features.FORCE_INPUTS), computed from the filtered motion as the other
+    # features are (and filtered as the labels are: filtered_prior), in the deployed
+    # feedforward from the reference
+    force_input: bool = False
 
     def edge_samples(self, rate_hz: float) -> int:
         """Samples at `rate_hz` at each end of a trajectory where the zero-phase filter's

@@ -4,8 +4,9 @@ force for that reference and so the limit a learned feedforward can be measured 
 Trial 0 runs the loop under PID alone; after each trial the learning filter (learning.ilc_filter)
 gives the next trial's feedforward force, read as a CSV [[source]]. Every trial runs the one
 run path (cosim.scenario, cosim.run), with a fresh noise seed. The folder gets each trial's
-table, feedforward.csv (the best trial's force), ilc.json and e2.png, written as each trial
-ends, so an interrupted iteration continues. ilc.json's `noise_floor` is the part of e2 that
+table, feedforward.csv (the best trial's force) and ilc.json, written as each trial ends, so
+an interrupted iteration continues, and e2.png once the call ends (its progress bar shows
+each trial's e2 before). ilc.json's `noise_floor` is the part of e2 that
 the loop's encoders cause (learning.ilc_loops).
 
 Docs: "ILC and the noise floor" (docs/explanation/ilc-noise-floor.md).
@@ -101,6 +102,7 @@ def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
     if floor and (ran or NOISE_FLOOR not in state):
         state[NOISE_FLOOR] = loop.noise_floor(out / RESULT)
         _finish(out, state, loop)
+    plot_trials(state["trials"], out / "e2.png", state.get(NOISE_FLOOR), loop.axes, loop.unit)
     return state
 
 
@@ -113,7 +115,7 @@ def _trial_record(trial: int, seed: int | None, metrics: dict[str, dict[str, flo
 
 
 def _finish(out: Path, state: dict[str, Any], loop: IlcLoop) -> None:
-    """After a trial: the best trial's table as the result, ilc.json, e2.png."""
+    """After a trial: the best trial's table as the result, and ilc.json."""
     trials = state["trials"]
     best = min(trials, key=lambda t: math.hypot(*(t[a]["e2"] for a in loop.axes)))["trial"]
     state["best"] = best
@@ -121,7 +123,6 @@ def _finish(out: Path, state: dict[str, Any], loop: IlcLoop) -> None:
         out / "tables" / f"trial-{best:03d}.csv", tmp))
     text = json.dumps(state, indent=2) + "\n"
     atomic_write(out / STATE, lambda tmp: tmp.write_text(text, "utf-8"))
-    plot_trials(trials, out / "e2.png", state.get(NOISE_FLOOR), loop.axes, loop.unit)
 
 
 def _resumed(out: Path, identity: dict[str, Any]) -> dict[str, Any]:

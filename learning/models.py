@@ -274,20 +274,24 @@ class LinearSkip(SequenceNetwork):
         return skip
 
 
-def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor) -> None:
+def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor,
+                    columns: slice = slice(None)) -> None:
     """Set the skip of a LinearSkip network to the least-squares fit y ~ x W + b over the
-    samples (n, n_features), (n, n_outputs), and zero the inner network's head, so that training
-    starts from the linear fit.
+    samples (n, n_features), (n, n_outputs), on the features `columns` alone (the others'
+    weights zero), and zero the inner network's head, so that training starts from the
+    linear fit.
 
     The fit is solved on the CPU whatever device the samples and the network are on: the
     nearly collinear features need the SVD-based driver (gelsd), which CUDA lacks."""
     if not isinstance(network, LinearSkip):
         return
-    x, y = x.detach().cpu().double(), y.detach().cpu().double()
+    x, y = x.detach().cpu().double()[:, columns], y.detach().cpu().double()
     design = torch.cat([x, torch.ones(len(x), 1, dtype=torch.float64)], dim=1)
     solution = torch.linalg.lstsq(design, y, driver="gelsd").solution
+    weight = torch.zeros(network.linear.weight.shape, dtype=torch.float64)
+    weight[:, columns] = solution[:-1].T
     with torch.no_grad():
-        network.linear.weight.copy_(solution[:-1].T)
+        network.linear.weight.copy_(weight)  # onto the network's device
         network.linear.bias.copy_(solution[-1])
         head = _head(network.network)
         nn.init.zeros_(head.weight)

@@ -17,7 +17,7 @@ from typing import Any
 
 from flexff.fmu.errors import InputError
 from flexff.learning.features import FeatureConfig
-from flexff.learning.models import check_kind
+from flexff.learning.models import check_kind, uses_prior
 
 SCHEDULES = ("constant", "onecycle", "cosine")
 
@@ -122,5 +122,8 @@ def make_config(model: str, preset: str, **overrides: Any) -> TrainConfig:
         else:
             known = sorted(top | feature_fields | set(settings["architecture"]))
             raise InputError(f"unknown setting {key!r} for a {model} run; known: {known}")
+    if uses_prior(model) and feature_overrides.get("force_input"):
+        raise InputError(f"force_input is for the black-box networks: the {model} model has the "
+                         f"identified rigid-body force as its prior already")
     return TrainConfig(model=model, preset=preset, features=replace(features, **feature_overrides),
                        **settings)

@@ -51,10 +51,15 @@ SCENARIO_LABELS: dict[str, str] = {
     "tcn-currents": "TCN current FF",
     "pgnn-currents": "physics-guided current FF",
 }
+# black-box networks with the identified rigid-body force as inputs (learning.evaluate's
+# KIND-force)
+SCENARIO_LABELS.update({f"{name}-force": f"{SCENARIO_LABELS[name]} on identified force"
+                        for name in ("lstm", "cnn-lstm", "tcn")})
 # models trained on the force ILC learned on each training reference (learning.evaluate's
-# KIND-ilc, and its identified-ilc)
+# KIND-ilc and KIND-force-ilc, and its identified-ilc)
 SCENARIO_LABELS.update({f"{name}-ilc": f"{SCENARIO_LABELS[name]} (ILC labels)"
-                        for name in ("identified", "lstm", "cnn-lstm", "tcn", "pgnn")})
+                        for name in ("identified", "lstm", "cnn-lstm", "tcn", "pgnn",
+                                     "lstm-force", "cnn-lstm-force", "tcn-force")})
 LIMIT = "limit"  # the scenario of iterative learning control's force (learning.ilc)
 PER_LIMIT = "e2_per_limit"  # a scenario's e2 / the limit's
 OWN = "own_e2"  # a scenario's own share of e2 over the noise floor: sqrt(e2^2 - floor^2)

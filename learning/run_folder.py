@@ -92,6 +92,13 @@ class Run:
         rigid-body model, learning.identify); empty for other models and runs from before."""
         return dict(self.info.get("prior_parameters", {}))
 
+    @property
+    def force_input(self) -> dict[str, float] | None:
+        """The parameters of the identified rigid-body model whose force a black-box network
+        takes as its last inputs (learning.features.FeatureConfig.force_input); None: none."""
+        parameters = self.info.get("force_input")
+        return None if parameters is None else dict(parameters)
+
 
 def save_run(out: Path, config: TrainConfig, network: SequenceNetwork,
              feature_scaler: MinMaxScaler, label_scaler: MinMaxScaler, feature_names: list[str],

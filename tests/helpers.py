@@ -17,8 +17,9 @@ NETWORK_RTOL = 1e-6
 
 
 def train_tiny_models(folder: Path, sizes: dict, seed: int) -> Path:
-    """Small networks of each kind in `sizes` (kind -> architecture overrides), one epoch on a
-    small synthetic set, exported as `folder`/<kind>.onnx beside their run folders."""
+    """Small networks of each kind in `sizes` (name -> settings: a "model" kind, the name's
+    where none, and architecture or preprocessing overrides), one epoch on a small synthetic
+    set, exported as `folder`/<name>.onnx beside their run folders."""
     from flexff.learning.export import export
     from flexff.learning.synthetic import synthetic_dataset
     from flexff.learning.threads import torch_threads
@@ -27,10 +28,11 @@ def train_tiny_models(folder: Path, sizes: dict, seed: int) -> Path:
     data = synthetic_dataset(folder / "data", n_train=3, n_test=1, duration=3.0, rate_hz=100.0,
                              seed=seed)
     with torch_threads():
-        for kind, architecture in sizes.items():
-            train(kind, "fast", data, folder / kind, progress=False, epochs=1, val_fraction=0.2,
-                  **architecture)
-            export(folder / kind, folder / f"{kind}.onnx")
+        for name, settings in sizes.items():
+            overrides = {k: v for k, v in settings.items() if k != "model"}
+            train(settings.get("model", name), "fast", data, folder / name, progress=False,
+                  epochs=1, val_fraction=0.2, **overrides)
+            export(folder / name, folder / f"{name}.onnx")
     return folder
 
 

@@ -31,9 +31,11 @@ from tests.runners import run_fmu, run_fmu_libcosim
 
 STEPS = 600  # 0.6 s of the thesis evaluation reference at 1 kHz
 # one model per kind of input the FMU computes in C: the full features (LSTM), the directions
-# set (TCN) and the full features with the rigid-body prior (pgnn)
+# set (TCN), the full features with the rigid-body prior (pgnn) and with the identified
+# rigid-body force as inputs (TCN)
 TINY = {"lstm": {"hidden": 12}, "tcn": {"channels": 8, "levels": 2, "feature_set": "directions"},
-        "pgnn": {"channels": 8, "levels": 3}}
+        "pgnn": {"channels": 8, "levels": 3},
+        "tcn-force": {"model": "tcn", "channels": 8, "levels": 2, "force_input": True}}
 
 
 @pytest.fixture(scope="module")
@@ -52,12 +54,16 @@ def metadata(model) -> dict[str, str]:
 
 
 def independent_forces(model, reference, task: bool = False) -> np.ndarray:
-    """The documented scheme with onnxruntime's Python API, step by step at the model rate;
+    """The documented scheme with onnxruntime's Python API, step by step at the model rate
+    (a linear skip beside the graph at every step);
     `task`: the network in its own task, each call's result used one model period later and
     extrapolated one period further (zero before the first)."""
     meta = metadata(model)
     period = round(1e3 / float(meta["sample_rate_hz"]))
     features = reference_features(reference, meta["feature_set"])
+    if "force_input" in meta:  # the identified force, as the learning side computes it
+        features = np.hstack([features, rigid_forces(features, meta["feature_set"],
+                                                     json.loads(meta["force_input"]))])
     runtime = session(model)
     names = [o.name for o in runtime.get_outputs()]
     state = {i.name: np.zeros(i.shape, np.float32) for i in runtime.get_inputs()
@@ -74,6 +80,9 @@ def independent_forces(model, reference, task: bool = False) -> np.ndarray:
         if task:
             j, phase = j - 1, phase + period
         forces[k] = calls[j] + phase / period * (calls[j] - calls[max(j - 1, 0)])
+    if "linear_inputs" in meta:  # the skip beside the graph, at every step
+        skip = json.loads(meta["linear_inputs"])
+        forces += features @ np.array(skip["weights"]).T + np.array(skip["bias"])
     if meta["prior"] == "rigid-body":
         labels = "currents" if json.loads(meta["output_signals"])[0] == "i1_ff" else "forces"
         forces += rigid_forces(features, meta["feature_set"],
@@ -220,6 +229,13 @@ def test_models_that_do_not_fit_are_refused(models, tmp_path):
                                             "prior_parameters": bad})
         onnx.save(graph, str(tmp_path / "bad.onnx"))
         with pytest.raises(ValueError, match=r"metadata prior_parameters .*export the model"):
+            learned_feedforward_system(tmp_path / "bad.onnx")
+    graph = onnx.load(str(models / "tcn-force.onnx"))
+    for key, value in (("force_input", '{"m_ee9": 1.0}'), ("force_input", "null")):
+        onnx.helper.set_model_props(graph, {**metadata(models / "tcn-force.onnx"), key: value})
+        onnx.save(graph, str(tmp_path / "bad.onnx"))
+        with pytest.raises(ValueError, match=r"metadata force_input .*export the model|"
+                                             r"Fx_id.*are not the features signals"):
             learned_feedforward_system(tmp_path / "bad.onnx")
 
 

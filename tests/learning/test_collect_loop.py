@@ -236,9 +236,9 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
     seen = {}
 
     def fake(env, out, preset, models, data, epochs, loop, scheduler, currents=(),
-             device="auto", ilc_labels=()):
+             device="auto", ilc_labels=(), force_input=()):
         seen.update(env=env, loop=loop, scheduler=scheduler, device=device,
-                    ilc_labels=ilc_labels)
+                    ilc_labels=ilc_labels, force_input=force_input)
         (Path(out) / "table.md").write_text("| table |\n")
 
     monkeypatch.setattr("flexff.learning.evaluate.evaluate", fake)
@@ -246,9 +246,10 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
     config.write_text('[reference]\nkind = "thesis-eval"\n[plant]\nm_up1 = 0.13\n')
     assert main(["evaluate", "--config", str(config), "--env", "hardware", "-o",
                  str(tmp_path / "eval"), "--scheduler", "tcp://cluster:8786",
-                 "--ilc-labels", "pgnn"]) == 0
+                 "--ilc-labels", "pgnn", "--force-input", "tcn", "lstm"]) == 0
     assert seen["env"] == "hardware" and seen["loop"].builtin("plant").parameters["m_up1"] == 0.13
     assert seen["scheduler"] == "tcp://cluster:8786" and seen["ilc_labels"] == ["pgnn"]
+    assert seen["force_input"] == ["tcn", "lstm"]
     assert "| table |" in capsys.readouterr().out
 
 
@@ -352,12 +353,13 @@ def test_the_loops_edits_are_checked_as_a_file_is():
     assert with_feedforward(loop, "rigid-body-feedforward", {}).checked
 
 
-def test_cli_evaluate_refuses_ilc_labels_for_a_machine(tmp_path, capsys):
+@pytest.mark.parametrize("option", [["--ilc-labels", "pgnn"], ["--force-input", "tcn"]])
+def test_cli_evaluate_refuses_manipulator_options_for_a_machine(tmp_path, capsys, option):
     from flexff.cli import main
 
     drive = Path(__file__).parents[2] / "machines" / "examples" / "drive.toml"
     assert main(["evaluate", "--config", str(drive), "-o", str(tmp_path / "eval"),
-                 "--ilc-labels", "pgnn"]) == 2
-    assert "--currents and --ilc-labels are for the manipulator's environments: leave them " \
-           "out for a machine" in capsys.readouterr().err
+                 *option]) == 2
+    assert "--currents, --ilc-labels and --force-input are for the manipulator's environments: " \
+           "leave them out for a machine" in capsys.readouterr().err
     assert not (tmp_path / "eval").exists()

@@ -43,14 +43,16 @@ def _same(a, b):
     return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
-@pytest.mark.parametrize("kind", list(TINY))
+@pytest.mark.parametrize("kind, extra", [
+    *(pytest.param(kind, {}, id=kind) for kind in TINY),
+    pytest.param("tcn", {"force_input": True}, id="tcn-force")])
 def test_training_on_another_device_mixes_no_tensors_and_equals_the_cpus(data, tmp_path,
-                                                                          kind):
+                                                                          kind, extra):
     on_cpu = train(kind, "fast", data, tmp_path / "cpu", progress=False, epochs=2,
-                   device="cpu", **TINY[kind])
+                   device="cpu", **TINY[kind], **extra)
     with FakeDevice() as device:
         on_device = train(kind, "fast", data, tmp_path / "device", progress=False, epochs=2,
-                          device=str(DEVICE), **TINY[kind])
+                          device=str(DEVICE), **TINY[kind], **extra)
     assert device.checked > 1000  # the mode saw the training
     assert on_device["device"] == str(DEVICE)
     assert on_device["history"]["train"] == on_cpu["history"]["train"]

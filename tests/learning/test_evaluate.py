@@ -170,6 +170,8 @@ def test_bad_requests_are_refused(tmp_path):
         evaluate("sim", tmp_path, models=["mlp"])
     with pytest.raises(ValueError, match="needs an ONNX model"):
         scenario_config("sim", "lstm")
+    with pytest.raises(ValueError, match="force inputs are for the black-box networks: pgnn"):
+        evaluate("sim", tmp_path, force_input=["pgnn"])
 
 
 @pytest.mark.parametrize("env, variant, duration", [("sim", "nominal", 15.0),
@@ -239,6 +241,23 @@ def test_a_current_level_model_is_its_own_scenario(evaluation, tmp_path):
     assert not np.any(signals["Fx_ff"]) and np.abs(signals["feedforward.i1_ff"]).max() > 0.01
     assert any(line.startswith("tcn-currents: e2 = ") for line in lines)
     assert "| TCN current FF |" in (tmp_path / "table.md").read_text()
+
+
+@pytest.mark.slow  # 35 s; force inputs fast: test_train.py, test_learned_feedforward.py
+def test_a_black_box_model_on_the_identified_force_is_its_own_scenario(evaluation, tmp_path):
+    """KIND-force: the TCN takes the force of the very model the identified scenario runs."""
+    out, _, _ = evaluation
+    lines = []
+    summary = evaluate("sim", tmp_path, models=[], force_input=["tcn"], data=out / "data",
+                       epochs=1, say=lines.append, progress=False, ilc_iterations=1)
+    assert list(summary["scenarios"]) == ["pid", "rigid-body", "identified", "tcn-force",
+                                          "limit"]
+    card = read_card(tmp_path / "tcn-force.onnx")
+    assert card.input_signals[-2:] == ["Fx_id", "Fy_id"]
+    assert card.force_input == pytest.approx(
+        read_identified(tmp_path / "identified" / "identified.json"), rel=1e-9)
+    assert any(line.startswith("tcn-force: e2 = ") for line in lines)
+    assert "| TCN FF on identified force |" in (tmp_path / "table.md").read_text()
 
 
 def test_a_model_trained_on_ilc_labels_is_its_own_scenario(tmp_path):
