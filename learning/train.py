@@ -239,8 +239,8 @@ def _skip_columns(config: TrainConfig) -> slice:
     """The features a linear skip is fitted on: with force inputs those alone, so that the
     physics enters linearly through them and no least-squares weight on the collinear motion
     features, fitted to the labels' noise, extrapolates beyond the training range (hardware
-    stand-in, the test split's geometric-mean e2 ratio x / y: TCN 224 / 192 and LSTM
-    205 / 238 with the skip on the force inputs, 53 / 73 and 53 / 71 on every feature)."""
+    stand-in, the test split's geometric-mean e2 ratio x / y: TCN 233 / 201 and LSTM
+    207 / 246 with the skip on the force inputs, 53 / 73 and 53 / 71 on every feature)."""
     return slice(-len(FORCE_INPUTS), None) if config.features.force_input else slice(None)
 
 
