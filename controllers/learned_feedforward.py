@@ -64,9 +64,7 @@ def learned_feedforward_system(model: str | Path, step: float = 1e-3,
     r = ca.SX.sym("r", network.n_outputs)
     with_prior = card.prior == "rigid-body"
     force = r + _prior(u, card) if with_prior else r
-    if card.linear_inputs is not None:  # the network's skip, at every step of the loop
-        force = force + ca.mtimes(ca.DM(card.linear_inputs["weights"]), inputs) \
-            + ca.DM(card.linear_inputs["bias"])
+    force = force + linear_skip(card, inputs)
     mode = "precomputed" if reference is not None else "task" if task else "step"
     added = (", the identified rigid-body force among its inputs"
              if card.force_input is not None else "")
@@ -97,6 +95,15 @@ def _prior(reference: ca.SX, card: ModelCard) -> ca.SX:
     if card.labels == "forces":
         return force
     return motor_currents(force, reference_motion(reference)[0])
+
+
+def linear_skip(card: ModelCard, inputs: ca.SX) -> ca.SX:
+    """The network's linear skip beside the graph (the card's linear_inputs) on the model's
+    `inputs`, added at every step of the loop; 0 for a model without one."""
+    if card.linear_inputs is None:
+        return ca.SX(0)
+    return ca.mtimes(ca.DM(card.linear_inputs["weights"]), inputs) \
+        + ca.DM(card.linear_inputs["bias"])
 
 
 def model_period(card: ModelCard, step: float, model: str | Path) -> int:

@@ -15,7 +15,7 @@ from pathlib import Path
 import casadi as ca
 
 from flexff.controllers.feedforward import feedforward_system
-from flexff.controllers.learned_feedforward import model_period
+from flexff.controllers.learned_feedforward import linear_skip, model_period
 from flexff.controllers.linear_prior import linear_model_from_dict
 from flexff.controllers.machine_features import FeatureInputs, feature_function
 from flexff.controllers.model_card import read_card
@@ -119,10 +119,7 @@ def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
         raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
                          f"machine {machine.name!r} has {len(machine.axes)} axes")
     result = ca.SX.sym("r", network.n_outputs)
-    effort = result
-    if card.linear_inputs is not None:  # the network's skip, at every step of the loop
-        effort = effort + ca.mtimes(ca.DM(card.linear_inputs["weights"]), features) \
-            + ca.DM(card.linear_inputs["bias"])
+    effort = result + linear_skip(card, features)
     if card.prior == "linear":  # a physics-guided model: its residual plus the prior
         assert card.machine_prior is not None  # the card's check
         prior = linear_model_from_dict(card.machine_prior, f"{model}: metadata machine_prior")

@@ -38,11 +38,10 @@ def compiled(function: ca.Function) -> ca.Function:
         library = cache.cached_path(key, SUFFIX)
         if not library.is_file():
             _compile(source, key)
-    except subprocess.CalledProcessError as error:
-        _warn_interpreted(function.name(), (error.stderr or str(error)).strip().splitlines()[0])
-        return function
-    except (OSError, RuntimeError) as error:  # no compiler; no C for this Function
-        _warn_interpreted(function.name(), str(error).strip().splitlines()[0])
+    except (subprocess.CalledProcessError, OSError, RuntimeError) as error:  # the compiler
+        # failed (its messages), none runs, or the Function has no C
+        reason = getattr(error, "stderr", None) or str(error)
+        _warn_interpreted(function.name(), reason.strip().splitlines()[0])
         return function
     return ca.external(function.name(), str(library))
 

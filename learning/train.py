@@ -292,9 +292,7 @@ def with_force_inputs(features: np.ndarray, parameters: dict[str, float], config
     network learns to pass it on (its linear skip, fitted first, takes it about 1:1); the
     deployed feedforward computes it from the reference, unfiltered, and so passes the sharp
     step on, as the physics-guided model's prior does (prior_labels)."""
-    force = rigid_forces(features, config.feature_set, parameters)
-    if config.filtered_prior:
-        force = filter_labels(force, rate_hz, config)
+    force = prior_labels(features, parameters, replace(config, labels="forces"), rate_hz)
     return np.hstack([features, force])
 
 
