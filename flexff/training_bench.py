@@ -4,9 +4,10 @@ Each model kind of each preset trains a few epochs in a process of its own, with
 `flexff evaluate --env ENV` gives it, on CUDA (where there is one) and on the CPU with every
 core. Per run: the seconds from the process's start to its first epoch (imports, CUDA, data
 preparation), the median seconds per epoch after the first, and on CUDA the GPU's busy share
-during the epochs and its peak memory. On CUDA the thesis preset also runs under bf16
-autocast (the mixed-precision candidate) and as several trainings sharing the GPU
-(learning.workers.TRAININGS_PER_GPU). The estimate of a whole evaluation's training
+during the epochs and its peak memory. On CUDA the training steps replay CUDA graphs
+(learning.training_step); the thesis preset also runs with eager steps (what the graphs
+gain), under bf16 autocast (the mixed-precision candidate), and as several trainings sharing
+the GPU (learning.workers.TRAININGS_PER_GPU). The estimate of a whole evaluation's training
 multiplies each run's epochs and members by its seconds per epoch, and divides by the
 trainings that share the GPU. A run that fails is a figure too (its error); the others go on,
 and when every one fails the bench stops with the first one's error.
@@ -62,23 +63,25 @@ def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis")
     cuda = torch.cuda.is_available()
     devices = ["cuda", "cpu"] if cuda else ["cpu"]
     kinds = models or tuple(NETWORKS)
-    runs = [(preset, kind, device, precision) for preset in presets for kind in kinds
+    runs = [(preset, kind, device, variant) for preset in presets for kind in kinds
             for device in devices
-            for precision in (("float32", "bf16") if bf16 and device == "cuda" and
-                              preset == "thesis" else ("float32",))]
+            for variant in (("", "eager", *(("bf16",) if bf16 else ()))
+                            if device == "cuda" and preset == "thesis" else ("",))]
     figures: dict[str, Any] = {"data": str(data), "env": env, "cores": granted_cores(),
                                "gpu": torch.cuda.get_device_name() if cuda else None,
                                "torch": torch.__version__, "presets": {}}
     with tempfile.TemporaryDirectory(prefix="flexff-bench-") as scratch:
-        for preset, kind, device, precision in tqdm(runs, desc="training bench", unit="run"):
-            overrides = environment.overrides(preset, kind)
-            variant = device if precision == "float32" else f"{device}_{precision}"
-            run = _timed_run(kind, preset, data, Path(scratch) / f"{preset}-{kind}-{variant}",
-                             device, precision, EPOCHS[device][preset], overrides)
+        for preset, kind, device, variant in tqdm(runs, desc="training bench", unit="run"):
+            overrides = {**environment.overrides(preset, kind),
+                         **({"cuda_graphs": False} if variant == "eager" else {})}
+            name = f"{device}_{variant}" if variant else device
+            run = _timed_run(kind, preset, data, Path(scratch) / f"{preset}-{kind}-{name}",
+                             device, "bf16" if variant == "bf16" else "float32",
+                             EPOCHS[device][preset], overrides)
             entry = figures["presets"].setdefault(preset, {}).setdefault(kind, {
                 "epochs": _preset_epochs(kind, preset, overrides),
                 "members": environment.members(preset, kind)})
-            entry[variant] = run
+            entry[name] = run
             if save is not None:
                 save(figures)
         failed = [run[device].get("error") for entries in figures["presets"].values()
@@ -91,6 +94,8 @@ def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis")
         for entry in entries.values():
             if "epoch_s" in entry.get("cuda", {}) and "epoch_s" in entry["cpu"]:
                 entry["speedup"] = entry["cpu"]["epoch_s"] / entry["cuda"]["epoch_s"]
+            if "epoch_s" in entry.get("cuda", {}) and "epoch_s" in entry.get("cuda_eager", {}):
+                entry["graph_speedup"] = entry["cuda_eager"]["epoch_s"] / entry["cuda"]["epoch_s"]
         figures.setdefault("estimate_s", {})[preset] = _estimate(
             entries, figures.get("sharing") if preset == "thesis" else None)
     return figures
@@ -160,7 +165,7 @@ def _timed_run(kind: str, preset: str, data: Path, out: Path, device: str, preci
     timed = seconds[1:] or seconds
     return {"start_s": child["first_epoch_start"] - spawned,
             "epoch_s": statistics.median(timed), "epochs_timed": len(seconds),
-            **{k: child[k] for k in ("gpu_busy", "gpu_memory_gb", "val")}}
+            **{k: child[k] for k in ("gpu_busy", "gpu_memory_gb", "val", "cuda_graphs")}}
 
 
 def _child(request: dict[str, Any]) -> dict[str, Any]:
@@ -195,7 +200,7 @@ def _child(request: dict[str, Any]) -> dict[str, Any]:
     first_start = ends[0] - seconds[0]
     during = [share for when, share in busy if first_start <= when <= ends[-1]]
     return {"first_epoch_start": first_start, "seconds": seconds,
-            "val": metrics["history"]["val"][-1],
+            "val": metrics["history"]["val"][-1], "cuda_graphs": metrics["cuda_graphs"],
             "gpu_busy": statistics.mean(during) / 100 if during else None,
             "gpu_memory_gb": torch.cuda.max_memory_allocated() / 1e9 if cuda else None}
 

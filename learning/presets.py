@@ -40,6 +40,8 @@ class TrainConfig:
     seed: int = 0
     device: str = "auto"  # "auto": CUDA when available, else CPU
     threads: int = 0  # CPU threads; 0: half the cores granted, at least one (learning.threads)
+    # on CUDA, each training step replayed from a CUDA graph (learning.training_step)
+    cuda_graphs: bool = True
 
     def __post_init__(self) -> None:
         check_kind(self.model)

@@ -71,6 +71,14 @@ from flexff.learning.run_folder import (
 )
 from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.threads import torch_threads
+from flexff.learning.training_step import (
+    CudaGraphs,
+    TrainingStep,
+    adam,
+    load_state,
+    portable_state,
+    set_learning_rate,
+)
 
 EpochReport = Callable[[dict[str, Any]], None]
 # trajectories run whole side by side in one pass of role_mse: a recurrent network's pass is
@@ -177,7 +185,8 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
 def _settings(config: TrainConfig, dataset: Dataset) -> dict[str, Any]:
     """What a checkpoint must share to be resumed: the configuration (where it runs aside)
     and the data."""
-    settings = {k: v for k, v in config.to_dict().items() if k not in ("device", "threads")}
+    settings = {k: v for k, v in config.to_dict().items()
+                if k not in ("device", "threads", "cuda_graphs")}
     plain: dict[str, Any] = json.loads(json.dumps({"config": settings, "data": dataset.digest}))
     return plain
 
@@ -227,7 +236,7 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
             "parameters": parameter_count(network),
             "seconds_per_epoch": float(np.mean(history["seconds"])),
             "epochs": config.epochs, "best_epoch": history["best_epoch"],
-            "device": str(device),
+            "device": str(device), "cuda_graphs": history["cuda_graphs"],
             "threads": torch.get_num_threads() if device.type == "cpu" else None,
             "history": {k: history[k] for k in ("train", "val", "seconds")},
         }
@@ -343,7 +352,7 @@ class Checkpoints:
             return
         save_checkpoint(self.out, {
             "settings": json.dumps(self.settings), "epoch": done, "epochs": epochs,
-            "network": network.state_dict(), "optimizer": optimizer.state_dict(),
+            "network": network.state_dict(), "optimizer": portable_state(optimizer),
             "best": best, "best_state": best_state or {},
             "rng": json.dumps(rng.bit_generator.state), "torch_rng": torch.get_rng_state(),
             "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else [],
@@ -351,13 +360,13 @@ class Checkpoints:
 
 
 def _restore(checkpoint: dict[str, Any], network: SequenceNetwork,
-             optimizer: torch.optim.Optimizer, rng: np.random.Generator, out: Path) -> tuple[
-                 dict[str, Any], float, dict[str, torch.Tensor] | None]:
-    """Put the training state of `checkpoint` (from run folder `out`) back; return its history,
-    best loss and best weights."""
+             optimizer: torch.optim.Adam, captured: bool, rng: np.random.Generator, out: Path
+             ) -> tuple[dict[str, Any], float, dict[str, torch.Tensor] | None]:
+    """Put the training state of `checkpoint` (from run folder `out`) back, the optimizer's
+    as a `captured` step's Adam wants it; return its history, best loss and best weights."""
     try:
         network.load_state_dict(checkpoint["network"])
-        optimizer.load_state_dict(checkpoint["optimizer"])
+        load_state(optimizer, checkpoint["optimizer"], captured)
         rng.bit_generator.state = json.loads(checkpoint["rng"])
         torch.set_rng_state(checkpoint["torch_rng"])
         if checkpoint["cuda_rng"] and torch.cuda.is_available():
@@ -372,13 +381,16 @@ def _restore(checkpoint: dict[str, Any], network: SequenceNetwork,
 def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
               rng: np.random.Generator, progress: bool, saver: Checkpoints,
               checkpoint: dict[str, Any] | None, on_epoch: EpochReport | None) -> dict[str, Any]:
-    optimizer = torch.optim.Adam(network.parameters(), lr=config.learning_rate)
+    captured = config.cuda_graphs and data.x.is_cuda
+    optimizer = adam(network, config.learning_rate, captured)
+    step = TrainingStep(network, optimizer, config.grad_clip, CudaGraphs() if captured else None)
     recurrent = config.model in RECURRENT
     sampler = None if recurrent else WindowSampler(data, config.window, network.history)
     history: dict[str, Any] = {"train": [], "val": [], "seconds": []}
     best, best_state = math.inf, None
     if checkpoint is not None:
-        history, best, best_state = _restore(checkpoint, network, optimizer, rng, saver.out)
+        history, best, best_state = _restore(checkpoint, network, optimizer, captured, rng,
+                                             saver.out)
     first = len(history["train"])
     bar = tqdm(range(first, config.epochs), initial=first, total=config.epochs,
                desc=f"{config.model}", disable=not progress, unit="epoch")
@@ -386,9 +398,9 @@ def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
         start = time.perf_counter()
         network.train()
         if sampler is None:  # a recurrent network
-            loss = _recurrent_epoch(network, config, data, optimizer, rng, epoch)
+            loss = _recurrent_epoch(network, config, data, step, rng, epoch)
         else:
-            loss = _window_epoch(network, config, sampler, optimizer, rng, epoch)
+            loss = _window_epoch(config, sampler, step, rng, epoch)
         val = role_mse(network, data, VALIDATION)
         history["seconds"].append(time.perf_counter() - start)
         history["train"].append(loss)
@@ -406,74 +418,55 @@ def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
         raise RunError(f"training diverged (validation loss {history['val'][-1]}): lower "
                        f"learning_rate (now {config.learning_rate:g}) or grad_clip")
     network.load_state_dict(best_state)
+    history["cuda_graphs"] = step.graphs is not None
     return history
 
 
 def _recurrent_epoch(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
-                     optimizer: torch.optim.Optimizer, rng: np.random.Generator,
-                     epoch: int) -> float:
+                     step: TrainingStep, rng: np.random.Generator, epoch: int) -> float:
     """One TBPTT pass: each group of trajectories chunk by chunk, the state carried on.
 
     Which chunks hold training samples, and how many, is read from a host copy of the roles,
-    and the loss is summed on the device: on a GPU no chunk waits for the one before."""
+    and the loss is summed on the device: on a GPU no chunk waits for the one before. A chunk
+    without training samples only carries the state on."""
     roles = data.role.cpu().numpy() == TRAIN
     groups = data.groups(config.batch_size, rng)
     chunks = range(0, data.x.shape[1], config.window)
     total, count, k = torch.zeros((), device=data.x.device), 0, 0
     for on_host, group in groups:
         x, y, role = data.x[group], data.y[group], data.role[group]
-        state = None
+        state = network.initial_state(len(group), x.device)
         for start in chunks:
-            _set_learning_rate(optimizer, config, epoch + k / (len(groups) * len(chunks)))
+            _set_learning_rate(step.optimizer, config, epoch + k / (len(groups) * len(chunks)))
             k += 1
             part = slice(start, start + config.window)
-            pred, state = network(x[:, part], state)
-            state = tuple(s.detach() for s in state)
             samples = int(roles[on_host, part].sum())
             if samples:
-                loss = _step(optimizer, network, config, pred, y[:, part], role[:, part] == TRAIN)
+                loss, state = step(x[:, part], state, y[:, part], role[:, part] == TRAIN)
                 total, count = total + loss * samples, count + samples
+            else:
+                with torch.no_grad():
+                    state = network(x[:, part], state)[1]
     return float(total) / count
 
 
-def _window_epoch(network: SequenceNetwork, config: TrainConfig, sampler: WindowSampler,
-                  optimizer: torch.optim.Optimizer, rng: np.random.Generator,
-                  epoch: int) -> float:
+def _window_epoch(config: TrainConfig, sampler: WindowSampler, step: TrainingStep,
+                  rng: np.random.Generator, epoch: int) -> float:
     """One pass over random training windows, each with its history as the initial buffer;
     the loss summed on the device (no batch waits for the one before)."""
     n_batches = math.ceil(len(sampler) / config.batch_size)
     total = count = torch.zeros((), device=sampler.data.x.device)
     for k, (hist, x, y, mask) in enumerate(sampler.batches(config.batch_size, rng)):
-        _set_learning_rate(optimizer, config, epoch + k / n_batches)
-        pred, _ = network(x, (hist.transpose(1, 2),))
-        loss = _step(optimizer, network, config, pred, y, mask)
+        _set_learning_rate(step.optimizer, config, epoch + k / n_batches)
+        loss, _ = step(x, (hist.transpose(1, 2),), y, mask)
         samples = mask.sum()
         total, count = total + loss * samples, count + samples
     return float(total / count)
 
 
-def _step(optimizer: torch.optim.Optimizer, network: SequenceNetwork, config: TrainConfig,
-          pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-    """One optimizer step on the masked MSE; the loss, detached, where it was computed."""
-    loss = masked_mse(pred, target, mask)
-    optimizer.zero_grad(set_to_none=True)
-    loss.backward()
-    if config.grad_clip:
-        torch.nn.utils.clip_grad_norm_(network.parameters(), config.grad_clip)
-    optimizer.step()
-    return loss.detach()
-
-
-def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-    """Mean squared error over the samples where mask is true (both outputs)."""
-    weight = mask.unsqueeze(-1).to(pred.dtype)
-    return ((pred - target) ** 2 * weight).sum() / (weight.sum() * pred.shape[-1])
-
-
 def _set_learning_rate(optimizer: torch.optim.Optimizer, config: TrainConfig,
                        epochs_done: float) -> None:
-    for group in optimizer.param_groups:
-        group["lr"] = learning_rate(config, epochs_done / config.epochs)
+    set_learning_rate(optimizer, learning_rate(config, epochs_done / config.epochs))
 
 
 def learning_rate(config: TrainConfig, fraction: float) -> float:

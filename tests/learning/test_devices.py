@@ -6,6 +6,7 @@ the CPU's exactly, as the same arithmetic runs underneath. With CUDA the fast pr
 trains on the GPU itself (skipped here)."""
 
 import json
+import warnings
 from contextlib import nullcontext
 
 import numpy as np
@@ -134,6 +135,41 @@ def test_the_fast_preset_trains_on_cuda_as_on_the_cpu(data, tmp_path, kind):
     assert runs["cuda"]["test_mse"] == pytest.approx(runs["cpu"]["test_mse"], rel=0.2)
     export(tmp_path / "cuda", tmp_path / f"{kind}.onnx")
     assert json.loads((tmp_path / "cuda" / "metrics.json").read_text())["device"] == "cuda"
+
+
+@CUDA
+@pytest.mark.parametrize("kind", list(TINY))
+def test_steps_replayed_from_cuda_graphs_train_as_eager_ones(data, tmp_path, kind):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a failed capture warns: it would fall back unseen
+        runs = {graphs: train(kind, "fast", data, tmp_path / str(graphs), progress=False,
+                              epochs=3, device="cuda", cuda_graphs=graphs)
+                for graphs in (True, False)}
+    assert runs[True]["cuda_graphs"] and not runs[False]["cuda_graphs"]
+    assert runs[True]["test_mse"] == pytest.approx(runs[False]["test_mse"], rel=0.05)
+
+
+@CUDA
+@pytest.mark.parametrize("first,then", [("cuda", "cpu"), ("cpu", "cuda"), ("cuda", "cuda")])
+def test_a_checkpoint_of_replayed_steps_resumes_anywhere(data, tmp_path, monkeypatch, first,
+                                                          then):
+    whole = train("lstm", "fast", data, tmp_path / "whole", progress=False, epochs=2,
+                  device=then, **TINY["lstm"])
+    real = training.Checkpoints.epoch_done
+
+    def stop_after_one(self, epochs, network, optimizer, rng, history, *rest):
+        real(self, epochs, network, optimizer, rng, history, *rest)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(training.Checkpoints, "epoch_done", stop_after_one)
+    with pytest.raises(KeyboardInterrupt):
+        train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2, device=first,
+              checkpoint_every=1, **TINY["lstm"])
+    monkeypatch.setattr(training.Checkpoints, "epoch_done", real)
+    resumed = train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2,
+                    device=then, **TINY["lstm"])
+    assert resumed["cuda_graphs"] == (then == "cuda")
+    assert resumed["test_mse"] == pytest.approx(whole["test_mse"], rel=0.05)
 
 
 def test_the_command_lines_devices_are_the_librarys():

@@ -1,0 +1,106 @@
+"""The training step, eager and replayed (learning.training_step).
+
+Without a GPU the capture is emulated: `EmulatedGraphs.capture` computes the step's outputs
+once and puts the network, Adam and the random generator back, as a real capture runs
+nothing; each replay runs the step again on the captured inputs and writes its results into
+the first outputs, as a graph overwrites its own. The steps must then equal eager ones bit
+for bit, through shape changes and a state carried from step to step. On CUDA the real
+graphs run (tests/learning/test_devices.py)."""
+
+import copy
+
+import pytest
+import torch
+
+from flexff.learning.models import build_network
+from flexff.learning.training_step import TrainingStep, adam, set_learning_rate
+
+
+class EmulatedGraphs:
+    """CudaGraphs' interface on the CPU (see the module)."""
+
+    def __init__(self, network, optimizer, fail=False):
+        self.network, self.optimizer, self.fail = network, optimizer, fail
+        self.captures = self.replays = 0
+
+    def warm_up(self, work):
+        return work()
+
+    def capture(self, work):
+        if self.fail:
+            raise RuntimeError("operation not permitted when stream is capturing\nmore")
+        weights = copy.deepcopy(self.network.state_dict())
+        moments = copy.deepcopy(self.optimizer.state_dict())
+        generator = torch.get_rng_state()
+        loss, state = work()
+        self.network.load_state_dict(weights)
+        self.optimizer.load_state_dict(moments)
+        torch.set_rng_state(generator)
+        self.captures += 1
+
+        def replay():
+            self.replays += 1
+            new_loss, new_state = work()
+            loss.copy_(new_loss)
+            for old, new in zip(state, new_state):
+                old.copy_(new)
+
+        return (loss, state), replay
+
+
+def _batches(network, n=9):
+    """Steps of two batch shapes, interleaved, the state of each carried on."""
+    generator = torch.Generator().manual_seed(3)
+    for k in range(n):
+        batch = 3 if k % 3 else 2
+        x = torch.randn(batch, 7, 4, generator=generator)
+        y = torch.randn(batch, 7, 2, generator=generator)
+        mask = torch.rand(batch, 7, generator=generator) > 0.3
+        yield batch, x, y, mask
+
+
+def _train(kind, graphs_of=None):
+    torch.manual_seed(0)
+    network = build_network(kind, 4, hidden=5, dropout=0.2, **(
+        {"conv_channels": [3, 2], "conv_kernels": [3, 2]} if kind == "cnn-lstm" else {}))
+    optimizer = adam(network, 1e-2, captured=False)
+    graphs = graphs_of(network, optimizer) if graphs_of else None
+    step = TrainingStep(network, optimizer, 0.5, graphs)
+    states, losses = {}, []
+    for k, (batch, x, y, mask) in enumerate(_batches(network)):
+        set_learning_rate(optimizer, 1e-2 / (k + 1))
+        state = states.get(batch, network.initial_state(batch))
+        loss, state = step(x, state, y, mask)
+        states[batch] = tuple(s.clone() for s in state)
+        losses.append(float(loss))
+    return network, losses, graphs
+
+
+@pytest.mark.parametrize("kind", ["lstm", "cnn-lstm"])
+def test_replayed_steps_equal_eager_ones(kind):
+    eager, eager_losses, _ = _train(kind)
+    replayed, losses, graphs = _train(kind, EmulatedGraphs)
+    assert graphs.captures == 2 and graphs.replays == 7  # 9 steps, a warm-up per shape
+    assert losses == eager_losses
+    assert all(torch.equal(a, b) for a, b in zip(replayed.state_dict().values(),
+                                                  eager.state_dict().values()))
+
+
+def test_a_failed_capture_warns_once_and_steps_eagerly():
+    eager, eager_losses, _ = _train("lstm")
+    with pytest.warns(RuntimeWarning, match="capture as a CUDA graph failed .operation not "
+                                            "permitted when stream is capturing.$") as caught:
+        stepped, losses, _ = _train(
+            "lstm", lambda network, optimizer: EmulatedGraphs(network, optimizer, fail=True))
+    assert len(caught) == 1
+    assert losses == eager_losses
+    assert all(torch.equal(a, b) for a, b in zip(stepped.state_dict().values(),
+                                                  eager.state_dict().values()))
+
+
+def test_the_learning_rate_is_set_in_place_where_a_graph_reads_it():
+    network = build_network("tcn", 4, channels=4, levels=1)
+    optimizer = adam(network, 1e-3, captured=False)
+    optimizer.param_groups[0]["lr"] = rate = torch.tensor(1e-3)
+    set_learning_rate(optimizer, 5e-4)
+    assert optimizer.param_groups[0]["lr"] is rate and float(rate) == pytest.approx(5e-4)
