@@ -464,7 +464,8 @@ def _train(args: argparse.Namespace) -> int:
     if is_machine_dataset(args.data):
         return _train_machine(args)
     overrides = {"labels": args.labels, **({"epochs": args.epochs} if args.epochs else {}),
-                 **({"force_input": True} if args.force_input else {})}
+                 **({"force_input": True} if args.force_input else {}),
+                 **({"cuda_graphs": True} if args.cuda_graphs else {})}
     seeds = args.seed or [0]
     if len(seeds) == 1 and args.scheduler is None:
         from flexff.learning.train import train
@@ -820,6 +821,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--scheduler", help="address of a Dask scheduler to train on (its "
                                            "workers see this file system)")
     _device_option(train, "train on")
+    train.add_argument("--cuda-graphs", action="store_true",
+                       help="on CUDA, replay each training step from a CUDA graph (not yet "
+                            "measured on a GPU)")
     train.set_defaults(handler=_train)
 
     export = commands.add_parser("export", help="export a training run (or an ensemble of "

@@ -40,8 +40,9 @@ class TrainConfig:
     seed: int = 0
     device: str = "auto"  # "auto": CUDA when available, else CPU
     threads: int = 0  # CPU threads; 0: half the cores granted, at least one (learning.threads)
-    # on CUDA, each training step replayed from a CUDA graph (learning.training_step)
-    cuda_graphs: bool = True
+    # on CUDA, each training step replayed from a CUDA graph (learning.training_step); off
+    # by default until measured on a GPU (docs/how-to/gpu.md)
+    cuda_graphs: bool = False
 
     def __post_init__(self) -> None:
         check_kind(self.model)

@@ -2,14 +2,14 @@
 
 The networks are small (35k to 90k parameters, batches of 32): on a GPU an eager step spends
 its time launching kernels from Python, not in them (the H200 was busy 13 to 30 % of an
-epoch; flexff bench --training). On CUDA a `TrainingStep` therefore captures the whole step
-(forward, masked MSE, backward, gradient clipping, Adam) once per input shape as a CUDA graph
-and replays it: the host copies the batch into the graph's inputs and launches one graph.
-The first step of each shape runs eagerly (it creates the optimizer's state and the
-libraries' workspaces, which a capture must not), the second is captured and replayed, the
-rest replayed. Adam runs `capturable` with its learning rate in a device tensor, so that the
-schedule changes it between replays (`set_learning_rate`). Where a capture fails, the step
-runs eagerly from then on, after one warning.
+epoch; flexff bench --training). On CUDA, where asked (`cuda_graphs`), a `TrainingStep`
+therefore captures the whole step (forward, masked MSE, backward, gradient clipping, Adam)
+once per input shape as a CUDA graph and replays it: the host copies the batch into the
+graph's inputs and launches one graph. Each shape's first step runs eagerly (it creates the
+optimizer's state and the libraries' workspaces, which a capture must not), its second is
+captured and replayed. Adam runs `capturable`, its learning rate a device tensor that the
+schedule sets between replays. Where a capture fails, the steps run eagerly after one
+warning.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def adam(network: SequenceNetwork, learning_rate: float, captured: bool) -> torc
         return torch.optim.Adam(network.parameters(), lr=learning_rate)
     device = next(network.parameters()).device
     return torch.optim.Adam(network.parameters(), lr=torch.tensor(learning_rate, device=device),
-                            capturable=True)
+                            capturable=True, foreach=True)
 
 
 def set_learning_rate(optimizer: torch.optim.Optimizer, value: float) -> None:

@@ -164,10 +164,10 @@ def test_a_checkpoint_of_replayed_steps_resumes_anywhere(data, tmp_path, monkeyp
     monkeypatch.setattr(training.Checkpoints, "epoch_done", stop_after_one)
     with pytest.raises(KeyboardInterrupt):
         train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2, device=first,
-              checkpoint_every=1, **TINY["lstm"])
+              checkpoint_every=1, cuda_graphs=True, **TINY["lstm"])
     monkeypatch.setattr(training.Checkpoints, "epoch_done", real)
     resumed = train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2,
-                    device=then, **TINY["lstm"])
+                    device=then, cuda_graphs=True, **TINY["lstm"])
     assert resumed["cuda_graphs"] == (then == "cuda")
     assert resumed["test_mse"] == pytest.approx(whole["test_mse"], rel=0.05)
 

@@ -5,15 +5,36 @@ once and puts the network, Adam and the random generator back, as a real capture
 nothing; each replay runs the step again on the captured inputs and writes its results into
 the first outputs, as a graph overwrites its own. The steps must then equal eager ones bit
 for bit, through shape changes and a state carried from step to step. On CUDA the real
-graphs run (tests/learning/test_devices.py)."""
+graphs run (tests/learning/test_devices.py). The capturable Adam a graph needs runs on the CPU
+too, through torch's own code, once the CPU is on torch's list of devices it allows."""
 
 import copy
+import importlib
 
 import pytest
 import torch
 
 from flexff.learning.models import build_network
-from flexff.learning.training_step import TrainingStep, adam, set_learning_rate
+from flexff.learning.training_step import (
+    TrainingStep,
+    adam,
+    load_state,
+    portable_state,
+    set_learning_rate,
+)
+
+
+@pytest.fixture
+def capturable_on_the_cpu(monkeypatch):
+    """torch's capturable Adam allowed on the CPU: it refuses the CPU by a list alone."""
+    modules = [importlib.import_module(f"torch.optim.{name}") for name in ("adam", "optimizer")]
+    allowed = modules[1]._get_capturable_supported_devices
+
+    def with_the_cpu(supports_xla=True):
+        return [*allowed(supports_xla), "cpu"]
+
+    for module in modules:
+        monkeypatch.setattr(module, "_get_capturable_supported_devices", with_the_cpu)
 
 
 class EmulatedGraphs:
@@ -59,11 +80,15 @@ def _batches(network, n=9):
         yield batch, x, y, mask
 
 
-def _train(kind, graphs_of=None):
+def _network(kind, dropout=0.2):
     torch.manual_seed(0)
-    network = build_network(kind, 4, hidden=5, dropout=0.2, **(
+    return build_network(kind, 4, hidden=5, dropout=dropout, linear_skip=True, **(
         {"conv_channels": [3, 2], "conv_kernels": [3, 2]} if kind == "cnn-lstm" else {}))
-    optimizer = adam(network, 1e-2, captured=False)
+
+
+def _train(kind, graphs_of=None, captured=False):
+    network = _network(kind)
+    optimizer = adam(network, 1e-2, captured)
     graphs = graphs_of(network, optimizer) if graphs_of else None
     step = TrainingStep(network, optimizer, 0.5, graphs)
     states, losses = {}, []
@@ -104,3 +129,43 @@ def test_the_learning_rate_is_set_in_place_where_a_graph_reads_it():
     optimizer.param_groups[0]["lr"] = rate = torch.tensor(1e-3)
     set_learning_rate(optimizer, 5e-4)
     assert optimizer.param_groups[0]["lr"] is rate and float(rate) == pytest.approx(5e-4)
+
+
+def _close(a, b):
+    return all(torch.allclose(x, y, rtol=1e-4, atol=1e-6) for x, y in
+               zip(a.state_dict().values(), b.state_dict().values()))
+
+
+@pytest.mark.parametrize("kind", ["lstm", "cnn-lstm"])
+def test_a_capturable_adam_with_its_rate_in_a_tensor_steps_as_a_plain_one(
+        capturable_on_the_cpu, kind):
+    plain, plain_losses, _ = _train(kind)
+    replayed, losses, graphs = _train(kind, EmulatedGraphs, captured=True)
+    assert graphs.replays == 7
+    assert losses == pytest.approx(plain_losses, rel=1e-5)
+    assert _close(replayed, plain)
+
+
+@pytest.mark.parametrize("first, then", [(True, False), (False, True)])
+def test_an_optimizer_state_moves_between_captured_and_plain_steps(capturable_on_the_cpu,
+                                                                    first, then):
+    def steps(network, optimizer, batches):
+        step = TrainingStep(network, optimizer, 0.5, None)
+        for batch, x, y, mask in batches:
+            step(x, network.initial_state(batch), y, mask)
+
+    batches = list(_batches(None, 6))
+    whole = _network("lstm", dropout=0.0)
+    steps(whole, adam(whole, 1e-2, first), batches)
+    moved = _network("lstm", dropout=0.0)
+    optimizer = adam(moved, 1e-2, first)
+    steps(moved, optimizer, batches[:3])
+    state = portable_state(optimizer)
+    assert all(type(group["lr"]) is float and not group["capturable"]
+               for group in state["param_groups"])
+    then_optimizer = adam(moved, 1.0, then)
+    load_state(then_optimizer, state, then)
+    assert all(float(group["lr"]) == pytest.approx(1e-2) and group["capturable"] == then
+               for group in then_optimizer.param_groups)
+    steps(moved, then_optimizer, batches[3:])
+    assert _close(moved, whole)
