@@ -346,8 +346,6 @@ def _finished(job: TrainJob) -> dict[str, Any] | None:
         metrics = json.loads((job.run / "metrics.json").read_text())
     except (OSError, ValueError, KeyError):
         return None
-    wanted = make_config(job.model, job.preset, **job.overrides)
-    settings = json.loads(json.dumps(wanted.to_dict()))
-    same = all(config.get(key) == value for key, value in settings.items()
-               if key not in ("device", "threads"))
+    wanted = make_config(job.model, job.preset, **job.overrides).learned_settings()
+    same = all(config.get(key) == value for key, value in wanted.items())
     return metrics if same else None

@@ -34,7 +34,7 @@ from flexff.learning.machine_features import (
     prepare,
 )
 from flexff.learning.models import SequenceNetwork, uses_prior
-from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig
+from flexff.learning.presets import CHECKPOINT_EVERY, PLACEMENT, TrainConfig
 from flexff.learning.run_folder import RUN_FILE, save_run, start_run
 from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.train import (
@@ -84,8 +84,7 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
                              f"'{split}' (flexff data import --test, or the excitation's split)")
     resolved = (features or MachineFeatures()).resolved(
         rate_hz, [t.signals for t in train_set], machine)
-    settings = {"config": {k: v for k, v in config.to_dict().items()
-                           if k not in ("device", "threads")},
+    settings = {"config": config.learned_settings(),
                 "features": features_to_dict(resolved), "machine": machine_table(machine),
                 "data": digest, "prior": None if prior is None else prior.to_dict()}
     if reuse and _finished_alike(out, settings):
@@ -151,7 +150,7 @@ def _finished_alike(out: Path, settings: Mapping[str, Any]) -> bool:
         json.loads((out / "metrics.json").read_text())
     except (OSError, ValueError):
         return False
-    config = {k: v for k, v in info["config"].items() if k not in ("device", "threads")}
+    config = {k: v for k, v in info["config"].items() if k not in PLACEMENT}
     found = {"config": config, "features": info.get("machine_features"),
              "machine": info.get("machine"), "data": info.get("data", {}).get("sha256"),
              "prior": info.get("machine_prior")}

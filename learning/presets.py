@@ -12,6 +12,7 @@ Why each choice: "Learning", section The fast preset (docs/explanation/learning.
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -20,6 +21,9 @@ from flexff.learning.features import FeatureConfig
 from flexff.learning.models import check_kind, uses_prior
 
 SCHEDULES = ("constant", "onecycle", "cosine")
+# the settings that say where and how a run executes, not what it learns: runs that differ in
+# them alone resume and reuse each other
+PLACEMENT = ("device", "threads", "cuda_graphs")
 
 
 @dataclass(frozen=True)
@@ -58,6 +62,12 @@ class TrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+    def learned_settings(self) -> dict[str, Any]:
+        """`to_dict` without the PLACEMENT settings, as JSON holds it."""
+        settings = {k: v for k, v in self.to_dict().items() if k not in PLACEMENT}
+        plain: dict[str, Any] = json.loads(json.dumps(settings))
+        return plain
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:

@@ -185,10 +185,7 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
 def _settings(config: TrainConfig, dataset: Dataset) -> dict[str, Any]:
     """What a checkpoint must share to be resumed: the configuration (where it runs aside)
     and the data."""
-    settings = {k: v for k, v in config.to_dict().items()
-                if k not in ("device", "threads", "cuda_graphs")}
-    plain: dict[str, Any] = json.loads(json.dumps({"config": settings, "data": dataset.digest}))
-    return plain
+    return {"config": config.learned_settings(), "data": dataset.digest}
 
 
 def _splits(dataset: Dataset) -> tuple[list[Trajectory], list[Trajectory]]:

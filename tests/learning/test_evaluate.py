@@ -81,7 +81,12 @@ def test_rigid_body_feedforward_is_exact_on_the_nominal_plant(evaluation):
 
 
 def test_a_finished_training_run_and_identification_are_reused(evaluation):
+    """... also where the run trained elsewhere, and before flexff knew cuda_graphs."""
     out, _, _ = evaluation
+    info = json.loads((out / "runs" / "pgnn" / "run.json").read_text())
+    info["config"].pop("cuda_graphs")
+    info["config"].update(device="cuda:1", threads=7)
+    (out / "runs" / "pgnn" / "run.json").write_text(json.dumps(info))
     files = (out / "runs" / "pgnn" / "model.pt", out / "identified" / "identified.json")
     stamps = [path.stat().st_mtime_ns for path in files]
     evaluate("sim", out, models=["pgnn"], data=out / "data", epochs=1, say=lambda _: None,
