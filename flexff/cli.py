@@ -581,7 +581,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         return _evaluate_logs(args)
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
              scheduler=args.scheduler, currents=args.currents, device=args.device,
-             ilc_labels=args.ilc_labels, force_input=args.force_input)
+             ilc_labels=None if args.ilc_labels is None else
+             [kind for kind in args.ilc_labels if kind != "none"], force_input=args.force_input)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
           f"forces.png, the .onnx models, ilc/ for the limit, held-out/ for the test split's "
@@ -891,10 +892,12 @@ def build_parser() -> argparse.ArgumentParser:
                             choices=MODELS,
                             help="also the current-level model of these kinds: labels i1..i3, "
                                  "fed forward after the control allocation")
-    evaluation.add_argument("--ilc-labels", nargs="+", default=[], metavar="KIND",
-                            choices=MODELS,
+    evaluation.add_argument("--ilc-labels", nargs="+", metavar="KIND",
+                            choices=(*MODELS, "none"),
                             help="also these kinds trained on the force iterative learning "
-                                 "control learns on each training reference (2 trials each)")
+                                 "control learns on each training reference (2 trials each); "
+                                 "default: pgnn on --env hardware, where --models has it; "
+                                 "none: no ILC labels"),
     evaluation.add_argument("--force-input", nargs="+", default=[], metavar="KIND",
                             choices=[m for m in MODELS if m != "pgnn"],
                             help="also these black-box kinds with the identified rigid-body "

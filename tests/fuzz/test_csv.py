@@ -5,13 +5,16 @@ repository's own tables mutated, tables of odd cells, and garbage (tests/fuzz/ha
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from pathlib import Path
+from unittest import mock
 
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from flexff.cosim.csv_text import read_time_table
+from flexff.cosim import csv_text
+from flexff.cosim.csv_text import TimeTable, read_time_table
 from flexff.cosim.references import read_csv
 from flexff.fmu.errors import InputError
 from tests.fuzz.harness import check, fast, fuzz_seconds, run_for, slow
@@ -43,6 +46,21 @@ def tables(draw: st.DrawFn) -> bytes:
     return draw(st.sampled_from(["", "\ufeff"])).encode() + text.encode()
 
 
+@st.composite
+def plain_tables(draw: st.DrawFn) -> bytes:
+    """A table of numbers alone, as flexff and most tools write them: the fast reader's
+    case, with the quirks it must hand on (a blank or short row, a NaN, a last line end)."""
+    names = draw(st.lists(st.sampled_from(NAMES), min_size=1, max_size=4))
+    number = st.floats(allow_nan=draw(st.booleans()), width=64).map(repr)
+    rows = draw(st.lists(st.lists(number, min_size=len(names), max_size=len(names)),
+                         max_size=8))
+    if rows and draw(st.booleans()):  # a blank or a short row
+        rows.insert(draw(st.integers(0, len(rows))), draw(st.sampled_from([[], rows[0][:-1]])))
+    end = draw(st.sampled_from(["\n", "\r\n"]))
+    text = end.join(",".join(row) for row in [names, *rows]) + draw(st.sampled_from(["", end]))
+    return text.encode()
+
+
 contents = st.one_of(st.sampled_from(VALID).flatmap(mutated_bytes), tables(), garbage())
 
 
@@ -72,6 +90,33 @@ examples = dict(data=contents, required=st.sampled_from(COLUMNS), everything=st.
 def test_csv_fast(tmp_path: Path, data: bytes, required: tuple[str, ...], everything: bool,
                   step: float) -> None:
     fuzz_tables(tmp_path, data, required, everything, step)
+
+
+def _outcome(read: Callable[[], TimeTable]) -> object:
+    """A table's columns and lines, or the error's message."""
+    try:
+        table = read()
+    except InputError as error:
+        return str(error)
+    return {name: values.tolist() for name, values in table.columns.items()}, table.lines
+
+
+@fast()
+@given(data=st.one_of(st.sampled_from(VALID), plain_tables(), tables(), contents),
+       required=st.sampled_from(COLUMNS), everything=st.booleans())
+def test_the_plain_tables_reader_reads_as_the_careful_one(
+        tmp_path: Path, data: bytes, required: tuple[str, ...], everything: bool) -> None:
+    """numpy's parser, taken for plain files (csv_text._plain_table), gives what the careful
+    reader gives: the same columns, lines and errors."""
+    path = _file(tmp_path, data)
+
+    def read() -> TimeTable:
+        return read_time_table(path, required, None if everything else ("vx_ref",))
+
+    fast_outcome = _outcome(read)
+    with mock.patch.object(csv_text, "_plain_table", lambda path: None):
+        assert fast_outcome == _outcome(read)
+    path.unlink()
 
 
 @pytest.mark.slow

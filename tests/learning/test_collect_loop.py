@@ -253,6 +253,24 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
     assert "| table |" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("given, passed", [([], None), (["none"], []),
+                                           (["pgnn", "lstm"], ["pgnn", "lstm"])])
+def test_cli_evaluate_leaves_the_ilc_labels_to_the_environment_unless_told(
+        monkeypatch, tmp_path, given, passed):
+    from flexff.cli import main
+
+    seen = {}
+
+    def fake(env, out, *args, ilc_labels=(), **kwargs):
+        seen["ilc_labels"] = ilc_labels
+        (Path(out) / "table.md").write_text("| table |\n")
+
+    monkeypatch.setattr("flexff.learning.evaluate.evaluate", fake)
+    extra = ["--ilc-labels", *given] if given else []
+    assert main(["evaluate", "--env", "hardware", "-o", str(tmp_path / "eval"), *extra]) == 0
+    assert seen["ilc_labels"] == passed
+
+
 @pytest.mark.parametrize("env", ["sim", "hardware"])
 @pytest.mark.parametrize("name", ["pid", "rigid-body"])
 def test_the_default_scenarios_are_the_short_forms(env, name):

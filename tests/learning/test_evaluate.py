@@ -281,3 +281,43 @@ def test_a_model_trained_on_ilc_labels_is_its_own_scenario(tmp_path):
     assert len(list((out / "data-sim-ilc" / "ilc").iterdir())) == 3
     assert any(line.startswith("pgnn-ilc: e2 = ") for line in lines)
     assert "| physics-guided FF (ILC labels) |" in (out / "table.md").read_text()
+
+
+class _Stop(Exception):
+    pass
+
+
+@pytest.mark.parametrize("models, labelled", [(None, True), (["lstm", "pgnn"], True),
+                                              (["lstm"], False)])
+def test_the_hardware_evaluation_trains_its_physics_guided_model_on_ilc_labels_too(
+        tmp_path, monkeypatch, models, labelled):
+    """By default the hardware environment labels its training references by ILC and trains
+    one physics-guided network at 25 Hz there, beside two on the collected set at the
+    preset's rate; not where --models leaves the physics-guided model out."""
+    from flexff.learning import evaluate as evaluation
+
+    data = synthetic_dataset(tmp_path / "data", n_train=2, n_test=1, duration=2.0,
+                             rate_hz=100.0, seed=6)
+    labels = []
+    monkeypatch.setattr(evaluation, "ilc_labelled_set",
+                        lambda data, out, *_, **__: labels.append(out) or data)
+    jobs = {}
+
+    def train_parallel(todo, **_):
+        jobs.update({job.name: job for job in todo})
+        raise _Stop
+
+    monkeypatch.setattr(evaluation, "train_parallel", train_parallel)
+    with pytest.raises(_Stop):
+        evaluate("hardware", tmp_path / "out", **({} if models is None else {"models": models}),
+                 data=data, say=lambda _: None, progress=False)
+    assert bool(labels) == labelled
+    pgnn = [name for name in jobs if name.startswith("pgnn-seed")]
+    assert pgnn == ([] if models == ["lstm"] else ["pgnn-seed0", "pgnn-seed1"])
+    if pgnn:  # the fast preset's 100 Hz
+        assert "model_rate_hz" not in jobs["pgnn-seed0"].overrides
+    if labelled:
+        assert jobs["pgnn-ilc"].overrides["model_rate_hz"] == 25.0
+        assert not any(name.startswith("pgnn-ilc-seed") for name in jobs)
+    else:
+        assert "pgnn-ilc" not in jobs
