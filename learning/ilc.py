@@ -102,7 +102,10 @@ def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
     if floor and (ran or NOISE_FLOOR not in state):
         state[NOISE_FLOOR] = loop.noise_floor(out / RESULT)
         _finish(out, state, loop)
-    plot_trials(state["trials"], out / "e2.png", state.get(NOISE_FLOOR), loop.axes, loop.unit)
+        ran = True
+    if ran or not (out / "e2.png").is_file():  # a finished iteration's plot stays (1 s)
+        plot_trials(state["trials"], out / "e2.png", state.get(NOISE_FLOOR), loop.axes,
+                    loop.unit)
     return state
 
 
