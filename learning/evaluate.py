@@ -125,14 +125,15 @@ ENVIRONMENTS = {
     # ensemble lost with them (289 / 203 against 397 / 189; the identified model 211 / 179
     # against 218 / 163) and keeps two.
     # The physics-guided model also trains on the force ILC converged to on each training
-    # reference (learning.ilc_labels), the best labels measured: own share of e2 0.27 / 0.51
-    # µm/√s against 0.96 / 2.00 on the collected set (stop 50). There its network adds
-    # nothing to its prior (the identified model on the same labels: 0.25 / 0.54), so one
-    # member at 25 Hz does: 0.27 / 0.60, the test split 703 / 567 against two at 100 Hz,
-    # 0.27 / 0.51 and 701 / 560, in a quarter of the time. Two members on the collected set
-    # (0.99 / 2.05, the test split 264 / 248) keep what five gave (0.96 / 2.00, 268 / 245) in
-    # 40 % of the time; at 25 Hz they lost in y (1.23 / 2.85). Together the evaluation stays
-    # within 20 minutes on 2 cores, the labelling (4 min) included.
+    # reference (learning.ilc_labels): there it reaches the ILC limit (own share of e2 0.11 /
+    # 0.11 µm/√s, the limit's 0.13 / 0.18, against 0.99 / 2.05 on the collected set; the test
+    # split 726 / 616 against 264 / 248). Its network adds nothing to its prior there (the
+    # identified model on the same labels: 0.08 / at the floor), so one member at 25 Hz does,
+    # in a quarter of the time (on earlier labels 0.27 / 0.60 and 703 / 567, two at 100 Hz
+    # 0.27 / 0.51 and 701 / 560). Two members on the collected set (0.99 / 2.05, the test
+    # split 264 / 248) keep what five gave (0.96 / 2.00, 268 / 245) in 40 % of the time; at
+    # 25 Hz they lost in y (1.23 / 2.85). The evaluation took 17 min 19 s on 2 cores, the
+    # labelling 2 min 15 s of it.
     "hardware": Environment("hardware", "hardware", "thesis-hardware-eval",
                             {"cutoff_hz": 1.0}, fast={
         "lstm": {"model_rate_hz": 25.0, "epochs": 150, **_BLACK_BOX},
