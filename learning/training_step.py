@@ -78,7 +78,7 @@ class _Graph:
     """The inputs a captured step reads, its outputs, and how to run it."""
 
     inputs: list[torch.Tensor]
-    outputs: tuple[torch.Tensor, State]
+    outputs: StepResult
     run: Step
 
 

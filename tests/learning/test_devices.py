@@ -72,11 +72,9 @@ def _on(device):
     return FakeDevice() if device == str(DEVICE) else nullcontext()
 
 
-@pytest.mark.parametrize("first,then", [("cpu", str(DEVICE)), (str(DEVICE), "cpu")])
-def test_a_checkpoint_resumes_on_another_device_to_the_same_weights(data, tmp_path,
-                                                                    monkeypatch, first, then):
-    whole = tmp_path / "whole"
-    train("lstm", "fast", data, whole, progress=False, epochs=2, device="cpu", **TINY["lstm"])
+def _cut_and_resumed(data, run, monkeypatch, first, then, **settings):
+    """The tiny LSTM's two epochs into `run`: interrupted after the first on device `first`
+    (its checkpoint written), then resumed on `then`; the resumed run's metrics."""
     real = training.Checkpoints.epoch_done
 
     def stop_after_one(self, epochs, network, optimizer, rng, history, *rest):
@@ -85,12 +83,20 @@ def test_a_checkpoint_resumes_on_another_device_to_the_same_weights(data, tmp_pa
 
     monkeypatch.setattr(training.Checkpoints, "epoch_done", stop_after_one)
     with _on(first), pytest.raises(KeyboardInterrupt):
-        train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2, device=first,
-              checkpoint_every=1, **TINY["lstm"])
+        train("lstm", "fast", data, run, progress=False, epochs=2, device=first,
+              checkpoint_every=1, **settings, **TINY["lstm"])
     monkeypatch.setattr(training.Checkpoints, "epoch_done", real)
     with _on(then):
-        resumed = train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2,
-                        device=then, **TINY["lstm"])
+        return train("lstm", "fast", data, run, progress=False, epochs=2, device=then,
+                     **settings, **TINY["lstm"])
+
+
+@pytest.mark.parametrize("first,then", [("cpu", str(DEVICE)), (str(DEVICE), "cpu")])
+def test_a_checkpoint_resumes_on_another_device_to_the_same_weights(data, tmp_path,
+                                                                    monkeypatch, first, then):
+    whole = tmp_path / "whole"
+    train("lstm", "fast", data, whole, progress=False, epochs=2, device="cpu", **TINY["lstm"])
+    resumed = _cut_and_resumed(data, tmp_path / "cut", monkeypatch, first, then)
     assert len(resumed["history"]["train"]) == 2
     assert _same(_weights(tmp_path / "cut"), _weights(whole))
 
@@ -155,19 +161,8 @@ def test_a_checkpoint_of_replayed_steps_resumes_anywhere(data, tmp_path, monkeyp
                                                           then):
     whole = train("lstm", "fast", data, tmp_path / "whole", progress=False, epochs=2,
                   device=then, **TINY["lstm"])
-    real = training.Checkpoints.epoch_done
-
-    def stop_after_one(self, epochs, network, optimizer, rng, history, *rest):
-        real(self, epochs, network, optimizer, rng, history, *rest)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(training.Checkpoints, "epoch_done", stop_after_one)
-    with pytest.raises(KeyboardInterrupt):
-        train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2, device=first,
-              checkpoint_every=1, cuda_graphs=True, **TINY["lstm"])
-    monkeypatch.setattr(training.Checkpoints, "epoch_done", real)
-    resumed = train("lstm", "fast", data, tmp_path / "cut", progress=False, epochs=2,
-                    device=then, cuda_graphs=True, **TINY["lstm"])
+    resumed = _cut_and_resumed(data, tmp_path / "cut", monkeypatch, first, then,
+                               cuda_graphs=True)
     assert resumed["cuda_graphs"] == (then == "cuda")
     assert resumed["test_mse"] == pytest.approx(whole["test_mse"], rel=0.05)
 
