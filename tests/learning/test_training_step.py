@@ -80,10 +80,14 @@ def _batches(network, n=9):
         yield batch, x, y, mask
 
 
+SIZES = {"lstm": {"hidden": 5}, "cnn-lstm": {"hidden": 5, "conv_channels": [3, 2],
+                                             "conv_kernels": [3, 2]},
+         "tcn": {"channels": 3, "levels": 2, "kernel": 2}, "pgnn": {"channels": 3, "levels": 2}}
+
+
 def _network(kind, dropout=0.2):
     torch.manual_seed(0)
-    return build_network(kind, 4, hidden=5, dropout=dropout, linear_skip=True, **(
-        {"conv_channels": [3, 2], "conv_kernels": [3, 2]} if kind == "cnn-lstm" else {}))
+    return build_network(kind, 4, dropout=dropout, linear_skip=True, **SIZES[kind])
 
 
 def _train(kind, graphs_of=None, captured=False):
@@ -101,7 +105,7 @@ def _train(kind, graphs_of=None, captured=False):
     return network, losses, graphs
 
 
-@pytest.mark.parametrize("kind", ["lstm", "cnn-lstm"])
+@pytest.mark.parametrize("kind", list(SIZES))
 def test_replayed_steps_equal_eager_ones(kind):
     eager, eager_losses, _ = _train(kind)
     replayed, losses, graphs = _train(kind, EmulatedGraphs)
@@ -136,7 +140,7 @@ def _close(a, b):
                zip(a.state_dict().values(), b.state_dict().values()))
 
 
-@pytest.mark.parametrize("kind", ["lstm", "cnn-lstm"])
+@pytest.mark.parametrize("kind", list(SIZES))
 def test_a_capturable_adam_with_its_rate_in_a_tensor_steps_as_a_plain_one(
         capturable_on_the_cpu, kind):
     plain, plain_losses, _ = _train(kind)
