@@ -247,19 +247,23 @@ def training_markdown() -> str:
     for preset, entries in bench["presets"].items():
         out += [f"### The {preset} preset", "",
                 "| model | epochs | CPU [s/epoch] | CUDA [s/epoch] | CUDA over CPU | "
-                "CUDA, bf16 [s/epoch] | start on CUDA [s] | GPU busy | GPU memory [GB] |",
-                "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+                "at most, the GPU always busy | CUDA, bf16 [s/epoch] | start on CUDA [s] | "
+                "GPU busy | GPU memory [GB] |",
+                "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for kind, entry in entries.items():
             cuda, cpu, bf16 = (entry.get(k, {}) for k in ("cuda", "cpu", "cuda_bf16"))
             cells = [figure(v) if isinstance(v, float) else "–" for v in (
                 cpu.get("epoch_s"), cuda.get("epoch_s"), entry.get("speedup"),
-                bf16.get("epoch_s"), cuda.get("start_s"), cuda.get("gpu_busy"),
-                cuda.get("gpu_memory_gb"))]
+                entry.get("speedup_bound"), bf16.get("epoch_s"), cuda.get("start_s"),
+                cuda.get("gpu_busy"), cuda.get("gpu_memory_gb"))]
             out.append(f"| {kind} | {entry['epochs']} | {' | '.join(cells)} |")
         out.append("")
+        out += [f"{name} takes the figures of {entry['timed_as']}: the same network on as "
+                f"many samples, only their values preprocessed otherwise.\n"
+                for name, entry in entries.items() if "timed_as" in entry]
     estimate = bench["estimate_s"]["thesis"]
     out += [f"A whole `flexff evaluate --env hardware --preset thesis`'s training, from these "
-            f"figures (each model's epochs times its seconds per epoch, plus its start): "
+            f"figures (each training's epochs times its seconds per epoch, plus its start): "
             f"{figure(estimate['cuda_one_after_another'] / 60)} min on CUDA one after "
             f"another, {figure(estimate['cpu_one_after_another'] / 60)} min on the CPU.", "",
             "### The demo on CUDA", "", "| model | e2 ratio x / y, CPU | CUDA | change |",

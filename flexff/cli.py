@@ -211,7 +211,8 @@ def _bench(args: argparse.Namespace) -> int:
 
         save = (lambda figures: Path(args.output).write_text(json.dumps(figures, indent=2))) \
             if args.output else None
-        return _print_json(training_benchmark(Path(args.training).resolve(),
+        presets = (args.preset,) if args.preset else PRESETS
+        return _print_json(training_benchmark(Path(args.training).resolve(), presets,
                                               bf16=not args.no_bf16, save=save), args.output)
     if args.processes:
         from flexff.process_bench import process_benchmark
@@ -863,6 +864,8 @@ def build_parser() -> argparse.ArgumentParser:
                             "presets, on CUDA where available and on the CPU")
     bench.add_argument("--no-bf16", action="store_true",
                        help="with --training: leave out the bf16 autocast runs on CUDA")
+    bench.add_argument("--preset", choices=PRESETS,
+                       help="with --training: this preset alone (default: both)")
     bench.add_argument("--process-steps", default="200000,2000000", metavar="N,N",
                        help="with --processes: the run lengths in steps (of 1 ms)")
     bench.add_argument("--process-repeats", type=int, default=3, metavar="R",

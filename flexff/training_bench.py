@@ -1,16 +1,17 @@
 """`flexff bench --training DATA`: how fast the networks train here, on each device.
 
-Each model kind of each preset trains a few epochs in a process of its own, with the settings
-`flexff evaluate --env ENV` gives it, on CUDA (where there is one) and on the CPU with every
-core. Per run: the seconds from the process's start to its first epoch (imports, CUDA, data
-preparation), the median seconds per epoch after the first, and on CUDA the GPU's busy share
-during the epochs and its peak memory. On CUDA the training steps run eagerly, or replay CUDA graphs
-(learning.training_step) where asked; the thesis preset runs with both (what the graphs
-gain), under bf16 autocast (the mixed-precision candidate), and as several trainings sharing
-the GPU (learning.workers.TRAININGS_PER_GPU). The estimate of a whole evaluation's training
-multiplies each run's epochs and members by its seconds per epoch, and divides by the
-trainings that share the GPU. A run that fails is a figure too (its error); the others go on,
-and when every one fails the bench stops with the first one's error.
+Each training `flexff evaluate --env ENV` runs by default (learning.evaluate.trained_scenarios,
+those on ILC labels too) trains a few epochs of each preset in a process of its own, with the
+evaluation's settings, on CUDA (where there is one) and on the CPU with every core; one that
+differs from a training timed before only in its data's values takes that one's figures. Per
+run: the seconds from the process's start to its first epoch, the median seconds per epoch
+after the first, and on CUDA the GPU's busy share and peak memory. On CUDA the thesis preset
+runs eagerly, replaying CUDA graphs (learning.training_step), under bf16 autocast (the
+mixed-precision candidate), and as several trainings sharing the GPU
+(learning.workers.TRAININGS_PER_GPU). The estimate of a whole evaluation's training multiplies
+each training's epochs and members by its seconds per epoch, and divides by the trainings that
+share the GPU. A run that fails is a figure too (its error); when every one fails the bench
+stops with the first one's error.
 """
 
 from __future__ import annotations
@@ -25,18 +26,27 @@ import time
 from collections.abc import Callable
 from contextlib import nullcontext
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tqdm import tqdm
 
 from flexff.cosim.executor import granted_cores
 from flexff.fmu.errors import InputError, RunError
 
+if TYPE_CHECKING:
+    from flexff.learning.evaluate import TrainedScenario
+
 # epochs per run on CUDA (the first is a warm-up, left out) and on the CPU (no warm-up to
 # speak of; an epoch of the thesis preset takes 7 to 23 s on 16 cores)
 EPOCHS = {"cuda": {"fast": 4, "thesis": 3}, "cpu": {"fast": 2, "thesis": 1}}
 SHARING_EPOCHS = 4  # epochs of each run when several share the GPU
 UTILISATION_S = 0.05  # how often the GPU's busy share is read during a run
+# FeatureConfig settings that change the data's values but not how much of it there is, nor
+# the network's size: trainings that differ in these alone (a scenario on ILC labels and its
+# kind on the collected set) do the same work per epoch
+VALUE_SETTINGS = ("encoders", "quantize_encoders", "cutoff_hz", "filter_order",
+                  "filter_forces", "position_noise_m", "force_noise_n", "current_noise_a",
+                  "filtered_prior")
 
 
 def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis"),
@@ -52,7 +62,7 @@ def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis")
     import torch
 
     from flexff.learning.dataset import load_dataset
-    from flexff.learning.evaluate import ENVIRONMENTS
+    from flexff.learning.evaluate import ENVIRONMENTS, trained_scenarios
     from flexff.learning.models import NETWORKS
 
     env = load_dataset(data).set
@@ -63,48 +73,95 @@ def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis")
     cuda = torch.cuda.is_available()
     devices = ["cuda", "cpu"] if cuda else ["cpu"]
     kinds = models or tuple(NETWORKS)
-    runs = [(preset, kind, device, variant) for preset in presets for kind in kinds
+    scenarios = {preset: trained_scenarios(environment, preset, kinds,
+                                           ilc_labels=environment.ilc_labelled(kinds))
+                 for preset in presets}
+    timed_as = {preset: _timed_as(preset, listed) for preset, listed in scenarios.items()}
+    runs = [(preset, scenario, device, variant) for preset, listed in scenarios.items()
+            for scenario in listed if timed_as[preset][scenario.name] == scenario.name
             for device in devices
             for variant in (("", "graphs", *(("bf16",) if bf16 else ()))
                             if device == "cuda" and preset == "thesis" else ("",))]
     figures: dict[str, Any] = {"data": str(data), "env": env, "cores": granted_cores(),
                                "gpu": torch.cuda.get_device_name() if cuda else None,
-                               "torch": torch.__version__, "presets": {}}
+                               "torch": torch.__version__, "presets": {
+                                   preset: {s.name: _entry(s, preset, timed_as[preset])
+                                            for s in listed}
+                                   for preset, listed in scenarios.items()}}
     with tempfile.TemporaryDirectory(prefix="flexff-bench-") as scratch:
-        for preset, kind, device, variant in tqdm(runs, desc="training bench", unit="run"):
-            overrides = {**environment.overrides(preset, kind),
-                         **({"cuda_graphs": True} if variant == "graphs" else {})}
+        for preset, scenario, device, variant in tqdm(runs, desc="training bench",
+                                                      unit="run"):
             name = f"{device}_{variant}" if variant else device
-            run = _timed_run(kind, preset, data, Path(scratch) / f"{preset}-{kind}-{name}",
-                             device, "bf16" if variant == "bf16" else "float32",
-                             EPOCHS[device][preset], overrides)
-            entry = figures["presets"].setdefault(preset, {}).setdefault(kind, {
-                "epochs": _preset_epochs(kind, preset, overrides),
-                "members": environment.members(preset, kind)})
-            entry[name] = run
+            run = _timed_run(scenario.kind, preset, data,
+                             Path(scratch) / f"{preset}-{scenario.name}-{name}", device,
+                             "bf16" if variant == "bf16" else "float32", EPOCHS[device][preset],
+                             {**scenario.overrides,
+                              **({"cuda_graphs": True} if variant == "graphs" else {})})
+            for listed, entry in figures["presets"][preset].items():
+                if entry.get("timed_as", listed) == scenario.name:
+                    entry[name] = run
             if save is not None:
                 save(figures)
-        failed = [run[device].get("error") for entries in figures["presets"].values()
-                  for run in entries.values() for device in devices]
+        failed = [entry[device].get("error") for entries in figures["presets"].values()
+                  for entry in entries.values() for device in devices]
         if all(failed):
             raise InputError(f"{data}: no training ran here: {failed[0]}")
         if cuda and len(sharing) > 1 and "thesis" in presets:
-            figures["sharing"] = _sharing(data, environment, kinds, sharing, Path(scratch))
+            figures["sharing"] = _sharing(data, scenarios["thesis"], sharing, Path(scratch))
     for preset, entries in figures["presets"].items():
         for entry in entries.values():
-            if "epoch_s" in entry.get("cuda", {}) and "epoch_s" in entry["cpu"]:
-                entry["speedup"] = entry["cpu"]["epoch_s"] / entry["cuda"]["epoch_s"]
-            if "epoch_s" in entry.get("cuda", {}) and "epoch_s" in entry.get("cuda_graphs", {}):
-                entry["graph_speedup"] = entry["cuda"]["epoch_s"] / entry["cuda_graphs"]["epoch_s"]
+            entry.update(_ratios(entry))
         figures.setdefault("estimate_s", {})[preset] = _estimate(
             entries, figures.get("sharing") if preset == "thesis" else None)
     return figures
 
 
-def _preset_epochs(kind: str, preset: str, overrides: dict[str, Any]) -> int:
+def _ratios(entry: dict[str, Any]) -> dict[str, float]:
+    """A training's ratios of seconds per epoch, where both were measured: the CPU's over
+    CUDA's (`speedup`), eager CUDA's over replayed graphs' (`graph_speedup`), and the CPU's
+    over the seconds the GPU was busy in an eager epoch (`speedup_bound`): what CUDA would
+    gain with no host time at all, its kernels as they are."""
+    cpu, cuda, graphs = (entry.get(k, {}) for k in ("cpu", "cuda", "cuda_graphs"))
+    ratios = {}
+    if "epoch_s" in cuda and "epoch_s" in cpu:
+        ratios["speedup"] = cpu["epoch_s"] / cuda["epoch_s"]
+        if cuda.get("gpu_busy"):
+            ratios["speedup_bound"] = cpu["epoch_s"] / (cuda["epoch_s"] * cuda["gpu_busy"])
+    if "epoch_s" in cuda and "epoch_s" in graphs:
+        ratios["graph_speedup"] = cuda["epoch_s"] / graphs["epoch_s"]
+    return ratios
+
+
+def _timed_as(preset: str, scenarios: list[TrainedScenario]) -> dict[str, str]:
+    """Each scenario's name -> the name of the first scenario whose training does the same
+    work per epoch (itself where none before does)."""
+    first: dict[str, str] = {}
+    return {s.name: first.setdefault(_work(s, preset), s.name) for s in scenarios}
+
+
+def _work(scenario: TrainedScenario, preset: str) -> str:
+    """What sets the work of an epoch of `scenario`'s training: its settings but for the
+    data's values (VALUE_SETTINGS), its seed and its epochs."""
     from flexff.learning.presets import make_config
 
-    return make_config(kind, preset, **overrides).epochs
+    settings = make_config(scenario.kind, preset, **scenario.overrides).learned_settings()
+    settings["features"] = {key: value for key, value in settings["features"].items()
+                            if key not in VALUE_SETTINGS}
+    return json.dumps({k: v for k, v in settings.items() if k not in ("seed", "epochs")},
+                      sort_keys=True)
+
+
+def _entry(scenario: TrainedScenario, preset: str, timed_as: dict[str, str]) -> dict[str, Any]:
+    """A scenario's figures before its runs: its epochs and networks, and the scenario it
+    takes its figures from where that is another."""
+    from flexff.learning.presets import make_config
+
+    entry = {"kind": scenario.kind,
+             "epochs": make_config(scenario.kind, preset, **scenario.overrides).epochs,
+             "members": scenario.members}
+    if timed_as[scenario.name] != scenario.name:
+        entry["timed_as"] = timed_as[scenario.name]
+    return entry
 
 
 def _estimate(entries: dict[str, Any], sharing: dict[str, Any] | None) -> dict[str, float]:
@@ -125,23 +182,22 @@ def _estimate(entries: dict[str, Any], sharing: dict[str, Any] | None) -> dict[s
     return estimate
 
 
-def _sharing(data: Path, environment: Any, kinds: tuple[str, ...], counts: tuple[int, ...],
-             scratch: Path) -> dict[str, Any]:
-    """The thesis preset's runs of `kinds`, SHARING_EPOCHS each, trained by each of
+def _sharing(data: Path, scenarios: list[TrainedScenario], counts: tuple[int, ...], scratch: Path
+             ) -> dict[str, Any]:
+    """The thesis preset's trainings of `scenarios`, SHARING_EPOCHS each, by each of
     `counts` processes side by side on the one GPU: the wall time of each count and its
     speedup over the first."""
     from flexff.learning.workers import TrainJob, train_parallel
 
     walls = {}
     for count in counts:
-        jobs = [TrainJob(kind, "thesis", data, scratch / f"share{count}" / kind,
-                         {**environment.overrides("thesis", kind), "epochs": SHARING_EPOCHS})
-                for kind in kinds]
+        jobs = [TrainJob(s.kind, "thesis", data, scratch / f"share{count}" / s.name,
+                         {**s.overrides, "epochs": SHARING_EPOCHS}) for s in scenarios]
         start = time.perf_counter()
         train_parallel(jobs, workers=count, progress=False, device="cuda")
         walls[str(count)] = time.perf_counter() - start
     first = walls[str(counts[0])]
-    return {"runs": len(kinds), "epochs": SHARING_EPOCHS, "wall_s": walls,
+    return {"runs": len(scenarios), "epochs": SHARING_EPOCHS, "wall_s": walls,
             "speedup": {count: first / wall for count, wall in walls.items()}}
 
 

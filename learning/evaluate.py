@@ -84,6 +84,10 @@ class Environment:
         members = self.ensembles.get(scenario, self.ensembles.get(model, 1))
         return members if preset == "fast" else 1
 
+    def ilc_labelled(self, models: Sequence[str]) -> list[str]:
+        """The kinds of `models` trained on ILC labels too unless told otherwise."""
+        return [kind for kind in self.ilc_labels if kind in models]
+
 
 # the hardware stand-in's black-box networks' inputs
 _BLACK_BOX = {"feature_set": "directions", "encoders": 3}
@@ -207,7 +211,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         raise InputError(f"unknown environment {env!r}: choose one of {', '.join(ENVIRONMENTS)}")
     environment = ENVIRONMENTS[env]
     if ilc_labels is None:
-        ilc_labels = [kind for kind in environment.ilc_labels if kind in models]
+        ilc_labels = environment.ilc_labelled(models)
     for kind in (*models, *currents, *ilc_labels, *force_input):
         check_kind(kind)
     if physics := [kind for kind in force_input if uses_prior(kind)]:
@@ -226,25 +230,16 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         say(f"collecting the {set_name} set (PID only){on} into {out / f'data-{set_name}'}")
         data = collect(set_name, out / f"data-{set_name}", scheduler=scheduler,
                        config=None if loop is None else with_feedforward(loop))
-    extra = {"epochs": epochs} if epochs else {}
-    forced = {"force_input": True}
-    levels: list[tuple[str, str, dict[str, Any], Path]] = [
-        *((kind, kind, {}, Path(data)) for kind in models),
-        *((f"{kind}-currents", kind, {"labels": "currents"}, Path(data)) for kind in currents),
-        *((f"{kind}-force", kind, forced, Path(data)) for kind in force_input)]
-    labelled = None
-    if ilc_labels:
-        labelled = ilc_labelled_set(data, out / f"data-{set_name}-ilc",
-                                    loop or default_loop(environment.plant), progress=progress,
-                                    say=say)
-        levels += [(f"{kind}-ilc", kind, ILC_PREPROCESSING, labelled) for kind in ilc_labels]
-        levels += [(f"{kind}-force-ilc", kind, {**ILC_PREPROCESSING, **forced}, labelled)
-                   for kind in ilc_labels if kind in force_input]
-    groups = {name: _member_jobs(kind, preset, {**environment.overrides(preset, kind, name),
-                                                **extra, **labels},
-                                 environment.members(preset, kind, name), trained_on,
-                                 out / "runs", name)
-              for name, kind, labels, trained_on in levels}  # scenario -> its training runs
+    scenarios = trained_scenarios(environment, preset, models, currents, ilc_labels,
+                                  force_input, {"epochs": epochs} if epochs else {})
+    trained_on = {False: Path(data)}  # ILC-labelled or not -> the dataset folder
+    if any(scenario.ilc_labelled for scenario in scenarios):
+        trained_on[True] = ilc_labelled_set(data, out / f"data-{set_name}-ilc",
+                                            loop or default_loop(environment.plant),
+                                            progress=progress, say=say)
+    groups = {s.name: _member_jobs(s.kind, preset, s.overrides, s.members,
+                                   trained_on[s.ilc_labelled], out / "runs", s.name)
+              for s in scenarios}  # scenario -> its training runs
     jobs = {job.name: job for group in groups.values() for job in group}
     training = {name: m for name, job in jobs.items() if (m := _finished(job))}
     if todo := [name for name in jobs if name not in training]:
@@ -261,8 +256,9 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
             f"{metrics['epochs']} epochs in {metrics['seconds']:.0f} s) -> {onnx_files[kind]}")
     files: dict[str, Path] = {**onnx_files,
                               IDENTIFIED: _identified(Path(data), features, out / IDENTIFIED, say)}
-    if labelled is not None:  # the identified model too, on the ILC labels
-        files[IDENTIFIED_ILC] = _identified(labelled, replace(features, **ILC_PREPROCESSING),
+    if True in trained_on:  # the identified model too, on the ILC labels
+        files[IDENTIFIED_ILC] = _identified(trained_on[True],
+                                            replace(features, **ILC_PREPROCESSING),
                                             out / IDENTIFIED_ILC, say)
     say(f"iterative learning control on the evaluation reference into {out / 'ilc'} (the limit)")
     limit = ilc(scenario_config(env, "pid", loop=loop), out / "ilc", ilc_iterations,
@@ -281,6 +277,40 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
             say(f"{name}: {warning}")
     held_out = _held_out(env, Path(data), feedforwards, files, loop, out, say, progress)
     return write_report(recordings, env, out, model_training, limit[NOISE_FLOOR], held_out)
+
+
+@dataclass(frozen=True)
+class TrainedScenario:
+    """A learned feedforward the evaluation trains: its scenario name, model kind, settings
+    over the preset's, networks (an ensemble's members), and whether it trains on the
+    ILC-labelled set (learning.ilc_labels) rather than the collected one."""
+
+    name: str
+    kind: str
+    overrides: dict[str, Any]
+    members: int
+    ilc_labelled: bool = False
+
+
+def trained_scenarios(environment: Environment, preset: str, models: Sequence[str],
+                      currents: Sequence[str] = (), ilc_labels: Sequence[str] = (),
+                      force_input: Sequence[str] = (), extra: Mapping[str, Any] | None = None
+                      ) -> list[TrainedScenario]:
+    """What `evaluate` trains (see its arguments), each scenario's settings the
+    environment's for it, then `extra`: the one list the evaluation and the training bench
+    (flexff.training_bench) take their trainings from."""
+    forced = {"force_input": True}
+    levels: list[tuple[str, str, Mapping[str, Any], bool]] = [
+        *((kind, kind, {}, False) for kind in models),
+        *((f"{kind}-currents", kind, {"labels": "currents"}, False) for kind in currents),
+        *((f"{kind}-force", kind, forced, False) for kind in force_input),
+        *((f"{kind}-ilc", kind, ILC_PREPROCESSING, True) for kind in ilc_labels),
+        *((f"{kind}-force-ilc", kind, {**ILC_PREPROCESSING, **forced}, True)
+          for kind in ilc_labels if kind in force_input)]
+    return [TrainedScenario(name, kind, {**environment.overrides(preset, kind, name),
+                                         **(extra or {}), **labels},
+                            environment.members(preset, kind, name), labelled)
+            for name, kind, labels, labelled in levels]
 
 
 def _held_out(env: str, data: Path, scenarios: Sequence[str], files: Mapping[str, Path],

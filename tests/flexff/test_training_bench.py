@@ -4,8 +4,9 @@ GPU machine: docs/results/training)."""
 
 import pytest
 
+from flexff.learning.evaluate import ENVIRONMENTS, MODELS, trained_scenarios
 from flexff.learning.synthetic import synthetic_dataset
-from flexff.training_bench import _estimate, _timed_run
+from flexff.training_bench import _estimate, _timed_as, _timed_run
 
 pytestmark = pytest.mark.learn
 TINY = {"channels": 8, "levels": 2}
@@ -45,6 +46,22 @@ def test_the_estimate_adds_each_runs_epochs_and_members_and_divides_by_sharing()
         "cuda_shared": (13.0 + 5 * 8.0) / 2.5}
     entries["tcn"]["cuda"] = {"error": "out of memory"}
     assert "cuda_one_after_another" not in _estimate(entries, sharing)
+
+
+@pytest.mark.parametrize("preset, borrowed", [("thesis", {"pgnn-ilc": "pgnn"}), ("fast", {})])
+def test_the_bench_times_what_the_evaluation_trains_and_each_kind_of_work_once(preset,
+                                                                               borrowed):
+    hardware = ENVIRONMENTS["hardware"]
+    scenarios = trained_scenarios(hardware, preset, MODELS,
+                                  ilc_labels=hardware.ilc_labelled(MODELS))
+    assert [s.name for s in scenarios] == [*MODELS, "pgnn-ilc"]
+    timed_as = _timed_as(preset, scenarios)
+    # on ILC labels the thesis preset trains pgnn's network on as many samples; the fast
+    # preset samples them at 25 Hz, pgnn at 100 Hz
+    assert {name: other for name, other in timed_as.items() if name != other} == borrowed
+    faster = trained_scenarios(hardware, preset, ["pgnn"], ilc_labels=["pgnn"],
+                               extra={"model_rate_hz": 50.0})
+    assert len(set(_timed_as(preset, faster).values())) == 1
 
 
 def test_a_set_no_training_can_run_on_is_one_line_and_exit_code_2(tmp_path, capsys):
