@@ -255,11 +255,13 @@ def _identified_parameters(config: TrainConfig, dataset: Dataset, model_rate: fl
     """The physics-guided model's prior, or a black-box network's force inputs: the
     deployable parameters of the rigid-body model identified from the training trajectories
     (learning.identify: inertias, flexures, motor friction and torque constants), without the
-    added training noise, so that runs of other seeds share it; None for a model with neither."""
+    added training noise, so that runs of other seeds share it; None for a model with neither.
+    It needs the motion alone: the compact features hold it, bit for bit as every other set
+    does, and cost a fraction of the work."""
     if not (uses_prior(config.model) or config.features.force_input):
         return None
-    forces = replace(config.features, labels="forces")
-    return dict(_identified_prior(str(Path(dataset.path).resolve()), dataset.digest, forces,
+    motion = replace(config.features, labels="forces", feature_set="compact")
+    return dict(_identified_prior(str(Path(dataset.path).resolve()), dataset.digest, motion,
                                   model_rate))
 
 
