@@ -532,7 +532,7 @@ def identify_samples(features: list[np.ndarray], forces: list[np.ndarray],
     def rows(widths: tuple[float, ...], columns: tuple[int, ...]) -> list[np.ndarray]:
         taken_rows: list[list[np.ndarray]] = [[] for _ in widths]
         for x, samples in zip(features, taken):  # each width's columns side by side
-            w = np.hstack([w.reshape(len(x), 2 * len(columns)) for w in
+            w = np.hstack([at_width.reshape(len(x), 2 * len(columns)) for at_width in
                            regressors(x[:, pos], x[:, vel], x[:, acc], widths, columns)])
             if config.filtered_prior:  # column by column
                 w = filter_labels(w, rate_hz, config)

@@ -22,12 +22,15 @@ from flexff.learning.dataset import REFERENCE_SIGNALS
 from flexff.learning.evaluate import preprocessing, scenario_config
 from flexff.learning.features import FeatureConfig, prepare_trajectory
 from flexff.learning.identify import (
+    WIDTHS,
+    _essential,
     base_parameters,
     identify,
     identify_motion,
     identify_samples,
     linear_names,
     regressor,
+    regressors,
     width_columns,
     write_identification,
 )
@@ -79,6 +82,33 @@ def test_only_the_coulomb_columns_depend_on_the_tanh_width():
     assert np.array_equal(narrow[:, list(fixed)], wide[:, list(fixed)])
     assert not np.allclose(narrow[:, list(varying)], wide[:, list(varying)])
     assert np.array_equal(regressor(pos, vel, acc, 1e-1, varying), wide[:, list(varying)])
+    # every candidate width in one pass, each as on its own
+    for width, at_width in zip(WIDTHS, regressors(pos, vel, acc, WIDTHS, varying)):
+        assert np.array_equal(at_width, regressor(pos, vel, acc, width, varying))
+
+
+def test_the_fits_on_the_qr_triangle_equal_fits_on_the_rows():
+    """_essential solves each fit on R of one QR of [w, labels]: the same parameters dropped
+    and the same estimates as least squares on every row, one parameter dropped at a time."""
+    rng = np.random.default_rng(5)
+    w = rng.standard_normal((3000, 12)) * np.logspace(-2, 2, 12)
+    nominal = rng.uniform(0.5, 1.5, 12)
+    truth = nominal * rng.uniform(0.8, 1.2, 12)
+    truth[:3] = nominal[:3]  # three the noise hides: their share is under the residual
+    labels = w @ truth + 0.5 * rng.standard_normal(3000)
+    free = np.ones(12, dtype=bool)
+    while True:  # the same rule, on the rows
+        beta = nominal.copy()
+        beta[free] = np.linalg.lstsq(w[:, free], labels - w[:, ~free] @ nominal[~free],
+                                     rcond=None)[0]
+        share = np.where(free, np.linalg.norm(w, axis=0) * np.abs(beta), np.inf)
+        if share.min() >= np.linalg.norm(labels - w @ beta):
+            break
+        free[np.argmin(share)] = False
+    estimated, mask, residual, _ = _essential(w, labels, nominal)
+    assert 0 < (~free).sum() < 12 and np.array_equal(mask, free)
+    np.testing.assert_allclose(estimated, beta, rtol=1e-10)
+    np.testing.assert_allclose(residual, labels - w @ beta, rtol=1e-10, atol=1e-12)
 
 
 def test_the_base_parameters_group_what_acts_together():
