@@ -6,7 +6,7 @@ import pytest
 
 from flexff.learning.evaluate import ENVIRONMENTS, MODELS, trained_scenarios
 from flexff.learning.synthetic import synthetic_dataset
-from flexff.training_bench import _estimate, _timed_as, _timed_run
+from flexff.training_bench import _estimate, _ratios, _timed_as, _timed_run
 
 pytestmark = pytest.mark.learn
 TINY = {"channels": 8, "levels": 2}
@@ -46,6 +46,13 @@ def test_the_estimate_adds_each_runs_epochs_and_members_and_divides_by_sharing()
         "cuda_shared": (13.0 + 5 * 8.0) / 2.5}
     entries["tcn"]["cuda"] = {"error": "out of memory"}
     assert "cuda_one_after_another" not in _estimate(entries, sharing)
+
+
+def test_the_bound_divides_the_cpus_epoch_by_the_gpus_busy_seconds():
+    entry = {"cpu": {"epoch_s": 2.0}, "cuda": {"epoch_s": 1.0, "gpu_busy": 0.25},
+             "cuda_graphs": {"epoch_s": 0.5}}
+    assert _ratios(entry) == {"speedup": 2.0, "speedup_bound": 8.0, "graph_speedup": 2.0}
+    assert _ratios({"cpu": {"epoch_s": 2.0}, "cuda": {"error": "out of memory"}}) == {}
 
 
 @pytest.mark.parametrize("preset, borrowed", [("thesis", {"pgnn-ilc": "pgnn"}), ("fast", {})])
