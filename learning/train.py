@@ -380,7 +380,7 @@ def _restore(checkpoint: dict[str, Any], network: SequenceNetwork,
 def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
               rng: np.random.Generator, progress: bool, saver: Checkpoints,
               checkpoint: dict[str, Any] | None, on_epoch: EpochReport | None) -> dict[str, Any]:
-    captured = config.cuda_graphs and data.x.is_cuda
+    captured = _replays_graphs(config, data)
     optimizer = adam(network, config.learning_rate, captured)
     step = TrainingStep(network, optimizer, config.grad_clip, CudaGraphs() if captured else None)
     recurrent = config.model in RECURRENT
@@ -419,6 +419,11 @@ def _fit_loop(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,
     network.load_state_dict(best_state)
     history["cuda_graphs"] = step.graphs is not None
     return history
+
+
+def _replays_graphs(config: TrainConfig, data: SequenceSet) -> bool:
+    """Whether the training steps replay CUDA graphs: asked for, and the data on CUDA."""
+    return config.cuda_graphs and data.x.is_cuda
 
 
 def _recurrent_epoch(network: SequenceNetwork, config: TrainConfig, data: SequenceSet,

@@ -14,7 +14,9 @@ import importlib
 import pytest
 import torch
 
+import flexff.learning.train as training
 from flexff.learning.models import build_network
+from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.training_step import (
     TrainingStep,
     adam,
@@ -173,3 +175,37 @@ def test_an_optimizer_state_moves_between_captured_and_plain_steps(capturable_on
                for group in then_optimizer.param_groups)
     steps(moved, then_optimizer, batches[3:])
     assert _close(moved, whole)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return synthetic_dataset(tmp_path_factory.mktemp("tiny") / "data", n_train=3, n_test=1,
+                             duration=4.0, rate_hz=200.0, seed=7)
+
+
+@pytest.mark.parametrize("kind, sizes", [("lstm", {"hidden": 8}),
+                                         ("tcn", {"channels": 8, "levels": 2})])
+def test_the_epochs_of_a_training_replaying_graphs_train_as_eager_ones(
+        capturable_on_the_cpu, monkeypatch, data, tmp_path, kind, sizes):
+    """learning.train's own epochs (the recurrent one carrying a graph's state from chunk to
+    chunk, the window one), checkpoints and schedule, with the graphs emulated on the CPU:
+    each step's outputs must be used before the next replay overwrites them."""
+    graphs = []
+
+    def step(network, optimizer, grad_clip, cuda_graphs):
+        graphs.append(EmulatedGraphs(network, optimizer) if cuda_graphs else None)
+        return TrainingStep(network, optimizer, grad_clip, graphs[-1])
+
+    monkeypatch.setattr(training, "_replays_graphs", lambda config, _: config.cuda_graphs)
+    monkeypatch.setattr(training, "CudaGraphs", object)
+    monkeypatch.setattr(training, "TrainingStep", step)
+    runs = {replayed: training.train(kind, "fast", data, tmp_path / str(replayed),
+                                     progress=False, epochs=3, checkpoint_every=1,
+                                     batch_size=2, cuda_graphs=replayed, **sizes)
+            for replayed in (False, True)}
+    assert graphs[0] is None and graphs[1].captures >= 1 and graphs[1].replays >= 6
+    assert runs[True]["cuda_graphs"] and not runs[False]["cuda_graphs"]
+    for key in ("train", "val"):  # the capturable Adam rounds otherwise (see above)
+        assert runs[True]["history"][key] == pytest.approx(runs[False]["history"][key],
+                                                           rel=1e-4)
+    assert runs[True]["test_mse"] == pytest.approx(runs[False]["test_mse"], rel=1e-4)
