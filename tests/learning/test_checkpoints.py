@@ -26,12 +26,6 @@ FILES = ("run.json", "model.pt", "metrics.json", "loss.png")
 
 
 @pytest.fixture(scope="module")
-def data(tmp_path_factory):
-    return synthetic_dataset(tmp_path_factory.mktemp("tiny") / "data", n_train=4, n_test=1,
-                             duration=4.0, rate_hz=200.0, seed=7)
-
-
-@pytest.fixture(scope="module")
 def uninterrupted(data, tmp_path_factory):
     """Three epochs of the fast LSTM, never interrupted."""
     out = tmp_path_factory.mktemp("runs") / "whole"

@@ -18,7 +18,6 @@ from flexff.fmu.errors import InputError
 from flexff.learning.export import export
 from flexff.learning.models import build_network, fit_linear_skip
 from flexff.learning.run_folder import load_run
-from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.train import train
 from tests.learning.fake_device import DEVICE, FakeDevice
 
@@ -28,12 +27,6 @@ pytestmark = pytest.mark.usefixtures("few_threads")
 TINY = {"lstm": {"hidden": 8}, "cnn-lstm": {"hidden": 8, "conv_channels": [4, 4, 2]},
         "tcn": {"channels": 8, "levels": 2}, "pgnn": {"channels": 8, "levels": 2}}
 CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
-
-
-@pytest.fixture(scope="module")
-def data(tmp_path_factory):
-    return synthetic_dataset(tmp_path_factory.mktemp("tiny") / "data", n_train=4, n_test=1,
-                             duration=4.0, rate_hz=200.0, seed=7)
 
 
 def _weights(path):

@@ -29,12 +29,6 @@ TINY = {"lstm": {"hidden": 16, "layers": 2, "linear_skip": False},
         "pgnn": {"channels": 8, "levels": 3}, "tcn": {"channels": 8}}
 
 
-@pytest.fixture(scope="module")
-def data(tmp_path_factory):
-    return synthetic_dataset(tmp_path_factory.mktemp("tiny") / "data", n_train=4, n_test=1,
-                             duration=4.0, rate_hz=200.0, seed=7)
-
-
 def test_tiny_training_reduces_the_loss_and_writes_the_run_folder(data, tmp_path):
     metrics = train("lstm", "fast", data, tmp_path / "run", progress=False, epochs=6,
                     **TINY["lstm"])

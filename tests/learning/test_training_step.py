@@ -16,7 +16,6 @@ import torch
 
 import flexff.learning.train as training
 from flexff.learning.models import build_network
-from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.training_step import (
     TrainingStep,
     adam,
@@ -175,12 +174,6 @@ def test_an_optimizer_state_moves_between_captured_and_plain_steps(capturable_on
                for group in then_optimizer.param_groups)
     steps(moved, then_optimizer, batches[3:])
     assert _close(moved, whole)
-
-
-@pytest.fixture(scope="module")
-def data(tmp_path_factory):
-    return synthetic_dataset(tmp_path_factory.mktemp("tiny") / "data", n_train=3, n_test=1,
-                             duration=4.0, rate_hz=200.0, seed=7)
 
 
 @pytest.mark.parametrize("kind, sizes", [("lstm", {"hidden": 8}),
