@@ -3,10 +3,12 @@
 
 `execute(function, jobs, workers, scheduler)` is a context manager that yields each job's
 Finished (its index, result or error, or that it was cancelled) as the jobs end, in the order
-they end; `cancel()` drops the jobs not started yet. Local worker processes die with the
-process that started them (even when it is killed) and take Ctrl-C as the user means it: the
-run in progress stops, an idle worker stays quiet, and no further job starts. A Dask scheduler
-that cannot be reached is a ConnectionError naming it, after SCHEDULER_TIMEOUT.
+they end; `cancel()` drops the jobs not started yet. Local worker processes come from the
+fork server (fmu.forkserver: clean, with the caller's environment and folder, and flexff
+loaded), die with the process that started them (even when it is killed) and take Ctrl-C as
+the user means it: the run in progress stops, an idle worker stays quiet, and no further job
+starts. A Dask scheduler that cannot be reached is a ConnectionError naming it, after
+SCHEDULER_TIMEOUT.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from flexff.fmu.errors import MissingPackage
-from flexff.fmu.orphans import die_with_parent
+from flexff.fmu.forkserver import Caller, context
 
 Job = TypeVar("Job")
 Result = TypeVar("Result")
@@ -78,7 +80,8 @@ def execute(function: Callable[[Job], Result], jobs: Sequence[Job], workers: int
             yield execution
         return
     pool = ProcessPoolExecutor(max_workers=max(1, min(workers or granted_cores(), len(jobs) or 1)),
-                               initializer=_start_worker, initargs=(os.getpid(),))
+                               mp_context=context(function.__module__),
+                               initializer=_start_worker, initargs=(Caller.now(),))
     try:
         futures: dict[Future[Result], int] = {pool.submit(_guarded, function, job): k
                                               for k, job in enumerate(jobs)}
@@ -111,8 +114,8 @@ def _on_dask(function: Callable[[Job], Result], jobs: Sequence[Job], scheduler: 
 _worker = {"running": False, "interrupted": False}  # a pool process's state, for Ctrl-C
 
 
-def _start_worker(parent: int) -> None:
-    die_with_parent(parent)
+def _start_worker(caller: Caller) -> None:
+    caller.adopt()
     signal.signal(signal.SIGINT, _on_interrupt)
 
 

@@ -35,7 +35,7 @@ from flexff.cosim.sandbox import Sandbox
 from flexff.fmu import cache
 from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
-from flexff.fmu.orphans import die_with_parent
+from flexff.fmu.orphans import die_with
 
 SOURCES = (Path(__file__).parent / "c" / "proxy.c", Path(__file__).parent / "c" / "sandbox.c")
 PYTHON, EXIT = ord("P"), ord("X")  # commands proxy_serve hands back (CMD_PYTHON, CMD_EXIT)
@@ -336,7 +336,7 @@ def main(argv: Sequence[str]) -> int:
     then serve the engine's calls (proxy_serve) and the master's requests until told to exit
     or the master is gone."""
     path, name, cmd, ack, memory, capacity, master, folder, report, options = argv
-    die_with_parent(int(master))  # a master killed while the FMU hangs takes it along
+    die_with(int(master))  # a master killed while the FMU hangs takes it along
     for number in (signal.SIGINT, signal.SIGTERM):  # the master's to handle: it closes us
         signal.signal(number, signal.SIG_IGN)
     cmd_fd, ack_fd, capacity_n = int(cmd), int(ack), int(capacity)

@@ -1,8 +1,8 @@
 """run_in_child: a function that calls into an FMU, run in a child process of its own, so that
 an FMU that crashes or hangs cannot take the caller with it.
 
-The child is forked from multiprocessing's fork server: it starts in milliseconds yet inherits
-none of the caller's FMUs or threads. The FMI call under way is kept in shared memory, so a
+The child is forked from the fork server (fmu.forkserver): it starts in milliseconds yet
+inherits none of the caller's FMUs or threads. The FMI call under way is kept in shared memory, so a
 child that dies is reported as, e.g., "fmi2DeSerializeFMUstate ... SIGSEGV"; findings sent
 before a crash (`emit`) are kept, and the child's files are removed whatever the end. What
 the child sends is JSON of a bounded length, never unpickled: an FMU that writes to the pipe
@@ -15,8 +15,6 @@ Docs: "Isolate an FMU" (docs/how-to/isolate-fmu.md).
 from __future__ import annotations
 
 import json
-import multiprocessing
-import os
 import shutil
 import signal
 import tempfile
@@ -26,7 +24,7 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Any
 
-from flexff.fmu.orphans import die_with_parent
+from flexff.fmu.forkserver import Caller, context
 
 _LABEL_BYTES = 256  # room for the name of the call under way
 MESSAGE_LIMIT = 1 << 20  # bytes one message from the child may have
@@ -79,16 +77,13 @@ def _trace_fmi_calls() -> None:
 
 
 def _child(function: Callable[..., Any], args: tuple[Any, ...], sender: Connection,
-           label: Any, folder: str, environment: dict[str, str], cwd: str) -> None:
-    """The child's whole life: take the caller's environment and folder (the fork server's
-    are those of its start), trace, run `function(emit, *args)`, say how it ended."""
+           label: Any, folder: str, caller: Caller) -> None:
+    """The child's whole life: end with the caller, take its environment and folder, trace, run
+    `function(emit, *args)`, say how it ended."""
     global _current
     _current = label
-    die_with_parent(os.getppid())  # the fork server's child: it ends with the caller
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's: it ends the child
-    os.environ.clear()
-    os.environ.update(environment)
-    os.chdir(cwd)
+    caller.adopt()
     tempfile.tempdir = folder
     _trace_fmi_calls()
 
@@ -118,13 +113,12 @@ def run_in_child(function: Callable[..., Any], args: tuple[Any, ...], timeout: f
     """Run `function(emit, *args)` in a child process (module doc), `emit(message)` sending a
     message of JSON's types back (tuples come back as lists); kill it after `timeout` seconds.
     `function` must be importable by name."""
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload([__name__, function.__module__])
-    receiver, sender = context.Pipe(duplex=False)
-    label = context.RawArray("c", _LABEL_BYTES)
+    fork_server = context(__name__, function.__module__)
+    receiver, sender = fork_server.Pipe(duplex=False)
+    label = fork_server.RawArray("c", _LABEL_BYTES)
     folder = tempfile.mkdtemp(prefix="flexff-child-")
-    process = context.Process(target=_child, daemon=True, args=(
-        function, args, sender, label, folder, dict(os.environ), os.getcwd()))
+    process = fork_server.Process(target=_child, daemon=True, args=(
+        function, args, sender, label, folder, Caller.now()))
     messages: list[Any] = []
     end: tuple[str, str | None] | None = None
     timed_out = False

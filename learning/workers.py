@@ -12,8 +12,6 @@ GPU" (docs/how-to/gpu.md).
 
 from __future__ import annotations
 
-import multiprocessing
-import os
 import queue
 from collections.abc import Mapping, Sequence
 from concurrent.futures import FIRST_EXCEPTION, Future, ProcessPoolExecutor, wait
@@ -25,7 +23,7 @@ import torch
 from tqdm import tqdm
 
 from flexff.cosim.executor import execute, granted_cores
-from flexff.fmu.orphans import die_with_parent
+from flexff.fmu.forkserver import Caller, context
 from flexff.learning.devices import pick_device, training_gpus
 
 POLL_S = 0.2  # how often the bars are redrawn while the workers run
@@ -73,14 +71,14 @@ def train_parallel(jobs: Sequence[TrainJob], workers: int | None = None,
     workers = worker_count(len(jobs), workers, len(gpus))
     threads = threads or max(1, granted_cores() // workers)
     run_on = "cuda" if gpus else str(picked)  # a worker's own GPU is its current one
-    context = multiprocessing.get_context("spawn")
-    with context.Manager() as manager:
+    fork_server = context("flexff.learning.train")
+    with fork_server.Manager() as manager:
         free_gpus = manager.Queue()
         for k in range(workers if gpus else 0):  # the GPUs dealt out in turn
             free_gpus.put(gpus[k % len(gpus)])
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context,
+        with ProcessPoolExecutor(max_workers=workers, mp_context=fork_server,
                                  initializer=_start_worker,
-                                 initargs=(os.getpid(), free_gpus if gpus else None)) as pool:
+                                 initargs=(Caller.now(), free_gpus if gpus else None)) as pool:
             epochs = manager.Queue()
             futures = {pool.submit(_train_one, job, threads, run_on, epochs): job
                        for job in ordered}
@@ -94,10 +92,11 @@ def worker_count(jobs: int, requested: int | None, gpus: int) -> int:
     return max(1, min(requested or default, jobs))
 
 
-def _start_worker(parent: int, free_gpus: Any) -> None:
-    """Pool initializer: die with `parent`; on CUDA take a GPU of the queue `free_gpus` (one
-    entry per worker) and make it this process's current device."""
-    die_with_parent(parent)
+def _start_worker(caller: Caller, free_gpus: Any) -> None:
+    """Pool initializer: die with the caller and take its environment and folder; on CUDA take
+    a GPU of the queue `free_gpus` (one entry per worker) and make it this process's current
+    device."""
+    caller.adopt()
     if free_gpus is not None:
         torch.cuda.set_device(free_gpus.get_nowait())
 

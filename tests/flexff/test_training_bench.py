@@ -76,7 +76,8 @@ def test_a_set_no_training_can_run_on_is_one_line_and_exit_code_2(tmp_path, caps
 
     tiny = synthetic_dataset(tmp_path / "tiny", n_train=2, n_test=1, duration=2.0,
                              rate_hz=100.0)  # too short to hold out validation windows
-    assert main(["bench", "--training", str(tiny), "-o", str(tmp_path / "bench.json")]) == 2
+    assert main(["bench", "--training", str(tiny), "--preset", "fast", "-o",
+                 str(tmp_path / "bench.json")]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert lines[-1].startswith(f"flexff: error: {tiny}: no training ran here: ")
     assert "too few to hold out" in lines[-1]

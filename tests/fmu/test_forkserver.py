@@ -1,0 +1,108 @@
+"""fmu.forkserver, the one source of child processes: an FMU's process (fmu.child) and the
+workers of runs and collection (cosim.executor) are clean processes, not forks of the caller,
+yet each has the caller's environment and working folder of the moment it was started, set
+after the fork server began, and ends with the caller. The server is to import the flexff
+modules the caller has. A fork of a caller with a thread of its own would warn on Python 3.12
+and later (an error here)."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import subprocess
+import sys
+import threading
+import time
+import warnings
+
+import psutil
+import pytest
+
+from flexff.cosim.executor import execute
+from flexff.fmu.child import run_in_child
+from flexff.fmu.forkserver import context
+from tests.helpers import REPOSITORY
+
+SETTING = "FLEXFF_TEST_SETTING"
+STATE = "as imported"  # what a process has that imported this module and changed nothing
+
+
+def _view(_job: object = None) -> tuple[str | None, str, str]:
+    """What a child sees: the setting, its folder and STATE."""
+    return os.environ.get(SETTING), os.getcwd(), STATE
+
+
+def _reports(emit) -> None:
+    emit(_view())
+
+
+@pytest.fixture
+def busy_caller(monkeypatch, tmp_path):
+    """The caller as a master is: a thread of its own running, a setting and a folder changed
+    since the fork server started, and a module's state changed in memory only."""
+    started = context().Process(target=os.getpid)  # the server started before the changes
+    started.start()
+    started.join()
+    monkeypatch.setenv(SETTING, "set after the server started")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys.modules[__name__], "STATE", "changed in the caller")
+    stop = threading.Event()
+    thread = threading.Thread(target=stop.wait)
+    thread.start()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)  # forking a threaded process
+        yield ("set after the server started", str(tmp_path), "as imported")
+    stop.set()
+    thread.join()
+
+
+def test_executor_workers_are_clean_and_take_the_callers_setting_and_folder(busy_caller):
+    with execute(_view, [0, 1], workers=2) as running:
+        seen = [finished.result for finished in running]
+    assert seen == [busy_caller] * 2
+
+
+def test_an_fmus_process_is_clean_and_takes_the_callers_setting_and_folder(busy_caller):
+    end = run_in_child(_reports, (), 30.0)
+    assert end.returned and end.error is None
+    assert [tuple(message) for message in end.messages] == [busy_caller]
+
+
+def test_the_server_is_to_import_the_flexff_modules_loaded_here_and_those_asked_for(
+        monkeypatch):
+    import flexff.cli  # noqa: F401  (a module a caller has loaded)
+
+    asked: list[str] = []
+    monkeypatch.setattr(multiprocessing.context.BaseContext, "set_forkserver_preload",
+                        lambda self, names: asked.extend(names))
+    context("json")
+    assert {"flexff", "flexff.cli", "flexff.fmu.forkserver", "json"} <= set(asked)
+    assert all(name.startswith("flexff") for name in asked[:-1]) and asked[-1] == "json"
+
+
+def test_an_fmus_process_ends_with_its_killed_caller(tmp_path):
+    """SIGKILL of the caller while its FMU's process hangs: that process ends within seconds,
+    though its parent is the fork server (fmu.orphans)."""
+    code = ("from tests.fmu.test_forkserver import _hangs; from flexff.fmu.child import "
+            "run_in_child; run_in_child(_hangs, (), 600)")
+    caller = subprocess.Popen([sys.executable, "-c", code], cwd=REPOSITORY,
+                              start_new_session=True)
+    started: list[psutil.Process] = []
+    try:
+        deadline = time.monotonic() + 60
+        while not any(p.ppid() != caller.pid for p in started):  # the FMU's process
+            assert caller.poll() is None and time.monotonic() < deadline
+            started = psutil.Process(caller.pid).children(recursive=True)
+            time.sleep(0.05)
+        caller.kill()
+        caller.wait()
+        _, alive = psutil.wait_procs(started, timeout=5)
+        assert not alive
+    finally:
+        for child in started:
+            if child.is_running():
+                child.kill()
+
+
+def _hangs(emit) -> None:
+    time.sleep(600)
