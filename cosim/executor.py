@@ -1,18 +1,20 @@
 """Jobs in parallel, in local processes or on a Dask cluster: the one executor of runs
-(cosim.batch) and data collection (learning.collect).
+(cosim.batch), data collection (learning.collect) and a machine's trainings.
 
-`execute(function, jobs, workers, scheduler)` is a context manager that yields each job's
-Finished (its index, result or error, or that it was cancelled) as the jobs end, in the order
-they end; `cancel()` drops the jobs not started yet. Local worker processes come from the
-fork server (fmu.forkserver: clean, with the caller's environment and folder, and flexff
-loaded), die with the process that started them (even when it is killed) and take Ctrl-C as
-the user means it: the run in progress stops, an idle worker stays quiet, and no further job
+`execute(function, jobs, workers, scheduler, fresh)` is a context manager that yields each
+job's Finished (its index, result or error, or cancelled) as the jobs end, in the order they
+end; `cancel()` drops the jobs not started yet. Local workers are forks of the caller (they
+have what it loaded and registered, a script's own built-ins too), or with `fresh` children of
+the fork server (fmu.forkserver), for CUDA, which a fork of a process that has looked for a
+GPU cannot use safely. They die with the caller (even when it is killed) and take Ctrl-C as the
+user means it: the run in progress stops, an idle worker stays quiet, and no further job
 starts. A Dask scheduler that cannot be reached is a ConnectionError naming it, after
 SCHEDULER_TIMEOUT.
 """
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
 from collections.abc import Callable, Iterator, Sequence
@@ -71,16 +73,17 @@ class Execution(Generic[Result]):
 
 @contextmanager
 def execute(function: Callable[[Job], Result], jobs: Sequence[Job], workers: int | None = None,
-            scheduler: str | None = None) -> Iterator[Execution[Result]]:
+            scheduler: str | None = None, fresh: bool = False) -> Iterator[Execution[Result]]:
     """Run `function(job)` for every job: in up to `workers` local processes (default: one
-    per core granted), or on the Dask scheduler at `scheduler` (dask.distributed, imported
-    only then)."""
+    per core granted; `fresh`: not forks of this one, module doc), or on the Dask scheduler
+    at `scheduler` (dask.distributed, imported only then)."""
     if scheduler is not None:
         with _on_dask(function, jobs, scheduler) as execution:
             yield execution
         return
     pool = ProcessPoolExecutor(max_workers=max(1, min(workers or granted_cores(), len(jobs) or 1)),
-                               mp_context=context(function.__module__),
+                               mp_context=context(function.__module__) if fresh
+                               else multiprocessing.get_context("fork"),
                                initializer=_start_worker, initargs=(Caller.now(),))
     try:
         futures: dict[Future[Result], int] = {pool.submit(_guarded, function, job): k

@@ -1,37 +1,32 @@
 """Clean child processes, quickly: multiprocessing's fork server, shared by an FMU's own process
-(fmu.child), the workers of runs and data collection (cosim.executor) and of trainings
-(learning.workers).
+(fmu.child), trainings (learning.workers) and other fresh workers (cosim.executor).
 
 A fork of the caller itself would copy its threads' state (torch's and BLAS's pools, an FMU's
-threads) and its CUDA context, which a child cannot use; Python 3.12 warns of it, and 3.14 no
-longer forks by default. The fork server is started once, single-threaded, and first imports
-the flexff modules the caller has imported by then (`context`), so that a child starts in
-milliseconds with them loaded. Its children have the environment and working folder of the
-server's start; each takes the caller's of the moment, and ends with the caller
-(`Caller.adopt`).
+threads) and its CUDA driver state, which a child cannot use safely; Python 3.12 warns of it,
+and 3.14 no longer forks by default. The fork server is started once, single-threaded, and
+first imports what its first user asks for (`context`), so that a child starts in milliseconds
+with that loaded; a child imports what else it needs. Only what is asked for: a library such
+as onnxruntime, once imported, hangs a forked child that calls exit(), as an FMU may. Each
+child takes the caller's environment and working folder of the moment, and ends with the
+caller (`Caller.adopt`). As with any start but a fork, each child first imports the caller's
+main script, which therefore keeps its top level under `if __name__ == "__main__":`.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import os
-import sys
 from dataclasses import dataclass
 from multiprocessing.context import ForkServerContext
 
 from flexff.fmu.orphans import die_with
 
-PACKAGE = "flexff"
-
 
 def context(*modules: str) -> ForkServerContext:
-    """The fork server's context. The server, if this call starts it, imports `modules` and
-    every flexff module imported here by now (those already started keep their imports; a
-    child imports what else it needs)."""
-    loaded = sorted(name for name in sys.modules if (name == PACKAGE or name.startswith(
-        PACKAGE + ".")) and not name.endswith(".__main__"))  # the command line runs on import
+    """The fork server's context; the server, if this call starts it, first imports `modules`
+    (one started before keeps what it imported)."""
     fork_server = multiprocessing.get_context("forkserver")
-    fork_server.set_forkserver_preload([*loaded, *modules])
+    fork_server.set_forkserver_preload(list(modules))
     return fork_server
 
 

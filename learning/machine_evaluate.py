@@ -129,7 +129,7 @@ def train_models(data: MachineDataset, identified: LinearModel, out: Path,
     gpus = len(training_gpus(pick_device(overrides.get("device", "auto"))))
     training, failed = {}, []
     with tqdm(total=len(jobs), unit="model", desc="train", disable=not progress) as bar, \
-            execute(_train, jobs, worker_count(len(jobs), workers, gpus)) as execution:
+            execute(_train, jobs, worker_count(len(jobs), workers, gpus), fresh=True) as execution:
         for finished in execution:
             kind = jobs[finished.index].kind
             if finished.error is not None:

@@ -3,11 +3,13 @@ controllers), and a user's own built-in, registered through the public API, is n
 and run like the manipulator's."""
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from flexff.cosim.batch import run_batch
 from flexff.cosim.builtins import Option, register_builtin, registered
 from flexff.cosim.config import parse_config
 from flexff.cosim.plugins import reference_kinds, short_forms
@@ -96,6 +98,16 @@ def test_a_user_builtin_runs(tmp_path):
     run_config(parse_config(GAIN + "k = 1.5\n"), tmp_path)
     record = load_recording(tmp_path)
     np.testing.assert_allclose(record["g.y"], 3.0)
+
+
+def test_a_user_builtin_runs_in_parallel_workers(tmp_path):
+    """Local workers are forks (cosim.executor): a script's own built-in is theirs too."""
+    register_gain()
+    configs = [replace(parse_config(GAIN + f"k = {k}\n"), name=f"k{k}") for k in (1, 2)]
+    results = run_batch(configs, tmp_path, workers=2)
+    assert [r.error for r in results] == [None, None]
+    for k, result in zip((1, 2), results):
+        np.testing.assert_allclose(load_recording(result.output_dir)["g.y"], 2.0 * k)
 
 
 def test_a_name_is_registered_once():

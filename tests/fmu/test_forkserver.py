@@ -1,13 +1,11 @@
-"""fmu.forkserver, the one source of child processes: an FMU's process (fmu.child) and the
-workers of runs and collection (cosim.executor) are clean processes, not forks of the caller,
+"""fmu.forkserver, the source of clean child processes: an FMU's process (fmu.child) and fresh
+workers (cosim.executor's `fresh`, as a machine's trainings use) are not forks of the caller,
 yet each has the caller's environment and working folder of the moment it was started, set
-after the fork server began, and ends with the caller. The server is to import the flexff
-modules the caller has. A fork of a caller with a thread of its own would warn on Python 3.12
-and later (an error here)."""
+after the fork server began, and ends with the caller. A fork of a caller with a thread of its
+own would warn on Python 3.12 and later (an error here)."""
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import subprocess
 import sys
@@ -56,8 +54,8 @@ def busy_caller(monkeypatch, tmp_path):
     thread.join()
 
 
-def test_executor_workers_are_clean_and_take_the_callers_setting_and_folder(busy_caller):
-    with execute(_view, [0, 1], workers=2) as running:
+def test_fresh_workers_are_clean_and_take_the_callers_setting_and_folder(busy_caller):
+    with execute(_view, [0, 1], workers=2, fresh=True) as running:
         seen = [finished.result for finished in running]
     assert seen == [busy_caller] * 2
 
@@ -66,18 +64,6 @@ def test_an_fmus_process_is_clean_and_takes_the_callers_setting_and_folder(busy_
     end = run_in_child(_reports, (), 30.0)
     assert end.returned and end.error is None
     assert [tuple(message) for message in end.messages] == [busy_caller]
-
-
-def test_the_server_is_to_import_the_flexff_modules_loaded_here_and_those_asked_for(
-        monkeypatch):
-    import flexff.cli  # noqa: F401  (a module a caller has loaded)
-
-    asked: list[str] = []
-    monkeypatch.setattr(multiprocessing.context.BaseContext, "set_forkserver_preload",
-                        lambda self, names: asked.extend(names))
-    context("json")
-    assert {"flexff", "flexff.cli", "flexff.fmu.forkserver", "json"} <= set(asked)
-    assert all(name.startswith("flexff") for name in asked[:-1]) and asked[-1] == "json"
 
 
 def test_an_fmus_process_ends_with_its_killed_caller(tmp_path):

@@ -20,7 +20,6 @@ import numpy as np
 import psutil
 import pytest
 
-import flexff.learning.collect as collect_module
 from flexff.cosim.run import simulate_config
 from flexff.learning.collect import (
     CollectionError,
@@ -41,8 +40,6 @@ from flexff.learning.dataset import (
 )
 from flexff.learning.trajectories import trajectory_set
 from flexff.plant.parameters import NOMINAL
-
-COLLECT_ONE = collect_module._collect_one  # as imported, whatever a test has patched
 
 FIRST = 3  # trajectories of the small collections
 
@@ -277,13 +274,6 @@ def _full_disk(path, signals):
     raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
 
-def _collect_one_on_a_full_disk(job):
-    """A collection's job where every file write fails (a worker process imports this module,
-    and keeps nothing of the caller's monkeypatches)."""
-    collect_module.save_signals = _full_disk
-    return COLLECT_ONE(job)
-
-
 @pytest.mark.parametrize("scheduler", [False, True], ids=["processes", "dask"])
 def test_a_full_disk_stops_the_collection_with_one_message(tmp_path, monkeypatch, capsys,
                                                            scheduler):
@@ -291,8 +281,8 @@ def test_a_full_disk_stops_the_collection_with_one_message(tmp_path, monkeypatch
     `flexff data collect` says so in one line, without stack frames."""
     from flexff.cli import main
 
-    monkeypatch.setattr(collect_module, "save_signals", _full_disk)  # a Dask thread's
-    monkeypatch.setattr(collect_module, "_collect_one", _collect_one_on_a_full_disk)
+    # forked workers inherit it
+    monkeypatch.setattr("flexff.learning.collect.save_signals", _full_disk)
     args = ["data", "collect", "--set", "sim", "-o", str(tmp_path / "sim"), "--workers", "1"]
     if scheduler:
         from dask.distributed import LocalCluster
@@ -317,29 +307,28 @@ def test_a_full_disk_stops_the_collection_with_one_message(tmp_path, monkeypatch
 
 
 def test_workers_end_with_a_killed_collection(tmp_path):
-    """SIGKILL of `data collect` (the parent alone): its pool workers (children of the fork
-    server, which lives as long as they do) end within seconds instead of waiting forever for
-    work, and every other process it started with them."""
+    """SIGKILL of `data collect` (the parent alone): its pool workers end within seconds
+    instead of waiting forever for work."""
     code = ("from flexff.learning.collect import run_collection; "
             f"run_collection('sim', {str(tmp_path / 'sim')!r}, workers=2, progress=False, "
             f"limit=6)")
     process = subprocess.Popen([sys.executable, "-c", code], start_new_session=True)
     parent = psutil.Process(process.pid)
-    started: list[psutil.Process] = []
+    workers = []
     try:
         deadline = time.monotonic() + 60
-        while sum(p.ppid() != parent.pid for p in started) < 2:  # the two workers
+        while len(workers) < 2:
             assert process.poll() is None and time.monotonic() < deadline
-            started = parent.children(recursive=True)
+            workers = parent.children()
             time.sleep(0.05)
         process.kill()
         process.wait()
-        _, alive = psutil.wait_procs(started, timeout=5)
+        _, alive = psutil.wait_procs(workers, timeout=5)
         assert not alive
     finally:
-        for child in started:  # the test's own processes, should the check fail
-            if child.is_running():
-                child.kill()
+        for worker in workers:  # the test's own processes, should the check fail
+            if worker.is_running():
+                worker.kill()
 
 
 def test_on_a_dask_scheduler(collected, tmp_path):
