@@ -44,6 +44,7 @@ USAGE = ("inputs (T, n_inputs) float64 in SI units -> outputs (T, n_outputs) flo
 _JSON = ("input_signals", "input_units", "output_signals", "output_units", "state",
          "prior_parameters", "force_input", "feature_range", "machine", "machine_features",
          "machine_prior", "linear_inputs")
+_NAME_LISTS = ("input_signals", "input_units", "output_signals", "output_units")
 _NUMBERS = {"sample_rate_hz": float, "history_samples": int, "ensemble_members": int}
 
 
@@ -119,6 +120,10 @@ class ModelCard:
             except (ValueError, TypeError) as error:
                 raise InputError(f"{where}: metadata {key} = {text!r} is not valid ({error}); "
                                  f"export the model again with `flexff export`") from None
+            if key in _NAME_LISTS and not (isinstance(values[key], list) and all(
+                    isinstance(name, str) for name in values[key])):
+                raise InputError(f"{where}: metadata {key} = {text!r} is not a list of names; "
+                                 f"export the model again with `flexff export`")
         card = cls(**values)
         card._check(where)
         return card

@@ -51,6 +51,8 @@ def test_an_older_export_reads_with_defaults():
     ({"input_kind": None}, "metadata lacks input_kind"),
     ({"sample_rate_hz": "fast"}, "sample_rate_hz = 'fast' is not valid"),
     ({"state": "[{"}, "state = .* is not valid"),
+    ({"input_signals": "0"}, "input_signals = '0' is not a list of names"),  # found by fuzzing
+    ({"output_units": '["N", 1]'}, "output_units = .* is not a list of names"),
     ({"input_kind": "currents"}, "unknown input kind 'currents'"),
     ({"prior": "friction"}, "unknown prior 'friction'"),
     ({"prior_parameters": '{"tau_coulomb9": 1}'}, "prior_parameters .* are not nominal-model"),

@@ -114,7 +114,7 @@ def _command(pid: int) -> bytes:
     try:
         with open(f"/proc/{pid}/cmdline", "rb") as command:
             return command.read()
-    except FileNotFoundError:
+    except (FileNotFoundError, ProcessLookupError):  # it ended since it was listed
         return b""
 
 
