@@ -4,9 +4,12 @@ import os
 import re
 import subprocess
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import psutil
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 # the Modelica Reference-FMUs, kept in the repository (README.md and LICENSE.txt beside them)
@@ -95,3 +98,24 @@ def matlab_v73_header(path: Path) -> None:
     text = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Thu Jan  1 00:00:00 2026 HDF5"
     with open(path, "r+b") as handle:
         handle.write(text.ljust(116, b" ") + bytes(8) + b"\x00\x02IM")
+
+
+def assert_descendants_end_with(process: subprocess.Popen,
+                                started: Callable[[list[psutil.Process]], bool]) -> None:
+    """Wait until `started(descendants of process)`, SIGKILL `process` alone, and assert that
+    every one of those descendants ends within 5 s (any left are killed after the check)."""
+    descendants: list[psutil.Process] = []
+    try:
+        deadline = time.monotonic() + 60
+        while not started(descendants):
+            assert process.poll() is None and time.monotonic() < deadline
+            descendants = psutil.Process(process.pid).children(recursive=True)
+            time.sleep(0.05)
+        process.kill()
+        process.wait()
+        _, alive = psutil.wait_procs(descendants, timeout=5)
+        assert not alive
+    finally:
+        for descendant in descendants:  # the test's own processes, should the check fail
+            if descendant.is_running():
+                descendant.kill()

@@ -13,13 +13,12 @@ import threading
 import time
 import warnings
 
-import psutil
 import pytest
 
 from flexff.cosim.executor import execute
 from flexff.fmu.child import run_in_child
 from flexff.fmu.forkserver import context
-from tests.helpers import REPOSITORY
+from tests.helpers import REPOSITORY, assert_descendants_end_with
 
 SETTING = "FLEXFF_TEST_SETTING"
 STATE = "as imported"  # what a process has that imported this module and changed nothing
@@ -73,21 +72,8 @@ def test_an_fmus_process_ends_with_its_killed_caller(tmp_path):
             "run_in_child; run_in_child(_hangs, (), 600)")
     caller = subprocess.Popen([sys.executable, "-c", code], cwd=REPOSITORY,
                               start_new_session=True)
-    started: list[psutil.Process] = []
-    try:
-        deadline = time.monotonic() + 60
-        while not any(p.ppid() != caller.pid for p in started):  # the FMU's process
-            assert caller.poll() is None and time.monotonic() < deadline
-            started = psutil.Process(caller.pid).children(recursive=True)
-            time.sleep(0.05)
-        caller.kill()
-        caller.wait()
-        _, alive = psutil.wait_procs(started, timeout=5)
-        assert not alive
-    finally:
-        for child in started:
-            if child.is_running():
-                child.kill()
+    assert_descendants_end_with(caller, lambda started: any(  # the FMU's, a server's child
+        child.ppid() != caller.pid for child in started))
 
 
 def _hangs(emit) -> None:
