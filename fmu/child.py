@@ -2,12 +2,12 @@
 an FMU that crashes or hangs cannot take the caller with it.
 
 The child is forked from the fork server (fmu.forkserver): it starts in milliseconds yet
-inherits none of the caller's FMUs or threads. The FMI call under way is kept in shared memory, so a
-child that dies is reported as, e.g., "fmi2DeSerializeFMUstate ... SIGSEGV"; findings sent
-before a crash (`emit`) are kept, and the child's files are removed whatever the end. What
-the child sends is JSON of a bounded length, never unpickled: an FMU that writes to the pipe
-cannot run code in the caller. The child dies with the caller (fmu.orphans). A script that
-calls this keeps its top level under `if __name__ == "__main__":`.
+inherits none of the caller's FMUs or threads. The FMI call under way is kept in shared
+memory, so a child that dies is reported as, e.g., "fmi2DeSerializeFMUstate ... SIGSEGV";
+findings sent before a crash (`emit`) are kept, and the child's files are removed whatever the
+end. What the child sends is JSON of a bounded length, never unpickled: an FMU that writes to
+the pipe cannot run code in the caller. The child dies with the caller (fmu.orphans). A script
+that calls this keeps its top level under `if __name__ == "__main__":`.
 
 Docs: "Isolate an FMU" (docs/how-to/isolate-fmu.md).
 """

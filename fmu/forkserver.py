@@ -44,8 +44,8 @@ class Caller:
         return cls(dict(os.environ), os.getcwd(), os.getpid())
 
     def adopt(self) -> None:
-        """In a child of the fork server: end with the caller (fmu.orphans), take its
-        environment and folder."""
+        """In a child (a fork server's, or a fork): end with the caller (fmu.orphans), take
+        its environment and folder."""
         die_with(self.pid)
         os.environ.clear()
         os.environ.update(self.environment)
