@@ -101,21 +101,34 @@ def matlab_v73_header(path: Path) -> None:
 
 
 def assert_descendants_end_with(process: subprocess.Popen,
-                                started: Callable[[list[psutil.Process]], bool]) -> None:
-    """Wait until `started(descendants of process)`, SIGKILL `process` alone, and assert that
-    every one of those descendants ends within 5 s (any left are killed after the check)."""
+                                started: Callable[[list[psutil.Process]], bool],
+                                settle_s: float = 0.0, within_s: float = 5.0) -> None:
+    """Wait until `started(descendants of process)`, then `settle_s` more (into a hang, say),
+    SIGKILL `process` alone, and assert that every one of those descendants ends within
+    `within_s` (any left are killed after the check)."""
     descendants: list[psutil.Process] = []
     try:
         deadline = time.monotonic() + 60
-        while not started(descendants):
+        while not _holds(started, descendants):
             assert process.poll() is None and time.monotonic() < deadline
             descendants = psutil.Process(process.pid).children(recursive=True)
             time.sleep(0.05)
+        time.sleep(settle_s)
         process.kill()
         process.wait()
-        _, alive = psutil.wait_procs(descendants, timeout=5)
-        assert not alive
-    finally:
-        for descendant in descendants:  # the test's own processes, should the check fail
+        _, alive = psutil.wait_procs(descendants, timeout=within_s)
+        assert not alive, f"{alive} outlived {process.pid}"
+    finally:  # the test's own processes, should the check fail
+        if process.poll() is None:
+            process.kill()
+        for descendant in descendants:
             if descendant.is_running():
                 descendant.kill()
+
+
+def _holds(started: Callable[[list[psutil.Process]], bool],
+           descendants: list[psutil.Process]) -> bool:
+    try:
+        return started(descendants)
+    except psutil.NoSuchProcess:  # one ended since it was listed: list them again
+        return False

@@ -9,14 +9,13 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
 from flexff.cosim.recording import PARQUET_NAME, PARTS_NAME, load_recording
 from flexff.cosim.watchdog import GRACE_S
 from tests.cosim.test_streaming import vdp_config
-from tests.helpers import REPOSITORY
+from tests.helpers import REPOSITORY, assert_descendants_end_with
 from tests.probe_fmu import build_probe
 
 
@@ -90,37 +89,7 @@ def test_sigterm_ends_a_run_whose_fmu_hangs(tmp_path, isolate):
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
 def test_an_isolated_fmu_dies_with_its_killed_master(tmp_path):
     process = _start(tmp_path, hanging(tmp_path, isolate=True))
-    try:
-        children = []
-        _wait_for(lambda: children.extend(_children(process.pid)) or children, process)
-        time.sleep(1.0)  # into the hang
-    finally:
-        process.kill()
-        process.wait()
-    deadline = time.monotonic() + 10
-    while any(_alive(pid) for pid in children):
-        assert time.monotonic() < deadline, f"the isolated FMU {children} outlived its master"
-        time.sleep(0.05)
+    assert_descendants_end_with(process, lambda started: any(
+        "flexff.cosim.isolation" in " ".join(child.cmdline()) for child in started),
+        settle_s=1.0, within_s=10.0)  # 1 s into the hang
 
-
-def _children(pid: int) -> list[int]:
-    """The isolated FMUs' processes among the children of `pid`."""
-    path = Path(f"/proc/{pid}/task/{pid}/children")
-    children = [int(c) for c in path.read_text().split()] if path.exists() else []
-    return [c for c in children if b"flexff.cosim.isolation" in _command(c)]
-
-
-def _command(pid: int) -> bytes:
-    try:
-        with open(f"/proc/{pid}/cmdline", "rb") as command:
-            return command.read()
-    except (FileNotFoundError, ProcessLookupError):  # it ended since it was listed
-        return b""
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().rpartition(")")[2].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
