@@ -23,6 +23,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
+from tqdm import tqdm
+
 from flexff.fmu.errors import MissingPackage
 from flexff.fmu.forkserver import Caller, context
 
@@ -81,6 +83,8 @@ def execute(function: Callable[[Job], Result], jobs: Sequence[Job], workers: int
         with _on_dask(function, jobs, scheduler) as execution:
             yield execution
         return
+    if not fresh:
+        _stop_bar_monitor()
     pool = ProcessPoolExecutor(max_workers=max(1, min(workers or granted_cores(), len(jobs) or 1)),
                                mp_context=context(function.__module__) if fresh
                                else multiprocessing.get_context("fork"),
@@ -92,6 +96,16 @@ def execute(function: Callable[[Job], Result], jobs: Sequence[Job], workers: int
                         lambda: [f.cancel() for f in futures])
     finally:  # on Ctrl-C too: the jobs not started are dropped, those in progress stop
         pool.shutdown(cancel_futures=True)
+
+
+def _stop_bar_monitor() -> None:
+    """Stop the thread an open tqdm bar keeps to refresh itself, before the pool forks: a fork
+    of a process running a second thread may deadlock in the child (a lock that thread held
+    stays held; Python 3.12 warns of it). The bars go on without it; a later bar starts it."""
+    monitor = tqdm.monitor
+    if monitor is not None:
+        monitor.exit()  # type: ignore[no-untyped-call]  # the stubs leave it untyped
+        tqdm.monitor = None
 
 
 @contextmanager

@@ -1,9 +1,13 @@
 """cosim.executor, the one executor of runs and data collection: results by job, errors as
-values, cancellation of the jobs not started, the same on a local Dask cluster."""
+values, cancellation of the jobs not started, the same on a local Dask cluster; no thread of
+a progress bar running when the workers fork."""
 
+import os
+import threading
 import time
 
 import pytest
+from tqdm import tqdm
 
 from flexff.cosim.executor import execute
 
@@ -39,6 +43,26 @@ def test_cancel_drops_the_jobs_not_started():
     assert seen[0].result == 100 and len(seen) == len(jobs)
     # the first, the one then running, and the two the pool had handed its worker queue ran
     assert sum(f.cancelled for f in seen) >= len(jobs) - 4
+
+
+def test_workers_fork_without_the_thread_of_an_open_progress_bar(monkeypatch):
+    """tqdm's monitor thread, which a bar starts, is stopped before the pool forks: a fork of a
+    process with a second thread may deadlock (Python 3.12+ warns of it)."""
+    threads_at_fork = []
+
+    def counting_fork():
+        threads_at_fork.append(sorted(t.name for t in threading.enumerate()))
+        return real_fork()
+
+    real_fork = os.fork
+    before = sorted(t.name for t in threading.enumerate())
+    with tqdm(total=5, disable=False, file=open(os.devnull, "w")) as bar:
+        assert "tqdm_monitor" in {t.name for t in threading.enumerate()}  # the bar started it
+        monkeypatch.setattr(os, "fork", counting_fork)
+        with execute(square_or_fail, [0, 1, 2], workers=2) as running:
+            for _ in running:
+                bar.update()
+    assert threads_at_fork == [before, before]  # two workers forked, without the monitor
 
 
 def test_a_local_dask_cluster_gives_the_same():
