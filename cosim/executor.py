@@ -25,7 +25,7 @@ from typing import Any, Generic, TypeVar
 
 from tqdm import tqdm
 
-from flexff.fmu.errors import MissingPackage
+from flexff.fmu.errors import InputError, MissingPackage
 from flexff.fmu.forkserver import Caller, context
 
 Job = TypeVar("Job")
@@ -38,6 +38,13 @@ def granted_cores() -> int:
     """The cores this process may run on (its CPU affinity), at least one."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return max(1, cores or 1)
+
+
+def check_workers(workers: int | None) -> None:
+    """An InputError for a count of local processes below 1 (None: one per core granted)."""
+    if workers is not None and workers < 1:
+        raise InputError(f"workers must be at least 1, got {workers} (leave it out for one "
+                         f"process per CPU)")
 
 
 @dataclass(frozen=True)
@@ -79,6 +86,7 @@ def execute(function: Callable[[Job], Result], jobs: Sequence[Job], workers: int
     """Run `function(job)` for every job: in up to `workers` local processes (default: one
     per core granted; `fresh`: not forks of this one, module doc), or on the Dask scheduler
     at `scheduler` (dask.distributed, imported only then)."""
+    check_workers(workers)
     if scheduler is not None:
         with _on_dask(function, jobs, scheduler) as execution:
             yield execution

@@ -75,13 +75,18 @@ def _output_file(path: str) -> None:
     output_folder(Path(path).parent)
 
 
+def _epochs(args: argparse.Namespace) -> dict[str, Any]:
+    """--epochs as a setting override where given (0 too: the configuration refuses it)."""
+    return {} if args.epochs is None else {"epochs": args.epochs}
+
+
 def _evaluate_machine(args: argparse.Namespace, loop: Any) -> int:
     """evaluate --config LOOP.toml whose loop has a [machine]: the workflow on that machine."""
     from flexff.learning.machine_evaluate import evaluate_machine
 
     train, test = args.trajectories
     evaluate_machine(loop, args.output, args.models, args.preset, train, test, args.duration,
-                     device=args.device, **({"epochs": args.epochs} if args.epochs else {}))
+                     device=args.device, **_epochs(args))
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, errors.png, identified.json, "
           f"data/, runs/, models/, fmus/, ilc/ for the limit)")
@@ -94,7 +99,7 @@ def _evaluate_logs(args: argparse.Namespace) -> int:
     from flexff.learning.log_evaluate import evaluate_logs
 
     evaluate_logs(args.data, args.output, args.models, args.preset, device=args.device,
-                  **({"epochs": args.epochs} if args.epochs else {}))
+                  **_epochs(args))
     print((Path(args.output) / "table.md").read_text())
     print(f"relative 2-norm of the effort error on the test logs; results in {args.output}/ "
           f"(summary.json, table.md, identified.json, runs/, models/)")
@@ -255,9 +260,11 @@ def _print_json(data: dict[str, Any], output: str | None) -> int:
 def _run(args: argparse.Namespace) -> int:
     from flexff.cosim.batch import run_batch, sweep
     from flexff.cosim.config import with_isolation
+    from flexff.cosim.executor import check_workers
     from flexff.cosim.run import load_run_config, output_folder, run_config
     from flexff.cosim.schema import RunConfig
 
+    check_workers(args.workers)  # one configuration runs here, but a wrong count is wrong
     output_folder(args.output)
     configs = args.configs
     if args.sweep:
@@ -464,7 +471,7 @@ def _train(args: argparse.Namespace) -> int:
 
     if is_machine_dataset(args.data):
         return _train_machine(args)
-    overrides = {"labels": args.labels, **({"epochs": args.epochs} if args.epochs else {}),
+    overrides = {"labels": args.labels, **_epochs(args),
                  **({"force_input": True} if args.force_input else {}),
                  **({"cuda_graphs": True} if args.cuda_graphs else {})}
     seeds = args.seed or [0]
@@ -505,7 +512,7 @@ def _train_machine(args: argparse.Namespace) -> int:
                          "--force-input (its physics is the pgnn's prior)")
     data = load_machine_dataset(args.data)
     config = make_config(args.model, args.preset, seed=(args.seed or [0])[0],
-                         device=args.device, **({"epochs": args.epochs} if args.epochs else {}))
+                         device=args.device, **_epochs(args))
     identified = identify_dataset(data)
     metrics = fit_machine(config, data.description, data.sample_rate_hz, data.trajectories,
                           data.digest, Path(args.output), learned_features(identified),

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from flexff.cosim.executor import Finished, execute
+from flexff.cosim.executor import Finished, check_workers, execute
 from flexff.cosim.recording import Recording, atomic_write
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import Scenario, reference_signals, resolve
@@ -176,9 +176,7 @@ def run_collection(set_name: str, out: str | Path, workers: int | None = None,
     trajectories = trajectory_set(set_name, draws)
     if limit is not None and limit < 1:
         raise InputError(f"limit must be at least 1, got {limit}")
-    if workers is not None and workers < 1:
-        raise InputError(f"workers must be at least 1, got {workers} (leave it out for one "
-                         f"process per CPU)")
+    check_workers(workers)
     specs = trajectories.trajectories[:limit]
     out = Path(out)
     folder = _check_folder(out, trajectories)

@@ -217,6 +217,10 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     if physics := [kind for kind in force_input if uses_prior(kind)]:
         raise InputError(f"force inputs are for the black-box networks: {', '.join(physics)} "
                          f"has the identified rigid-body force as its prior already")
+    scenarios = trained_scenarios(environment, preset, models, currents, ilc_labels,
+                                  force_input, {} if epochs is None else {"epochs": epochs})
+    for scenario in scenarios:  # every setting checked before any work
+        make_config(scenario.kind, preset, **scenario.overrides)
     out = Path(out)
     set_name = environment.trajectory_set
     features = preprocessing(env, preset)
@@ -230,8 +234,6 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         say(f"collecting the {set_name} set (PID only){on} into {out / f'data-{set_name}'}")
         data = collect(set_name, out / f"data-{set_name}", scheduler=scheduler,
                        config=None if loop is None else with_feedforward(loop))
-    scenarios = trained_scenarios(environment, preset, models, currents, ilc_labels,
-                                  force_input, {"epochs": epochs} if epochs else {})
     trained_on = {False: Path(data)}  # ILC-labelled or not -> the dataset folder
     if any(scenario.ilc_labelled for scenario in scenarios):
         trained_on[True] = ilc_labelled_set(data, out / f"data-{set_name}-ilc",

@@ -25,7 +25,13 @@ from flexff.learning.dataset_files import Trajectory
 from flexff.learning.deploy import SIModel
 from flexff.learning.linear_model import EDGE_PERIODS, write_linear_model
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
-from flexff.learning.machine_evaluate import MODELS, SUMMARY, learned_features, train_models
+from flexff.learning.machine_evaluate import (
+    MODELS,
+    SUMMARY,
+    check_settings,
+    learned_features,
+    train_models,
+)
 from flexff.learning.machine_features import MachineFeatures, prepare
 from flexff.learning.machine_identify import identify_dataset
 from flexff.learning.machine_train import features_from_dict, prior_efforts
@@ -38,6 +44,7 @@ def evaluate_logs(data_path: str | Path, out: str | Path, models: Sequence[str] 
                   **overrides: Any) -> dict[str, Any]:
     """Identify, train and compare on the machine dataset `data_path` (imported logs); write
     `out`; return the summary."""
+    check_settings(models, preset, overrides)
     data = load_machine_dataset(data_path)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -64,6 +64,7 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
                      workers: int | None = None, progress: bool = True,
                      **overrides: Any) -> dict[str, Any]:
     """Collect, identify, train, export, build and compare on `loop`; write `out`."""
+    check_settings(models, preset, overrides)
     machine = loop_machine(loop)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -115,6 +116,13 @@ def learned_features(identified: LinearModel) -> MachineFeatures:
     """The feature settings, all derived from the data, with the direction widths of the
     machine's identified Coulomb friction (machine_features.friction_widths)."""
     return MachineFeatures(direction_widths=friction_widths(identified))
+
+
+def check_settings(models: Sequence[str], preset: str, overrides: dict[str, Any]) -> None:
+    """Each model's training settings made once before any work: an override that a
+    configuration refuses (its name, its value) fails now, not after the collection."""
+    for kind in models:
+        make_config(kind, preset, **overrides)
 
 
 def train_models(data: MachineDataset, identified: LinearModel, out: Path,

@@ -10,6 +10,7 @@ import pytest
 from tqdm import tqdm
 
 from flexff.cosim.executor import execute
+from flexff.fmu.errors import InputError
 
 
 def square_or_fail(k: int) -> int:
@@ -30,6 +31,12 @@ def test_local_processes_give_each_job_its_result_or_error():
         got = outcomes(running)
     assert got == {0: (0, None, False), 1: (1, None, False), 2: (4, None, False),
                    3: (None, "three", False), 4: (16, None, False)}
+
+
+def test_no_worker_is_an_error_not_every_core():
+    with pytest.raises(InputError, match="workers must be at least 1, got 0"), \
+            execute(square_or_fail, [0, 1], workers=0):
+        pass
 
 
 def test_cancel_drops_the_jobs_not_started():

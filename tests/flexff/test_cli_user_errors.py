@@ -57,8 +57,13 @@ def test_the_error_classes():
      {"short.toml": SHORT}, "a sweep key is table.key"),
     (["run", "{tmp}/short.toml", "-o", "{tmp}/out", "--realtime", "--rt-factor", "-1"],
      {"short.toml": SHORT}, "real-time factor must be positive"),
+    (["run", "{tmp}/short.toml", "-o", "{tmp}/out", "--workers", "0"],
+     {"short.toml": SHORT}, "workers must be at least 1, got 0"),
+    pytest.param(["train", "--model", "lstm", "--data", "{tmp}/data", "-o", "{tmp}/run",
+                  "--epochs", "0"], {"data/readme.txt": "not a dataset"},
+                 "epochs, batch_size and window must be at least 1", marks=pytest.mark.learn),
 ], ids=["config-key", "fmu-file", "feedforward-model", "onnx-graph", "dataset-folder",
-        "sweep-value", "sweep-key", "rt-factor"])
+        "sweep-value", "sweep-key", "rt-factor", "workers", "epochs"])
 def test_bad_input_of_every_floor(capsys, caught, tmp_path, args, files, message):
     for name, text in files.items():
         (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)

@@ -177,6 +177,9 @@ def test_bad_requests_are_refused(tmp_path):
         scenario_config("sim", "lstm")
     with pytest.raises(ValueError, match="force inputs are for the black-box networks: pgnn"):
         evaluate("sim", tmp_path, force_input=["pgnn"])
+    with pytest.raises(ValueError, match="epochs, batch_size and window must be at least 1"):
+        evaluate("sim", tmp_path / "out", epochs=0)  # refused before the collection
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize("env, variant, duration", [("sim", "nominal", 15.0),

@@ -3,6 +3,8 @@ network compared by their force prediction on the test logs."""
 
 import json
 
+import pytest
+
 from flexff.learning.log_evaluate import evaluate_logs
 from flexff.learning.machine_dataset import write_machine_dataset
 from tests.learning.test_machine_train import machine, trajectory
@@ -27,6 +29,11 @@ def test_each_model_predicts_the_test_logs(tmp_path, capsys):
     table = (tmp_path / "eval" / "table.md").read_text()
     assert table.startswith("| axis | identified | tcn | pgnn |")
     assert f"{100 * errors['identified']['x']:.2f} %" in table
+
+
+def test_a_bad_setting_is_refused_before_the_data_loads(tmp_path):
+    with pytest.raises(ValueError, match="epochs, batch_size and window must be at least 1"):
+        evaluate_logs(tmp_path / "missing", tmp_path / "eval", epochs=0)
 
 
 def test_the_command_line_takes_a_logs_dataset(tmp_path, capsys):

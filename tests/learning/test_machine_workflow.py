@@ -60,6 +60,17 @@ def test_a_3_axis_machine_runs_the_whole_workflow(tmp_path):
     assert (tmp_path / "out" / "errors.png").stat().st_size > 10_000  # a panel per axis
 
 
+@pytest.mark.parametrize("overrides, message", [
+    ({"epochs": 0}, "epochs, batch_size and window must be at least 1"),
+    ({"hiden": 8}, "hiden"),
+])
+def test_a_bad_setting_is_refused_before_any_work(tmp_path, overrides, message):
+    loop = three_axes(tmp_path)
+    with pytest.raises(ValueError, match=message):
+        evaluate_machine(loop, tmp_path / "out", progress=False, **overrides)
+    assert not (tmp_path / "out").exists()
+
+
 def test_the_drive_example_through_the_command_line(tmp_path):
     out = tmp_path / "eval"
     done = subprocess.run([sys.executable, "-m", "flexff", "evaluate", "--config",
