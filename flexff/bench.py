@@ -200,7 +200,7 @@ def _hardware_loop_config(seconds: float | None, name: str, **tables: dict[str, 
     """The closed loop of the hardware evaluation (hardware plant, PID with notch, the thesis
     hardware reference) for its 100 s or its first `seconds`, with further `tables`."""
     return parse_config({
-        "run": {"stop": seconds} if seconds else {},
+        "run": {} if seconds is None else {"stop": seconds},
         "reference": {"kind": HARDWARE_REFERENCE},
         "plant": {"variant": "hardware", "seed": 1}, **tables}, name=name)
 
@@ -395,6 +395,9 @@ def run_benchmarks(steps: int = 20000, repeats: int = 5,
     for name, value in (("steps", steps), ("repeats", repeats)):
         if not isinstance(value, int) or value < 1:
             raise InputError(f"bench {name} must be a whole number of at least 1, got {value!r}")
+    if realtime_seconds is not None and not realtime_seconds > 0:
+        raise InputError(f"bench realtime seconds must be positive, got {realtime_seconds!r} "
+                         f"(leave it out for the whole 100 s)")
     results: dict[str, Any] = {"machine": platform.processor() or platform.machine(),
                                "python": platform.python_version(), "plant_step": {}}
     with tempfile.TemporaryDirectory() as tmp:

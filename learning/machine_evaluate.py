@@ -35,7 +35,7 @@ from flexff.cosim.recording import atomic_write
 from flexff.cosim.run import simulate_config
 from flexff.cosim.schema import RunConfig
 from flexff.fmu.build import build_fmu
-from flexff.fmu.errors import RunError
+from flexff.fmu.errors import InputError, RunError
 from flexff.learning.devices import pick_device, training_gpus
 from flexff.learning.export import export
 from flexff.learning.ilc import NOISE_FLOOR, ilc
@@ -64,6 +64,9 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
                      workers: int | None = None, progress: bool = True,
                      **overrides: Any) -> dict[str, Any]:
     """Collect, identify, train, export, build and compare on `loop`; write `out`."""
+    if n_test < 1:  # the comparison runs on the test trajectories
+        raise InputError(f"n_test (--trajectories TRAIN TEST): {n_test!r}: the evaluation "
+                         f"compares the models on the test trajectories: give at least one")
     check_settings(models, preset, overrides)
     machine = loop_machine(loop)
     out = Path(out)

@@ -98,6 +98,8 @@ def test_an_output_on_a_read_only_file_system(capsys, tmp_path, config, read_onl
 
 @pytest.mark.parametrize("args, text, message", [
     (["bench", "--steps", "0"], None, "bench steps must be a whole number of at least 1, got 0"),
+    (["bench", "--realtime-seconds", "0"], None,
+     "bench realtime seconds must be positive, got 0.0 (leave it out for the whole 100 s)"),
     (["run", "{config}", "-o", "{tmp}/out"], SHORT.replace("stop = 1.0", "stop = 1e7"),
      r"short.toml: run.stop, run.step: sampling the reference's 6 signals at 10000000001 "
      r"points needs 480,000 MB, more than the 16,000 MB of memory available: shorten run.stop"),
@@ -106,7 +108,7 @@ def test_an_output_on_a_read_only_file_system(capsys, tmp_path, config, read_onl
      r"than the 16,000 MB of memory available: a larger run.step"),
     (["run", "{config}", "-o", "{tmp}/out", "--sweep", "controller.encoders=2,3,2"], None,
      "the sweep lists the same value twice: 2"),
-], ids=["bench-steps-0", "stop-1e7", "step-1e-9", "sweep-twice"])
+], ids=["bench-steps-0", "bench-realtime-0", "stop-1e7", "step-1e-9", "sweep-twice"])
 def test_bad_input(capsys, monkeypatch, tmp_path, config, args, text, message):
     monkeypatch.setattr("flexff.cosim.memory.available_memory", lambda: 16 * 10**9)
     if text is not None:

@@ -63,6 +63,7 @@ def test_a_3_axis_machine_runs_the_whole_workflow(tmp_path):
 @pytest.mark.parametrize("overrides, message", [
     ({"epochs": 0}, "epochs, batch_size and window must be at least 1"),
     ({"hiden": 8}, "hiden"),
+    ({"n_test": 0}, "TEST\\): 0: the evaluation compares the models on the test trajectories"),
 ])
 def test_a_bad_setting_is_refused_before_any_work(tmp_path, overrides, message):
     loop = three_axes(tmp_path)
