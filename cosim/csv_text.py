@@ -84,7 +84,7 @@ def read_time_table(path: Path, required: Sequence[str] = (),
     if missing:
         also = f" (optionally {', '.join(optional)})" if optional else ""
         raise error(f"{path}: missing column(s) {', '.join(missing)}: the header row must name "
-                    f"{', '.join(wanted)}{also}")
+                    f"{', '.join(wanted)}{also}{_separator_hint(header)}")
     keep = set(wanted) | ({n for n in header if n != TIME} if optional is None
                           else set(optional) - {TIME})
     kept = [n for n in header if n in keep]
@@ -116,6 +116,16 @@ def read_time_table(path: Path, required: Sequence[str] = (),
         raise error(f"{path}: column {time}, {table.row(k)}: time does not increase "
                     f"(t = {table.time[k - 1]:.9g} s, then {table.time[k]:.9g} s)")
     return table
+
+
+def _separator_hint(header: list[str]) -> str:
+    """What to do where the header row is one cell holding another separator: a table saved
+    with semicolons or tabs (as spreadsheets in many locales save CSV) reads as one column."""
+    found = [name for sep, name in ((";", "semicolons"), ("\t", "tabs")) if sep in header[0]]
+    if len(header) != 1 or not found:
+        return ""
+    return (f"; the header row is one column that holds {found[0]}: save the table with commas "
+            f"between the columns and points as decimal marks")
 
 
 def _plain_table(path: Path) -> tuple[list[str], np.ndarray] | None:

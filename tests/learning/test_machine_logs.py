@@ -216,6 +216,15 @@ def _broken(case: str, folder: Path) -> tuple[list[Path], dict, str]:
     elif case == "missing time":
         a["clock"] = a.pop("t")
         message = f"{first}: missing column(s) t: the header row must name t"
+    elif case in ("semicolons", "tabs"):  # as a spreadsheet in many locales saves CSV
+        write_log(first, a)
+        first.write_text(first.read_text().replace(",", {"semicolons": ";", "tabs": "\t"}[case]))
+        message = (f"{first}: missing column(s) t: the header row must name t (optionally "
+                   f"ax_ref, enc_pos, jx_ref, ref_pos, vir, vx_ref); the header row is one "
+                   f"column that holds {case}: "
+                   f"save the table with commas between the columns and points as decimal "
+                   f"marks")
+        return [first, write_log(folder / "run-b.csv", b)], shape, message
     else:
         assert case == "too short"
         a = {n: v[:999] for n, v in a.items()}
@@ -225,7 +234,7 @@ def _broken(case: str, folder: Path) -> tuple[list[Path], dict, str]:
 
 @pytest.mark.parametrize("case", ["missing column", "missing own column", "NaN",
                                   "NaN of an expression", "time not increasing", "missing time",
-                                  "too short"])
+                                  "semicolons", "tabs", "too short"])
 def test_a_bad_log_is_refused_naming_file_column_and_row(tmp_path, case):
     files, shape, message = _broken(case, tmp_path / "logs")
     with pytest.raises(LogError) as error:
