@@ -72,6 +72,8 @@ def _output_file(path: str) -> None:
     """Check, before any work, that the file `path` can be written: its folder is made."""
     from flexff.cosim.run import output_folder
 
+    if Path(path).is_dir():
+        raise InputError(f"{path}: is a folder: give the name of the file to write")
     output_folder(Path(path).parent)
 
 

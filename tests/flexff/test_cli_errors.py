@@ -16,7 +16,7 @@ from flexff.cli import main
 from flexff.cosim.master import CosimError
 from tests.cosim.test_batch import SHORT  # a 1 s run of the manipulator
 
-# commands that write: {out} is the output folder (or the folder of the output file)
+# commands that write, the output last: {out} is the output folder (or the output file's)
 WRITERS = {
     "run": ["run", "{config}", "-o", "{out}"],
     "fmu build": ["fmu", "build", "plant", "-o", "{out}/plant.fmu"],
@@ -25,8 +25,16 @@ WRITERS = {
     "ssp export": ["ssp", "export", "{config}", "-o", "{out}/system.ssp"],
     "identify": ["identify", "{tmp}/no-data", "-o", "{out}"],
 }
-COMMANDS = [pytest.param(c, marks=pytest.mark.learn) if c in ("export", "identify") else c
-            for c in WRITERS]  # those two need PyTorch (the extra learn)
+
+
+def _marked(command: str):
+    """`command` as a parameter, marked learn where it needs PyTorch (export, identify)."""
+    return pytest.param(command, marks=pytest.mark.learn) if command in ("export", "identify") \
+        else command
+
+
+COMMANDS = [_marked(c) for c in WRITERS]
+FILE_COMMANDS = [_marked(c) for c in WRITERS if WRITERS[c][-1].startswith("{out}/")]
 
 
 @pytest.fixture
@@ -78,6 +86,18 @@ def test_an_output_under_a_file(capsys, tmp_path, config, command):
     code, line = fails(capsys, WRITERS[command], config=config, tmp=tmp_path,
                        out=blocker / "sub")
     assert (code, line) == (2, f"flexff: error: {blocker}: is a file, not a folder")
+
+
+@pytest.mark.parametrize("command", FILE_COMMANDS)
+def test_an_output_file_that_is_a_folder(capsys, tmp_path, config, command):
+    """A file's name given as an existing folder (it was the atomic write's temporary file
+    that the error named)."""
+    args = WRITERS[command]
+    target = Path(args[-1].format(out=tmp_path / "out"))
+    target.mkdir(parents=True)
+    code, line = fails(capsys, args, config=config, tmp=tmp_path, out=tmp_path / "out")
+    assert (code, line) == (2, f"flexff: error: {target}: is a folder: give the name of the "
+                               f"file to write")
 
 
 def test_run_into_an_existing_file(capsys, tmp_path, config):
