@@ -21,6 +21,9 @@ from flexff.learning.features import FeatureConfig
 from flexff.learning.models import check_kind, uses_prior
 
 SCHEDULES = ("constant", "onecycle", "cosine")
+# architecture entries that count (units, layers, channels, kernel taps): each at least 1
+SIZES = ("hidden", "layers", "channels", "levels", "kernel", "conv_channels", "conv_kernels")
+SEED_LIMIT = 2**63  # seeds below it (numpy's and torch's generators take them all)
 # the settings that say where and how a run executes, not what it learns: runs that differ in
 # them alone resume and reuse each other
 PLACEMENT = ("device", "threads", "cuda_graphs")
@@ -59,6 +62,16 @@ class TrainConfig:
             raise InputError(f"val_fraction must lie between 0 and 1, got {self.val_fraction}")
         if not self.learning_rate > 0 or self.grad_clip < 0 or self.threads < 0:
             raise InputError("learning_rate must be positive, grad_clip and threads not negative")
+        if not _whole(self.seed) or not 0 <= self.seed < SEED_LIMIT:
+            raise InputError(f"seed must be a whole number from 0 to 2**63 - 1, got {self.seed!r}")
+        for name in SIZES:
+            value = self.architecture.get(name, 1)
+            if not all(_whole(v) and v >= 1 for v in (value if isinstance(value, list)
+                                                      else [value])):
+                raise InputError(f"{name} must be at least 1 (whole numbers), got {value!r}")
+        if not 0 <= self.architecture.get("dropout", 0) < 1:
+            raise InputError(f"dropout must lie from 0 up to 1, got "
+                             f"{self.architecture['dropout']!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -107,6 +120,10 @@ _PRESET_FEATURES = {"thesis": FeatureConfig(),
 # epochs between training checkpoints (learning.train): about a minute of work on the machine
 # each preset is meant for; not a TrainConfig field, as it does not change the result
 CHECKPOINT_EVERY = {"thesis": 10, "fast": 5}
+
+
+def _whole(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def make_config(model: str, preset: str, **overrides: Any) -> TrainConfig:

@@ -220,6 +220,11 @@ def test_thesis_preset_follows_the_seed():
     (("lstm", "fast"), {"feature_set": "big"}, "unknown feature set 'big'"),
     (("tcn", "fast"), {"schedule": "step"}, "unknown schedule"),
     (("pgnn", "fast"), {"force_input": True}, "force_input is for the black-box networks"),
+    (("lstm", "fast"), {"seed": -1}, r"seed must be a whole number from 0 to 2\*\*63 - 1, got -1"),
+    (("lstm", "fast"), {"hidden": 0}, r"hidden must be at least 1 \(whole numbers\), got 0"),
+    (("cnn-lstm", "fast"), {"conv_kernels": [10, 0, 2]}, "conv_kernels must be at least 1"),
+    (("tcn", "fast"), {"channels": 2.5}, "channels must be at least 1"),
+    (("tcn", "fast"), {"dropout": 1.0}, "dropout must lie from 0 up to 1, got 1.0"),
 ])
 def test_bad_requests_are_refused(data, tmp_path, args, overrides, message):
     with pytest.raises(ValueError, match=message):
