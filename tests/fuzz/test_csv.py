@@ -10,7 +10,7 @@ from pathlib import Path
 from unittest import mock
 
 import pytest
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 
 from flexff.cosim import csv_text
@@ -87,6 +87,8 @@ examples = dict(data=contents, required=st.sampled_from(COLUMNS), everything=st.
 
 @fast()
 @given(**examples)
+@example(data=b"\n0,1,2\n1,2,3\n", required=(), everything=False, step=1e-3)  # no header
+@example(data=b"time;x_ref\n0;1\n1;2\n", required=(), everything=False, step=1e-3)
 def test_csv_fast(tmp_path: Path, data: bytes, required: tuple[str, ...], everything: bool,
                   step: float) -> None:
     fuzz_tables(tmp_path, data, required, everything, step)
