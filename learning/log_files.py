@@ -20,6 +20,7 @@ from scipy.io.matlab import matfile_version
 from scipy.signal import savgol_filter
 
 from flexff.cosim.csv_text import TIME, read_time_table
+from flexff.cosim.memory import check_memory
 from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
 from flexff.learning.features import decimation
@@ -203,7 +204,10 @@ def resampled(log: Log, rate: float) -> tuple[dict[str, np.ndarray], str]:
     n = round(factor)
     if n >= 2 and abs(factor - n) <= UNIFORM * factor and _uniform(time[::n], rate):
         return {k: v[::n] for k, v in columns.items()}, f"every {n}th sample kept"
-    grid = np.arange(int(np.floor(time[-1] * rate + 1e-9)) + 1) / rate
+    samples = int(np.floor(time[-1] * rate + 1e-9)) + 1
+    check_memory(samples * (len(columns) + 1),
+                 f"{log.path}: its {time[-1]:.6g} s at {rate:.6g} Hz (--rate)")
+    grid = np.arange(samples) / rate
     return ({k: np.interp(grid, time, v) for k, v in columns.items() if k != TIME}
             | {TIME: grid}), f"interpolated linearly from {log.rate_hz:.6g} Hz"
 

@@ -11,6 +11,7 @@ import pytest
 from scipy.io import savemat
 
 from flexff.cosim.machine import parse_machine
+from flexff.cosim.memory import MemoryNeeded
 from flexff.learning.log_files import LogError
 from flexff.learning.machine_dataset import load_machine_dataset
 from flexff.learning.machine_logs import import_machine_logs
@@ -127,6 +128,14 @@ def test_a_rate_keeps_every_nth_sample(tmp_path):
     a, b = full.trajectories[0].signals, tenth.trajectories[0].signals
     for signal in ("time", "x_ref", "x_measured", "x_effort"):
         assert np.array_equal(a[signal][::10], b[signal]), signal
+
+
+def test_a_rate_beyond_memory_is_refused_before_it_is_allocated(tmp_path):
+    files = logs(tmp_path / "logs", renamed)
+    with pytest.raises(MemoryNeeded, match=rf"^{files[0]}: its 1.999 s at 1e\+12 Hz \(--rate\) "
+                                       rf"needs [\d,]+ MB, more than the [\d,]+ MB of memory"):
+        import_machine_logs(files, tmp_path / "data", drive(MAP), rate_hz=1e12)
+    assert not (tmp_path / "data").exists()
 
 
 def test_a_missing_reference_is_derived_and_marked(tmp_path):
