@@ -66,7 +66,7 @@ class TrainConfig:
             raise InputError(f"seed must be a whole number from 0 to 2**63 - 1, got {self.seed!r}")
         for name in SIZES:
             value = self.architecture.get(name, 1)
-            if not all(_whole(v) and v >= 1 for v in (value if isinstance(value, list)
+            if not all(_whole(v) and v >= 1 for v in (value if isinstance(value, list | tuple)
                                                       else [value])):
                 raise InputError(f"{name} must be at least 1 (whole numbers), got {value!r}")
         if not 0 <= self.architecture.get("dropout", 0) < 1:

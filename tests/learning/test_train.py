@@ -204,6 +204,11 @@ def test_learning_rate_schedules():
     assert learning_rate(make_config("lstm", "thesis"), 0.7) == 2e-5
 
 
+def test_a_size_list_may_be_a_tuple():
+    assert make_config("cnn-lstm", "fast", conv_kernels=(6, 3, 2)).architecture[
+        "conv_kernels"] == (6, 3, 2)
+
+
 def test_thesis_preset_follows_the_seed():
     lstm, tcn = make_config("lstm", "thesis"), make_config("tcn", "thesis")
     assert (lstm.epochs, lstm.learning_rate, lstm.window, lstm.val_fraction) == (1000, 2e-5, 100,
