@@ -37,7 +37,7 @@ def test_parallel_training_equals_training_one_after_the_other(data, tmp_path):
 def test_a_failed_training_run_is_raised_with_its_message(data, tmp_path):
     jobs = [TrainJob("tcn", "fast", data, tmp_path / "bad", {"levels": 0}),
             TrainJob("pgnn", "fast", data, tmp_path / "good", TINY["pgnn"])]
-    with pytest.raises(ValueError, match="levels >= 1"):
+    with pytest.raises(ValueError, match="levels must be at least 1"):
         train_parallel(jobs, workers=2, progress=False)
 
 
