@@ -121,12 +121,11 @@ def read_time_table(path: Path, required: Sequence[str] = (),
 def _separator_hint(header: list[str]) -> str:
     """What to do where the header row is one cell holding another separator: a table saved
     with semicolons or tabs (as spreadsheets in many locales save CSV) reads as one column."""
-    found = [name for sep, name in ((";", "semicolons"), ("\t", "tabs"))
-             if len(header) == 1 and sep in header[0]]
-    if not found:
-        return ""
-    return (f"; the header row is one column that holds {found[0]}: save the table with commas "
-            f"between the columns and points as decimal marks")
+    for separator, name in ((";", "semicolons"), ("\t", "tabs")):
+        if len(header) == 1 and separator in header[0]:
+            return (f"; the header row is one column that holds {name}: save the table with "
+                    f"commas between the columns and points as decimal marks")
+    return ""
 
 
 def _plain_table(path: Path) -> tuple[list[str], np.ndarray] | None:
