@@ -49,6 +49,7 @@ from flexff.cosim.schema import (
     SourceConfig,
     whole_steps,
 )
+from flexff.fmu.description_faults import warn
 from flexff.fmu.errors import not_a_file
 from flexff.fmu.fmi_version import FMI_VERSIONS
 from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
@@ -59,6 +60,7 @@ SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration")
                 "spline": ("kind", "points", "duration")}
 TABLES = ("run", "reference", "source", "fmu", "connection", "record", "machine")
 RECORDED = "recorded"  # what a run's record holds, in its run.json: read back, it is ignored
+FAULTS = "description_faults"  # its FMUs' description warnings, in its run.json: likewise
 MAX_STEPS = 2**53  # a run's steps: point k's time start + k * step needs k exact in a float
 FLOAT32_MAX = 3.4028234663852886e38
 
@@ -92,6 +94,13 @@ def with_isolation(config: RunConfig, isolate: bool, step_timeout: float | None,
                  for f in config.fmus)
     timeout = config.step_timeout if step_timeout is None else step_timeout
     return checked(replace(config, fmus=fmus, step_timeout=timeout))
+
+
+def with_strict(config: RunConfig) -> RunConfig:
+    """`config` with every FMU file's description warnings refused (`flexff run --strict`),
+    checked again."""
+    return checked(replace(config, fmus=tuple(replace(f, strict=f.path is not None)
+                                              for f in config.fmus)))
 
 
 def _sandbox_keys(sandbox: Sandbox | None) -> dict[str, Any]:
@@ -150,7 +159,8 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                             **({"allow_nonfinite": True} if f.allow_nonfinite else {}),
                             **({"fmi": f.fmi} if f.fmi != FMI_VERSIONS[0] else {}),
                             **({"solver": f.solver} if f.solver else {}),
-                            **({"scheduled": True} if f.scheduled else {})}
+                            **({"scheduled": True} if f.scheduled else {}),
+                            **({"strict": True} if f.strict else {})}
                    for f in config.fmus}
     if config.connections:
         data["connection"] = [{"from": c.from_name, "to": c.to_name,
@@ -187,7 +197,7 @@ class _Parser(TableChecker):
     allow_nonfinite = False  # [run] allow_nonfinite, once read
 
     def parse(self, data: Mapping[str, Any], name: str) -> RunConfig:
-        others = [t for t in data if t not in (*TABLES, RECORDED)]
+        others = [t for t in data if t not in (*TABLES, RECORDED, FAULTS)]
         # a plain general form loads no machine package (cosim.plugins)
         forms = short_forms() if others or "fmu" not in data else ()
         tables = (*TABLES, *(t for form in forms for t in form.tables))
@@ -289,12 +299,15 @@ class _Parser(TableChecker):
                                                  "(or run with --isolate)")
         return self.number(run, "run", "step_timeout", None, positive=True)
 
-    def fmu_info(self, path: Path, where: str) -> FmuInfo:
-        """The FMU's model description, read once for all of its table's keys."""
+    def fmu_info(self, path: Path, where: str, strict: bool) -> FmuInfo:
+        """The FMU's model description, read once for all of its table's keys; its faults
+        that change no run said once (refused if `strict`: fmu.description_faults)."""
         try:
-            return read_fmu(path)
+            info = read_fmu(path, strict=strict)
         except FmuError as error:
             raise self.error(f"{where}.path", str(error)) from None
+        warn(where, path, info.faults)
+        return info
 
     def solver(self, t: Mapping[str, Any], where: str, info: FmuInfo) -> str | None:
         """fmu.NAME.solver: model exchange with a solver; "cvode" for an FMU that has no
@@ -418,15 +431,18 @@ class _Parser(TableChecker):
         allowed = self.nonfinite(t, where)
         if "path" in t:
             self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate",
-                                 "solver", "scheduled", "allow_nonfinite", *SANDBOX_KEYS))
+                                 "solver", "scheduled", "allow_nonfinite", "strict",
+                                 *SANDBOX_KEYS))
             path = self.path(t, where, "path")
-            info = self.fmu_info(path, where)
+            strict = self.flag(t, where, "strict")
+            info = self.fmu_info(path, where, strict)
             return FmuConfig(name, path=path, parameters=self.fmu_parameters(info, parameters,
                                                                              where, allowed),
                              unconnected=unconnected, tolerance=self.tolerance(t, where),
                              isolate=self.isolate(t, where), sandbox=self.sandbox(t, where),
                              solver=self.solver(t, where, info),
-                             scheduled=self.scheduled(t, where, info), allow_nonfinite=allowed)
+                             scheduled=self.scheduled(t, where, info), allow_nonfinite=allowed,
+                             strict=strict)
         builtins = registered()
         builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",

@@ -124,6 +124,10 @@ KEYS: tuple[Key, ...] = (
     Key("fmu.NAME", "scheduled", "boolean", "false (true for an FMU with that interface alone)",
         "", "Run an FMI 3.0 FMU through scheduled execution: each step, the partitions of its "
         "periodic input clocks that tick, in priority order.", ("path",)),
+    Key("fmu.NAME", "strict", "boolean", "false", "",
+        "Refuse the FMU for description faults that change no run too (an FMU with them "
+        "runs with one warning; faults that would make a run wrong always stop it).",
+        ("path",)),
     # [[connection]]
     Key("connection", "from", "string", "required", "", '"fmu.output" or a source signal.'),
     Key("connection", "to", "string", "required", "", '"fmu.input".'),

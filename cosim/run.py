@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from flexff.cosim.builtins import registered
-from flexff.cosim.config import RECORDED, expanded, load_config
+from flexff.cosim.config import FAULTS, RECORDED, expanded, load_config
 from flexff.cosim.disk import check_disk
 from flexff.cosim.folder_lock import folder_lock
 from flexff.cosim.handover import Worker
@@ -273,7 +273,7 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
             except (CosimError, KeyboardInterrupt) as error:
                 if sink.last_time is None:
                     raise
-                _close_record(sink, config, out, complete=False)
+                _close_record(sink, scenario, out, complete=False)
                 held = sink.writer.held()
                 kept = (f"the record up to t = {held['last_time']:.9g} s "
                         f"({held['points']} points) is in {out}")
@@ -284,7 +284,7 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
         metrics = summary_metrics(sink.tracking.metrics() if sink.tracking else {}, duration,
                                   streamed.wall_s, streamed.timing)
         metrics |= builtin_metrics(scenario)
-    _close_record(sink, config, out, complete=streamed.timing.stopped_at is None)
+    _close_record(sink, scenario, out, complete=streamed.timing.stopped_at is None)
     if sink.plots is not None:
         sink.plots.write(out)
     if pacing is not None:
@@ -296,13 +296,18 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
     return metrics
 
 
-def _close_record(sink: RunSink, config: RunConfig, out: Path, complete: bool) -> None:
-    """Join the record and write run.json: the configuration in the general form and, under
-    `recorded`, what the record holds (its points, the times of its first and last, and
-    whether the run reached its end)."""
+def _close_record(sink: RunSink, scenario: Scenario, out: Path, complete: bool) -> None:
+    """Join the record and write run.json: the configuration in the general form, under
+    `recorded` what the record holds (its points, the times of its first and last, and
+    whether the run reached its end) and, under `description_faults`, each FMU's faults that
+    the run went on despite (fmu.description_faults)."""
+    config = scenario.config
     sink.writer.close(csv=config.record.csv)
+    faults = {f.name: [str(fault) for fault in f.described().faults]
+              for f in scenario.fmus if f.described().faults}
     _write_json(out / "run.json", {**expanded(config), RECORDED: {
-        **sink.writer.held(), "every": config.record.every, "complete": complete}})
+        **sink.writer.held(), "every": config.record.every, "complete": complete},
+        **({FAULTS: faults} if faults else {})})
 
 
 def _stream(master: Master, scenario: Scenario, sink: RunSink, recorded: Sequence[str],

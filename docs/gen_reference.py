@@ -121,3 +121,14 @@ def signals_markdown() -> str:
         out += [f"| {code(v.name)} | {cell(v.unit)} | {cell(v.description)} |"
                 for v in getattr(signals, group)]
     return "\n".join(out) + "\n"
+
+
+def faults_markdown() -> str:
+    """The classes of model-description fault (fmu.description_faults.RULES): whether each
+    stops a run, and why."""
+    from flexff.fmu.description_faults import RULES, UNKNOWN
+
+    out = ["| fault | a run | why |", "|---|---|---|"]
+    out += [f"| {cell(r.name)} | {'stops' if r.fatal else 'warns'} | {cell(r.why)} |"
+            for r in (*RULES, UNKNOWN)]
+    return "\n".join(out) + "\n"

@@ -15,6 +15,7 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "config-keys": gen_reference.config_markdown,
     "builtins": gen_reference.builtins_markdown,
     "signals": gen_reference.signals_markdown,
+    "description-faults": gen_reference.faults_markdown,
     "results-demo": gen_results.demo_markdown,
     "results-bench": gen_results.bench_markdown,
     "results-processes": gen_results.processes_markdown,

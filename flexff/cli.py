@@ -181,7 +181,8 @@ def _fmu_validate(args: argparse.Namespace) -> int:
         counts = f"{errors} error(s), {len(problems) - errors} warning(s)"
         print(f"{path}: {'OK' if not problems else counts}")
         for problem in problems:
-            print(f"  - {problem.severity}: {problem}")
+            effect = f" ({problem.in_run})" if problem.in_run else ""
+            print(f"  - {problem.severity}{effect}: {problem}")
         if status != 2:
             status = max(status, int(errors > 0))
     return status
@@ -261,10 +262,11 @@ def _print_json(data: dict[str, Any], output: str | None) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from flexff.cosim.batch import run_batch, sweep
-    from flexff.cosim.config import with_isolation
+    from flexff.cosim.config import with_isolation, with_strict
     from flexff.cosim.executor import check_workers
     from flexff.cosim.run import load_run_config, output_folder, run_config
     from flexff.cosim.schema import RunConfig
+    from flexff.fmu.description_faults import DescriptionWarning
 
     check_workers(args.workers)  # one configuration runs here, but a wrong count is wrong
     output_folder(args.output)
@@ -279,6 +281,11 @@ def _run(args: argparse.Namespace) -> int:
                 raise InputError(f"--sweep {key} is given twice: list its values once")
             axes[key] = values
         configs = sweep(configs[0], axes)
+    if args.strict:  # its refusals say what the warnings would have said
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DescriptionWarning)
+            configs = [with_strict(c if isinstance(c, RunConfig) else load_run_config(c))
+                       for c in configs]
     if args.isolate or args.step_timeout is not None or args.no_sandbox:
         configs = [with_isolation(c if isinstance(c, RunConfig) else load_run_config(c),
                                   args.isolate, args.step_timeout, not args.no_sandbox)
@@ -681,8 +688,10 @@ def build_parser() -> argparse.ArgumentParser:
     validate = fmu_commands.add_parser("validate", help="fmpy's validation plus our own checks")
     validate.add_argument("files", nargs="+", help=".fmu files")
     validate.add_argument("--strict", action="store_true",
-                          help="a restored FMU state must reproduce the outputs bit for bit "
-                               "(default: within the FMU's tolerance, as a warning)")
+                          help="warnings are errors: the description's faults that a run "
+                               "warns of (as a strict run refuses them), and a restored FMU "
+                               "state that reproduces the outputs within the FMU's tolerance "
+                               "but not bit for bit")
     validate.add_argument("--timeout", type=float,
                           help="seconds the run of one FMU may take before it counts as hung "
                                "(default: a minute, fmu.validation.TIMEOUT)")
@@ -721,6 +730,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--step-timeout", type=float, metavar="S",
                      help="stop a run whose isolated FMU takes longer than S seconds in one "
                           "call ([run] step_timeout)")
+    run.add_argument("--strict", action="store_true",
+                     help="refuse FMUs whose model description has faults that change no run "
+                          "too ([fmu.NAME] strict = true); without it they run with a warning")
     run.add_argument("--rt-factor", type=float, metavar="F",
                      help="real-time factor of a paced run: 2 runs twice as fast (default 1)")
     run.add_argument("--max-overruns", type=int, metavar="N",

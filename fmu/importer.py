@@ -41,6 +41,7 @@ from fmpy.logging import addLoggerProxy
 from fmpy.model_description import ValidationError
 
 from flexff.fmu.archive import extract_archive
+from flexff.fmu.description_faults import Fault, description_faults, summary
 from flexff.fmu.errors import InputError, not_a_file
 from flexff.fmu.model_exchange import ModelExchangeStepper
 from flexff.fmu.scheduled import ScheduledStepper, periodic_clocks
@@ -114,6 +115,7 @@ class FmuInfo:
     co_simulation: bool = True  # whether it has the co-simulation interface
     me_identifier: str | None = None  # the model-exchange interface's identifier, if it has one
     se_identifier: str | None = None  # the scheduled-execution interface's, if it has one
+    faults: tuple[Fault, ...] = ()  # its description's warnings (fmu.description_faults)
     model_description: Any = field(default=None, compare=False, repr=False)
 
     @property
@@ -153,12 +155,11 @@ def _experiment_value(path: Path, experiment: Any, name: str) -> float | None:
                        f"not a number") from None
 
 
-def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
+def read_fmu(path: str | Path, checked: bool = True, strict: bool = False) -> FmuInfo:
     """Read the model description of a co-simulation FMU; FmuError if it is none. `checked`:
-    a description with a structural fault that `flexff fmu validate` finds (fmpy's checks:
-    the XML schema, unique and well-formed variable names, the model structure, required
-    start values, legal causality and variability) is an FmuError naming the first fault,
-    so that no run records one variable's values under another's name."""
+    its faults are classified (fmu.description_faults): a fatal one (two variables of one
+    name, say) is an FmuError naming it, so that no run records one variable's values under
+    another's name; the warnings are kept in `faults`, or with `strict` are an FmuError too."""
     path = Path(path)
     why = not_a_file(path, "FMU file")
     if why is not None:
@@ -166,13 +167,9 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
     if not zipfile.is_zipfile(path):
         raise FmuError(f"{path}: not an FMU (an FMU is a zip archive; this file is not one)")
     try:
-        md = read_model_description(str(path), validate=checked, validate_variable_names=True,
-                                    validate_model_structure=True)
-    except ValidationError as error:
-        more = f" (and {len(error.problems) - 1} more)" if len(error.problems) > 1 else ""
-        first = str(error.problems[0]).rstrip(".")
-        raise FmuError(f"{path}: modelDescription.xml: {first}{more}: not a valid "
-                       f"FMU (flexff fmu validate lists every problem)") from None
+        md = read_model_description(str(path), validate=False)
+    except ValidationError as error:  # a fault that leaves nothing to read (fmpy's parser)
+        raise FmuError(f"{path}: modelDescription.xml: {error.problems[0]}") from None
     except Exception as error:  # fmpy raises plain Exceptions and XML errors
         raise FmuError(f"{path}: cannot read modelDescription.xml: {error}") from None
     if md.fmiVersion not in ("2.0", "3.0"):
@@ -206,12 +203,26 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
                                     for name in ("stepSize", "stopTime", "startTime",
                                                  "tolerance"))
     token = md.guid if md.fmiVersion == "2.0" else md.instantiationToken
+    faults = _refused(path, md, strict) if checked else ()
     return FmuInfo(path, md.fmiVersion, md.modelName or path.stem,
                    interface.modelIdentifier, token or "", variables, inputs, outputs,
                    parameters, dependencies, step, stop, start, tolerance,
                    md.coSimulation is not None,
                    md.modelExchange.modelIdentifier if md.modelExchange else None,
-                   scheduled.modelIdentifier if scheduled else None, md)
+                   scheduled.modelIdentifier if scheduled else None, faults, md)
+
+
+def _refused(path: Path, md: Any, strict: bool) -> tuple[Fault, ...]:
+    """The description's faults, all warnings: FmuError naming the first fatal one (with
+    `strict`, the first of any)."""
+    faults = description_faults(path, md)
+    stopping = [f for f in faults if f.fatal or strict]
+    if stopping:
+        why = ("a run would be wrong" if stopping[0].fatal else
+               "strict = true refuses what would only be a warning")
+        raise FmuError(f"{path}: modelDescription.xml: {summary(stopping)}; {why} (flexff fmu "
+                       f"validate lists every fault)")
+    return tuple(faults)
 
 
 def typed_value(kind: str, value: Any) -> Any:

@@ -1,11 +1,13 @@
-"""validate_fmu: fmpy's static checks of an FMU plus a short run of our own, graded.
+"""validate_fmu: the faults of an FMU's description plus a short run of our own, graded.
 
-Our checks, on any FMI 2.0 or 3.0 co-simulation FMU: the binary loads, instantiates and
-exports its functions; with default values it initializes, steps and gives finite outputs;
-restoring a saved state (directly and serialized) reproduces the uninterrupted run. Every
-call into the FMU runs in a child process (fmu.child), so a crash or hang becomes a problem
-naming the call. Each problem is a sentence with a severity; a state restore that differs by
-at most the FMU's tolerance is a warning. Problems are returned, never raised.
+The description's faults are fmpy's checks and flexff's own (fmu.description_faults), each
+said to stop a run or only to be warned of. Our run's checks, on any FMI 2.0 or 3.0
+co-simulation FMU: the binary loads, instantiates and exports its functions; with default
+values it initializes, steps and gives finite outputs; restoring a saved state (directly and
+serialized) reproduces the uninterrupted run. Every call into the FMU runs in a child process
+(fmu.child), so a crash or hang becomes a problem naming the call. Each problem is a sentence
+with a severity; a state restore that differs by at most the FMU's tolerance is a warning.
+Problems are returned, never raised.
 
 Docs: "Validate and compare third-party FMUs" (docs/how-to/validate-compare.md).
 """
@@ -20,10 +22,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-import fmpy.validation
-
 from flexff.fmu.child import run_in_child, under_way
 from flexff.fmu.codegen import NET_TABLE_FILE
+from flexff.fmu.description_faults import Fault, description_faults
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 
 TOLERANCE = 1e-6  # relative: for a state restore, where the FMU's default experiment gives none
@@ -101,19 +102,32 @@ Emit = Callable[[tuple[str, str, float | None]], None]  # sends one finding to t
 
 
 class Problem(str):
-    """One finding: the sentence, its severity ("error" or "warning") and, where the finding
-    is a number (a difference), its size."""
+    """One finding: the sentence, its severity ("error" or "warning"), where the finding is a
+    number (a difference) its size, and for a fault of the description what it does to a run
+    (`in_run`: RUN_STOPS or RUN_WARNS; None for the checks that run the FMU)."""
 
     severity: str
     size: float | None
+    in_run: str | None
 
-    def __new__(cls, text: str, severity: str = "error", size: float | None = None
-                ) -> Problem:
+    def __new__(cls, text: str, severity: str = "error", size: float | None = None,
+                in_run: str | None = None) -> Problem:
         if severity not in SEVERITIES:
             raise ValueError(f"severity {severity!r}: expected one of {SEVERITIES}")
         problem = super().__new__(cls, text)
-        problem.severity, problem.size = severity, size
+        problem.severity, problem.size, problem.in_run = severity, size, in_run
         return problem
+
+
+RUN_STOPS, RUN_WARNS = "stops a run", "a run warns, or with strict = true stops"
+
+
+def _description_problem(fault: Fault, strict: bool) -> Problem:
+    """A description's fault as a finding: an error where it stops a run (fatal, or any with
+    `strict`), else a warning."""
+    stops = fault.fatal or strict
+    return Problem(str(fault), "error" if stops else "warning",
+                   in_run=RUN_STOPS if fault.fatal else RUN_WARNS)
 
 
 def _is_finding(message: Any) -> bool:
@@ -223,7 +237,7 @@ def _run_checks(instance: FmuInstance, emit: Emit, strict: bool, steps: int = 20
 def _checks(emit: Emit, path: str, strict: bool) -> None:
     """Every check that calls into the FMU at `path`: run in a child process (validate_fmu)."""
     try:
-        info = read_fmu(path)
+        info = read_fmu(path, checked=False)  # its description's faults: validate_fmu's
         under_way("loading the FMU's binary")
         with FmuInstance(info, "validation") as instance:
             missing = _missing_exports(instance)
@@ -238,22 +252,22 @@ def _checks(emit: Emit, path: str, strict: bool) -> None:
 def validate_fmu(path: str | Path, strict: bool = False, timeout: float = TIMEOUT
                  ) -> list[Problem]:
     """Problems found in the FMU at `path` (module doc); an empty list means it passed every
-    check. `strict`: a state restore must reproduce the outputs bit for bit. `timeout`: seconds
-    the checks that run the FMU may take."""
+    check. `strict`: the description's warnings are errors, as a strict run refuses them, and
+    a state restore must reproduce the outputs bit for bit. `timeout`: seconds the checks that
+    run the FMU may take."""
     path = Path(path)
     if not path.is_file():
         return [Problem(f"{path} does not exist or is not a file")]
     if not zipfile.is_zipfile(path):
         return [Problem(f"{path} is not an FMU: an FMU is a zip archive, this file is not one")]
-    try:  # an unreadable description or one without co-simulation: nothing more to check
-        info = read_fmu(path, checked=False)  # fmpy's checks list every problem, below
+    try:  # an unreadable description or one without an interface: nothing more to check
+        info = read_fmu(path, checked=False)
     except FmuError as error:
-        return [Problem(str(error))]
-    problems = [Problem(p) for p in fmpy.validation.validate_fmu(str(info.path))]
-    if problems:
-        return problems
+        return [Problem(str(error), in_run=RUN_STOPS)]
+    problems = [_description_problem(fault, strict)
+                for fault in description_faults(info.path, info.model_description)]
     end = run_in_child(_checks, (str(path), strict), timeout)
-    problems = [Problem(*finding) for finding in end.messages if _is_finding(finding)]
+    problems += [Problem(*finding) for finding in end.messages if _is_finding(finding)]
     failure = end.failure(timeout)
     if failure is not None:
         problems.append(Problem(failure))
