@@ -145,6 +145,8 @@ KEYS: tuple[Key, ...] = (
         'Start values ("instance.parameter" = number) with which the loop measures exactly, '
         "such as an encoder's resolution at 0: ILC and evaluate measure the noise floor with "
         "them."),
+    Key("machine", "ilc", "table", "ILC's defaults", "",
+        "Iterative learning control's settings on this loop ([machine.ilc])."),
     Key("machine.axis", "name", "string", "required", "",
         "A letter, then letters or digits; names <axis>_ref, v<axis>_ref, ..."),
     Key("machine.axis", "unit", "string", '"m"', "", "The axis's position unit."),
@@ -176,10 +178,18 @@ KEYS: tuple[Key, ...] = (
     Key("machine.log", "scalars", "table", "{}", "", "Named numbers for the expressions."),
     Key("machine.log", "columns", "table", "{}", "",
         "Dataset signal = expression of the log's columns and scalars."),
+    Key("machine.ilc", "iterations", "integer", "10", "",
+        "Learning trials after PID alone (flexff ilc --iterations, evaluate --ilc-iterations)."),
+    Key("machine.ilc", "cutoff_hz", "number", "0.15 times the rate", "Hz",
+        "The corner of the learning filter's zero-phase low-pass Q (--cutoff, "
+        "--ilc-cutoff)."),
+    Key("machine.ilc", "gain", "number", "1", "",
+        "The learning gain on the model's correction P^-1 e; below 1 learns more slowly but "
+        "tolerates a worse model (--gain, --ilc-gain)."),
 )
 
 TABLES = ("run", "reference", "reference.segments[k]", "source", "fmu.NAME", "connection",
-          "record", "machine", "machine.axis", "machine.prior", "machine.log")
+          "record", "machine", "machine.axis", "machine.prior", "machine.log", "machine.ilc")
 
 
 def keys_of(table: str, kind: str | None = None) -> tuple[str, ...]:
