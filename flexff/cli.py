@@ -36,6 +36,8 @@ MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to k
 PRESETS = ("fast", "thesis")
 TRAJECTORY_SETS = ("sim", "hardware")  # learning.dataset.SETS, named here to keep numpy unloaded
 DEVICES = ("auto", "cpu", "cuda")  # learning.devices', named here to keep torch unloaded
+EXCITATION = ("moves", "bang-bang", "spline", "multisine")  # learning.excitation's CLASSES,
+EVERY_EXCITATION = (*EXCITATION, "sine", "random", "rest", "solo")  # and EVERY_CLASS
 ITERATIONS, CUTOFF_HZ, GAIN = 10, 20.0, 1.0  # learning.ilc's defaults (keeps scipy unloaded)
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
                 PermissionError)  # OSErrors about paths the user gave: exit code 2, as are
@@ -88,8 +90,9 @@ def _evaluate_machine(args: argparse.Namespace, loop: Any) -> int:
 
     train, test = args.trajectories
     evaluate_machine(loop, args.output, args.models, args.preset, train, test, args.duration,
-                     ilc_iterations=args.ilc_iterations, ilc_cutoff_hz=args.ilc_cutoff,
-                     ilc_gain=args.ilc_gain, device=args.device, **_epochs(args))
+                     classes=args.classes, ilc_iterations=args.ilc_iterations,
+                     ilc_cutoff_hz=args.ilc_cutoff, ilc_gain=args.ilc_gain, device=args.device,
+                     **_epochs(args))
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, errors.png, identified.json, "
           f"data/, runs/, models/, fmus/, ilc/ for the limit)")
@@ -337,6 +340,10 @@ def machine_options(parser: argparse.ArgumentParser) -> None:
                         help="a [machine] loop: excitation trajectories (default 24 6)")
     parser.add_argument("--duration", type=float, default=20.0, metavar="S",
                         help="a [machine] loop: seconds per trajectory (default 20)")
+    parser.add_argument("--classes", nargs="+", default=list(EXCITATION), metavar="CLASS",
+                        choices=EVERY_EXCITATION,
+                        help=f"a [machine] loop: the excitation's classes, in turn (default "
+                             f"{' '.join(EXCITATION)}; also {', '.join(EVERY_EXCITATION[4:])})")
 
 
 def _tracked_axes(metrics: dict[str, Any]) -> list[str]:
@@ -427,7 +434,7 @@ def _data_collect(args: argparse.Namespace) -> int:
 
             train, test = args.trajectories
             data = collect_machine(config, args.output, train, test, args.duration,
-                                   workers=args.workers)
+                                   workers=args.workers, classes=args.classes)
             print(f"{data.description.name}: {len(data.trajectories)} trajectories -> "
                   f"{data.path}")
             return 0

@@ -41,6 +41,7 @@ from flexff.cosim.schema import RunConfig
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError, RunError
 from flexff.learning.devices import pick_device, training_gpus
+from flexff.learning.excitation import CLASSES
 from flexff.learning.export import export
 from flexff.learning.ilc import DIVERGED, NOISE_FLOOR, divergence_line, ilc
 from flexff.learning.linear_model import write_linear_model
@@ -67,9 +68,10 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
                      duration: float = 20.0, ilc_iterations: int | None = None,
                      workers: int | None = None, progress: bool = True,
                      ilc_cutoff_hz: float | None = None, ilc_gain: float | None = None,
-                     **overrides: Any) -> dict[str, Any]:
+                     classes: Sequence[str] = CLASSES, **overrides: Any) -> dict[str, Any]:
     """Collect, identify, train, export, build and compare on `loop`; write `out`. ILC's
-    `ilc_iterations`, `ilc_cutoff_hz` and `ilc_gain` default to the loop's [machine.ilc]."""
+    `ilc_iterations`, `ilc_cutoff_hz` and `ilc_gain` default to the loop's [machine.ilc];
+    `classes` are the excitation's (learning.excitation)."""
     if n_test < 1:  # the comparison runs on the test trajectories
         raise InputError(f"n_test (--trajectories TRAIN TEST): {n_test!r}: the evaluation "
                          f"compares the models on the test trajectories: give at least one")
@@ -77,8 +79,8 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     machine = loop_machine(loop)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    data = collect_machine(loop, out / "data", n_train, n_test, duration, workers=workers,
-                           progress=progress)
+    data = collect_machine(loop, out / "data", n_train, n_test, duration, classes=classes,
+                           workers=workers, progress=progress)
     identified = identify_dataset(data)
     write_linear_model(identified, out / "identified.json")
     fmus = {"identified": build_fmu(inverse_model_system(
