@@ -1,21 +1,15 @@
-"""Reference kinds for any machine's axes, within its description's limits: what a run's
-`[reference]` gives a loop with a `[machine]` of any number of axes, and what a collection's
-excitation draws from (learning.excitation).
+"""Reference kinds for any machine's axes, within its description's limits: a run's `[reference]`
+for a loop with a `[machine]` of any number of axes, and shapes a collection's excitation uses.
 
-Each kind makes, per axis, the position `<axis>_ref` and its analytic velocity, acceleration
-and jerk (`v<axis>_ref`, `a<axis>_ref`, `j<axis>_ref`) at rest at both ends, its peaks at most
-`share` of the axis's velocity, acceleration and (where given) jerk limits, its positions in the
-range (MARGIN of it about the centre):
-- "point-to-point": skew-sine moves (cosim.motion_shapes) to the axis's `points`, or to random
-  points of the range, a `rest` between;
-- "sine": one sine at `frequency_hz` (default: the frequency at which the range's amplitude
-  reaches the binding limit), faded in and out over FADE_PERIODS periods;
-- "multisine": SINES sines at random frequencies and phases, faded in and out;
-- "random": a smooth random path, a quintic spline through random points of the range spaced
-  by 1 / `bandwidth_hz` (default as the sine's frequency).
-Every axis starts at its `start` (default the range's centre). The sine, multisine and random
-kinds excite about the centre: from another start a skew-sine move leads there first (lead_in),
-as learning.excitation does from where the loop rests.
+Per axis, each kind makes `<axis>_ref` with its analytic velocity, acceleration and jerk, at
+rest at both ends, its peaks at most `share` of the axis's limits, its positions in MARGIN of
+the range: "point-to-point" (skew-sine moves to `points` or random ones, a `rest` between),
+"sine" (at `frequency_hz`, faded in and out), "multisine" (SINES random sines, faded) and
+"random" (a quintic spline through random points spaced by 1 / `bandwidth_hz`). Every axis
+starts at its `start` (default the centre); the sine kinds and "random" excite about the
+centre, led there first by a skew-sine move (lead_in).
+
+Docs: "Run configuration", references for a machine's axes (docs/reference/configuration.md).
 """
 
 from __future__ import annotations
@@ -289,8 +283,8 @@ def _scaled(motion: np.ndarray, limits: Limits, half: float, share: float) -> np
     bounds = [half, share * limits.velocity, share * limits.acceleration,
               share * limits.jerk if limits.jerk is not None else math.inf]
     peaks = np.abs(motion).max(axis=1)
-    scale = min(b / p for b, p in zip(bounds, peaks) if p > 0)
-    return motion * scale
+    scale = min(b / float(p) for b, p in zip(bounds, peaks) if p > 0)
+    return np.asarray(motion * scale)
 
 
 def _band(limits: Limits) -> tuple[float, float]:

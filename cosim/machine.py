@@ -1,20 +1,17 @@
 """A machine description: the axes a feedforward is learned for, as plain data checked once.
 
-Given in a run configuration as `[machine]` (or `machine = "FILE.toml"`, a file holding such a
-table), read by `parse_machine`, then checked against the loop's FMUs by `check_signals`. Each
-`[[machine.axis]]` names the axis (its reference signals are `<axis>_ref`, `v<axis>_ref`,
-`a<axis>_ref`, `j<axis>_ref`, derived by flexff), the measured position (`instance.variable`,
-or an expression of such outputs: the kinematic map; `true`, optional: the true position a
-simulation gives, which only the metrics read), the FMU input the feedforward drives,
-the effort the loop commands (the labels), units, and the excitation limits (`range`,
-`velocity`, `acceleration`, optional `jerk`); records and datasets name the measured position
-`<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
-terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
-`[machine.log]` says how the machine's logs name these signals (LogMap: `flexff data import`);
-`exact` the start values with which the loop measures exactly (its noise floor's measure);
-`[machine.ilc]` iterative learning control's settings for this loop (IlcSettings: `flexff ilc`
-and `flexff evaluate` read them, their options override them).
-Every key is listed in KEYS; every error is a ConfigError naming `machine.key`.
+Given in a run configuration as `[machine]` (or `machine = "FILE.toml"`), read by
+`parse_machine`, checked against the loop's FMUs by `check_signals`. Each `[[machine.axis]]`
+names the axis (its references `<axis>_ref`, `v<axis>_ref`, `a<axis>_ref`, `j<axis>_ref`), the
+measured position (`instance.variable` or an expression of outputs; `true`, optional, only
+for the metrics), the feedforward input, the commanded effort (the labels), units and the
+excitation limits (`range`, `velocity`, `acceleration`, optional `jerk`); datasets name them
+`<axis>_measured`, `<axis>_effort`. `[machine.prior]` chooses the prior's terms per axis
+(PRIOR_TERMS and user expressions), `[machine.log]` how logs name the signals (LogMap),
+`exact` the start values that measure exactly (the noise floor), `[machine.ilc]` ILC's
+settings (IlcSettings). Every key is in KEYS; every error a ConfigError naming `machine.key`.
+
+Docs: "Run configuration", [machine] (docs/reference/configuration.md).
 """
 
 from __future__ import annotations

@@ -1,22 +1,17 @@
 """Excitation for any machine: reference trajectories per axis within its description's limits,
 and the CSV tables a loop reads them from (learning.machine_loop.on_references).
 
-Classes (their shapes, each with analytic derivatives: cosim.motion_shapes, cosim.axis_references):
-- "moves": skew-sine moves (the thesis's lines) between random points of the range, rests between;
-- "bang-bang": trapezoidal-velocity moves (+a, coast, -a), S-curves where the axis has a jerk
-  limit, rests between (robot identification's excitation: inertia apart from Coulomb friction);
-- "spline": clamped quintic splines through random points, scaled in time, rests between;
-- "multisine": sines at random frequencies and phases, faded in and out, scaled into the limits;
-- on request "sine" (one sine at a random share of the frequency where the range meets the
-  limits), "random" (a smooth random path, cosim.axis_references), "rest" (every axis holds)
-  and "solo" (one axis in turn moves, the others hold: what the others feel of its motion is
-  the coupling alone).
-Every trajectory starts where the loop rests (`starts`; default its range's centre) and ends
-at rest: the moves chain from there, the sines and the random path lead to the centre first
-by a skew-sine move (cosim.axis_references.lead_in). Each move's peaks are a random share of
-the limits. Each axis draws from its own generator, train and test from streams apart;
-synchronised moves start and end together on every axis (the faster slowed down).
-An axis whose limits no move fits is refused with the key at fault (check_limits).
+Classes, each with analytic derivatives (cosim.motion_shapes, cosim.axis_references): "moves"
+(skew-sine moves between random points, rests between), "bang-bang" (trapezoidal or S-curve
+velocity), "spline" (quintic splines through random points), "multisine"; on request "sine",
+"random" (a smooth random path), "rest" and "solo" (one axis in turn moves: the coupling
+alone). Every trajectory starts where the loop rests (`starts`, default the range's centre)
+and ends at rest: moves chain from there, the sine kinds lead to the centre first. Peaks are
+a random share of the limits; each axis draws from its own generator, train and test from
+streams apart; synchronised moves start and end together. Limits no move fits are refused
+with the key at fault (check_limits).
+
+Docs: "Your own machine" (docs/tutorials/own-machine.md).
 """
 
 from __future__ import annotations

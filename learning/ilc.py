@@ -2,17 +2,13 @@
 force for that reference and so the limit a learned feedforward can be measured against.
 
 Trial 0 runs the loop under PID alone; after each trial the learning filter (learning.ilc_filter)
-gives the next trial's feedforward force, read as a CSV [[source]]. Every trial runs the one
-run path (cosim.scenario, cosim.run), with a fresh noise seed. The folder gets each trial's
-table, feedforward.csv (the best trial's force) and ilc.json, written as each trial ends, so
-an interrupted iteration continues, and e2.png once the call ends (its progress bar shows
-each trial's e2 before). ilc.json's `noise_floor` is the part of e2 that
-the loop's encoders cause (learning.ilc_loops).
-
-A trial whose error grows (on any axis beyond DIVERGENCE times that axis's best so far), whose
-plant gives a value that is not finite, or whose run fails (a co-simulation error: the plant
-driven off) ends the iteration: ilc.json's `diverged` says which trial and why, the best
-trial stays the result, and one line says so (divergence_line).
+gives the next trial's force, read as a CSV [[source]], each trial on the one run path with a
+fresh noise seed. The folder gets each trial's table, feedforward.csv (the best trial's force)
+and ilc.json as each trial ends (an interrupted iteration continues), e2.png at the end;
+ilc.json's `noise_floor` is the part of e2 the loop's encoders cause (learning.ilc_loops).
+A trial whose e2 on an axis passes DIVERGENCE times its best, whose plant gives a value that
+is not finite or whose run fails ends the iteration: ilc.json's `diverged` says which and why,
+the best trial stays the result, one line says so (divergence_line).
 
 Docs: "ILC and the noise floor" (docs/explanation/ilc-noise-floor.md).
 """

@@ -1,20 +1,17 @@
 """`flexff evaluate --config LOOP.toml`: the whole workflow on any machine's loop, and the
 comparison an engineer would make, per axis.
 
-The loop's dataset is collected (learning.machine_collect), the linear model of its prior
-identified on the training trajectories (learning.linear_model), each model trained on features
-with the machine's identified friction widths (learning.machine_train, the models side by side
-in worker processes, one per core or shared GPUs), exported and built into its feedforward
-FMU; then, on the loop's own
-reference (its sources), the loop runs under PID alone, with the identified model's
-feedforward, with each learned one, and iterative learning control finds the best
-feedforward for that one reference (the limit; learning.ilc: its iterations, cutoff and gain
-from the arguments, else the description's [machine.ilc]; an iteration that diverges keeps its
-best trial, an ILC that fails leaves its column out, and the evaluation goes on; summary.json's
-`ilc` and a line under table.md say which). summary.json holds every run's
-e2, einf, rms per axis and its e2 ratio PID alone / scenario, and where the description says how
-the loop measures exactly (`[machine] exact`) the noise floor and each run's own share over it;
-table.md the ratios; errors.png each run's tracking error per axis.
+The loop's dataset is collected (learning.machine_collect), its prior's linear model identified
+(learning.linear_model), each model trained with the identified friction widths side by side
+in worker processes (learning.machine_train), exported and built into its feedforward FMU; then,
+on the loop's own reference, the loop runs under PID alone, with the identified feedforward and
+each learned one, and ILC finds the limit (learning.ilc; its settings from the arguments, else
+[machine.ilc]; a diverged iteration keeps its best trial, a failed one leaves its column out,
+the evaluation goes on). summary.json holds every run's e2, einf, rms and e2 ratio PID alone /
+scenario per axis, the noise floor and own shares where `[machine] exact` is given, and how
+ILC ended; table.md the ratios and that line; errors.png each run's tracking error per axis.
+
+Docs: "Your own machine" (docs/tutorials/own-machine.md).
 """
 
 from __future__ import annotations
