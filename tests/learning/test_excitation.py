@@ -11,12 +11,12 @@ import pytest
 
 from flexff.cosim.config import load_config
 from flexff.cosim.machine import parse_machine
+from flexff.cosim.motion_shapes import PiecewiseJerk
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import source_signals
 from flexff.cosim.schema import ConfigError, RunConfig, SourceConfig
 from flexff.learning.excitation import CLASSES, EVERY_CLASS, excitation_set, write_table
 from flexff.learning.excitation_plot import plot_excitation
-from flexff.cosim.motion_shapes import PiecewiseJerk
 from flexff.learning.machine_loop import loop_machine, on_references, record_signals
 from tests.learning.test_machine_loop import EXAMPLES, LOOP
 
