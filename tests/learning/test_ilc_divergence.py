@@ -58,20 +58,27 @@ def test_a_model_of_the_wrong_sign_stops_the_iteration_and_keeps_the_best_trial(
     assert again["trials"] == state["trials"] and said[-1] == line[0]
 
 
-def test_a_run_that_fails_after_learning_is_a_divergence(tmp_path, monkeypatch):
+@pytest.mark.parametrize("how", ["fails", "nan"])
+def test_a_run_that_fails_or_goes_non_finite_after_learning_is_a_divergence(tmp_path,
+                                                                            monkeypatch, how):
     run = ilc_loops.MachineLoop.trial
 
     def failing(self, table, trial):
-        if trial == 2:
+        if trial == 2 and how == "fails":
             raise NonFinite("drive: output 'x' is nan at t = 0.5 s: a non-finite value stops "
                             "the run")
-        return run(self, table, trial)
+        done = run(self, table, trial)
+        if trial == 2:  # a loop that lets non-finite values through (allow_nonfinite)
+            done.error[500:] = np.nan
+        return done
 
     monkeypatch.setattr(ilc_loops.MachineLoop, "trial", failing)
     state = ilc(drive_loop(), tmp_path, iterations=4, progress=False, say=lambda _: None,
                 floor=False)
-    assert state[DIVERGED]["trial"] == 2 and "is nan" in state[DIVERGED]["reason"]
+    assert state[DIVERGED]["trial"] == 2
+    assert ("is nan" if how == "fails" else "not finite") in state[DIVERGED]["reason"]
     assert len(state["trials"]) == 2 and state["best"] in (0, 1)
+    assert not (tmp_path / "tables" / "trial-003.csv").exists()
 
 
 def test_the_loop_s_ilc_settings_are_the_defaults_and_options_override_them(tmp_path):
