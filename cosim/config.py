@@ -22,6 +22,7 @@ from typing import Any
 
 import tomli_w
 
+from flexff.cosim.axis_references import AXIS_KINDS, AXIS_OPTIONS, REST, SHARE
 from flexff.cosim.builtins import checked_options, registered
 from flexff.cosim.checks import TableChecker
 from flexff.cosim.example_configs import config_examples as config_examples  # public API
@@ -30,6 +31,7 @@ from flexff.cosim.memory import MemoryNeeded
 from flexff.cosim.plugins import ShortForm, check_workspace, reference_kinds, short_forms
 from flexff.cosim.references import (
     Reference,
+    Sampled,
     SegmentError,
     build_reference,
     reference_kind_names,
@@ -210,13 +212,15 @@ class _Parser(TableChecker):
                                "order", "allow_nonfinite"))
         self.allow_nonfinite = self.flag(run, "run", "allow_nonfinite")
         step = self.number(run, "run", "step", 1e-3, positive=True)
+        machine = self.machine(data, short)  # an axis reference's axes and limits
         reference, signal = None, None
         if "reference" in data:
             reference = self.reference(self.table(data, "reference"))
-            signal = self.sampled(reference, self.table(data, "reference"), step)
+            signal = self.sampled(reference, self.table(data, "reference"), step, machine)
         fmus: list[FmuConfig] = []
         sources: list[SourceConfig] = []
-        start = (float(signal.x[0]), float(signal.y[0])) if signal is not None else None
+        start = ((float(signal.x[0]), float(signal.y[0])) if isinstance(signal, Reference)
+                 else None)
         if short is not None:
             fmus, sources = short.expand(self, data, start)
         for fmu_name, table in self.table(data, "fmu").items():
@@ -243,15 +247,15 @@ class _Parser(TableChecker):
                                                                  fmus),
             algorithm=self.choice(run, "run", "algorithm", ALGORITHMS, "gauss-seidel"),
             record=self.record(self.table(data, "record")), origin=self.origin,
-            machine=self.machine(data, short))
+            machine=machine)
         object.__setattr__(config, "checked", True)  # frozen; see RunConfig
         return config
 
     # -- run ----------------------------------------------------------------------------
-    def sampled(self, reference: ReferenceConfig, table: Mapping[str, Any], step: float
-                ) -> Reference:
+    def sampled(self, reference: ReferenceConfig, table: Mapping[str, Any], step: float,
+                machine: Machine | None) -> Sampled:
         try:
-            return build_reference(reference.kind, reference.options, step)
+            return build_reference(reference.kind, reference.options, step, machine)
         except SegmentError as error:
             raise self.error(f"reference.segments[{error.index}]", str(error)) from None
         except MemoryNeeded as error:
@@ -261,7 +265,7 @@ class _Parser(TableChecker):
             given = [f"reference.{k}" for k in table if k != "kind"]
             raise self.error(", ".join(given) or "reference.kind", str(error)) from None
 
-    def stop(self, run: Mapping[str, Any], signal: Reference | None, fmus: Sequence[FmuConfig],
+    def stop(self, run: Mapping[str, Any], signal: Sampled | None, fmus: Sequence[FmuConfig],
              step: float, start: float) -> float:
         """run.stop, the end time; default the start plus the reference's duration, else the
         first FMU's experiment."""
@@ -569,6 +573,8 @@ class _Parser(TableChecker):
                 self.keys(t, r, ("kind",))
                 return ReferenceConfig(kind)
             return ReferenceConfig(kind, machine_kind.check(self, t))
+        if kind in AXIS_KINDS:
+            return ReferenceConfig(kind, self.axis_reference(t, kind))
         if kind == "csv":
             self.keys(t, r, ("kind", "path", "smoothing_window"))
             return ReferenceConfig(kind, {
@@ -599,6 +605,52 @@ class _Parser(TableChecker):
             **circle, "start": self.point(t, r, "start", (0.0, 0.0)),
             "line_duration": self.number(t, r, "line_duration", None, True),
             "circle_duration": self.number(t, r, "circle_duration", None, True)})
+
+    def axis_reference(self, t: Mapping[str, Any], kind: str) -> dict[str, Any]:
+        """The options of a reference of a machine's axes (cosim.axis_references); the axes
+        that per-axis tables name are checked when it is built, against the [machine]."""
+        r = "reference"
+        self.keys(t, r, ("kind", *AXIS_OPTIONS["common"], *AXIS_OPTIONS[kind]))
+        options: dict[str, Any] = {"duration": self.number(t, r, "duration", None, True)}
+        seed = self.integer(t, r, "seed", 0)
+        if seed < 0:
+            raise self.error("reference.seed", f"expected a whole number >= 0, got {seed}")
+        share = self.number(t, r, "share", SHARE, positive=True)
+        if share > 1:
+            raise self.error("reference.share", f"the share of the limits the reference "
+                             f"reaches lies in (0, 1], got {share:g}")
+        options |= {"seed": seed, "share": share}
+        if "start" in t:
+            options["start"] = self.per_axis(t, "start", positive=False)
+        if "rest" in t:
+            options["rest"] = self.number(t, r, "rest", REST)
+            if options["rest"] < 0:
+                raise self.error("reference.rest", f"expected s >= 0, got {options['rest']:g}")
+        for key in ("frequency_hz", "bandwidth_hz"):
+            if key in t:
+                options[key] = (self.number(t, r, key, None, True)
+                                if not isinstance(t[key], dict)
+                                else self.per_axis(t, key, positive=True))
+        if "points" in t:
+            points = t["points"]
+            if not isinstance(points, dict) or not all(
+                    isinstance(v, list) and v and all(isinstance(p, int | float)
+                                                      and not isinstance(p, bool)
+                                                      and math.isfinite(p) for p in v)
+                    for v in points.values()):
+                raise self.error("reference.points", f"expected a table of axis = [position, "
+                                 f"...] (the points each axis moves to), got {points!r}")
+            options["points"] = {a: [float(p) for p in v] for a, v in points.items()}
+        return options
+
+    def per_axis(self, t: Mapping[str, Any], key: str, positive: bool) -> dict[str, float]:
+        """A table of axis = number."""
+        table = t[key]
+        if not isinstance(table, dict):
+            raise self.error(f"reference.{key}", f"expected a table of axis = number, got "
+                             f"{table!r}")
+        return {axis: self.number(table, f"reference.{key}", axis, None, positive)
+                for axis in table}
 
     def segments(self, t: Mapping[str, Any]) -> tuple[dict[str, Any], ...]:
         """The checked tables of reference.segments (geometry is checked when built)."""

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from flexff.cosim.axis_references import AXIS_KINDS
+
 
 @dataclass(frozen=True)
 class Key:
@@ -23,7 +25,7 @@ class Key:
     kinds: tuple[str, ...] = ()
 
 
-REFERENCE_KINDS = ("circle", "line-circle", "spline", "segments", "csv")
+REFERENCE_KINDS = ("circle", "line-circle", "spline", "segments", "csv", *AXIS_KINDS)
 CIRCLE = ("circle", "line-circle")
 SEGMENT_KINDS = ("line", "hold", "circle", "spline")
 
@@ -47,15 +49,34 @@ KEYS: tuple[Key, ...] = (
         "Let every FMU's NaN or infinite outputs and parameters through."),
     # [reference]
     Key("reference", "kind", "string", "required", "",
-        "circle, line-circle, spline, segments, csv, or a kind a machine package registers.",
-        REFERENCE_KINDS),
+        "circle, line-circle, spline, segments, csv (the plane's x, y); point-to-point, sine, "
+        "multisine, random (every axis of the [machine]); or a kind a machine package "
+        "registers.", REFERENCE_KINDS),
     Key("reference", "radius", "number", "required", "m", "The circle's radius.", CIRCLE),
     Key("reference", "centre", "[x, y]", "[0, 0]", "m", "The circle's centre.", CIRCLE),
     Key("reference", "turns", "number", "1", "1", "Turns; negative runs clockwise.", CIRCLE),
     Key("reference", "start_angle", "number", "0", "rad", "Where on the circle it starts.",
         CIRCLE),
     Key("reference", "duration", "number", "required", "s", "How long the path takes.",
-        ("circle", "spline")),
+        ("circle", "spline", *AXIS_KINDS)),
+    Key("reference", "seed", "integer", "0", "", "The random draws' seed (each axis its own).",
+        AXIS_KINDS),
+    Key("reference", "share", "number", "0.8", "1",
+        "The share of each axis's velocity, acceleration and jerk limits reached at most.",
+        AXIS_KINDS),
+    Key("reference", "start", "table: axis = number", "the range's centre", "axis unit",
+        "Where each axis starts; sine, multisine and random move to the centre first.",
+        AXIS_KINDS),
+    Key("reference", "points", "table: axis = [numbers]", "random points of the range",
+        "axis unit", "The positions each axis moves to, in turn.", ("point-to-point",)),
+    Key("reference", "rest", "number", "0.2", "s", "The hold before each move and after the "
+        "last.", ("point-to-point",)),
+    Key("reference", "frequency_hz", "number, or table: axis = number",
+        "where the range's amplitude meets the limits", "Hz", "The sine's frequency.",
+        ("sine",)),
+    Key("reference", "bandwidth_hz", "number, or table: axis = number",
+        "where the range's amplitude meets the limits", "Hz",
+        "The random path's points per second.", ("random",)),
     Key("reference", "start", "[x, y]", "[0, 0]", "m", "The starting point.",
         ("line-circle", "segments")),
     Key("reference", "line_duration", "number", "required", "s",
@@ -149,6 +170,8 @@ KEYS: tuple[Key, ...] = (
         'Start values ("instance.parameter" = number) with which the loop measures exactly, '
         "such as an encoder's resolution at 0: ILC and evaluate measure the noise floor with "
         "them."),
+    Key("machine", "ilc", "table", "ILC's defaults", "",
+        "Iterative learning control's settings on this loop ([machine.ilc])."),
     Key("machine.axis", "name", "string", "required", "",
         "A letter, then letters or digits; names <axis>_ref, v<axis>_ref, ..."),
     Key("machine.axis", "unit", "string", '"m"', "", "The axis's position unit."),
@@ -180,10 +203,18 @@ KEYS: tuple[Key, ...] = (
     Key("machine.log", "scalars", "table", "{}", "", "Named numbers for the expressions."),
     Key("machine.log", "columns", "table", "{}", "",
         "Dataset signal = expression of the log's columns and scalars."),
+    Key("machine.ilc", "iterations", "integer", "10", "",
+        "Learning trials after PID alone (flexff ilc --iterations, evaluate --ilc-iterations)."),
+    Key("machine.ilc", "cutoff_hz", "number", "0.15 times the rate", "Hz",
+        "The corner of the learning filter's zero-phase low-pass Q (--cutoff, "
+        "--ilc-cutoff)."),
+    Key("machine.ilc", "gain", "number", "1", "",
+        "The learning gain on the model's correction P^-1 e; below 1 learns more slowly but "
+        "tolerates a worse model (--gain, --ilc-gain)."),
 )
 
 TABLES = ("run", "reference", "reference.segments[k]", "source", "fmu.NAME", "connection",
-          "record", "machine", "machine.axis", "machine.prior", "machine.log")
+          "record", "machine", "machine.axis", "machine.prior", "machine.log", "machine.ilc")
 
 
 def keys_of(table: str, kind: str | None = None) -> tuple[str, ...]:

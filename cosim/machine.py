@@ -1,18 +1,17 @@
 """A machine description: the axes a feedforward is learned for, as plain data checked once.
 
-Given in a run configuration as `[machine]` (or `machine = "FILE.toml"`, a file holding such a
-table), read by `parse_machine`, then checked against the loop's FMUs by `check_signals`. Each
-`[[machine.axis]]` names the axis (its reference signals are `<axis>_ref`, `v<axis>_ref`,
-`a<axis>_ref`, `j<axis>_ref`, derived by flexff), the measured position (`instance.variable`,
-or an expression of such outputs: the kinematic map; `true`, optional: the true position a
-simulation gives, which only the metrics read), the FMU input the feedforward drives,
-the effort the loop commands (the labels), units, and the excitation limits (`range`,
-`velocity`, `acceleration`, optional `jerk`); records and datasets name the measured position
-`<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
-terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
-`[machine.log]` says how the machine's logs name these signals (LogMap: `flexff data import`);
-`exact` the start values with which the loop measures exactly (its noise floor's measure).
-Every key is listed in KEYS; every error is a ConfigError naming `machine.key`.
+Given in a run configuration as `[machine]` (or `machine = "FILE.toml"`), read by
+`parse_machine`, checked against the loop's FMUs by `check_signals`. Each `[[machine.axis]]`
+names the axis (its references `<axis>_ref`, `v<axis>_ref`, `a<axis>_ref`, `j<axis>_ref`), the
+measured position (`instance.variable` or an expression of outputs; `true`, optional, only
+for the metrics), the feedforward input, the commanded effort (the labels), units and the
+excitation limits (`range`, `velocity`, `acceleration`, optional `jerk`); datasets name them
+`<axis>_measured`, `<axis>_effort`. `[machine.prior]` chooses the prior's terms per axis
+(PRIOR_TERMS and user expressions), `[machine.log]` how logs name the signals (LogMap),
+`exact` the start values that measure exactly (the noise floor), `[machine.ilc]` ILC's
+settings (IlcSettings). Every key is in KEYS; every error a ConfigError naming `machine.key`.
+
+Docs: "Run configuration", [machine] (docs/reference/configuration.md).
 """
 
 from __future__ import annotations
@@ -39,11 +38,12 @@ SCALAR_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 PRIOR_TERMS = ("inertia", "viscous", "coulomb", "coulomb_asymmetric", "offset")
 DEFAULT_PRIOR_TERMS = ("inertia", "viscous", "coulomb", "offset")
 KEYS = {
-    "machine": ("name", "axis", "prior", "log", "exact"),
+    "machine": ("name", "axis", "prior", "log", "exact", "ilc"),
     "axis": ("name", "unit", "measured", "true", "feedforward", "effort", "effort_unit",
              "range", "velocity", "acceleration", "jerk"),
     "prior": ("terms", "extra", "coulomb_width"),
     "log": ("time", "scalars", "columns"),
+    "ilc": ("iterations", "cutoff_hz", "gain"),
 }
 
 
@@ -128,6 +128,23 @@ class LogMap:
 
 
 @dataclass(frozen=True)
+class IlcSettings:
+    """Iterative learning control on this machine's loop (learning.ilc): learning trials after
+    PID alone, the corner of its zero-phase low-pass Q [Hz] and the gain on the model's
+    correction; None: ILC's own default."""
+
+    iterations: int | None = None
+    cutoff_hz: float | None = None
+    gain: float | None = None
+
+    def table(self) -> dict[str, float]:
+        """The settings given, as the TOML table `[machine.ilc]`."""
+        return {k: v for k, v in (("iterations", self.iterations),
+                                  ("cutoff_hz", self.cutoff_hz), ("gain", self.gain))
+                if v is not None}
+
+
+@dataclass(frozen=True)
 class Machine:
     """A machine's axes, prior and log map, checked."""
 
@@ -136,6 +153,7 @@ class Machine:
     prior: Prior = Prior()
     log: LogMap = LogMap()
     exact: Mapping[str, float] = field(default_factory=dict)  # "instance.parameter" -> value
+    ilc: IlcSettings = IlcSettings()
 
     def axis(self, name: str) -> Axis:
         return next(a for a in self.axes if a.name == name)
@@ -190,7 +208,8 @@ def parse_machine(table: Any, origin: str, base: Path = Path(".")) -> Machine:
         raise check.error("machine.name", f"expected a non-empty string, got {name!r}")
     prior = check.prior(table.get("prior", {}), axes)
     log = check.log(table.get("log", {}), Machine(name, axes).signals)
-    return Machine(name, axes, prior, log, check.exact(table.get("exact", {})))
+    return Machine(name, axes, prior, log, check.exact(table.get("exact", {})),
+                   check.ilc(table.get("ilc", {})))
 
 
 def machine_table(machine: Machine) -> dict[str, Any]:
@@ -211,7 +230,8 @@ def machine_table(machine: Machine) -> dict[str, Any]:
     log = {"time": machine.log.time, "scalars": dict(machine.log.scalars),
            "columns": {n: e.text for n, e in machine.log.columns.items()}}
     return {"name": machine.name, "axis": axes, "prior": prior, "log": log,
-            **({"exact": dict(machine.exact)} if machine.exact else {})}
+            **({"exact": dict(machine.exact)} if machine.exact else {}),
+            **({"ilc": machine.ilc.table()} if machine.ilc.table() else {})}
 
 
 def check_signals(machine: Machine, outputs: Iterable[str], inputs: Iterable[str],
@@ -335,6 +355,16 @@ class _Check:
                 raise self.error(f"machine.exact.{name}", "expected 'instance.parameter'")
             self.number(table, "machine.exact", name, positive=False)
         return {name: float(value) for name, value in table.items()}
+
+    def ilc(self, table: Any) -> IlcSettings:
+        self.table(table, "machine.ilc", "ilc")
+        iterations = table.get("iterations")
+        if iterations is not None and (isinstance(iterations, bool)
+                                       or not isinstance(iterations, int) or iterations < 1):
+            raise self.error("machine.ilc.iterations", f"expected a whole number of learning "
+                             f"trials, at least 1, got {iterations!r}")
+        return IlcSettings(iterations, self.number(table, "machine.ilc", "cutoff_hz"),
+                           self.number(table, "machine.ilc", "gain"))
 
     def prior(self, table: Any, axes: tuple[Axis, ...]) -> Prior:
         self.table(table, "machine.prior", "prior")

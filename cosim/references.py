@@ -10,6 +10,9 @@ Every segment checks its arguments and that it stays inside the workspace (the c
 machine packages register, cosim.plugins), and raises InputError naming the offending point
 otherwise. Sampling checks first that the samples fit
 into the available memory (MemoryNeeded, an InputError, says how much they need).
+
+These kinds are the plane's (x, y). The kinds of cosim.axis_references (AXIS_KINDS) make a
+reference for the axes of a run's [machine], any number of them; build_reference makes both.
 """
 
 from __future__ import annotations
@@ -21,11 +24,13 @@ from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
 
+from flexff.cosim.axis_references import AXIS_KINDS, build_axis_reference
 from flexff.cosim.csv_text import TIME, read_time_table
+from flexff.cosim.machine import Machine
 from flexff.cosim.memory import check_memory
 from flexff.cosim.plugins import check_workspace, reference_kinds
 from flexff.fmu.errors import InputError
@@ -53,6 +58,7 @@ class Reference:
 
     SIGNALS: ClassVar[tuple[str, ...]] = ("x_ref", "y_ref", "vx_ref", "vy_ref", "ax_ref",
                                           "ay_ref")
+    positions: ClassVar[tuple[str, ...]] = ("x_ref", "y_ref")  # held after the end
 
     def __post_init__(self) -> None:
         arrays = self._arrays()
@@ -76,6 +82,22 @@ class Reference:
             writer = csv.writer(handle)
             writer.writerow((TIME, *self.SIGNALS))
             writer.writerows(np.column_stack(self._arrays()).tolist())
+
+
+class Sampled(Protocol):
+    """A sampled reference of either family: the plane's (Reference) or a machine's axes'
+    (cosim.axis_references.AxisReference)."""
+
+    @property
+    def t(self) -> np.ndarray: ...
+
+    @property
+    def positions(self) -> tuple[str, ...]: ...
+
+    @property
+    def duration(self) -> float: ...
+
+    def signals(self) -> dict[str, np.ndarray]: ...
 
 
 class Segment:
@@ -321,7 +343,7 @@ def _finite_point(name: str, point: Sequence[float]) -> None:
         raise InputError(f"{name} must be a finite (x, y) pair in m, got {point!r}")
 
 
-GENERIC_KINDS = ("circle", "line-circle", "spline", "segments", "csv")
+GENERIC_KINDS = ("circle", "line-circle", "spline", "segments", "csv", *AXIS_KINDS)
 
 
 def reference_kind_names() -> tuple[str, ...]:
@@ -329,18 +351,24 @@ def reference_kind_names() -> tuple[str, ...]:
     return (*reference_kinds(), *GENERIC_KINDS)
 
 
-def build_reference(kind: str, options: Mapping[str, Any], step: float) -> Reference:
+def build_reference(kind: str, options: Mapping[str, Any], step: float,
+                    machine: Machine | None = None) -> Sampled:
     """The reference of a checked [reference] table (cosim.config), sampled every `step`
-    seconds from t = 0: once per process for the last few tables (the configuration's check
-    and the run both ask for it; a Reference is not changed by its users)."""
+    seconds from t = 0 (a kind of AXIS_KINDS for the axes of `machine`): once per process for
+    the last few tables (the configuration's check and the run both ask for it; a reference
+    is not changed by its users)."""
     stamp = None  # a CSV file changed since is read again
     if kind == "csv" and Path(options["path"]).is_file():
         stat = Path(options["path"]).stat()
         stamp = (stat.st_mtime_ns, stat.st_size)
-    key = json.dumps({"kind": kind, "options": options, "step": step, "file": stamp},
-                     sort_keys=True, default=str)
+    axes = None  # an axis reference's axes, limits included
+    if kind in AXIS_KINDS and machine is not None:
+        axes = [(a.name, a.limits) for a in machine.axes]
+    key = json.dumps({"kind": kind, "options": options, "step": step, "file": stamp,
+                      "axes": axes}, sort_keys=True, default=str)
     if key not in _SAMPLED:
-        reference = _built(kind, options, step)
+        reference: Sampled = (build_axis_reference(kind, options, step, machine)
+                              if kind in AXIS_KINDS else _built(kind, options, step))
         for values in (reference.t, *reference.signals().values()):
             values.flags.writeable = False  # shared: nobody changes it in place
         _SAMPLED[key] = reference
@@ -351,7 +379,7 @@ def build_reference(kind: str, options: Mapping[str, Any], step: float) -> Refer
 
 
 SAMPLED_KEPT = 4  # references kept sampled (a 100 s one at 1 kHz: 5.6 MB)
-_SAMPLED: OrderedDict[str, Reference] = OrderedDict()
+_SAMPLED: OrderedDict[str, Sampled] = OrderedDict()
 
 
 def _built(kind: str, options: Mapping[str, Any], step: float) -> Reference:

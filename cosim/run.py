@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from flexff.cosim.axis_references import AXIS_KINDS
 from flexff.cosim.builtins import registered
 from flexff.cosim.config import FAULTS, RECORDED, expanded, load_config
 from flexff.cosim.disk import check_disk
@@ -90,7 +91,7 @@ def _check_source_memory(config: RunConfig) -> None:
     """A streamed run holds its sampled reference whole: refuse one that does not fit."""
     if config.reference is None:
         return
-    signals = len(Reference.SIGNALS)
+    signals = _reference_count(config)
     try:
         check_memory((config.steps + 1) * signals, f"sampling the reference's {signals} "
                                                    f"signals at {config.steps + 1} points")
@@ -101,8 +102,16 @@ def _check_source_memory(config: RunConfig) -> None:
 
 def _least_signals(config: RunConfig) -> int:
     """The columns any run of `config` holds: time, the reference, the recorded signals."""
-    return (1 + len(Reference.SIGNALS) * (config.reference is not None)
+    return (1 + _reference_count(config) * (config.reference is not None)
             + len(config.record.signals or ()))
+
+
+def _reference_count(config: RunConfig) -> int:
+    """The signals a run's [reference] gives: the plane's six, or four per machine axis."""
+    if config.reference is not None and config.reference.kind in AXIS_KINDS \
+            and config.machine is not None:
+        return len(config.machine.reference_signals)
+    return len(Reference.SIGNALS)
 
 
 def _wanted(scenario: Scenario, master: Master) -> list[str]:

@@ -22,7 +22,7 @@ from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import check_signals
 from flexff.cosim.master import Master, ResolvedFmu
-from flexff.cosim.references import Reference, build_reference
+from flexff.cosim.references import Reference, Sampled, build_reference
 from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig, point_time
 from flexff.cosim.wiring import Link, Port, WiringError, wire
 from flexff.fmu.errors import InputError
@@ -108,10 +108,10 @@ def reference_signals(config: RunConfig) -> dict[str, np.ndarray]:
     if config.reference is None:
         return {}
     return reference_samples(build_reference(config.reference.kind, config.reference.options,
-                                             config.step), config.steps)
+                                             config.step, config.machine), config.steps)
 
 
-def reference_samples(reference: Reference, steps: int) -> dict[str, np.ndarray]:
+def reference_samples(reference: Sampled, steps: int) -> dict[str, np.ndarray]:
     """The reference signals at points 0 .. steps: cut (views of the sampled reference, no
     copy), or held at rest after its end."""
     signals = reference.signals()
@@ -122,7 +122,7 @@ def reference_samples(reference: Reference, steps: int) -> dict[str, np.ndarray]
     for name, values in signals.items():
         column = np.empty(steps + 1)
         column[:n] = values[:n]
-        column[n:] = values[n - 1] if name in ("x_ref", "y_ref") else 0.0
+        column[n:] = values[n - 1] if name in reference.positions else 0.0
         out[name] = column
     return out
 

@@ -36,7 +36,9 @@ MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")  # learning.models, named here to k
 PRESETS = ("fast", "thesis")
 TRAJECTORY_SETS = ("sim", "hardware")  # learning.dataset.SETS, named here to keep numpy unloaded
 DEVICES = ("auto", "cpu", "cuda")  # learning.devices', named here to keep torch unloaded
-ITERATIONS, CUTOFF_HZ = 10, 20.0  # learning.ilc's defaults, named here to keep scipy unloaded
+EXCITATION = ("moves", "bang-bang", "spline", "multisine")  # learning.excitation's CLASSES,
+EVERY_EXCITATION = (*EXCITATION, "sine", "random", "rest", "solo")  # and EVERY_CLASS
+ITERATIONS, CUTOFF_HZ, GAIN = 10, 20.0, 1.0  # learning.ilc's defaults (keeps scipy unloaded)
 INPUT_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
                 PermissionError)  # OSErrors about paths the user gave: exit code 2, as are
 INPUT_ERRNOS = (errno.EROFS, errno.ENAMETOOLONG, errno.ELOOP)  # these (others: 1)
@@ -88,7 +90,9 @@ def _evaluate_machine(args: argparse.Namespace, loop: Any) -> int:
 
     train, test = args.trajectories
     evaluate_machine(loop, args.output, args.models, args.preset, train, test, args.duration,
-                     device=args.device, **_epochs(args))
+                     classes=args.classes, ilc_iterations=args.ilc_iterations,
+                     ilc_cutoff_hz=args.ilc_cutoff, ilc_gain=args.ilc_gain, device=args.device,
+                     **_epochs(args))
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, errors.png, identified.json, "
           f"data/, runs/, models/, fmus/, ilc/ for the limit)")
@@ -343,6 +347,10 @@ def machine_options(parser: argparse.ArgumentParser) -> None:
                         help="a [machine] loop: excitation trajectories (default 24 6)")
     parser.add_argument("--duration", type=float, default=20.0, metavar="S",
                         help="a [machine] loop: seconds per trajectory (default 20)")
+    parser.add_argument("--classes", nargs="+", default=list(EXCITATION), metavar="CLASS",
+                        choices=EVERY_EXCITATION,
+                        help=f"a [machine] loop: the excitation's classes, in turn (default "
+                             f"{' '.join(EXCITATION)}; also {', '.join(EVERY_EXCITATION[4:])})")
 
 
 def _tracked_axes(metrics: dict[str, Any]) -> list[str]:
@@ -433,7 +441,7 @@ def _data_collect(args: argparse.Namespace) -> int:
 
             train, test = args.trajectories
             data = collect_machine(config, args.output, train, test, args.duration,
-                                   workers=args.workers)
+                                   workers=args.workers, classes=args.classes)
             print(f"{data.description.name}: {len(data.trajectories)} trajectories -> "
                   f"{data.path}")
             return 0
@@ -587,6 +595,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     loop = None if args.config is None else load_run_config(args.config)
     machine = loop is not None and not is_manipulator_loop(loop)
     logs = loop is None and args.data is not None and is_machine_dataset(args.data)
+    if logs and any(v is not None for v in (args.ilc_iterations, args.ilc_cutoff,
+                                            args.ilc_gain)):
+        raise InputError("--ilc-iterations, --ilc-cutoff and --ilc-gain set the ILC of a loop: "
+                         "leave them out for imported logs (no loop runs)")
     if (machine or logs) and (args.currents or args.ilc_labels or args.force_input):
         raise InputError("--currents, --ilc-labels and --force-input are for the manipulator's "
                          f"environments: leave them out for "
@@ -599,7 +611,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
              scheduler=args.scheduler, currents=args.currents, device=args.device,
              ilc_labels=None if args.ilc_labels is None else
-             [kind for kind in args.ilc_labels if kind != "none"], force_input=args.force_input)
+             [kind for kind in args.ilc_labels if kind != "none"], force_input=args.force_input,
+             ilc_iterations=args.ilc_iterations, ilc_cutoff_hz=args.ilc_cutoff,
+             ilc_gain=args.ilc_gain)
     print((Path(args.output) / "table.md").read_text())
     print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
           f"forces.png, the .onnx models, ilc/ for the limit, held-out/ for the test split's "
@@ -611,7 +625,8 @@ def _ilc(args: argparse.Namespace) -> int:
     from flexff.cosim.run import load_run_config
     from flexff.learning.ilc import NOISE_FLOOR, RESULT, ilc
 
-    state = ilc(load_run_config(args.config), args.output, args.iterations, args.cutoff)
+    state = ilc(load_run_config(args.config), args.output, args.iterations, args.cutoff,
+                gain=args.gain)
     for trial in state["trials"]:
         axes = _tracked_axes(trial)
         e2 = ", ".join(f"{trial[a]['e2']:.4g}" for a in axes)
@@ -935,6 +950,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                 "train on (its workers see this file system)")
     _device_option(evaluation, "train the networks on")
     machine_options(evaluation)
+    _ilc_options(evaluation, "--ilc-")
     evaluation.set_defaults(handler=_evaluate)
 
     learning = commands.add_parser(
@@ -944,12 +960,7 @@ def build_parser() -> argparse.ArgumentParser:
                           help="the loop and its reference (flexff's controller, any plant; "
                                "its own feedforward is replaced)")
     learning.add_argument("-o", "--output", required=True, help="the output folder")
-    learning.add_argument("--iterations", type=int, default=ITERATIONS, metavar="N",
-                          help=f"learning trials after PID alone (default {ITERATIONS})")
-    learning.add_argument("--cutoff", type=float, default=None, metavar="HZ",
-                          help=f"corner of the zero-phase low-pass Q of the learning filter "
-                               f"(default {CUTOFF_HZ:g} on the manipulator, 0.15 times the "
-                               f"rate on a loop with a [machine])")
+    _ilc_options(learning, "--")
     learning.set_defaults(handler=_ilc)
 
     demo = commands.add_parser("demo", help="the whole pipeline on the embedded defaults")
@@ -957,6 +968,23 @@ def build_parser() -> argparse.ArgumentParser:
     _device_option(demo, "train the networks on")
     demo.set_defaults(handler=_demo)
     return parser
+
+
+def _ilc_options(command: argparse.ArgumentParser, prefix: str) -> None:
+    """ILC's settings (learning.ilc), named `prefix`iterations, `prefix`cutoff, `prefix`gain;
+    a loop's [machine.ilc] gives the defaults the options leave unset."""
+    command.add_argument(f"{prefix}iterations", type=int, metavar="N",
+                         help=f"ILC: learning trials after PID alone (default: [machine.ilc] "
+                              f"iterations, else {ITERATIONS})")
+    command.add_argument(f"{prefix}cutoff", type=float, metavar="HZ",
+                         help=f"ILC: corner of the learning filter's zero-phase low-pass Q "
+                              f"(default: [machine.ilc] cutoff_hz, else {CUTOFF_HZ:g} on "
+                              f"the manipulator, 0.15 times the rate on a loop with a "
+                              f"[machine])")
+    command.add_argument(f"{prefix}gain", type=float, metavar="G",
+                         help=f"ILC: learning gain on the model's correction (default: "
+                              f"[machine.ilc] gain, else {GAIN:g}; lower it where the "
+                              f"iteration diverges)")
 
 
 def _device_option(command: argparse.ArgumentParser, what: str) -> None:

@@ -189,17 +189,19 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
              data: str | Path | None = None, epochs: int | None = None,
              say: Callable[[str], None] = print, loop: RunConfig | None = None,
              progress: bool = True, scheduler: str | None = None,
-             ilc_iterations: int = ITERATIONS, currents: Sequence[str] = (),
+             ilc_iterations: int | None = ITERATIONS, currents: Sequence[str] = (),
              device: str = "auto", ilc_labels: Sequence[str] | None = None,
-             force_input: Sequence[str] = ()) -> dict[str, Any]:
+             force_input: Sequence[str] = (), ilc_cutoff_hz: float | None = None,
+             ilc_gain: float | None = None) -> dict[str, Any]:
     """Run the whole evaluation of `env` ("sim" or "hardware") into folder `out`; return the
     summary (see learning.report.write_report). `data` reuses a collected dataset folder; `loop`
     collects and evaluates on that run configuration instead of the environment's plant;
     `scheduler` collects and trains on that Dask cluster (learning.workers); `ilc_iterations`
-    are the learning trials of the limit (learning.ilc); `currents` adds the current-level
-    model of each kind named (scenario KIND-currents, the same settings with labels =
-    "currents", learning.features); `ilc_labels` adds the model of each kind named trained on
-    the force ILC learns on each training reference (scenario KIND-ilc, on the set
+    are the learning trials of the limit (learning.ilc; None: its default), `ilc_cutoff_hz`
+    and `ilc_gain` its learning filter's corner and gain (None: its defaults); `currents` adds
+    the current-level model of each kind named (scenario KIND-currents, the same settings with
+    labels = "currents", learning.features); `ilc_labels` adds the model of each kind named
+    trained on the force ILC learns on each training reference (scenario KIND-ilc, on the set
     learning.ilc_labels writes beside the collected one) and the rigid-body model identified
     there (IDENTIFIED_ILC), by default those of `models` the environment names (none: `()`);
     `force_input` adds the black-box model of each kind named with the identified rigid-body
@@ -264,7 +266,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
                                             out / IDENTIFIED_ILC, say)
     say(f"iterative learning control on the evaluation reference into {out / 'ilc'} (the limit)")
     limit = ilc(scenario_config(env, "pid", loop=loop), out / "ilc", ilc_iterations,
-                progress=progress, say=say)
+                ilc_cutoff_hz, progress=progress, say=say, gain=ilc_gain)
     recordings: dict[str, Recording] = {}
     feedforwards = [BASE, "rigid-body", *(n for n in (IDENTIFIED, IDENTIFIED_ILC) if n in files),
                     *groups]  # each on any reference

@@ -1,18 +1,17 @@
 """Excitation for any machine: reference trajectories per axis within its description's limits,
 and the CSV tables a loop reads them from (learning.machine_loop.on_references).
 
-Classes (learning.excitation_shapes has their shapes, each with analytic derivatives):
-- "moves": skew-sine moves (the thesis's lines) between random points of the range, rests between;
-- "bang-bang": trapezoidal-velocity moves (+a, coast, -a), S-curves where the axis has a jerk
-  limit, rests between (robot identification's excitation: inertia apart from Coulomb friction);
-- "spline": clamped quintic splines through random points, scaled in time, rests between;
-- "multisine": sines at random frequencies and phases, faded in and out, scaled into the limits;
-- on request "rest" (every axis holds) and "solo" (one axis in turn moves, the others hold:
-  what the others feel of its motion is the coupling alone).
-Every trajectory starts at its range's centre and ends at rest; each move's peaks are a random
-share of the limits. Each axis draws from its own generator, train and test from streams apart;
-synchronised moves start and end together on every axis (the faster slowed down).
-An axis whose limits no move fits is refused with the key at fault (check_limits).
+Classes, each with analytic derivatives (cosim.motion_shapes, cosim.axis_references): "moves"
+(skew-sine moves between random points, rests between), "bang-bang" (trapezoidal or S-curve
+velocity), "spline" (quintic splines through random points), "multisine"; on request "sine",
+"random" (a smooth random path), "rest" and "solo" (one axis in turn moves: the coupling
+alone). Every trajectory starts where the loop rests (`starts`, default the range's centre)
+and ends at rest: moves chain from there, the sine kinds lead to the centre first. Peaks are
+a random share of the limits; each axis draws from its own generator, train and test from
+streams apart; synchronised moves start and end together. Limits no move fits are refused
+with the key at fault (check_limits).
+
+Docs: "Your own machine" (docs/tutorials/own-machine.md).
 """
 
 from __future__ import annotations
@@ -24,11 +23,16 @@ from pathlib import Path
 
 import numpy as np
 
+from flexff.cosim.axis_references import (
+    lead_in,
+    multisine_shape,
+    natural_frequency,
+    sine,
+    smooth_random,
+)
 from flexff.cosim.csv_text import TIME
 from flexff.cosim.machine import Limits, Machine
-from flexff.cosim.recording import atomic_write
-from flexff.cosim.schema import ConfigError
-from flexff.learning.excitation_shapes import (
+from flexff.cosim.motion_shapes import (
     Shape,
     SkewSine,
     Stretched,
@@ -38,9 +42,11 @@ from flexff.learning.excitation_shapes import (
     skew_sine_time,
     spline_extent,
 )
+from flexff.cosim.recording import atomic_write
+from flexff.cosim.schema import ConfigError
 
 CLASSES = ("moves", "bang-bang", "spline", "multisine")  # the default set's classes, in turn
-EVERY_CLASS = (*CLASSES, "rest", "solo")
+EVERY_CLASS = (*CLASSES, "sine", "random", "rest", "solo")
 SHARE = (0.3, 0.9)  # a move's peaks: this share of the limits, drawn uniformly
 REST = (0.1, 0.6)  # rests between moves [s], drawn uniformly
 MARGIN = 0.95  # of the range used by the moves
@@ -49,7 +55,9 @@ MIN_REACH = 0.1  # a move across the range must reach this share of velocity and
 SPLINE_POINTS = (2, 4)  # points a spline passes through after its start
 SPLINE_TRIES = 20  # draws of a spline's points that overshoot the range before a single point
 FILL_TRIES = 3  # draws of a move that does not fit the time left before the axis rests
-SINES = 4  # a multisine's sines
+LEAD_SHARE = 0.5  # of the limits: the move from where the loop rests to a sine's centre
+FREQUENCY_SHARE = (0.1, 1.0)  # a sine's frequency, a random path's bandwidth: this share of
+# the frequency where the range's amplitude meets the limits (natural_frequency), uniformly
 PHASE_SAMPLES = 5  # samples a bang-bang phase lasts at least (_resolved)
 MOVE_SAMPLES = 20  # samples a move lasts at least
 
@@ -73,16 +81,19 @@ class Excitation:
 
 def excitation_set(machine: Machine, n_train: int, n_test: int, duration: float,
                    rate_hz: float, seed: int = 0, classes: Sequence[str] = CLASSES,
-                   origin: str = "machine", synchronised: bool = False) -> list[Excitation]:
+                   origin: str = "machine", synchronised: bool = False,
+                   starts: Sequence[float] | None = None) -> list[Excitation]:
     """`n_train` + `n_test` trajectories of `duration` s sampled at `rate_hz`, the classes in
     turn, every axis its own independent trajectory (or, `synchronised`, moves that start
-    and end together on every axis); the same for the same seed, the test split from
-    generators of its own (it does not change with `n_train`). Errors name `origin` (the
-    description's file) and the key."""
+    and end together on every axis) from its position in `starts` (default its range's
+    centre); the same for the same seed, the test split from generators of its own (it does
+    not change with `n_train`). Errors name `origin` (the description's file) and the key."""
     _check_request(n_train, n_test, duration, rate_hz, seed, classes)
     check_limits(machine, duration, origin)
     t = np.arange(round(duration * rate_hz) + 1) / rate_hz
     limits = [axis.limits for axis in machine.axes]
+    origins = list(starts) if starts is not None else [0.5 * (lim.low + lim.high)
+                                                       for lim in limits]
     out = []
     for split, count, stream, prefix in (("train", n_train, 0, ""), ("test", n_test, 1, "test-")):
         for k in range(count):
@@ -90,10 +101,11 @@ def excitation_set(machine: Machine, n_train: int, n_test: int, duration: float,
             rngs = [np.random.default_rng([seed, stream, k, a]) for a in range(len(limits))]
             if kind == "solo":
                 moving = k // len(classes) % len(limits)  # the solos' turn
-                motions = [trajectories("moves" if a == moving else "rest", [lim], t, [rng])[0]
-                           for a, (lim, rng) in enumerate(zip(limits, rngs))]
+                motions = [trajectories("moves" if a == moving else "rest", [lim], t, [rng],
+                                        starts=[start])[0]
+                           for a, (lim, rng, start) in enumerate(zip(limits, rngs, origins))]
             else:
-                motions = trajectories(kind, limits, t, rngs, synchronised)
+                motions = trajectories(kind, limits, t, rngs, synchronised, origins)
             signals: dict[str, np.ndarray] = {}
             for axis, values in zip(machine.axes, motions):
                 signals.update(zip((axis.reference, *axis.derivatives), values))
@@ -102,21 +114,45 @@ def excitation_set(machine: Machine, n_train: int, n_test: int, duration: float,
 
 
 def trajectories(kind: str, limits: Sequence[Limits], t: np.ndarray,
-                 rngs: Sequence[np.random.Generator], synchronised: bool = False
-                 ) -> list[np.ndarray]:
+                 rngs: Sequence[np.random.Generator], synchronised: bool = False,
+                 starts: Sequence[float] | None = None) -> list[np.ndarray]:
     """Position, velocity, acceleration and jerk (4, n) of each axis's trajectory of class
-    `kind` at the times `t` (from 0), each axis drawing from its own generator; moves
-    `synchronised` last as long as the slowest axis's (the others slowed down)."""
+    `kind` at the times `t` (from 0), from `starts` (default the ranges' centres), each axis
+    drawing from its own generator; moves `synchronised` last as long as the slowest axis's
+    (the others slowed down)."""
     limits = [_resolved(lim, float(t[1] - t[0])) for lim in limits]
-    if kind == "multisine":
-        return [_multisine(lim, t, rng) for lim, rng in zip(limits, rngs)]
-    centres = [0.5 * (lim.low + lim.high) for lim in limits]
+    origins = list(starts) if starts is not None else [0.5 * (lim.low + lim.high)
+                                                       for lim in limits]
+    if kind in ("multisine", "sine", "random"):
+        return [lead_in(start, lim, t, LEAD_SHARE, _body(kind, lim, rng))
+                for start, lim, rng in zip(origins, limits, rngs)]
     if kind == "rest":
-        return [_held(c, t) for c in centres]
+        return [_held(start, t) for start in origins]
     draws = [_draw(kind, lim) for lim in limits]
     if synchronised:
-        return _chained(centres, t, rngs, draws)
-    return [_chained([c], t, [rng], [draw])[0] for c, rng, draw in zip(centres, rngs, draws)]
+        return _chained(origins, t, rngs, draws)
+    return [_chained([start], t, [rng], [draw])[0]
+            for start, rng, draw in zip(origins, rngs, draws)]
+
+
+def _body(kind: str, limits: Limits, rng: np.random.Generator
+          ) -> Callable[[np.ndarray], np.ndarray]:
+    """A sine-like class's motion about the range's centre (cosim.axis_references), at a
+    random share of the limits, drawn when called on its times (from 0)."""
+    def multisine(t: np.ndarray) -> np.ndarray:
+        return multisine_shape(limits, t, rng) * _share(rng)
+
+    def one_sine(t: np.ndarray) -> np.ndarray:
+        natural = natural_frequency(limits, 0.5 * (_band(limits)[1] - _band(limits)[0]))
+        return sine(limits, t, _share(rng), natural * float(rng.uniform(*FREQUENCY_SHARE)))
+
+    def random_path(t: np.ndarray) -> np.ndarray:
+        natural = natural_frequency(limits, 0.5 * (_band(limits)[1] - _band(limits)[0]))
+        return smooth_random(limits, t, rng, _share(rng),
+                             natural * float(rng.uniform(*FREQUENCY_SHARE)))
+
+    bodies = {"multisine": multisine, "sine": one_sine, "random": random_path}
+    return bodies[kind]
 
 
 Draw = Callable[[float, np.random.Generator], Shape]
@@ -212,31 +248,6 @@ def _spline_move(limits: Limits, position: float, rng: np.random.Generator) -> S
                 and max(-lowest, highest) >= MIN_STROKE * (high - low):
             return shape
     return quintic_spline([_target(limits, position, rng) - position], limits, share)
-
-
-def _multisine(limits: Limits, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """SINES sines in the band the limits allow (up to where the band's amplitude takes the
-    whole acceleration, down to two periods in the duration), faded in and out by
-    sin^2(pi t / T), scaled to a random share of the tightest limit."""
-    low, high = _band(limits)
-    half, duration = 0.5 * (high - low), float(t[-1])
-    top = math.sqrt(limits.acceleration / half) / (2 * math.pi)
-    frequencies = rng.uniform(min(max(0.1 * top, 2 / duration), top), top, SINES)
-    phases = rng.uniform(0, 2 * math.pi, SINES)
-    c = math.pi / duration
-    fade = [0.5 * (1 - np.cos(2 * c * t)), c * np.sin(2 * c * t), 2 * c * c * np.cos(2 * c * t),
-            -4 * c**3 * np.sin(2 * c * t)]
-    w = 2 * math.pi * frequencies[:, None]
-    angle = w * t + phases[:, None]
-    sines = [(w**n * np.sin(angle + n * math.pi / 2)).sum(0) for n in range(4)]
-    binomial = ((1,), (1, 1), (1, 2, 1), (1, 3, 3, 1))  # Leibniz's rule for fade * sines
-    derivatives = np.array([sum(b * fade[n - m] * sines[m] for m, b in enumerate(binomial[n]))
-                            for n in range(4)])
-    bounds = [half, limits.velocity, limits.acceleration, limits.jerk or math.inf]
-    scale = min(b / float(np.abs(d).max()) for b, d in zip(bounds, derivatives))
-    out = derivatives * scale * _share(rng)
-    out[0] += 0.5 * (limits.low + limits.high)
-    return out
 
 
 def check_limits(machine: Machine, duration: float, origin: str = "machine") -> None:

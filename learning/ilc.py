@@ -2,12 +2,13 @@
 force for that reference and so the limit a learned feedforward can be measured against.
 
 Trial 0 runs the loop under PID alone; after each trial the learning filter (learning.ilc_filter)
-gives the next trial's feedforward force, read as a CSV [[source]]. Every trial runs the one
-run path (cosim.scenario, cosim.run), with a fresh noise seed. The folder gets each trial's
-table, feedforward.csv (the best trial's force) and ilc.json, written as each trial ends, so
-an interrupted iteration continues, and e2.png once the call ends (its progress bar shows
-each trial's e2 before). ilc.json's `noise_floor` is the part of e2 that
-the loop's encoders cause (learning.ilc_loops).
+gives the next trial's force, read as a CSV [[source]], each trial on the one run path with a
+fresh noise seed. The folder gets each trial's table, feedforward.csv (the best trial's force)
+and ilc.json as each trial ends (an interrupted iteration continues), e2.png at the end;
+ilc.json's `noise_floor` is the part of e2 the loop's encoders cause (learning.ilc_loops).
+A trial whose e2 on an axis passes DIVERGENCE times its best, whose plant gives a value that
+is not finite or whose run fails ends the iteration: ilc.json's `diverged` says which and why,
+the best trial stays the result, one line says so (divergence_line).
 
 Docs: "ILC and the noise floor" (docs/explanation/ilc-noise-floor.md).
 """
@@ -27,17 +28,19 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from flexff.cosim.csv_text import TIME
+from flexff.cosim.master import CosimError
 from flexff.cosim.plots import save_figure
 from flexff.cosim.recording import atomic_write
 from flexff.cosim.run import output_folder
 from flexff.cosim.schema import RecordConfig, RunConfig
-from flexff.fmu.errors import InputError
-from flexff.learning.ilc_filter import CUTOFF_HZ, LearningFilter, check_cutoff
+from flexff.fmu.errors import InputError, RunError
+from flexff.learning.ilc_filter import CUTOFF_HZ, GAIN, LearningFilter, check_cutoff, check_gain
 from flexff.learning.ilc_loops import (
     IlcLoop,
     InverseModel,
     MachineLoop,
     ManipulatorLoop,
+    Trial,
     identified_on_trial,
 )
 from flexff.learning.loop import is_manipulator_loop
@@ -47,14 +50,22 @@ RESULT = "feedforward.csv"
 STATE = "ilc.json"
 NOISE_FLOOR = "noise_floor"  # ilc.json's key: e2 per axis of the measurement noise's share
 MACHINE_CUTOFF = 0.15  # Q's default corner on a machine's loop, a share of the rate
+# a trial whose e2 on an axis exceeds this many times that axis's best so far has diverged: a
+# converging iteration's e2 wanders near its floor by a few per cent from trial to trial (the
+# drive's and the manipulator's, 10 trials), a diverging one grows geometrically
+DIVERGENCE = 2.0
+DIVERGED = "diverged"  # ilc.json's key: the trial that ended the iteration, and why
 
 
-def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
+def ilc(config: RunConfig, out: str | Path, iterations: int | None = None,
         cutoff_hz: float | None = None, progress: bool = True,
         say: Callable[[str], None] = print, model: InverseModel | None = None,
-        floor: bool = True) -> dict[str, Any]:
+        floor: bool = True, gain: float | None = None) -> dict[str, Any]:
     """Run PID alone and `iterations` learning trials of `config` (continuing the iteration in
-    `out` where one with the same loop and cutoff is there); return the content of ilc.json.
+    `out` where one with the same loop, cutoff and gain is there); return the content of
+    ilc.json. `iterations`, `cutoff_hz` and the learning `gain` default to the loop's
+    `[machine.ilc]` settings, else ITERATIONS, the cutoff below and GAIN. A diverging
+    iteration stops (DIVERGENCE), keeps its best trial and says so in one line.
     A loop with a [machine] description learns each of its axes' feedforward inputs
     (learning.ilc_loops.MachineLoop; the filter's model is `model`, by default the linear
     model identified on trial 0), the manipulator's (learning.loop.is_manipulator_loop) is
@@ -63,40 +74,58 @@ def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
     12 trials: 35x PID alone at 20 Hz, 48x at 60 Hz, 163x at 150 Hz, where the rigid model
     still holds below its 250 Hz mount). `floor` measures the noise floor after the last
     trial (two more runs; learning.ilc_labels, which wants only the force, leaves it out)."""
+    settings = config.machine.ilc if config.machine is not None else None
+    if iterations is None:
+        iterations = (settings and settings.iterations) or ITERATIONS
     if iterations < 1:
         raise InputError(f"--iterations must be at least 1, got {iterations}")
+    gain = gain if gain is not None else (settings and settings.gain) or GAIN
+    check_gain(gain)
     plain = replace(config, record=RecordConfig(csv=False))
     manipulator = is_manipulator_loop(config)
     loop: IlcLoop = (ManipulatorLoop(plain) if manipulator
                      else MachineLoop(plain, model or identified_on_trial))
     if cutoff_hz is None:
-        cutoff_hz = CUTOFF_HZ if manipulator else MACHINE_CUTOFF / config.step
+        cutoff_hz = (settings and settings.cutoff_hz) or (
+            CUTOFF_HZ if manipulator else MACHINE_CUTOFF / config.step)
     check_cutoff(cutoff_hz, config.step)
     out = output_folder(out)
     (out / "tables").mkdir(exist_ok=True)
-    identity = {"loop": loop.identity(), "cutoff_hz": cutoff_hz}
+    identity = {"loop": loop.identity(), "cutoff_hz": cutoff_hz, "gain": gain}
     state = _resumed(out, identity)
     if not state["trials"]:
         _write_table(out / "tables" / "trial-000.csv", plain.step,
                      np.zeros((plain.steps + 1, len(loop.columns))), loop.columns)
     done = len(state["trials"])
+    stopped = DIVERGED in state
     if done:
-        say(f"{out}: {done} trial(s) there" + (", continuing" if done <= iterations else ""))
+        say(f"{out}: {done} trial(s) there" + (", continuing" if done <= iterations
+                                                and not stopped else ""))
+    if stopped:
+        say(divergence_line(state))
     filter_: LearningFilter | None = None
-    ran = done <= iterations
+    ran = done <= iterations and not stopped
     with tqdm(total=iterations + 1, initial=min(done, iterations + 1), unit="trial",
-              disable=not progress, desc="ILC") as bar:
-        for trial in range(done, iterations + 1):
-            ran_trial = loop.trial(out / "tables" / f"trial-{trial:03d}.csv", trial)
-            if filter_ is None:
-                filter_ = loop.learning_filter(ran_trial.recording, cutoff_hz)
-            _write_table(out / "tables" / f"trial-{trial + 1:03d}.csv", plain.step,
-                         filter_.update(ran_trial.applied, ran_trial.error), loop.columns)
-            state["trials"].append(_trial_record(trial, ran_trial.seed,
-                                                 loop.metrics(ran_trial.recording),
-                                                 state["trials"]))
+              disable=not progress or stopped, desc="ILC") as bar:
+        for trial in range(done, iterations + 1 if ran else done):
+            ran_trial, reason = _trial(loop, out / "tables" / f"trial-{trial:03d}.csv", trial)
+            if ran_trial is not None:
+                if filter_ is None:
+                    filter_ = replace(loop.learning_filter(ran_trial.recording, cutoff_hz),
+                                      gain=gain)
+                _write_table(out / "tables" / f"trial-{trial + 1:03d}.csv", plain.step,
+                             filter_.update(ran_trial.applied, ran_trial.error), loop.columns)
+                state["trials"].append(_trial_record(trial, ran_trial.seed,
+                                                     loop.metrics(ran_trial.recording),
+                                                     state["trials"]))
+                reason = _growth(state["trials"], loop.axes)
+            if reason is not None:
+                state[DIVERGED] = {"trial": trial, "reason": reason}
             _finish(out, state, loop)
             bar.update()
+            if reason is not None:
+                say(divergence_line(state))
+                break
             bar.set_postfix_str(", ".join(f"e2 {a} {state['trials'][-1][a]['e2']:.3g}"
                                           for a in loop.axes))
     if floor and (ran or NOISE_FLOOR not in state):
@@ -107,6 +136,46 @@ def ilc(config: RunConfig, out: str | Path, iterations: int = ITERATIONS,
         plot_trials(state["trials"], out / "e2.png", state.get(NOISE_FLOOR), loop.axes,
                     loop.unit)
     return state
+
+
+def _trial(loop: IlcLoop, table: Path, trial: int) -> tuple[Trial | None, str | None]:
+    """Run one trial: the trial, or None and why it diverged (its run failed, or its plant
+    gave a value that is not finite). Trial 0, PID alone, is the loop's own: its failure is
+    an error, not the iteration's."""
+    try:
+        ran = loop.trial(table, trial)
+    except CosimError as error:
+        if trial == 0:
+            raise
+        return None, f"its run failed: {str(error).splitlines()[0]}"
+    if not (np.all(np.isfinite(ran.applied)) and np.all(np.isfinite(ran.error))):
+        if trial == 0:
+            raise RunError("under PID alone the loop's effort or position is not finite: "
+                           "the loop itself is unstable on this reference")
+        return None, "the plant gave a value that is not finite"
+    return ran, None
+
+
+def _growth(trials: list[dict[str, Any]], axes: tuple[str, ...]) -> str | None:
+    """Why the last of `trials` diverged (its e2 on an axis beyond DIVERGENCE times that axis's
+    best before), None while it did not."""
+    if len(trials) < 2:
+        return None
+    last = trials[-1]
+    for axis in axes:
+        best = min(t[axis]["e2"] for t in trials[:-1])
+        if not last[axis]["e2"] <= DIVERGENCE * best:
+            return (f"e2 on {axis} grew to {last[axis]['e2']:.3g}, "
+                    f"{last[axis]['e2'] / best:.3g}x its best {best:.3g}")
+    return None
+
+
+def divergence_line(state: dict[str, Any]) -> str:
+    """One line: which trial diverged, why, and which trial the iteration keeps."""
+    diverged = state[DIVERGED]
+    return (f"ILC diverged at trial {diverged['trial']} ({diverged['reason']}): stopped, "
+            f"keeping trial {state['best']}, the best so far; a lower cutoff or gain, or a "
+            f"better model of the plant, may converge")
 
 
 def _trial_record(trial: int, seed: int | None, metrics: dict[str, dict[str, float]],
@@ -129,22 +198,23 @@ def _finish(out: Path, state: dict[str, Any], loop: IlcLoop) -> None:
 
 
 def _resumed(out: Path, identity: dict[str, Any]) -> dict[str, Any]:
-    """ilc.json of an earlier iteration of the same loop and cutoff in `out` (its trials
+    """ilc.json of an earlier iteration of the same loop, cutoff and gain in `out` (its trials
     whose next table is there), a fresh state in an empty folder; InputError for another
-    iteration's folder."""
+    iteration's folder. A record from before the gain was a setting learned with GAIN."""
     path = out / STATE
     if not path.is_file():
         return {**identity, "trials": []}
     try:
         state = json.loads(path.read_text("utf-8"))
+        state.setdefault("gain", GAIN)
         same = all(state[k] == v for k, v in identity.items())
         trials = state["trials"]
     except (ValueError, KeyError, TypeError):
         raise InputError(f"{path}: not the record of an ILC run: choose another output "
                          f"folder") from None
     if not same:
-        raise InputError(f"{out} holds an ILC run of another loop or cutoff: choose another "
-                         f"output folder, or delete it to start again")
+        raise InputError(f"{out} holds an ILC run of another loop, cutoff or gain: choose "
+                         f"another output folder, or delete it to start again")
     kept = 0  # the trials, in order, whose next table is there
     while kept < len(trials) and trials[kept]["trial"] == kept and (
             out / "tables" / f"trial-{kept + 1:03d}.csv").is_file():

@@ -1,11 +1,13 @@
 """The learning filter of iterative learning control (learning.ilc): from one trial's force and
 error to the next trial's feedforward force.
 
-The update is f_{j+1} = Q (u_j + P^-1 e_j): u_j the force the plant received (feedforward plus
-the controller's recorded feedback), P^-1 e_j the rigid-body inverse dynamics along the
-reference less along the trial's path, and Q a zero-phase Butterworth low-pass (filtfilt) that
-keeps the iteration away from what the rigid model misses. The iteration converges in the
-2-norm where |Q S (1 - P / P_model)| < 1 at every frequency.
+The update is f_{j+1} = Q (u_j + g P^-1 e_j): u_j the force the plant received (feedforward
+plus the controller's recorded feedback), P^-1 e_j the rigid-body inverse dynamics along the
+reference less along the trial's path, g the learning gain (1 by default) and Q a zero-phase
+Butterworth low-pass (filtfilt) that keeps the iteration away from what the rigid model misses.
+The iteration converges in the 2-norm where |Q (1 - g S P / P_model)| < 1 at every frequency:
+a model of the wrong sign (a negative identified mass) never does, one off by a factor converges
+with g below 2 / (that factor).
 
 Docs: "ILC and the noise floor" (docs/explanation/ilc-noise-floor.md).
 """
@@ -13,6 +15,7 @@ Docs: "ILC and the noise floor" (docs/explanation/ilc-noise-floor.md).
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -26,6 +29,7 @@ from flexff.plant.parameters import PlantParameters
 
 CUTOFF_HZ = 20.0  # Q's corner: half the hardware tool mode's frequency
 ORDER = 4  # Q's Butterworth order, run twice: 8th-order roll-off, zero phase
+GAIN = 1.0  # the learning gain g on the model's correction P^-1 e
 
 
 @dataclass(frozen=True)
@@ -38,6 +42,7 @@ class LearningFilter:
     inverse_dynamics: ca.Function  # (pos, vel, acc) -> F [N] of one sample
     reference: tuple[np.ndarray, np.ndarray, np.ndarray]
     cutoff_hz: float = CUTOFF_HZ
+    gain: float = GAIN
 
     @functools.cached_property
     def reference_force(self) -> np.ndarray:
@@ -66,32 +71,42 @@ class LearningFilter:
     def update(self, applied: np.ndarray, error: np.ndarray) -> np.ndarray:
         """The next trial's feedforward force (n, 2) [N] from the force the plant received,
         u_j = f_j + F_fb (n, 2) [N], and the tracking error e_j (n, 2) [m]."""
-        return self.q(applied + self.model_force(error))
+        return self.q(applied + self.gain * self.model_force(error))
 
 
 def learning_filter(reference: Mapping[str, np.ndarray], step: float,
-                    parameters: PlantParameters, cutoff_hz: float = CUTOFF_HZ
-                    ) -> LearningFilter:
+                    parameters: PlantParameters, cutoff_hz: float = CUTOFF_HZ,
+                    gain: float = GAIN) -> LearningFilter:
     """The learning filter of a loop whose plant has `parameters`, along `reference` (x_ref ..
     ay_ref, sampled every `step` seconds); InputError for a cutoff at or above the Nyquist
     frequency or a reference too short to filter."""
     motion = tuple(np.column_stack([reference[f"{d}x_ref"], reference[f"{d}y_ref"]])
                    for d in ("", "v", "a"))
     return filter_along((motion[0], motion[1], motion[2]), step,
-                        model_inverse_dynamics(parameters), cutoff_hz)
+                        model_inverse_dynamics(parameters), cutoff_hz, gain)
 
 
 def filter_along(motion: tuple[np.ndarray, np.ndarray, np.ndarray], step: float,
-                 inverse_dynamics: ca.Function, cutoff_hz: float = CUTOFF_HZ) -> LearningFilter:
+                 inverse_dynamics: ca.Function, cutoff_hz: float = CUTOFF_HZ,
+                 gain: float = GAIN) -> LearningFilter:
     """The learning filter of the model `inverse_dynamics` (pos, vel, acc) -> effort of one
     sample along the reference `motion` (position, velocity, acceleration, each (n, axes));
-    InputError for a cutoff at or above the Nyquist frequency or a reference too short."""
+    InputError for a cutoff at or above the Nyquist frequency, a gain that is not positive or
+    a reference too short."""
     check_cutoff(cutoff_hz, step)
+    check_gain(gain)
     n = motion[0].shape[0]
     if n <= 3 * (2 * ORDER + 1):
         raise InputError(f"the reference has {n} points: the learning filter needs more than "
                          f"{3 * (2 * ORDER + 1)}; lengthen run.stop")
-    return LearningFilter(step, inverse_dynamics, motion, cutoff_hz)
+    return LearningFilter(step, inverse_dynamics, motion, cutoff_hz, gain)
+
+
+def check_gain(gain: float) -> None:
+    """InputError unless the learning gain is a positive finite number."""
+    if not (isinstance(gain, int | float) and math.isfinite(gain) and gain > 0):
+        raise InputError(f"the learning gain {gain!r} must be a positive finite number "
+                         f"(1: the model's whole correction each trial)")
 
 
 def check_cutoff(cutoff_hz: float, step: float) -> None:

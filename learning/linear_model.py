@@ -7,13 +7,16 @@ the condition number of the column-scaled regressor and the relative error ||F -
 best of WIDTHS, fractions of the axis's velocity limit, refined between its neighbours). A
 column the data cannot tell from the columns before it (QR of the unit-norm columns in the
 prior's order, |R_kk| below RANK_TOLERANCE) is refused, naming the term and the combination of
-the others it equals.
+the others it equals. A fit that is unphysical or ill-determined is warned of in one line
+naming the axis and the term (IdentificationWarning): an inertia that is not positive, a
+friction term (POSITIVE_TERMS) clearly negative, or a condition number above CONDITION_LIMIT.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -52,7 +55,20 @@ CHOLESKY_FLOOR = 1e-5  # _triangular: below this diagonal of R, Householder's QR
 SAMPLES_PER_CUTOFF = 2.0
 EDGE_PERIODS = 2.0
 
+# terms whose parameter a physical axis has positive: an inertia, friction that opposes motion
+POSITIVE_TERMS = ("inertia", "viscous", "coulomb", "coulomb_positive", "coulomb_negative")
+NEGATIVE_STDS = 3.0  # a friction term warns below zero by more than this many deviations
+NEGLIGIBLE = 1e-3  # and its effort at the velocity limit above this share of the efforts' rms
+# the column-scaled regressor's condition number above which the fit warns: a drive's prior
+# (with cogging, with and without offset) on a multisine gives 3.6 and 5.9, a term a share
+# of 1e-3 from another 3.5e4 (tests/learning/test_linear_model.py's data)
+CONDITION_LIMIT = 1e4
+
 Filter = Callable[[np.ndarray], np.ndarray]  # (n, k) samples -> (m, k), along axis 0
+
+
+class IdentificationWarning(UserWarning):
+    """An identified model that is unphysical or ill-determined; the message names the term."""
 
 
 class IdentificationError(InputError):
@@ -132,7 +148,35 @@ def identify_linear(machine: Machine, motion: Motion | Sequence[Motion],
             return _fit(machine, k, stacked, labels, width)
 
         fits[axis.name] = _smallest_residual(fit_at, widths)
+        scale = float(np.sqrt(np.mean(labels**2)))
+        for problem in fit_problems(axis.name, fits[axis.name], scale, axis.limits.velocity):
+            warnings.warn(problem, IdentificationWarning, stacklevel=2)
     return LinearModel(machine, fits, lead_s)
+
+
+def fit_problems(axis: str, fit: AxisFit, effort_rms: float, velocity: float) -> list[str]:
+    """What makes one axis's fit suspect, a line each naming the term: an inertia that is not
+    positive (a feedforward with it pushes against the motion, and ILC on it diverges); a
+    friction term below zero by more than NEGATIVE_STDS standard deviations whose effort at
+    the axis's `velocity` limit is not negligible beside the efforts' rms `effort_rms`; a
+    condition number above CONDITION_LIMIT."""
+    problems = []
+    advice = (f"(relative error {fit.relative_error:.1%}): check the axis's effort sign and "
+              f"units, its prior's terms, and that the excitation moves it")
+    for term, value, std in zip(fit.terms, fit.parameters, fit.std):
+        if term not in POSITIVE_TERMS:
+            continue
+        effort = abs(value) * (velocity if term == "viscous" else 1.0)
+        if (value <= 0 if term == "inertia" else value < -NEGATIVE_STDS * std
+                and effort > NEGLIGIBLE * effort_rms):
+            problems.append(f"axis {axis}: the identified {term} is {value:.4g} (std "
+                            f"{std:.2g}), but a {term} must be positive {advice}")
+    if fit.condition > CONDITION_LIMIT:
+        problems.append(f"axis {axis}: the regressor's condition number is {fit.condition:.3g} "
+                        f"(above {CONDITION_LIMIT:g}): the data hardly tell the terms "
+                        f"{', '.join(fit.terms)} apart, so their values are unreliable; excite "
+                        f"the axis over more speeds and accelerations, or drop a term")
+    return problems
 
 
 def _smallest_residual(fit_at: Callable[[float], AxisFit], widths: list[float]) -> AxisFit:

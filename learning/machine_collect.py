@@ -3,23 +3,30 @@
 excitation set (learning.excitation) under its feedback alone, recorded as a machine dataset
 (learning.machine_dataset) at the loop's step.
 
-The excitation's tables are written to `references/` first; each trajectory runs in a worker
-process (cosim.executor, one per core) and its .npz is written as it ends, so an interrupted
-collection keeps what it finished: the same command again runs only the rest. A folder of
-another loop or excitation is refused (collection.json records both).
+Every trajectory starts where the loop rests (rest_positions: its measured positions at the
+start of a one-step run, the plant's initial outputs) and leads from there into the
+excitation (learning.excitation's starts): no trajectory begins with a step the controller
+answers with a spike of effort. The excitation's tables are written to `references/` first;
+each trajectory runs in a worker process (cosim.executor, one per core) and its .npz is
+written as it ends, so an interrupted collection keeps what it finished: the same command
+again runs only the rest. A folder of another loop or excitation is refused (collection.json
+records both).
 """
 
 from __future__ import annotations
 
 import json
+import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from tqdm import tqdm
 
 from flexff.cosim.config import expanded
+from flexff.cosim.csv_text import TIME
 from flexff.cosim.executor import execute
 from flexff.cosim.recording import atomic_write
 from flexff.cosim.run import simulate_config
@@ -63,12 +70,18 @@ def collect_machine(loop: RunConfig, out: str | Path, n_train: int = 24, n_test:
     machine = loop_machine(loop)
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
+    starts = rest_positions(loop)
+    centres = [0.5 * (a.limits.low + a.limits.high) for a in machine.axes]
     settings = {"loop": json.loads(json.dumps(expanded(loop), default=str)),
                 "n_train": n_train, "n_test": n_test, "duration": duration, "seed": seed,
-                "classes": list(classes)}
+                "classes": list(classes),
+                # where the loop rests, recorded where it is not every range's centre (a
+                # collection made before trajectories started there started at the centre)
+                **({"starts": dict(zip((a.name for a in machine.axes), starts))}
+                   if starts != centres else {})}
     _check_folder(folder, settings)
     excitations = excitation_set(machine, n_train, n_test, duration, 1.0 / loop.step, seed,
-                                 classes, origin=loop.origin)
+                                 classes, origin=loop.origin, starts=starts)
     (folder / "references").mkdir(exist_ok=True)
     entries, jobs = {}, []
     for excitation in excitations:
@@ -94,6 +107,26 @@ def collect_machine(loop: RunConfig, out: str | Path, n_train: int = 24, n_test:
                        f"{folder} (run the command again for the rest): {failed[0]}")
     write_machine_manifest(folder, machine, 1.0 / loop.step, list(entries.values()), SOURCE)
     return load_machine_dataset(folder, machine)
+
+
+def rest_positions(loop: RunConfig) -> list[float]:
+    """Where each axis of the loop rests when it starts: its measured position (the machine's
+    expression) at the start of a one-step run with the references held at the ranges'
+    centres and no feedforward; the plant's initial outputs, which no reference moves yet."""
+    machine = loop_machine(loop)
+    held = {TIME: np.array([0.0, loop.step])}
+    for axis in machine.axes:
+        centre = 0.5 * (axis.limits.low + axis.limits.high)
+        held[axis.reference] = np.full(2, centre)
+        held |= {name: np.zeros(2) for name in axis.derivatives}
+    with tempfile.TemporaryDirectory(prefix="flexff-rest-") as folder:
+        table = Path(folder) / "held.csv"
+        np.savetxt(table, np.column_stack(list(held.values())), fmt="%.17g", delimiter=",",
+                   header=",".join(held), comments="")
+        recording = simulate_config(on_references(loop, table, loop.step, "rest"),
+                                    progress=False)
+    signals = record_signals(recording, machine)
+    return [float(signals[axis.measured_signal][0]) for axis in machine.axes]
 
 
 def _check_folder(folder: Path, settings: dict[str, Any]) -> None:

@@ -1,22 +1,23 @@
 """`flexff evaluate --config LOOP.toml`: the whole workflow on any machine's loop, and the
 comparison an engineer would make, per axis.
 
-The loop's dataset is collected (learning.machine_collect), the linear model of its prior
-identified on the training trajectories (learning.linear_model), each model trained on features
-with the machine's identified friction widths (learning.machine_train, the models side by side
-in worker processes, one per core or shared GPUs), exported and built into its feedforward
-FMU; then, on the loop's own
-reference (its sources), the loop runs under PID alone, with the identified model's
-feedforward, with each learned one, and iterative learning control finds the best
-feedforward for that one reference (the limit; learning.ilc). summary.json holds every run's
-e2, einf, rms per axis and its e2 ratio PID alone / scenario, and where the description says how
-the loop measures exactly (`[machine] exact`) the noise floor and each run's own share over it;
-table.md the ratios; errors.png each run's tracking error per axis.
+The loop's dataset is collected (learning.machine_collect), its prior's linear model identified
+(learning.linear_model), each model trained with the identified friction widths side by side
+in worker processes (learning.machine_train), exported and built into its feedforward FMU; then,
+on the loop's own reference, the loop runs under PID alone, with the identified feedforward and
+each learned one, and ILC finds the limit (learning.ilc; its settings from the arguments, else
+[machine.ilc]; a diverged iteration keeps its best trial, a failed one leaves its column out,
+the evaluation goes on). summary.json holds every run's e2, einf, rms and e2 ratio PID alone /
+scenario per axis, the noise floor and own shares where `[machine] exact` is given, and how
+ILC ended; table.md the ratios and that line; errors.png each run's tracking error per axis.
+
+Docs: "Your own machine" (docs/tutorials/own-machine.md).
 """
 
 from __future__ import annotations
 
 import json
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,8 +38,9 @@ from flexff.cosim.schema import RunConfig
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError, RunError
 from flexff.learning.devices import pick_device, training_gpus
+from flexff.learning.excitation import CLASSES
 from flexff.learning.export import export
-from flexff.learning.ilc import NOISE_FLOOR, ilc
+from flexff.learning.ilc import DIVERGED, NOISE_FLOOR, divergence_line, ilc
 from flexff.learning.linear_model import write_linear_model
 from flexff.learning.machine_collect import collect_machine
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
@@ -60,10 +62,13 @@ SUMMARY = "summary.json"
 
 def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = MODELS,
                      preset: str = "fast", n_train: int = 24, n_test: int = 6,
-                     duration: float = 20.0, ilc_iterations: int = 10,
+                     duration: float = 20.0, ilc_iterations: int | None = None,
                      workers: int | None = None, progress: bool = True,
-                     **overrides: Any) -> dict[str, Any]:
-    """Collect, identify, train, export, build and compare on `loop`; write `out`."""
+                     ilc_cutoff_hz: float | None = None, ilc_gain: float | None = None,
+                     classes: Sequence[str] = CLASSES, **overrides: Any) -> dict[str, Any]:
+    """Collect, identify, train, export, build and compare on `loop`; write `out`. ILC's
+    `ilc_iterations`, `ilc_cutoff_hz` and `ilc_gain` default to the loop's [machine.ilc];
+    `classes` are the excitation's (learning.excitation)."""
     if n_test < 1:  # the comparison runs on the test trajectories
         raise InputError(f"n_test (--trajectories TRAIN TEST): {n_test!r}: the evaluation "
                          f"compares the models on the test trajectories: give at least one")
@@ -71,8 +76,8 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     machine = loop_machine(loop)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    data = collect_machine(loop, out / "data", n_train, n_test, duration, workers=workers,
-                           progress=progress)
+    data = collect_machine(loop, out / "data", n_train, n_test, duration, classes=classes,
+                           workers=workers, progress=progress)
     identified = identify_dataset(data)
     write_linear_model(identified, out / "identified.json")
     fmus = {"identified": build_fmu(inverse_model_system(
@@ -94,14 +99,15 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
         {a.name: {name: a.error(rec.signals, a.columns(rec.signals))
                   for name, rec in recordings.items()} for a in axes},
         {a.name: a.unit for a in machine.axes}, out / "errors.png")
-    limit = ilc(loop, out / "ilc", ilc_iterations, progress=progress, say=lambda _: None,
-                model=lambda _machine, _recording: identified.casadi_function())
-    best = next(t for t in limit["trials"] if t["trial"] == limit["best"])
-    metrics["ilc"] = {a.name: {k: best[a.name][k] for k in ("e2", "einf", "rms")}
-                      for a in machine.axes}
-    floor = limit.get(NOISE_FLOOR)
+    limit, ilc_record, ilc_line = _limit(loop, out, identified, ilc_iterations,
+                                         ilc_cutoff_hz, ilc_gain, progress)
+    if limit is not None:
+        best = next(t for t in limit["trials"] if t["trial"] == limit["best"])
+        metrics["ilc"] = {a.name: {k: best[a.name][k] for k in ("e2", "einf", "rms")}
+                          for a in machine.axes}
+    floor = limit.get(NOISE_FLOOR) if limit is not None else None
     summary = {"machine": machine.name, "axes": [a.name for a in machine.axes],
-               **({NOISE_FLOOR: floor} if floor else {}),
+               **({NOISE_FLOOR: floor} if floor else {}), "ilc": ilc_record,
                "scenarios": {name: {a: {**m, "e2_ratio": metrics["pid"][a]["e2"] / m["e2"],
                                         **(own_fields(m["e2"], floor[a]) if floor else {})}
                                     for a, m in per_axis.items()}
@@ -111,8 +117,40 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
                "identified": identified.to_dict()["axes"]}
     text = json.dumps(summary, indent=2) + "\n"
     atomic_write(out / SUMMARY, lambda tmp: tmp.write_text(text, "utf-8"))
-    atomic_write(out / "table.md", lambda tmp: tmp.write_text(ratio_table(summary), "utf-8"))
+    table = summary_table(summary, ilc_line)
+    atomic_write(out / "table.md", lambda tmp: tmp.write_text(table, "utf-8"))
     return summary
+
+
+def summary_table(summary: dict[str, Any], ilc_line: str) -> str:
+    """table.md: the e2 ratios (report.ratio_table), the ILC column headed as diverged where
+    it did, and the line that says how ILC ended."""
+    labels = {"ilc": "ilc (diverged: best so far)"} if DIVERGED in summary["ilc"] else None
+    return ratio_table(summary, labels) + "\n" + ilc_line + "\n"
+
+
+def _limit(loop: RunConfig, out: Path, identified: LinearModel, iterations: int | None,
+           cutoff_hz: float | None, gain: float | None, progress: bool
+           ) -> tuple[dict[str, Any] | None, dict[str, Any], str]:
+    """ILC on the loop's reference with the identified model (learning.ilc): its ilc.json
+    (None where it failed), the summary's record of it and a line for the table. A
+    divergence or a failure is warned of in one line and leaves the evaluation going."""
+    try:
+        limit = ilc(loop, out / "ilc", iterations, cutoff_hz, progress=progress,
+                    say=lambda _: None, gain=gain,
+                    model=lambda _machine, _recording: identified.casadi_function())
+    except RunError as error:
+        line = f"ILC failed, its column is left out: {error}"
+        warnings.warn(line, stacklevel=2)
+        return None, {"failed": str(error)}, line
+    record = {"best": limit["best"], "trials": len(limit["trials"]),
+              "cutoff_hz": limit["cutoff_hz"], "gain": limit["gain"]}
+    if DIVERGED in limit:
+        line = divergence_line(limit)
+        warnings.warn(line, stacklevel=2)
+        return limit, {**record, DIVERGED: limit[DIVERGED]}, line
+    return limit, record, (f"ILC: trial {limit['best']} the best of {len(limit['trials'])} "
+                           f"(cutoff {limit['cutoff_hz']:.4g} Hz, gain {limit['gain']:g})")
 
 
 def learned_features(identified: LinearModel) -> MachineFeatures:

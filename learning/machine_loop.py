@@ -5,9 +5,10 @@ feedforward inputs fed from a table (or zero), and a dataset's signals read from
 A loop is changed with dataclasses.replace and checked again as a file is (cosim.config.
 checked). The references come as a CSV time table with the machine's reference signals
 (`<axis>_ref` and its derivatives, learning.excitation writes them); the loop's own sources of
-those signals and its [reference] go. Each axis's feedforward input is fed by a connection from
-the source signal `<axis>_ff`: a column of a CSV table (`feedforward`, as ILC writes), else a
-constant zero (PID alone); whatever fed it before goes.
+those signals and its [reference] of them (an axis kind, cosim.axis_references) go. Each
+axis's feedforward input is fed by a connection from the source signal `<axis>_ff`: a column
+of a CSV table (`feedforward`, as ILC writes), else a constant zero (PID alone); whatever fed
+it before goes.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from flexff.cosim.axis_references import AXIS_KINDS
 from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import Machine
@@ -53,7 +55,8 @@ def on_references(loop: RunConfig, table: Path, stop: float, name: str,
     axis's feedforward from the CSV table `feedforward` (columns `<axis>_ff`) or zero."""
     machine = loop_machine(loop)
     given = set(machine.reference_signals)
-    reference = loop.reference if given.isdisjoint(Reference.SIGNALS) else None
+    reference = (loop.reference if given.isdisjoint(Reference.SIGNALS)
+                 and not (loop.reference and loop.reference.kind in AXIS_KINDS) else None)
     sources = (*_other_sources(loop, given), SourceConfig("csv", path=Path(table)))
     return with_feedforward(replace(loop, name=name, start=0.0, stop=stop, reference=reference,
                                     sources=sources), feedforward)

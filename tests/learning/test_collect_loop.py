@@ -236,9 +236,11 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
     seen = {}
 
     def fake(env, out, preset, models, data, epochs, loop, scheduler, currents=(),
-             device="auto", ilc_labels=(), force_input=()):
+             device="auto", ilc_labels=(), force_input=(), ilc_iterations=None,
+             ilc_cutoff_hz=None, ilc_gain=None):
         seen.update(env=env, loop=loop, scheduler=scheduler, device=device,
-                    ilc_labels=ilc_labels, force_input=force_input)
+                    ilc_labels=ilc_labels, force_input=force_input,
+                    ilc=(ilc_iterations, ilc_cutoff_hz, ilc_gain))
         (Path(out) / "table.md").write_text("| table |\n")
 
     monkeypatch.setattr("flexff.learning.evaluate.evaluate", fake)
@@ -246,7 +248,9 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
     config.write_text('[reference]\nkind = "thesis-eval"\n[plant]\nm_up1 = 0.13\n')
     assert main(["evaluate", "--config", str(config), "--env", "hardware", "-o",
                  str(tmp_path / "eval"), "--scheduler", "tcp://cluster:8786",
-                 "--ilc-labels", "pgnn", "--force-input", "tcn", "lstm"]) == 0
+                 "--ilc-labels", "pgnn", "--force-input", "tcn", "lstm",
+                 "--ilc-iterations", "3", "--ilc-gain", "0.5"]) == 0
+    assert seen["ilc"] == (3, None, 0.5)
     assert seen["env"] == "hardware" and seen["loop"].builtin("plant").parameters["m_up1"] == 0.13
     assert seen["scheduler"] == "tcp://cluster:8786" and seen["ilc_labels"] == ["pgnn"]
     assert seen["force_input"] == ["tcn", "lstm"]

@@ -11,12 +11,12 @@ import pytest
 
 from flexff.cosim.config import load_config
 from flexff.cosim.machine import parse_machine
+from flexff.cosim.motion_shapes import PiecewiseJerk
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import source_signals
 from flexff.cosim.schema import ConfigError, RunConfig, SourceConfig
 from flexff.learning.excitation import CLASSES, EVERY_CLASS, excitation_set, write_table
 from flexff.learning.excitation_plot import plot_excitation
-from flexff.learning.excitation_shapes import PiecewiseJerk
 from flexff.learning.machine_loop import loop_machine, on_references, record_signals
 from tests.learning.test_machine_loop import EXAMPLES, LOOP
 
@@ -61,9 +61,10 @@ def test_every_class_keeps_every_axis_within_its_limits(jerk):
             assert abs(v[0]) + abs(v[-1]) <= 1e-9 * limits.velocity  # at rest at both ends
             solo = excitation.kind == "solo"  # the k // 6-th solo moves axis k // 6 alone
             moves = excitation.kind != "rest" and (not solo or index == k // len(EVERY_CLASS))
-            least = 0.05 if excitation.kind == "multisine" else 0.15  # of the range
+            sines = excitation.kind in ("multisine", "sine", "random")  # scaled, not moves
+            least = 0.05 if sines else 0.15  # of the range
             assert (np.ptp(x) > least * span) == moves
-            if moves and excitation.kind != "multisine":  # moves reach for the limits
+            if moves and not sines:  # moves reach for the limits
                 assert max(np.abs(v).max() / limits.velocity,
                            np.abs(a).max() / limits.acceleration) > 0.3
     assert jerk is None or jerk_reached > 0.5  # the jerk limit binds
@@ -225,3 +226,9 @@ def test_a_move_ends_at_its_end_where_duration_rounds_past_its_segments(monkeypa
         lambda shape: math.fsum(s[0] for s in shape.segments)))  # Python 3.12's sum()
     x, v, a, _ = move(np.array([move.duration]))[:, 0]
     assert x == pytest.approx(0.5) and v == pytest.approx(0.0, abs=1e-12) and a == -10.0
+
+
+def test_the_cli_s_classes_are_the_module_s():
+    from flexff import cli
+
+    assert (cli.EXCITATION, cli.EVERY_EXCITATION) == (CLASSES, EVERY_CLASS)

@@ -173,10 +173,10 @@ def test_a_rerun_continues_after_the_last_finished_trial(iteration, tmp_path):
 
 def test_a_folder_of_another_iteration_is_refused(iteration, tmp_path):
     loop, out, _ = iteration
-    with pytest.raises(InputError, match="another loop or cutoff"):
+    with pytest.raises(InputError, match="another loop, cutoff or gain"):
         ilc(loop, out, iterations=1, cutoff_hz=10.0, progress=False)
     other = replace(loop, stop=1.0)
-    with pytest.raises(InputError, match="another loop or cutoff"):
+    with pytest.raises(InputError, match="another loop, cutoff or gain"):
         ilc(other, out, iterations=1, progress=False)
 
 
@@ -246,4 +246,5 @@ def test_the_cli_runs_and_reports_each_trial(tmp_path, capsys):
 
 
 def test_the_cli_defaults_are_the_module_defaults():
-    assert (cli.ITERATIONS, cli.CUTOFF_HZ) == (ilc_module.ITERATIONS, CUTOFF_HZ)
+    assert (cli.ITERATIONS, cli.CUTOFF_HZ, cli.GAIN) == (ilc_module.ITERATIONS, CUTOFF_HZ,
+                                                         ilc_module.GAIN)

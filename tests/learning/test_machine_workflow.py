@@ -50,6 +50,7 @@ def test_a_3_axis_machine_runs_the_whole_workflow(tmp_path):
                                epochs=1)
     assert summary["axes"] == list(AXES)
     assert set(summary["scenarios"]) == {"pid", "identified", "tcn", "pgnn", "ilc"}
+    assert summary["ilc"]["trials"] == 3 and "diverged" not in summary["ilc"]
     identified = summary["identified"]
     for k, axis in enumerate(AXES):
         inertia = identified[axis]["parameters"][0]

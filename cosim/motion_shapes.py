@@ -6,7 +6,8 @@ so that its peaks stay within `share` of an axis's Limits: the skew-sine move (t
 line, eq. 4.2), the bang-bang move (piecewise-constant acceleration, or jerk where the axis
 has a jerk limit: robot identification's trapezoidal and S-curve velocity profiles) and a
 clamped quintic spline through intermediate points, scaled in time. Any of them can be slowed
-down to a longer duration (Stretched: synchronised moves). learning.excitation chains them.
+down to a longer duration (Stretched: synchronised moves). learning.excitation chains them
+into a machine's excitation, cosim.axis_references into the reference kinds of any axes.
 """
 
 from __future__ import annotations
