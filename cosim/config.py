@@ -150,7 +150,8 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                             **({"allow_nonfinite": True} if f.allow_nonfinite else {}),
                             **({"fmi": f.fmi} if f.fmi != FMI_VERSIONS[0] else {}),
                             **({"solver": f.solver} if f.solver else {}),
-                            **({"scheduled": True} if f.scheduled else {})}
+                            **({"scheduled": True} if f.scheduled else {}),
+                            **({"feedthrough": False} if not f.feedthrough else {})}
                    for f in config.fmus}
     if config.connections:
         data["connection"] = [{"from": c.from_name, "to": c.to_name,
@@ -332,6 +333,14 @@ class _Parser(TableChecker):
     def isolate(self, t: Mapping[str, Any], where: str) -> bool:
         return self.flag(t, where, "isolate")
 
+    def feedthrough(self, t: Mapping[str, Any], where: str) -> bool:
+        """False where the table says its FMU's outputs depend on no input directly (its
+        model structure declares no dependencies, which FMI reads as every input)."""
+        value = t.get("feedthrough", True)
+        if not isinstance(value, bool):
+            raise self.error(f"{where}.feedthrough", f"expected true or false, got {value!r}")
+        return value
+
     def sandbox(self, t: Mapping[str, Any], where: str) -> Sandbox | None:
         """The sandbox of an isolated FMU (None: sandbox = false), with its limits."""
         given = [k for k in SANDBOX_KEYS if k in t]
@@ -418,7 +427,8 @@ class _Parser(TableChecker):
         allowed = self.nonfinite(t, where)
         if "path" in t:
             self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate",
-                                 "solver", "scheduled", "allow_nonfinite", *SANDBOX_KEYS))
+                                 "solver", "scheduled", "allow_nonfinite", "feedthrough",
+                                 *SANDBOX_KEYS))
             path = self.path(t, where, "path")
             info = self.fmu_info(path, where)
             return FmuConfig(name, path=path, parameters=self.fmu_parameters(info, parameters,
@@ -426,7 +436,8 @@ class _Parser(TableChecker):
                              unconnected=unconnected, tolerance=self.tolerance(t, where),
                              isolate=self.isolate(t, where), sandbox=self.sandbox(t, where),
                              solver=self.solver(t, where, info),
-                             scheduled=self.scheduled(t, where, info), allow_nonfinite=allowed)
+                             scheduled=self.scheduled(t, where, info), allow_nonfinite=allowed,
+                             feedthrough=self.feedthrough(t, where))
         builtins = registered()
         builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",

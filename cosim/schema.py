@@ -80,6 +80,7 @@ class FmuConfig:
     scheduled: bool = False  # through the FMU's scheduled-execution interface (fmu.scheduled)
     allow_nonfinite: bool = False  # NaN and infinite values allowed in and out (cosim.finite)
     fmi: int = 2  # the FMI version a built-in is built in (2 or 3)
+    feedthrough: bool = True  # False: no output depends directly on an input (cosim.wiring)
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,12 @@ class Port:
     info: FmuInfo
     unconnected: str = "error"  # or "start": unconnected inputs keep their start values
     given: frozenset[str] = frozenset()  # inputs the configuration gives a value
+    feedthrough: bool = True  # False: no output depends directly on an input, whatever the
+    # model structure says ([fmu.NAME] feedthrough = false)
+
+    def depends(self, output: str) -> bool:
+        """Whether `output` depends directly on an input of this FMU."""
+        return self.feedthrough and bool(self.info.dependencies[output])
 
 
 @dataclass(frozen=True)
@@ -188,6 +194,18 @@ def _unknown(port: Port, name: str, causality: str) -> str:
             f"{causality}s: {', '.join(known) or 'none'})")
 
 
+def _undeclared(ports: Mapping[str, Port]) -> str:
+    """The hint for FMUs whose outputs declare no dependencies (FMI: on every input), which
+    make every stepping order a loop where their outputs do not in fact depend on inputs."""
+    names = [n for n, p in ports.items() if p.feedthrough and p.info.undeclared]
+    if not names:
+        return ""
+    tables = " or ".join(f"[fmu.{n}]" for n in names)
+    return (f"; {' and '.join(names)} {'declares' if len(names) == 1 else 'declare'} no output "
+            f"dependencies, which FMI reads as depending on every input: where outputs do not "
+            f"depend directly on inputs (positions, states), set feedthrough = false in {tables}")
+
+
 def _checked(link: Link, c: ConnectionConfig | None, ports: Mapping[str, Port],
              position: Mapping[str, int], algorithm: str) -> Link:
     """The link with its kind and feedback flag, after the type, unit and loop checks."""
@@ -200,11 +218,11 @@ def _checked(link: Link, c: ConnectionConfig | None, ports: Mapping[str, Port],
         frm = producer.variables[link.signal]
         kind, unit = frm.kind, frm.unit
         feeds_back = algorithm == "jacobi" or position[link.producer] >= position[link.consumer]
-        if feeds_back and algorithm != "jacobi" and producer.dependencies[link.signal]:
+        if feeds_back and algorithm != "jacobi" and ports[link.producer].depends(link.signal):
             raise WiringError(key, f"{link.from_name} feeds {link.consumer}.{link.input}, which "
                               f"steps before {link.producer} (run.order), and depends directly on "
                               f"{link.producer}'s inputs: an algebraic loop; reorder the FMUs, or "
-                              f"run with algorithm = \"jacobi\"")
+                              f"run with algorithm = \"jacobi\"{_undeclared(ports)}")
         if not frm.scalar or not to.scalar:
             raise WiringError(key, f"{link.from_name} -> {link.consumer}.{link.input}: array "
                                    f"variables cannot be connected")

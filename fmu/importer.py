@@ -115,6 +115,12 @@ class FmuInfo:
     me_identifier: str | None = None  # the model-exchange interface's identifier, if it has one
     se_identifier: str | None = None  # the scheduled-execution interface's, if it has one
     model_description: Any = field(default=None, compare=False, repr=False)
+    declared: frozenset[str] = frozenset()  # outputs whose model structure lists dependencies
+
+    @property
+    def undeclared(self) -> frozenset[str]:
+        """Outputs without a dependency list: by FMI, each depends on every input."""
+        return frozenset(self.outputs) - self.declared
 
     @property
     def scheduled_only(self) -> bool:
@@ -198,10 +204,12 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
     parameters = tuple(n for n, v in variables.items()
                        if v.causality in ("parameter", "structuralParameter"))
     dependencies = {n: frozenset(inputs) for n in outputs}  # absent: depends on all (FMI)
+    declared = set()
     for unknown in md.outputs:
         if unknown.variable is not None and unknown.dependencies is not None:
             dependencies[unknown.variable.name] = frozenset(
                 d.name for d in unknown.dependencies if d.name in inputs)
+            declared.add(unknown.variable.name)
     step, stop, start, tolerance = (_experiment_value(path, md.defaultExperiment, name)
                                     for name in ("stepSize", "stopTime", "startTime",
                                                  "tolerance"))
@@ -211,7 +219,7 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
                    parameters, dependencies, step, stop, start, tolerance,
                    md.coSimulation is not None,
                    md.modelExchange.modelIdentifier if md.modelExchange else None,
-                   scheduled.modelIdentifier if scheduled else None, md)
+                   scheduled.modelIdentifier if scheduled else None, md, frozenset(declared))
 
 
 def typed_value(kind: str, value: Any) -> Any:
