@@ -536,9 +536,10 @@ def _export(args: argparse.Namespace) -> int:
 def _identify(args: argparse.Namespace) -> int:
     from flexff.cosim.run import output_folder
     from flexff.learning.evaluate import preprocessing
-    from flexff.learning.identify import identify, relative_gains, write_identification
+    from flexff.learning.identify import REPORT, identify, relative_gains, write_identification
     from flexff.learning.machine_dataset import is_machine_dataset
 
+    output_folder(args.output)  # a folder, as for every command: made, or refused, first
     if is_machine_dataset(args.data):
         from flexff.learning.linear_model import write_linear_model
         from flexff.learning.machine_dataset import load_machine_dataset
@@ -546,10 +547,9 @@ def _identify(args: argparse.Namespace) -> int:
 
         model = identify_dataset(load_machine_dataset(args.data))
         print(model.summary())
-        print(f"wrote {write_linear_model(model, args.output)}")
+        print(f"wrote {write_linear_model(model, Path(args.output) / REPORT)}")
         return 0
 
-    output_folder(args.output)
     identification = identify(args.data, preprocessing(args.env))
     path = write_identification(identification, args.output)
     rows = identification.rows()
@@ -848,11 +848,12 @@ def build_parser() -> argparse.ArgumentParser:
     export.set_defaults(handler=_export)
 
     identification = commands.add_parser(
-        "identify", help="identify the rigid-body model's parameters on a dataset folder by "
-                         "least squares (for the rigid-body feedforward)")
+        "identify", help="identify a dataset's physics prior by least squares (a machine's "
+                         "terms, or the manipulator's rigid-body model)")
     identification.add_argument("data", help="a dataset folder (its training split is used)")
     identification.add_argument("-o", "--output", required=True,
-                                help="the folder to write identified.json into")
+                                help="the folder to write identified.json into (made if "
+                                     "missing; an existing folder is written into)")
     identification.add_argument("--env", default="hardware", choices=("sim", "hardware"),
                                 help="preprocess as flexff evaluate's environment does: "
                                      "hardware (the thesis's: encoders counted, 1.8 Hz; for "
