@@ -158,6 +158,14 @@ def _fmu_build(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fmu_info(args: argparse.Namespace) -> int:
+    from flexff.fmu.info import fmu_summary, format_summary
+
+    summary = fmu_summary(args.file)
+    print(json.dumps(summary, indent=2) if args.json else format_summary(summary, args.all))
+    return 0
+
+
 def _fmu_validate(args: argparse.Namespace) -> int:
     """Exit 0 when no FMU has an error (warnings allowed), 1 when one has, 2 when a path is
     missing or unreadable."""
@@ -691,6 +699,14 @@ def build_parser() -> argparse.ArgumentParser:
                           help="seconds the run of one FMU may take before it counts as hung "
                                "(default: a minute, fmu.validation.TIMEOUT)")
     validate.set_defaults(handler=_fmu_validate)
+
+    fmu_info = fmu_commands.add_parser(
+        "info", help="what an FMU declares: ports, dependencies, default experiment, "
+                     "interfaces, platforms")
+    fmu_info.add_argument("file", help="an .fmu file")
+    fmu_info.add_argument("--all", action="store_true", help="list local variables too")
+    fmu_info.add_argument("--json", action="store_true", help="print JSON instead of text")
+    fmu_info.set_defaults(handler=_fmu_info)
 
     compare = fmu_commands.add_parser(
         "compare", help="run each FMU alone on its default experiment in flexff and in FMPy; "
