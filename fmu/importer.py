@@ -116,11 +116,13 @@ class FmuInfo:
     se_identifier: str | None = None  # the scheduled-execution interface's, if it has one
     model_description: Any = field(default=None, compare=False, repr=False)
     declared: frozenset[str] = frozenset()  # outputs whose model structure lists dependencies
+    states: frozenset[str] = frozenset()  # outputs that are continuous states (of Derivatives)
 
     @property
     def undeclared(self) -> frozenset[str]:
-        """Outputs without a dependency list: by FMI, each depends on every input."""
-        return frozenset(self.outputs) - self.declared
+        """Outputs without a dependency list that are no states: by FMI, each depends on
+        every input."""
+        return frozenset(self.outputs) - self.declared - self.states
 
     @property
     def scheduled_only(self) -> bool:
@@ -203,7 +205,10 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
     outputs = tuple(n for n, v in data.items() if v.causality == "output")
     parameters = tuple(n for n, v in variables.items()
                        if v.causality in ("parameter", "structuralParameter"))
-    dependencies = {n: frozenset(inputs) for n in outputs}  # absent: depends on all (FMI)
+    # absent: depends on every input (FMI), but for an output that is a continuous state,
+    # which only integration changes
+    states = _state_outputs(md, outputs)
+    dependencies = {n: frozenset() if n in states else frozenset(inputs) for n in outputs}
     declared = set()
     for unknown in md.outputs:
         if unknown.variable is not None and unknown.dependencies is not None:
@@ -219,7 +224,18 @@ def read_fmu(path: str | Path, checked: bool = True) -> FmuInfo:
                    parameters, dependencies, step, stop, start, tolerance,
                    md.coSimulation is not None,
                    md.modelExchange.modelIdentifier if md.modelExchange else None,
-                   scheduled.modelIdentifier if scheduled else None, md, frozenset(declared))
+                   scheduled.modelIdentifier if scheduled else None, md, frozenset(declared),
+                   frozenset(states - declared))
+
+
+def _state_outputs(md: Any, outputs: Sequence[str]) -> set[str]:
+    """The outputs that are continuous states: the `derivative` of a variable the model
+    structure lists among its derivatives, or an alias of one (its value reference)."""
+    states = {(d.variable.derivative.valueReference, d.variable.derivative.type)
+              for d in md.derivatives
+              if d.variable is not None and d.variable.derivative is not None}
+    by_name = {v.name: v for v in md.modelVariables}
+    return {n for n in outputs if (by_name[n].valueReference, by_name[n].type) in states}
 
 
 def typed_value(kind: str, value: Any) -> Any:

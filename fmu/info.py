@@ -1,7 +1,8 @@
 """What an FMU declares, for `flexff fmu info`: its ports (causality, type, unit, start, value
 reference), each output's direct dependencies on inputs (or that it declares none, which FMI
-reads as every input: cosim.wiring's algebraic-loop check), its default experiment, its
-interfaces and the platforms it carries binaries for, and whether it carries sources.
+reads as every input, but for a continuous state: cosim.wiring's algebraic-loop check), its
+default experiment, its interfaces and the platforms it carries binaries for, and whether it
+carries sources.
 
 Read by fmu.importer.read_fmu, unchecked (a description fmpy's validation would refuse is still
 shown: `flexff fmu validate` says what is wrong with it), and by the archive's file names.
@@ -41,7 +42,7 @@ def fmu_summary(path: str | Path) -> dict[str, Any]:
                        **({"array": True} if not v.scalar else {}),
                        **({"description": v.description} if v.description else {})}
                       for v in sorted(info.variables.values(), key=_port_order)],
-        "dependencies": {name: {"declared": name in info.declared,
+        "dependencies": {name: {"declared": name in info.declared, "state": name in info.states,
                                 "inputs": sorted(info.dependencies[name])}
                          for name in info.outputs},
     }
@@ -92,8 +93,9 @@ def format_summary(summary: dict[str, Any], everything: bool = False) -> str:
     for name, dependency in summary["dependencies"].items():
         inputs = ", ".join(dependency["inputs"]) or "none"
         lines.append(f"  {name}: {inputs}" if dependency["declared"] else
-                     f"  {name}: not declared, so by FMI every input")
-    if not all(d["declared"] for d in summary["dependencies"].values()):
+                     f"  {name}: none (not declared; a continuous state)" if dependency["state"]
+                     else f"  {name}: not declared, so by FMI every input")
+    if not all(d["declared"] or d["state"] for d in summary["dependencies"].values()):
         lines.append("(where the outputs not declared are states, feedthrough = false in the "
                      "FMU's [fmu.NAME] table lets Gauss-Seidel step it before their readers)")
     return "\n".join(lines)

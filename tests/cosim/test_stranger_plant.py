@@ -3,6 +3,8 @@ connections, records and the machine description, and an FMU that declares no ou
 dependencies stepped by Gauss-Seidel once `feedthrough = false` says its outputs are states."""
 
 import json
+import re
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -16,6 +18,7 @@ from flexff.cosim.schema import ConfigError
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import read_fmu
 from tests.array_plant import AXES, build_array_plant
+from tests.helpers import REFERENCE_FMUS
 
 TARGETS = (0.1, 0.05, 0.02)
 AXIS_NAMES = ("r", "y", "z")
@@ -122,3 +125,21 @@ def test_a_description_of_logs_alone_needs_no_loop_signals(folder: Path):
     with pytest.raises(ConfigError, match=r"machine\.axis\[0\]\.measured: required where a "
                                           r"loop is run"):
         run_config(folder / "run.toml", folder / "out")
+
+
+def test_an_output_that_is_a_state_depends_on_no_input_without_a_declaration(tmp_path):
+    """The Reference FMUs' VanDerPol with its dependency lists taken out: its outputs x0, x1
+    are the states of its Derivatives, which only integration changes."""
+    source = REFERENCE_FMUS / "fmi2" / "VanDerPol.fmu"
+    stripped = tmp_path / "VanDerPol.fmu"
+    with zipfile.ZipFile(source) as original, zipfile.ZipFile(stripped, "w") as out:
+        for item in original.infolist():
+            data = original.read(item)
+            if item.filename == "modelDescription.xml":
+                data = re.sub(rb'(<Outputs>.*?</Outputs>)', lambda m: re.sub(
+                    rb' dependencies="[^"]*"(?: dependenciesKind="[^"]*")?', b"", m.group(1)),
+                    data, flags=re.DOTALL)
+            out.writestr(item, data)
+    info = read_fmu(stripped)
+    assert info.declared == set() and info.states == {"x0", "x1"}
+    assert info.undeclared == set() and info.dependencies["x0"] == set()

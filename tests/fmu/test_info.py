@@ -28,7 +28,7 @@ def test_undeclared_dependencies_are_told_with_the_setting(tmp_path, capsys):
     plant = build_array_plant(tmp_path)
     summary = fmu_summary(plant)
     assert summary["dependencies"]["pos[1]"] == {
-        "declared": False, "inputs": ["force[1]", "force[2]", "force[3]"]}
+        "declared": False, "state": False, "inputs": ["force[1]", "force[2]", "force[3]"]}
     assert main(["fmu", "info", str(plant)]) == 0
     text = capsys.readouterr().out
     assert "pos[1]: not declared, so by FMI every input" in text
