@@ -333,12 +333,19 @@ class _Parser(TableChecker):
     def isolate(self, t: Mapping[str, Any], where: str) -> bool:
         return self.flag(t, where, "isolate")
 
-    def feedthrough(self, t: Mapping[str, Any], where: str) -> bool:
+    def feedthrough(self, t: Mapping[str, Any], where: str, info: FmuInfo) -> bool:
         """False where the table says its FMU's outputs depend on no input directly (its
-        model structure declares no dependencies, which FMI reads as every input)."""
+        model structure declares no dependencies, which FMI reads as every input); refused
+        where the FMU declares an output that does."""
         value = t.get("feedthrough", True)
         if not isinstance(value, bool):
             raise self.error(f"{where}.feedthrough", f"expected true or false, got {value!r}")
+        direct = sorted(n for n in info.declared if info.dependencies[n])
+        if not value and direct:
+            raise self.error(f"{where}.feedthrough", f"{info.path.name} declares that "
+                             f"{', '.join(direct)} depend{'s' if len(direct) == 1 else ''} "
+                             "directly on its inputs: feedthrough = false is for an FMU that "
+                             "declares no dependencies; leave it out (or reorder the FMUs)")
         return value
 
     def sandbox(self, t: Mapping[str, Any], where: str) -> Sandbox | None:
@@ -437,7 +444,7 @@ class _Parser(TableChecker):
                              isolate=self.isolate(t, where), sandbox=self.sandbox(t, where),
                              solver=self.solver(t, where, info),
                              scheduled=self.scheduled(t, where, info), allow_nonfinite=allowed,
-                             feedthrough=self.feedthrough(t, where))
+                             feedthrough=self.feedthrough(t, where, info))
         builtins = registered()
         builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",

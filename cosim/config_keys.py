@@ -122,7 +122,8 @@ KEYS: tuple[Key, ...] = (
     Key("fmu.NAME", "feedthrough", "boolean", "true (as the FMU's model structure says)", "",
         "false: no output depends directly on an input (an FMU that declares no output "
         "dependencies, which FMI reads as every input, but whose outputs are positions or "
-        "states), so Gauss-Seidel may step it first.", ("path",)),
+        "states), so Gauss-Seidel may step it first; refused for an FMU that declares one "
+        "that does.", ("path",)),
     Key("fmu.NAME", "solver", "string", "none (co-simulation)", "",
         '"cvode": run the FMU as model exchange.', ("path",)),
     Key("fmu.NAME", "scheduled", "boolean", "false (true for an FMU with that interface alone)",

@@ -143,3 +143,16 @@ def test_an_output_that_is_a_state_depends_on_no_input_without_a_declaration(tmp
     info = read_fmu(stripped)
     assert info.declared == set() and info.states == {"x0", "x1"}
     assert info.undeclared == set() and info.dependencies["x0"] == set()
+
+
+def test_feedthrough_false_is_refused_for_an_fmu_declaring_direct_dependencies(tmp_path):
+    """The setting stands in for dependencies an FMU leaves out, never against ones it gives."""
+    fmu = REFERENCE_FMUS / "fmi2" / "Feedthrough.fmu"
+    data = {"fmu": {"ft": {"path": str(fmu), "unconnected": "start", "feedthrough": False}}}
+    with pytest.raises(ConfigError, match=r"fmu\.ft\.feedthrough: Feedthrough\.fmu declares "
+                                          r"that .*Float64_continuous_output.* depend directly "
+                                          r"on its inputs"):
+        parse_config(data)
+    vdp = {"fmu": {"vdp": {"path": str(REFERENCE_FMUS / "fmi2" / "VanDerPol.fmu"),
+                           "feedthrough": False}}}
+    assert not parse_config(vdp).fmus[0].feedthrough  # declared, and none direct: harmless
