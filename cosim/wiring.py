@@ -13,6 +13,7 @@ The rules and why: "The master algorithm", section Connections and types
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -128,6 +129,10 @@ def wire(ports: Sequence[Port], sources: Collection[str],
     by_name = {p.name: p for p in ports}
     position = {n: i for i, n in enumerate(names)}
     explicit = {c.to_name: c for c in connections}
+    for target in connections:  # a mistyped target first: it is why its input is unconnected
+        consumer, _, name = target.to_name.partition(".")
+        if name not in by_name[consumer].info.inputs:
+            raise WiringError(f"{target.key}.to", _unknown(by_name[consumer], name, "input"))
     producers = _producers(ports, sources)
     links = []
     for port in ports:
@@ -155,10 +160,6 @@ def wire(ports: Sequence[Port], sources: Collection[str],
                 link = Link(producer or SOURCE, signal, port.name, name)
                 c = None
             links.append(_checked(link, c, by_name, position, algorithm))
-    for c in connections:
-        consumer, _, name = c.to_name.partition(".")
-        if name not in by_name[consumer].info.inputs:
-            raise WiringError(f"{c.key}.to", _unknown(by_name[consumer], name, "input"))
     return links
 
 
@@ -190,8 +191,10 @@ def _explicit(c: ConnectionConfig, ports: Mapping[str, Port], sources: Collectio
 
 def _unknown(port: Port, name: str, causality: str) -> str:
     known = getattr(port.info, f"{causality}s")
-    return (f"{port.info.path.name} ({port.name}) has no {causality} {name!r} (its "
-            f"{causality}s: {', '.join(known) or 'none'})")
+    close = difflib.get_close_matches(name, known, n=1)
+    return (f"{port.info.path.name} ({port.name}) has no {causality} {name!r}"
+            f"{f' (did you mean {close[0]!r}?)' if close else ''} (its {causality}s: "
+            f"{', '.join(known) or 'none'})")
 
 
 def _undeclared(ports: Mapping[str, Port]) -> str:

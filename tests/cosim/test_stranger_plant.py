@@ -156,3 +156,13 @@ def test_feedthrough_false_is_refused_for_an_fmu_declaring_direct_dependencies(t
     vdp = {"fmu": {"vdp": {"path": str(REFERENCE_FMUS / "fmi2" / "VanDerPol.fmu"),
                            "feedthrough": False}}}
     assert not parse_config(vdp).fmus[0].feedthrough  # declared, and none direct: harmless
+
+
+def test_a_mistyped_connection_target_is_named_before_the_input_it_leaves_unconnected(
+        folder: Path):
+    (folder / "run.toml").write_text(loop_config(False).replace('to = "plant.force[1]"',
+                                                                'to = "plant.force(1)"'))
+    with pytest.raises(ConfigError, match=r"connection\[0\]\.to: arrayplant\.fmu \(plant\) has "
+                                          r"no input 'force\(1\)' \(did you mean "
+                                          r"'force\[1\]'\?\)"):
+        run_config(folder / "run.toml", folder / "out")
