@@ -91,7 +91,8 @@ def _run_job(job: tuple[RunConfig | str | Path, Path, bool]) -> BatchResult:
 
 def sweep(path: str | Path, axes: Mapping[str, Sequence[Any]]) -> list[RunConfig]:
     """Copies of the run configuration at `path` (TOML or SSP) with each key of `axes`
-    (dotted: `plant.m_up1`, `fmu.vdp.parameters.mu`, `run.step`) set to each of its values, one
+    (dotted: `plant.m_up1`, `fmu.vdp.parameters.mu`, `run.step`; a table in a list by its
+    name: `fmu.pid.axes.x.crossover_hz`) set to each of its values, one
     copy per combination (the product, the last key varying fastest), named
     <stem>-<key>=<value>-...; each copy is checked like any configuration, its errors naming
     the file and key. A TOML file is edited as written (its short form included), an SSP file
@@ -135,12 +136,27 @@ def _set(data: dict[str, Any], key: str, value: Any, path: Path) -> None:
     if tables[0] == "fmu" and len(tables) > 1 and tables[1] not in fmus:
         raise ConfigError(str(path), key, f"no FMU {tables[1]!r} in the file (its FMUs: "
                                           f"{', '.join(fmus) or 'none'})")
-    table = data
-    for part in tables:
-        table = table.setdefault(part, {})
-        if not isinstance(table, dict):
+    table: Any = data
+    for k, part in enumerate(tables):
+        table = _named(table, part, ".".join(tables[:k]), key, path) \
+            if isinstance(table, list) else table.setdefault(part, {})
+        if not isinstance(table, dict | list):
             raise ConfigError(str(path), key, f"{part!r} is not a table")
+    if not isinstance(table, dict):
+        raise ConfigError(str(path), key, f"{tables[-1]!r} lists tables: name one of them "
+                                          f"({'.'.join(tables)}.NAME.{name})")
     table[name] = value
+
+
+def _named(tables: list[Any], name: str, where: str, key: str, path: Path) -> dict[str, Any]:
+    """The table of the list `tables` whose `name` is `name` (an axis of `axes = [{name =
+    "x", ...}]` or of [[machine.axis]]): a sweep key addresses it as LIST.NAME.KEY."""
+    found = [t for t in tables if isinstance(t, dict) and t.get("name") == name]
+    if len(found) != 1:
+        names = [str(t.get("name")) for t in tables if isinstance(t, dict) and "name" in t]
+        raise ConfigError(str(path), key, f"{where} lists no table named {name!r} (its "
+                                          f"tables' names: {', '.join(names) or 'none'})")
+    return found[0]
 
 
 def _folder_name(text: str) -> str:

@@ -162,7 +162,8 @@ def expanded(config: RunConfig) -> dict[str, Any]:
                             **({"fmi": f.fmi} if f.fmi != FMI_VERSIONS[0] else {}),
                             **({"solver": f.solver} if f.solver else {}),
                             **({"scheduled": True} if f.scheduled else {}),
-                            **({"strict": True} if f.strict else {})}
+                            **({"strict": True} if f.strict else {}),
+                            **({"feedthrough": False} if not f.feedthrough else {})}
                    for f in config.fmus}
     if config.connections:
         data["connection"] = [{"from": c.from_name, "to": c.to_name,
@@ -349,6 +350,21 @@ class _Parser(TableChecker):
     def isolate(self, t: Mapping[str, Any], where: str) -> bool:
         return self.flag(t, where, "isolate")
 
+    def feedthrough(self, t: Mapping[str, Any], where: str, info: FmuInfo) -> bool:
+        """False where the table says its FMU's outputs depend on no input directly (its
+        model structure declares no dependencies, which FMI reads as every input); refused
+        where the FMU declares an output that does."""
+        value = t.get("feedthrough", True)
+        if not isinstance(value, bool):
+            raise self.error(f"{where}.feedthrough", f"expected true or false, got {value!r}")
+        direct = sorted(n for n in info.declared if info.dependencies[n])
+        if not value and direct:
+            raise self.error(f"{where}.feedthrough", f"{info.path.name} declares that "
+                             f"{', '.join(direct)} depend{'s' if len(direct) == 1 else ''} "
+                             "directly on its inputs: feedthrough = false is for an FMU that "
+                             "declares no dependencies; leave it out (or reorder the FMUs)")
+        return value
+
     def sandbox(self, t: Mapping[str, Any], where: str) -> Sandbox | None:
         """The sandbox of an isolated FMU (None: sandbox = false), with its limits."""
         given = [k for k in SANDBOX_KEYS if k in t]
@@ -436,6 +452,7 @@ class _Parser(TableChecker):
         if "path" in t:
             self.keys(t, where, ("path", "parameters", "unconnected", "tolerance", "isolate",
                                  "solver", "scheduled", "allow_nonfinite", "strict",
+                                 "feedthrough",
                                  *SANDBOX_KEYS))
             path = self.path(t, where, "path")
             strict = self.flag(t, where, "strict")
@@ -446,7 +463,7 @@ class _Parser(TableChecker):
                              isolate=self.isolate(t, where), sandbox=self.sandbox(t, where),
                              solver=self.solver(t, where, info),
                              scheduled=self.scheduled(t, where, info), allow_nonfinite=allowed,
-                             strict=strict)
+                             strict=strict, feedthrough=self.feedthrough(t, where, info))
         builtins = registered()
         builtin = builtins[self.choice(t, where, "builtin", tuple(builtins), None)]
         self.keys(t, where, ("builtin", "parameters", "unconnected", "tolerance", "isolate",

@@ -140,6 +140,11 @@ KEYS: tuple[Key, ...] = (
     Key("fmu.NAME", "fmi", "integer", "2", "",
         "The FMI version a built-in is built in: 2 or 3 (3.0, bit-equal to 2.0).",
         ("builtin",)),
+    Key("fmu.NAME", "feedthrough", "boolean", "true (as the FMU's model structure says)", "",
+        "false: no output depends directly on an input (an FMU that declares no output "
+        "dependencies, which FMI reads as every input, but whose outputs are positions or "
+        "states), so Gauss-Seidel may step it first; refused for an FMU that declares one "
+        "that does.", ("path",)),
     Key("fmu.NAME", "solver", "string", "none (co-simulation)", "",
         '"cvode": run the FMU as model exchange.', ("path",)),
     Key("fmu.NAME", "scheduled", "boolean", "false (true for an FMU with that interface alone)",
@@ -175,13 +180,14 @@ KEYS: tuple[Key, ...] = (
     Key("machine.axis", "name", "string", "required", "",
         "A letter, then letters or digits; names <axis>_ref, v<axis>_ref, ..."),
     Key("machine.axis", "unit", "string", '"m"', "", "The axis's position unit."),
-    Key("machine.axis", "measured", "string", "required", "",
-        '"instance.variable", or an expression of outputs (a kinematic map).'),
+    Key("machine.axis", "measured", "string", "required where a loop is run", "",
+        '"instance.variable" (FMI names too: plant.pos[1], plant.der(x), plant.\'my var\'), '
+        "or an expression of outputs (a kinematic map)."),
     Key("machine.axis", "true", "string", "none", "",
         "The true position a simulation gives; only the metrics read it."),
-    Key("machine.axis", "feedforward", "string", "required", "",
+    Key("machine.axis", "feedforward", "string", "required where a loop is run", "",
         "The FMU input the feedforward drives."),
-    Key("machine.axis", "effort", "string", "required", "",
+    Key("machine.axis", "effort", "string", "required where a loop is run", "",
         "The output the controller commands: the labels."),
     Key("machine.axis", "effort_unit", "string", '"N"', "", "The effort's unit."),
     Key("machine.axis", "range", "[low, high]", "required", "axis unit",

@@ -1,17 +1,20 @@
 """A machine description: the axes a feedforward is learned for, as plain data checked once.
 
-Given in a run configuration as `[machine]` (or `machine = "FILE.toml"`), read by
-`parse_machine`, checked against the loop's FMUs by `check_signals`. Each `[[machine.axis]]`
-names the axis (its references `<axis>_ref`, `v<axis>_ref`, `a<axis>_ref`, `j<axis>_ref`), the
-measured position (`instance.variable` or an expression of outputs; `true`, optional, only
-for the metrics), the feedforward input, the commanded effort (the labels), units and the
-excitation limits (`range`, `velocity`, `acceleration`, optional `jerk`); datasets name them
-`<axis>_measured`, `<axis>_effort`. `[machine.prior]` chooses the prior's terms per axis
-(PRIOR_TERMS and user expressions), `[machine.log]` how logs name the signals (LogMap),
-`exact` the start values that measure exactly (the noise floor), `[machine.ilc]` ILC's
-settings (IlcSettings). Every key is in KEYS; every error a ConfigError naming `machine.key`.
-
-Docs: "Run configuration", [machine] (docs/reference/configuration.md).
+Given in a run configuration as `[machine]` (or `machine = "FILE.toml"`, a file holding such a
+table), read by `parse_machine`, then checked against the loop's FMUs by `check_signals`. Each
+`[[machine.axis]]` names the axis (its reference signals are `<axis>_ref`, `v<axis>_ref`,
+`a<axis>_ref`, `j<axis>_ref`, derived by flexff), the measured position (`instance.variable`,
+or an expression of such outputs: the kinematic map; `true`, optional: the true position a
+simulation gives, which only the metrics read), the FMU input the feedforward drives,
+the effort the loop commands (the labels): these three are asked of a loop only, a description
+of logs alone leaves them out; units, and the excitation limits (`range`,
+`velocity`, `acceleration`, optional `jerk`); records and datasets name the measured position
+`<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
+terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
+`[machine.log]` says how the machine's logs name these signals (LogMap: `flexff data import`);
+`exact` the start values with which the loop measures exactly (its noise floor's measure).
+`[machine.ilc]` ILC's settings (IlcSettings).
+Every key is listed in KEYS; every error is a ConfigError naming `machine.key`.
 """
 
 from __future__ import annotations
@@ -22,9 +25,10 @@ import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from flexff.cosim.schema import ConfigError
+from flexff.fmu.errors import InputError
 from flexff.fmu.expressions import (
     CONSTANTS,
     FUNCTIONS,
@@ -32,6 +36,13 @@ from flexff.fmu.expressions import (
     ExpressionError,
     parse_expression,
 )
+
+T = TypeVar("T")
+
+
+class MissingLoopSignal(InputError):
+    """A loop signal asked of an axis whose description (of logs alone) does not give it."""
+
 
 AXIS_NAME = re.compile(r"[A-Za-z][A-Za-z0-9]*\Z")
 SCALAR_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
@@ -59,18 +70,49 @@ class Limits:
     jerk: float | None = None
 
 
+LOOP_SIGNALS = ("measured", "feedforward", "effort")  # an axis's signals in a loop
+LOOP_SIGNALS_HELP = {"measured": "measured position (\"instance.variable\", or an expression "
+                                 "of outputs)",
+                     "feedforward": "input the feedforward drives (\"instance.variable\")",
+                     "effort": "commanded effort, the labels (\"instance.variable\")"}
+
+
 @dataclass(frozen=True)
 class Axis:
-    """One axis: what the loop measures and commands on it, in which units."""
+    """One axis: what the loop measures and commands on it, in which units. A description of
+    logs alone gives no loop signals (None); `measured`, `feedforward` and `effort` are asked
+    of a loop only, and check_signals refuses a loop's description that lacks one."""
 
     name: str
-    measured: Expression  # of "instance.variable" outputs; a bare name is the signal itself
-    feedforward: str  # "instance.variable": the FMU input the learned model drives
-    effort: str  # "instance.variable": the commanded effort, the model's label
+    loop_measured: Expression | None  # of "instance.variable" outputs; a bare name is the
+    # signal itself
+    loop_feedforward: str | None  # "instance.variable": the FMU input the learned model drives
+    loop_effort: str | None  # "instance.variable": the commanded effort, the model's label
     limits: Limits
     unit: str = "m"
     effort_unit: str = "N"
     true: Expression | None = None  # the true position, for evaluation only (a simulation's)
+
+    @property
+    def measured(self) -> Expression:
+        """The measured position in the loop (MissingLoopSignal in a logs-only description)."""
+        return self._given(self.loop_measured, "measured")
+
+    @property
+    def feedforward(self) -> str:
+        """The FMU input the learned model drives (MissingLoopSignal where not given)."""
+        return self._given(self.loop_feedforward, "feedforward")
+
+    @property
+    def effort(self) -> str:
+        """The loop's commanded effort (MissingLoopSignal where not given)."""
+        return self._given(self.loop_effort, "effort")
+
+    def _given(self, value: T | None, part: str) -> T:
+        if value is None:
+            raise MissingLoopSignal(f"machine axis {self.name!r}: no {part} given; a loop's "
+                                    f"description names {', '.join(LOOP_SIGNALS)} per axis")
+        return value
 
     @property
     def evaluated(self) -> Expression:
@@ -214,9 +256,11 @@ def parse_machine(table: Any, origin: str, base: Path = Path(".")) -> Machine:
 
 def machine_table(machine: Machine) -> dict[str, Any]:
     """The description as the TOML table `parse_machine` reads (cosim.config.expanded)."""
-    axes = [{"name": a.name, "unit": a.unit, "measured": a.measured.text,
-             **({"true": a.true.text} if a.true else {}), "feedforward": a.feedforward,
-             "effort": a.effort, "effort_unit": a.effort_unit,
+    axes = [{"name": a.name, "unit": a.unit,
+             **({"measured": a.loop_measured.text} if a.loop_measured else {}),
+             **({"true": a.true.text} if a.true else {}),
+             **({"feedforward": a.loop_feedforward} if a.loop_feedforward else {}),
+             **({"effort": a.loop_effort} if a.loop_effort else {}), "effort_unit": a.effort_unit,
              "range": [a.limits.low, a.limits.high], "velocity": a.limits.velocity,
              "acceleration": a.limits.acceleration,
              **({"jerk": a.limits.jerk} if a.limits.jerk is not None else {})}
@@ -241,6 +285,11 @@ def check_signals(machine: Machine, outputs: Iterable[str], inputs: Iterable[str
     outputs, inputs = set(outputs), set(inputs)
     for k, axis in enumerate(machine.axes):
         key = f"machine.axis[{k}]"
+        for part, value in zip(LOOP_SIGNALS, (axis.loop_measured, axis.loop_feedforward,
+                                              axis.loop_effort), strict=True):
+            if value is None:
+                raise ConfigError(origin, f"{key}.{part}", "required where a loop is run: "
+                                  f"name the loop's {LOOP_SIGNALS_HELP[part]}")
         for part, position in (("measured", axis.measured), ("true", axis.true)):
             for name in sorted(position.names if position else ()):
                 if name not in outputs:
@@ -255,6 +304,13 @@ def check_signals(machine: Machine, outputs: Iterable[str], inputs: Iterable[str
         if axis.effort in axis.measured.names:
             raise ConfigError(origin, f"{key}.effort", f"{axis.effort!r} is the measured "
                               "position, not an effort: name the output the controller commands")
+
+
+def _instance_variable(text: str) -> bool:
+    """Whether `text` is an FMU's instance name, a dot and a variable's name (any, as FMI's
+    flat names may be; the loop's check finds one its FMU lacks)."""
+    instance, dot, variable = text.partition(".")
+    return bool(dot and instance and variable.strip() and not re.search(r"\s", instance))
 
 
 def _nearest(name: str, names: set[str]) -> str:
@@ -302,8 +358,9 @@ class _Check:
 
     def signal(self, table: Mapping[str, Any], key: str, name: str) -> str:
         value = self.text(table, key, name)
-        if not re.fullmatch(r"[^.\s]+\.\S+", value):
-            raise self.error(f"{key}.{name}", f"expected 'instance.variable', got {value!r}")
+        if not _instance_variable(value):
+            raise self.error(f"{key}.{name}", f"expected 'instance.variable' (the variable "
+                             f"as the FMU names it: pos, pos[1], der(x), 'my var'), got {value!r}")
         return value
 
     def axis(self, table: Any, key: str) -> Axis:
@@ -312,11 +369,12 @@ class _Check:
         if not AXIS_NAME.match(name):
             raise self.error(f"{key}.name", f"{name!r}: an axis name is a letter, then letters "
                              "or digits (it names signals such as <axis>_ref)")
-        measured = self.position(table, key, "measured")
+        measured = self.position(table, key, "measured") if "measured" in table else None
         true = self.position(table, key, "true") if "true" in table else None
         limits = self.limits(table, key)
-        return Axis(name, measured, self.signal(table, key, "feedforward"),
-                    self.signal(table, key, "effort"), limits,
+        feedforward, effort = (self.signal(table, key, part) if part in table else None
+                               for part in ("feedforward", "effort"))
+        return Axis(name, measured, feedforward, effort, limits,
                     self.text(table, key, "unit", "m"), self.text(table, key, "effort_unit", "N"),
                     true)
 
@@ -351,7 +409,7 @@ class _Check:
             raise self.error("machine.exact", "expected a table of \"instance.parameter\" = "
                              "number: the start values with which the loop measures exactly")
         for name in table:
-            if not re.fullmatch(r"[^.\s]+\.\S+", name):
+            if not _instance_variable(name):
                 raise self.error(f"machine.exact.{name}", "expected 'instance.parameter'")
             self.number(table, "machine.exact", name, positive=False)
         return {name: float(value) for name, value in table.items()}

@@ -116,7 +116,7 @@ def _reference_count(config: RunConfig) -> int:
 
 def _wanted(scenario: Scenario, master: Master) -> list[str]:
     """The signals a run records: its [record] signals (all by default) plus those the
-    metrics (its tracked axes) and plots need."""
+    metrics (its tracked axes), the plots and a [machine]'s dataset need."""
     wanted = scenario.config.record.signals
     if wanted is None:
         return [*master.signals, *master.typed_signals]
@@ -127,8 +127,18 @@ def _wanted(scenario: Scenario, master: Master) -> list[str]:
             raise ConfigError(scenario.config.origin, "record.signals", str(error)) from None
     tracked = sorted({n for a in tracked_axes(scenario.config)
                       for n in a.reference.names | a.position.names})
-    return [*wanted, *(n for n in dict.fromkeys((*PLOT_SIGNALS, *tracked))
+    return [*wanted, *(n for n in dict.fromkeys((*PLOT_SIGNALS, *tracked,
+                                                 *_machine_signals(scenario.config)))
                        if n not in wanted and _known(master, n))]
+
+
+def _machine_signals(config: RunConfig) -> tuple[str, ...]:
+    """What a dataset, ILC and the evaluation read of a run of a loop with a [machine]: each
+    axis's reference derivatives, measured position's signals and effort."""
+    if config.machine is None:
+        return ()
+    return tuple(n for a in config.machine.axes
+                 for n in (*a.derivatives, *sorted(a.measured.names), a.effort))
 
 
 def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | None = None,

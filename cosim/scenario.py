@@ -76,7 +76,8 @@ def resolve(config: RunConfig, folder: str | Path) -> Scenario:
         fmus.append(ResolvedFmu(f.name, path, _start_values(f), info, tolerance, f.isolate,
                                 f.solver, f.allow_nonfinite, f.sandbox, f.scheduled))
         ports.append(Port(f.name, info, f.unconnected,
-                          frozenset(n for n in f.parameters if n in info.inputs)))
+                          frozenset(n for n in f.parameters if n in info.inputs),
+                          f.feedthrough))
     try:
         links = wire(ports, list(sources), config.connections, config.algorithm)
     except WiringError as error:

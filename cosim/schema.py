@@ -81,6 +81,7 @@ class FmuConfig:
     allow_nonfinite: bool = False  # NaN and infinite values allowed in and out (cosim.finite)
     fmi: int = 2  # the FMI version a built-in is built in (2 or 3)
     strict: bool = False  # its description's warnings refused too (fmu.description_faults)
+    feedthrough: bool = True  # False: no output depends directly on an input (cosim.wiring)
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ The rules and why: "The master algorithm", section Connections and types
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -45,6 +46,12 @@ class Port:
     info: FmuInfo
     unconnected: str = "error"  # or "start": unconnected inputs keep their start values
     given: frozenset[str] = frozenset()  # inputs the configuration gives a value
+    feedthrough: bool = True  # False: no output depends directly on an input, whatever the
+    # model structure says ([fmu.NAME] feedthrough = false)
+
+    def depends(self, output: str) -> bool:
+        """Whether `output` depends directly on an input of this FMU."""
+        return self.feedthrough and bool(self.info.dependencies[output])
 
 
 @dataclass(frozen=True)
@@ -122,6 +129,10 @@ def wire(ports: Sequence[Port], sources: Collection[str],
     by_name = {p.name: p for p in ports}
     position = {n: i for i, n in enumerate(names)}
     explicit = {c.to_name: c for c in connections}
+    for target in connections:  # a mistyped target first: it is why its input is unconnected
+        consumer, _, name = target.to_name.partition(".")
+        if name not in by_name[consumer].info.inputs:
+            raise WiringError(f"{target.key}.to", _unknown(by_name[consumer], name, "input"))
     producers = _producers(ports, sources)
     links = []
     for port in ports:
@@ -149,10 +160,6 @@ def wire(ports: Sequence[Port], sources: Collection[str],
                 link = Link(producer or SOURCE, signal, port.name, name)
                 c = None
             links.append(_checked(link, c, by_name, position, algorithm))
-    for c in connections:
-        consumer, _, name = c.to_name.partition(".")
-        if name not in by_name[consumer].info.inputs:
-            raise WiringError(f"{c.key}.to", _unknown(by_name[consumer], name, "input"))
     return links
 
 
@@ -184,8 +191,22 @@ def _explicit(c: ConnectionConfig, ports: Mapping[str, Port], sources: Collectio
 
 def _unknown(port: Port, name: str, causality: str) -> str:
     known = getattr(port.info, f"{causality}s")
-    return (f"{port.info.path.name} ({port.name}) has no {causality} {name!r} (its "
-            f"{causality}s: {', '.join(known) or 'none'})")
+    close = difflib.get_close_matches(name, known, n=1)
+    return (f"{port.info.path.name} ({port.name}) has no {causality} {name!r}"
+            f"{f' (did you mean {close[0]!r}?)' if close else ''} (its {causality}s: "
+            f"{', '.join(known) or 'none'})")
+
+
+def _undeclared(ports: Mapping[str, Port]) -> str:
+    """The hint for FMUs whose outputs declare no dependencies (FMI: on every input), which
+    make every stepping order a loop where their outputs do not in fact depend on inputs."""
+    names = [n for n, p in ports.items() if p.feedthrough and p.info.undeclared]
+    if not names:
+        return ""
+    tables = " or ".join(f"[fmu.{n}]" for n in names)
+    return (f"; {' and '.join(names)} {'declares' if len(names) == 1 else 'declare'} no output "
+            f"dependencies, which FMI reads as depending on every input: where outputs do not "
+            f"depend directly on inputs (positions, states), set feedthrough = false in {tables}")
 
 
 def _checked(link: Link, c: ConnectionConfig | None, ports: Mapping[str, Port],
@@ -200,11 +221,11 @@ def _checked(link: Link, c: ConnectionConfig | None, ports: Mapping[str, Port],
         frm = producer.variables[link.signal]
         kind, unit = frm.kind, frm.unit
         feeds_back = algorithm == "jacobi" or position[link.producer] >= position[link.consumer]
-        if feeds_back and algorithm != "jacobi" and producer.dependencies[link.signal]:
+        if feeds_back and algorithm != "jacobi" and ports[link.producer].depends(link.signal):
             raise WiringError(key, f"{link.from_name} feeds {link.consumer}.{link.input}, which "
                               f"steps before {link.producer} (run.order), and depends directly on "
                               f"{link.producer}'s inputs: an algebraic loop; reorder the FMUs, or "
-                              f"run with algorithm = \"jacobi\"")
+                              f"run with algorithm = \"jacobi\"{_undeclared(ports)}")
         if not frm.scalar or not to.scalar:
             raise WiringError(key, f"{link.from_name} -> {link.consumer}.{link.input}: array "
                                    f"variables cannot be connected")

@@ -1,11 +1,19 @@
 """Reference tables generated from the code: the CLI from its argparse parser, the run
-configuration's keys from cosim.config_keys, built-in FMUs' options from their registry."""
+configuration's keys from cosim.config_keys, built-in FMUs' options from their registry.
+
+The reference pages hold them in the repository, each between `<!-- generated: NAME -->` and
+`<!-- end generated: NAME -->`, so that the pages read whole where Markdown is read (a clone,
+the repository's web view); a test checks they are current, and `python docs/gen_reference.py`
+writes them anew after a change. The site's build (hooks.py) generates them again.
+"""
 
 from __future__ import annotations
 
 import argparse
 import html
-from collections.abc import Iterator
+import re
+from collections.abc import Callable, Iterator
+from pathlib import Path
 
 from flexff.cli import build_parser
 from flexff.cosim.builtins import registered
@@ -132,3 +140,40 @@ def faults_markdown() -> str:
     out += [f"| {cell(r.name)} | {'stops' if r.fatal else 'warns'} | {cell(r.why)} |"
             for r in (*RULES, UNKNOWN)]
     return "\n".join(out) + "\n"
+
+
+REFERENCE: dict[str, Callable[[], str]] = {
+    "cli": cli_markdown, "config-keys": config_markdown, "builtins": builtins_markdown,
+    "signals": signals_markdown,
+}
+PAGES = tuple(Path(__file__).parent / "reference" / name
+              for name in ("cli.md", "configuration.md", "signals.md"))
+# a block: its start marker alone, or the marker, its content and its end marker
+BLOCK = re.compile(r"<!-- generated: ([a-z-]+) -->\n(?:.*?<!-- end generated: \1 -->\n)?",
+                   re.DOTALL)
+
+
+def refreshed(markdown: str) -> str:
+    """The page with each block of REFERENCE generated anew between its markers."""
+    def block(match: re.Match[str]) -> str:
+        name = match.group(1)
+        if name not in REFERENCE:
+            return match.group(0)
+        content = REFERENCE[name]().strip("\n")
+        return (f"<!-- generated: {name} -->\n\n{content}\n\n"
+                f"<!-- end generated: {name} -->\n")
+
+    return BLOCK.sub(block, markdown)
+
+
+def main() -> None:
+    """Write each reference page's generated blocks anew."""
+    for page in PAGES:
+        text = page.read_text()
+        if refreshed(text) != text:
+            page.write_text(refreshed(text))
+            print(f"wrote {page}")
+
+
+if __name__ == "__main__":
+    main()

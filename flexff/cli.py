@@ -162,6 +162,14 @@ def _fmu_build(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fmu_info(args: argparse.Namespace) -> int:
+    from flexff.fmu.info import fmu_summary, format_summary
+
+    summary = fmu_summary(args.file)
+    print(json.dumps(summary, indent=2) if args.json else format_summary(summary, args.all))
+    return 0
+
+
 def _fmu_validate(args: argparse.Namespace) -> int:
     """Exit 0 when no FMU has an error (warnings allowed), 1 when one has, 2 when a path is
     missing or unreadable."""
@@ -551,9 +559,10 @@ def _export(args: argparse.Namespace) -> int:
 def _identify(args: argparse.Namespace) -> int:
     from flexff.cosim.run import output_folder
     from flexff.learning.evaluate import preprocessing
-    from flexff.learning.identify import identify, relative_gains, write_identification
+    from flexff.learning.identify import REPORT, identify, relative_gains, write_identification
     from flexff.learning.machine_dataset import is_machine_dataset
 
+    output_folder(args.output)  # a folder, as for every command: made, or refused, first
     if is_machine_dataset(args.data):
         from flexff.learning.linear_model import write_linear_model
         from flexff.learning.machine_dataset import load_machine_dataset
@@ -561,10 +570,9 @@ def _identify(args: argparse.Namespace) -> int:
 
         model = identify_dataset(load_machine_dataset(args.data))
         print(model.summary())
-        print(f"wrote {write_linear_model(model, args.output)}")
+        print(f"wrote {write_linear_model(model, Path(args.output) / REPORT)}")
         return 0
 
-    output_folder(args.output)
     identification = identify(args.data, preprocessing(args.env))
     path = write_identification(identification, args.output)
     rows = identification.rows()
@@ -652,13 +660,17 @@ def _demo(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="flexff", description="Learned feedforward for a flexure manipulator, as FMI "
-                                   "co-simulation.")
+        prog="flexff", description="Learned feedforward control for a machine's loop, as FMI "
+                                   "co-simulation: describe the loop's FMUs and axes (or import "
+                                   "its logs), collect data, identify, train, and build the "
+                                   "feedforward FMU. The thesis's flexure manipulator is the "
+                                   "built-in example and default.")
     parser.add_argument("--debug", action="store_true",
                         help="show the Python traceback of an error (sets FLEXFF_DEBUG=1)")
     commands = parser.add_subparsers(dest="command", required=True)
 
-    plant = commands.add_parser("plant", help="the manipulator plant model")
+    plant = commands.add_parser("plant", help="the built-in example's plant model (the "
+                                              "thesis's flexure manipulator)")
     plant_commands = plant.add_subparsers(dest="plant_command", required=True)
     info = plant_commands.add_parser("info", help="parameters, natural frequencies, workspace")
     info.add_argument("--variant", choices=sorted(VARIANTS), default="nominal")
@@ -711,6 +723,14 @@ def build_parser() -> argparse.ArgumentParser:
                           help="seconds the run of one FMU may take before it counts as hung "
                                "(default: a minute, fmu.validation.TIMEOUT)")
     validate.set_defaults(handler=_fmu_validate)
+
+    fmu_info = fmu_commands.add_parser(
+        "info", help="what an FMU declares: ports, dependencies, default experiment, "
+                     "interfaces, platforms")
+    fmu_info.add_argument("file", help="an .fmu file")
+    fmu_info.add_argument("--all", action="store_true", help="list local variables too")
+    fmu_info.add_argument("--json", action="store_true", help="print JSON instead of text")
+    fmu_info.set_defaults(handler=_fmu_info)
 
     compare = fmu_commands.add_parser(
         "compare", help="run each FMU alone on its default experiment in flexff and in FMPy; "
@@ -791,8 +811,9 @@ def build_parser() -> argparse.ArgumentParser:
     data = commands.add_parser("data", help="training data")
     data_commands = data.add_subparsers(dest="data_command", required=True)
     collect = data_commands.add_parser(
-        "collect", help="co-simulate a trajectory set under PID into a dataset folder "
-                        "(resumes an interrupted collection)")
+        "collect", help="co-simulate a loop under PID on excitation trajectories into a dataset "
+                        "folder: a loop with a [machine] on its own excitation, or the "
+                        "manipulator on a trajectory set (resumes an interrupted collection)")
     collect.add_argument("--set", help=f"the manipulator's trajectory set: "
                                        f"{' or '.join(TRAJECTORY_SETS)}; a loop with a "
                                        f"[machine] gets its excitation")
@@ -811,9 +832,10 @@ def build_parser() -> argparse.ArgumentParser:
     imports = data_commands.add_parser(
         "import", help="turn logs of a real machine (CSV or MATLAB .mat) into a dataset folder")
     imports.add_argument("files", nargs="+", metavar="FILE",
-                         help="logs with columns time, theta_s1..3, Fx, Fy (optionally x_ref .. "
-                              "ay_ref), one trajectory each; with --machine, the columns its "
-                              "[machine.log] names")
+                         help="logs, one trajectory each: with --machine, the columns its "
+                              "[machine.log] names (a signal's own name where it names none); "
+                              "without, the manipulator's: time, theta_s1..3, Fx, Fy "
+                              "(optionally x_ref .. ay_ref)")
     imports.add_argument("--machine", metavar="DESC.toml",
                          help="a TOML file with a [machine] table (a description, or a run "
                               "configuration that holds the table itself): import that "
@@ -833,13 +855,15 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--preset", default="fast", choices=PRESETS,
                        help="fast: minutes on a laptop CPU; "
                             "thesis: the thesis's network sizes (GPU)")
-    train.add_argument("--data", required=True, help="a dataset folder (flexff data collect)")
+    train.add_argument("--data", required=True,
+                       help="a dataset folder (flexff data collect or data import)")
     train.add_argument("-o", "--output", required=True, help="the run folder to write")
     train.add_argument("--epochs", type=int, help="override the preset's number of epochs")
     train.add_argument("--labels", default="forces", choices=("forces", "currents"),
-                       help="what the model learns and feeds forward: the wrist force Fx, Fy "
-                            "(default), or the motor currents i1..i3, added after the control "
-                            "allocation")
+                       help="what the model learns and feeds forward: the efforts the loop "
+                            "commands (default; a machine's axes' efforts, the manipulator's "
+                            "wrist force Fx, Fy), or, on the manipulator, the motor currents "
+                            "i1..i3, added after the control allocation")
     train.add_argument("--force-input", action="store_true",
                        help="give a black-box network the force of the rigid-body model "
                             "identified on the training split as two more inputs")
@@ -875,15 +899,17 @@ def build_parser() -> argparse.ArgumentParser:
     export.set_defaults(handler=_export)
 
     identification = commands.add_parser(
-        "identify", help="identify the rigid-body model's parameters on a dataset folder by "
-                         "least squares (for the rigid-body feedforward)")
+        "identify", help="identify a dataset's physics prior by least squares (a machine's "
+                         "terms, or the manipulator's rigid-body model)")
     identification.add_argument("data", help="a dataset folder (its training split is used)")
     identification.add_argument("-o", "--output", required=True,
-                                help="the folder to write identified.json into")
+                                help="the folder to write identified.json into (made if "
+                                     "missing; an existing folder is written into)")
     identification.add_argument("--env", default="hardware", choices=("sim", "hardware"),
-                                help="preprocess as flexff evaluate's environment does: "
-                                     "hardware (the thesis's: encoders counted, 1.8 Hz; for "
-                                     "measured or noisy encoders) or sim (ideal encoders)")
+                                help="a manipulator dataset: preprocess as flexff evaluate's "
+                                     "environment does: hardware (the thesis's: encoders "
+                                     "counted, 1.8 Hz; for measured or noisy encoders) or sim "
+                                     "(ideal encoders); a machine's dataset derives its own")
     identification.set_defaults(handler=_identify)
 
     bench = commands.add_parser("bench", help="speed benchmarks, printed as JSON (the "
@@ -918,9 +944,13 @@ def build_parser() -> argparse.ArgumentParser:
     bench.set_defaults(handler=_bench)
 
     evaluation = commands.add_parser(
-        "evaluate", help="the thesis's Table 5.2 (sim) or 6.2 (hardware) for flexff: collect, "
-                         "train, export, co-simulate with each feedforward, report")
-    evaluation.add_argument("--env", default="sim", choices=("sim", "hardware"))
+        "evaluate", help="collect, train, export, co-simulate the loop with each feedforward "
+                         "and report its tracking against PID alone (on the manipulator, the "
+                         "thesis's Table 5.2 or 6.2); with --data of imported logs, each "
+                         "model's effort prediction")
+    evaluation.add_argument("--env", default="sim", choices=("sim", "hardware"),
+                            help="the manipulator's environment, without --config or --data: "
+                                 "sim (Table 5.2) or hardware (Table 6.2)")
     evaluation.add_argument("--config", metavar="CONFIG.toml|SYSTEM.ssp",
                             help="collect and evaluate on this loop (flexff's controller and "
                                  "any plant) instead of the environment's plant")
@@ -929,8 +959,8 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--models", nargs="+", default=list(MODELS), choices=MODELS)
     evaluation.add_argument("--currents", nargs="+", default=[], metavar="KIND",
                             choices=MODELS,
-                            help="also the current-level model of these kinds: labels i1..i3, "
-                                 "fed forward after the control allocation")
+                            help="the manipulator: also the current-level model of these kinds: "
+                                 "labels i1..i3, fed forward after the control allocation")
     evaluation.add_argument("--ilc-labels", nargs="+", metavar="KIND",
                             choices=(*MODELS, "none"),
                             help="also these kinds trained on the force iterative learning "

@@ -107,8 +107,9 @@ RULES: tuple[Rule, ...] = (
     _fmpy("dependency kinds", r"dependenciesKind",
           "flexff reads the dependencies, not their kinds"),
     _fmpy("outputs list", r"ModelStructure/Outputs must have exactly one entry",
-          "an output without an entry is taken to depend on every input, as the standard "
-          "says: at worst an ordering is refused as an algebraic loop, never run wrongly"),
+          "an output without an entry is taken to depend on every input (a continuous state "
+          "on none), as the standard says: at worst an ordering is refused as an algebraic "
+          "loop (feedthrough = false declares none), never run wrongly"),
     _fmpy("initial unknowns", r"ModelStructure/InitialUnknowns",
           "flexff reads no initial unknown: it reads the outputs it needs after initialization"),
     _fmpy("state derivative", r"continuous state derivative",

@@ -3,14 +3,18 @@ identification term `sin(2*pi*x/0.016)`), read once and evaluated on numbers or 
 
 Python's own parser reads the text; only numbers, names (dotted ones such as `plant.theta`
 are one name), + - * / **, unary minus and the functions of FUNCTIONS pass: nothing is
-executed. The same tree evaluates on NumPy arrays (`evaluate`) and on CasADi symbols
-(`to_casadi`), so a term that is fitted offline is the term a generated FMU computes.
+executed. A name may be an FMI structured name, which Python would not read as one (`a[1]`,
+`b.c[2,3]`, `der(x)`, `'my var'`, after an instance: `plant.pos[1]`): such names are read
+first (FMI_NAME) and stand in the tree as single names. The same tree evaluates on NumPy
+arrays (`evaluate`) and on CasADi symbols (`to_casadi`), so a term that is fitted offline is
+the term a generated FMU computes.
 """
 
 from __future__ import annotations
 
 import ast
 import math
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -35,6 +39,19 @@ _OPERATORS: dict[type, Callable[[Any, Any], Any]] = {
 }
 
 
+# FMI 2.0/3.0 structured names (specification 2.2.9): identifiers or 'quoted' parts with
+# integer array indices, joined by dots; der(name) or der(name, order) as a part
+_INDEX = r"\[\d+(?:,\d+)*\]"
+_PART = rf"(?:[A-Za-z_][A-Za-z0-9_]*|'(?:[^'\\]|\\.)+')(?:{_INDEX})*"
+_SEGMENT = rf"(?:der\({_PART}(?:\.{_PART})*(?:,\d+)?\)|{_PART})"
+FMI_NAME = re.compile(rf"{_SEGMENT}(?:\.{_SEGMENT})*")
+_PYTHON_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*\Z")
+_NUMBER = re.compile(r"(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_STAND_IN = "__fmi_name_{}__"
+NAMES_HELP = ("names (a signal, `instance.variable`, FMI names such as `plant.pos[1]`, "
+              "`plant.der(x)`, `plant.'my var'`)")
+
+
 class ExpressionError(InputError):
     """An expression that cannot be read or names what is not there; names its key."""
 
@@ -54,13 +71,48 @@ def parse_expression(text: str, key: str) -> Expression:
     if not isinstance(text, str) or not text.strip():
         raise ExpressionError(f"{key}: expected an expression as a non-empty string, "
                               f"got {text!r}")
+    source, stand_ins = _fmi_names(text.strip())
     try:
-        tree = ast.parse(text.strip(), mode="eval").body
+        tree = _NamesRestored(stand_ins).visit(ast.parse(source, mode="eval").body)
     except SyntaxError as error:
-        raise ExpressionError(f"{key}: {text!r} is not an expression ({error.msg})") from None
+        raise ExpressionError(f"{key}: {text!r} is not an expression ({error.msg}); it may use "
+                              f"numbers, {NAMES_HELP}, + - * / ** and functions") from None
     names: set[str] = set()
     _check(tree, text, key, names)
     return Expression(text.strip(), tree, frozenset(names))
+
+
+def _fmi_names(text: str) -> tuple[str, dict[str, str]]:
+    """`text` with every FMI name that Python would not read as a name replaced by a stand-in
+    identifier, and the stand-ins' names."""
+    out: list[str] = []
+    stand_ins: dict[str, str] = {}
+    at = 0
+    while at < len(text):
+        number = _NUMBER.match(text, at)
+        token = number or (None if text[at].isspace() else FMI_NAME.match(text, at))
+        if token is None:
+            out.append(text[at])
+            at += 1
+            continue
+        found = token.group()
+        if number is None and not _PYTHON_NAME.match(found):
+            stand_in = _STAND_IN.format(len(stand_ins))
+            stand_ins[stand_in] = found
+            found = stand_in
+        out.append(found)
+        at = token.end()
+    return "".join(out), stand_ins
+
+
+class _NamesRestored(ast.NodeTransformer):
+    """The tree with each stand-in identifier named by the FMI name it stands for."""
+
+    def __init__(self, stand_ins: Mapping[str, str]) -> None:
+        self.stand_ins = stand_ins
+
+    def visit_Name(self, node: ast.Name) -> ast.Name:
+        return ast.Name(self.stand_ins.get(node.id, node.id), node.ctx)
 
 
 def _check(node: ast.expr, text: str, key: str, names: set[str]) -> None:
@@ -86,8 +138,21 @@ def _check(node: ast.expr, text: str, key: str, names: set[str]) -> None:
         for argument in node.args:
             _check(argument, text, key, names)
         return
-    raise ExpressionError(f"{key}: {text!r} holds {ast.unparse(node)!r}; an expression may "
-                          f"use numbers, names, + - * / ** and {', '.join(sorted(FUNCTIONS))}")
+    raise ExpressionError(f"{key}: {text!r} holds {ast.unparse(node)!r}, {_why(node)}; an "
+                          f"expression may use numbers, {NAMES_HELP}, + - * / ** and "
+                          f"{', '.join(sorted(FUNCTIONS))}")
+
+
+def _why(node: ast.expr) -> str:
+    """Why `node` is no part of an expression, in the user's terms."""
+    if isinstance(node, ast.Subscript):
+        return ("which is no FMI array element (its indices are whole numbers, as in "
+                "pos[1] or a[1,2], with no spaces)")
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return "a quoted text, not a name (an FMI quoted name follows its instance: plant.'a b')"
+    if isinstance(node, ast.Call):
+        return "a call with keywords or of no function by name"
+    return "which is no number, name, operation or function"
 
 
 def _dotted(node: ast.expr, text: str, key: str) -> str:

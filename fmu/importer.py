@@ -117,6 +117,14 @@ class FmuInfo:
     se_identifier: str | None = None  # the scheduled-execution interface's, if it has one
     faults: tuple[Fault, ...] = ()  # its description's warnings (fmu.description_faults)
     model_description: Any = field(default=None, compare=False, repr=False)
+    declared: frozenset[str] = frozenset()  # outputs whose model structure lists dependencies
+    states: frozenset[str] = frozenset()  # outputs that are continuous states (of Derivatives)
+
+    @property
+    def undeclared(self) -> frozenset[str]:
+        """Outputs without a dependency list that are no states: by FMI, each depends on
+        every input."""
+        return frozenset(self.outputs) - self.declared - self.states
 
     @property
     def scheduled_only(self) -> bool:
@@ -194,11 +202,16 @@ def read_fmu(path: str | Path, checked: bool = True, strict: bool = False) -> Fm
     outputs = tuple(n for n, v in data.items() if v.causality == "output")
     parameters = tuple(n for n, v in variables.items()
                        if v.causality in ("parameter", "structuralParameter"))
-    dependencies = {n: frozenset(inputs) for n in outputs}  # absent: depends on all (FMI)
+    # absent: depends on every input (FMI), but for an output that is a continuous state,
+    # which only integration changes
+    states = _state_outputs(md, outputs)
+    dependencies = {n: frozenset() if n in states else frozenset(inputs) for n in outputs}
+    declared = set()
     for unknown in md.outputs:
         if unknown.variable is not None and unknown.dependencies is not None:
             dependencies[unknown.variable.name] = frozenset(
                 d.name for d in unknown.dependencies if d.name in inputs)
+            declared.add(unknown.variable.name)
     step, stop, start, tolerance = (_experiment_value(path, md.defaultExperiment, name)
                                     for name in ("stepSize", "stopTime", "startTime",
                                                  "tolerance"))
@@ -209,7 +222,8 @@ def read_fmu(path: str | Path, checked: bool = True, strict: bool = False) -> Fm
                    parameters, dependencies, step, stop, start, tolerance,
                    md.coSimulation is not None,
                    md.modelExchange.modelIdentifier if md.modelExchange else None,
-                   scheduled.modelIdentifier if scheduled else None, faults, md)
+                   scheduled.modelIdentifier if scheduled else None, faults, md,
+                   frozenset(declared), frozenset(states - declared))
 
 
 def _refused(path: Path, md: Any, strict: bool) -> tuple[Fault, ...]:
@@ -223,6 +237,16 @@ def _refused(path: Path, md: Any, strict: bool) -> tuple[Fault, ...]:
         raise FmuError(f"{path}: modelDescription.xml: {summary(stopping)}; {why} (flexff fmu "
                        f"validate lists every fault)")
     return tuple(faults)
+
+
+def _state_outputs(md: Any, outputs: Sequence[str]) -> set[str]:
+    """The outputs that are continuous states: the `derivative` of a variable the model
+    structure lists among its derivatives, or an alias of one (its value reference)."""
+    states = {(d.variable.derivative.valueReference, d.variable.derivative.type)
+              for d in md.derivatives
+              if d.variable is not None and d.variable.derivative is not None}
+    by_name = {v.name: v for v in md.modelVariables}
+    return {n for n in outputs if (by_name[n].valueReference, by_name[n].type) in states}
 
 
 def typed_value(kind: str, value: Any) -> Any:

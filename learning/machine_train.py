@@ -46,6 +46,17 @@ from flexff.learning.train import (
 )
 
 MSE_UNITS = "MSE of min-max scaled efforts, axis by axis (run.json label_names)"
+# the FeatureConfig settings a machine's run reads; its features are MachineFeatures'
+MACHINE_FEATURE_KEYS = ("edge_periods",)
+
+
+def machine_config(config: TrainConfig, learned: bool = False) -> dict[str, Any]:
+    """The training configuration as a machine's run.json holds it: its feature settings
+    only those that apply (the manipulator's encoders, corner and noise do not), the
+    PLACEMENT settings left out where `learned`."""
+    data = config.learned_settings() if learned else json.loads(json.dumps(config.to_dict()))
+    data["features"] = {k: data["features"][k] for k in MACHINE_FEATURE_KEYS}
+    return data
 
 
 def features_to_dict(features: MachineFeatures) -> dict[str, Any]:
@@ -84,7 +95,7 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
                              f"'{split}' (flexff data import --test, or the excitation's split)")
     resolved = (features or MachineFeatures()).resolved(
         rate_hz, [t.signals for t in train_set], machine)
-    settings = {"config": config.learned_settings(),
+    settings = {"config": machine_config(config, learned=True),
                 "features": features_to_dict(resolved), "machine": machine_table(machine),
                 "data": digest, "prior": None if prior is None else prior.to_dict()}
     if reuse and _finished_alike(out, settings):
@@ -139,7 +150,8 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
              {"metrics.json": lambda path: path.write_text(json.dumps(metrics, indent=2) + "\n"),
               "loss.png": lambda path: plot_losses(history, path,
                                                    f"{config.model} ({config.preset}), "
-                                                   f"{machine.name}")})
+                                                   f"{machine.name}")},
+             machine_config(config))
     return {**metrics, "run": str(out)}
 
 

@@ -103,17 +103,19 @@ class Run:
 def save_run(out: Path, config: TrainConfig, network: SequenceNetwork,
              feature_scaler: MinMaxScaler, label_scaler: MinMaxScaler, feature_names: list[str],
              label_names: list[str], model_rate_hz: float, extra: dict[str, Any],
-             files: Mapping[str, Callable[[Path], object]]) -> None:
+             files: Mapping[str, Callable[[Path], object]],
+             config_record: dict[str, Any] | None = None) -> None:
     """Write model.pt, run.json and `files` (name -> writer of that file) into `out`, then
     delete the checkpoints; a finished run's files there change only once all new ones are
-    complete."""
+    complete. run.json's `config` is `config_record` where given (the settings that apply to
+    the run), else the whole configuration."""
     out.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(dir=out, prefix=STAGING))
     try:
         torch.save({k: v.detach().cpu() for k, v in network.state_dict().items()},
                    staging / WEIGHTS_FILE)
         info = {"format": FORMAT, "version": VERSION, "flexff_version": flexff_version(),
-                "config": config.to_dict(), "feature_names": feature_names,
+                "config": config_record or config.to_dict(), "feature_names": feature_names,
                 "label_names": label_names, "model_rate_hz": model_rate_hz,
                 "scalers": {"features": feature_scaler.to_dict(),
                             "labels": label_scaler.to_dict()},

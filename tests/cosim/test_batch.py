@@ -230,3 +230,36 @@ def test_sweep_errors_name_the_file_and_key(tmp_path, capsys, case, fragment):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("flexff: error: ") and err.count("\n") == 1 and fragment in err, err
+
+
+PID_AXES = """
+[run]
+stop = 0.1
+
+[fmu.pid]
+builtin = "pid"
+axes = [{ name = "x", mass = 2.0, crossover_hz = 20.0 },
+        { name = "y", mass = 1.0, crossover_hz = 15.0 }]
+
+[[source]]
+kind = "constant"
+values = { x_ref = 0.0, y_ref = 0.0 }
+"""
+
+
+def test_a_sweep_sets_one_axis_of_a_list_of_axis_tables(tmp_path):
+    """`fmu.pid.axes.x.crossover_hz`: a table in a list, addressed by its name; the other
+    axis keeps its own value."""
+    path = tmp_path / "pid.toml"
+    path.write_text(PID_AXES)
+    configs = sweep(path, {"fmu.pid.axes.x.crossover_hz": [10.0, 40.0]})
+    assert [c.name for c in configs] == ["pid-fmu.pid.axes.x.crossover_hz=10.0",
+                                         "pid-fmu.pid.axes.x.crossover_hz=40.0"]
+    axes = [next(f for f in c.fmus if f.name == "pid").options["axes"] for c in configs]
+    assert [[a["crossover_hz"] for a in each] for each in axes] == [[10.0, 15.0], [40.0, 15.0]]
+    with pytest.raises(ValueError, match=r"fmu.pid.axes.z.crossover_hz: fmu.pid.axes lists no "
+                                         r"table named 'z' \(its tables' names: x, y\)"):
+        sweep(path, {"fmu.pid.axes.z.crossover_hz": [10.0]})
+    with pytest.raises(ValueError, match=r"'axes' lists tables: name one of them "
+                                         r"\(fmu.pid.axes.NAME.crossover_hz\)"):
+        sweep(path, {"fmu.pid.axes.crossover_hz": [10.0]})

@@ -104,3 +104,16 @@ def test_data_collect_help_lists_the_library_s_trajectory_sets():
     from flexff.learning.dataset import SETS
 
     assert TRAJECTORY_SETS == SETS
+
+
+def test_the_reference_pages_hold_their_tables_as_the_code_makes_them():
+    """The CLI, configuration and signal tables are in the repository's pages, current: after
+    a change to the parser, the keys or the built-ins, `python docs/gen_reference.py`."""
+    import gen_reference
+
+    for page in gen_reference.PAGES:
+        text = page.read_text()
+        names = re.findall(r"<!-- end generated: ([a-z-]+) -->", text)
+        assert names and set(names) <= set(gen_reference.REFERENCE), page.name
+        assert gen_reference.refreshed(text) == text, (
+            f"{page.name} is not current: run python docs/gen_reference.py")

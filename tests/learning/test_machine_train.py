@@ -61,6 +61,9 @@ def test_a_machine_trains_into_a_run_folder(names, tmp_path):
     info = json.loads((tmp_path / "run" / "run.json").read_text())
     assert info["label_names"] == [f"{n}_effort" for n in names]
     assert [a["name"] for a in info["machine"]["axis"]] == list(names)
+    # the settings that apply: no manipulator's encoders, 1.8 Hz corner or training noise
+    assert info["config"]["features"] == {"edge_periods": 2.0}
+    assert info["machine_features"]["cutoff_hz"] == pytest.approx(metrics["cutoff_hz"])
     first = names[0]
     assert run.feature_names[:4] == [first, f"v{first}", f"a{first}", f"dir_{first}_0.003"]
     assert 5.0 < metrics["cutoff_hz"] < 7.0  # four times the 1.5 Hz band's edge

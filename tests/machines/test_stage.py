@@ -101,10 +101,10 @@ def test_stage_options_are_checked():
 def test_identification_recovers_the_stage_parameters(tmp_path):
     """flexff's data collection and identification on the example loop find each axis's moving
     mass, viscous and Coulomb friction (the coupled yaw mode stays outside the per-axis prior)."""
-    data, found = tmp_path / "data", tmp_path / "identified.json"
+    data, found = tmp_path / "data", tmp_path / "identified" / "identified.json"
     for command in (["data", "collect", "--config", str(EXAMPLE), "-o", str(data), "--workers",
                      "1", "--trajectories", "6", "2", "--duration", "8"],
-                    ["identify", str(data), "-o", str(found)]):
+                    ["identify", str(data), "-o", str(found.parent)]):
         subprocess.run([sys.executable, "-m", "flexff", *command], check=True,
                        capture_output=True, cwd=ROOT)
     axes = json.loads(found.read_text())["axes"]
