@@ -303,6 +303,10 @@ class Master:
                 read_before=not jacobi and (feeds_later[fmu.name] or not feeds_back[fmu.name]),
                 read_after=jacobi or feeds_back[fmu.name]))
         self.typed_signals = tuple(f"{p.name}.{n}" for p in self._plans for n in p.typed_outputs)
+        self._typed_index = frozenset(self.typed_signals)
+        self._own_names: dict[str, list[str]] = {}  # an output's own name -> its full names
+        for signal in (*self.signals, *self.typed_signals):
+            self._own_names.setdefault(signal.partition(".")[2], []).append(signal)
 
     def layout(self) -> dict[str, Any]:
         """The bus layout and every FMU's call plan, as plain data (for the C floor, whose plan
@@ -368,9 +372,8 @@ class Master:
         everything = (*self.signals, *self.typed_signals)
         record = list(everything if record is None else record)
         resolved = [self.resolve(n) for n in record]
-        floats = [(j, self.signals.index(q)) for j, q in enumerate(resolved)
-                  if q in self.signals]
-        typed = [(j, q) for j, q in enumerate(resolved) if q not in self.signals]
+        floats = [(j, self._index[q]) for j, q in enumerate(resolved) if q in self._index]
+        typed = [(j, q) for j, q in enumerate(resolved) if q not in self._index]
         columns = np.array([i for _, i in floats], dtype=np.int64)
         full = len(floats) == len(resolved) and np.array_equal(
             columns, np.arange(len(self.signals)))
@@ -526,24 +529,24 @@ class Master:
 
     def resolve(self, name: str) -> str:
         """The full name of a signal: `fmu.output`, a source, or a unique output's own name."""
-        everything = (*self.signals, *self.typed_signals)
-        if name in everything:
+        if name in self._index or name in self._typed_index:
             return name
-        matches = [s for s in everything if s.partition(".")[2] == name]
+        matches = self._own_names.get(name, ())
         if len(matches) == 1:
             return matches[0]
         if matches:
             raise InputError(f"signal {name!r} is ambiguous: {', '.join(matches)}")
         raise InputError(f"cannot record unknown signal {name!r}; known: "
-                         f"{', '.join(everything)}")
+                         f"{', '.join((*self.signals, *self.typed_signals))}")
 
     def _source_columns(self, values: Mapping[str, np.ndarray | float], steps: int
                         ) -> list[np.ndarray]:
         """Every source's values in the bus's order, checked before the run (steps + 1 finite
         samples, or a finite constant) and not copied (a float64 array is used as given): the
         engine's rows are filled from them chunk by chunk (_fill_source_rows)."""
+        sources = set(self.sources)
         missing = [n for n in self.sources if n not in values]
-        extra = [n for n in values if n not in self.sources]
+        extra = [n for n in values if n not in sources]
         if missing or extra:
             raise ValueError(f"source values: missing {missing}, unexpected {extra}")
         columns = []
@@ -552,7 +555,7 @@ class Master:
             if column.ndim and column.shape != (steps + 1,):
                 raise ValueError(f"source {name!r} has {column.shape} samples, the run needs "
                                  f"({steps + 1},) (or a constant)")
-            if not np.all(np.isfinite(column)):
+            if not np.isfinite(column).all():
                 raise ValueError(f"source {name!r} has non-finite values")
             columns.append(column)
         return columns
