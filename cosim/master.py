@@ -19,7 +19,7 @@ import gc
 import math
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from ctypes import POINTER, byref, c_double, c_long, c_uint, c_void_p, cast
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -244,12 +244,14 @@ class Master:
 
     `sources` names the external signals (the reference, constants) given to `run`; `links`
     is the wiring (cosim.wiring.wire; default: every input by name); `start` the time of
-    point 0; `step_timeout` (s) bounds every call of an isolated FMU.
+    point 0; `step_timeout` (s) bounds every call of an isolated FMU; `log`, where given, takes
+    every message of the FMUs loaded in this process, one line each (cosim.fmu_log).
     """
 
     def __init__(self, fmus: Sequence[ResolvedFmu], sources: Sequence[str], step: float,
                  links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel",
-                 start: float = 0.0, step_timeout: float | None = None) -> None:
+                 start: float = 0.0, step_timeout: float | None = None,
+                 log: Callable[[str], None] | None = None) -> None:
         if not step > 0:
             raise InputError(f"step must be positive, got {step}")
         if algorithm not in ALGORITHMS:
@@ -271,7 +273,8 @@ class Master:
                 self._instances.append(
                     IsolatedInstance(info, fmu.name, step_timeout, fmu.solver, fmu.sandbox,
                                      fmu.scheduled) if fmu.isolate
-                    else FmuInstance(info, fmu.name, fmu.solver, scheduled=fmu.scheduled))
+                    else FmuInstance(info, fmu.name, fmu.solver, scheduled=fmu.scheduled,
+                                     log=log))
             self._layout(infos)
         except BaseException:
             self.close()

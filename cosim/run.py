@@ -1,9 +1,10 @@
 """run_config: one configured run, from TOML (or SSP) to a folder of results.
 
 The folder gets the record (cosim.recording), metrics.json (cosim.metrics and what built-ins
-add), the plots (cosim.plots) and run.json (the checked configuration in the general form and
-what the record holds). Record, metrics, plots and timing are fed chunk by chunk (RunSink), so
-memory does not grow with the run. A run holds its folder's lock (cosim.folder_lock), checks
+add), the plots (cosim.plots), the FMUs' messages (cosim.fmu_log) and run.json (the checked
+configuration in the general form and what the record holds). Record, metrics, plots and
+timing are fed chunk by chunk (RunSink), the messages line by line, so memory does not grow
+with the run. A run holds its folder's lock (cosim.folder_lock), checks
 folder, memory and disk (cosim.disk) before it starts, and, when an FMU fails, Ctrl-C or
 SIGTERM stops it, keeps the record so far and writes run.json before raising.
 
@@ -26,6 +27,7 @@ import numpy as np
 from flexff.cosim.builtins import registered
 from flexff.cosim.config import RECORDED, expanded, load_config
 from flexff.cosim.disk import check_disk
+from flexff.cosim.fmu_log import LOG_NAME, FmuLog
 from flexff.cosim.folder_lock import folder_lock
 from flexff.cosim.handover import Worker
 from flexff.cosim.master import CosimError, Master, Streamed
@@ -259,9 +261,10 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
                 cpu: int | None) -> dict[str, Any]:
     """run_config's run, in the folder `out` it holds the lock of."""
     plot = _manipulator(config) if config.record.plot is None else config.record.plot
-    with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
+    with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder, \
+            FmuLog(out / LOG_NAME) as log:
         scenario = resolve(config, folder)
-        with scenario.master() as master:
+        with scenario.master(log.write) as master:
             recorded = _wanted(scenario, master)
             check_disk(out, config, len(_kept(recorded, config)))
             sink = RunSink(out, recorded, _kept(recorded, config), config.steps + 1,
