@@ -44,6 +44,7 @@ from flexff.cosim.engine import (
     start_schedule,
 )
 from flexff.cosim.handover import ChunkBuffers, Handover, StepTimes, Worker
+from flexff.cosim.interrupts import deferred
 from flexff.cosim.isolation import IsolatedInstance
 from flexff.cosim.recording import CHUNK_MIN_ROWS, Recording, chunk_rows
 from flexff.cosim.sandbox import DEFAULT, Sandbox
@@ -447,35 +448,43 @@ class Master:
         window(base, handover.current)
         gc_was_enabled = gc.isenabled()
         gc.disable()  # no collection pauses inside the loop
-        try:
-            with _progress_bar(steps, progress) as bar:
-                if pacing is not None:
-                    start_schedule(run)
-                for k0 in range(0, steps + 1, PROGRESS_CHUNK):
-                    k1 = min(k0 + PROGRESS_CHUNK, steps + 1)
-                    start = time.perf_counter()
-                    status = engine.engine_run(byref(run), k0, k1)
-                    wall += time.perf_counter() - start
-                    if status != OK:
-                        break
-                    bar.update(min(k1, steps) - k0)
-                    if k1 - base == rows or k1 == steps + 1:
-                        hand(base, k1)
-                        base = k1
-            stopped_at = run.failed_k if status == OVERRUN else None
-            row = (stopped_at or 0) - base  # the stopped step's row in the chunk buffers
-            chunk_times = handover.current.times
-            stopped_step = (float(chunk_times.tet[row]), float(chunk_times.lateness[row])) if (
-                stopped_at is not None and chunk_times is not None) else (0.0, 0.0)
-            if status == FAILED:  # points before failed_k were recorded, failed_k if its step
-                hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))  # failed
-            elif stopped_at is not None:
-                end = stopped_at + 1  # points 0 .. stopped_at were recorded, the step was made
-                hand(base, end)
-        finally:
-            handover.wait()
-            if gc_was_enabled:
-                gc.enable()
+        recorded = 0  # the points recorded so far
+        with deferred() as interrupted:  # Ctrl-C and SIGTERM raised between engine calls
+            try:
+                with _progress_bar(steps, progress) as bar:
+                    if pacing is not None:
+                        start_schedule(run)
+                    for k0 in range(0, steps + 1, PROGRESS_CHUNK):
+                        k1 = min(k0 + PROGRESS_CHUNK, steps + 1)
+                        start = time.perf_counter()
+                        status = engine.engine_run(byref(run), k0, k1)
+                        wall += time.perf_counter() - start
+                        if status != OK:
+                            break
+                        recorded = k1
+                        bar.update(min(k1, steps) - k0)
+                        if k1 - base == rows or k1 == steps + 1:
+                            hand(base, k1)
+                            base = k1
+                        interrupted()
+                stopped_at = run.failed_k if status == OVERRUN else None
+                row = (stopped_at or 0) - base  # the stopped step's row in the chunk buffers
+                made_times = handover.current.times
+                stopped_step = (float(made_times.tet[row]), float(made_times.lateness[row])) \
+                    if stopped_at is not None and made_times is not None else (0.0, 0.0)
+                if status == FAILED:  # points before failed_k were recorded, failed_k if its
+                    # step failed after recording
+                    hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))
+                elif stopped_at is not None:
+                    end = stopped_at + 1  # points 0 .. stopped_at were recorded, step made
+                    hand(base, end)
+            except KeyboardInterrupt:  # the points so far, handed over before it is raised on
+                hand(base, max(base, recorded))
+                raise
+            finally:
+                handover.wait()
+                if gc_was_enabled:
+                    gc.enable()
         handover.check()
         if status == FAILED and run.failed_call in NONFINITE:
             p = self._plans[run.failed_fmu]

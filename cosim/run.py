@@ -42,12 +42,21 @@ from flexff.cosim.metrics import (
 from flexff.cosim.plots import PLOT_SIGNALS, RunPlots, plot_tet
 from flexff.cosim.plugins import short_names
 from flexff.cosim.realtime import realtime_process
-from flexff.cosim.recording import Recording, RecordWriter, atomic_write, signal_name
+from flexff.cosim.recording import (
+    PARQUET_NAME,
+    RecordError,
+    Recording,
+    RecordWriter,
+    atomic_write,
+    signal_name,
+)
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ConfigError, RunConfig
 from flexff.cosim.timing import OverrunError, Pacing
 from flexff.cosim.watchdog import watchdog
+
+METRICS_NAME, RUN_JSON_NAME = "metrics.json", "run.json"  # in the run's folder
 
 
 def load_run_config(path: str | Path) -> RunConfig:
@@ -269,10 +278,15 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
             check_disk(out, config, len(_kept(recorded, config)))
             sink = RunSink(out, recorded, _kept(recorded, config), config.steps + 1,
                            config.step, plot, config.record.every, tracked_axes(config))
+            (out / METRICS_NAME).unlink(missing_ok=True)  # an earlier run's
+            log.forget_earlier()
+            _write_run_json(sink, config, out, complete=False)  # until the run has ended
             try:
                 with watchdog(f"the record up to its last chunk is in {sink.writer.parts}",
                               lambda: [Path(folder), *master.scratch()]):
                     streamed = _stream(master, scenario, sink, recorded, progress, pacing, cpu)
+            except RecordError as error:
+                raise _unwritten(error, sink, config, out) from None
             except (CosimError, KeyboardInterrupt) as error:
                 if sink.last_time is None:
                     raise
@@ -287,12 +301,15 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
         metrics = summary_metrics(sink.tracking.metrics() if sink.tracking else {}, duration,
                                   streamed.wall_s, streamed.timing)
         metrics |= builtin_metrics(scenario)
-    _close_record(sink, config, out, complete=streamed.timing.stopped_at is None)
+    try:
+        _close_record(sink, config, out, complete=streamed.timing.stopped_at is None)
+    except RecordError as error:
+        raise _unwritten(error, sink, config, out) from None
     if sink.plots is not None:
         sink.plots.write(out)
     if pacing is not None:
         plot_tet(streamed.timing, out / "tet.png")
-    _write_json(out / "metrics.json", metrics)
+    _write_json(out / METRICS_NAME, metrics)
     if streamed.timing.stopped_at is not None:
         raise OverrunError(f"{streamed.timing.stop_message()}; the record up to there is in "
                            f"{out}")
@@ -300,12 +317,32 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
 
 
 def _close_record(sink: RunSink, config: RunConfig, out: Path, complete: bool) -> None:
-    """Join the record and write run.json: the configuration in the general form and, under
-    `recorded`, what the record holds (its points, the times of its first and last, and
-    whether the run reached its end)."""
+    """Join the record and write run.json (_write_run_json)."""
     sink.writer.close(csv=config.record.csv)
-    _write_json(out / "run.json", {**expanded(config), RECORDED: {
+    _write_run_json(sink, config, out, complete)
+
+
+def _write_run_json(sink: RunSink, config: RunConfig, out: Path, complete: bool) -> None:
+    """run.json: the configuration in the general form and, under `recorded`, what the record
+    holds (its points, the times of its first and last, and whether the run reached its end;
+    written first with `complete` false, so that a killed run's says so)."""
+    _write_json(out / RUN_JSON_NAME, {**expanded(config), RECORDED: {
         **sink.writer.held(), "every": config.record.every, "complete": complete}})
+
+
+def _unwritten(error: RecordError, sink: RunSink, config: RunConfig, out: Path) -> RecordError:
+    """The error of a record file that could not be written (a full disk), saying what was
+    kept: the chunks written before (left as they are, since joining them takes as much space
+    again) or the joined record, and run.json saying so where it can still be written."""
+    try:
+        _write_run_json(sink, config, out, complete=False)
+    except OSError:
+        pass  # the one written at the start says the record is incomplete
+    held = sink.writer.held()
+    where = sink.writer.parts if sink.writer.parts.is_dir() else out / PARQUET_NAME
+    kept = (f"the record up to t = {held['last_time']:.9g} s ({held['points']} points) is in "
+            f"{where}" if held["points"] else "no point of the record was kept")
+    return RecordError(error.errno, f"{error.strerror}; {kept}", error.filename)
 
 
 def _stream(master: Master, scenario: Scenario, sink: RunSink, recorded: Sequence[str],
