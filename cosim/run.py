@@ -4,9 +4,9 @@ The folder gets the record (cosim.recording), metrics.json (cosim.metrics and wh
 add), the plots (cosim.plots), the FMUs' messages (cosim.fmu_log) and run.json (the checked
 configuration in the general form and what the record holds). Record, metrics, plots and
 timing are fed chunk by chunk (RunSink), the messages line by line, so memory does not grow
-with the run. A run holds its folder's lock (cosim.folder_lock), checks
-folder, memory and disk (cosim.disk) before it starts, and, when an FMU fails, Ctrl-C or
-SIGTERM stops it, keeps the record so far and writes run.json before raising.
+with the run. A run holds its folder's lock (cosim.folder_lock), checks folder, memory and disk
+(cosim.disk) before it starts, and, when an FMU fails, Ctrl-C or SIGTERM stops it or the disk
+is full, keeps the record so far and writes run.json before raising.
 
 The run folder: "File formats" (docs/reference/file-formats.md); errors and exit codes: "Exit
 codes and errors" (docs/reference/exit-codes.md).
@@ -286,7 +286,7 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
                               lambda: [Path(folder), *master.scratch()]):
                     streamed = _stream(master, scenario, sink, recorded, progress, pacing, cpu)
             except RecordError as error:
-                raise _unwritten(error, sink, config, out) from None
+                raise _unwritten(error, sink, config, out, complete=False) from None
             except (CosimError, KeyboardInterrupt) as error:
                 if sink.last_time is None:
                     raise
@@ -301,10 +301,11 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
         metrics = summary_metrics(sink.tracking.metrics() if sink.tracking else {}, duration,
                                   streamed.wall_s, streamed.timing)
         metrics |= builtin_metrics(scenario)
+    complete = streamed.timing.stopped_at is None
     try:
-        _close_record(sink, config, out, complete=streamed.timing.stopped_at is None)
+        _close_record(sink, config, out, complete)
     except RecordError as error:
-        raise _unwritten(error, sink, config, out) from None
+        raise _unwritten(error, sink, config, out, complete) from None
     if sink.plots is not None:
         sink.plots.write(out)
     if pacing is not None:
@@ -330,12 +331,13 @@ def _write_run_json(sink: RunSink, config: RunConfig, out: Path, complete: bool)
         **sink.writer.held(), "every": config.record.every, "complete": complete}})
 
 
-def _unwritten(error: RecordError, sink: RunSink, config: RunConfig, out: Path) -> RecordError:
+def _unwritten(error: RecordError, sink: RunSink, config: RunConfig, out: Path,
+               complete: bool) -> RecordError:
     """The error of a record file that could not be written (a full disk), saying what was
     kept: the chunks written before (left as they are, since joining them takes as much space
     again) or the joined record, and run.json saying so where it can still be written."""
     try:
-        _write_run_json(sink, config, out, complete=False)
+        _write_run_json(sink, config, out, complete)
     except OSError:
         pass  # the one written at the start says the record is incomplete
     held = sink.writer.held()

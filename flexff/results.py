@@ -65,9 +65,11 @@ def export_csv(folder: str | Path) -> Path:
 
 def _partial(folder: Path, configuration: dict[str, Any]) -> str | None:
     recorded = configuration.get(RECORDED) or {}
+    if recorded.get("complete") is True:  # joined or not (a disk that filled at the join)
+        return None
     if (folder / PARTS_NAME).is_dir() and not (folder / PARQUET_NAME).is_file():
-        return (f"the run was killed; its record is the chunks in {PARTS_NAME}/ up to the last "
-                f"one written")
+        return (f"the run did not end normally (it was killed, or its disk was full): its "
+                f"record is the chunks in {PARTS_NAME}/ up to the last one written")
     if recorded.get("complete") is False:
         end = recorded.get("last_time")
         return ("the run stopped before it recorded a point" if end is None else

@@ -129,6 +129,27 @@ def test_a_full_disk_names_the_file_and_what_was_kept(tmp_path, monkeypatch, cap
     assert (recorded["points"], recorded["complete"]) == (2000, False)
 
 
+def test_a_disk_full_at_the_join_keeps_the_whole_record_unjoined(tmp_path, monkeypatch, capsys):
+    import pyarrow.parquet as pq
+
+    monkeypatch.setattr("flexff.cosim.recording.CHUNK_BYTES", 16_000)  # 1000 points a chunk
+
+    def full(*args, **kwargs):
+        raise OSError(28, "Error writing bytes to file. Detail: [errno 28] No space left on "
+                          "device")
+
+    monkeypatch.setattr(pq, "ParquetWriter", full)
+    (tmp_path / "run.toml").write_text(vdp_config(3.0, '[record]\nsignals = ["vdp.x0"]\n'))
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "run.toml"), "-o", str(out)]) == 1
+    assert capsys.readouterr().err == (
+        f"flexff: error: {out / PARQUET_NAME}: No space left on device; the record up to t = 3 s "
+        f"(3001 points) is in {out / PARTS_NAME}\n")
+    assert load_recording(out).time.size == 3001 and not (out / PARQUET_NAME).exists()
+    assert results.load(out).partial is None  # whole, if not joined
+    assert json.loads((out / "run.json").read_text())["recorded"]["complete"] is True
+
+
 def test_a_killed_run_is_marked_partial_when_read_and_exported(tmp_path, capsys):
     (tmp_path / "run.toml").write_text(vdp_config(1e5))
     out = tmp_path / "out"
@@ -140,8 +161,8 @@ def test_a_killed_run_is_marked_partial_when_read_and_exported(tmp_path, capsys)
     finally:
         process.send_signal(signal.SIGKILL)
         process.wait()
-    why = ("the run was killed; its record is the chunks in signals.parts/ up to the last one "
-           "written")
+    why = ("the run did not end normally (it was killed, or its disk was full): its record is "
+           "the chunks in signals.parts/ up to the last one written")
     assert results.load(out).partial == why
     assert json.loads((out / "run.json").read_text())["recorded"]["complete"] is False
     assert main(["results", "export", str(out)]) == 0
