@@ -21,7 +21,7 @@ class FmuLog:
         self.path = path
         self.error: OSError | None = None  # the write that ended the log
         self._file: TextIO | None = None
-        self._warned = False
+        self._closed = False
 
     def forget_earlier(self) -> None:
         """Remove an earlier run's log, unless this one has begun (the run has started)."""
@@ -30,8 +30,8 @@ class FmuLog:
 
     def write(self, line: str) -> None:
         """Append one line (given without its newline); never raises (it is called from an
-        FMU's logger), a failed write ends the log."""
-        if self.error is not None:
+        FMU's logger), a failed write ends the log, and one after `close` is dropped."""
+        if self.error is not None or self._closed:
             return
         try:
             if self._file is None:
@@ -42,13 +42,15 @@ class FmuLog:
 
     def close(self) -> None:
         """Flush and close the file (safe twice); warn where a write failed."""
-        if self._file is not None and not self._file.closed:
+        if self._closed:
+            return
+        self._closed = True
+        if self._file is not None:
             try:
                 self._file.close()
             except OSError as error:
                 self.error = self.error or error
-        if self.error is not None and not self._warned:
-            self._warned = True
+        if self.error is not None:
             warnings.warn(f"{self.path}: {self.error.strerror or self.error}: the FMUs' "
                           f"messages from there on are not in it", stacklevel=2)
 
