@@ -19,7 +19,7 @@ import gc
 import math
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from ctypes import POINTER, byref, c_double, c_long, c_uint, c_void_p, cast
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +44,7 @@ from flexff.cosim.engine import (
     start_schedule,
 )
 from flexff.cosim.handover import ChunkBuffers, Handover, StepTimes, Worker
+from flexff.cosim.interrupts import deferred
 from flexff.cosim.isolation import IsolatedInstance
 from flexff.cosim.recording import CHUNK_MIN_ROWS, Recording, chunk_rows
 from flexff.cosim.sandbox import DEFAULT, Sandbox
@@ -244,12 +245,14 @@ class Master:
 
     `sources` names the external signals (the reference, constants) given to `run`; `links`
     is the wiring (cosim.wiring.wire; default: every input by name); `start` the time of
-    point 0; `step_timeout` (s) bounds every call of an isolated FMU.
+    point 0; `step_timeout` (s) bounds every call of an isolated FMU; `log`, where given, takes
+    every message of the FMUs loaded in this process, one line each (cosim.fmu_log).
     """
 
     def __init__(self, fmus: Sequence[ResolvedFmu], sources: Sequence[str], step: float,
                  links: Sequence[Link] | None = None, algorithm: str = "gauss-seidel",
-                 start: float = 0.0, step_timeout: float | None = None) -> None:
+                 start: float = 0.0, step_timeout: float | None = None,
+                 log: Callable[[str], None] | None = None) -> None:
         if not step > 0:
             raise InputError(f"step must be positive, got {step}")
         if algorithm not in ALGORITHMS:
@@ -271,7 +274,8 @@ class Master:
                 self._instances.append(
                     IsolatedInstance(info, fmu.name, step_timeout, fmu.solver, fmu.sandbox,
                                      fmu.scheduled) if fmu.isolate
-                    else FmuInstance(info, fmu.name, fmu.solver, scheduled=fmu.scheduled))
+                    else FmuInstance(info, fmu.name, fmu.solver, scheduled=fmu.scheduled,
+                                     log=log))
             self._layout(infos)
         except BaseException:
             self.close()
@@ -303,6 +307,10 @@ class Master:
                 read_before=not jacobi and (feeds_later[fmu.name] or not feeds_back[fmu.name]),
                 read_after=jacobi or feeds_back[fmu.name]))
         self.typed_signals = tuple(f"{p.name}.{n}" for p in self._plans for n in p.typed_outputs)
+        self._typed_index = frozenset(self.typed_signals)
+        self._own_names: dict[str, list[str]] = {}  # an output's own name -> its full names
+        for signal in (*self.signals, *self.typed_signals):
+            self._own_names.setdefault(signal.partition(".")[2], []).append(signal)
 
     def layout(self) -> dict[str, Any]:
         """The bus layout and every FMU's call plan, as plain data (for the C floor, whose plan
@@ -368,9 +376,8 @@ class Master:
         everything = (*self.signals, *self.typed_signals)
         record = list(everything if record is None else record)
         resolved = [self.resolve(n) for n in record]
-        floats = [(j, self.signals.index(q)) for j, q in enumerate(resolved)
-                  if q in self.signals]
-        typed = [(j, q) for j, q in enumerate(resolved) if q not in self.signals]
+        floats = [(j, self._index[q]) for j, q in enumerate(resolved) if q in self._index]
+        typed = [(j, q) for j, q in enumerate(resolved) if q not in self._index]
         columns = np.array([i for _, i in floats], dtype=np.int64)
         full = len(floats) == len(resolved) and np.array_equal(
             columns, np.arange(len(self.signals)))
@@ -441,35 +448,43 @@ class Master:
         window(base, handover.current)
         gc_was_enabled = gc.isenabled()
         gc.disable()  # no collection pauses inside the loop
-        try:
-            with _progress_bar(steps, progress) as bar:
-                if pacing is not None:
-                    start_schedule(run)
-                for k0 in range(0, steps + 1, PROGRESS_CHUNK):
-                    k1 = min(k0 + PROGRESS_CHUNK, steps + 1)
-                    start = time.perf_counter()
-                    status = engine.engine_run(byref(run), k0, k1)
-                    wall += time.perf_counter() - start
-                    if status != OK:
-                        break
-                    bar.update(min(k1, steps) - k0)
-                    if k1 - base == rows or k1 == steps + 1:
-                        hand(base, k1)
-                        base = k1
-            stopped_at = run.failed_k if status == OVERRUN else None
-            row = (stopped_at or 0) - base  # the stopped step's row in the chunk buffers
-            chunk_times = handover.current.times
-            stopped_step = (float(chunk_times.tet[row]), float(chunk_times.lateness[row])) if (
-                stopped_at is not None and chunk_times is not None) else (0.0, 0.0)
-            if status == FAILED:  # points before failed_k were recorded, failed_k if its step
-                hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))  # failed
-            elif stopped_at is not None:
-                end = stopped_at + 1  # points 0 .. stopped_at were recorded, the step was made
-                hand(base, end)
-        finally:
-            handover.wait()
-            if gc_was_enabled:
-                gc.enable()
+        recorded = 0  # the points recorded so far
+        with deferred() as interrupted:  # Ctrl-C and SIGTERM raised between engine calls
+            try:
+                with _progress_bar(steps, progress) as bar:
+                    if pacing is not None:
+                        start_schedule(run)
+                    for k0 in range(0, steps + 1, PROGRESS_CHUNK):
+                        k1 = min(k0 + PROGRESS_CHUNK, steps + 1)
+                        start = time.perf_counter()
+                        status = engine.engine_run(byref(run), k0, k1)
+                        wall += time.perf_counter() - start
+                        if status != OK:
+                            break
+                        recorded = k1
+                        bar.update(min(k1, steps) - k0)
+                        if k1 - base == rows or k1 == steps + 1:
+                            hand(base, k1)
+                            base = k1
+                        interrupted()
+                stopped_at = run.failed_k if status == OVERRUN else None
+                row = (stopped_at or 0) - base  # the stopped step's row in the chunk buffers
+                made_times = handover.current.times
+                stopped_step = (float(made_times.tet[row]), float(made_times.lateness[row])) \
+                    if stopped_at is not None and made_times is not None else (0.0, 0.0)
+                if status == FAILED:  # points before failed_k were recorded, failed_k if its
+                    # step failed after recording
+                    hand(base, max(base, run.failed_k + (run.failed_call in AFTER_RECORD)))
+                elif stopped_at is not None:
+                    end = stopped_at + 1  # points 0 .. stopped_at were recorded, step made
+                    hand(base, end)
+            except KeyboardInterrupt:  # the points so far, handed over before it is raised on
+                hand(base, max(base, recorded))
+                raise
+            finally:
+                handover.wait()
+                if gc_was_enabled:
+                    gc.enable()
         handover.check()
         if status == FAILED and run.failed_call in NONFINITE:
             p = self._plans[run.failed_fmu]
@@ -526,24 +541,24 @@ class Master:
 
     def resolve(self, name: str) -> str:
         """The full name of a signal: `fmu.output`, a source, or a unique output's own name."""
-        everything = (*self.signals, *self.typed_signals)
-        if name in everything:
+        if name in self._index or name in self._typed_index:
             return name
-        matches = [s for s in everything if s.partition(".")[2] == name]
+        matches = self._own_names.get(name, ())
         if len(matches) == 1:
             return matches[0]
         if matches:
             raise InputError(f"signal {name!r} is ambiguous: {', '.join(matches)}")
         raise InputError(f"cannot record unknown signal {name!r}; known: "
-                         f"{', '.join(everything)}")
+                         f"{', '.join((*self.signals, *self.typed_signals))}")
 
     def _source_columns(self, values: Mapping[str, np.ndarray | float], steps: int
                         ) -> list[np.ndarray]:
         """Every source's values in the bus's order, checked before the run (steps + 1 finite
         samples, or a finite constant) and not copied (a float64 array is used as given): the
         engine's rows are filled from them chunk by chunk (_fill_source_rows)."""
+        sources = set(self.sources)
         missing = [n for n in self.sources if n not in values]
-        extra = [n for n in values if n not in self.sources]
+        extra = [n for n in values if n not in sources]
         if missing or extra:
             raise ValueError(f"source values: missing {missing}, unexpected {extra}")
         columns = []
@@ -552,7 +567,7 @@ class Master:
             if column.ndim and column.shape != (steps + 1,):
                 raise ValueError(f"source {name!r} has {column.shape} samples, the run needs "
                                  f"({steps + 1},) (or a constant)")
-            if not np.all(np.isfinite(column)):
+            if not np.isfinite(column).all():
                 raise ValueError(f"source {name!r} has non-finite values")
             columns.append(column)
         return columns

@@ -37,6 +37,16 @@ CHUNK_MIN_ROWS = 1000  # a chunk's points are a multiple of it (the master's pro
 PARQUET_OPTIONS: dict[str, Any] = {"compression": "none", "use_dictionary": False}
 
 
+class RecordError(OSError):
+    """A record's file that could not be written (a full disk), named by its path."""
+
+    @classmethod
+    def of(cls, error: OSError, path: Path) -> RecordError:
+        """`error` (whose own text may name no file, as pyarrow's does not) about `path`."""
+        reason = os.strerror(error.errno) if error.errno else (error.strerror or str(error))
+        return cls(error.errno, reason, str(path))
+
+
 @dataclass(frozen=True, eq=False)
 class Recording:
     """Signals sampled at the communication points `time` (one value per point each)."""
@@ -116,13 +126,17 @@ class RecordWriter:
         self.times: tuple[float, float] | None = None  # of the first and the last point
 
     def write(self, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
-        """Append the points `time` with their values, one array per signal."""
+        """Append the points `time` with their values, one array per signal (RecordError where
+        the chunk cannot be written: the chunks before stay as they are)."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
         table = pa.table({"time": time, **columns})
-        atomic_write(self._part(self.count),
-                     lambda tmp: pq.write_table(table, tmp, **PARQUET_OPTIONS))
+        path = self._part(self.count)
+        try:
+            atomic_write(path, lambda tmp: pq.write_table(table, tmp, **PARQUET_OPTIONS))
+        except OSError as error:
+            raise RecordError.of(error, path) from None
         self.count += 1
         if time.size:
             first = self.times[0] if self.times else float(time[0])
@@ -140,7 +154,8 @@ class RecordWriter:
 
     def close(self, csv: bool = False) -> list[Path]:
         """Join the chunks this writer wrote (never another's) into signals.parquet (and write
-        signals.csv if `csv`); return the files written."""
+        signals.csv if `csv`); return the files written. RecordError where a file cannot be
+        written: the chunks stay until they are joined."""
         import pyarrow.parquet as pq
 
         parts = [self._part(k) for k in range(self.count)]
@@ -155,11 +170,17 @@ class RecordWriter:
                     for batch in pq.ParquetFile(part).iter_batches(JOIN_ROWS, use_threads=False):
                         writer.write_batch(batch, row_group_size=JOIN_ROWS)
 
-        paths = [atomic_write(self.folder / PARQUET_NAME, join) if parts
-                 else self.folder / PARQUET_NAME]
+        joined = self.folder / PARQUET_NAME
+        try:
+            paths = [atomic_write(joined, join) if parts else joined]
+        except OSError as error:
+            raise RecordError.of(error, joined) from None
         shutil.rmtree(self.parts)
         if csv:
-            paths.append(export_csv(self.folder))
+            try:
+                paths.append(export_csv(self.folder))
+            except OSError as error:
+                raise RecordError.of(error, self.folder / CSV_NAME) from None
         return paths
 
 

@@ -1,11 +1,12 @@
 """run_config: one configured run, from TOML (or SSP) to a folder of results.
 
 The folder gets the record (cosim.recording), metrics.json (cosim.metrics and what built-ins
-add), the plots (cosim.plots) and run.json (the checked configuration in the general form and
-what the record holds). Record, metrics, plots and timing are fed chunk by chunk (RunSink), so
-memory does not grow with the run. A run holds its folder's lock (cosim.folder_lock), checks
-folder, memory and disk (cosim.disk) before it starts, and, when an FMU fails, Ctrl-C or
-SIGTERM stops it, keeps the record so far and writes run.json before raising.
+add), the plots (cosim.plots), the FMUs' messages (cosim.fmu_log) and run.json (the checked
+configuration in the general form and what the record holds). Record, metrics, plots and
+timing are fed chunk by chunk (RunSink), the messages line by line, so memory does not grow
+with the run. A run holds its folder's lock (cosim.folder_lock), checks folder, memory and disk
+(cosim.disk) before it starts, and, when an FMU fails, Ctrl-C or SIGTERM stops it or the disk
+is full, keeps the record so far and writes run.json before raising.
 
 The run folder: "File formats" (docs/reference/file-formats.md); errors and exit codes: "Exit
 codes and errors" (docs/reference/exit-codes.md).
@@ -27,6 +28,7 @@ from flexff.cosim.axis_references import AXIS_KINDS
 from flexff.cosim.builtins import registered
 from flexff.cosim.config import FAULTS, RECORDED, expanded, load_config
 from flexff.cosim.disk import check_disk
+from flexff.cosim.fmu_log import LOG_NAME, FmuLog
 from flexff.cosim.folder_lock import folder_lock
 from flexff.cosim.handover import Worker
 from flexff.cosim.master import CosimError, Master, Streamed
@@ -41,12 +43,21 @@ from flexff.cosim.metrics import (
 from flexff.cosim.plots import PLOT_SIGNALS, RunPlots, plot_tet
 from flexff.cosim.plugins import short_names
 from flexff.cosim.realtime import realtime_process
-from flexff.cosim.recording import Recording, RecordWriter, atomic_write, signal_name
+from flexff.cosim.recording import (
+    PARQUET_NAME,
+    RecordError,
+    Recording,
+    RecordWriter,
+    atomic_write,
+    signal_name,
+)
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ConfigError, RunConfig
 from flexff.cosim.timing import OverrunError, Pacing
 from flexff.cosim.watchdog import watchdog
+
+METRICS_NAME, RUN_JSON_NAME = "metrics.json", "run.json"  # in the run's folder
 
 
 def load_run_config(path: str | Path) -> RunConfig:
@@ -278,17 +289,23 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
                 cpu: int | None) -> dict[str, Any]:
     """run_config's run, in the folder `out` it holds the lock of."""
     plot = _manipulator(config) if config.record.plot is None else config.record.plot
-    with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
+    with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder, \
+            FmuLog(out / LOG_NAME) as log:
         scenario = resolve(config, folder)
-        with scenario.master() as master:
+        with scenario.master(log.write) as master:
             recorded = _wanted(scenario, master)
             check_disk(out, config, len(_kept(recorded, config)))
             sink = RunSink(out, recorded, _kept(recorded, config), config.steps + 1,
                            config.step, plot, config.record.every, tracked_axes(config))
+            (out / METRICS_NAME).unlink(missing_ok=True)  # an earlier run's
+            log.forget_earlier()
+            _write_run_json(sink, scenario, out, complete=False)  # until the run has ended
             try:
                 with watchdog(f"the record up to its last chunk is in {sink.writer.parts}",
                               lambda: [Path(folder), *master.scratch()]):
                     streamed = _stream(master, scenario, sink, recorded, progress, pacing, cpu)
+            except RecordError as error:
+                raise _unwritten(error, sink, scenario, out, complete=False) from None
             except (CosimError, KeyboardInterrupt) as error:
                 if sink.last_time is None:
                     raise
@@ -303,12 +320,16 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
         metrics = summary_metrics(sink.tracking.metrics() if sink.tracking else {}, duration,
                                   streamed.wall_s, streamed.timing)
         metrics |= builtin_metrics(scenario)
-    _close_record(sink, scenario, out, complete=streamed.timing.stopped_at is None)
+    complete = streamed.timing.stopped_at is None
+    try:
+        _close_record(sink, scenario, out, complete)
+    except RecordError as error:
+        raise _unwritten(error, sink, scenario, out, complete) from None
     if sink.plots is not None:
         sink.plots.write(out)
     if pacing is not None:
         plot_tet(streamed.timing, out / "tet.png")
-    _write_json(out / "metrics.json", metrics)
+    _write_json(out / METRICS_NAME, metrics)
     if streamed.timing.stopped_at is not None:
         raise OverrunError(f"{streamed.timing.stop_message()}; the record up to there is in "
                            f"{out}")
@@ -316,17 +337,39 @@ def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pac
 
 
 def _close_record(sink: RunSink, scenario: Scenario, out: Path, complete: bool) -> None:
-    """Join the record and write run.json: the configuration in the general form, under
-    `recorded` what the record holds (its points, the times of its first and last, and
-    whether the run reached its end) and, under `description_faults`, each FMU's faults that
-    the run went on despite (fmu.description_faults)."""
+    """Join the record and write run.json (_write_run_json)."""
+    sink.writer.close(csv=scenario.config.record.csv)
+    _write_run_json(sink, scenario, out, complete)
+
+
+def _write_run_json(sink: RunSink, scenario: Scenario, out: Path, complete: bool) -> None:
+    """run.json: the configuration in the general form, under `recorded` what the record
+    holds (its points, the times of its first and last, and whether the run reached its end;
+    written first with `complete` false, so that a killed run's says so) and, under
+    `description_faults`, each FMU's faults that the run went on despite
+    (fmu.description_faults)."""
     config = scenario.config
-    sink.writer.close(csv=config.record.csv)
     faults = {f.name: [str(fault) for fault in f.described().faults]
               for f in scenario.fmus if f.described().faults}
-    _write_json(out / "run.json", {**expanded(config), RECORDED: {
+    _write_json(out / RUN_JSON_NAME, {**expanded(config), RECORDED: {
         **sink.writer.held(), "every": config.record.every, "complete": complete},
         **({FAULTS: faults} if faults else {})})
+
+
+def _unwritten(error: RecordError, sink: RunSink, scenario: Scenario, out: Path,
+               complete: bool) -> RecordError:
+    """The error of a record file that could not be written (a full disk), saying what was
+    kept: the chunks written before (left as they are, since joining them takes as much space
+    again) or the joined record, and run.json saying so where it can still be written."""
+    try:
+        _write_run_json(sink, scenario, out, complete)
+    except OSError:
+        pass  # the one written at the start says the record is incomplete
+    held = sink.writer.held()
+    where = sink.writer.parts if sink.writer.parts.is_dir() else out / PARQUET_NAME
+    kept = (f"the record up to t = {held['last_time']:.9g} s ({held['points']} points) is in "
+            f"{where}" if held["points"] else "no point of the record was kept")
+    return RecordError(error.errno, f"{error.strerror}; {kept}", error.filename)
 
 
 def _stream(master: Master, scenario: Scenario, sink: RunSink, recorded: Sequence[str],

@@ -10,7 +10,7 @@ model description, and wires them (cosim.wiring). Wiring problems become ConfigE
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -49,10 +49,11 @@ class Scenario:
     def steps(self) -> int:
         return self.config.steps
 
-    def master(self) -> Master:
-        """The FMUs loaded and wired, ready to run (a context manager)."""
+    def master(self, log: Callable[[str], None] | None = None) -> Master:
+        """The FMUs loaded and wired, ready to run (a context manager); `log` takes their
+        messages (Master)."""
         return Master(self.fmus, list(self.sources), self.step, self.links,
-                      self.config.algorithm, self.config.start, self.config.step_timeout)
+                      self.config.algorithm, self.config.start, self.config.step_timeout, log)
 
     def reference(self) -> dict[str, np.ndarray]:
         """The sampled reference signals (empty without a [reference])."""

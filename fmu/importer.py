@@ -43,6 +43,7 @@ from fmpy.model_description import ValidationError
 from flexff.fmu.archive import extract_archive
 from flexff.fmu.description_faults import Fault, description_faults, summary
 from flexff.fmu.errors import InputError, not_a_file
+from flexff.fmu.messages import MessageLog
 from flexff.fmu.model_exchange import ModelExchangeStepper
 from flexff.fmu.scheduled import ScheduledStepper, periodic_clocks
 from flexff.fmu.stepper import Stepper
@@ -305,7 +306,7 @@ class _Fmi2Log:
     """
 
     def __init__(self) -> None:
-        self.sinks: dict[int, list[str]] = {}
+        self.sinks: dict[int, MessageLog] = {}
         self.callback = fmi2CallbackLoggerTYPE(self._log)
         self._next = 1
 
@@ -315,7 +316,7 @@ class _Fmi2Log:
         if sink is not None:
             sink.append(_message(status, message))
 
-    def callbacks(self, sink: list[str]) -> tuple[fmi2CallbackFunctions, int]:
+    def callbacks(self, sink: MessageLog) -> tuple[fmi2CallbackFunctions, int]:
         key, self._next = self._next, self._next + 1
         self.sinks[key] = sink
         callbacks = fmi2CallbackFunctions()
@@ -336,7 +337,8 @@ def _message(status: int, message: bytes | None) -> str:
 
 
 class FmuInstance:
-    """One instantiated FMU (FMI 2.0 or 3.0) with its own message log: a co-simulation one, or
+    """One instantiated FMU (FMI 2.0 or 3.0) with its own message log (each message given to
+    `log`, where given, as one line; the last few kept for errors): a co-simulation one, or
     a model-exchange one (`solver`, fmu.model_exchange.SOLVERS; an FMU without co-simulation
     needs one) or a scheduled-execution one (`scheduled`; an FMU with that interface alone
     needs it), the last two stepped by `stepper` once initialized. It is unpacked into
@@ -345,9 +347,9 @@ class FmuInstance:
 
     def __init__(self, info: FmuInfo, name: str, solver: str | None = None,
                  folder: Path | None = None, confine: Callable[[], None] | None = None,
-                 scheduled: bool = False) -> None:
+                 scheduled: bool = False, log: Callable[[str], None] | None = None) -> None:
         self.info, self.name = info, name
-        self.messages: list[str] = []
+        self.messages = MessageLog(name, log)
         self.initialized = False
         self.scheduled = scheduled or info.scheduled_only
         self.model_exchange = not self.scheduled and (solver is not None
@@ -413,11 +415,11 @@ class FmuInstance:
         self.messages.append(_message(status, message))
 
     def _log_text(self) -> str:
-        return f" ({'; '.join(self.messages[-5:])})" if self.messages else ""
+        return f" ({'; '.join(self.messages.last(5))})" if self.messages.count else ""
 
     def fail(self, what: str) -> FmuError:
         """The error for a failed call, with the FMU's last messages."""
-        log = "; ".join(self.messages[-5:]) or "no message from the FMU"
+        log = "; ".join(self.messages.last(5)) or "no message from the FMU"
         if self.stepper is not None and self.stepper.error is not None:
             log = f"{self.stepper.error}; {log}"
         return FmuError(f"{self.name}: {what} failed: {log}")
