@@ -145,6 +145,8 @@ KEYS: tuple[Key, ...] = (
         'Start values ("instance.parameter" = number) with which the loop measures exactly, '
         "such as an encoder's resolution at 0: ILC and evaluate measure the noise floor with "
         "them."),
+    Key("machine", "learning", "table", "derived from the data", "",
+        "The preprocessing of features and labels ([machine.learning])."),
     Key("machine.axis", "name", "string", "required", "",
         "A letter, then letters or digits; names <axis>_ref, v<axis>_ref, ..."),
     Key("machine.axis", "unit", "string", '"m"', "", "The axis's position unit."),
@@ -176,10 +178,21 @@ KEYS: tuple[Key, ...] = (
     Key("machine.log", "scalars", "table", "{}", "", "Named numbers for the expressions."),
     Key("machine.log", "columns", "table", "{}", "",
         "Dataset signal = expression of the log's columns and scalars."),
+    Key("machine.learning", "cutoff_hz", "number",
+        "4x the band of 99 % of the references' velocity energy, at most 5 % of the rate", "Hz",
+        "The labels' zero-phase Butterworth low-pass corner (the measured motion's: 8x it)."),
+    Key("machine.learning", "filter_order", "integer", "4", "",
+        "The order of that low-pass (1 to 12)."),
+    Key("machine.learning", "lead_s", "number", "half a sample (the zero-order hold's)", "s",
+        "How far each effort is taken before the motion it is compared with."),
+    Key("machine.learning", "model_rate_hz", "number",
+        "the data rate over a whole number, at least 10x cutoff_hz", "Hz",
+        "The rate the labels are decimated to and the models run at."),
 )
 
 TABLES = ("run", "reference", "reference.segments[k]", "source", "fmu.NAME", "connection",
-          "record", "machine", "machine.axis", "machine.prior", "machine.log")
+          "record", "machine", "machine.axis", "machine.prior", "machine.log",
+          "machine.learning")
 
 
 def keys_of(table: str, kind: str | None = None) -> tuple[str, ...]:

@@ -108,6 +108,23 @@ def _evaluate_logs(args: argparse.Namespace) -> int:
     return 0
 
 
+def _predict(args: argparse.Namespace) -> int:
+    """predict RUN --data LOGS -o FILE.csv: each model's efforts per sample of the logs."""
+    from flexff.learning.machine_features import preprocessing_text
+    from flexff.learning.predict import predict_logs, write_predictions
+
+    _output_file(args.output)
+    predictions = predict_logs(args.run, args.data, args.split)
+    print(preprocessing_text(predictions.preprocessing))
+    written = write_predictions(predictions, args.output,
+                                {"run": str(args.run), "data": str(args.data),
+                                 "split": args.split})
+    for name, errors in predictions.relative_error.items():
+        print(f"{name}: " + ", ".join(f"{axis} {100 * e:.2f} %" for axis, e in errors.items()))
+    print(f"relative 2-norm of the filtered effort error; wrote {', '.join(map(str, written))}")
+    return 0
+
+
 def _fmu_build(args: argparse.Namespace) -> int:
     from flexff.fmu.build import build_fmu
 
@@ -542,9 +559,12 @@ def _identify(args: argparse.Namespace) -> int:
     if is_machine_dataset(args.data):
         from flexff.learning.linear_model import write_linear_model
         from flexff.learning.machine_dataset import load_machine_dataset
-        from flexff.learning.machine_identify import identify_dataset
+        from flexff.learning.machine_identify import dataset_features, identify_dataset
 
-        model = identify_dataset(load_machine_dataset(args.data))
+        data = load_machine_dataset(args.data)
+        features, settings = dataset_features(data)
+        print(settings)
+        model = identify_dataset(data, features)
         print(model.summary())
         print(f"wrote {write_linear_model(model, args.output)}")
         return 0
@@ -924,6 +944,19 @@ def build_parser() -> argparse.ArgumentParser:
     _device_option(evaluation, "train the networks on")
     machine_options(evaluation)
     evaluation.set_defaults(handler=_evaluate)
+
+    prediction = commands.add_parser(
+        "predict", help="each trained model's predicted effort per sample of a machine's logs "
+                        "beside the measured one (raw and filtered), as CSV, JSON and PNG")
+    prediction.add_argument("run", help="flexff evaluate's output folder (identified.json, "
+                                        "runs/) or one training run folder")
+    prediction.add_argument("--data", required=True,
+                            help="a machine dataset folder (flexff data import --machine)")
+    prediction.add_argument("-o", "--output", required=True,
+                            help="the CSV file to write (its .json and .png beside it)")
+    prediction.add_argument("--split", default="all", choices=("all", "train", "test"),
+                            help="the dataset's trajectories to predict (default all)")
+    prediction.set_defaults(handler=_predict)
 
     learning = commands.add_parser(
         "ilc", help="iterative learning control on a run's one reference: the best feedforward "
