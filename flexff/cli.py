@@ -125,6 +125,20 @@ def _predict(args: argparse.Namespace) -> int:
     return 0
 
 
+def _tune(args: argparse.Namespace) -> int:
+    """tune LOOP: each axis's plant measured in the loop, the PID block's loop shape proposed."""
+    from flexff.cosim.run import load_run_config
+    from flexff.learning.pid_tune import tune_loop, tuning_table, write_tuning
+
+    _output_file(args.output)
+    tuning = tune_loop(load_run_config(args.config), args.phase_margin, args.seconds,
+                       args.high_hz)
+    print(tuning_table(tuning))
+    print(f"wrote {write_tuning(tuning, args.output, args.config)} (the PID block's mass, "
+          f"damping and crossover_hz per axis; margins around the identified model)")
+    return 0
+
+
 def _fmu_build(args: argparse.Namespace) -> int:
     from flexff.fmu.build import build_fmu
 
@@ -957,6 +971,21 @@ def build_parser() -> argparse.ArgumentParser:
     prediction.add_argument("--split", default="all", choices=("all", "train", "test"),
                             help="the dataset's trajectories to predict (default all)")
     prediction.set_defaults(handler=_predict)
+
+    tune = commands.add_parser(
+        "tune", help="measure each axis's plant in a loop (a chirp) and propose its PID "
+                     "block's mass, damping and crossover_hz for a phase margin, as TOML")
+    tune.add_argument("config", metavar="CONFIG.toml|SYSTEM.ssp",
+                      help="the loop with a [machine] (its PID closed while measuring)")
+    tune.add_argument("-o", "--output", required=True, help="the TOML file to write")
+    tune.add_argument("--phase-margin", type=float, default=40.0, metavar="DEG",
+                      help="the phase margin to keep (default 40)")
+    tune.add_argument("--seconds", type=float, default=8.0, metavar="S",
+                      help="the chirp's length per axis (default 8)")
+    tune.add_argument("--high-hz", type=float, metavar="HZ",
+                      help="the chirp's highest frequency, the highest crossover proposed "
+                           "(default 5 %% of the loop's rate)")
+    tune.set_defaults(handler=_tune)
 
     learning = commands.add_parser(
         "ilc", help="iterative learning control on a run's one reference: the best feedforward "
