@@ -49,6 +49,17 @@ def test_the_drive_is_measured_and_its_tuned_loop_keeps_the_margin():
     assert tuned["einf"] < given["einf"] < 1e-3
 
 
+def test_a_current_loops_lag_is_found_and_lowers_the_crossover():
+    """The rough drive: the same 2 kg behind a 2 ms current loop (and friction, springs and
+    ripple its rigid model leaves out): the lag is measured as delay, which costs phase, so
+    the same margin gives a lower crossover than on the plain drive (50 Hz)."""
+    tuning = tune_loop(load_run_config(EXAMPLES / "drive-rough.toml"), 40.0, seconds=3.0)
+    (axis,) = tuning.axes
+    assert axis.mass == pytest.approx(DRIVE.mass, rel=0.1)
+    assert axis.delay_s == pytest.approx(0.002, abs=5e-4)
+    assert axis.crossover_hz is not None and axis.crossover_hz < 25.0
+
+
 def test_each_stage_axis_is_measured_alone_and_written_in_the_blocks_layout():
     loop = load_run_config(EXAMPLES / "stage.toml")
     tuning = tune_loop(loop, 40.0, seconds=3.0)
