@@ -10,11 +10,9 @@ the effort the loop commands (the labels), units, and the excitation limits (`ra
 `velocity`, `acceleration`, optional `jerk`); records and datasets name the measured position
 `<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
 terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
-`[machine.log]` says how the machine's logs name these signals (LogMap: `flexff data import`);
-`exact` the start values with which the loop measures exactly (its noise floor's measure).
-`[machine.learning]` sets the preprocessing that is otherwise derived from the data (Learning:
-the labels' filter corner and order, the efforts' lead, the model rate).
-Every key is listed in KEYS; every error is a ConfigError naming `machine.key`.
+`[machine.log]` names these signals in the machine's logs (LogMap), `exact` the start values
+with which the loop measures exactly, `[machine.learning]` the preprocessing otherwise derived
+from the data (Learning). Every key is in KEYS; every error is a ConfigError naming the key.
 """
 
 from __future__ import annotations

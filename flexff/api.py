@@ -10,11 +10,9 @@ command line (`flexff run`), as functions.
     results = api.run_many(configs, "sweep")     # in parallel, one subfolder each
     result = api.read("out")                     # flexff.results.load: recording, metrics, run.json
     api.register_builtin("gain", (api.Option("k", "number", 1.0),), gain_system)  # [fmu.g]
-    predicted = api.predict("evaluation", "logs")  # each model's efforts on a machine's logs
-    api.write_predictions(predicted, "predictions.csv")  # as `flexff predict`: CSV, JSON, PNG
 
 A configuration is a frozen cosim.schema.RunConfig; change one through `api.sweep` (or
-dataclasses.replace and `api.check`), so that every change passes the checks a file passes.
+dataclasses.replace and `api.check`). `api.predict` is `flexff predict` as a function.
 """
 
 from __future__ import annotations

@@ -1,21 +1,15 @@
 """`flexff tune LOOP`: the PID block's loop shape (`mass`, `damping`, `crossover_hz` per axis)
 from each axis's plant measured in the loop, for a stated phase margin.
 
-Each axis is measured on its own, in the loop as it is (its PID closed, the other axes held
-where the plant rests, every feedforward zero): its reference sweeps a logarithmic chirp from
-LOW_HZ to `high_hz` about the position where the plant rests (read at the start of the run),
-as large as the description's range, velocity and acceleration allow, faded in over the
-first second after SETTLE_S seconds at rest. The commanded effort and the measured motion
-(both low-passed alike at FIT_CORNER times `high_hz`, zero-phase) give the axis's rigid
-model by least squares, effort = mass a + damping v + Coulomb tanh(v / w) + offset, with the
-effort taken `lead` earlier, the lead searched in quarter samples: what it holds beyond the
-zero-order hold's half sample is the plant's delay (a current loop's lag, a computation's).
-
-The proposal is the highest crossover up to `high_hz` (the band the model was measured in)
-whose loop, the axis's PID block loop-shaped on the identified mass and damping, has the
-phase margin asked for and GAIN_MARGIN_DB, both around the identified model with its delay
-(controllers.loop_shaping.loop_margins). TOML: the `[fmu.<block>]` options to set, and a
-`[tune]` table of what was measured.
+Each axis is measured on its own in the loop as it is (PID closed, the other axes held where
+the plant rests, feedforward zero): its reference sweeps a logarithmic chirp up to `high_hz`
+about its rest, as large as the description's limits allow. Effort and measured motion,
+low-passed alike, give its rigid model by least squares (effort = mass a + damping v +
+Coulomb tanh(v / w) + offset), the effort's lead searched: beyond the zero-order hold's half
+sample it is the plant's delay (a current loop's lag). The proposal is the highest crossover
+up to `high_hz` whose loop, the block loop-shaped on that model, keeps the phase margin and
+GAIN_MARGIN_DB around the model with its delay. TOML: the block's table with the proposal,
+and `[tune]`, what was measured.
 
 Docs: "Tune the PID block" (docs/how-to/tune-pid.md).
 """
