@@ -177,6 +177,8 @@ KEYS: tuple[Key, ...] = (
         "them."),
     Key("machine", "ilc", "table", "ILC's defaults", "",
         "Iterative learning control's settings on this loop ([machine.ilc])."),
+    Key("machine", "learning", "table", "derived from the data", "",
+        "The preprocessing of features and labels ([machine.learning])."),
     Key("machine.axis", "name", "string", "required", "",
         "A letter, then letters or digits; names <axis>_ref, v<axis>_ref, ..."),
     Key("machine.axis", "unit", "string", '"m"', "", "The axis's position unit."),
@@ -217,10 +219,21 @@ KEYS: tuple[Key, ...] = (
     Key("machine.ilc", "gain", "number", "1", "",
         "The learning gain on the model's correction P^-1 e; below 1 learns more slowly but "
         "tolerates a worse model (--gain, --ilc-gain)."),
+    Key("machine.learning", "cutoff_hz", "number",
+        "4x the band of 99 % of the references' velocity energy, at most 5 % of the rate", "Hz",
+        "The labels' zero-phase Butterworth low-pass corner (the measured motion's: 8x it)."),
+    Key("machine.learning", "filter_order", "integer", "4", "",
+        "The order of that low-pass (1 to 12)."),
+    Key("machine.learning", "lead_s", "number", "half a sample (the zero-order hold's)", "s",
+        "How far each effort is taken before the motion it is compared with."),
+    Key("machine.learning", "model_rate_hz", "number",
+        "the data rate over a whole number, at least 10x cutoff_hz", "Hz",
+        "The rate the labels are decimated to and the models run at."),
 )
 
 TABLES = ("run", "reference", "reference.segments[k]", "source", "fmu.NAME", "connection",
-          "record", "machine", "machine.axis", "machine.prior", "machine.log", "machine.ilc")
+          "record", "machine", "machine.axis", "machine.prior", "machine.log", "machine.ilc",
+          "machine.learning")
 
 
 def keys_of(table: str, kind: str | None = None) -> tuple[str, ...]:

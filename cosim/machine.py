@@ -11,10 +11,10 @@ of logs alone leaves them out; units, and the excitation limits (`range`,
 `velocity`, `acceleration`, optional `jerk`); records and datasets name the measured position
 `<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
 terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
-`[machine.log]` says how the machine's logs name these signals (LogMap: `flexff data import`);
-`exact` the start values with which the loop measures exactly (its noise floor's measure).
-`[machine.ilc]` ILC's settings (IlcSettings).
-Every key is listed in KEYS; every error is a ConfigError naming `machine.key`.
+`[machine.log]` names these signals in the machine's logs (LogMap), `exact` the start values
+with which the loop measures exactly, `[machine.ilc]` ILC's settings (IlcSettings),
+`[machine.learning]` the preprocessing otherwise derived from the data (Learning). Every key is
+in KEYS; every error is a ConfigError naming the key.
 """
 
 from __future__ import annotations
@@ -49,12 +49,13 @@ SCALAR_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 PRIOR_TERMS = ("inertia", "viscous", "coulomb", "coulomb_asymmetric", "offset")
 DEFAULT_PRIOR_TERMS = ("inertia", "viscous", "coulomb", "offset")
 KEYS = {
-    "machine": ("name", "axis", "prior", "log", "exact", "ilc"),
+    "machine": ("name", "axis", "prior", "log", "exact", "ilc", "learning"),
     "axis": ("name", "unit", "measured", "true", "feedforward", "effort", "effort_unit",
              "range", "velocity", "acceleration", "jerk"),
     "prior": ("terms", "extra", "coulomb_width"),
     "log": ("time", "scalars", "columns"),
     "ilc": ("iterations", "cutoff_hz", "gain"),
+    "learning": ("cutoff_hz", "filter_order", "lead_s", "model_rate_hz"),
 }
 
 
@@ -187,6 +188,23 @@ class IlcSettings:
 
 
 @dataclass(frozen=True)
+class Learning:
+    """The preprocessing of features and labels, each None: derived from the training data
+    (learning.machine_features.MachineFeatures, which these settings start): the labels'
+    zero-phase low-pass corner [Hz] and order, the efforts' lead over the motion [s] (None:
+    half a sample, the zero-order hold's), the model rate [Hz]."""
+
+    cutoff_hz: float | None = None
+    filter_order: int | None = None
+    lead_s: float | None = None
+    model_rate_hz: float | None = None
+
+    def given(self) -> dict[str, float | int]:
+        """The settings given, by name."""
+        return {k: v for k, v in vars(self).items() if v is not None}
+
+
+@dataclass(frozen=True)
 class Machine:
     """A machine's axes, prior and log map, checked."""
 
@@ -196,6 +214,7 @@ class Machine:
     log: LogMap = LogMap()
     exact: Mapping[str, float] = field(default_factory=dict)  # "instance.parameter" -> value
     ilc: IlcSettings = IlcSettings()
+    learning: Learning = Learning()
 
     def axis(self, name: str) -> Axis:
         return next(a for a in self.axes if a.name == name)
@@ -251,7 +270,7 @@ def parse_machine(table: Any, origin: str, base: Path = Path(".")) -> Machine:
     prior = check.prior(table.get("prior", {}), axes)
     log = check.log(table.get("log", {}), Machine(name, axes).signals)
     return Machine(name, axes, prior, log, check.exact(table.get("exact", {})),
-                   check.ilc(table.get("ilc", {})))
+                   check.ilc(table.get("ilc", {})), check.learning(table.get("learning", {})))
 
 
 def machine_table(machine: Machine) -> dict[str, Any]:
@@ -275,7 +294,8 @@ def machine_table(machine: Machine) -> dict[str, Any]:
            "columns": {n: e.text for n, e in machine.log.columns.items()}}
     return {"name": machine.name, "axis": axes, "prior": prior, "log": log,
             **({"exact": dict(machine.exact)} if machine.exact else {}),
-            **({"ilc": machine.ilc.table()} if machine.ilc.table() else {})}
+            **({"ilc": machine.ilc.table()} if machine.ilc.table() else {}),
+            **({"learning": machine.learning.given()} if machine.learning.given() else {})}
 
 
 def check_signals(machine: Machine, outputs: Iterable[str], inputs: Iterable[str],
@@ -423,6 +443,20 @@ class _Check:
                              f"trials, at least 1, got {iterations!r}")
         return IlcSettings(iterations, self.number(table, "machine.ilc", "cutoff_hz"),
                            self.number(table, "machine.ilc", "gain"))
+    def learning(self, table: Any) -> Learning:
+        self.table(table, "machine.learning", "learning")
+        key = "machine.learning"
+        order = table.get("filter_order")
+        if order is not None and (isinstance(order, bool) or not isinstance(order, int)
+                                  or not 1 <= order <= 12):
+            raise self.error(f"{key}.filter_order", f"expected a whole number from 1 to 12 (the "
+                             f"labels' Butterworth low-pass order), got {order!r}")
+        lead = self.number(table, key, "lead_s", positive=False)
+        if lead is not None and lead < 0:
+            raise self.error(f"{key}.lead_s", f"expected the efforts' lead over the motion in "
+                             f"seconds, at least 0, got {lead!r}")
+        return Learning(self.number(table, key, "cutoff_hz"), order, lead,
+                        self.number(table, key, "model_rate_hz"))
 
     def prior(self, table: Any, axes: tuple[Axis, ...]) -> Prior:
         self.table(table, "machine.prior", "prior")

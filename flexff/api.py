@@ -12,10 +12,13 @@ command line (`flexff run`), as functions.
     api.register_builtin("gain", (api.Option("k", "number", 1.0),), gain_system)  # [fmu.g]
 
 A configuration is a frozen cosim.schema.RunConfig; change one through `api.sweep` (or
-dataclasses.replace and `api.check`), so that every change passes the checks a file passes.
+dataclasses.replace and `api.check`). `api.predict` is `flexff predict` as a function.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from flexff.cosim.batch import BatchResult, sweep
 from flexff.cosim.batch import run_batch as run_many
@@ -29,5 +32,28 @@ from flexff.cosim.schema import RunConfig
 from flexff.results import RunResult
 from flexff.results import load as read
 
+if TYPE_CHECKING:  # learning loads PyTorch: only when a prediction is asked for
+    from flexff.learning.predict import Predictions
+
+
+def predict(run: str | Path, data: str | Path, split: str = "all") -> Predictions:
+    """Each model of `run` (flexff evaluate's folder or a training run) on the machine
+    dataset `data` (`split`: all, train, test): per trajectory the measured efforts raw and
+    filtered as the labels are, each model's prediction, the preprocessing used and the
+    relative errors (learning.predict)."""
+    from flexff.learning.predict import predict_logs
+
+    return predict_logs(run, data, split)
+
+
+def write_predictions(predictions: Predictions, out: str | Path,
+                      about: dict[str, Any] | None = None) -> list[Path]:
+    """`predictions` as `flexff predict` writes them: the CSV `out`, its .json and .png."""
+    from flexff.learning.predict import write_predictions as write
+
+    return write(predictions, out, about)
+
+
 __all__ = ["BatchResult", "Option", "Recording", "RunConfig", "RunResult", "check", "load",
-           "read", "register_builtin", "run", "run_many", "simulate", "sweep"]
+           "predict", "read", "register_builtin", "run", "run_many", "simulate", "sweep",
+           "write_predictions"]

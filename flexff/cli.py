@@ -112,6 +112,37 @@ def _evaluate_logs(args: argparse.Namespace) -> int:
     return 0
 
 
+def _predict(args: argparse.Namespace) -> int:
+    """predict RUN --data LOGS -o FILE.csv: each model's efforts per sample of the logs."""
+    from flexff.learning.machine_features import preprocessing_text
+    from flexff.learning.predict import predict_logs, write_predictions
+
+    _output_file(args.output)
+    predictions = predict_logs(args.run, args.data, args.split)
+    print(preprocessing_text(predictions.preprocessing))
+    written = write_predictions(predictions, args.output,
+                                {"run": str(args.run), "data": str(args.data),
+                                 "split": args.split})
+    for name, errors in predictions.relative_error.items():
+        print(f"{name}: " + ", ".join(f"{axis} {100 * e:.2f} %" for axis, e in errors.items()))
+    print(f"relative 2-norm of the filtered effort error; wrote {', '.join(map(str, written))}")
+    return 0
+
+
+def _tune(args: argparse.Namespace) -> int:
+    """tune LOOP: each axis's plant measured in the loop, the PID block's loop shape proposed."""
+    from flexff.cosim.run import load_run_config
+    from flexff.learning.pid_tune import tune_loop, tuning_table, write_tuning
+
+    _output_file(args.output)
+    tuning = tune_loop(load_run_config(args.config), args.phase_margin, args.seconds,
+                       args.high_hz)
+    print(tuning_table(tuning))
+    print(f"wrote {write_tuning(tuning, args.output, args.config)} (the PID block's mass, "
+          f"damping and crossover_hz per axis; margins around the identified model)")
+    return 0
+
+
 def _fmu_build(args: argparse.Namespace) -> int:
     from flexff.fmu.build import build_fmu
 
@@ -566,9 +597,12 @@ def _identify(args: argparse.Namespace) -> int:
     if is_machine_dataset(args.data):
         from flexff.learning.linear_model import write_linear_model
         from flexff.learning.machine_dataset import load_machine_dataset
-        from flexff.learning.machine_identify import identify_dataset
+        from flexff.learning.machine_identify import dataset_features, identify_dataset
 
-        model = identify_dataset(load_machine_dataset(args.data))
+        data = load_machine_dataset(args.data)
+        features, settings = dataset_features(data)
+        print(settings)
+        model = identify_dataset(data, features)
         print(model.summary())
         print(f"wrote {write_linear_model(model, Path(args.output) / REPORT)}")
         return 0
@@ -982,6 +1016,34 @@ def build_parser() -> argparse.ArgumentParser:
     machine_options(evaluation)
     _ilc_options(evaluation, "--ilc-")
     evaluation.set_defaults(handler=_evaluate)
+
+    prediction = commands.add_parser(
+        "predict", help="each trained model's predicted effort per sample of a machine's logs "
+                        "beside the measured one (raw and filtered), as CSV, JSON and PNG")
+    prediction.add_argument("run", help="flexff evaluate's output folder (identified.json, "
+                                        "runs/) or one training run folder")
+    prediction.add_argument("--data", required=True,
+                            help="a machine dataset folder (flexff data import --machine)")
+    prediction.add_argument("-o", "--output", required=True,
+                            help="the CSV file to write (its .json and .png beside it)")
+    prediction.add_argument("--split", default="all", choices=("all", "train", "test"),
+                            help="the dataset's trajectories to predict (default all)")
+    prediction.set_defaults(handler=_predict)
+
+    tune = commands.add_parser(
+        "tune", help="measure each axis's plant in a loop (a chirp) and propose its PID "
+                     "block's mass, damping and crossover_hz for a phase margin, as TOML")
+    tune.add_argument("config", metavar="CONFIG.toml|SYSTEM.ssp",
+                      help="the loop with a [machine] (its PID closed while measuring)")
+    tune.add_argument("-o", "--output", required=True, help="the TOML file to write")
+    tune.add_argument("--phase-margin", type=float, default=40.0, metavar="DEG",
+                      help="the phase margin to keep (default 40)")
+    tune.add_argument("--seconds", type=float, default=8.0, metavar="S",
+                      help="the chirp's length per axis (default 8)")
+    tune.add_argument("--high-hz", type=float, metavar="HZ",
+                      help="the chirp's highest frequency, the highest crossover proposed "
+                           "(default 5 %% of the loop's rate)")
+    tune.set_defaults(handler=_tune)
 
     learning = commands.add_parser(
         "ilc", help="iterative learning control on a run's one reference: the best feedforward "

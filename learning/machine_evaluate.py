@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import json
 import warnings
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +45,7 @@ from flexff.learning.linear_model import write_linear_model
 from flexff.learning.machine_collect import collect_machine
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
 from flexff.learning.machine_features import MachineFeatures, friction_widths
-from flexff.learning.machine_identify import identify_dataset
+from flexff.learning.machine_identify import dataset_features, identify_dataset
 from flexff.learning.machine_loop import loop_machine, with_feedforward, with_feedforward_fmu
 from flexff.learning.machine_train import fit_machine
 from flexff.learning.models import uses_prior
@@ -65,10 +65,12 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
                      duration: float = 20.0, ilc_iterations: int | None = None,
                      workers: int | None = None, progress: bool = True,
                      ilc_cutoff_hz: float | None = None, ilc_gain: float | None = None,
-                     classes: Sequence[str] = CLASSES, **overrides: Any) -> dict[str, Any]:
+                     classes: Sequence[str] = CLASSES, say: Callable[[str], None] = print,
+                     **overrides: Any) -> dict[str, Any]:
     """Collect, identify, train, export, build and compare on `loop`; write `out`. ILC's
     `ilc_iterations`, `ilc_cutoff_hz` and `ilc_gain` default to the loop's [machine.ilc];
-    `classes` are the excitation's (learning.excitation)."""
+    `classes` are the excitation's (learning.excitation); `say` gets the preprocessing used,
+    each derived setting marked."""
     if n_test < 1:  # the comparison runs on the test trajectories
         raise InputError(f"n_test (--trajectories TRAIN TEST): {n_test!r}: the evaluation "
                          f"compares the models on the test trajectories: give at least one")
@@ -78,7 +80,9 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     out.mkdir(parents=True, exist_ok=True)
     data = collect_machine(loop, out / "data", n_train, n_test, duration, classes=classes,
                            workers=workers, progress=progress)
-    identified = identify_dataset(data)
+    features, settings = dataset_features(data)
+    say(settings)
+    identified = identify_dataset(data, features)
     write_linear_model(identified, out / "identified.json")
     fmus = {"identified": build_fmu(inverse_model_system(
         machine, identified.casadi_function(), loop.step,
@@ -154,9 +158,11 @@ def _limit(loop: RunConfig, out: Path, identified: LinearModel, iterations: int 
 
 
 def learned_features(identified: LinearModel) -> MachineFeatures:
-    """The feature settings, all derived from the data, with the direction widths of the
-    machine's identified Coulomb friction (machine_features.friction_widths)."""
-    return MachineFeatures(direction_widths=friction_widths(identified))
+    """The feature settings of the description (the rest derived from the data), with the
+    direction widths of the machine's identified Coulomb friction
+    (machine_features.friction_widths)."""
+    return replace(MachineFeatures.of(identified.machine),
+                   direction_widths=friction_widths(identified))
 
 
 def check_settings(models: Sequence[str], preset: str, overrides: dict[str, Any]) -> None:

@@ -6,7 +6,9 @@ reference.
 Every preprocessing choice is a setting of MachineFeatures whose default comes from the data:
 the low-pass corners (`cutoff_hz`, `data_cutoff`), the model rate, `lead_s` (the zero-order
 hold's half-sample lead between effort and motion), and the direction widths, the Coulomb
-widths that the identification finds (`friction_widths`) where a prior is identified.
+widths that the identification finds (`friction_widths`) where a prior is identified. A
+description's `[machine.learning]` sets the first four (`MachineFeatures.of`); `preprocessing`
+records what was used and which of it was derived, `ERROR` how a prediction is scored.
 
 Docs: "Learning", section Any other machine (docs/explanation/learning.md).
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -29,6 +32,7 @@ from flexff.controllers.machine_features import (
 from flexff.cosim.machine import Machine
 from flexff.fmu.errors import InputError
 from flexff.learning.features import differentiate, lowpass
+from flexff.learning.linear_model import EDGE_PERIODS
 
 ENERGY_SHARE = 0.99  # of the references' velocity energy under the band's edge
 CUTOFF_PER_BAND = 4.0  # the default corner: this many times the band's edge (identification
@@ -41,6 +45,11 @@ MOTION_PER_CUTOFF = 8.0  # the measured motion's corner: this many times the lab
 MODEL_RATE_PER_CUTOFF = 10.0  # the default model rate: at least this many times the corner
 HOLD_LEAD = 0.5  # the default lead of an effort over the motion it causes [samples]
 MAX_LEAD = 10.0  # the longest lead accepted [samples]
+ERROR = ("relative 2-norm per axis, ||F - P|| / ||F||, over the samples of every log scored: F "
+         "the measured efforts, each taken lead_s before its sample and passed through the "
+         "labels' filter (a zero-phase Butterworth low-pass of filter_order at cutoff_hz, run "
+         "forwards and backwards, then decimated to model_rate_hz), P the model's prediction "
+         "at the same samples; edge_periods corner periods at each end of a log left out")
 
 
 @dataclass(frozen=True)
@@ -58,6 +67,15 @@ class MachineFeatures:
     direction_widths: tuple[float, ...] = DIRECTION_WIDTHS
     lead_s: float | None = None  # the efforts' lead over the motion [s]; None: HOLD_LEAD samples
     terms: bool = True  # features of moving at all and of the description's extra terms
+
+    @classmethod
+    def of(cls, machine: Machine) -> MachineFeatures:
+        """The settings the description's `[machine.learning]` gives, the rest derived."""
+        given = machine.learning
+        default = cls()
+        return replace(default, cutoff_hz=given.cutoff_hz, lead_s=given.lead_s,
+                       model_rate_hz=given.model_rate_hz,
+                       filter_order=given.filter_order or default.filter_order)
 
     @property
     def inputs(self) -> FeatureInputs:
@@ -97,6 +115,32 @@ class MachineFeatures:
             raise InputError(f"model_rate_hz {self.model_rate_hz:g} must divide the data rate "
                              f"{rate_hz:g} Hz by a whole number")
         return round(factor)
+
+
+def preprocessing(given: MachineFeatures, resolved: MachineFeatures, rate_hz: float
+                  ) -> dict[str, Any]:
+    """What turned efforts into labels (`resolved` from the settings `given`, data at
+    `rate_hz`) and how a prediction is scored, as JSON data (metrics.json, summary.json):
+    each value, and which of them were derived from the data."""
+    assert resolved.cutoff_hz is not None and resolved.lead_s is not None
+    derived = [name for name in ("cutoff_hz", "lead_s", "model_rate_hz")
+               if getattr(given, name) is None]
+    return {"error": ERROR, "filter": "zero-phase Butterworth low-pass",
+            "cutoff_hz": resolved.cutoff_hz, "filter_order": resolved.filter_order,
+            "lead_s": resolved.lead_s, "lead_samples": resolved.lead_s * rate_hz,
+            "model_rate_hz": resolved.model_rate_hz, "data_rate_hz": rate_hz,
+            "edge_periods": EDGE_PERIODS, "derived": derived}
+
+
+def preprocessing_text(record: Mapping[str, Any]) -> str:
+    """`preprocessing`'s record as one line for the terminal: each value, derived ones marked
+    with the setting of [machine.learning] that would fix them."""
+    def mark(name: str) -> str:
+        return f" (derived; set [machine.learning] {name})" if name in record["derived"] else ""
+    return (f"labels: efforts {1e3 * record['lead_s']:.4g} ms ahead "
+            f"({record['lead_samples']:.3g} samples){mark('lead_s')}, low-pass of order "
+            f"{record['filter_order']} at {record['cutoff_hz']:.4g} Hz{mark('cutoff_hz')}, "
+            f"model rate {record['model_rate_hz']:.4g} Hz{mark('model_rate_hz')}")
 
 
 def friction_widths(model: LinearModel) -> tuple[float, ...]:

@@ -9,7 +9,22 @@ from __future__ import annotations
 from flexff.controllers.linear_prior import LinearModel
 from flexff.learning.linear_model import identify_linear, parallel_filter
 from flexff.learning.machine_dataset import MachineDataset
-from flexff.learning.machine_features import MachineFeatures, motion, named_motion
+from flexff.learning.machine_features import (
+    MachineFeatures,
+    motion,
+    named_motion,
+    preprocessing,
+    preprocessing_text,
+)
+
+
+def dataset_features(data: MachineDataset) -> tuple[MachineFeatures, str]:
+    """The description's feature settings (`[machine.learning]`) resolved on the dataset's
+    training trajectories, and a line saying what they are, each derived one marked."""
+    given = MachineFeatures.of(data.description)
+    resolved = given.resolved(data.sample_rate_hz, [t.signals for t in data.split("train")],
+                              data.description)
+    return resolved, preprocessing_text(preprocessing(given, resolved, data.sample_rate_hz))
 
 
 def identify_dataset(data: MachineDataset, features: MachineFeatures | None = None
@@ -21,8 +36,8 @@ def identify_dataset(data: MachineDataset, features: MachineFeatures | None = No
     machine = data.description
     rate = data.sample_rate_hz
     train = [t for t in data.trajectories if t.split == "train"]
-    resolved = (features or MachineFeatures()).resolved(rate, [t.signals for t in train],
-                                                        machine)
+    resolved = (features or MachineFeatures.of(machine)).resolved(
+        rate, [t.signals for t in train], machine)
     motions, efforts = [], []
     for trajectory in train:
         moved, effort = motion(trajectory.signals, rate, machine, resolved)

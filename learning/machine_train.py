@@ -32,6 +32,7 @@ from flexff.learning.machine_features import (
     motion,
     named_motion,
     prepare,
+    preprocessing,
 )
 from flexff.learning.models import SequenceNetwork, uses_prior
 from flexff.learning.presets import CHECKPOINT_EVERY, PLACEMENT, TrainConfig
@@ -93,8 +94,8 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
         if not chosen:
             raise InputError(f"the '{split}' split is empty: mark some trajectories "
                              f"'{split}' (flexff data import --test, or the excitation's split)")
-    resolved = (features or MachineFeatures()).resolved(
-        rate_hz, [t.signals for t in train_set], machine)
+    given = features or MachineFeatures.of(machine)
+    resolved = given.resolved(rate_hz, [t.signals for t in train_set], machine)
     settings = {"config": machine_config(config, learned=True),
                 "features": features_to_dict(resolved), "machine": machine_table(machine),
                 "data": digest, "prior": None if prior is None else prior.to_dict()}
@@ -137,7 +138,8 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
         [feature_scaler.transform(x) for x in test_x], targets(test_f, test_prior),
         edge, rng, Checkpoints(out, settings, every), checkpoint, measure, progress, on_epoch)
     metrics = {**metrics, "seconds": time.perf_counter() - start, "model_rate_hz": model_rate,
-               "cutoff_hz": resolved.cutoff_hz}
+               "cutoff_hz": resolved.cutoff_hz,
+               "preprocessing": preprocessing(given, resolved, rate_hz)}
     save_run(out, config, network, feature_scaler, label_scaler,
              feature_names(machine, resolved.inputs), [a.effort_signal for a in machine.axes],
              model_rate,

@@ -26,6 +26,13 @@ def test_each_model_predicts_the_test_logs(tmp_path, capsys):
     assert errors["pgnn"]["x"] < 0.05
     assert 0 < errors["tcn"]["x"] < 1.0  # one epoch: a network's error, not the model's
     assert json.loads((tmp_path / "eval" / "summary.json").read_text()) == summary
+    # how the errors are scored, and each model's efforts on the test logs per sample
+    assert summary["preprocessing"]["derived"] == ["cutoff_hz", "lead_s", "model_rate_hz"]
+    assert summary["preprocessing"]["error"].startswith("relative 2-norm per axis")
+    assert "model rate" in capsys.readouterr().out  # the derived settings, printed
+    assert (tmp_path / "eval" / "predictions.csv").read_text().startswith(
+        "trajectory,split,time,scored,x_effort,x_effort_filtered,identified.x_effort,"
+        "tcn.x_effort,pgnn.x_effort")
     table = (tmp_path / "eval" / "table.md").read_text()
     assert table.startswith("| axis | identified | tcn | pgnn |")
     assert f"{100 * errors['identified']['x']:.2f} %" in table

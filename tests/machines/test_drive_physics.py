@@ -5,6 +5,7 @@ the PID with tunable gains, run by `flexff run` from a general-form configuratio
 import math
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ from scipy.linalg import expm
 from flexff import api
 from flexff.controllers.pid_options import pid_gains_from_options
 from flexff.fmu.build import build_fmu
-from flexff.machines.drive import DRIVE, drive_system
+from flexff.machines.drive import DRIVE, drive_system, effort_of
 
 STEP = 1e-3
 QUIET = {"coulomb_positive": 0.0, "coulomb_negative": 0.0, "cogging": 0.0}
@@ -77,6 +78,33 @@ def test_energy_with_cogging_is_conserved_without_losses(fmus):
 def test_coulomb_friction_is_asymmetric_and_the_force_saturates(fmus, force, speed):
     r = _run(fmus["drive"], lambda t: force, 1.0, ["v_true"], cogging=0.0)
     assert r["v_true"][-1] == pytest.approx(speed, rel=1e-4)
+
+
+ROUGH = {"stribeck": 1.0, "stribeck_velocity": 0.01, "friction_ripple": 0.8,
+         "friction_period": 0.037, "force_ripple": 0.05, "ripple_pitch": 0.023, "spring": 40.0,
+         "spring_cubic": 2e4}  # machines/examples/drive-rough.toml's, but the current lag
+
+
+def test_the_rough_effects_are_the_inverse_dynamics_they_name(fmus):
+    """Stribeck and position-dependent friction, force ripple, a cubic spring: the effort of
+    effort_of along a move, fed open loop, moves the drive along it (7 um off in 1 s; the
+    same effort without the effects leaves it by 0.1 m)."""
+    def motion(t):
+        w = 2 * math.pi
+        return 0.03 * (1 - np.cos(w * t)), 0.03 * w * np.sin(w * t), 0.03 * w**2 * np.cos(w * t)
+    rough = replace(DRIVE, **ROUGH)
+    effort = {round(t / STEP): effort_of(rough, *motion(t + STEP / 2), np)
+              for t in np.arange(0.0, 1.0 + STEP / 2, STEP)}
+    for start, within in ((ROUGH, 2e-5), ({}, None)):
+        r = _run(fmus["drive"], lambda t: effort[round(t / STEP)], 1.0, ["x_true"], **start)
+        off = np.max(np.abs(r["x_true"] - motion(r["time"])[0]))
+        assert off < within if within else off > 0.05
+
+
+def test_the_current_loop_lags_the_force_by_its_time_constant(fmus):
+    r = _run(fmus["drive"], lambda t: 10.0, 0.05, ["F_motor"], current_lag=0.005)
+    np.testing.assert_allclose(r["F_motor"], 10.0 * (1 - np.exp(-r["time"] / 0.005)),
+                               atol=1e-7)
 
 
 def test_closed_loop_under_the_tunable_pid_tracks_a_setpoint_move(tmp_path, fmus):
