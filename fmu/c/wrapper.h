@@ -179,6 +179,11 @@ typedef struct {
                           * after a state was restored into an instance never initialized) */
 #if NET_TASK
     Task *task;          /* the network's own task (wrapper_task.c) */
+    int features_ready;  /* features hold the inputs of the call at point features_step, for
+                          * the x, u and p below (its state primed if it is the first call):
+                          * the outputs and the step at a call point evaluate them once */
+    long long features_step;
+    fmi2Real features_x[DIM(N_X)], features_u[DIM(N_U)], features_p[DIM(N_P)];
 #endif
 #endif
 } Instance;
@@ -246,6 +251,7 @@ fmi2Status check_table_inputs(Instance *c);
 fmi2Status net_prepare(Instance *c);
 void net_commit(Instance *c);
 void net_restart(Instance *c);
+void net_forget_features(Instance *c);
 fmi2Status check_network_inputs(Instance *c, const fmi2Real *features, const fmi2Real *u,
                                 fmi2Real t);
 fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t);
@@ -261,6 +267,7 @@ void task_post(Instance *c, const fmi2Real *features, const float *state);
 fmi2Status task_settle(Instance *c, int due);
 long task_overruns(const Instance *c);
 const long *task_overruns_counter(const Instance *c);
+void task_counts(const Instance *c, long counts[3]);
 #endif
 #endif
 

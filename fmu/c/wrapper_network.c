@@ -336,6 +336,14 @@ static fmi2Status net_call(Instance *c) {
 }
 
 #if NET_TASK
+/* Whether c->features hold the inputs of the current call point's call (task_prepare). */
+static int features_current(const Instance *c) {
+    return c->features_ready && c->features_step == c->d.net_step &&
+           memcmp(c->features_x, c->d.x, sizeof c->features_x) == 0 &&
+           memcmp(c->features_u, c->d.u, sizeof c->features_u) == 0 &&
+           memcmp(c->features_p, c->d.p, sizeof c->features_p) == 0;
+}
+
 /* NET_TASK: at a call point the result of the last one becomes the latest (waiting for it if
  * the task is not done) and the inputs of this one's call are evaluated into c->features
  * (net_commit starts it); c->r extrapolates the last two results to the current point, one to
@@ -352,10 +360,18 @@ static fmi2Status task_prepare(Instance *c, long phase) {
             memcpy(c->d.net_state, c->d.net_job_state, sizeof c->d.net_state);
             c->d.net_job = 0;
         }
-        if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
-            return fail(c, "Evaluating the network's inputs failed.");
-        if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
-        if (c->d.net_step == 0 && net_start(c) != fmi2OK) return fmi2Error;
+        if (!features_current(c)) {
+            if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
+                return fail(c, "Evaluating the network's inputs failed.");
+            if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK)
+                return fmi2Error;
+            if (c->d.net_step == 0 && net_start(c) != fmi2OK) return fmi2Error;
+            c->features_ready = 1;
+            c->features_step = c->d.net_step;
+            memcpy(c->features_x, c->d.x, sizeof c->features_x);
+            memcpy(c->features_u, c->d.u, sizeof c->features_u);
+            memcpy(c->features_p, c->d.p, sizeof c->features_p);
+        }
     }
     if (c->d.net_step < NET_PERIOD) {
         memset(c->r, 0, sizeof c->r);
@@ -410,11 +426,21 @@ void net_commit(Instance *c) {
     c->d.net_step++;
 }
 
+/* The call point's inputs evaluated before are not the current Data's (it was replaced). */
+void net_forget_features(Instance *c) {
+#if NET_TASK
+    c->features_ready = 0;
+#else
+    (void)c;
+#endif
+}
+
 /* Back to the first call point with the zero state (the other fields are zero already). */
 void net_restart(Instance *c) {
 #if NET_TASK
     task_settle(c, 0); /* the worker idle; its result, of the run left, is dropped */
     c->d.net_job = 0;
+    net_forget_features(c);
 #endif
     c->d.net_step = 0;
     c->d.net_pending = 0;

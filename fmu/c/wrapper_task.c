@@ -16,6 +16,10 @@
  * time, as Simulink Real-Time's multitasking does on one core. Measured on the 2-core VM
  * (LSTM, 30 s paced at 1 kHz): the 1 kHz task's TET p99 11 us on one core, 25 to 27 us with
  * the worker on the other core or unpinned, where each hand-over wakes a second CPU.
+ * The worker takes its caller's scheduling and CPUs itself, as each job starts: read and set
+ * from the calling thread at each hand-over, those system calls cost the 1 kHz task about 3 us
+ * at every call point (of 13 us the hand-over took it; measured on the 2-core VM, TCN paced at
+ * 1 kHz on one core).
  *
  * One mutex guards the hand-over; the worker touches only the job buffers below and the network
  * (whose call times it records), never the instance's Data, which the calling thread alone
@@ -34,6 +38,10 @@
 
 #if HAS_NETWORK
 #if NET_TASK
+#if defined(__linux__)
+#include <sys/syscall.h>
+#include <unistd.h>
+#endif
 #define TASK_THREAD_NAME "flexff-network" /* at most 15 characters */
 
 struct Task {
@@ -45,10 +53,14 @@ struct Task {
     int posted, finished, quit;
     int busy;            /* a job is out for the current Data (calling thread only) */
 #if defined(__linux__)
+    pthread_t caller;     /* the thread that posted the job, and its kernel id */
+    pid_t caller_tid;
     int policy, priority; /* the caller's scheduling the worker's was last set from */
     cpu_set_t cpus;       /* the caller's CPUs the worker's were last set from */
 #endif
     long overruns;       /* results not ready when due (calling thread only) */
+    long handovers;      /* jobs posted (calling thread only) */
+    long inline_calls;   /* jobs the calling thread ran itself when due (calling thread only) */
     fmi2Real in[NET_N_IN];
     float state_in[DIM(NET_STATE_SIZE)];
     fmi2Real r[N_R];
@@ -69,12 +81,46 @@ static void run_posted(Task *t) {
     pthread_cond_signal(&t->done);
 }
 
+/* The worker (the calling thread) one priority below the thread that posted its job under a
+ * real-time policy, or ordinary under an ordinary one, and on that thread's CPUs; each only
+ * when the poster's changed since the last job. What the system refuses leaves the worker as it
+ * was (it still runs, only less promptly); so does a poster that has ended. */
+static void follow_caller(Task *t) {
+#if defined(__linux__)
+    struct sched_param caller, worker;
+    cpu_set_t cpus;
+    int policy;
+    if (sched_getaffinity(t->caller_tid, sizeof cpus, &cpus) == 0 &&
+        !CPU_EQUAL(&cpus, &t->cpus)) {
+        t->cpus = cpus;
+        sched_setaffinity(0, sizeof cpus, &cpus);
+    }
+    policy = sched_getscheduler(t->caller_tid);
+    if (policy < 0 || sched_getparam(t->caller_tid, &caller) != 0) return;
+    policy &= ~SCHED_RESET_ON_FORK;
+    if (policy == t->policy && caller.sched_priority == t->priority) return;
+    t->policy = policy;
+    t->priority = caller.sched_priority;
+    memset(&worker, 0, sizeof worker);
+    if (policy == SCHED_FIFO || policy == SCHED_RR) {
+        const int lowest = sched_get_priority_min(policy);
+        worker.sched_priority = caller.sched_priority > lowest ? caller.sched_priority - 1 : lowest;
+    } else {
+        policy = SCHED_OTHER;
+    }
+    pthread_setschedparam(pthread_self(), policy, &worker);
+#else
+    (void)t;
+#endif
+}
+
 static void *work(void *arg) {
     Task *t = (Task *)arg;
     pthread_mutex_lock(&t->lock);
     for (;;) {
         while (!t->posted && !t->quit) pthread_cond_wait(&t->wake, &t->lock);
         if (!t->posted) break; /* quit, with nothing left to run */
+        follow_caller(t);
         run_posted(t);
     }
     pthread_mutex_unlock(&t->lock);
@@ -141,44 +187,17 @@ void task_stop(Instance *c) {
     c->task = NULL;
 }
 
-/* The worker one priority below the calling thread under a real-time policy, or ordinary
- * under an ordinary one, and on the caller's CPUs; each only when the caller's changed since
- * the last call. What the system refuses leaves the worker as it was (it still runs, only
- * less promptly). */
-static void follow_caller(Task *t) {
-#if defined(__linux__)
-    struct sched_param caller, worker;
-    cpu_set_t cpus;
-    int policy;
-    if (pthread_getaffinity_np(pthread_self(), sizeof cpus, &cpus) == 0 &&
-        !CPU_EQUAL(&cpus, &t->cpus)) {
-        t->cpus = cpus;
-        pthread_setaffinity_np(t->thread, sizeof cpus, &cpus);
-    }
-    if (pthread_getschedparam(pthread_self(), &policy, &caller) != 0 ||
-        (policy == t->policy && caller.sched_priority == t->priority))
-        return;
-    t->policy = policy;
-    t->priority = caller.sched_priority;
-    memset(&worker, 0, sizeof worker);
-    if (policy == SCHED_FIFO || policy == SCHED_RR) {
-        const int lowest = sched_get_priority_min(policy);
-        worker.sched_priority = caller.sched_priority > lowest ? caller.sched_priority - 1 : lowest;
-    } else {
-        policy = SCHED_OTHER;
-    }
-    pthread_setschedparam(t->thread, policy, &worker);
-#else
-    (void)t;
-#endif
-}
-
 /* Start a call on `features` from the recurrent state `state` (the worker is idle: every job
  * is settled before the next is posted). */
 void task_post(Instance *c, const fmi2Real *features, const float *state) {
     Task *t = c->task;
-    if (!c->scheduled) follow_caller(t);
     pthread_mutex_lock(&t->lock);
+#if defined(__linux__)
+    if (!c->scheduled && !pthread_equal(t->caller, pthread_self())) { /* a system call only */
+        t->caller = pthread_self();                                 /* for a new caller */
+        t->caller_tid = (pid_t)syscall(SYS_gettid);
+    }
+#endif
     memcpy(t->in, features, sizeof t->in);
     memcpy(t->state_in, state, sizeof t->state_in);
     t->posted = 1;
@@ -186,6 +205,7 @@ void task_post(Instance *c, const fmi2Real *features, const float *state) {
     pthread_cond_signal(&t->wake);
     pthread_mutex_unlock(&t->lock);
     t->busy = 1;
+    t->handovers++;
     c->d.net_job = 1;
 }
 
@@ -196,7 +216,10 @@ fmi2Status task_settle(Instance *c, int due) {
     if (t == NULL || !t->busy) return fmi2OK;
     pthread_mutex_lock(&t->lock);
     if (!t->finished && due) t->overruns++;
-    if (c->scheduled && t->posted) run_posted(t); /* its partition did not run in time */
+    if (c->scheduled && t->posted) { /* its partition did not run in time */
+        if (due) t->inline_calls++;
+        run_posted(t);
+    }
     while (!t->finished) pthread_cond_wait(&t->done, &t->lock);
     pthread_mutex_unlock(&t->lock);
     t->busy = 0;
@@ -210,6 +233,13 @@ fmi2Status task_settle(Instance *c, int due) {
 }
 
 long task_overruns(const Instance *c) { return c->task ? c->task->overruns : 0; }
+
+void task_counts(const Instance *c, long counts[3]) {
+    const Task *t = c->task;
+    counts[0] = t ? t->handovers : 0;
+    counts[1] = t ? t->overruns : 0;
+    counts[2] = t ? t->inline_calls : 0;
+}
 
 const long *task_overruns_counter(const Instance *c) {
     return c->task ? &c->task->overruns : NULL;

@@ -4,6 +4,7 @@ and libcosim give the same outputs bit for bit; a network slower than its deadli
 (and stops a paced run at --max-overruns); a state saved while a call is pending continues
 exactly."""
 
+import ctypes
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -95,8 +96,22 @@ def _worker_threads() -> list[int]:
             if (task / "comm").read_text().strip() == "flexff-network"]
 
 
+def _settle(s: LoggedSlave) -> None:
+    """Wait for the job out (flexff_network_times waits for it, counting no overrun)."""
+    times = (ctypes.c_double * 4)()
+    assert s.slave.dll.flexff_network_times(ctypes.c_void_p(s.slave.component), times) == 0
+
+
+def _counts(s: LoggedSlave) -> list[int]:
+    """The task's calls handed over, results not ready when due, results the step computed."""
+    counts = (ctypes.c_long * 3)()
+    assert s.slave.dll.flexff_network_counts(ctypes.c_void_p(s.slave.component), counts) == 0
+    return list(counts)
+
+
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs two CPUs to pin to one")
 def test_the_worker_runs_on_its_callers_cpus(task_fmu):
+    """The worker takes its caller's CPUs as each job starts (no system call in the step)."""
     everywhere = os.sched_getaffinity(0)
     one = {max(everywhere)}
     s = LoggedSlave(task_fmu)
@@ -106,15 +121,35 @@ def test_the_worker_runs_on_its_callers_cpus(task_fmu):
         assert os.sched_getaffinity(worker) == everywhere  # created as its caller
         os.sched_setaffinity(0, one)  # this thread only, as --cpu pins a paced run
         s.slave.doStep(0.0, H)  # point 0 posts a call
+        _settle(s)
         assert os.sched_getaffinity(worker) == one
         os.sched_setaffinity(0, everywhere)
         for k in range(1, PERIOD + 1):  # up to the next call, which follows the caller again
             s.slave.doStep(k * H, H)
+        _settle(s)
         assert os.sched_getaffinity(worker) == everywhere
     finally:
         os.sched_setaffinity(0, everywhere)
         s.free()
     assert _worker_threads() == []
+
+
+def test_the_step_never_computes_a_result_that_was_ready_in_time(task_fmu):
+    """A deterministic schedule: before each call point the job out is waited for outside the
+    step (as a worker with time to spare would have finished it), so every result is ready
+    when due: the steps hand every call over and compute, or wait for, none of them."""
+    s = LoggedSlave(task_fmu)
+    try:
+        s.initialize()
+        for k in range(STEPS):
+            if k % PERIOD == 0:
+                _settle(s)
+            s.set(u1=INPUTS[k, 0], u2=INPUTS[k, 1])
+            s.get("y1", "y2")
+            s.slave.doStep(k * H, H)
+        assert _counts(s) == [len(range(0, STEPS, PERIOD)), 0, 0]
+    finally:
+        s.free()
 
 
 def test_a_network_that_misses_its_deadline_is_counted(slow_fmu):
