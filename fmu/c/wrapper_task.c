@@ -11,7 +11,11 @@
  * the thread that steps the instance runs under SCHED_FIFO or SCHED_RR (a paced run where the
  * system permits), the worker gets the same policy one priority below, so that it is neither
  * preempted by ordinary processes nor able to preempt the step; otherwise it is an ordinary
- * thread like its caller. It also runs on the CPUs its caller may run on: a paced run pinned to
+ * thread of the batch policy (SCHED_BATCH), which never preempts another on waking: as a plain
+ * one (SCHED_OTHER, the caller's equal) the kernel gave it the CPU at the hand-over, and a paced
+ * run on one core without SCHED_FIFO computed the network inside the step at call points
+ * (TCN paced at 1 kHz: the feedforward's step p99 one network call, 30 us, where it is 1 to
+ * 2 us between call points). It also runs on the CPUs its caller may run on: a paced run pinned to
  * one core (flexff run --realtime --cpu K) runs the network there in the base task's idle
  * time, as Simulink Real-Time's multitasking does on one core. Measured on the 2-core VM
  * (LSTM, 30 s paced at 1 kHz): the 1 kHz task's TET p99 11 us on one core, 25 to 27 us with
@@ -19,7 +23,9 @@
  * The worker takes its caller's scheduling and CPUs itself, as each job starts: read and set
  * from the calling thread at each hand-over, those system calls cost the 1 kHz task about 3 us
  * at every call point (of 13 us the hand-over took it; measured on the 2-core VM, TCN paced at
- * 1 kHz on one core).
+ * 1 kHz on one core). The counts (task_counts) say what the task did: calls handed over,
+ * results not ready when due, and results computed in the step (by the calling thread when due,
+ * or by the worker preempting the step on its CPU).
  *
  * One mutex guards the hand-over; the worker touches only the job buffers below and the network
  * (whose call times it records), never the instance's Data, which the calling thread alone
@@ -57,10 +63,13 @@ struct Task {
     pid_t caller_tid;
     int policy, priority; /* the caller's scheduling the worker's was last set from */
     cpu_set_t cpus;       /* the caller's CPUs the worker's were last set from */
+    int started, started_cpu; /* the posted job started, on this CPU */
 #endif
     long overruns;       /* results not ready when due (calling thread only) */
     long handovers;      /* jobs posted (calling thread only) */
-    long inline_calls;   /* jobs the calling thread ran itself when due (calling thread only) */
+    long in_step;        /* jobs computed in the step that needed or posted them: run by the
+                          * calling thread when due, or by the worker preempting the step on
+                          * its CPU (calling thread only) */
     fmi2Real in[NET_N_IN];
     float state_in[DIM(NET_STATE_SIZE)];
     fmi2Real r[N_R];
@@ -106,7 +115,7 @@ static void follow_caller(Task *t) {
         const int lowest = sched_get_priority_min(policy);
         worker.sched_priority = caller.sched_priority > lowest ? caller.sched_priority - 1 : lowest;
     } else {
-        policy = SCHED_OTHER;
+        policy = SCHED_BATCH; /* an ordinary thread that never preempts the step on waking */
     }
     pthread_setschedparam(pthread_self(), policy, &worker);
 #else
@@ -121,6 +130,10 @@ static void *work(void *arg) {
         while (!t->posted && !t->quit) pthread_cond_wait(&t->wake, &t->lock);
         if (!t->posted) break; /* quit, with nothing left to run */
         follow_caller(t);
+#if defined(__linux__)
+        t->started = 1;
+        t->started_cpu = sched_getcpu();
+#endif
         run_posted(t);
     }
     pthread_mutex_unlock(&t->lock);
@@ -145,7 +158,7 @@ int task_start(Instance *c, char *error, size_t size) {
     }
     t->net = c->net;
 #if defined(__linux__)
-    t->policy = SCHED_OTHER; /* as a thread is created */
+    t->policy = -1; /* none yet: the first job sets the worker's */
     pthread_getaffinity_np(pthread_self(), sizeof t->cpus, &t->cpus); /* inherited */
 #endif
     pthread_mutex_init(&t->lock, NULL);
@@ -202,11 +215,23 @@ void task_post(Instance *c, const fmi2Real *features, const float *state) {
     memcpy(t->state_in, state, sizeof t->state_in);
     t->posted = 1;
     t->finished = 0;
-    pthread_cond_signal(&t->wake);
+#if defined(__linux__)
+    t->started = 0;
+#endif
     pthread_mutex_unlock(&t->lock);
+    pthread_cond_signal(&t->wake); /* after the unlock: a worker woken on another CPU takes
+                                    * the lock at once */
     t->busy = 1;
     t->handovers++;
     c->d.net_job = 1;
+#if defined(__linux__)
+    if (!c->scheduled) { /* the worker already started on this CPU: it preempted the step */
+        const int cpu = sched_getcpu();
+        pthread_mutex_lock(&t->lock);
+        t->in_step += t->started && t->started_cpu == cpu;
+        pthread_mutex_unlock(&t->lock);
+    }
+#endif
 }
 
 /* Bring the job out for the current Data into it (net_job_r, net_job_state), waiting for the
@@ -217,7 +242,7 @@ fmi2Status task_settle(Instance *c, int due) {
     pthread_mutex_lock(&t->lock);
     if (!t->finished && due) t->overruns++;
     if (c->scheduled && t->posted) { /* its partition did not run in time */
-        if (due) t->inline_calls++;
+        if (due) t->in_step++;
         run_posted(t);
     }
     while (!t->finished) pthread_cond_wait(&t->done, &t->lock);
@@ -238,7 +263,7 @@ void task_counts(const Instance *c, long counts[3]) {
     const Task *t = c->task;
     counts[0] = t ? t->handovers : 0;
     counts[1] = t ? t->overruns : 0;
-    counts[2] = t ? t->inline_calls : 0;
+    counts[2] = t ? t->in_step : 0;
 }
 
 const long *task_overruns_counter(const Instance *c) {

@@ -134,6 +134,34 @@ def test_the_worker_runs_on_its_callers_cpus(task_fmu):
     assert _worker_threads() == []
 
 
+def test_the_worker_never_preempts_its_caller(task_fmu):
+    """Rate-monotonic: the worker is below the thread that steps the instance. Under the
+    default scheduler it is a batch thread, which never preempts another on waking: an ordinary
+    one preempted the step on the caller's CPU at a call point and ran the network in it (the
+    feedforward's step p99 one network call, paced on one core without SCHED_FIFO)."""
+    s = LoggedSlave(task_fmu)
+    try:
+        s.initialize()
+        [worker] = _worker_threads()
+        s.slave.doStep(0.0, H)  # point 0 posts a call
+        _settle(s)
+        assert os.sched_getscheduler(worker) == os.SCHED_BATCH
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+        except PermissionError:
+            return  # no real-time scheduling here: the ordinary case is the one to check
+        try:
+            for k in range(1, PERIOD + 1):
+                s.slave.doStep(k * H, H)
+            _settle(s)
+        finally:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        assert os.sched_getscheduler(worker) == os.SCHED_FIFO
+        assert os.sched_getparam(worker).sched_priority == 9
+    finally:
+        s.free()
+
+
 def test_the_step_never_computes_a_result_that_was_ready_in_time(task_fmu):
     """A deterministic schedule: before each call point the job out is waited for outside the
     step (as a worker with time to spare would have finished it), so every result is ready
