@@ -20,12 +20,12 @@
  * time, as Simulink Real-Time's multitasking does on one core. Measured on the 2-core VM
  * (LSTM, 30 s paced at 1 kHz): the 1 kHz task's TET p99 11 us on one core, 25 to 27 us with
  * the worker on the other core or unpinned, where each hand-over wakes a second CPU.
- * The worker takes its caller's scheduling and CPUs itself, as each job starts: read and set
- * from the calling thread at each hand-over, those system calls cost the 1 kHz task about 3 us
- * at every call point (of 13 us the hand-over took it; measured on the 2-core VM, TCN paced at
- * 1 kHz on one core). The counts (task_counts) say what the task did: calls handed over,
+ * The worker follows a new caller's scheduling and CPUs when it posts its first job, then
+ * takes any change itself as each job starts: read and set by the calling thread at every
+ * hand-over, those system calls cost the 1 kHz task about 3 us at each call point (of 13 us the
+ * hand-over took it; measured on the 2-core VM, TCN paced at 1 kHz on one core). The counts (task_counts) say what the task did: calls handed over,
  * results not ready when due, and results computed in the step (by the calling thread when due,
- * or by the worker preempting the step on its CPU).
+ * or by the worker before the step went on, the two pinned to one CPU).
  *
  * One mutex guards the hand-over; the worker touches only the job buffers below and the network
  * (whose call times it records), never the instance's Data, which the calling thread alone
@@ -68,8 +68,8 @@ struct Task {
     long overruns;       /* results not ready when due (calling thread only) */
     long handovers;      /* jobs posted (calling thread only) */
     long in_step;        /* jobs computed in the step that needed or posted them: run by the
-                          * calling thread when due, or by the worker preempting the step on
-                          * its CPU (calling thread only) */
+                          * calling thread when due, or by the worker before the step went on,
+                          * both pinned to one CPU (calling thread only) */
     fmi2Real in[NET_N_IN];
     float state_in[DIM(NET_STATE_SIZE)];
     fmi2Real r[N_R];
@@ -90,10 +90,13 @@ static void run_posted(Task *t) {
     pthread_cond_signal(&t->done);
 }
 
-/* The worker (the calling thread) one priority below the thread that posted its job under a
- * real-time policy, or ordinary under an ordinary one, and on that thread's CPUs; each only
- * when the poster's changed since the last job. What the system refuses leaves the worker as it
- * was (it still runs, only less promptly); so does a poster that has ended. */
+/* The worker one priority below the thread that posts its jobs under a real-time policy, or a
+ * batch thread under an ordinary one, and on that thread's CPUs; each only when the poster's
+ * changed since the last call. Called with the lock held, by the poster when it is new (so that
+ * its first job already runs so) and by the worker as each job starts (so that it follows a
+ * poster that changed since, without a system call in the poster's step). What the system
+ * refuses leaves the worker as it was (it still runs, only less promptly); so does a poster
+ * that has ended. */
 static void follow_caller(Task *t) {
 #if defined(__linux__)
     struct sched_param caller, worker;
@@ -102,7 +105,7 @@ static void follow_caller(Task *t) {
     if (sched_getaffinity(t->caller_tid, sizeof cpus, &cpus) == 0 &&
         !CPU_EQUAL(&cpus, &t->cpus)) {
         t->cpus = cpus;
-        sched_setaffinity(0, sizeof cpus, &cpus);
+        pthread_setaffinity_np(t->thread, sizeof cpus, &cpus);
     }
     policy = sched_getscheduler(t->caller_tid);
     if (policy < 0 || sched_getparam(t->caller_tid, &caller) != 0) return;
@@ -117,7 +120,7 @@ static void follow_caller(Task *t) {
     } else {
         policy = SCHED_BATCH; /* an ordinary thread that never preempts the step on waking */
     }
-    pthread_setschedparam(pthread_self(), policy, &worker);
+    pthread_setschedparam(t->thread, policy, &worker);
 #else
     (void)t;
 #endif
@@ -206,9 +209,10 @@ void task_post(Instance *c, const fmi2Real *features, const float *state) {
     Task *t = c->task;
     pthread_mutex_lock(&t->lock);
 #if defined(__linux__)
-    if (!c->scheduled && !pthread_equal(t->caller, pthread_self())) { /* a system call only */
-        t->caller = pthread_self();                                 /* for a new caller */
+    if (!c->scheduled && !pthread_equal(t->caller, pthread_self())) { /* system calls only */
+        t->caller = pthread_self();                                  /* for a new caller */
         t->caller_tid = (pid_t)syscall(SYS_gettid);
+        follow_caller(t);
     }
 #endif
     memcpy(t->in, features, sizeof t->in);
@@ -225,10 +229,10 @@ void task_post(Instance *c, const fmi2Real *features, const float *state) {
     t->handovers++;
     c->d.net_job = 1;
 #if defined(__linux__)
-    if (!c->scheduled) { /* the worker already started on this CPU: it preempted the step */
-        const int cpu = sched_getcpu();
+    if (!c->scheduled) { /* both on one CPU, and the worker already started: it ran in the
+                          * step's time (having preempted it, or while something else did) */
         pthread_mutex_lock(&t->lock);
-        t->in_step += t->started && t->started_cpu == cpu;
+        t->in_step += t->started && CPU_COUNT(&t->cpus) == 1 && t->started_cpu == sched_getcpu();
         pthread_mutex_unlock(&t->lock);
     }
 #endif
