@@ -1,8 +1,11 @@
 /*
  * wrapper_task.c -- the embedded network in its own task (NET_TASK), as Simulink Real-Time's
  * multitasking runs a slow block: one worker thread per instance, started at fmi2Instantiate and
- * joined at fmi2FreeInstance. At a call point k the wrapper hands the network's inputs of step k
- * to the worker and returns at once; at the call point k + NET_PERIOD it takes the result
+ * joined at fmi2FreeInstance. At a call point k the wrapper hands the point's x, u and p to the
+ * worker and returns at once; the worker evaluates the network's inputs from them (a step
+ * evaluating them cost the 1 kHz task 1 to 5 us at each call point) and calls the network,
+ * and a non-finite input fails that call, reported when its result is due, naming the input
+ * and point k's time. At the call point k + NET_PERIOD the wrapper takes the result
  * (wrapper_network.c), waiting for it if the worker is not done: that wait is a rate-transition
  * overrun, counted here. The result is always used at k + NET_PERIOD, so the outputs are the
  * same whatever the timing, and any importer runs the FMU unchanged.
@@ -70,20 +73,30 @@ struct Task {
     long in_step;        /* jobs computed in the step that needed or posted them: run by the
                           * calling thread when due, or by the worker before the step went on,
                           * both pinned to one CPU (calling thread only) */
-    fmi2Real in[NET_N_IN];
+    fmi2Real x[DIM(N_X)], u[DIM(N_U)], p[DIM(N_P)], time; /* the job: its call point's */
     float state_in[DIM(NET_STATE_SIZE)];
+    fmi2Real in[NET_N_IN]; /* the network's inputs, evaluated from x, u and p by the job */
+    CasadiWork work;
+    int mem;               /* the instance's CasADi memory of network_input */
     fmi2Real r[N_R];
     float state_out[DIM(NET_STATE_SIZE)];
     int failed;
     char error[512];
 };
 
-/* The posted job, run with the lock held on entry and exit (released while it runs). */
+/* The posted job, run with the lock held on entry and exit (released while it runs): the
+ * network's inputs at its call point, checked as the step checks them, then the call. */
 static void run_posted(Task *t) {
     t->posted = 0;
     pthread_mutex_unlock(&t->lock);
-    const int failed = net_run(t->net, t->in, 1, t->state_in, t->r, t->state_out, t->error,
-                               sizeof t->error) != 0;
+    int failed = eval_network_input_with(&t->work, t->mem, t->x, t->u, t->p, t->in) != 0;
+    if (failed)
+        snprintf(t->error, sizeof t->error, "Evaluating the network's inputs failed.");
+    else
+        failed = network_inputs_problem(t->net, t->in, t->u, t->time, t->error,
+                                        sizeof t->error) ||
+                 net_run(t->net, t->in, 1, t->state_in, t->r, t->state_out, t->error,
+                         sizeof t->error) != 0;
     pthread_mutex_lock(&t->lock);
     t->failed = failed;
     t->finished = 1;
@@ -160,6 +173,7 @@ int task_start(Instance *c, char *error, size_t size) {
         return -1;
     }
     t->net = c->net;
+    t->mem = c->mem[3];
 #if defined(__linux__)
     t->policy = -1; /* none yet: the first job sets the worker's */
     pthread_getaffinity_np(pthread_self(), sizeof t->cpus, &t->cpus); /* inherited */
@@ -203,9 +217,11 @@ void task_stop(Instance *c) {
     c->task = NULL;
 }
 
-/* Start a call on `features` from the recurrent state `state` (the worker is idle: every job
- * is settled before the next is posted). */
-void task_post(Instance *c, const fmi2Real *features, const float *state) {
+/* Start the call of the current point, on the network's inputs from its x, u and p, from the
+ * recurrent state `state` (the worker is idle: every job is settled before the next is
+ * posted). */
+void task_post(Instance *c, const fmi2Real *x, const fmi2Real *u, const fmi2Real *p,
+               const float *state) {
     Task *t = c->task;
     pthread_mutex_lock(&t->lock);
 #if defined(__linux__)
@@ -215,7 +231,10 @@ void task_post(Instance *c, const fmi2Real *features, const float *state) {
         follow_caller(t);
     }
 #endif
-    memcpy(t->in, features, sizeof t->in);
+    memcpy(t->x, x, sizeof t->x);
+    memcpy(t->u, u, sizeof t->u);
+    memcpy(t->p, p, sizeof t->p);
+    t->time = c->d.time;
     memcpy(t->state_in, state, sizeof t->state_in);
     t->posted = 1;
     t->finished = 0;

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fmpy.fmi2 import fmi2Error
 
 from flexff.bench import slow_graph
 from flexff.cosim.master import Master, ResolvedFmu
@@ -18,7 +19,7 @@ from flexff.cosim.timing import Pacing
 from flexff.fmu.onnx_fmu import onnx_system
 from flexff.fmu.validation import validate_fmu
 from tests.fmu.test_network import INPUTS, PERIOD, STEPS, H, network_system, running_sum_graph
-from tests.fmu_toys import LoggedSlave, build_toy
+from tests.fmu_toys import LoggedSlave, build_toy, status_of
 from tests.runners import run_fmu, run_fmu_libcosim
 
 
@@ -176,6 +177,24 @@ def test_the_step_never_computes_a_result_that_was_ready_in_time(task_fmu):
             s.get("y1", "y2")
             s.slave.doStep(k * H, H)
         assert _counts(s) == [len(range(0, STEPS, PERIOD)), 0, 0]
+    finally:
+        s.free()
+
+
+def test_a_network_input_that_is_not_finite_is_named_when_its_result_is_due(task_fmu):
+    """The task evaluates its call's inputs (2 u: infinite for u = 1e308), not the step: the
+    call of point PERIOD fails in the task, and the step at 2 PERIOD, which needs its result,
+    reports the input, the point's time and the FMU's inputs there."""
+    s = LoggedSlave(task_fmu)
+    try:
+        s.initialize()
+        for k in range(2 * PERIOD):
+            s.set(u1=1e308 if k == PERIOD else 1.0, u2=1.0)
+            s.get("y1")
+            s.slave.doStep(k * H, H)
+        assert status_of(lambda: s.get("y1")) == fmi2Error
+        assert f"is inf at t = {PERIOD * H:.17g}: it is not defined for the inputs u1 = 1e+308" \
+            in s.log()
     finally:
         s.free()
 
