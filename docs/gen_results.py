@@ -199,14 +199,20 @@ def bench_markdown() -> str:
     rt = bench["realtime"]
     out += ["", f"### Paced at 1 kHz on one core ({rt['reference']})", "",
             "| loop | 1 kHz task TET p50 / p99 / max [µs] | overruns | network call p50 / p99 "
-            "[µs] |", "|---|---:|---:|---:|"]
-    for name in ("tcn", "lstm", "idle"):
+            "[µs] | feedforward step p50 / p99 [µs], hand-over / none | network computed in "
+            "the 1 kHz task |", "|---|---:|---:|---:|---:|---:|"]
+    loops = [n for n in ("tcn", "tcn_onnxruntime", "lstm", "lstm_onnxruntime") if n in rt]
+    for name in (*loops, "idle"):
         r = rt[name]
         base = r["tasks"]["base"] if "tasks" in r else r
         tet = " / ".join(figure(base["tet_us"][q]) for q in ("p50", "p99", "max"))
         calls = next(iter(r.get("network_call_us", {}).values()), None)
         call = f"{figure(calls['p50'])} / {figure(calls['p99'])}" if calls else "–"
-        out.append(f"| {name} | {tet} | {r['overruns']} | {call} |")
+        ff = r.get("feedforward_step")
+        split = " / ".join(f"{figure(ff['tet_us'][s]['p50'])}, {figure(ff['tet_us'][s]['p99'])}"
+                           for s in ("handover", "no_handover")) if ff else "–"
+        inside = f"{ff['computed_in_base_task']} of {ff['handovers']}" if ff else "–"
+        out.append(f"| {name} | {tet} | {r['overruns']} | {call} | {split} | {inside} |")
     return "\n".join(out) + "\n"
 
 

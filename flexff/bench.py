@@ -23,7 +23,7 @@ from flexff.cosim.recording import Recording
 from flexff.cosim.run import run_config, simulate
 from flexff.cosim.scenario import Scenario, reference_signals, resolve
 from flexff.cosim.schema import RunConfig
-from flexff.cosim.timing import Pacing
+from flexff.cosim.timing import PERCENTILES, US, Pacing, StepTiming
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
 from flexff.fmu.network_runtime import RUNTIMES
@@ -205,11 +205,14 @@ def _hardware_loop_config(seconds: float | None, name: str, **tables: dict[str, 
         "plant": {"variant": "hardware", "seed": 1}, **tables}, name=name)
 
 
-def _hardware_loop(folder: Path, model: Path, mode: str, seconds: float | None) -> Scenario:
-    """The hardware loop with the learned feedforward `model` in `mode`, resolved."""
+def _hardware_loop(folder: Path, model: Path, mode: str, seconds: float | None,
+                   runtime: str = RUNTIMES[0]) -> Scenario:
+    """The hardware loop with the learned feedforward `model` in `mode`, its network computed
+    by `runtime`, resolved."""
     return resolve(_hardware_loop_config(
-        seconds, f"realtime-{model.stem}-{mode}",
-        feedforward={"kind": "learned", "model": str(model), "mode": mode}), folder)
+        seconds, f"realtime-{model.stem}-{mode}-{runtime}",
+        feedforward={"kind": "learned", "model": str(model), "mode": mode,
+                     "runtime": runtime}), folder)
 
 
 def _e2(recording: Recording) -> dict[str, float]:
@@ -218,38 +221,46 @@ def _e2(recording: Recording) -> dict[str, float]:
 
 
 def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | None = None,
-                       kinds: tuple[str, ...] = REALTIME_MODELS) -> dict[str, Any]:
+                       kinds: tuple[str, ...] = REALTIME_MODELS,
+                       runtimes: tuple[str, ...] = RUNTIMES) -> dict[str, Any]:
     """The closed loop of the hardware evaluation (hardware plant, PID with notch, thesis
     hardware reference: 100 s, or its first `seconds`) with the TCN and the LSTM feedforward,
-    its network in its own task (mode "task"), paced at 1 kHz: per task (the 1 kHz base task,
-    the network's), TET p50 / p99 / max and overruns, each FMU's share; the tracking (e2)
-    against the single-rate feedforward (mode "step", the network inside the 1 kHz step, run
-    unpaced: the same run as paced, bit for bit, and its TET for comparison). As floors, the
-    same paced loop with no FMU for as long (`idle`: the lateness and overruns the machine
-    alone causes), a one-node graph FMU (`one_node_graph`) and a network made deliberately
-    slower than the period in its own task at 25 Hz (`slow_network`), each run as --realtime
-    runs (cosim.realtime: SCHED_FIFO and locked memory where permitted), pinned to one CPU
-    (`paced_cpu`) as `flexff run --realtime --cpu K` runs: the network's task then runs on
-    that core in the base task's idle time."""
+    its network in its own task (mode "task") computed by each of `runtimes` (the default, C,
+    under the model's name; another as `MODEL_RUNTIME`), paced at 1 kHz: per task (the 1 kHz
+    base task, the network's), TET p50 / p99 / max and overruns, each FMU's share; the
+    feedforward's share split into the steps that hand a call over to the network's task and
+    the others, and the calls handed over, waited for and computed in the base task
+    (`feedforward_step`); the tracking (e2) against the single-rate feedforward (mode "step",
+    the network inside the 1 kHz step, run unpaced: the same run as paced, bit for bit, and
+    its TET for comparison). As floors, the same paced loop with no FMU for as long (`idle`:
+    the lateness and overruns the machine alone causes), a one-node graph FMU
+    (`one_node_graph`) and a network made deliberately slower than the period in its own task
+    at 25 Hz (`slow_network`), each run as --realtime runs (cosim.realtime: SCHED_FIFO and
+    locked memory where permitted), pinned to one CPU (`paced_cpu`) as `flexff run --realtime
+    --cpu K` runs: the network's task then runs on that core in the base task's idle time."""
     cpu = paced_cpu()
     results: dict[str, Any] = {"reference": HARDWARE_REFERENCE, "cpu": cpu}
     paced_s = 0.0
     for kind in kinds:
-        recording = simulate(_hardware_loop(folder, models[kind], "task", seconds),
-                             progress=False, pacing=Pacing(rt_factor=1.0), cpu=cpu)
-        table = recording.timing.table(recording.wall_s)
         single = simulate(_hardware_loop(folder, models[kind], "step", seconds), progress=False)
-        e2_task, e2_step = _e2(recording), _e2(single)
-        results[kind] = {
-            **{key: table[key] for key in (
-                "period_us", "achieved_real_time_factor", "tasks", "tet_us_per_fmu",
-                "tet_over_period_p99", "lateness_us", "overruns", "rate_transition_overruns",
-                "network_call_us", "process")},
-            "single_rate_unpaced_tet_us": single.timing.table(single.wall_s)["tet_us"],
-            "tracking_e2": {"task": e2_task, "single_rate": e2_step,
-                            "task_over_single_rate": {a: e2_task[a] / e2_step[a]
-                                                      for a in e2_task}}}
-        paced_s = recording.timing.tet.size * recording.timing.period
+        e2_step = _e2(single)
+        for runtime in runtimes:
+            recording = simulate(_hardware_loop(folder, models[kind], "task", seconds, runtime),
+                                 progress=False, pacing=Pacing(rt_factor=1.0), cpu=cpu)
+            table = recording.timing.table(recording.wall_s)
+            e2_task = _e2(recording)
+            results[kind if runtime == RUNTIMES[0] else f"{kind}_{runtime}"] = {
+                "runtime": runtime,
+                **{key: table[key] for key in (
+                    "period_us", "achieved_real_time_factor", "tasks", "tet_us_per_fmu",
+                    "tet_over_period_p99", "lateness_us", "overruns",
+                    "rate_transition_overruns", "network_call_us", "process")},
+                "feedforward_step": feedforward_step(recording.timing),
+                "single_rate_unpaced_tet_us": single.timing.table(single.wall_s)["tet_us"],
+                "tracking_e2": {"task": e2_task, "single_rate": e2_step,
+                                "task_over_single_rate": {a: e2_task[a] / e2_step[a]
+                                                          for a in e2_task}}}
+            paced_s = recording.timing.tet.size * recording.timing.period
     with realtime_process(cpu):  # every paced loop here runs as --realtime --cpu runs it
         idle = idle_timing(paced_s)
     table = idle.table(idle.tet.size * idle.period)
@@ -258,6 +269,59 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
     results["one_node_graph"] = one_node_graph_benchmark(folder, paced_s)
     results["slow_network"] = slow_network_benchmark(folder, paced_s)
     return results
+
+
+def feedforward_step(timing: StepTiming, fmu: str = "feedforward") -> dict[str, Any]:
+    """The share of `fmu` (a network in its own task) in each step's TET [us], split into the
+    steps at its call points, which hand a call over to the network's task (and take the last
+    one's result), and the others; its p99 over its p50 in all steps; the calls handed over
+    (`handovers`: one per call point), those whose result the base task waited for (not
+    ready when due) and those computed in the base task (by the step itself, or by the
+    network's task preempting it: never, when the task works as it should)."""
+    calls = timing.network_calls[fmu]
+    share = timing.fmu_tet[:, timing.names.index(fmu)]
+    handover = np.arange(share.size) % int(calls["period_steps"]) == 0
+    return {"tet_us": {"handover": _us_stats(share[handover]),
+                       "no_handover": _us_stats(share[~handover])},
+            "p99_over_p50": float(np.percentile(share, 99) / np.percentile(share, 50)),
+            "handovers": int(calls.get("handovers", handover.sum())),
+            "waited_for": int(calls.get("overruns", 0)),
+            "computed_in_base_task": int(calls.get("computed_in_step", 0))}
+
+
+def _us_stats(seconds: np.ndarray) -> dict[str, float]:
+    """p50, p99, p99.9 and max of durations in seconds, in microseconds."""
+    return {**{name: float(np.percentile(seconds, q)) * US for name, q in PERCENTILES.items()},
+            "max": float(seconds.max()) * US}
+
+
+def realtime_table(figures: dict[str, Any]) -> str:
+    """realtime_benchmark's paced loops as text: per loop the 1 kHz task's TET p50 / p99 /
+    max and overruns, the feedforward's step p50 / p99 at call points (a hand-over) and
+    between them, its p99 over p50, and the calls handed over, waited for and computed in
+    the base task; the idle loop's TET and overruns."""
+    rows = [["loop", "TET p50 / p99 / max [µs]", "overruns",
+             "ff step, hand-over p50 / p99", "ff step, none p50 / p99", "ff p99/p50",
+             "hand-overs / waited / in base task"]]
+    for name, loop in figures.items():
+        if not (isinstance(loop, dict) and "feedforward_step" in loop):
+            continue
+        tet, ff = loop["tasks"]["base"]["tet_us"], loop["feedforward_step"]
+        split = ff["tet_us"]
+        rows.append([name, f"{tet['p50']:.3g} / {tet['p99']:.3g} / {tet['max']:.3g}",
+                     str(loop["overruns"]),
+                     f"{split['handover']['p50']:.3g} / {split['handover']['p99']:.3g}",
+                     f"{split['no_handover']['p50']:.3g} / {split['no_handover']['p99']:.3g}",
+                     f"{ff['p99_over_p50']:.3g}",
+                     f"{ff['handovers']} / {ff['waited_for']} / {ff['computed_in_base_task']}"])
+    idle = figures["idle"]["tet_us"]
+    rows.append(["idle", f"{idle['p50']:.3g} / {idle['p99']:.3g} / {idle['max']:.3g}",
+                 str(figures["idle"]["overruns"]), "–", "–", "–", "–"])
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(cell.ljust(w) if i == 0 else cell.rjust(w)
+                       for i, (cell, w) in enumerate(zip(row, widths))) for row in rows]
+    return "\n".join([f"paced at 1 kHz on CPU {figures['cpu']} ({figures['reference']}), "
+                      f"the feedforward's step in µs", *lines])
 
 
 def paced_cpu() -> int:

@@ -278,7 +278,7 @@ def _bench(args: argparse.Namespace) -> int:
         return _print_json(process_benchmark(Path(args.processes).resolve(), steps,
                                              repeats=args.process_repeats,
                                              ecos_python=args.ecos_python), args.output)
-    from flexff.bench import network_call_table, run_benchmarks
+    from flexff.bench import network_call_table, realtime_table, run_benchmarks
 
     models = None
     if args.models:
@@ -290,6 +290,7 @@ def _bench(args: argparse.Namespace) -> int:
     status = _print_json(figures, args.output)
     # the JSON is stdout's (for a pipe); the table is for whoever reads along
     print(network_call_table(figures["network_call"]), file=sys.stderr, flush=True)
+    print(realtime_table(figures["realtime"]), file=sys.stderr, flush=True)
     return status
 
 

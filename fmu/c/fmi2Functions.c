@@ -315,6 +315,25 @@ FLEXFF_EXPORT int flexff_network_task(fmi2Component comp, long *period,
 #endif
     return 0;
 }
+
+/* flexff's own entry, not part of FMI: what the network's own task did so far, for the
+ * real-time report and its tests: counts[0] the calls handed over to it (one per call point),
+ * counts[1] the results not ready when due (the step waited for the network: an overrun),
+ * counts[2] those the step computed itself (under scheduled execution, when the network
+ * clock's partition had not run). 0, or -1 as flexff_network_times and for a network that
+ * runs in the step (no task). */
+FLEXFF_EXPORT int flexff_network_counts(fmi2Component comp, long counts[3]) {
+    Instance *c = (Instance *)comp;
+    if (registry_find(comp) < 0 || c->magic != INSTANCE_MAGIC || c->net == NULL ||
+        counts == NULL)
+        return -1;
+#if NET_TASK
+    task_counts(c, counts);
+    return 0;
+#else
+    return -1;
+#endif
+}
 #endif
 
 fmi2Status fmi2Reset(fmi2Component comp) {
@@ -324,6 +343,7 @@ fmi2Status fmi2Reset(fmi2Component comp) {
 #if NET_TASK
     task_settle(c, 0); /* the worker idle before its Data is reset; a failed call is dropped */
 #endif
+    net_forget_features(c);
 #endif
     set_defaults(c);
     return fmi2OK;
@@ -562,6 +582,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
 #if NET_TASK
     task_settle(c, 0); /* the worker idle; the call it made for the state left is dropped */
 #endif
+    net_forget_features(c);
 #endif
     memcpy(&c->d, &st->d, sizeof c->d);
     return fmi2OK;

@@ -179,6 +179,12 @@ typedef struct {
                           * after a state was restored into an instance never initialized) */
 #if NET_TASK
     Task *task;          /* the network's own task (wrapper_task.c) */
+    int features_ready;  /* features hold the inputs of the call at point features_step (the
+                          * first), for the x, u and p below, its state primed on them: the
+                          * outputs and the step there evaluate them once */
+    long long features_step;
+    fmi2Real features_x[DIM(N_X)], features_u[DIM(N_U)], features_p[DIM(N_P)]; /* at the
+                          * current call point: its call's (the task evaluates its inputs) */
 #endif
 #endif
 } Instance;
@@ -246,8 +252,13 @@ fmi2Status check_table_inputs(Instance *c);
 fmi2Status net_prepare(Instance *c);
 void net_commit(Instance *c);
 void net_restart(Instance *c);
+void net_forget_features(Instance *c);
 fmi2Status check_network_inputs(Instance *c, const fmi2Real *features, const fmi2Real *u,
                                 fmi2Real t);
+/* 1 (and why, into text) if the network's inputs `features` at t, from the FMU's inputs u,
+ * are not all finite, else 0. */
+int network_inputs_problem(const Network *net, const fmi2Real *features, const fmi2Real *u,
+                           fmi2Real t, char *text, size_t size);
 fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t);
 
 #if NET_TASK
@@ -257,10 +268,24 @@ fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t);
 int task_start(Instance *c, char *error, size_t size);
 void task_stop(Instance *c);
 fmi2Status task_run(Instance *c);
-void task_post(Instance *c, const fmi2Real *features, const float *state);
+/* CasADi work arrays of a thread beside the one that steps the instance. */
+typedef struct {
+    const casadi_real *arg[DIM(SZ_ARG)];
+    casadi_real *res[DIM(SZ_RES)];
+    casadi_int iw[DIM(SZ_IW)];
+    casadi_real w[DIM(SZ_W)];
+} CasadiWork;
+
+/* The network's inputs from x, u and p with `work` (CasADi memory `mem`): 0, or non-zero if
+ * the evaluation failed. */
+int eval_network_input_with(CasadiWork *work, int mem, const fmi2Real *x, const fmi2Real *u,
+                            const fmi2Real *p, fmi2Real *features);
+void task_post(Instance *c, const fmi2Real *x, const fmi2Real *u, const fmi2Real *p,
+               const float *state);
 fmi2Status task_settle(Instance *c, int due);
 long task_overruns(const Instance *c);
 const long *task_overruns_counter(const Instance *c);
+void task_counts(const Instance *c, long counts[3]);
 #endif
 #endif
 

@@ -8,7 +8,7 @@
  *
  * With NET_TASK the graph runs in its own task (wrapper_task.c): the call started at call point
  * k on the inputs of step k gives its result at k + NET_PERIOD, and the results are extrapolated
- * one period further to make up for that delay. Until the first result, r is zero (the initial
+ * one period further to make up for that delay; the task evaluates the network's inputs too. Until the first result, r is zero (the initial
  * output of a rate transition, as in Simulink): the step never runs the network itself.
  *
  * With NET_PRIMED the first call starts from the state of a network that has rested on its
@@ -179,18 +179,38 @@ fmi2Status check_finite_result(Instance *c, const fmi2Real *r, fmi2Real t) {
 /* The network's inputs computed from the FMU's inputs u must be finite: a non-finite one
  * (inverse kinematics of a reference outside the workspace, say) would only come back as
  * "the network returned nan", which names neither the cause nor the culprit. */
-fmi2Status check_network_inputs(Instance *c, const fmi2Real *features, const fmi2Real *u,
-                                fmi2Real t) {
+int network_inputs_problem(const Network *net, const fmi2Real *features, const fmi2Real *u,
+                           fmi2Real t, char *text, size_t size) {
     const int bad = first_nonfinite(features, NET_N_IN);
     char inputs[1024];
-    if (bad < 0) return fmi2OK;
-    const char *name = net_input_name(c->net, bad);
+    if (bad < 0) return 0;
+    const char *name = net_input_name(net, bad);
     describe_inputs(u, inputs, sizeof inputs);
-    return fail(c, "The network's input %s%s%s(%d of %d) is %g at t = %.17g: it is not defined "
-                   "for the inputs %s (for a feedforward: is the reference inside the workspace?).",
-                name ? "'" : "", name ? name : "", name ? "' " : "", bad + 1, NET_N_IN,
-                features[bad], t, inputs);
+    snprintf(text, size, "The network's input %s%s%s(%d of %d) is %g at t = %.17g: it is not "
+                         "defined for the inputs %s (for a feedforward: is the reference inside "
+                         "the workspace?).",
+             name ? "'" : "", name ? name : "", name ? "' " : "", bad + 1, NET_N_IN,
+             features[bad], t, inputs);
+    return 1;
 }
+
+fmi2Status check_network_inputs(Instance *c, const fmi2Real *features, const fmi2Real *u,
+                                fmi2Real t) {
+    char text[2048];
+    if (!network_inputs_problem(c->net, features, u, t, text, sizeof text)) return fmi2OK;
+    return fail(c, "%s", text);
+}
+
+#if NET_TASK
+int eval_network_input_with(CasadiWork *work, int mem, const fmi2Real *x, const fmi2Real *u,
+                            const fmi2Real *p, fmi2Real *features) {
+    work->arg[0] = x;
+    work->arg[1] = u;
+    work->arg[2] = p;
+    work->res[0] = features;
+    return MODEL_FN(network_input)(work->arg, work->res, work->iw, work->w, mem);
+}
+#endif
 
 /* The table must start at the start time and advance by the sample time: row k is then the
  * communication point k. */
@@ -336,10 +356,21 @@ static fmi2Status net_call(Instance *c) {
 }
 
 #if NET_TASK
+/* Whether c->features hold the inputs of the first call point's call, its state primed on
+ * them (task_prepare). */
+static int features_current(const Instance *c) {
+    return c->features_ready && c->features_step == c->d.net_step &&
+           memcmp(c->features_x, c->d.x, sizeof c->features_x) == 0 &&
+           memcmp(c->features_u, c->d.u, sizeof c->features_u) == 0 &&
+           memcmp(c->features_p, c->d.p, sizeof c->features_p) == 0;
+}
+
 /* NET_TASK: at a call point the result of the last one becomes the latest (waiting for it if
- * the task is not done) and the inputs of this one's call are evaluated into c->features
- * (net_commit starts it); c->r extrapolates the last two results to the current point, one to
- * two periods after the later one started (zero before the first result). */
+ * the task is not done) and the point's x, u and p are kept for its call (net_commit starts
+ * it; the task evaluates the network's inputs from them, so that the step does not: at the
+ * first point they are evaluated here too, to prime the state); c->r extrapolates the last two
+ * results to the current point, one to two periods after the later one started (zero before
+ * the first result). */
 static fmi2Status task_prepare(Instance *c, long phase) {
     if (phase == 0) {
         if (c->d.net_job) {
@@ -352,10 +383,18 @@ static fmi2Status task_prepare(Instance *c, long phase) {
             memcpy(c->d.net_state, c->d.net_job_state, sizeof c->d.net_state);
             c->d.net_job = 0;
         }
-        if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
-            return fail(c, "Evaluating the network's inputs failed.");
-        if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
-        if (c->d.net_step == 0 && net_start(c) != fmi2OK) return fmi2Error;
+        if (c->d.net_step == 0 && !features_current(c)) {
+            if (eval_network_input(c, c->d.x, c->d.u, c->features) != 0)
+                return fail(c, "Evaluating the network's inputs failed.");
+            if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK)
+                return fmi2Error;
+            if (net_start(c) != fmi2OK) return fmi2Error;
+            c->features_ready = 1;
+            c->features_step = 0;
+        }
+        memcpy(c->features_x, c->d.x, sizeof c->features_x);
+        memcpy(c->features_u, c->d.u, sizeof c->features_u);
+        memcpy(c->features_p, c->d.p, sizeof c->features_p);
     }
     if (c->d.net_step < NET_PERIOD) {
         memset(c->r, 0, sizeof c->r);
@@ -395,8 +434,8 @@ fmi2Status net_prepare(Instance *c) {
  * NET_TASK, the point's call starts instead). */
 void net_commit(Instance *c) {
 #if NET_TASK
-    if (c->d.net_step % NET_PERIOD == 0)
-        task_post(c, c->features, c->d.net_state); /* the inputs task_prepare evaluated */
+    if (c->d.net_step % NET_PERIOD == 0) /* the point's x, u and p, kept by task_prepare */
+        task_post(c, c->features_x, c->features_u, c->features_p, c->d.net_state);
     c->d.net_step++;
     return;
 #endif
@@ -410,11 +449,21 @@ void net_commit(Instance *c) {
     c->d.net_step++;
 }
 
+/* The call point's inputs evaluated before are not the current Data's (it was replaced). */
+void net_forget_features(Instance *c) {
+#if NET_TASK
+    c->features_ready = 0;
+#else
+    (void)c;
+#endif
+}
+
 /* Back to the first call point with the zero state (the other fields are zero already). */
 void net_restart(Instance *c) {
 #if NET_TASK
     task_settle(c, 0); /* the worker idle; its result, of the run left, is dropped */
     c->d.net_job = 0;
+    net_forget_features(c);
 #endif
     c->d.net_step = 0;
     c->d.net_pending = 0;

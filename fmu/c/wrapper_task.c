@@ -1,8 +1,11 @@
 /*
  * wrapper_task.c -- the embedded network in its own task (NET_TASK), as Simulink Real-Time's
  * multitasking runs a slow block: one worker thread per instance, started at fmi2Instantiate and
- * joined at fmi2FreeInstance. At a call point k the wrapper hands the network's inputs of step k
- * to the worker and returns at once; at the call point k + NET_PERIOD it takes the result
+ * joined at fmi2FreeInstance. At a call point k the wrapper hands the point's x, u and p to the
+ * worker and returns at once; the worker evaluates the network's inputs from them (a step
+ * evaluating them cost the 1 kHz task 1 to 5 us at each call point) and calls the network,
+ * and a non-finite input fails that call, reported when its result is due, naming the input
+ * and point k's time. At the call point k + NET_PERIOD the wrapper takes the result
  * (wrapper_network.c), waiting for it if the worker is not done: that wait is a rate-transition
  * overrun, counted here. The result is always used at k + NET_PERIOD, so the outputs are the
  * same whatever the timing, and any importer runs the FMU unchanged.
@@ -11,11 +14,21 @@
  * the thread that steps the instance runs under SCHED_FIFO or SCHED_RR (a paced run where the
  * system permits), the worker gets the same policy one priority below, so that it is neither
  * preempted by ordinary processes nor able to preempt the step; otherwise it is an ordinary
- * thread like its caller. It also runs on the CPUs its caller may run on: a paced run pinned to
+ * thread of the batch policy (SCHED_BATCH), which never preempts another on waking: as a plain
+ * one (SCHED_OTHER, the caller's equal) the kernel gave it the CPU at the hand-over, and a paced
+ * run on one core without SCHED_FIFO computed the network inside the step at call points
+ * (TCN paced at 1 kHz: the feedforward's step p99 one network call, 30 us, where it is 1 to
+ * 2 us between call points). It also runs on the CPUs its caller may run on: a paced run pinned to
  * one core (flexff run --realtime --cpu K) runs the network there in the base task's idle
  * time, as Simulink Real-Time's multitasking does on one core. Measured on the 2-core VM
  * (LSTM, 30 s paced at 1 kHz): the 1 kHz task's TET p99 11 us on one core, 25 to 27 us with
  * the worker on the other core or unpinned, where each hand-over wakes a second CPU.
+ * The worker follows a new caller's scheduling and CPUs when it posts its first job, then
+ * takes any change itself as each job starts: read and set by the calling thread at every
+ * hand-over, those system calls cost the 1 kHz task about 3 us at each call point (of 13 us the
+ * hand-over took it; measured on the 2-core VM, TCN paced at 1 kHz on one core). The counts (task_counts) say what the task did: calls handed over,
+ * results not ready when due, and results computed in the step (by the calling thread when due,
+ * or by the worker before the step went on, the two pinned to one CPU).
  *
  * One mutex guards the hand-over; the worker touches only the job buffers below and the network
  * (whose call times it records), never the instance's Data, which the calling thread alone
@@ -34,6 +47,10 @@
 
 #if HAS_NETWORK
 #if NET_TASK
+#if defined(__linux__)
+#include <sys/syscall.h>
+#include <unistd.h>
+#endif
 #define TASK_THREAD_NAME "flexff-network" /* at most 15 characters */
 
 struct Task {
@@ -45,28 +62,81 @@ struct Task {
     int posted, finished, quit;
     int busy;            /* a job is out for the current Data (calling thread only) */
 #if defined(__linux__)
+    pthread_t caller;     /* the thread that posted the job, and its kernel id */
+    pid_t caller_tid;
     int policy, priority; /* the caller's scheduling the worker's was last set from */
     cpu_set_t cpus;       /* the caller's CPUs the worker's were last set from */
+    int started, started_cpu; /* the posted job started, on this CPU */
 #endif
     long overruns;       /* results not ready when due (calling thread only) */
-    fmi2Real in[NET_N_IN];
+    long handovers;      /* jobs posted (calling thread only) */
+    long in_step;        /* jobs computed in the step that needed or posted them: run by the
+                          * calling thread when due, or by the worker before the step went on,
+                          * both pinned to one CPU (calling thread only) */
+    fmi2Real x[DIM(N_X)], u[DIM(N_U)], p[DIM(N_P)], time; /* the job: its call point's */
     float state_in[DIM(NET_STATE_SIZE)];
+    fmi2Real in[NET_N_IN]; /* the network's inputs, evaluated from x, u and p by the job */
+    CasadiWork work;
+    int mem;               /* the instance's CasADi memory of network_input */
     fmi2Real r[N_R];
     float state_out[DIM(NET_STATE_SIZE)];
     int failed;
     char error[512];
 };
 
-/* The posted job, run with the lock held on entry and exit (released while it runs). */
+/* The posted job, run with the lock held on entry and exit (released while it runs): the
+ * network's inputs at its call point, checked as the step checks them, then the call. */
 static void run_posted(Task *t) {
     t->posted = 0;
     pthread_mutex_unlock(&t->lock);
-    const int failed = net_run(t->net, t->in, 1, t->state_in, t->r, t->state_out, t->error,
-                               sizeof t->error) != 0;
+    int failed = eval_network_input_with(&t->work, t->mem, t->x, t->u, t->p, t->in) != 0;
+    if (failed)
+        snprintf(t->error, sizeof t->error, "Evaluating the network's inputs failed.");
+    else
+        failed = network_inputs_problem(t->net, t->in, t->u, t->time, t->error,
+                                        sizeof t->error) ||
+                 net_run(t->net, t->in, 1, t->state_in, t->r, t->state_out, t->error,
+                         sizeof t->error) != 0;
     pthread_mutex_lock(&t->lock);
     t->failed = failed;
     t->finished = 1;
     pthread_cond_signal(&t->done);
+}
+
+/* The worker one priority below the thread that posts its jobs under a real-time policy, or a
+ * batch thread under an ordinary one, and on that thread's CPUs; each only when the poster's
+ * changed since the last call. Called with the lock held, by the poster when it is new (so that
+ * its first job already runs so) and by the worker as each job starts (so that it follows a
+ * poster that changed since, without a system call in the poster's step). What the system
+ * refuses leaves the worker as it was (it still runs, only less promptly); so does a poster
+ * that has ended. */
+static void follow_caller(Task *t) {
+#if defined(__linux__)
+    struct sched_param caller, worker;
+    cpu_set_t cpus;
+    int policy;
+    if (sched_getaffinity(t->caller_tid, sizeof cpus, &cpus) == 0 &&
+        !CPU_EQUAL(&cpus, &t->cpus)) {
+        t->cpus = cpus;
+        pthread_setaffinity_np(t->thread, sizeof cpus, &cpus);
+    }
+    policy = sched_getscheduler(t->caller_tid);
+    if (policy < 0 || sched_getparam(t->caller_tid, &caller) != 0) return;
+    policy &= ~SCHED_RESET_ON_FORK;
+    if (policy == t->policy && caller.sched_priority == t->priority) return;
+    t->policy = policy;
+    t->priority = caller.sched_priority;
+    memset(&worker, 0, sizeof worker);
+    if (policy == SCHED_FIFO || policy == SCHED_RR) {
+        const int lowest = sched_get_priority_min(policy);
+        worker.sched_priority = caller.sched_priority > lowest ? caller.sched_priority - 1 : lowest;
+    } else {
+        policy = SCHED_BATCH; /* an ordinary thread that never preempts the step on waking */
+    }
+    pthread_setschedparam(t->thread, policy, &worker);
+#else
+    (void)t;
+#endif
 }
 
 static void *work(void *arg) {
@@ -75,6 +145,11 @@ static void *work(void *arg) {
     for (;;) {
         while (!t->posted && !t->quit) pthread_cond_wait(&t->wake, &t->lock);
         if (!t->posted) break; /* quit, with nothing left to run */
+        follow_caller(t);
+#if defined(__linux__)
+        t->started = 1;
+        t->started_cpu = sched_getcpu();
+#endif
         run_posted(t);
     }
     pthread_mutex_unlock(&t->lock);
@@ -98,8 +173,9 @@ int task_start(Instance *c, char *error, size_t size) {
         return -1;
     }
     t->net = c->net;
+    t->mem = c->mem[3];
 #if defined(__linux__)
-    t->policy = SCHED_OTHER; /* as a thread is created */
+    t->policy = -1; /* none yet: the first job sets the worker's */
     pthread_getaffinity_np(pthread_self(), sizeof t->cpus, &t->cpus); /* inherited */
 #endif
     pthread_mutex_init(&t->lock, NULL);
@@ -141,52 +217,44 @@ void task_stop(Instance *c) {
     c->task = NULL;
 }
 
-/* The worker one priority below the calling thread under a real-time policy, or ordinary
- * under an ordinary one, and on the caller's CPUs; each only when the caller's changed since
- * the last call. What the system refuses leaves the worker as it was (it still runs, only
- * less promptly). */
-static void follow_caller(Task *t) {
-#if defined(__linux__)
-    struct sched_param caller, worker;
-    cpu_set_t cpus;
-    int policy;
-    if (pthread_getaffinity_np(pthread_self(), sizeof cpus, &cpus) == 0 &&
-        !CPU_EQUAL(&cpus, &t->cpus)) {
-        t->cpus = cpus;
-        pthread_setaffinity_np(t->thread, sizeof cpus, &cpus);
-    }
-    if (pthread_getschedparam(pthread_self(), &policy, &caller) != 0 ||
-        (policy == t->policy && caller.sched_priority == t->priority))
-        return;
-    t->policy = policy;
-    t->priority = caller.sched_priority;
-    memset(&worker, 0, sizeof worker);
-    if (policy == SCHED_FIFO || policy == SCHED_RR) {
-        const int lowest = sched_get_priority_min(policy);
-        worker.sched_priority = caller.sched_priority > lowest ? caller.sched_priority - 1 : lowest;
-    } else {
-        policy = SCHED_OTHER;
-    }
-    pthread_setschedparam(t->thread, policy, &worker);
-#else
-    (void)t;
-#endif
-}
-
-/* Start a call on `features` from the recurrent state `state` (the worker is idle: every job
- * is settled before the next is posted). */
-void task_post(Instance *c, const fmi2Real *features, const float *state) {
+/* Start the call of the current point, on the network's inputs from its x, u and p, from the
+ * recurrent state `state` (the worker is idle: every job is settled before the next is
+ * posted). */
+void task_post(Instance *c, const fmi2Real *x, const fmi2Real *u, const fmi2Real *p,
+               const float *state) {
     Task *t = c->task;
-    if (!c->scheduled) follow_caller(t);
     pthread_mutex_lock(&t->lock);
-    memcpy(t->in, features, sizeof t->in);
+#if defined(__linux__)
+    if (!c->scheduled && !pthread_equal(t->caller, pthread_self())) { /* system calls only */
+        t->caller = pthread_self();                                  /* for a new caller */
+        t->caller_tid = (pid_t)syscall(SYS_gettid);
+        follow_caller(t);
+    }
+#endif
+    memcpy(t->x, x, sizeof t->x);
+    memcpy(t->u, u, sizeof t->u);
+    memcpy(t->p, p, sizeof t->p);
+    t->time = c->d.time;
     memcpy(t->state_in, state, sizeof t->state_in);
     t->posted = 1;
     t->finished = 0;
-    pthread_cond_signal(&t->wake);
+#if defined(__linux__)
+    t->started = 0;
+#endif
     pthread_mutex_unlock(&t->lock);
+    pthread_cond_signal(&t->wake); /* after the unlock: a worker woken on another CPU takes
+                                    * the lock at once */
     t->busy = 1;
+    t->handovers++;
     c->d.net_job = 1;
+#if defined(__linux__)
+    if (!c->scheduled) { /* both on one CPU, and the worker already started: it ran in the
+                          * step's time (having preempted it, or while something else did) */
+        pthread_mutex_lock(&t->lock);
+        t->in_step += t->started && CPU_COUNT(&t->cpus) == 1 && t->started_cpu == sched_getcpu();
+        pthread_mutex_unlock(&t->lock);
+    }
+#endif
 }
 
 /* Bring the job out for the current Data into it (net_job_r, net_job_state), waiting for the
@@ -196,7 +264,10 @@ fmi2Status task_settle(Instance *c, int due) {
     if (t == NULL || !t->busy) return fmi2OK;
     pthread_mutex_lock(&t->lock);
     if (!t->finished && due) t->overruns++;
-    if (c->scheduled && t->posted) run_posted(t); /* its partition did not run in time */
+    if (c->scheduled && t->posted) { /* its partition did not run in time */
+        if (due) t->in_step++;
+        run_posted(t);
+    }
     while (!t->finished) pthread_cond_wait(&t->done, &t->lock);
     pthread_mutex_unlock(&t->lock);
     t->busy = 0;
@@ -210,6 +281,13 @@ fmi2Status task_settle(Instance *c, int due) {
 }
 
 long task_overruns(const Instance *c) { return c->task ? c->task->overruns : 0; }
+
+void task_counts(const Instance *c, long counts[3]) {
+    const Task *t = c->task;
+    counts[0] = t ? t->handovers : 0;
+    counts[1] = t ? t->overruns : 0;
+    counts[2] = t ? t->in_step : 0;
+}
 
 const long *task_overruns_counter(const Instance *c) {
     return c->task ? &c->task->overruns : NULL;

@@ -1,9 +1,12 @@
 """flexff.bench's figures that a test can check in seconds (the whole bench runs in
 tests/flexff/test_cli.py)."""
 
+import numpy as np
 import pyarrow.parquet as pq
+import pytest
 
-from flexff.bench import network_call_table, recording_benchmark
+from flexff.bench import feedforward_step, network_call_table, realtime_table, recording_benchmark
+from flexff.cosim.timing import Pacing, StepTiming
 
 
 def test_the_recording_benchmark_runs_the_loop_with_its_record_on_and_off(tmp_path):
@@ -43,3 +46,45 @@ def test_the_network_call_table_lines_up_each_model_and_runtime():
     only_c = {**figures, "models": {"lstm": {"c": figures["models"]["lstm"]["c"]}}}
     head, row = network_call_table(only_c).splitlines()[1:]
     assert "onnxruntime" not in head and row.split() == ["lstm", "7.94", "/", "12.6", "0.558"]
+
+
+def _timing(period: int = 10, steps: int = 100) -> StepTiming:
+    """A paced run's timing: the feedforward's share 20 us at its call points (every `period`
+    steps from 0), 2 us between them; the plant's 10 us throughout."""
+    share = np.where(np.arange(steps) % period == 0, 20e-6, 2e-6)
+    fmu_tet = np.column_stack([share, np.full(steps, 10e-6)])
+    calls = {"calls": steps // period, "p50": 30.0, "p99": 40.0, "max": 50.0,
+             "period_steps": period, "overruns": 1, "handovers": steps // period,
+             "computed_in_step": 0}
+    return StepTiming(1e-3, ("feedforward", "plant"), fmu_tet.sum(axis=1), fmu_tet,
+                      np.zeros(steps), Pacing(), 0, 1, (), None,
+                      network_calls={"feedforward": calls})
+
+
+def test_the_feedforward_step_splits_at_the_hand_overs():
+    """The steps at the network's call points hand a call over: their share of the TET apart
+    from the others', with the task's counts."""
+    figures = feedforward_step(_timing())
+    assert figures["tet_us"]["handover"]["p50"] == pytest.approx(20.0)
+    assert figures["tet_us"]["handover"]["max"] == pytest.approx(20.0)
+    assert figures["tet_us"]["no_handover"]["p99"] == pytest.approx(2.0)
+    assert figures["p99_over_p50"] == pytest.approx(10.0)  # 10 % of the steps hand over
+    assert (figures["handovers"], figures["waited_for"], figures["computed_in_base_task"]) == (
+        10, 1, 0)
+
+
+def test_the_realtime_table_lines_up_each_loop():
+    """The bench's text summary of its paced loops: a row per loop and runtime, the idle loop
+    last, columns aligned."""
+    timing = _timing()
+    table = timing.table(0.1)
+    loop = {"tasks": table["tasks"], "overruns": 3, "feedforward_step": feedforward_step(timing)}
+    figures = {"reference": "thesis-hardware-eval", "cpu": 1, "tcn": loop,
+               "tcn_onnxruntime": loop, "idle": {"tet_us": table["tet_us"], "overruns": 2}}
+    title, head, *rows = realtime_table(figures).splitlines()
+    assert title.startswith("paced at 1 kHz on CPU 1 (thesis-hardware-eval)")
+    assert len({len(line) for line in (head, *rows)}) == 1  # columns aligned
+    assert [row.split()[0] for row in rows] == ["tcn", "tcn_onnxruntime", "idle"]
+    cells = rows[0].split()
+    assert cells[6] == "3"  # the overruns, after TET p50 / p99 / max
+    assert cells[-6:] == ["10", "10", "/", "1", "/", "0"]  # p99/p50, then the counts

@@ -90,9 +90,13 @@ def test_bench_prints_json(tmp_path):
             q: model["c"][f"{q}_us"] / model["onnxruntime"][f"{q}_us"] for q in ("p50", "p99")}
         assert f"\n{kind} " in result.stderr  # its row of the table
     assert "network time per call (thesis-eval, step mode)" in result.stderr
-    for kind in ("tcn", "lstm"):  # the paced hardware loop: 0.5 s at 1 kHz
-        paced = figures["realtime"][kind]
+    for kind in ("tcn", "lstm", "tcn_onnxruntime", "lstm_onnxruntime"):  # the paced hardware
+        paced = figures["realtime"][kind]  # loop, 0.5 s at 1 kHz, its network in each runtime
         assert paced["period_us"] == 1000.0 and paced["overruns"] >= 0
+        ff = paced["feedforward_step"]  # 0.5 s at 100 Hz: a hand-over every 10th step from 0
+        assert ff["handovers"] == 50 and ff["computed_in_base_task"] == 0
+        assert ff["tet_us"]["handover"]["p50"] > 0 and ff["tet_us"]["no_handover"]["p50"] > 0
+        assert f"\n{kind} " in result.stderr  # its row of the paced loops' table
         assert set(paced["tet_us_per_fmu"]) == {"feedforward", "controller", "plant"}
         assert set(paced["tasks"]) == {"base", "feedforward.network"}  # the network's own
         assert paced["tasks"]["feedforward.network"]["overruns"] >= 0

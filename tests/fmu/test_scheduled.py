@@ -14,6 +14,7 @@ fmi3Functions.c, fmu.model_description3) and flexff's scheduler for such FMUs (f
 
 from __future__ import annotations
 
+import ctypes
 import zipfile
 
 import fmpy.validation
@@ -77,7 +78,9 @@ def test_flexff_runs_it_scheduled_as_its_co_simulation_twins(fmus, reference):
 def _fmpy_scheduled(fmu, reference, network_partition):
     """FMPy's scheduled-execution binding driven by a loop of this test, as a master steps a
     co-simulation FMU: at each point the inputs set and the forces read, then the step clock's
-    partition and (if `network_partition`) the network clock's where it ticks."""
+    partition and (if `network_partition`) the network clock's where it ticks. The forces, and
+    the task's counts (flexff_network_counts: calls handed over, results not ready when due,
+    results the step computed itself)."""
     md = read_model_description(fmu)
     clocks = {c.name: c.value_reference for c in periodic_clocks(fmu)}
     vrs = {v.name: v.valueReference for v in md.modelVariables}
@@ -95,17 +98,24 @@ def _fmpy_scheduled(fmu, reference, network_partition):
         instance.activateModelPartition(clocks["step_clock"], k * STEP)
         if network_partition and k % PERIOD == 0:
             instance.activateModelPartition(clocks["network_clock"], k * STEP)
+    counts = (ctypes.c_long * 3)()
+    assert instance.dll.flexff_network_counts(ctypes.c_void_p(instance.component), counts) == 0
     instance.terminate()
     instance.freeInstance()
-    return np.array(forces)
+    return np.array(forces), list(counts)
 
 
 def test_fmpy_driven_by_its_own_scheduler_gets_the_same_forces(fmus, reference):
     twin = _master_run(fmus[3], reference, False)
     expected = np.column_stack([twin["ff.Fx_ff"][:STEPS], twin["ff.Fy_ff"][:STEPS]])
-    assert np.array_equal(_fmpy_scheduled(fmus[3], reference, True), expected)
+    calls = len(range(0, STEPS, PERIOD))
+    forces, counts = _fmpy_scheduled(fmus[3], reference, True)
+    assert np.array_equal(forces, expected)
+    assert counts == [calls, 0, 0]  # every result was ready: the step computed none
     # the network's partition never run: each result is computed when due (an overrun)
-    assert np.array_equal(_fmpy_scheduled(fmus[3], reference, False), expected)
+    forces, counts = _fmpy_scheduled(fmus[3], reference, False)
+    assert np.array_equal(forces, expected)
+    assert counts == [calls, calls - 1, calls - 1]  # the last call is never due
 
 
 def test_a_clock_flexff_cannot_schedule_is_refused(fmus, tmp_path):

@@ -4,12 +4,14 @@ and libcosim give the same outputs bit for bit; a network slower than its deadli
 (and stops a paced run at --max-overruns); a state saved while a call is pending continues
 exactly."""
 
+import ctypes
 import os
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from fmpy.fmi2 import fmi2Error
 
 from flexff.bench import slow_graph
 from flexff.cosim.master import Master, ResolvedFmu
@@ -17,7 +19,7 @@ from flexff.cosim.timing import Pacing
 from flexff.fmu.onnx_fmu import onnx_system
 from flexff.fmu.validation import validate_fmu
 from tests.fmu.test_network import INPUTS, PERIOD, STEPS, H, network_system, running_sum_graph
-from tests.fmu_toys import LoggedSlave, build_toy
+from tests.fmu_toys import LoggedSlave, build_toy, status_of
 from tests.runners import run_fmu, run_fmu_libcosim
 
 
@@ -95,8 +97,22 @@ def _worker_threads() -> list[int]:
             if (task / "comm").read_text().strip() == "flexff-network"]
 
 
+def _settle(s: LoggedSlave) -> None:
+    """Wait for the job out (flexff_network_times waits for it, counting no overrun)."""
+    times = (ctypes.c_double * 4)()
+    assert s.slave.dll.flexff_network_times(ctypes.c_void_p(s.slave.component), times) == 0
+
+
+def _counts(s: LoggedSlave) -> list[int]:
+    """The task's calls handed over, results not ready when due, results the step computed."""
+    counts = (ctypes.c_long * 3)()
+    assert s.slave.dll.flexff_network_counts(ctypes.c_void_p(s.slave.component), counts) == 0
+    return list(counts)
+
+
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs two CPUs to pin to one")
 def test_the_worker_runs_on_its_callers_cpus(task_fmu):
+    """The worker takes its caller's CPUs as each job starts (no system call in the step)."""
     everywhere = os.sched_getaffinity(0)
     one = {max(everywhere)}
     s = LoggedSlave(task_fmu)
@@ -106,15 +122,81 @@ def test_the_worker_runs_on_its_callers_cpus(task_fmu):
         assert os.sched_getaffinity(worker) == everywhere  # created as its caller
         os.sched_setaffinity(0, one)  # this thread only, as --cpu pins a paced run
         s.slave.doStep(0.0, H)  # point 0 posts a call
+        _settle(s)
         assert os.sched_getaffinity(worker) == one
         os.sched_setaffinity(0, everywhere)
         for k in range(1, PERIOD + 1):  # up to the next call, which follows the caller again
             s.slave.doStep(k * H, H)
+        _settle(s)
         assert os.sched_getaffinity(worker) == everywhere
     finally:
         os.sched_setaffinity(0, everywhere)
         s.free()
     assert _worker_threads() == []
+
+
+def test_the_worker_never_preempts_its_caller(task_fmu):
+    """Rate-monotonic: the worker is below the thread that steps the instance. Under the
+    default scheduler it is a batch thread, which never preempts another on waking: an ordinary
+    one preempted the step on the caller's CPU at a call point and ran the network in it (the
+    feedforward's step p99 one network call, paced on one core without SCHED_FIFO)."""
+    s = LoggedSlave(task_fmu)
+    try:
+        s.initialize()
+        [worker] = _worker_threads()
+        s.slave.doStep(0.0, H)  # point 0 posts a call
+        _settle(s)
+        assert os.sched_getscheduler(worker) == os.SCHED_BATCH
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+        except PermissionError:
+            return  # no real-time scheduling here: the ordinary case is the one to check
+        try:
+            for k in range(1, PERIOD + 1):
+                s.slave.doStep(k * H, H)
+            _settle(s)
+        finally:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        assert os.sched_getscheduler(worker) == os.SCHED_FIFO
+        assert os.sched_getparam(worker).sched_priority == 9
+    finally:
+        s.free()
+
+
+def test_the_step_never_computes_a_result_that_was_ready_in_time(task_fmu):
+    """A deterministic schedule: before each call point the job out is waited for outside the
+    step (as a worker with time to spare would have finished it), so every result is ready
+    when due: the steps hand every call over and compute, or wait for, none of them."""
+    s = LoggedSlave(task_fmu)
+    try:
+        s.initialize()
+        for k in range(STEPS):
+            if k % PERIOD == 0:
+                _settle(s)
+            s.set(u1=INPUTS[k, 0], u2=INPUTS[k, 1])
+            s.get("y1", "y2")
+            s.slave.doStep(k * H, H)
+        assert _counts(s) == [len(range(0, STEPS, PERIOD)), 0, 0]
+    finally:
+        s.free()
+
+
+def test_a_network_input_that_is_not_finite_is_named_when_its_result_is_due(task_fmu):
+    """The task evaluates its call's inputs (2 u: infinite for u = 1e308), not the step: the
+    call of point PERIOD fails in the task, and the step at 2 PERIOD, which needs its result,
+    reports the input, the point's time and the FMU's inputs there."""
+    s = LoggedSlave(task_fmu)
+    try:
+        s.initialize()
+        for k in range(2 * PERIOD):
+            s.set(u1=1e308 if k == PERIOD else 1.0, u2=1.0)
+            s.get("y1")
+            s.slave.doStep(k * H, H)
+        assert status_of(lambda: s.get("y1")) == fmi2Error
+        assert f"is inf at t = {PERIOD * H:.17g}: it is not defined for the inputs u1 = 1e+308" \
+            in s.log()
+    finally:
+        s.free()
 
 
 def test_a_network_that_misses_its_deadline_is_counted(slow_fmu):
