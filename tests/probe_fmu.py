@@ -48,17 +48,22 @@ VARIABLES = (  # name, value reference, causality, variability, start (None: non
     ("hang_at", 6, "parameter", "fixed", -1.0), ("attempt", 7, "parameter", "fixed", 0.0),
     ("attempt_at", 8, "parameter", "fixed", 0.0))
 ATTEMPTS = {"socket": 1, "escape": 2, "allocate": 3, "processes": 4, "program": 5,
-            "scratch": 6}  # the probe's `attempt` values (tests/probe_fmu.c)
+            "scratch": 6, "terminal": 7, "shrink": 8, "chmod": 9, "times": 10, "xattr": 11,
+            "orphan": 12, "flood": 13, "threads": 14, "shared": 15, "fill": 16, "spin": 17,
+            "stop": 18, "log": 19}  # the probe's `attempt` values (tests/probe_fmu.c)
 ESCAPE = "/tmp/flexff-probe-escape.txt"  # where attempt "escape" writes
+OUTSIDE = "/tmp/flexff-probe-outside.txt"  # whose metadata attempts chmod, times, xattr change
+INJECTED = "echo flexff-probe-injected"  # what attempt "terminal" types
+HANG_INSTANTIATE = "hang_instantiate"  # an instance of this name hangs in fmi2Instantiate
 
 
 def _library(folder: Path, source: Path = SOURCE, name: str = "probe") -> Path:
     for header, text in fmi_headers().items():
         (folder / header).write_text(text)
     library = folder / f"{name}{fmpy.sharedLibraryExtension}"
-    subprocess.run([compiler(), "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-shared",
-                    "-fPIC", f"-I{folder}", str(source), str(UNSUPPORTED), "-o", str(library)],
-                   check=True)
+    subprocess.run([compiler(), "-O2", "-std=c99", "-D_GNU_SOURCE", "-shared", "-fPIC",
+                    "-pthread", f"-I{folder}", str(source), str(UNSUPPORTED), "-o",
+                    str(library)], check=True)
     return library
 
 

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from flexff.cli import main
+from flexff.cosim.child_output import OutputRelay
 from flexff.cosim.config import parse_config, with_isolation
 from flexff.cosim.isolation import LENGTH, MESSAGE_LIMIT, IsolatedInstance
 from flexff.cosim.master import CosimError
@@ -129,7 +130,9 @@ def _fake_child(tmp_path, reply: bytes) -> IsolatedInstance:
     sent.write_bytes(reply)
     read = os.open(sent, os.O_RDONLY)
     instance.name, instance.timeout, instance._ack, instance._timed_out = "p", 5.0, read, False
+    instance._broken = False
     instance._process = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    instance._output = OutputRelay(os.open(os.devnull, os.O_RDONLY), "p")
     return instance
 
 
