@@ -7,12 +7,11 @@ told otherwise, inside a sandbox (cosim.sandbox). The engine calls the proxy's f
 (cosim/c/proxy.c), which pass values and commands through shared memory without a system
 call while both sides are busy; an isolated FMU gives the same results bit for bit.
 Everything else goes over pipes as length-prefixed JSON, bounded in size and checked in shape:
-nothing the child sends can run code in the master, and its text is escaped (fmu.printable).
-The shared memory is sealed at its size: the child cannot shrink it under the master (which
-would die of SIGBUS). The child has a session of its own, no terminal, stdin from /dev/null,
-and its stdout and stderr in a pipe the master relays (cosim.child_output). Every call it
-answers is bounded by the step timeout (STEP_TIMEOUT unless the run sets one): instantiating,
-each step, each request. The child dies with its master, however the master ends
+nothing the child sends can run code in the master; its text is escaped (fmu.printable). The
+shared memory is sealed at its size (shrunk, the master would die of SIGBUS). The child has no
+terminal, stdin from /dev/null, its stdout and stderr in a pipe the master relays
+(cosim.child_output). Every call it answers, instantiating included, is bounded by the step
+timeout (STEP_TIMEOUT by default). The child dies with its master, however the master ends
 (fmu.orphans). Reference: docs/how-to/isolate-fmu.md.
 """
 
@@ -362,6 +361,22 @@ class IsolatedInstance:
             view[got:got + len(chunk)] = chunk
             got += len(chunk)
         return bytes(data)
+
+
+def confine_checks(folder: Path, report: int) -> None:
+    """Confine this process (fmu.validation's checks) as an isolated FMU's child is: the
+    sandbox's default limits, its environment, stdin, stdout and stderr on /dev/null, the
+    sandbox's line on `report` (fmu.validation.Confine). In a process with a thread of its own
+    already (the fork server's child has one waiting for its caller's end), the namespaces do
+    not hold, nor Landlock in that thread: the other layers do."""
+    python_path = os.environ.get("PYTHONPATH", "")
+    os.environ.clear()
+    os.environ.update(sandbox.environment(folder / "work", python_path))
+    null = os.open(os.devnull, os.O_RDWR)
+    for fd in (0, 1, 2):
+        os.dup2(null, fd)
+    os.close(null)
+    sandbox.enter(library(), folder, sandbox.DEFAULT, report)
 
 
 def _read_exactly(fd: int, size: int) -> bytes:

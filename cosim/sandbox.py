@@ -67,8 +67,9 @@ def as_list(sandbox: Sandbox) -> list[Any]:
 
 def from_list(values: list[Any]) -> Sandbox:
     """The sandbox `as_list` gave."""
-    *limits, read = values
-    return Sandbox(*limits, read=None if read is None else tuple(Path(p) for p in read))
+    memory, cpu, scratch, threads, read = values
+    return Sandbox(memory, cpu, scratch, threads,
+                   None if read is None else tuple(Path(p) for p in read))
 
 
 def environment(scratch: Path, python_path: str) -> dict[str, str]:

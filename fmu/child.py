@@ -6,8 +6,10 @@ inherits none of the caller's FMUs or threads. The FMI call under way is kept in
 memory, so a child that dies is reported as, e.g., "fmi2DeSerializeFMUstate ... SIGSEGV";
 findings sent before a crash (`emit`) are kept, and the child's files are removed whatever the
 end. What the child sends is JSON of a bounded length, never unpickled: an FMU that writes to
-the pipe cannot run code in the caller. The child dies with the caller (fmu.orphans). A script
-that calls this keeps its top level under `if __name__ == "__main__":`.
+the pipe cannot run code in the caller. The child dies with the caller (fmu.orphans). A child that confines
+itself (fmu.validation's checks, in cosim's sandbox) leaves the sandbox's line in its folder's
+REPORT file (`report_path`), which the caller reads (`ChildEnd.report`). A script that calls
+this keeps its top level under `if __name__ == "__main__":`.
 
 Docs: "Isolate an FMU" (docs/how-to/isolate-fmu.md).
 """
@@ -22,12 +24,16 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import Any
 
 from flexff.fmu.forkserver import Caller, context
+from flexff.fmu.printable import printable
 
 _LABEL_BYTES = 256  # room for the name of the call under way
 MESSAGE_LIMIT = 1 << 20  # bytes one message from the child may have
+REPORT = "sandbox-report.txt"  # in the child's folder: the line of the sandbox that stopped it
+REPORT_CHARS = 600  # the most of it read back
 _current: Any = None  # the shared label, set in a child process only
 
 
@@ -42,12 +48,15 @@ class ChildEnd:
     exit_code: int | None = None  # its exit status, when it exited without returning
     timed_out: bool = False  # still running at the deadline: killed
     call: str = ""  # the FMI call (or step) under way when it ended, "" if none
+    report: str = ""  # the line of the sandbox that stopped it, "" if none
 
     def failure(self, timeout: float) -> str | None:
         """The end as a sentence naming the call under way, None if the function returned."""
         where = f"{self.call}: " if self.call else ""
         if self.timed_out:
             return f"{where}the FMU did not return within {timeout:g} s (timeout)"
+        if self.report and not self.returned:
+            return f"{where}the sandbox stopped the FMU's process: {self.report}"
         if self.signal is not None:
             return f"{where}the FMU crashed ({self.signal})"
         if not self.returned:
@@ -61,6 +70,20 @@ def under_way(what: str) -> None:
     """Name the step now under way in a child (no effect in any other process)."""
     if _current is not None:
         _current.value = what.encode("utf-8", "replace")[:_LABEL_BYTES - 1]
+
+
+def report_path() -> Path:
+    """In a child, the file its sandbox's line goes to (REPORT, in the child's folder)."""
+    return Path(tempfile.gettempdir(), REPORT)
+
+
+def _report(folder: str) -> str:
+    """The first line of the child's REPORT, escaped and short ("" if none)."""
+    try:
+        text = Path(folder, REPORT).read_bytes()[:REPORT_CHARS].decode("utf-8", "replace")
+    except OSError:
+        return ""
+    return printable(text.splitlines()[0] if text.strip() else "")
 
 
 def _trace_fmi_calls() -> None:
@@ -151,10 +174,11 @@ def run_in_child(function: Callable[..., Any], args: tuple[Any, ...], timeout: f
             process.kill()
             process.join()
         receiver.close()
+        report = _report(folder)
         shutil.rmtree(folder, ignore_errors=True)
     code = process.exitcode
     return ChildEnd(
         messages, returned=end is not None, error=end[1] if end and end[0] == "raised" else None,
         signal=signal.Signals(-code).name if code is not None and code < 0 and not timed_out
         else None, exit_code=code, timed_out=timed_out,
-        call=label.value.decode("utf-8", "replace") if end is None else "")
+        call=label.value.decode("utf-8", "replace") if end is None else "", report=report)

@@ -19,8 +19,9 @@
  *                   write 20 MB (with escape sequences and a forged flexff line) to them,
  *                   14 start 5000 threads, 15 map 1 GB of shared memory, 16 write 300 MB into
  *                   its working directory, 17 spin forever, 18 stop itself (SIGSTOP),
- *                   19 log a message with terminal escapes and fail
- * An instance named "hang_instantiate" never returns from fmi2Instantiate.
+ *                   19 log a message with terminal escapes and fail, 20 read OUTSIDE
+ * An instance named "hang_instantiate" never returns from fmi2Instantiate; the hostile probe
+ * (GUID "{probe-hostile}") tries to write to ESCAPE in fmi2Instantiate.
  */
 
 #include <dirent.h>
@@ -46,7 +47,7 @@
 enum { START, TOLERANCE, CLOCK, U, Y, CRASH_AT, HANG_AT, ATTEMPT, ATTEMPT_AT, N };
 enum { NOTHING, SOCKET, ESCAPE_WRITE, ALLOCATE, PROCESSES, PROGRAM, SCRATCH_WRITE, TERMINAL,
        SHRINK_SHARED, CHMOD, TIMES, XATTR, ORPHAN, FLOOD, THREADS, SHARED_MAP, FILL, SPIN,
-       STOP, LOG_ESCAPES };
+       STOP, LOG_ESCAPES, READ_OUTSIDE };
 #define ESCAPE "/tmp/flexff-probe-escape.txt"
 #define OUTSIDE "/tmp/flexff-probe-outside.txt" /* a file the tests make, mode 0644 */
 #define INJECTED "echo flexff-probe-injected\n"
@@ -57,15 +58,21 @@ typedef struct {
     fmi2ComponentEnvironment env;
 } Probe;
 
+static fmi2Status attempt(Probe *p, int what);
+
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
                               fmi2String location, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean logging) {
-    (void)type; (void)guid; (void)location; (void)visible; (void)logging;
+    (void)type; (void)location; (void)visible; (void)logging;
     while (name != NULL && strcmp(name, "hang_instantiate") == 0) pause();
     Probe *p = calloc(1, sizeof *p);
     if (p == NULL) return NULL;
     p->log = functions->logger;
     p->env = functions->componentEnvironment;
+    if (guid != NULL && strcmp(guid, "{probe-hostile}") == 0 && attempt(p, ESCAPE_WRITE) != fmi2OK) {
+        free(p);
+        return NULL;
+    }
     p->v[TOLERANCE] = -1.0;
     p->v[CRASH_AT] = -1.0;
     p->v[HANG_AT] = -1.0;
@@ -239,6 +246,13 @@ static fmi2Status attempt(Probe *p, int what) {
         }
     } else if (what == STOP) {
         raise(SIGSTOP);
+    } else if (what == READ_OUTSIDE) {
+        char text[16] = {0};
+        FILE *f = fopen(OUTSIDE, "r");
+        if (f == NULL) return fmi2Error;
+        size_t n = fread(text, 1, sizeof text - 1, f);
+        fclose(f);
+        if (n == 0) return fmi2Error;
     } else if (what == LOG_ESCAPES) {
         p->log(p->env, "probe", fmi2Error, "logError", "\033[2J\033]0;owned\007red\nflexff: forged");
         return fmi2Error;

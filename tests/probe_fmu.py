@@ -50,7 +50,7 @@ VARIABLES = (  # name, value reference, causality, variability, start (None: non
 ATTEMPTS = {"socket": 1, "escape": 2, "allocate": 3, "processes": 4, "program": 5,
             "scratch": 6, "terminal": 7, "shrink": 8, "chmod": 9, "times": 10, "xattr": 11,
             "orphan": 12, "flood": 13, "threads": 14, "shared": 15, "fill": 16, "spin": 17,
-            "stop": 18, "log": 19}  # the probe's `attempt` values (tests/probe_fmu.c)
+            "stop": 18, "log": 19, "read": 20}  # the probe's `attempt` values (tests/probe_fmu.c)
 ESCAPE = "/tmp/flexff-probe-escape.txt"  # where attempt "escape" writes
 OUTSIDE = "/tmp/flexff-probe-outside.txt"  # whose metadata attempts chmod, times, xattr change
 INJECTED = "echo flexff-probe-injected"  # what attempt "terminal" types
@@ -67,7 +67,7 @@ def _library(folder: Path, source: Path = SOURCE, name: str = "probe") -> Path:
     return library
 
 
-def _model_description(experiment: dict[str, float]) -> str:
+def _model_description(experiment: dict[str, float], guid: str = "{probe}") -> str:
     rows = []
     for name, vr, causality, variability, start in VARIABLES:
         initial = ' initial="calculated"' if causality == "output" else ""
@@ -82,7 +82,7 @@ def _model_description(experiment: dict[str, float]) -> str:
                       in enumerate(VARIABLES) if causality == "output")
     attributes = " ".join(f'{key}="{value!r}"' for key, value in experiment.items())
     return (f'<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription fmiVersion="2.0" '
-            f'modelName="probe" guid="{{probe}}" variableNamingConvention="flat">'
+            f'modelName="probe" guid="{guid}" variableNamingConvention="flat">'
             f'<CoSimulation modelIdentifier="probe"/>'
             f'<DefaultExperiment {attributes}/>'
             f'<ModelVariables>{"".join(rows)}</ModelVariables>'
@@ -91,14 +91,16 @@ def _model_description(experiment: dict[str, float]) -> str:
             f'</fmiModelDescription>\n')
 
 
-def build_probe(folder: Path, **experiment: float) -> Path:
+def build_probe(folder: Path, hostile: bool = False, **experiment: float) -> Path:
     """The probe FMU in `folder`, with a DefaultExperiment of the given attributes (startTime,
-    stopTime, stepSize, tolerance)."""
+    stopTime, stepSize, tolerance); `hostile`: one that tries to write to ESCAPE when it is
+    instantiated."""
     folder.mkdir(parents=True, exist_ok=True)
     library = _library(folder)
     path = folder / "probe.fmu"
+    guid = "{probe-hostile}" if hostile else "{probe}"
     with zipfile.ZipFile(path, "w") as zf:
-        zf.writestr("modelDescription.xml", _model_description(experiment))
+        zf.writestr("modelDescription.xml", _model_description(experiment, guid))
         zf.write(library, f"binaries/{fmpy.platform}/{library.name}")
     return path
 

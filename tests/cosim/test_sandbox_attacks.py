@@ -26,15 +26,19 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from flexff.cli import main
 from flexff.cosim import isolation
 from flexff.cosim.child_output import LIMIT_BYTES
+from flexff.cosim.config import parse_config
 from flexff.cosim.isolation import LENGTH, MESSAGE_LIMIT
+from flexff.cosim.run import simulate_config
 from flexff.fmu.importer import FmuError
 from tests.cosim.test_sandbox import _fake_child
-from tests.probe_fmu import ATTEMPTS, HANG_INSTANTIATE, INJECTED, OUTSIDE, build_probe
+from tests.helpers import REFERENCE_FMUS
+from tests.probe_fmu import ATTEMPTS, ESCAPE, HANG_INSTANTIATE, INJECTED, OUTSIDE, build_probe
 
 STEP = 0.1
 ROOT = Path(__file__).resolve().parents[2]
@@ -213,3 +217,50 @@ def test_a_64_mb_reply_is_refused_fast(tmp_path):
         instance._response("get")
     assert time.monotonic() - began < 3  # 30 s, growing the reply by each chunk read
     os.close(instance._ack)
+
+
+@pytest.fixture(scope="module")
+def hostile(tmp_path_factory):
+    """A probe that tries to write outside its folder when it is instantiated."""
+    return build_probe(tmp_path_factory.mktemp("hostile"), hostile=True, startTime=0.0,
+                       stopTime=1.0, stepSize=STEP)
+
+
+def test_validate_runs_the_fmus_code_in_the_sandbox(hostile, capsys):
+    Path(ESCAPE).unlink(missing_ok=True)
+    assert main(["fmu", "validate", str(hostile)]) == 1
+    out = capsys.readouterr().out
+    assert ("error: running the FMU failed" in out or "the sandbox stopped" in out), out
+    assert f"it tried to write to {ESCAPE}, outside its scratch folder" in out, out
+    assert not Path(ESCAPE).exists()
+
+
+def test_validate_without_the_sandbox_runs_it_free(hostile, capsys):
+    """The opt-out, as `flexff run --no-sandbox`: the constructor writes where it likes."""
+    Path(ESCAPE).unlink(missing_ok=True)
+    try:
+        assert main(["fmu", "validate", "--no-sandbox", str(hostile)]) == 0
+        assert Path(ESCAPE).read_text() == "probe"
+    finally:
+        Path(ESCAPE).unlink(missing_ok=True)
+
+
+@pytest.mark.parametrize("read, code", [(None, 0), ([], 1), ([OUTSIDE], 0)],
+                         ids=["reads not confined", "sandbox_read = []", "the file given"])
+def test_sandbox_read_confines_what_it_reads(tmp_path, probe, outside, capsys, read, code):
+    extra = "" if read is None else f"sandbox_read = {read!r}".replace("'", '"')
+    assert main(["run", str(write_config(tmp_path, probe, "read", extra=extra)), "-o",
+                 str(tmp_path / "out")]) == code, capsys.readouterr().err
+
+
+def test_a_reference_fmu_reading_only_its_own_is_bit_equal():
+    fmus = {"vdp": {"path": str(REFERENCE_FMUS / "fmi3" / "VanDerPol.fmu")},
+            "ft": {"path": str(REFERENCE_FMUS / "fmi2" / "Feedthrough.fmu"),
+                   "unconnected": "start"}}
+    run = {"run": {"step": 0.01, "stop": 1.0},
+           "connection": [{"from": "vdp.x0", "to": "ft.Float64_continuous_input"}]}
+    inside = simulate_config(parse_config({**run, "fmu": fmus}))
+    confined = {name: {**fmu, "isolate": True, "sandbox_read": []} for name, fmu in fmus.items()}
+    alone = simulate_config(parse_config({**run, "fmu": confined}))
+    for name in inside.signals:
+        assert np.array_equal(inside[name], alone[name]), name
