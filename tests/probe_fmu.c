@@ -19,7 +19,9 @@
  *                   write 20 MB (with escape sequences and a forged flexff line) to them,
  *                   14 start 5000 threads, 15 map 1 GB of shared memory, 16 write 300 MB into
  *                   its working directory, 17 spin forever, 18 stop itself (SIGSTOP),
- *                   19 log a message with terminal escapes and fail, 20 read OUTSIDE
+ *                   19 log a message with terminal escapes and fail, 20 read OUTSIDE,
+ *                   21 limit the size of its parent's files to 0 (an isolating master dies of
+ *                   SIGXFSZ as it writes its record)
  * An instance named "hang_instantiate" never returns from fmi2Instantiate; the hostile probe
  * (GUID "{probe-hostile}") tries to write to ESCAPE in fmi2Instantiate.
  */
@@ -35,6 +37,7 @@
 #include <sys/ioctl.h>
 #include <sys/mman.h>
 #include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/time.h>
@@ -47,7 +50,7 @@
 enum { START, TOLERANCE, CLOCK, U, Y, CRASH_AT, HANG_AT, ATTEMPT, ATTEMPT_AT, N };
 enum { NOTHING, SOCKET, ESCAPE_WRITE, ALLOCATE, PROCESSES, PROGRAM, SCRATCH_WRITE, TERMINAL,
        SHRINK_SHARED, CHMOD, TIMES, XATTR, ORPHAN, FLOOD, THREADS, SHARED_MAP, FILL, SPIN,
-       STOP, LOG_ESCAPES, READ_OUTSIDE };
+       STOP, LOG_ESCAPES, READ_OUTSIDE, LIMIT_PARENT };
 #define ESCAPE "/tmp/flexff-probe-escape.txt"
 #define OUTSIDE "/tmp/flexff-probe-outside.txt" /* a file the tests make, mode 0644 */
 #define INJECTED "echo flexff-probe-injected\n"
@@ -253,6 +256,9 @@ static fmi2Status attempt(Probe *p, int what) {
         size_t n = fread(text, 1, sizeof text - 1, f);
         fclose(f);
         if (n == 0) return fmi2Error;
+    } else if (what == LIMIT_PARENT) {
+        struct rlimit none = {0, 0};
+        if (prlimit(getppid(), RLIMIT_FSIZE, &none, NULL) != 0) return fmi2Error;
     } else if (what == LOG_ESCAPES) {
         p->log(p->env, "probe", fmi2Error, "logError", "\033[2J\033]0;owned\007red\nflexff: forged");
         return fmi2Error;

@@ -11,7 +11,8 @@
  *     shared mappings too), CPU time (RLIMIT_CPU), the size of a file it writes (RLIMIT_FSIZE),
  *     threads (RLIMIT_NPROC, counted in its own user namespace), no core files;
  *   - no new privileges (set-user-ID programs run without theirs);
- *   - Landlock: files are written only beneath the scratch folder (and /dev/null) and, where
+ *   - Landlock: files are written only beneath the scratch folder (and /dev/null), no device
+ *     it opens takes an ioctl (a terminal's settings: ABI 5), and, where
  *     asked (sandbox_read), read only beneath the paths given; no TCP bind or connect; no
  *     signals to, or abstract sockets of, processes outside the sandbox;
  *   - a session of its own (setsid): no controlling terminal to type into;
@@ -21,8 +22,8 @@
  *     Landlock refuses, input pushed into a terminal (ioctl TIOCSTI, TIOCLINUX, TIOCSCTTY),
  *     a change to a file's mode, owner, times or extended attributes (Landlock's rights do
  *     not cover them), the prctl options that would let it outlive flexff or be traced
- *     (PR_SET_PDEATHSIG, PR_SET_DUMPABLE, PR_SET_PTRACER, PR_SET_MM), and the kernel's
- *     administrative calls.
+ *     (PR_SET_PDEATHSIG, PR_SET_DUMPABLE, PR_SET_PTRACER, PR_SET_MM), another process's limits
+ *     (prlimit64: the master's CPU time would kill it), and the kernel's administrative calls.
  * An open for writing is trapped and then made again by the handler, from the one instruction
  * the filter lets through (sandbox_syscall_return), so that Landlock decides and the handler
  * can name the path it refused. An FMU that calls that instruction itself can only open files;
@@ -83,6 +84,7 @@ enum { LANDLOCK_VERSION_FLAG = 1, LANDLOCK_PATH_BENEATH = 1 };
      (1ULL << 9) | (1ULL << 10) | (1ULL << 11) | (1ULL << 12)) /* write, remove, make */
 #define FS_REFER (1ULL << 13)                                  /* ABI 2 */
 #define FS_TRUNCATE (1ULL << 14)                               /* ABI 3 */
+#define FS_IOCTL_DEV (1ULL << 15)                              /* ABI 5 */
 #define NET_TCP ((1ULL << 0) | (1ULL << 1))                    /* ABI 4: bind, connect */
 #define SCOPES ((1ULL << 0) | (1ULL << 1))                     /* ABI 6: abstract sockets, signals */
 
@@ -178,7 +180,8 @@ static const struct {
     {SYS_userfaultfd, "userfaultfd", ADMIN}, {SYS_acct, "acct", ADMIN}, {SYS_iopl, "iopl", ADMIN},
     {SYS_ioperm, "ioperm", ADMIN}, {SYS_settimeofday, "settimeofday", ADMIN},
     {SYS_clock_settime, "clock_settime", ADMIN}, {SYS_sethostname, "sethostname", ADMIN},
-    {SYS_setdomainname, "setdomainname", ADMIN},
+    {SYS_setdomainname, "setdomainname", ADMIN}, {SYS_pidfd_getfd, "pidfd_getfd", ADMIN},
+    {SYS_kcmp, "kcmp", ADMIN},
     /* a file's mode, owner, times and extended attributes: no Landlock right covers them */
     {SYS_chmod, "chmod", METADATA_FIRST}, {SYS_fchmod, "fchmod", METADATA_FD},
     {SYS_fchmodat, "fchmodat", METADATA_SECOND}, {SYS_fchmodat2_, "fchmodat2", METADATA_SECOND},
@@ -255,6 +258,10 @@ static void on_sigsys(int number, siginfo_t *info, void *context) {
         add(&line, "it tried to push input into a terminal (ioctl ");
         add(&line, name);
         add(&line, ")");
+    } else if (nr == SYS_prlimit64) {
+        add(&line, "it tried to change the limits of process ");
+        add_number(&line, (unsigned long long)r[REG_RDI]);
+        add(&line, " (prlimit64)");
     } else if (nr == SYS_prctl) {
         const char *name = "?";
         for (int k = 0; k < N_PRCTL_OPTIONS; k++)
@@ -403,6 +410,14 @@ static int install_filter(void) {
     trap_if_one_of(&f, 1, requests, N_TERMINAL_REQUESTS);
     on_call(&f, SYS_prctl, N_PRCTL_OPTIONS + 3);
     trap_if_one_of(&f, 0, options, N_PRCTL_OPTIONS);
+    /* prlimit64 of another process (the master's CPU time, say): libc asks for its own, 0 */
+    on_call(&f, SYS_prlimit64, 6);
+    emit(&f, LOAD(ARG_LO(0)));
+    emit(&f, IF(0, 0, 3));
+    emit(&f, LOAD(ARG_HI(0)));
+    emit(&f, IF(0, 0, 1));
+    emit(&f, RETURN(ALLOW));
+    emit(&f, RETURN(TRAP));
     /* the calls stopped whatever their arguments: one comparison each, one trap for all */
     static const int processes[] = {SYS_fork, SYS_vfork, SYS_execve, SYS_execveat};
     enum { N_PROCESSES = sizeof processes / sizeof processes[0] };
@@ -506,7 +521,7 @@ static int add_beneath(int ruleset, const char *path, uint64_t allowed) {
     if (fd < 0) return -1;
     struct stat status;
     if (fstat(fd, &status) == 0 && !S_ISDIR(status.st_mode)) /* a file: its rights only */
-        allowed &= FS_EXECUTE | FS_WRITE_FILE | FS_READ_FILE | FS_TRUNCATE;
+        allowed &= FS_EXECUTE | FS_WRITE_FILE | FS_READ_FILE | FS_TRUNCATE | FS_IOCTL_DEV;
     struct path_beneath rule = {allowed, fd};
     int result = (int)syscall(LANDLOCK_ADD_RULE, ruleset, LANDLOCK_PATH_BENEATH, &rule, 0);
     close(fd);
@@ -519,7 +534,8 @@ static int add_beneath(int ruleset, const char *path, uint64_t allowed) {
 static int landlock(const char *scratch, const char *readable) {
     long abi = syscall(LANDLOCK_CREATE_RULESET, NULL, 0, LANDLOCK_VERSION_FLAG);
     if (abi < 1) return 0;
-    uint64_t writes = FS_WRITES | (abi >= 2 ? FS_REFER : 0) | (abi >= 3 ? FS_TRUNCATE : 0);
+    uint64_t writes = FS_WRITES | (abi >= 2 ? FS_REFER : 0) | (abi >= 3 ? FS_TRUNCATE : 0) |
+                      (abi >= 5 ? FS_IOCTL_DEV : 0); /* ioctl on a device it opens: a terminal */
     uint64_t reads = readable != NULL ? FS_READS : 0;
     struct ruleset attr = {writes | reads, abi >= 4 ? NET_TCP : 0, abi >= 6 ? SCOPES : 0};
     size_t size = abi >= 6 ? sizeof attr : abi >= 4 ? 2 * sizeof(uint64_t) : sizeof(uint64_t);

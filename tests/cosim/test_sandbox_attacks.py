@@ -6,13 +6,17 @@ with exit 1 and one line naming the FMU, and flexff never dies of a signal becau
   reaches the user's shell, run under a pseudo-terminal;
 - the memory shared with the master, shrunk: the master lives (no SIGBUS) and says so;
 - a file's mode, times and extended attributes outside the scratch folder: unchanged;
-- a cleared parent-death signal (it would outlive its master): stopped;
+- a cleared parent-death signal (it would outlive its master), a limit set on the master
+  (its files' size: the record would fail to be written): stopped;
 - stdout and stderr truncated and flooded: the user's log keeps what it had and takes at most
   a bounded amount, escaped, each line marked as the FMU's;
 - threads, shared mappings and the scratch folder: bounded by the sandbox's limits;
 - a spinning, stopped or hanging FMU (in fmi2Instantiate too) ends the run by itself;
 - an FMU's log message with terminal escapes reaches the terminal escaped;
-- a 64 MB reply on the pipe is refused in well under a second's reading.
+- a 64 MB reply on the pipe is refused in well under a second's reading;
+- `flexff fmu validate` runs the FMU's code in the sandbox (a constructor that writes outside
+  is stopped), unless --no-sandbox;
+- sandbox_read confines what it reads, and an honest FMU reading only its own is bit-equal.
 """
 
 from __future__ import annotations
@@ -119,6 +123,16 @@ def test_the_shared_memory_cannot_be_shrunk_under_the_master(tmp_path, probe):
     err = done.stderr.strip()
     assert len(err.splitlines()) == 1 and err.startswith("flexff: error: p: the step at t = "
                                                          "0.2 s failed"), err
+
+
+def test_the_masters_limits_cannot_be_changed(tmp_path, probe):
+    done = run_flexff(tmp_path, write_config(tmp_path, probe, "limit_parent"),
+                      capture_output=True, text=True)
+    assert done.returncode == 1, (done.returncode, done.stderr)
+    err = done.stderr.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "the sandbox stopped its process: it tried to change the limits of process " in err
+    assert "(prlimit64)" in err
 
 
 @pytest.mark.parametrize("attempt, call", [("chmod", "chmod"), ("times", "utimensat"),
