@@ -21,7 +21,7 @@
  *                   its working directory, 17 spin forever, 18 stop itself (SIGSTOP),
  *                   19 log a message with terminal escapes and fail, 20 read OUTSIDE,
  *                   21 limit the size of its parent's files to 0 (an isolating master dies of
- *                   SIGXFSZ as it writes its record)
+ *                   SIGXFSZ as it writes its record), 22 read its parent's environment
  * An instance named "hang_instantiate" never returns from fmi2Instantiate; the hostile probe
  * (GUID "{probe-hostile}") tries to write to ESCAPE in fmi2Instantiate.
  */
@@ -50,7 +50,7 @@
 enum { START, TOLERANCE, CLOCK, U, Y, CRASH_AT, HANG_AT, ATTEMPT, ATTEMPT_AT, N };
 enum { NOTHING, SOCKET, ESCAPE_WRITE, ALLOCATE, PROCESSES, PROGRAM, SCRATCH_WRITE, TERMINAL,
        SHRINK_SHARED, CHMOD, TIMES, XATTR, ORPHAN, FLOOD, THREADS, SHARED_MAP, FILL, SPIN,
-       STOP, LOG_ESCAPES, READ_OUTSIDE, LIMIT_PARENT };
+       STOP, LOG_ESCAPES, READ_OUTSIDE, LIMIT_PARENT, PARENT_ENVIRONMENT };
 #define ESCAPE "/tmp/flexff-probe-escape.txt"
 #define OUTSIDE "/tmp/flexff-probe-outside.txt" /* a file the tests make, mode 0644 */
 #define INJECTED "echo flexff-probe-injected\n"
@@ -259,6 +259,14 @@ static fmi2Status attempt(Probe *p, int what) {
     } else if (what == LIMIT_PARENT) {
         struct rlimit none = {0, 0};
         if (prlimit(getppid(), RLIMIT_FSIZE, &none, NULL) != 0) return fmi2Error;
+    } else if (what == PARENT_ENVIRONMENT) {
+        char path[64], text[64];
+        snprintf(path, sizeof path, "/proc/%d/environ", (int)getppid());
+        FILE *f = fopen(path, "r");
+        if (f == NULL) return fmi2Error;
+        size_t n = fread(text, 1, sizeof text, f);
+        fclose(f);
+        if (n == 0) return fmi2Error;
     } else if (what == LOG_ESCAPES) {
         p->log(p->env, "probe", fmi2Error, "logError", "\033[2J\033]0;owned\007red\nflexff: forged");
         return fmi2Error;

@@ -278,3 +278,11 @@ def test_a_reference_fmu_reading_only_its_own_is_bit_equal():
     alone = simulate_config(parse_config({**run, "fmu": confined}))
     for name in inside.signals:
         assert np.array_equal(inside[name], alone[name]), name
+
+
+@pytest.mark.parametrize("isolate, code", [(False, 0), (True, 1)],
+                         ids=["in-process", "sandboxed"])
+def test_the_masters_environment_cannot_be_read(tmp_path, probe, capsys, isolate, code):
+    """/proc/PID/environ of the master (its secrets): Landlock refuses the sandboxed FMU."""
+    config = write_config(tmp_path, probe, "environment", isolate=isolate)
+    assert main(["run", str(config), "-o", str(tmp_path / "out")]) == code
