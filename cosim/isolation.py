@@ -366,9 +366,9 @@ class IsolatedInstance:
 def confine_checks(folder: Path, report: int) -> None:
     """Confine this process (fmu.validation's checks) as an isolated FMU's child is: the
     sandbox's default limits, its environment, stdin, stdout and stderr on /dev/null, the
-    sandbox's line on `report` (fmu.validation.Confine). In a process with a thread of its own
-    already (the fork server's child has one waiting for its caller's end), the namespaces do
-    not hold, nor Landlock in that thread: the other layers do."""
+    sandbox's line on `report` (fmu.validation.Confine). The process must have one thread
+    (fmu.child's `fresh` child), or the kernel refuses it the namespaces and Landlock binds
+    only the calling thread."""
     python_path = os.environ.get("PYTHONPATH", "")
     os.environ.clear()
     os.environ.update(sandbox.environment(folder / "work", python_path))

@@ -6,22 +6,25 @@ inherits none of the caller's FMUs or threads. The FMI call under way is kept in
 memory, so a child that dies is reported as, e.g., "fmi2DeSerializeFMUstate ... SIGSEGV";
 findings sent before a crash (`emit`) are kept, and the child's files are removed whatever the
 end. What the child sends is JSON of a bounded length, never unpickled: an FMU that writes to
-the pipe cannot run code in the caller. The child dies with the caller (fmu.orphans). A child that confines
-itself (fmu.validation's checks, in cosim's sandbox) leaves the sandbox's line in its folder's
-REPORT file (`report_path`), which the caller reads (`ChildEnd.report`). A script that calls
-this keeps its top level under `if __name__ == "__main__":`.
+the pipe cannot run code in the caller. The child dies with the caller (fmu.orphans). A child
+that confines itself (fmu.validation's checks, in cosim's sandbox) leaves the sandbox's line in
+its folder's REPORT file (`report_path`), which the caller reads (`ChildEnd.report`). A script
+that calls this keeps its top level under `if __name__ == "__main__":`.
 
 Docs: "Isolate an FMU" (docs/how-to/isolate-fmu.md).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import multiprocessing
+import os
 import shutil
 import signal
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -34,6 +37,9 @@ _LABEL_BYTES = 256  # room for the name of the call under way
 MESSAGE_LIMIT = 1 << 20  # bytes one message from the child may have
 REPORT = "sandbox-report.txt"  # in the child's folder: the line of the sandbox that stopped it
 REPORT_CHARS = 600  # the most of it read back
+# a fresh child's environment as it starts: numpy's BLAS, imported before the child runs,
+# starts no threads (the caller's environment is taken over afterwards, Caller.adopt)
+ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 _current: Any = None  # the shared label, set in a child process only
 
 
@@ -122,6 +128,22 @@ def _child(function: Callable[..., Any], args: tuple[Any, ...], sender: Connecti
     sender.close()
 
 
+@contextlib.contextmanager
+def _environment(values: dict[str, str]) -> Iterator[None]:
+    """This process's environment with `values` for the duration (a child started then
+    takes them)."""
+    before = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for key, value in before.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
 def _checked(data: bytes) -> tuple[str, Any]:
     """A message from the child: [kind, message] with a kind of the protocol's."""
     kind, message = json.loads(data)
@@ -131,22 +153,29 @@ def _checked(data: bytes) -> tuple[str, Any]:
     return kind, message
 
 
-def run_in_child(function: Callable[..., Any], args: tuple[Any, ...], timeout: float
-                 ) -> ChildEnd:
+def run_in_child(function: Callable[..., Any], args: tuple[Any, ...], timeout: float,
+                 fresh: bool = False) -> ChildEnd:
     """Run `function(emit, *args)` in a child process (module doc), `emit(message)` sending a
     message of JSON's types back (tuples come back as lists); kill it after `timeout` seconds.
-    `function` must be importable by name."""
-    fork_server = context(__name__, function.__module__)
-    receiver, sender = fork_server.Pipe(duplex=False)
-    label = fork_server.RawArray("c", _LABEL_BYTES)
+    `function` must be importable by name. `fresh`: a new interpreter, the caller's own child
+    and single-threaded (a sandbox's namespaces need that), instead of the fork server's
+    (which waits for the caller's end in a thread); it starts in a second, not milliseconds."""
+    starter = (multiprocessing.get_context("spawn") if fresh
+               else context(__name__, function.__module__))
+    receiver, sender = starter.Pipe(duplex=False)
+    label = starter.RawArray("c", _LABEL_BYTES)
     folder = tempfile.mkdtemp(prefix="flexff-child-")
-    process = fork_server.Process(target=_child, daemon=True, args=(
+    process = starter.Process(target=_child, daemon=True, args=(
         function, args, sender, label, folder, Caller.now()))
     messages: list[Any] = []
     end: tuple[str, str | None] | None = None
     timed_out = False
     try:
-        process.start()
+        if fresh:
+            with _environment(ONE_THREAD):
+                process.start()
+        else:
+            process.start()
         sender.close()
         deadline = time.monotonic() + timeout
         while end is None:

@@ -272,7 +272,8 @@ def validate_fmu(path: str | Path, strict: bool = False, timeout: float = TIMEOU
     problems = [Problem(p) for p in fmpy.validation.validate_fmu(str(info.path))]
     if problems:
         return problems
-    end = run_in_child(_checks, (str(path), strict, confine), timeout)
+    end = run_in_child(_checks, (str(path), strict, confine), timeout,
+                       fresh=confine is not None)
     problems = [Problem(*finding) for finding in end.messages if _is_finding(finding)]
     failure = end.failure(timeout)
     if failure is not None:

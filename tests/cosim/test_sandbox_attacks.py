@@ -34,12 +34,13 @@ import numpy as np
 import pytest
 
 from flexff.cli import main
-from flexff.cosim import isolation
+from flexff.cosim import isolation, sandbox
 from flexff.cosim.child_output import LIMIT_BYTES
 from flexff.cosim.config import parse_config
 from flexff.cosim.isolation import LENGTH, MESSAGE_LIMIT
 from flexff.cosim.run import simulate_config
-from flexff.fmu.importer import FmuError
+from flexff.fmu.importer import FmuError, read_fmu
+from flexff.fmu.validation import validate_fmu
 from tests.cosim.test_sandbox import _fake_child
 from tests.helpers import REFERENCE_FMUS
 from tests.probe_fmu import ATTEMPTS, ESCAPE, HANG_INSTANTIATE, INJECTED, OUTSIDE, build_probe
@@ -286,3 +287,20 @@ def test_the_masters_environment_cannot_be_read(tmp_path, probe, capsys, isolate
     """/proc/PID/environ of the master (its secrets): Landlock refuses the sandboxed FMU."""
     config = write_config(tmp_path, probe, "environment", isolate=isolate)
     assert main(["run", str(config), "-o", str(tmp_path / "out")]) == code
+
+
+def confine_and_record(folder: Path, report: int) -> None:
+    """confine_checks, writing the layers that hold to $FLEXFF_TEST_HELD (opened before)."""
+    out = os.open(os.environ["FLEXFF_TEST_HELD"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+    held = sandbox.enter(isolation.library(), folder, sandbox.DEFAULT, report)
+    os.write(out, "\n".join(held).encode())
+    os.close(out)
+
+
+def test_validate_holds_every_layer_an_isolated_run_holds(probe, tmp_path, monkeypatch):
+    """Its process has one thread when it confines itself, so the namespaces hold too."""
+    monkeypatch.setenv("FLEXFF_TEST_HELD", str(tmp_path / "held.txt"))
+    assert validate_fmu(probe, confine=confine_and_record) == []
+    held = (tmp_path / "held.txt").read_text().splitlines()
+    with isolation.IsolatedInstance(read_fmu(probe), "p") as instance:
+        assert set(held) == set(instance.held), held
