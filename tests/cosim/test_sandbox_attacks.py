@@ -304,3 +304,12 @@ def test_validate_holds_every_layer_an_isolated_run_holds(probe, tmp_path, monke
     held = (tmp_path / "held.txt").read_text().splitlines()
     with isolation.IsolatedInstance(read_fmu(probe), "p") as instance:
         assert set(held) == set(instance.held), held
+
+
+def test_an_attempt_while_instantiating_ends_the_run_with_exit_1(tmp_path, hostile, capsys):
+    Path(ESCAPE).unlink(missing_ok=True)
+    assert main(["run", str(write_config(tmp_path, hostile, "nothing")), "-o",
+                 str(tmp_path / "out")]) == 1  # the FMU's fault, not the input's: not 2
+    assert (f"flexff: error: p: instantiating it failed: the sandbox stopped its process: it "
+            f"tried to write to {ESCAPE}, outside its scratch folder") in one_line(capsys)
+    assert not Path(ESCAPE).exists()
