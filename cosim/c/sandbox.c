@@ -9,7 +9,8 @@
  *     mount namespace in which the scratch folder is a tmpfs of its own size (its quota);
  *   - limits: private writable memory (RLIMIT_DATA), address space (RLIMIT_AS, which counts
  *     shared mappings too), CPU time (RLIMIT_CPU), the size of a file it writes (RLIMIT_FSIZE),
- *     threads (RLIMIT_NPROC, counted in its own user namespace), no core files;
+ *     threads (RLIMIT_NPROC, where it has a user namespace of its own: counted there), no
+ *     core files;
  *   - no new privileges (set-user-ID programs run without theirs);
  *   - Landlock: files are written only beneath the scratch folder (and /dev/null), no device
  *     it opens takes an ioctl (a terminal's settings: ABI 5), and, where
@@ -556,7 +557,8 @@ static int landlock(const char *scratch, const char *readable) {
 
 /* Confine this process: `scratch` the only folder it writes to (a tmpfs of `scratch_bytes`
  * where the namespaces hold), `memory` bytes of private writable memory, `cpu_seconds` of CPU
- * time (<= 0: unbounded), `threads` threads at most (RLIMIT_NPROC, which does not bind root),
+ * time (<= 0: unbounded), `threads` threads at most (RLIMIT_NPROC, in its own user namespace
+ * only; it does not bind root),
  * the report of a stopped attempt on `report`, reads beneath `readable` only where given
  * (landlock). Returns the HOLD_* layers that hold. */
 __attribute__((visibility("default"))) int sandbox_enter(const char *scratch, long long memory,
@@ -568,7 +570,10 @@ __attribute__((visibility("default"))) int sandbox_enter(const char *scratch, lo
     int held = 0;
     if (setsid() >= 0 || getsid(0) == getpid()) held |= HOLD_SESSION;
     held |= enter_namespaces(scratch, scratch_bytes);
-    if (set_limits(cpu_seconds, scratch_bytes, threads) == 0) held |= HOLD_LIMITS;
+    /* RLIMIT_NPROC counts the user's processes in its user namespace: in the sandbox's own,
+     * the FMU's threads; in the user's, every process of theirs, which it must not bound */
+    long tasks = held & HOLD_NAMESPACES ? threads : 0;
+    if (set_limits(cpu_seconds, scratch_bytes, tasks) == 0) held |= HOLD_LIMITS;
     if (prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0) != 0) return held;
     held |= HOLD_NO_NEW_PRIVILEGES;
     held |= landlock(scratch, readable);
