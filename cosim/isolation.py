@@ -31,6 +31,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from collections.abc import Mapping, Sequence
 from ctypes import c_char, c_char_p, c_double, c_int, c_long, c_longlong, c_size_t, c_void_p
 from pathlib import Path
@@ -282,7 +283,8 @@ class IsolatedInstance:
             try:
                 self._process.wait(CLOSE_WAIT)
             except subprocess.TimeoutExpired:
-                pass
+                warnings.warn(f"{self.name}: terminating and freeing it did not end within "
+                              f"{CLOSE_WAIT:g} s; its process was stopped", stacklevel=2)
         self._stop()
         shutil.rmtree(self.scratch, ignore_errors=True)
         if self._proxy:

@@ -21,7 +21,8 @@
  *                   its working directory, 17 spin forever, 18 stop itself (SIGSTOP),
  *                   19 log a message with terminal escapes and fail, 20 read OUTSIDE,
  *                   21 limit the size of its parent's files to 0 (an isolating master dies of
- *                   SIGXFSZ as it writes its record), 22 read its parent's environment
+ *                   SIGXFSZ as it writes its record), 22 read its parent's environment,
+ *                   23 hang in fmi2Terminate
  * An instance named "hang_instantiate" never returns from fmi2Instantiate; the hostile probe
  * (GUID "{probe-hostile}") tries to write to ESCAPE in fmi2Instantiate.
  */
@@ -50,7 +51,7 @@
 enum { START, TOLERANCE, CLOCK, U, Y, CRASH_AT, HANG_AT, ATTEMPT, ATTEMPT_AT, N };
 enum { NOTHING, SOCKET, ESCAPE_WRITE, ALLOCATE, PROCESSES, PROGRAM, SCRATCH_WRITE, TERMINAL,
        SHRINK_SHARED, CHMOD, TIMES, XATTR, ORPHAN, FLOOD, THREADS, SHARED_MAP, FILL, SPIN,
-       STOP, LOG_ESCAPES, READ_OUTSIDE, LIMIT_PARENT, PARENT_ENVIRONMENT };
+       STOP, LOG_ESCAPES, READ_OUTSIDE, LIMIT_PARENT, PARENT_ENVIRONMENT, HANG_TERMINATE };
 #define ESCAPE "/tmp/flexff-probe-escape.txt"
 #define OUTSIDE "/tmp/flexff-probe-outside.txt" /* a file the tests make, mode 0644 */
 #define INJECTED "echo flexff-probe-injected\n"
@@ -97,7 +98,11 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolerance_defined,
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) { (void)c; return fmi2OK; }
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) { (void)c; return fmi2OK; }
-fmi2Status fmi2Terminate(fmi2Component c) { (void)c; return fmi2OK; }
+fmi2Status fmi2Terminate(fmi2Component c) {
+    Probe *p = c;
+    while (p->v[ATTEMPT] == HANG_TERMINATE) pause();
+    return fmi2OK;
+}
 fmi2Status fmi2Reset(fmi2Component c) { (void)c; return fmi2OK; }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
@@ -277,7 +282,7 @@ static fmi2Status attempt(Probe *p, int what) {
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior) {
     Probe *p = c;
     (void)no_prior;
-    if (p->v[ATTEMPT] != NOTHING && t >= p->v[ATTEMPT_AT]) {
+    if (p->v[ATTEMPT] != NOTHING && p->v[ATTEMPT] != HANG_TERMINATE && t >= p->v[ATTEMPT_AT]) {
         int what = (int)p->v[ATTEMPT];
         p->v[ATTEMPT] = NOTHING;
         if (attempt(p, what) != fmi2OK) return fmi2Error;

@@ -313,3 +313,13 @@ def test_an_attempt_while_instantiating_ends_the_run_with_exit_1(tmp_path, hosti
     assert (f"flexff: error: p: instantiating it failed: the sandbox stopped its process: it "
             f"tried to write to {ESCAPE}, outside its scratch folder") in one_line(capsys)
     assert not Path(ESCAPE).exists()
+
+
+def test_a_hang_in_terminate_is_stopped_and_named(tmp_path, probe, capsys, monkeypatch):
+    monkeypatch.setattr(isolation, "CLOSE_WAIT", 1.0)
+    began = time.monotonic()
+    assert main(["run", str(write_config(tmp_path, probe, "hang_terminate")), "-o",
+                 str(tmp_path / "out")]) == 0  # the record is whole
+    assert time.monotonic() - began < 30
+    assert ("flexff: warning: p: terminating and freeing it did not end within 1 s; its "
+            "process was stopped") in one_line(capsys)
