@@ -6,8 +6,9 @@ restoring a saved state (directly and serialized) reproduces the uninterrupted r
 call into the FMU runs in a child process (fmu.child), so a crash or hang becomes a problem
 naming the call; given a `confine` (flexff fmu validate gives cosim's sandbox unless
 --no-sandbox), that process confines itself after unpacking the FMU and before loading its
-binary, so that an FMU's code runs no freer than in an isolated run. Each problem is a sentence with a severity; a state restore that differs by
-at most the FMU's tolerance is a warning. Problems are returned, never raised.
+binary, so that an FMU's code runs no freer than in an isolated run. Each problem is a
+sentence with a severity; a state restore that differs by at most the FMU's tolerance is a
+warning. Problems are returned, never raised.
 
 Docs: "Validate and compare third-party FMUs" (docs/how-to/validate-compare.md).
 """

@@ -51,7 +51,8 @@ ATTEMPTS = {"socket": 1, "escape": 2, "allocate": 3, "processes": 4, "program": 
             "scratch": 6, "terminal": 7, "shrink": 8, "chmod": 9, "times": 10, "xattr": 11,
             "orphan": 12, "flood": 13, "threads": 14, "shared": 15, "fill": 16, "spin": 17,
             "stop": 18, "log": 19, "read": 20, "limit_parent": 21,
-            "environment": 22, "hang_terminate": 23}  # the probe's `attempt` values (tests/probe_fmu.c)
+            "environment": 22,
+            "hang_terminate": 23}  # the probe's `attempt` values (tests/probe_fmu.c)
 ESCAPE = "/tmp/flexff-probe-escape.txt"  # where attempt "escape" writes
 OUTSIDE = "/tmp/flexff-probe-outside.txt"  # whose metadata attempts chmod, times, xattr change
 INJECTED = "echo flexff-probe-injected"  # what attempt "terminal" types

@@ -16,7 +16,8 @@
  *     it opens takes an ioctl (a terminal's settings: ABI 5), and, where
  *     asked (sandbox_read), read only beneath the paths given; no TCP bind or connect; no
  *     signals to, or abstract sockets of, processes outside the sandbox;
- *   - a session of its own (setsid): no controlling terminal to type into;
+ *   - a session of its own (setsid): no controlling terminal to type into; the first process
+ *     the kernel ends when memory runs out (oom_score_adj 1000);
  *   - seccomp (x86_64): the calls an FMU has no business making stop the process (SIGSYS),
  *     after one line naming the attempt on the report pipe: a network socket, a new process or
  *     program, a writable mapping larger than the memory limit, an open for writing that
@@ -569,6 +570,9 @@ __attribute__((visibility("default"))) int sandbox_enter(const char *scratch, lo
     memory_limit = (unsigned long long)memory;
     int held = 0;
     if (setsid() >= 0 || getsid(0) == getpid()) held |= HOLD_SESSION;
+    /* the kernel's choice when memory runs out, before flexff: the memory it holds outside
+     * its address space (a tmpfs, memfds) is not counted in flexff's favour otherwise */
+    write_file("/proc/self/oom_score_adj", "1000");
     held |= enter_namespaces(scratch, scratch_bytes);
     /* RLIMIT_NPROC counts the user's processes in its user namespace: in the sandbox's own,
      * the FMU's threads; in the user's, every process of theirs, which it must not bound */

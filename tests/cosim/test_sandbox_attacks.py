@@ -323,3 +323,10 @@ def test_a_hang_in_terminate_is_stopped_and_named(tmp_path, probe, capsys, monke
     assert time.monotonic() - began < 30
     assert ("flexff: warning: p: terminating and freeing it did not end within 1 s; its "
             "process was stopped") in one_line(capsys)
+
+
+def test_out_of_memory_the_kernel_ends_the_fmus_process_first(probe):
+    with isolation.IsolatedInstance(read_fmu(probe), "p") as instance:
+        pid = instance._process.pid
+        assert Path(f"/proc/{pid}/oom_score_adj").read_text().strip() == "1000"
+        assert os.getsid(pid) == pid != os.getsid(0)  # a session of its own: no terminal
