@@ -371,6 +371,7 @@ def confine_checks(folder: Path, report: int) -> None:
     sandbox's line on `report` (fmu.validation.Confine). The process must have one thread
     (fmu.child's `fresh` child), or the kernel refuses it the namespaces and Landlock binds
     only the calling thread."""
+    lib = library()  # built (in the cache) with the caller's environment, where it is not yet
     python_path = os.environ.get("PYTHONPATH", "")
     os.environ.clear()
     os.environ.update(sandbox.environment(folder / "work", python_path))
@@ -378,7 +379,7 @@ def confine_checks(folder: Path, report: int) -> None:
     for fd in (0, 1, 2):
         os.dup2(null, fd)
     os.close(null)
-    sandbox.enter(library(), folder, sandbox.DEFAULT, report)
+    sandbox.enter(lib, folder, sandbox.DEFAULT, report)
 
 
 def _read_exactly(fd: int, size: int) -> bytes:

@@ -11,7 +11,8 @@
  *   attempt         what fmi2DoStep tries once, from t >= attempt_at (parameters; what a
  *                   sandbox must stop, and an honest twin): 0 nothing, 1 open a network
  *                   socket, 2 write to ESCAPE, 3 allocate 10 GB, 4 start 64 processes, 5 run
- *                   /bin/true, 6 write and read back a file in its working directory,
+ *                   /bin/true, 6 write and read back a file in its working directory (and
+ *                   set its mode and times, and name a thread of its own),
  *                   7 push a command into the terminal (ioctl TIOCSTI on /dev/tty, stdin,
  *                   stdout, stderr), 8 shrink the memory it shares with an isolating master,
  *                   9 chmod, 10 set the times of, 11 set an extended attribute of OUTSIDE,
@@ -139,6 +140,12 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     return fmi2Error;
 }
 
+static void *nap(void *unused) {
+    (void)unused;
+    usleep(1000);
+    return NULL;
+}
+
 static void *idle(void *unused) {
     (void)unused;
     for (;;) pause();
@@ -184,6 +191,13 @@ static fmi2Status attempt(Probe *p, int what) {
         f = fopen(path, "r");
         if (f == NULL || fread(back, 1, 5, f) != 5 || strcmp(back, "probe") != 0) return fmi2Error;
         fclose(f);
+        if (what == SCRATCH_WRITE && (chmod(path, 0600) != 0 || utimensat(AT_FDCWD, path, NULL, 0)))
+            return fmi2Error; /* its own file's metadata: as a library's cache may */
+        pthread_t worker; /* a named thread, as a runtime's pool is (/proc/self/task/N/comm) */
+        if (what == SCRATCH_WRITE && (pthread_create(&worker, NULL, nap, NULL) != 0 ||
+                                      pthread_setname_np(worker, "probe-worker") != 0 ||
+                                      pthread_join(worker, NULL) != 0))
+            return fmi2Error;
     } else if (what == ALLOCATE) {
         char *memory = malloc((size_t)10 << 30);
         if (memory == NULL) return fmi2Error;

@@ -12,7 +12,8 @@
  *     threads (RLIMIT_NPROC, where it has a user namespace of its own: counted there), no
  *     core files;
  *   - no new privileges (set-user-ID programs run without theirs);
- *   - Landlock: files are written only beneath the scratch folder (and /dev/null), no device
+ *   - Landlock: files are written only beneath the scratch folder (and /dev/null, and its own
+ *     /proc/PID, where threads are named), no device
  *     it opens takes an ioctl (a terminal's settings: ABI 5), and, where
  *     asked (sandbox_read), read only beneath the paths given; no TCP bind or connect; no
  *     signals to, or abstract sockets of, processes outside the sandbox;
@@ -22,8 +23,9 @@
  *     after one line naming the attempt on the report pipe: a network socket, a new process or
  *     program, a writable mapping larger than the memory limit, an open for writing that
  *     Landlock refuses, input pushed into a terminal (ioctl TIOCSTI, TIOCLINUX, TIOCSCTTY),
- *     a change to a file's mode, owner, times or extended attributes (Landlock's rights do
- *     not cover them), the prctl options that would let it outlive flexff or be traced
+ *     a change to a file's mode, owner, times or extended attributes outside the scratch
+ *     folder's file system (Landlock's rights do not cover them; within it, the change is
+ *     reported done and not made), the prctl options that would let it outlive flexff or be traced
  *     (PR_SET_PDEATHSIG, PR_SET_DUMPABLE, PR_SET_PTRACER, PR_SET_MM), another process's limits
  *     (prlimit64: the master's CPU time would kill it), and the kernel's administrative calls.
  * An open for writing is trapped and then made again by the handler, from the one instruction
@@ -100,6 +102,7 @@ struct path_beneath {
 
 static int report_fd = -1;
 static unsigned long long memory_limit; /* bytes */
+static dev_t scratch_device;            /* the scratch folder's file system (its own tmpfs) */
 
 /* -- the one instruction the filter lets an open for writing through --------------------- */
 #if defined(__x86_64__)
@@ -226,6 +229,22 @@ static void reopen(greg_t *r, long nr, Line *line) {
     stop(line);
 }
 
+/* A metadata call is never made. Its file looked up (followed where it is a symbolic link):
+ * on the scratch folder's file system, the FMU's own, the call is reported done; where the
+ * lookup fails, that failure is its result (nothing changed either way); 1 if so. Anywhere
+ * else the process stops (0). */
+static int metadata_answered(greg_t *r, int kind) {
+    struct stat status;
+    long path = kind == METADATA_FIRST ? r[REG_RDI] : kind == METADATA_SECOND ? r[REG_RSI] : 0;
+    long found = path != 0 ? sandbox_syscall(SYS_newfstatat, kind == METADATA_FIRST ? AT_FDCWD
+                                                              : r[REG_RDI],
+                                             path, (long)&status, 0, 0, 0)
+                           : sandbox_syscall(SYS_fstat, r[REG_RDI], (long)&status, 0, 0, 0, 0);
+    if (found == 0 && status.st_dev != scratch_device) return 0;
+    r[REG_RAX] = found;
+    return 1;
+}
+
 static void on_sigsys(int number, siginfo_t *info, void *context) {
     (void)number;
     greg_t *r = ((ucontext_t *)context)->uc_mcontext.gregs;
@@ -235,6 +254,10 @@ static void on_sigsys(int number, siginfo_t *info, void *context) {
         reopen(r, nr, &line);
         return;
     }
+    for (int k = 0; k < N_STOPPED_CALLS; k++)
+        if (STOPPED_CALLS[k].nr == nr && STOPPED_CALLS[k].kind != ADMIN &&
+            metadata_answered(r, STOPPED_CALLS[k].kind))
+            return;
     if (nr == SYS_socket) {
         add(&line, "it tried to open a network socket (address family ");
         add_number(&line, (unsigned long long)r[REG_RDI]);
@@ -547,6 +570,7 @@ static int landlock(const char *scratch, const char *readable) {
     uint64_t file_writes = FS_WRITE_FILE | (abi >= 3 ? FS_TRUNCATE : 0);
     int failed = add_beneath(ruleset, scratch, writes | reads) |
                  add_beneath(ruleset, "/dev/null", file_writes | reads);
+    add_beneath(ruleset, "/proc/self", file_writes | reads); /* its own: a thread's name */
     for (const char *path = readable; path != NULL && *path; path += strlen(path) + 1)
         add_beneath(ruleset, path, reads); /* one that is not there is left out */
     if (failed == 0 && syscall(LANDLOCK_RESTRICT_SELF, ruleset, 0) == 0)
@@ -578,6 +602,8 @@ __attribute__((visibility("default"))) int sandbox_enter(const char *scratch, lo
      * the FMU's threads; in the user's, every process of theirs, which it must not bound */
     long tasks = held & HOLD_NAMESPACES ? threads : 0;
     if (set_limits(cpu_seconds, scratch_bytes, tasks) == 0) held |= HOLD_LIMITS;
+    struct stat scratch_status;
+    scratch_device = stat(scratch, &scratch_status) == 0 ? scratch_status.st_dev : (dev_t)-1;
     if (prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0) != 0) return held;
     held |= HOLD_NO_NEW_PRIVILEGES;
     held |= landlock(scratch, readable);
