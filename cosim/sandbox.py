@@ -35,7 +35,8 @@ LAYERS = (  # sandbox.c's HOLD_* bits, in order
     "sandbox_read's")
 SYSTEM_READ = (  # what a confined reader still reads: the system's libraries and what they read
     "/usr", "/lib", "/lib64", "/lib32", "/etc/ld.so.cache", "/etc/localtime", "/proc/self",
-    "/sys/devices/system/cpu", "/dev/zero", "/dev/urandom")
+    "/proc/cpuinfo", "/proc/meminfo", "/sys/devices/system/cpu", "/sys/fs/cgroup", "/dev/zero",
+    "/dev/urandom")
 KEPT_ENVIRONMENT = ("PATH", "LANG", "LC_ALL")
 KEYS = ("sandbox", "sandbox_memory", "sandbox_cpu", "sandbox_scratch",
         "sandbox_read")  # an [fmu.NAME]'s keys (cosim.config)
