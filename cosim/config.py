@@ -37,7 +37,7 @@ from flexff.cosim.references import (
     reference_kind_names,
 )
 from flexff.cosim.sandbox import KEYS as SANDBOX_KEYS
-from flexff.cosim.sandbox import MEMORY_MB, Sandbox
+from flexff.cosim.sandbox import MEMORY_MB, SCRATCH_MB, Sandbox
 from flexff.cosim.schema import (
     ALGORITHMS,
     SOURCE_KINDS,
@@ -110,7 +110,11 @@ def _sandbox_keys(sandbox: Sandbox | None) -> dict[str, Any]:
     if sandbox is None:
         return {"sandbox": False}
     return {**({"sandbox_memory": sandbox.memory_mb} if sandbox.memory_mb != MEMORY_MB else {}),
-            **({"sandbox_cpu": sandbox.cpu_s} if sandbox.cpu_s is not None else {})}
+            **({"sandbox_cpu": sandbox.cpu_s} if sandbox.cpu_s is not None else {}),
+            **({"sandbox_scratch": sandbox.scratch_mb} if sandbox.scratch_mb != SCRATCH_MB
+               else {}),
+            **({"sandbox_read": [str(p) for p in sandbox.read]} if sandbox.read is not None
+               else {})}
 
 
 def read_tables(path: Path) -> dict[str, Any]:
@@ -378,7 +382,23 @@ class _Parser(TableChecker):
             return None
         cpu = (self.number(t, where, "sandbox_cpu", None, positive=True) if "sandbox_cpu" in t
                else None)
-        return Sandbox(self.number(t, where, "sandbox_memory", MEMORY_MB, positive=True), cpu)
+        return Sandbox(self.number(t, where, "sandbox_memory", MEMORY_MB, positive=True), cpu,
+                       self.number(t, where, "sandbox_scratch", SCRATCH_MB, positive=True),
+                       read=self.sandbox_read(t, where))
+
+    def sandbox_read(self, t: Mapping[str, Any], where: str) -> tuple[Path, ...] | None:
+        """The paths a sandboxed FMU may read besides its own folder and the system's (None:
+        reads not confined)."""
+        if "sandbox_read" not in t:
+            return None
+        value = t["sandbox_read"]
+        if not (isinstance(value, list) and all(isinstance(v, str) and v for v in value)):
+            raise self.error(f"{where}.sandbox_read", f"expected a list of paths, got {value!r}")
+        paths = tuple((self.base / v).resolve() for v in value)
+        for given, path in zip(value, paths):
+            if not path.exists():
+                raise self.error(f"{where}.sandbox_read", f"no such file or folder: {given}")
+        return paths
 
     def nonfinite(self, t: Mapping[str, Any], where: str) -> bool:
         """Whether the FMU may take and give NaN and infinite values: its own

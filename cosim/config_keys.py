@@ -39,8 +39,9 @@ KEYS: tuple[Key, ...] = (
         "a whole number of steps."),
     Key("run", "tolerance", "number", "each FMU's default experiment", "1",
         "Relative tolerance of every FMU's own solver."),
-    Key("run", "step_timeout", "number", "none", "s",
-        "Bound on each call of an FMU in its own process (needs isolate)."),
+    Key("run", "step_timeout", "number", "60", "s",
+        "Bound on each call of an FMU in its own process, instantiating and each step included "
+        "(needs isolate)."),
     Key("run", "algorithm", "string", '"gauss-seidel"', "",
         'The master algorithm: "gauss-seidel" or "jacobi".'),
     Key("run", "order", "list of strings", "the order of the [fmu.*] tables", "",
@@ -137,6 +138,11 @@ KEYS: tuple[Key, ...] = (
         "The sandboxed FMU's private writable memory (needs isolate).", ("path", "builtin")),
     Key("fmu.NAME", "sandbox_cpu", "number", "none", "s",
         "The sandboxed FMU's CPU time (needs isolate).", ("path", "builtin")),
+    Key("fmu.NAME", "sandbox_scratch", "number", "1024", "MB",
+        "What the sandboxed FMU's scratch folder holds (needs isolate).", ("path", "builtin")),
+    Key("fmu.NAME", "sandbox_read", "list of paths", "everything", "",
+        "Confine the sandboxed FMU's reads to its own folder, the system's libraries and these "
+        "paths (needs isolate).", ("path", "builtin")),
     Key("fmu.NAME", "fmi", "integer", "2", "",
         "The FMI version a built-in is built in: 2 or 3 (3.0, bit-equal to 2.0).",
         ("builtin",)),

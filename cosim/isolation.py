@@ -7,13 +7,18 @@ told otherwise, inside a sandbox (cosim.sandbox). The engine calls the proxy's f
 (cosim/c/proxy.c), which pass values and commands through shared memory without a system
 call while both sides are busy; an isolated FMU gives the same results bit for bit.
 Everything else goes over pipes as length-prefixed JSON, bounded in size and checked in shape:
-nothing the child sends can run code in the master. The child dies with its master, however
-the master ends (fmu.orphans). Reference: docs/how-to/isolate-fmu.md.
+nothing the child sends can run code in the master; its text is escaped (fmu.printable). The
+shared memory is sealed at its size (shrunk, the master would die of SIGBUS). The child has no
+terminal, stdin from /dev/null, its stdout and stderr in a pipe the master relays
+(cosim.child_output). Every call it answers, instantiating included, is bounded by the step
+timeout (STEP_TIMEOUT by default). The child dies with its master, however the master ends
+(fmu.orphans). Reference: docs/how-to/isolate-fmu.md.
 """
 
 from __future__ import annotations
 
 import ctypes
+import fcntl
 import functools
 import json
 import mmap
@@ -25,24 +30,33 @@ import struct
 import subprocess
 import sys
 import tempfile
+import time
+import warnings
 from collections.abc import Mapping, Sequence
 from ctypes import c_char, c_char_p, c_double, c_int, c_long, c_longlong, c_size_t, c_void_p
 from pathlib import Path
 from typing import Any
 
 from flexff.cosim import engine, sandbox
+from flexff.cosim.child_output import OutputRelay
 from flexff.cosim.sandbox import Sandbox
 from flexff.fmu import cache
 from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
+from flexff.fmu.errors import RunError
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 from flexff.fmu.orphans import die_with
+from flexff.fmu.printable import printable
 
 SOURCES = (Path(__file__).parent / "c" / "proxy.c", Path(__file__).parent / "c" / "sandbox.c")
 PYTHON, EXIT = ord("P"), ord("X")  # commands proxy_serve hands back (CMD_PYTHON, CMD_EXIT)
 SERVE_PYTHON = 1  # proxy_serve's result for a Python request
 DIED, TIMED_OUT = 1, 2  # proxy_failure
 CLOSE_WAIT = 10.0  # seconds a child has to terminate its FMU and exit after the run
-START_WAIT = 60.0  # seconds at least that a child has to start Python and instantiate the FMU
+START_WAIT = 60.0  # seconds a child has to start Python (instantiating is a call: the timeout)
+STEP_TIMEOUT = 60.0  # seconds each call of an isolated FMU may take, unless the run says
+STARTED = "started"  # the child's first answer, before it unpacks and instantiates the FMU
+ERROR_CHARS = 4000  # the most of an error message from the child shown
+SEALS = fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW | fcntl.F_SEAL_SEAL  # the shared memory's
 REQUESTS = ("initialize", "set", "get", "fail", "network_times")  # what the child's Python does
 LENGTH = struct.Struct("<Q")  # a message's length prefix
 MESSAGE_LIMIT = 64 << 20  # bytes a message may have: a child claiming more is stopped
@@ -72,7 +86,8 @@ def library() -> ctypes.CDLL:
     lib.proxy_serve.argtypes = [c_void_p, c_long, c_int, c_void_p, c_void_p, c_void_p,
                                 c_void_p]
     lib.proxy_serve.restype = c_int
-    lib.sandbox_enter.argtypes = [c_char_p, c_longlong, c_double, c_int]
+    lib.sandbox_enter.argtypes = [c_char_p, c_longlong, c_double, c_int, c_longlong, c_long,
+                                  c_char_p]
     lib.sandbox_enter.restype = c_int
     return lib
 
@@ -116,6 +131,11 @@ def _send(fd: int, message: Any) -> None:
         data = data[os.write(fd, data):]
 
 
+class ChildError(RunError):
+    """An isolated FMU's process that hung, died or was stopped while it was being started
+    (a run's later failures are the master's CosimError): exit 1."""
+
+
 def _signal_name(number: int) -> str:
     try:
         return signal.Signals(number).name
@@ -125,20 +145,22 @@ def _signal_name(number: int) -> str:
 
 class IsolatedInstance:
     """An FMU instantiated in a child process, with FmuInstance's interface for the master;
-    `timeout` (s, None: none) bounds every call the child answers (its start, which includes
-    starting Python, at least START_WAIT); `confined` (None: not) sandboxes the child."""
+    `timeout` (s, None: STEP_TIMEOUT) bounds every call the child answers, instantiating
+    included (starting Python: START_WAIT); `confined` (None: not) sandboxes the child."""
 
     def __init__(self, info: FmuInfo, name: str, timeout: float | None = None,
                  solver: str | None = None, confined: Sandbox | None = sandbox.DEFAULT,
                  scheduled: bool = False) -> None:
-        self.info, self.name, self.timeout, self.confined = info, name, timeout, confined
+        self.info, self.name, self.confined = info, name, confined
+        self.timeout = STEP_TIMEOUT if timeout is None else timeout
         self.library = info.path
         self.initialized = False
         self.held: list[str] = []  # the sandbox's layers that hold in the child
         lib = library()
         self._capacity = max(1, len(info.variables))
-        self._memory = os.memfd_create(f"flexff-{name}")
+        self._memory = os.memfd_create(f"flexff-{name}", os.MFD_CLOEXEC | os.MFD_ALLOW_SEALING)
         os.ftruncate(self._memory, lib.proxy_shared_size(self._capacity))
+        fcntl.fcntl(self._memory, fcntl.F_ADD_SEALS, SEALS)
         self._shared = mmap.mmap(self._memory, lib.proxy_shared_size(self._capacity))
         self._view = c_char.from_buffer(self._shared)
         self.scratch = Path(tempfile.mkdtemp(prefix=FOLDER))  # the FMU, and its work folder
@@ -151,23 +173,34 @@ class IsolatedInstance:
         env = ({**os.environ, "PYTHONPATH": python_path} if confined is None
                else sandbox.environment(self.scratch / "work", python_path))
         options = {"solver": solver, "scheduled": scheduled,
-                   "limits": None if confined is None else [confined.memory_mb, confined.cpu_s]}
+                   "limits": None if confined is None else sandbox.as_list(confined)}
+        output, output_write = os.pipe()
         self._process = subprocess.Popen(
             [sys.executable, "-m", "flexff.cosim.isolation", str(info.path), name,
              str(cmd_read), str(ack_write), str(self._memory), str(self._capacity),
              str(os.getpid()), str(self.scratch), str(report_write), json.dumps(options)],
             pass_fds=(cmd_read, ack_write, self._memory, report_write), env=env,
-            cwd=self.scratch / "work")
-        for fd in (cmd_read, ack_write, report_write):
+            cwd=self.scratch / "work", stdin=subprocess.DEVNULL, stdout=output_write,
+            stderr=output_write, start_new_session=True)
+        for fd in (cmd_read, ack_write, report_write, output_write):
             os.close(fd)
+        self._output = OutputRelay(output, name)
         self._proxy = lib.proxy_open(self._ack, ctypes.addressof(self._view), self._capacity,
-                                     timeout or 0.0)
+                                     self.timeout)
         self._timed_out = False
+        self._broken = False  # the child hung, died, was stopped or broke the protocol
         try:
-            held = self._response("instantiating it", max(START_WAIT, timeout or 0.0))
+            if self._response("starting its process", START_WAIT) != STARTED:
+                raise self._refused("starting its process", "an answer that is not the start")
+            held = self._response("instantiating it")
             if not (isinstance(held, list) and all(isinstance(h, str) for h in held)):
                 raise self._refused("instantiating it", "an answer that is no list of layers")
             self.held = held
+        except FmuError as error:
+            self.close()
+            if not self._broken:  # the FMU's own refusal: an FmuError, as in-process
+                raise
+            raise ChildError(str(error)) from None
         except BaseException:
             self.close()
             raise
@@ -214,10 +247,9 @@ class IsolatedInstance:
         """The error for a failed call: the sandbox's report, the child's signal, the
         timeout, or the FMU's messages."""
         if self._timed_out or library().proxy_failure(self._proxy) == TIMED_OUT:
-            self._stop()
-            return FmuError(f"{self.name}: {what} did not end within the step timeout of "
-                            f"{self.timeout:g} s; its process was stopped")
+            return self._hung(what, self.timeout)
         if self._gone():
+            self._broken = True
             code = self._process.wait(CLOSE_WAIT)
             stopped = sandbox.report(self._report) if code == sandbox.STOPPED else ""
             if stopped:
@@ -226,11 +258,23 @@ class IsolatedInstance:
             if code == -signal.SIGXCPU and self.confined is not None:
                 return FmuError(f"{self.name}: {what} failed: its process used up its CPU time "
                                 f"({self.confined.cpu_s:g} s, sandbox_cpu)")
+            if code == -signal.SIGXFSZ and self.confined is not None:
+                return FmuError(f"{self.name}: {what} failed: its process wrote a file over its "
+                                f"scratch folder's size ({self.confined.scratch_mb:g} MB)")
             how = (f"ended with {_signal_name(-code)}" if code < 0 else
                    f"exited with status {code}")
             return FmuError(f"{self.name}: {what} failed: its process {how}")
         message = self._request("fail", what)
-        return FmuError(message if isinstance(message, str) else f"{self.name}: {what} failed")
+        return FmuError(printable(message, ERROR_CHARS) if isinstance(message, str)
+                        else f"{self.name}: {what} failed")
+
+    def _hung(self, what: str, waited: float) -> FmuError:
+        """A call that did not end within `waited` seconds: the child stopped."""
+        self._timed_out = self._broken = True
+        self._stop()
+        which = "the step timeout of " if waited == self.timeout else ""
+        return FmuError(f"{self.name}: {what} did not end within {which}{waited:g} s; its "
+                        f"process was stopped")
 
     def close(self) -> None:
         """Let the child terminate and free the FMU, then release everything (safe twice)."""
@@ -239,7 +283,8 @@ class IsolatedInstance:
             try:
                 self._process.wait(CLOSE_WAIT)
             except subprocess.TimeoutExpired:
-                pass
+                warnings.warn(f"{self.name}: terminating and freeing it did not end within "
+                              f"{CLOSE_WAIT:g} s; its process was stopped", stacklevel=2)
         self._stop()
         shutil.rmtree(self.scratch, ignore_errors=True)
         if self._proxy:
@@ -268,9 +313,11 @@ class IsolatedInstance:
         if self._process.poll() is None:
             self._process.kill()
         self._process.wait()
+        self._output.join(CLOSE_WAIT)
 
     def _refused(self, what: str, why: str) -> FmuError:
         """A child that broke the protocol: stopped, and named."""
+        self._broken = True
         self._stop()
         return FmuError(f"{self.name}: {what} failed: its process sent {why}; it was stopped")
 
@@ -283,34 +330,56 @@ class IsolatedInstance:
         return self._response(what)
 
     def _response(self, what: str, timeout: float | None = None) -> Any:
-        """The child's answer: its value, or its error raised; a message over MESSAGE_LIMIT or
-        not of the protocol's shape stops the child."""
-        timeout = timeout or self.timeout
-        length = LENGTH.unpack(self._read(LENGTH.size, what, timeout))[0]
+        """The child's answer within `timeout` s (None: the step timeout): its value, or its
+        error raised; a message over MESSAGE_LIMIT or not of the protocol's shape stops the
+        child."""
+        waited = self.timeout if timeout is None else timeout
+        deadline = time.monotonic() + waited
+        length = LENGTH.unpack(self._read(LENGTH.size, what, deadline, waited))[0]
         if length > MESSAGE_LIMIT:
             raise self._refused(what, f"a message of {length} bytes (at most {MESSAGE_LIMIT})")
         try:
-            status, value = _decoded(self._read(length, what, timeout))
+            status, value = _decoded(self._read(length, what, deadline, waited))
         except (ValueError, TypeError, RecursionError):  # RecursionError: nested too deep
             raise self._refused(what, "a message that is not the protocol's") from None
         if status == "error" and isinstance(value, str):
-            raise FmuError(value[:MESSAGE_LIMIT])
+            raise FmuError(printable(value, ERROR_CHARS))
         if status != "ok":
             raise self._refused(what, "a message that is not the protocol's")
         return value
 
-    def _read(self, size: int, what: str, timeout: float | None) -> bytes:
-        data = b""
-        while len(data) < size:
-            ready, _, _ = select.select([self._ack], [], [], timeout)
+    def _read(self, size: int, what: str, deadline: float, waited: float) -> bytes:
+        """`size` bytes from the child by `deadline` (time.monotonic; `waited` s after the
+        request), into one buffer: a long message costs its length, once."""
+        data = bytearray(size)
+        view, got = memoryview(data), 0
+        while got < size:
+            ready, _, _ = select.select([self._ack], [], [], max(0.0, deadline - time.monotonic()))
             if not ready:
-                self._timed_out = True
-                raise self.fail(what)
-            chunk = os.read(self._ack, min(size - len(data), 1 << 20))
+                raise self._hung(what, waited)
+            chunk = os.read(self._ack, min(size - got, 1 << 20))
             if not chunk:
                 raise self.fail(what)
-            data += chunk
-        return data
+            view[got:got + len(chunk)] = chunk
+            got += len(chunk)
+        return bytes(data)
+
+
+def confine_checks(folder: Path, report: int) -> None:
+    """Confine this process (fmu.validation's checks) as an isolated FMU's child is: the
+    sandbox's default limits, its environment, stdin, stdout and stderr on /dev/null, the
+    sandbox's line on `report` (fmu.validation.Confine). The process must have one thread
+    (fmu.child's `fresh` child), or the kernel refuses it the namespaces and Landlock binds
+    only the calling thread."""
+    lib = library()  # built (in the cache) with the caller's environment, where it is not yet
+    python_path = os.environ.get("PYTHONPATH", "")
+    os.environ.clear()
+    os.environ.update(sandbox.environment(folder / "work", python_path))
+    null = os.open(os.devnull, os.O_RDWR)
+    for fd in (0, 1, 2):
+        os.dup2(null, fd)
+    os.close(null)
+    sandbox.enter(lib, folder, sandbox.DEFAULT, report)
 
 
 def _read_exactly(fd: int, size: int) -> bytes:
@@ -346,9 +415,10 @@ def main(argv: Sequence[str]) -> int:
     given = json.loads(options)
     bounds = given["limits"]
     held: list[str] = []
+    _send(ack_fd, ["ok", STARTED])
 
     def confine() -> None:
-        held.extend(sandbox.enter(lib, Path(folder, "work"), Sandbox(*bounds), int(report)))
+        held.extend(sandbox.enter(lib, Path(folder), sandbox.from_list(bounds), int(report)))
 
     try:
         instance = FmuInstance(read_fmu(path), name, given["solver"], Path(folder, "fmu"),

@@ -204,6 +204,7 @@ def _fmu_info(args: argparse.Namespace) -> int:
 def _fmu_validate(args: argparse.Namespace) -> int:
     """Exit 0 when no FMU has an error (warnings allowed), 1 when one has, 2 when a path is
     missing or unreadable."""
+    from flexff.cosim.isolation import confine_checks
     from flexff.fmu.validation import TIMEOUT, validate_fmu
 
     if args.timeout is None:
@@ -219,7 +220,8 @@ def _fmu_validate(args: argparse.Namespace) -> int:
             print(f"flexff: error: {path}: {unusable}", file=sys.stderr)
             status = 2
             continue
-        problems = validate_fmu(path, strict=args.strict, timeout=args.timeout)
+        problems = validate_fmu(path, strict=args.strict, timeout=args.timeout,
+                                confine=None if args.no_sandbox else confine_checks)
         errors = sum(p.severity == "error" for p in problems)
         counts = f"{errors} error(s), {len(problems) - errors} warning(s)"
         print(f"{path}: {'OK' if not problems else counts}")
@@ -757,6 +759,9 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--timeout", type=float,
                           help="seconds the run of one FMU may take before it counts as hung "
                                "(default: a minute, fmu.validation.TIMEOUT)")
+    validate.add_argument("--no-sandbox", action="store_true",
+                          help="run the FMU's code without the sandbox of an isolated run "
+                               "(default: in it)")
     validate.set_defaults(handler=_fmu_validate)
 
     fmu_info = fmu_commands.add_parser(

@@ -45,6 +45,7 @@ from flexff.fmu.description_faults import Fault, description_faults, summary
 from flexff.fmu.errors import InputError, not_a_file
 from flexff.fmu.messages import MessageLog
 from flexff.fmu.model_exchange import ModelExchangeStepper
+from flexff.fmu.printable import printable
 from flexff.fmu.scheduled import ScheduledStepper, periodic_clocks
 from flexff.fmu.stepper import Stepper
 
@@ -60,6 +61,7 @@ INTEGER_RANGES = {"int8": (-2**7, 2**7), "uint8": (0, 2**8), "int16": (-2**15, 2
                   "int64": (-2**63, 2**63), "uint64": (0, 2**64),
                   "enumeration": (-2**63, 2**63)}
 STATUS_LABELS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+MESSAGE_CHARS = 2000  # the most of one FMU log message kept
 
 
 class FmuError(InputError):
@@ -332,8 +334,9 @@ _FMI2_LOG = _Fmi2Log()
 
 
 def _message(status: int, message: bytes | None) -> str:
+    """An FMU's log message as flexff keeps and shows it: its status, its text escaped."""
     label = STATUS_LABELS[status] if 0 <= status < len(STATUS_LABELS) else str(status)
-    return f"[{label}] {(message or b'').decode('utf-8', 'replace')}"
+    return f"[{label}] {printable((message or b'').decode('utf-8', 'replace'), MESSAGE_CHARS)}"
 
 
 class FmuInstance:

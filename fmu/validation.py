@@ -5,9 +5,11 @@ said to stop a run or only to be warned of. Our run's checks, on any FMI 2.0 or 
 co-simulation FMU: the binary loads, instantiates and exports its functions; with default
 values it initializes, steps and gives finite outputs; restoring a saved state (directly and
 serialized) reproduces the uninterrupted run. Every call into the FMU runs in a child process
-(fmu.child), so a crash or hang becomes a problem naming the call. Each problem is a sentence
-with a severity; a state restore that differs by at most the FMU's tolerance is a warning.
-Problems are returned, never raised.
+(fmu.child), so a crash or hang becomes a problem naming the call; given a `confine` (flexff
+fmu validate gives cosim's sandbox unless --no-sandbox), that process confines itself after
+unpacking the FMU and before loading its binary, so that an FMU's code runs no freer than in
+an isolated run. Each problem is a sentence with a severity; a state restore that differs by
+at most the FMU's tolerance is a warning. Problems are returned, never raised.
 
 Docs: "Validate and compare third-party FMUs" (docs/how-to/validate-compare.md).
 """
@@ -15,14 +17,17 @@ Docs: "Validate and compare third-party FMUs" (docs/how-to/validate-compare.md).
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import math
+import os
+import tempfile
 import zipfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from flexff.fmu.child import run_in_child, under_way
+from flexff.fmu.child import report_path, run_in_child, under_way
 from flexff.fmu.codegen import NET_TABLE_FILE
 from flexff.fmu.description_faults import Fault, description_faults
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
@@ -99,6 +104,9 @@ def _experiment(info: FmuInfo) -> tuple[float, float]:
 
 
 Emit = Callable[[tuple[str, str, float | None]], None]  # sends one finding to the parent
+# Confines the checks' process for good: (its folder, holding the FMU in fmu/ and its scratch
+# folder work/, the file descriptor for the sandbox's line); importable by name.
+Confine = Callable[[Path, int], None]
 
 
 class Problem(str):
@@ -234,12 +242,23 @@ def _run_checks(instance: FmuInstance, emit: Emit, strict: bool, steps: int = 20
     instance.call("freeing the FMU state", lambda: free_state(saved))
 
 
-def _checks(emit: Emit, path: str, strict: bool) -> None:
-    """Every check that calls into the FMU at `path`: run in a child process (validate_fmu)."""
+def _confine(confine: Confine, folder: Path) -> None:
+    """Work in `folder`'s scratch folder, then `confine` this process."""
+    os.chdir(folder / "work")
+    report = os.open(report_path(), os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_CLOEXEC, 0o600)
+    confine(folder, report)
+
+
+def _checks(emit: Emit, path: str, strict: bool, confine: Confine | None) -> None:
+    """Every check that calls into the FMU at `path`: run in a child process (validate_fmu),
+    confined by `confine` where given."""
     try:
         info = read_fmu(path, checked=False)  # its description's faults: validate_fmu's
         under_way("loading the FMU's binary")
-        with FmuInstance(info, "validation") as instance:
+        folder = Path(tempfile.mkdtemp(prefix="flexff-validated-"))
+        (folder / "work").mkdir()
+        hook = None if confine is None else functools.partial(_confine, confine, folder)
+        with FmuInstance(info, "validation", folder=folder / "fmu", confine=hook) as instance:
             missing = _missing_exports(instance)
             for problem in missing:
                 emit((problem, "error", None))
@@ -249,12 +268,12 @@ def _checks(emit: Emit, path: str, strict: bool) -> None:
         emit((f"running the FMU failed: {error}", "error", None))
 
 
-def validate_fmu(path: str | Path, strict: bool = False, timeout: float = TIMEOUT
-                 ) -> list[Problem]:
+def validate_fmu(path: str | Path, strict: bool = False, timeout: float = TIMEOUT,
+                 confine: Confine | None = None) -> list[Problem]:
     """Problems found in the FMU at `path` (module doc); an empty list means it passed every
     check. `strict`: the description's warnings are errors, as a strict run refuses them, and
     a state restore must reproduce the outputs bit for bit. `timeout`: seconds the checks that
-    run the FMU may take."""
+    run the FMU may take. `confine`: how their process confines itself (None: not)."""
     path = Path(path)
     if not path.is_file():
         return [Problem(f"{path} does not exist or is not a file")]
@@ -266,7 +285,8 @@ def validate_fmu(path: str | Path, strict: bool = False, timeout: float = TIMEOU
         return [Problem(str(error), in_run=RUN_STOPS)]
     problems = [_description_problem(fault, strict)
                 for fault in description_faults(info.path, info.model_description)]
-    end = run_in_child(_checks, (str(path), strict), timeout)
+    end = run_in_child(_checks, (str(path), strict, confine), timeout,
+                       fresh=confine is not None)
     problems += [Problem(*finding) for finding in end.messages if _is_finding(finding)]
     failure = end.failure(timeout)
     if failure is not None:

@@ -48,21 +48,28 @@ VARIABLES = (  # name, value reference, causality, variability, start (None: non
     ("hang_at", 6, "parameter", "fixed", -1.0), ("attempt", 7, "parameter", "fixed", 0.0),
     ("attempt_at", 8, "parameter", "fixed", 0.0))
 ATTEMPTS = {"socket": 1, "escape": 2, "allocate": 3, "processes": 4, "program": 5,
-            "scratch": 6}  # the probe's `attempt` values (tests/probe_fmu.c)
+            "scratch": 6, "terminal": 7, "shrink": 8, "chmod": 9, "times": 10, "xattr": 11,
+            "orphan": 12, "flood": 13, "threads": 14, "shared": 15, "fill": 16, "spin": 17,
+            "stop": 18, "log": 19, "read": 20, "limit_parent": 21,
+            "environment": 22,
+            "hang_terminate": 23}  # the probe's `attempt` values (tests/probe_fmu.c)
 ESCAPE = "/tmp/flexff-probe-escape.txt"  # where attempt "escape" writes
+OUTSIDE = "/tmp/flexff-probe-outside.txt"  # whose metadata attempts chmod, times, xattr change
+INJECTED = "echo flexff-probe-injected"  # what attempt "terminal" types
+HANG_INSTANTIATE = "hang_instantiate"  # an instance of this name hangs in fmi2Instantiate
 
 
 def _library(folder: Path, source: Path = SOURCE, name: str = "probe") -> Path:
     for header, text in fmi_headers().items():
         (folder / header).write_text(text)
     library = folder / f"{name}{fmpy.sharedLibraryExtension}"
-    subprocess.run([compiler(), "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-shared",
-                    "-fPIC", f"-I{folder}", str(source), str(UNSUPPORTED), "-o", str(library)],
-                   check=True)
+    subprocess.run([compiler(), "-O2", "-std=c99", "-D_GNU_SOURCE", "-shared", "-fPIC",
+                    "-pthread", f"-I{folder}", str(source), str(UNSUPPORTED), "-o",
+                    str(library)], check=True)
     return library
 
 
-def _model_description(experiment: dict[str, float]) -> str:
+def _model_description(experiment: dict[str, float], guid: str = "{probe}") -> str:
     rows = []
     for name, vr, causality, variability, start in VARIABLES:
         initial = ' initial="calculated"' if causality == "output" else ""
@@ -77,7 +84,7 @@ def _model_description(experiment: dict[str, float]) -> str:
                       in enumerate(VARIABLES) if causality == "output")
     attributes = " ".join(f'{key}="{value!r}"' for key, value in experiment.items())
     return (f'<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription fmiVersion="2.0" '
-            f'modelName="probe" guid="{{probe}}" variableNamingConvention="flat">'
+            f'modelName="probe" guid="{guid}" variableNamingConvention="flat">'
             f'<CoSimulation modelIdentifier="probe"/>'
             f'<DefaultExperiment {attributes}/>'
             f'<ModelVariables>{"".join(rows)}</ModelVariables>'
@@ -86,14 +93,16 @@ def _model_description(experiment: dict[str, float]) -> str:
             f'</fmiModelDescription>\n')
 
 
-def build_probe(folder: Path, **experiment: float) -> Path:
+def build_probe(folder: Path, hostile: bool = False, **experiment: float) -> Path:
     """The probe FMU in `folder`, with a DefaultExperiment of the given attributes (startTime,
-    stopTime, stepSize, tolerance)."""
+    stopTime, stepSize, tolerance); `hostile`: one that tries to write to ESCAPE when it is
+    instantiated."""
     folder.mkdir(parents=True, exist_ok=True)
     library = _library(folder)
     path = folder / "probe.fmu"
+    guid = "{probe-hostile}" if hostile else "{probe}"
     with zipfile.ZipFile(path, "w") as zf:
-        zf.writestr("modelDescription.xml", _model_description(experiment))
+        zf.writestr("modelDescription.xml", _model_description(experiment, guid))
         zf.write(library, f"binaries/{fmpy.platform}/{library.name}")
     return path
 

@@ -5,15 +5,29 @@
  * is loaded; it cannot be undone. Each layer is asked of the kernel separately, and the result
  * says which ones hold (HOLD_*), so that a kernel without one (no user namespaces, no Landlock,
  * another architecture) keeps the others:
- *   - a user and network namespace: no network interface but a loopback that is down;
- *   - limits: private writable memory (RLIMIT_DATA), CPU time (RLIMIT_CPU), no core files;
+ *   - a user and network namespace: no network interface but a loopback that is down; and a
+ *     mount namespace in which the scratch folder is a tmpfs of its own size (its quota);
+ *   - limits: private writable memory (RLIMIT_DATA), address space (RLIMIT_AS, which counts
+ *     shared mappings too), CPU time (RLIMIT_CPU), the size of a file it writes (RLIMIT_FSIZE),
+ *     threads (RLIMIT_NPROC, where it has a user namespace of its own: counted there), no
+ *     core files;
  *   - no new privileges (set-user-ID programs run without theirs);
- *   - Landlock: files are written only beneath the scratch folder (and /dev/null); no TCP bind
- *     or connect; no signals to, or abstract sockets of, processes outside the sandbox;
+ *   - Landlock: files are written only beneath the scratch folder (and /dev/null, and its own
+ *     /proc/PID, where threads are named), no device
+ *     it opens takes an ioctl (a terminal's settings: ABI 5), and, where
+ *     asked (sandbox_read), read only beneath the paths given; no TCP bind or connect; no
+ *     signals to, or abstract sockets of, processes outside the sandbox;
+ *   - a session of its own (setsid): no controlling terminal to type into; the first process
+ *     the kernel ends when memory runs out (oom_score_adj 1000);
  *   - seccomp (x86_64): the calls an FMU has no business making stop the process (SIGSYS),
  *     after one line naming the attempt on the report pipe: a network socket, a new process or
  *     program, a writable mapping larger than the memory limit, an open for writing that
- *     Landlock refuses, and the kernel's administrative calls.
+ *     Landlock refuses, input pushed into a terminal (ioctl TIOCSTI, TIOCLINUX, TIOCSCTTY),
+ *     a change to a file's mode, owner, times or extended attributes outside the scratch
+ *     folder's file system (Landlock's rights do not cover them; within it, the change is
+ *     reported done and not made), the prctl options that would let it outlive flexff or be traced
+ *     (PR_SET_PDEATHSIG, PR_SET_DUMPABLE, PR_SET_PTRACER, PR_SET_MM), another process's limits
+ *     (prlimit64: the master's CPU time would kill it), and the kernel's administrative calls.
  * An open for writing is trapped and then made again by the handler, from the one instruction
  * the filter lets through (sandbox_syscall_return), so that Landlock decides and the handler
  * can name the path it refused. An FMU that calls that instruction itself can only open files;
@@ -34,9 +48,11 @@
 #include <stdint.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <sys/mount.h>
 #include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/syscall.h>
 #include <sys/types.h>
 #include <ucontext.h>
@@ -50,18 +66,29 @@ enum {
     HOLD_LANDLOCK_NETWORK = 16,
     HOLD_LANDLOCK_SCOPE = 32,
     HOLD_SECCOMP = 64,
+    HOLD_SESSION = 128,
+    HOLD_SCRATCH_QUOTA = 256,
+    HOLD_LANDLOCK_READS = 512,
 };
+/* The address space beyond the memory limit (RLIMIT_AS): the interpreter, the libraries and
+ * the threads' stacks, ~0.1-0.3 GB; small enough that shared mappings stay near the limit. */
+#define ADDRESS_SLACK (512ULL << 20)
 enum { STOPPED = 86 }; /* the exit status of a process the sandbox stopped (SANDBOX_STATUS) */
 
 /* Landlock's ABI (linux/landlock.h), spelt out: the build machine's headers may predate it. */
 enum { LANDLOCK_CREATE_RULESET = 444, LANDLOCK_ADD_RULE = 445, LANDLOCK_RESTRICT_SELF = 446 };
 enum { LANDLOCK_VERSION_FLAG = 1, LANDLOCK_PATH_BENEATH = 1 };
+#define FS_EXECUTE (1ULL << 0)
 #define FS_WRITE_FILE (1ULL << 1)
+#define FS_READ_FILE (1ULL << 2)
+#define FS_READ_DIR (1ULL << 3)
+#define FS_READS (FS_EXECUTE | FS_READ_FILE | FS_READ_DIR)
 #define FS_WRITES                                                                           \
     (FS_WRITE_FILE | (1ULL << 4) | (1ULL << 5) | (1ULL << 6) | (1ULL << 7) | (1ULL << 8) | \
      (1ULL << 9) | (1ULL << 10) | (1ULL << 11) | (1ULL << 12)) /* write, remove, make */
 #define FS_REFER (1ULL << 13)                                  /* ABI 2 */
 #define FS_TRUNCATE (1ULL << 14)                               /* ABI 3 */
+#define FS_IOCTL_DEV (1ULL << 15)                              /* ABI 5 */
 #define NET_TCP ((1ULL << 0) | (1ULL << 1))                    /* ABI 4: bind, connect */
 #define SCOPES ((1ULL << 0) | (1ULL << 1))                     /* ABI 6: abstract sockets, signals */
 
@@ -75,6 +102,7 @@ struct path_beneath {
 
 static int report_fd = -1;
 static unsigned long long memory_limit; /* bytes */
+static dev_t scratch_device;            /* the scratch folder's file system (its own tmpfs) */
 
 /* -- the one instruction the filter lets an open for writing through --------------------- */
 #if defined(__x86_64__)
@@ -134,26 +162,57 @@ static void stop(Line *line) {
 }
 
 #if defined(__x86_64__)
+/* The calls that stop the process whatever their arguments, and what the report calls them. */
+enum { ADMIN, METADATA_FIRST, METADATA_SECOND, METADATA_FD }; /* where a metadata call's path is */
+enum { SYS_fchmodat2_ = 452, SYS_setxattrat_ = 463, SYS_removexattrat_ = 466 }; /* 6.6, 6.13 */
 static const struct {
     int nr;
     const char *name;
-} ADMIN[] = {
-    {SYS_ptrace, "ptrace"}, {SYS_process_vm_readv, "process_vm_readv"},
-    {SYS_process_vm_writev, "process_vm_writev"}, {SYS_mount, "mount"},
-    {SYS_umount2, "umount2"}, {SYS_pivot_root, "pivot_root"}, {SYS_chroot, "chroot"},
-    {SYS_unshare, "unshare"}, {SYS_setns, "setns"}, {SYS_bpf, "bpf"},
-    {SYS_perf_event_open, "perf_event_open"}, {SYS_kexec_load, "kexec_load"},
-    {SYS_kexec_file_load, "kexec_file_load"}, {SYS_init_module, "init_module"},
-    {SYS_finit_module, "finit_module"}, {SYS_delete_module, "delete_module"},
-    {SYS_reboot, "reboot"}, {SYS_swapon, "swapon"}, {SYS_swapoff, "swapoff"},
-    {SYS_keyctl, "keyctl"}, {SYS_add_key, "add_key"}, {SYS_request_key, "request_key"},
-    {SYS_io_uring_setup, "io_uring_setup"}, {SYS_io_uring_enter, "io_uring_enter"},
-    {SYS_io_uring_register, "io_uring_register"}, {SYS_userfaultfd, "userfaultfd"},
-    {SYS_acct, "acct"}, {SYS_iopl, "iopl"}, {SYS_ioperm, "ioperm"},
-    {SYS_settimeofday, "settimeofday"}, {SYS_clock_settime, "clock_settime"},
-    {SYS_sethostname, "sethostname"}, {SYS_setdomainname, "setdomainname"},
+    int kind;
+} STOPPED_CALLS[] = {
+    {SYS_ptrace, "ptrace", ADMIN}, {SYS_process_vm_readv, "process_vm_readv", ADMIN},
+    {SYS_process_vm_writev, "process_vm_writev", ADMIN}, {SYS_mount, "mount", ADMIN},
+    {SYS_umount2, "umount2", ADMIN}, {SYS_pivot_root, "pivot_root", ADMIN},
+    {SYS_chroot, "chroot", ADMIN}, {SYS_unshare, "unshare", ADMIN}, {SYS_setns, "setns", ADMIN},
+    {SYS_bpf, "bpf", ADMIN}, {SYS_perf_event_open, "perf_event_open", ADMIN},
+    {SYS_kexec_load, "kexec_load", ADMIN}, {SYS_kexec_file_load, "kexec_file_load", ADMIN},
+    {SYS_init_module, "init_module", ADMIN}, {SYS_finit_module, "finit_module", ADMIN},
+    {SYS_delete_module, "delete_module", ADMIN}, {SYS_reboot, "reboot", ADMIN},
+    {SYS_swapon, "swapon", ADMIN}, {SYS_swapoff, "swapoff", ADMIN}, {SYS_keyctl, "keyctl", ADMIN},
+    {SYS_add_key, "add_key", ADMIN}, {SYS_request_key, "request_key", ADMIN},
+    {SYS_io_uring_setup, "io_uring_setup", ADMIN}, {SYS_io_uring_enter, "io_uring_enter", ADMIN},
+    {SYS_io_uring_register, "io_uring_register", ADMIN},
+    {SYS_userfaultfd, "userfaultfd", ADMIN}, {SYS_acct, "acct", ADMIN}, {SYS_iopl, "iopl", ADMIN},
+    {SYS_ioperm, "ioperm", ADMIN}, {SYS_settimeofday, "settimeofday", ADMIN},
+    {SYS_clock_settime, "clock_settime", ADMIN}, {SYS_sethostname, "sethostname", ADMIN},
+    {SYS_setdomainname, "setdomainname", ADMIN}, {SYS_pidfd_getfd, "pidfd_getfd", ADMIN},
+    {SYS_kcmp, "kcmp", ADMIN},
+    /* a file's mode, owner, times and extended attributes: no Landlock right covers them */
+    {SYS_chmod, "chmod", METADATA_FIRST}, {SYS_fchmod, "fchmod", METADATA_FD},
+    {SYS_fchmodat, "fchmodat", METADATA_SECOND}, {SYS_fchmodat2_, "fchmodat2", METADATA_SECOND},
+    {SYS_chown, "chown", METADATA_FIRST}, {SYS_fchown, "fchown", METADATA_FD},
+    {SYS_lchown, "lchown", METADATA_FIRST}, {SYS_fchownat, "fchownat", METADATA_SECOND},
+    {SYS_utime, "utime", METADATA_FIRST}, {SYS_utimes, "utimes", METADATA_FIRST},
+    {SYS_futimesat, "futimesat", METADATA_SECOND}, {SYS_utimensat, "utimensat", METADATA_SECOND},
+    {SYS_setxattr, "setxattr", METADATA_FIRST}, {SYS_lsetxattr, "lsetxattr", METADATA_FIRST},
+    {SYS_fsetxattr, "fsetxattr", METADATA_FD}, {SYS_removexattr, "removexattr", METADATA_FIRST},
+    {SYS_lremovexattr, "lremovexattr", METADATA_FIRST},
+    {SYS_fremovexattr, "fremovexattr", METADATA_FD},
+    {SYS_setxattrat_, "setxattrat", METADATA_SECOND},
+    {SYS_removexattrat_, "removexattrat", METADATA_SECOND},
 };
-enum { N_ADMIN = sizeof ADMIN / sizeof ADMIN[0] };
+enum { N_STOPPED_CALLS = sizeof STOPPED_CALLS / sizeof STOPPED_CALLS[0] };
+
+/* The ioctl requests and prctl options that stop the process, by name. */
+enum { TIOCSCTTY_ = 0x540E, TIOCSTI_ = 0x5412, TIOCLINUX_ = 0x541C };
+static const struct {
+    unsigned value;
+    const char *name;
+} TERMINAL_REQUESTS[] = {{TIOCSTI_, "TIOCSTI"}, {TIOCLINUX_, "TIOCLINUX"},
+                         {TIOCSCTTY_, "TIOCSCTTY"}},
+  PRCTL_OPTIONS[] = {{PR_SET_PDEATHSIG, "PR_SET_PDEATHSIG"}, {PR_SET_DUMPABLE, "PR_SET_DUMPABLE"},
+                     {PR_SET_MM, "PR_SET_MM"}, {0x59616d61, "PR_SET_PTRACER"}};
+enum { N_TERMINAL_REQUESTS = 3, N_PRCTL_OPTIONS = 4 };
 
 /* An open for writing: made again from the allowed instruction; Landlock's refusal stops. */
 static void reopen(greg_t *r, long nr, Line *line) {
@@ -170,6 +229,22 @@ static void reopen(greg_t *r, long nr, Line *line) {
     stop(line);
 }
 
+/* A metadata call is never made. Its file looked up (followed where it is a symbolic link):
+ * on the scratch folder's file system, the FMU's own, the call is reported done; where the
+ * lookup fails, that failure is its result (nothing changed either way); 1 if so. Anywhere
+ * else the process stops (0). */
+static int metadata_answered(greg_t *r, int kind) {
+    struct stat status;
+    long path = kind == METADATA_FIRST ? r[REG_RDI] : kind == METADATA_SECOND ? r[REG_RSI] : 0;
+    long found = path != 0 ? sandbox_syscall(SYS_newfstatat, kind == METADATA_FIRST ? AT_FDCWD
+                                                              : r[REG_RDI],
+                                             path, (long)&status, 0, 0, 0)
+                           : sandbox_syscall(SYS_fstat, r[REG_RDI], (long)&status, 0, 0, 0, 0);
+    if (found == 0 && status.st_dev != scratch_device) return 0;
+    r[REG_RAX] = found;
+    return 1;
+}
+
 static void on_sigsys(int number, siginfo_t *info, void *context) {
     (void)number;
     greg_t *r = ((ucontext_t *)context)->uc_mcontext.gregs;
@@ -179,6 +254,10 @@ static void on_sigsys(int number, siginfo_t *info, void *context) {
         reopen(r, nr, &line);
         return;
     }
+    for (int k = 0; k < N_STOPPED_CALLS; k++)
+        if (STOPPED_CALLS[k].nr == nr && STOPPED_CALLS[k].kind != ADMIN &&
+            metadata_answered(r, STOPPED_CALLS[k].kind))
+            return;
     if (nr == SYS_socket) {
         add(&line, "it tried to open a network socket (address family ");
         add_number(&line, (unsigned long long)r[REG_RDI]);
@@ -197,13 +276,47 @@ static void on_sigsys(int number, siginfo_t *info, void *context) {
         add(&line, " MB, over its memory limit of ");
         add_number(&line, memory_limit >> 20);
         add(&line, " MB");
-    } else {
-        const char *name = "a system call";
-        for (int k = 0; k < N_ADMIN; k++)
-            if (ADMIN[k].nr == nr) name = ADMIN[k].name;
-        add(&line, "it made a forbidden system call (");
+    } else if (nr == SYS_ioctl) {
+        const char *name = "?";
+        for (int k = 0; k < N_TERMINAL_REQUESTS; k++)
+            if (TERMINAL_REQUESTS[k].value == (unsigned)r[REG_RSI]) name = TERMINAL_REQUESTS[k].name;
+        add(&line, "it tried to push input into a terminal (ioctl ");
         add(&line, name);
         add(&line, ")");
+    } else if (nr == SYS_prlimit64) {
+        add(&line, "it tried to change the limits of process ");
+        add_number(&line, (unsigned long long)r[REG_RDI]);
+        add(&line, " (prlimit64)");
+    } else if (nr == SYS_prctl) {
+        const char *name = "?";
+        for (int k = 0; k < N_PRCTL_OPTIONS; k++)
+            if (PRCTL_OPTIONS[k].value == (unsigned)r[REG_RDI]) name = PRCTL_OPTIONS[k].name;
+        add(&line, (unsigned)r[REG_RDI] == PR_SET_PDEATHSIG
+                       ? "it tried to outlive flexff (prctl "
+                       : "it made a forbidden system call (prctl ");
+        add(&line, name);
+        add(&line, ")");
+    } else {
+        int k = 0;
+        while (k < N_STOPPED_CALLS && STOPPED_CALLS[k].nr != nr) k++;
+        const char *name = k < N_STOPPED_CALLS ? STOPPED_CALLS[k].name : "a system call";
+        int kind = k < N_STOPPED_CALLS ? STOPPED_CALLS[k].kind : ADMIN;
+        if (kind == ADMIN) {
+            add(&line, "it made a forbidden system call (");
+            add(&line, name);
+            add(&line, ")");
+        } else {
+            add(&line, "it tried to change a file's mode, owner, times or attributes (");
+            add(&line, name);
+            const char *path = (const char *)(kind == METADATA_FIRST    ? r[REG_RDI]
+                                              : kind == METADATA_SECOND ? r[REG_RSI]
+                                                                        : 0);
+            if (path != NULL) {
+                add(&line, " ");
+                add_path(&line, path);
+            }
+            add(&line, ")");
+        }
     }
     stop(&line);
 }
@@ -267,6 +380,14 @@ static void open_call(Filter *f, int nr, int k) {
     emit(f, RETURN(ALLOW));
 }
 
+/* Trap when argument k (its low 32 bits) is one of `values`, else allow. */
+static void trap_if_one_of(Filter *f, int k, const unsigned *values, unsigned char n) {
+    emit(f, LOAD(ARG_LO(k)));
+    for (unsigned char i = 0; i < n; i++) emit(f, IF(values[i], (unsigned char)(n - i), 0));
+    emit(f, RETURN(ALLOW));
+    emit(f, RETURN(TRAP));
+}
+
 static int install_filter(void) {
     Filter f = {.n = 0};
     emit(&f, LOAD(offsetof(struct seccomp_data, arch)));
@@ -307,16 +428,31 @@ static int install_filter(void) {
     open_call(&f, SYS_openat, 2);
     open_call(&f, SYS_open, 1);
     open_call(&f, SYS_creat, -1);
-    static const int stopped[] = {SYS_fork, SYS_vfork, SYS_execve, SYS_execveat};
-    for (size_t k = 0; k < sizeof stopped / sizeof stopped[0]; k++) {
-        on_call(&f, stopped[k], 1);
-        emit(&f, RETURN(TRAP));
-    }
-    for (int k = 0; k < N_ADMIN; k++) {
-        on_call(&f, ADMIN[k].nr, 1);
-        emit(&f, RETURN(TRAP));
-    }
+    unsigned requests[N_TERMINAL_REQUESTS], options[N_PRCTL_OPTIONS];
+    for (int k = 0; k < N_TERMINAL_REQUESTS; k++) requests[k] = TERMINAL_REQUESTS[k].value;
+    for (int k = 0; k < N_PRCTL_OPTIONS; k++) options[k] = PRCTL_OPTIONS[k].value;
+    on_call(&f, SYS_ioctl, N_TERMINAL_REQUESTS + 3);
+    trap_if_one_of(&f, 1, requests, N_TERMINAL_REQUESTS);
+    on_call(&f, SYS_prctl, N_PRCTL_OPTIONS + 3);
+    trap_if_one_of(&f, 0, options, N_PRCTL_OPTIONS);
+    /* prlimit64 of another process (the master's CPU time, say): libc asks for its own, 0 */
+    on_call(&f, SYS_prlimit64, 6);
+    emit(&f, LOAD(ARG_LO(0)));
+    emit(&f, IF(0, 0, 3));
+    emit(&f, LOAD(ARG_HI(0)));
+    emit(&f, IF(0, 0, 1));
     emit(&f, RETURN(ALLOW));
+    emit(&f, RETURN(TRAP));
+    /* the calls stopped whatever their arguments: one comparison each, one trap for all */
+    static const int processes[] = {SYS_fork, SYS_vfork, SYS_execve, SYS_execveat};
+    enum { N_PROCESSES = sizeof processes / sizeof processes[0] };
+    unsigned char left = N_PROCESSES + N_STOPPED_CALLS;
+    emit(&f, LOAD(NR));
+    for (int k = 0; k < N_PROCESSES; k++, left--) emit(&f, IF((unsigned)processes[k], left, 0));
+    for (int k = 0; k < N_STOPPED_CALLS; k++, left--)
+        emit(&f, IF((unsigned)STOPPED_CALLS[k].nr, left, 0));
+    emit(&f, RETURN(ALLOW));
+    emit(&f, RETURN(TRAP));
     if (f.n >= MAX_FILTER) return -1;
 
     struct sigaction action;
@@ -352,26 +488,51 @@ static void add_id_map(Line *line, unsigned id) {
     line->text[line->n] = '\0';
 }
 
-/* A user namespace that maps this user to itself, and a network namespace in it. */
-static int enter_namespaces(void) {
+/* A user namespace that maps this user to itself, and network, IPC and mount namespaces in
+ * it; in the last, `scratch` becomes a tmpfs of `scratch_bytes` (its quota; <= 0: none) and
+ * the working folder. The HOLD_* layers that hold. */
+static int enter_namespaces(const char *scratch, long long scratch_bytes) {
     unsigned uid = (unsigned)getuid(), gid = (unsigned)getgid();
-    if (unshare(CLONE_NEWUSER | CLONE_NEWNET | CLONE_NEWIPC) != 0) return -1;
+    if (unshare(CLONE_NEWUSER | CLONE_NEWNET | CLONE_NEWIPC | CLONE_NEWNS) != 0) return 0;
     Line uid_map = {{0}, 0}, gid_map = {{0}, 0};
     add_id_map(&uid_map, uid);
     add_id_map(&gid_map, gid);
     if (write_file("/proc/self/setgroups", "deny") != 0 ||
         write_file("/proc/self/uid_map", uid_map.text) != 0 ||
         write_file("/proc/self/gid_map", gid_map.text) != 0)
-        return -1;
+        return 0;
+    int held = HOLD_NAMESPACES;
+    if (scratch_bytes > 0) {
+        Line options = {{0}, 0};
+        add(&options, "size=");
+        add_number(&options, (unsigned long long)scratch_bytes);
+        add(&options, ",mode=700");
+        options.text[options.n] = '\0';
+        if (mount("flexff-scratch", scratch, "tmpfs", MS_NOSUID | MS_NODEV, options.text) == 0 &&
+            chdir(scratch) == 0)
+            held |= HOLD_SCRATCH_QUOTA;
+    }
     struct __user_cap_header_struct header = {_LINUX_CAPABILITY_VERSION_3, 0};
     struct __user_cap_data_struct none[2];
     memset(none, 0, sizeof none);
-    return (int)syscall(SYS_capset, &header, none); /* the namespace's capabilities dropped */
+    if (syscall(SYS_capset, &header, none) != 0) return 0; /* the namespace's capabilities */
+    return held;
 }
 
-static int set_limits(double cpu_seconds) {
-    struct rlimit memory = {memory_limit, memory_limit}, no_core = {0, 0};
-    int failed = setrlimit(RLIMIT_DATA, &memory) | setrlimit(RLIMIT_CORE, &no_core);
+static int set_limits(double cpu_seconds, long long file_bytes, long threads) {
+    rlim_t space = memory_limit + ADDRESS_SLACK;
+    struct rlimit memory = {memory_limit, memory_limit}, address = {space, space},
+                  no_core = {0, 0};
+    int failed = setrlimit(RLIMIT_DATA, &memory) | setrlimit(RLIMIT_AS, &address) |
+                 setrlimit(RLIMIT_CORE, &no_core);
+    if (file_bytes > 0) {
+        struct rlimit file = {(rlim_t)file_bytes, (rlim_t)file_bytes};
+        failed |= setrlimit(RLIMIT_FSIZE, &file);
+    }
+    if (threads > 0) {
+        struct rlimit tasks = {(rlim_t)threads, (rlim_t)threads};
+        failed |= setrlimit(RLIMIT_NPROC, &tasks);
+    }
     if (cpu_seconds > 0) {
         rlim_t soft = (rlim_t)(cpu_seconds + 0.999);
         struct rlimit cpu = {soft, soft + 1};
@@ -383,45 +544,69 @@ static int set_limits(double cpu_seconds) {
 static int add_beneath(int ruleset, const char *path, uint64_t allowed) {
     int fd = open(path, O_PATH | O_CLOEXEC);
     if (fd < 0) return -1;
+    struct stat status;
+    if (fstat(fd, &status) == 0 && !S_ISDIR(status.st_mode)) /* a file: its rights only */
+        allowed &= FS_EXECUTE | FS_WRITE_FILE | FS_READ_FILE | FS_TRUNCATE | FS_IOCTL_DEV;
     struct path_beneath rule = {allowed, fd};
     int result = (int)syscall(LANDLOCK_ADD_RULE, ruleset, LANDLOCK_PATH_BENEATH, &rule, 0);
     close(fd);
     return result;
 }
 
-/* Writes beneath `scratch` only; with ABI 4 no TCP, with ABI 6 no reach outside. */
-static int landlock(const char *scratch) {
+/* Writes beneath `scratch` only; with ABI 4 no TCP, with ABI 6 no reach outside; where
+ * `readable` is given (paths, each ended by a NUL, the list by an empty one), reads beneath
+ * them (and `scratch`) only. */
+static int landlock(const char *scratch, const char *readable) {
     long abi = syscall(LANDLOCK_CREATE_RULESET, NULL, 0, LANDLOCK_VERSION_FLAG);
     if (abi < 1) return 0;
-    uint64_t writes = FS_WRITES | (abi >= 2 ? FS_REFER : 0) | (abi >= 3 ? FS_TRUNCATE : 0);
-    struct ruleset attr = {writes, abi >= 4 ? NET_TCP : 0, abi >= 6 ? SCOPES : 0};
+    uint64_t writes = FS_WRITES | (abi >= 2 ? FS_REFER : 0) | (abi >= 3 ? FS_TRUNCATE : 0) |
+                      (abi >= 5 ? FS_IOCTL_DEV : 0); /* ioctl on a device it opens: a terminal */
+    uint64_t reads = readable != NULL ? FS_READS : 0;
+    struct ruleset attr = {writes | reads, abi >= 4 ? NET_TCP : 0, abi >= 6 ? SCOPES : 0};
     size_t size = abi >= 6 ? sizeof attr : abi >= 4 ? 2 * sizeof(uint64_t) : sizeof(uint64_t);
     int ruleset = (int)syscall(LANDLOCK_CREATE_RULESET, &attr, size, 0);
     if (ruleset < 0) return 0;
     int held = 0;
     uint64_t file_writes = FS_WRITE_FILE | (abi >= 3 ? FS_TRUNCATE : 0);
-    if (add_beneath(ruleset, scratch, writes) == 0 &&
-        add_beneath(ruleset, "/dev/null", file_writes) == 0 &&
-        syscall(LANDLOCK_RESTRICT_SELF, ruleset, 0) == 0)
+    int failed = add_beneath(ruleset, scratch, writes | reads) |
+                 add_beneath(ruleset, "/dev/null", file_writes | reads);
+    add_beneath(ruleset, "/proc/self", file_writes | reads); /* its own: a thread's name */
+    for (const char *path = readable; path != NULL && *path; path += strlen(path) + 1)
+        add_beneath(ruleset, path, reads); /* one that is not there is left out */
+    if (failed == 0 && syscall(LANDLOCK_RESTRICT_SELF, ruleset, 0) == 0)
         held = HOLD_LANDLOCK_FILES | (abi >= 4 ? HOLD_LANDLOCK_NETWORK : 0) |
-               (abi >= 6 ? HOLD_LANDLOCK_SCOPE : 0);
+               (abi >= 6 ? HOLD_LANDLOCK_SCOPE : 0) | (reads ? HOLD_LANDLOCK_READS : 0);
     close(ruleset);
     return held;
 }
 
-/* Confine this process: `scratch` the only folder it writes to, `memory` bytes of private
- * writable memory, `cpu_seconds` of CPU time (<= 0: unbounded), the report of a stopped
- * attempt on `report`. Returns the HOLD_* layers that hold. */
+/* Confine this process: `scratch` the only folder it writes to (a tmpfs of `scratch_bytes`
+ * where the namespaces hold), `memory` bytes of private writable memory, `cpu_seconds` of CPU
+ * time (<= 0: unbounded), `threads` threads at most (RLIMIT_NPROC, in its own user namespace
+ * only; it does not bind root),
+ * the report of a stopped attempt on `report`, reads beneath `readable` only where given
+ * (landlock). Returns the HOLD_* layers that hold. */
 __attribute__((visibility("default"))) int sandbox_enter(const char *scratch, long long memory,
-                                                         double cpu_seconds, int report) {
+                                                         double cpu_seconds, int report,
+                                                         long long scratch_bytes, long threads,
+                                                         const char *readable) {
     report_fd = report;
     memory_limit = (unsigned long long)memory;
     int held = 0;
-    if (enter_namespaces() == 0) held |= HOLD_NAMESPACES;
-    if (set_limits(cpu_seconds) == 0) held |= HOLD_LIMITS;
+    if (setsid() >= 0 || getsid(0) == getpid()) held |= HOLD_SESSION;
+    /* the kernel's choice when memory runs out, before flexff: the memory it holds outside
+     * its address space (a tmpfs, memfds) is not counted in flexff's favour otherwise */
+    write_file("/proc/self/oom_score_adj", "1000");
+    held |= enter_namespaces(scratch, scratch_bytes);
+    /* RLIMIT_NPROC counts the user's processes in its user namespace: in the sandbox's own,
+     * the FMU's threads; in the user's, every process of theirs, which it must not bound */
+    long tasks = held & HOLD_NAMESPACES ? threads : 0;
+    if (set_limits(cpu_seconds, scratch_bytes, tasks) == 0) held |= HOLD_LIMITS;
+    struct stat scratch_status;
+    scratch_device = stat(scratch, &scratch_status) == 0 ? scratch_status.st_dev : (dev_t)-1;
     if (prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0) != 0) return held;
     held |= HOLD_NO_NEW_PRIVILEGES;
-    held |= landlock(scratch);
+    held |= landlock(scratch, readable);
 #if defined(__x86_64__)
     if (install_filter() == 0) held |= HOLD_SECCOMP;
 #endif

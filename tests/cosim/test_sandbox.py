@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from flexff.cli import main
+from flexff.cosim.child_output import OutputRelay
 from flexff.cosim.config import parse_config, with_isolation
 from flexff.cosim.isolation import LENGTH, MESSAGE_LIMIT, IsolatedInstance
 from flexff.cosim.master import CosimError
@@ -129,7 +130,9 @@ def _fake_child(tmp_path, reply: bytes) -> IsolatedInstance:
     sent.write_bytes(reply)
     read = os.open(sent, os.O_RDONLY)
     instance.name, instance.timeout, instance._ack, instance._timed_out = "p", 5.0, read, False
+    instance._broken = False
     instance._process = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    instance._output = OutputRelay(os.open(os.devnull, os.O_RDONLY), "p")
     return instance
 
 
@@ -154,6 +157,10 @@ def test_a_child_that_breaks_the_protocol_is_stopped(tmp_path, reply, why):
     ('isolate = true\nsandbox_cpu = -1', "fmu.p.sandbox_cpu"),
     ('isolate = true\nsandbox = false\nsandbox_memory = 100',
      "fmu.p.sandbox_memory: is a limit of the sandbox, which sandbox = false turns off"),
+    ('isolate = true\nsandbox_scratch = 0', "fmu.p.sandbox_scratch"),
+    ('isolate = true\nsandbox_read = "/etc"', "fmu.p.sandbox_read: expected a list of paths"),
+    ('isolate = true\nsandbox_read = ["no/such/folder"]',
+     "fmu.p.sandbox_read: no such file or folder: no/such/folder"),
 ])
 def test_bad_sandbox_keys_name_their_key(probe, fmu, message):
     with pytest.raises(ConfigError, match=message.replace("(", r"\(")):
@@ -162,8 +169,11 @@ def test_bad_sandbox_keys_name_their_key(probe, fmu, message):
 
 
 def test_the_keys_reach_the_fmu_and_survive_expansion(probe):
-    config = probe_config(probe, "nothing", extra="sandbox_memory = 512\nsandbox_cpu = 30")
-    assert config.fmus[0].sandbox == Sandbox(512.0, 30.0)
-    assert with_isolation(config, True, None).fmus[0].sandbox == Sandbox(512.0, 30.0)
+    keys = ('sandbox_memory = 512\nsandbox_cpu = 30\nsandbox_scratch = 64\n'
+            f'sandbox_read = ["{probe}"]')
+    config = probe_config(probe, "nothing", extra=keys)
+    limits = Sandbox(512.0, 30.0, 64.0, read=(probe,))
+    assert config.fmus[0].sandbox == limits
+    assert with_isolation(config, True, None).fmus[0].sandbox == limits
     assert with_isolation(config, True, None, False).fmus[0].sandbox is None
     assert probe_config(probe, "nothing", extra="sandbox = false").fmus[0].sandbox is None
