@@ -6,6 +6,9 @@
 # and an example machine's evaluation on CUDA, with the GPU's busy share read all along.
 #
 # Run from the repository root:  OUT=folder bash docs/results/training/gpu_check.sh
+# with flexff installed (pip install --no-deps -e .: its built-in FMUs are entry points) or,
+# where nothing can be installed, the checkout's flexff.egg-info and the missing packages on
+# PYTHONPATH.
 # Settings: PYTHON (default python3), EPOCHS of the short evaluation (default 8), BUDGET in
 # seconds the whole check must end within (default 580). Every phase writes to $OUT as it goes,
 # so what ran is kept when the budget cuts one short. docs/results/training/gpu_check.py turns
