@@ -34,16 +34,20 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("files", type=Path, help="what gpu_check.sh wrote ($OUT)")
     parser.add_argument("--cpu-evaluation", type=Path, required=True,
-                        help="the short thesis evaluation's folder, run on the CPU")
+                        help="the short thesis evaluation's folder, run on the CPU (where it "
+                             "holds no co-simulation, CUDA's figures stand alone)")
     parser.add_argument("--cpu-drive", type=Path, required=True,
                         help="the example drive's evaluation folder, run on the CPU")
     parser.add_argument("--commit", required=True)
     parser.add_argument("--date", required=True)
     parser.add_argument("--machine", required=True)
+    parser.add_argument("--note", action="append", default=[],
+                        help="a line on how the check ran, kept with the figures")
     parser.add_argument("-o", "--output", type=Path, required=True)
     args = parser.parse_args()
     figures = check_figures(args.files, args.cpu_evaluation, args.cpu_drive)
-    figures = {"date": args.date, "commit": args.commit, "machine": args.machine, **figures}
+    figures = {"date": args.date, "commit": args.commit, "machine": args.machine,
+               "notes": args.note, **figures}
     args.output.write_text(json.dumps(figures, indent=2) + "\n")
 
 
@@ -68,12 +72,13 @@ def check_figures(files: Path, cpu_evaluation: Path, cpu_drive: Path) -> dict[st
         on_cpu = _e2_ratios({str(path.relative_to(cpu)): path.read_bytes()
                              for path in [*cpu.glob("cosim/*/metrics.json"),
                                           *cpu.glob("summary.json")]})
-        if on_cuda and on_cpu:
+        if on_cuda:  # and the CPU's beside, where it ran
             figures.setdefault("e2_ratio", {})[name] = {
-                scenario: {axis: {"cpu": on_cpu[scenario][axis], "cuda": ratio,
-                                  "change": ratio / on_cpu[scenario][axis] - 1}
+                scenario: {axis: {"cuda": ratio, **({"cpu": on_cpu[scenario][axis],
+                                                     "change": ratio / on_cpu[scenario][axis] - 1}
+                                                    if scenario in on_cpu else {})}
                            for axis, ratio in axes.items()}
-                for scenario, axes in on_cuda.items() if scenario in on_cpu}
+                for scenario, axes in on_cuda.items()}
     return figures
 
 
