@@ -29,6 +29,8 @@ from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
+WORK = r"/tmp/tmp\.\w+/"  # gpu_check.sh's work folder (mktemp -d), named WORK in the figures
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -199,7 +201,7 @@ def _evaluation(log: list[tuple[float, str]], gpu: list[tuple[float, float, floa
     wall = end - start
     return {"epochs": {name: m["epochs"] for name, (_, m) in written.items()},
             "graphs": variant == "cuda_graphs", "wall_s": round(wall, 1),
-            **({"stopped_by": errors[0]} if errors else {}),
+            **({"stopped_by": re.sub(WORK, "WORK/", errors[0])} if errors else {}),
             "phases_s": _log_phases(log, start),
             "training_s": round(training_s, 1),
             "gpu_busy_training": _busy(gpu, trained[0], exported[0]),
