@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     from flexff.learning.evaluate import TrainedScenario
 
 # epochs per run on CUDA (the first is a warm-up, left out) and on the CPU (no warm-up to
-# speak of; an epoch of the thesis preset took 1.3 to 1.9 s on 16 cores, 12 to 76 s on 2)
+# speak of; an epoch of the thesis preset took 12 to 76 s on 2 cores)
 EPOCHS = {"cuda": {"fast": 4, "thesis": 3}, "cpu": {"fast": 2, "thesis": 1}}
 SHARING_EPOCHS = 4  # epochs of each run when several share the GPU
 # the CUDA variants timed with several trainings sharing the GPU: figures key -> settings
