@@ -8,10 +8,10 @@ run: the seconds from the process's start to its first epoch, the median seconds
 after the first, and on CUDA the GPU's busy share and peak memory. On CUDA the thesis preset
 runs eagerly, replaying CUDA graphs (learning.training_step), under bf16 autocast (the
 mixed-precision candidate), and as several trainings sharing the GPU
-(learning.workers.TRAININGS_PER_GPU). The estimate of a whole evaluation's training multiplies
-each training's epochs and members by its seconds per epoch, and divides by the trainings that
-share the GPU. A run that fails is a figure too (its error); when every one fails the bench
-stops with the first one's error.
+(learning.workers.TRAININGS_PER_GPU), eagerly and replaying graphs. The estimate of a whole
+evaluation's training multiplies each training's epochs and members by its seconds per epoch,
+and divides by the speed-up of the trainings sharing the GPU. A run that fails is a figure
+too (its error); when every one fails the bench stops with the first one's error.
 """
 
 from __future__ import annotations
@@ -37,9 +37,11 @@ if TYPE_CHECKING:
     from flexff.learning.evaluate import TrainedScenario
 
 # epochs per run on CUDA (the first is a warm-up, left out) and on the CPU (no warm-up to
-# speak of; an epoch of the thesis preset took 1.3 to 1.9 s on 16 cores, 12 to 76 s on 2)
+# speak of; an epoch of the thesis preset took 12 to 76 s on 2 cores)
 EPOCHS = {"cuda": {"fast": 4, "thesis": 3}, "cpu": {"fast": 2, "thesis": 1}}
 SHARING_EPOCHS = 4  # epochs of each run when several share the GPU
+# the CUDA variants timed with several trainings sharing the GPU: figures key -> settings
+SHARED = {"sharing_graphs": {"cuda_graphs": True}, "sharing": {"cuda_graphs": False}}
 UTILISATION_S = 0.05  # how often the GPU's busy share is read during a run
 # FeatureConfig settings that change the data's values but not how much of it there is, nor
 # the network's size: trainings that differ in these alone (a scenario on ILC labels and its
@@ -56,8 +58,9 @@ def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis")
                        ) -> dict[str, Any]:
     """Time the trainings of `presets` x `models` (default: all) on the dataset folder
     `data` with the settings of the evaluation of its set (sim or hardware), on CUDA and the
-    CPU; on CUDA the thesis preset (the one meant for a GPU) with bf16 autocast too, and its
-    runs by `sharing` processes side by side; JSON-ready figures, also given to `save` as
+    CPU; on CUDA eagerly and, for the thesis preset (the one meant for a GPU), replaying CUDA
+    graphs and with bf16 autocast too, and its runs by `sharing` processes side by side, eager
+    and replaying graphs; JSON-ready figures, also given to `save` as
     they grow (nothing measured is lost when the bench is stopped)."""
     import torch
 
@@ -96,7 +99,8 @@ def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis")
                              Path(scratch) / f"{preset}-{scenario.name}-{name}", device,
                              "bf16" if variant == "bf16" else "float32", EPOCHS[device][preset],
                              {**scenario.overrides,
-                              **({"cuda_graphs": True} if variant == "graphs" else {})})
+                              **({"cuda_graphs": variant == "graphs"} if device == "cuda"
+                                 else {})})
             for listed, entry in figures["presets"][preset].items():
                 if entry.get("timed_as", listed) == scenario.name:
                     entry[name] = run
@@ -107,12 +111,17 @@ def training_benchmark(data: Path, presets: tuple[str, ...] = ("fast", "thesis")
         if all(failed):
             raise InputError(f"{data}: no training ran here: {failed[0]}")
         if cuda and len(sharing) > 1 and "thesis" in presets:
-            figures["sharing"] = _sharing(data, scenarios["thesis"], sharing, Path(scratch))
+            for key, settings in SHARED.items():
+                figures[key] = _sharing(data, scenarios["thesis"], sharing,
+                                        Path(scratch) / key, settings)
+                if save is not None:
+                    save(figures)
     for preset, entries in figures["presets"].items():
         for entry in entries.values():
             entry.update(_ratios(entry))
         figures.setdefault("estimate_s", {})[preset] = _estimate(
-            entries, figures.get("sharing") if preset == "thesis" else None)
+            entries, {"cuda": figures.get("sharing"), "cuda_graphs": figures.get("sharing_graphs")}
+            if preset == "thesis" else {})
     return figures
 
 
@@ -164,9 +173,11 @@ def _entry(scenario: TrainedScenario, preset: str, timed_as: dict[str, str]) -> 
     return entry
 
 
-def _estimate(entries: dict[str, Any], sharing: dict[str, Any] | None) -> dict[str, float]:
+def _estimate(entries: dict[str, Any], sharing: dict[str, dict[str, Any] | None]
+              ) -> dict[str, float]:
     """Seconds of a whole evaluation's training: on the CPU, each run on its own cores; on
-    CUDA, one after another, and shared as the sharing figures measured."""
+    each CUDA variant (eager 'cuda', 'cuda_graphs'), one after another, and shared as that
+    variant's figures in `sharing` measured."""
     def total(device: str) -> float:
         return float(sum(e["members"] * (e[device]["start_s"] + e["epochs"] * e[device]["epoch_s"])
                          for e in entries.values()))
@@ -174,31 +185,69 @@ def _estimate(entries: dict[str, Any], sharing: dict[str, Any] | None) -> dict[s
     if not all("epoch_s" in e["cpu"] for e in entries.values()):
         return {}
     estimate = {"cpu_one_after_another": total("cpu")}
-    if all("epoch_s" in e.get("cuda", {}) for e in entries.values()):
-        estimate["cuda_one_after_another"] = total("cuda")
-        if sharing:
-            best = max(sharing["speedup"].values())
-            estimate["cuda_shared"] = total("cuda") / best
+    for variant in ("cuda", "cuda_graphs"):
+        if all("epoch_s" in e.get(variant, {}) for e in entries.values()):
+            estimate[f"{variant}_one_after_another"] = total(variant)
+            if shared := sharing.get(variant):
+                best = max(shared["speedup"].values())
+                estimate[f"{variant}_shared"] = total(variant) / best
     return estimate
 
 
-def _sharing(data: Path, scenarios: list[TrainedScenario], counts: tuple[int, ...], scratch: Path
-             ) -> dict[str, Any]:
-    """The thesis preset's trainings of `scenarios`, SHARING_EPOCHS each, by each of
-    `counts` processes side by side on the one GPU: the wall time of each count and its
-    speedup over the first."""
+def _sharing(data: Path, scenarios: list[TrainedScenario], counts: tuple[int, ...], scratch: Path,
+             settings: dict[str, Any]) -> dict[str, Any]:
+    """The thesis preset's trainings of `scenarios` with `settings`, SHARING_EPOCHS each, by
+    each of `counts` processes side by side on the one GPU: the wall time of each count, its
+    speedup over the first, and the GPU's busy share meanwhile."""
     from flexff.learning.workers import TrainJob, train_parallel
 
-    walls = {}
+    walls, busy = {}, {}
     for count in counts:
         jobs = [TrainJob(s.kind, "thesis", data, scratch / f"share{count}" / s.name,
-                         {**s.overrides, "epochs": SHARING_EPOCHS}) for s in scenarios]
+                         {**s.overrides, **settings, "epochs": SHARING_EPOCHS})
+                for s in scenarios]
         start = time.perf_counter()
-        train_parallel(jobs, workers=count, progress=False, device="cuda")
+        with _BusyShare() as share:
+            train_parallel(jobs, workers=count, progress=False, device="cuda")
         walls[str(count)] = time.perf_counter() - start
+        busy[str(count)] = share.mean()
     first = walls[str(counts[0])]
     return {"runs": len(scenarios), "epochs": SHARING_EPOCHS, "wall_s": walls,
-            "speedup": {count: first / wall for count, wall in walls.items()}}
+            "speedup": {count: first / wall for count, wall in walls.items()},
+            "gpu_busy": busy}
+
+
+class _BusyShare:
+    """The GPU's busy share (torch.cuda.utilization, from NVML), read every UTILISATION_S
+    by a thread while the block runs: each reading's time and share [0, 1]."""
+
+    def __init__(self) -> None:
+        self.readings: list[tuple[float, float]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._sample, daemon=True)
+
+    def __enter__(self) -> _BusyShare:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def _sample(self) -> None:
+        import torch
+
+        while not self._stop.wait(UTILISATION_S):
+            try:
+                self.readings.append((time.time(), torch.cuda.utilization() / 100))
+            except Exception:  # no NVML here (nvidia-ml-py): no busy share
+                return
+
+    def mean(self, since: float = 0.0, until: float = float("inf")) -> float | None:
+        """The mean share of the readings from `since` to `until` (None where there are
+        none)."""
+        during = [share for when, share in self.readings if since <= when <= until]
+        return statistics.mean(during) if during else None
 
 
 def _timed_run(kind: str, preset: str, data: Path, out: Path, device: str, precision: str,
@@ -221,7 +270,8 @@ def _timed_run(kind: str, preset: str, data: Path, out: Path, device: str, preci
     timed = seconds[1:] or seconds
     return {"start_s": child["first_epoch_start"] - spawned,
             "epoch_s": statistics.median(timed), "epochs_timed": len(seconds),
-            **{k: child[k] for k in ("gpu_busy", "gpu_memory_gb", "val", "cuda_graphs")}}
+            **{k: child[k] for k in ("gpu_busy", "gpu_memory_gb", "val", "device",
+                                     "cuda_graphs")}}
 
 
 def _child(request: dict[str, Any]) -> dict[str, Any]:
@@ -231,34 +281,21 @@ def _child(request: dict[str, Any]) -> dict[str, Any]:
     from flexff.learning.train import train
 
     ends: list[float] = []
-    busy: list[tuple[float, int]] = []
-    stop = threading.Event()
-    cuda = request["device"] == "cuda"
-
-    def sample() -> None:
-        while not stop.wait(UTILISATION_S):
-            try:
-                busy.append((time.time(), torch.cuda.utilization()))
-            except Exception:  # no NVML here (nvidia-ml-py): no busy share
-                return
-
-    sampler = threading.Thread(target=sample, daemon=True)
-    if cuda:
-        sampler.start()
+    share = _BusyShare() if request["device"] == "cuda" else None
     autocast = torch.autocast("cuda", dtype=torch.bfloat16) \
         if request["precision"] == "bf16" else nullcontext()
-    with autocast:
+    with autocast, share or nullcontext():
         metrics = train(request["kind"], request["preset"], request["data"], request["out"],
                         progress=False, on_epoch=lambda _: ends.append(time.time()),
-                        **request["overrides"])
-    stop.set()
+                        device=request["device"], **request["overrides"])
     seconds = metrics["history"]["seconds"]
     first_start = ends[0] - seconds[0]
-    during = [share for when, share in busy if first_start <= when <= ends[-1]]
     return {"first_epoch_start": first_start, "seconds": seconds,
-            "val": metrics["history"]["val"][-1], "cuda_graphs": metrics["cuda_graphs"],
-            "gpu_busy": statistics.mean(during) / 100 if during else None,
-            "gpu_memory_gb": torch.cuda.max_memory_allocated() / 1e9 if cuda else None}
+            "val": metrics["history"]["val"][-1], "device": metrics["device"],
+            "cuda_graphs": metrics["cuda_graphs"],
+            "gpu_busy": share.mean(first_start, ends[-1]) if share is not None else None,
+            "gpu_memory_gb": torch.cuda.max_memory_allocated() / 1e9 if share is not None
+            else None}
 
 
 if __name__ == "__main__":

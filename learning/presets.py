@@ -48,7 +48,7 @@ class TrainConfig:
     device: str = "auto"  # "auto": CUDA when available, else CPU
     threads: int = 0  # CPU threads; 0: half the cores granted, at least one (learning.threads)
     # on CUDA, each training step replayed from a CUDA graph (learning.training_step); off
-    # by default until measured on a GPU (docs/how-to/gpu.md)
+    # by default: on an H200 its TCN trained otherwise than eager steps (docs/how-to/gpu.md)
     cuda_graphs: bool = False
 
     def __post_init__(self) -> None:

@@ -23,7 +23,21 @@ def test_a_timed_run_gives_its_start_and_seconds_per_epoch(data, tmp_path):
     assert run["epochs_timed"] == 3
     assert 0 < run["epoch_s"] < run["start_s"] < 60  # the start holds imports and data
     assert run["gpu_busy"] is None and run["gpu_memory_gb"] is None
-    assert run["val"] > 0
+    assert run["val"] > 0 and run["device"] == "cpu"
+
+
+def test_a_run_on_the_cpu_trains_there_where_cuda_is_available(data, tmp_path, monkeypatch):
+    """The CPU's figures are the CPU's: a run asked for on the CPU does not take the default
+    device, which is CUDA wherever a GPU is (the bench's CPU runs trained on the GPU so)."""
+    import torch
+
+    from flexff.training_bench import _child
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    child = _child({"kind": "tcn", "preset": "fast", "data": str(data),
+                    "out": str(tmp_path / "run"), "device": "cpu", "precision": "float32",
+                    "overrides": {**TINY, "epochs": 1}})
+    assert child["device"] == "cpu" and not child["cuda_graphs"]
 
 
 def test_a_failed_run_is_kept_as_its_error(data, tmp_path):
@@ -32,20 +46,25 @@ def test_a_failed_run_is_kept_as_its_error(data, tmp_path):
     assert set(run) == {"error"} and run["error"]
 
 
-def test_the_estimate_adds_each_runs_epochs_and_members_and_divides_by_sharing():
+def test_the_estimate_adds_each_runs_epochs_and_members_and_divides_by_its_sharing():
     entries = {"tcn": {"epochs": 100, "members": 1,
                        "cpu": {"start_s": 5.0, "epoch_s": 2.0},
                        "cuda": {"start_s": 3.0, "epoch_s": 0.1}},
                "pgnn": {"epochs": 10, "members": 5,
                         "cpu": {"start_s": 5.0, "epoch_s": 1.0},
-                        "cuda": {"start_s": 3.0, "epoch_s": 0.5}}}
-    sharing = {"speedup": {"1": 1.0, "4": 2.5}}
+                        "cuda": {"start_s": 3.0, "epoch_s": 0.5},
+                        "cuda_graphs": {"start_s": 3.0, "epoch_s": 0.25}}}
+    sharing = {"cuda": {"speedup": {"1": 1.0, "4": 2.5}},
+               "cuda_graphs": {"speedup": {"1": 1.0, "4": 2.0}}}
     assert _estimate(entries, sharing) == {
         "cpu_one_after_another": 205.0 + 5 * 15.0,
         "cuda_one_after_another": 13.0 + 5 * 8.0,
-        "cuda_shared": (13.0 + 5 * 8.0) / 2.5}
+        "cuda_shared": (13.0 + 5 * 8.0) / 2.5}  # the TCN's graphs were not timed
+    entries["tcn"]["cuda_graphs"] = {"start_s": 3.0, "epoch_s": 0.05}
+    assert _estimate(entries, sharing)["cuda_graphs_shared"] == (8.0 + 5 * 5.5) / 2.0
     entries["tcn"]["cuda"] = {"error": "out of memory"}
     assert "cuda_one_after_another" not in _estimate(entries, sharing)
+    assert "cuda_graphs_one_after_another" in _estimate(entries, sharing)
 
 
 def test_the_bound_divides_the_cpus_epoch_by_the_gpus_busy_seconds():

@@ -181,8 +181,9 @@ def test_an_optimizer_state_moves_between_captured_and_plain_steps(capturable_on
 def test_the_epochs_of_a_training_replaying_graphs_train_as_eager_ones(
         capturable_on_the_cpu, monkeypatch, data, tmp_path, kind, sizes):
     """learning.train's own epochs (the recurrent one carrying a graph's state from chunk to
-    chunk, the window one), checkpoints and schedule, with the graphs emulated on the CPU:
-    each step's outputs must be used before the next replay overwrites them."""
+    chunk, the window one), checkpoints and schedule, with the graphs emulated on the CPU
+    (on the CPU also where CUDA is: its kernels round otherwise): each step's outputs must
+    be used before the next replay overwrites them."""
     graphs = []
 
     def step(network, optimizer, grad_clip, cuda_graphs):
@@ -193,7 +194,7 @@ def test_the_epochs_of_a_training_replaying_graphs_train_as_eager_ones(
     monkeypatch.setattr(training, "CudaGraphs", object)
     monkeypatch.setattr(training, "TrainingStep", step)
     runs = {replayed: training.train(kind, "fast", data, tmp_path / str(replayed),
-                                     progress=False, epochs=3, checkpoint_every=1,
+                                     progress=False, epochs=3, checkpoint_every=1, device="cpu",
                                      batch_size=2, cuda_graphs=replayed, **sizes)
             for replayed in (False, True)}
     assert graphs[0] is None and graphs[1].captures >= 1 and graphs[1].replays >= 6
