@@ -315,6 +315,16 @@ class IsolatedInstance:
         self._process.wait()
         self._output.join(CLOSE_WAIT)
 
+    def _ended(self, what: str) -> FmuError:
+        """The error for a child whose pipe closed: waited for, it died (fail names how), or,
+        still alive, broke the protocol and is stopped. (fail asks a live child why; asking
+        one whose pipe closed again would recurse while it is dying, not yet dead.)"""
+        try:
+            self._process.wait(CLOSE_WAIT)
+        except subprocess.TimeoutExpired:
+            return self._refused(what, "no answer but closed its pipe")
+        return self.fail(what)
+
     def _refused(self, what: str, why: str) -> FmuError:
         """A child that broke the protocol: stopped, and named."""
         self._broken = True
@@ -326,7 +336,7 @@ class IsolatedInstance:
         try:
             _send(self._cmd, [what, args])
         except OSError:
-            raise self.fail(what) from None
+            raise self._ended(what) from None
         return self._response(what)
 
     def _response(self, what: str, timeout: float | None = None) -> Any:
@@ -359,7 +369,7 @@ class IsolatedInstance:
                 raise self._hung(what, waited)
             chunk = os.read(self._ack, min(size - got, 1 << 20))
             if not chunk:
-                raise self.fail(what)
+                raise self._ended(what)
             view[got:got + len(chunk)] = chunk
             got += len(chunk)
         return bytes(data)

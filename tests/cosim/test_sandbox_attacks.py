@@ -330,3 +330,16 @@ def test_out_of_memory_the_kernel_ends_the_fmus_process_first(probe):
         pid = instance._process.pid
         assert Path(f"/proc/{pid}/oom_score_adj").read_text().strip() == "1000"
         assert os.getsid(pid) == pid != os.getsid(0)  # a session of its own: no terminal
+
+
+def test_a_child_dying_while_its_pipe_closes_is_named(tmp_path, hostile, capsys, monkeypatch):
+    """The child's pipe closes before its exit can be reaped (a kernel ends a process in that
+    order): the master waits for it, not asks it again (that recursed: RecursionError)."""
+    unreaped = subprocess.Popen.poll
+    monkeypatch.setattr(subprocess.Popen, "poll",
+                        lambda self: None if self.returncode is None else unreaped(self))
+    Path(ESCAPE).unlink(missing_ok=True)
+    assert main(["run", str(write_config(tmp_path, hostile, "nothing")), "-o",
+                 str(tmp_path / "out")]) == 1
+    assert (f"flexff: error: p: instantiating it failed: the sandbox stopped its process: it "
+            f"tried to write to {ESCAPE}, outside its scratch folder") in one_line(capsys)
