@@ -1,20 +1,16 @@
 """A machine description: the axes a feedforward is learned for, as plain data checked once.
 
-Given in a run configuration as `[machine]` (or `machine = "FILE.toml"`, a file holding such a
-table), read by `parse_machine`, then checked against the loop's FMUs by `check_signals`. Each
-`[[machine.axis]]` names the axis (its reference signals are `<axis>_ref`, `v<axis>_ref`,
-`a<axis>_ref`, `j<axis>_ref`, derived by flexff), the measured position (`instance.variable`,
-or an expression of such outputs: the kinematic map; `true`, optional: the true position a
-simulation gives, which only the metrics read), the FMU input the feedforward drives,
-the effort the loop commands (the labels): these three are asked of a loop only, a description
-of logs alone leaves them out; units, and the excitation limits (`range`,
-`velocity`, `acceleration`, optional `jerk`); records and datasets name the measured position
-`<axis>_measured` and the effort `<axis>_effort`. `[machine.prior]` chooses the physics prior's
-terms per axis (PRIOR_TERMS, and user terms as expressions of the axes' `x`, `vx`, `ax`).
-`[machine.log]` names these signals in the machine's logs (LogMap), `exact` the start values
-with which the loop measures exactly, `[machine.ilc]` ILC's settings (IlcSettings),
-`[machine.learning]` the preprocessing otherwise derived from the data (Learning). Every key is
-in KEYS; every error is a ConfigError naming the key.
+Given in a run configuration as `[machine]` (or `machine = "FILE.toml"`), read by
+`parse_machine`, checked against the loop's FMUs by `check_signals`. Each `[[machine.axis]]`
+names the axis (its references `<axis>_ref`, `v<axis>_ref`, `a<axis>_ref`, `j<axis>_ref`), the
+measured position (`instance.variable` or an expression of outputs; `true`, optional, only for
+the metrics), the feedforward input and the commanded effort (the labels; these three only
+where a loop runs), units and the excitation limits (`range`, `velocity`, `acceleration`,
+optional `jerk`); datasets name them `<axis>_measured`, `<axis>_effort`. `[machine.prior]`
+chooses the prior's terms per axis (PRIOR_TERMS and user expressions), `[machine.log]` how
+logs name the signals (LogMap), `exact` the start values that measure exactly,
+`[machine.ilc]` ILC's settings (IlcSettings), `[machine.learning]` the preprocessing otherwise
+derived from the data (Learning). Every key is in KEYS; every error a ConfigError naming it.
 """
 
 from __future__ import annotations

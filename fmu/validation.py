@@ -285,7 +285,7 @@ def validate_fmu(path: str | Path, strict: bool = False, timeout: float = TIMEOU
         return [Problem(str(error), in_run=RUN_STOPS)]
     problems = [_description_problem(fault, strict)
                 for fault in description_faults(info.path, info.model_description)]
-    end = run_in_child(_checks, (str(path), strict, confine), timeout,
+    end = run_in_child(_checks, (str(path.absolute()), strict, confine), timeout,
                        fresh=confine is not None)
     problems += [Problem(*finding) for finding in end.messages if _is_finding(finding)]
     failure = end.failure(timeout)
