@@ -21,8 +21,10 @@
  * 2 us between call points). It also runs on the CPUs its caller may run on: a paced run pinned to
  * one core (flexff run --realtime --cpu K) runs the network there in the base task's idle
  * time, as Simulink Real-Time's multitasking does on one core. Measured on the 2-core VM
- * (LSTM, 30 s paced at 1 kHz): the 1 kHz task's TET p99 11 us on one core, 25 to 27 us with
- * the worker on the other core or unpinned, where each hand-over wakes a second CPU.
+ * (LSTM, 30 s paced at 1 kHz, 2026-11-26): the 1 kHz task's TET p99 11 us on one core, 25 to
+ * 27 us with the worker on the other core or unpinned, where each hand-over wakes a second
+ * CPU; on 2026-11-28, 29 to 37 us on one core (TCN and LSTM, both runtimes): a hand-over step
+ * still costs the feedforward about 10 us more than the others (p50 12 against 1.7 us).
  * The worker follows a new caller's scheduling and CPUs when it posts its first job, then
  * takes any change itself as each job starts: read and set by the calling thread at every
  * hand-over, those system calls cost the 1 kHz task about 3 us at each call point (of 13 us the
