@@ -4,12 +4,9 @@ from t >= fail_at on request."""
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 
-import fmpy
-
-from tests.probe_fmu import _library
+from tests.probe_fmu import packaged_fmu
 
 SOURCE = Path(__file__).with_suffix(".c")
 DESCRIPTION = """<?xml version="1.0" encoding="UTF-8"?>
@@ -29,10 +26,4 @@ DESCRIPTION = """<?xml version="1.0" encoding="UTF-8"?>
 
 def build_chatty(folder: Path) -> Path:
     """The chatty FMU in `folder`."""
-    folder.mkdir(parents=True, exist_ok=True)
-    library = _library(folder, SOURCE, "chatty")
-    path = folder / "chatty.fmu"
-    with zipfile.ZipFile(path, "w") as zf:
-        zf.writestr("modelDescription.xml", DESCRIPTION)
-        zf.write(library, f"binaries/{fmpy.platform}/{library.name}")
-    return path
+    return packaged_fmu(folder, DESCRIPTION, SOURCE, "chatty")

@@ -97,22 +97,23 @@ def build_probe(folder: Path, hostile: bool = False, **experiment: float) -> Pat
     """The probe FMU in `folder`, with a DefaultExperiment of the given attributes (startTime,
     stopTime, stepSize, tolerance); `hostile`: one that tries to write to ESCAPE when it is
     instantiated."""
-    folder.mkdir(parents=True, exist_ok=True)
-    library = _library(folder)
-    path = folder / "probe.fmu"
     guid = "{probe-hostile}" if hostile else "{probe}"
+    return packaged_fmu(folder, _model_description(experiment, guid))
+
+
+def packaged_fmu(folder: Path, description: str, source: Path = SOURCE,
+                 name: str = "probe") -> Path:
+    """The FMU `name`.fmu in `folder`: `source` compiled for this platform beside
+    `description` (its modelDescription.xml)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    library = _library(folder, source, name)
+    path = folder / f"{name}.fmu"
     with zipfile.ZipFile(path, "w") as zf:
-        zf.writestr("modelDescription.xml", _model_description(experiment, guid))
+        zf.writestr("modelDescription.xml", description)
         zf.write(library, f"binaries/{fmpy.platform}/{library.name}")
     return path
 
 
 def build_ball(folder: Path) -> Path:
     """The bouncing ball, a model-exchange FMU only, in `folder`."""
-    folder.mkdir(parents=True, exist_ok=True)
-    library = _library(folder, BALL_SOURCE, "ball")
-    path = folder / "ball.fmu"
-    with zipfile.ZipFile(path, "w") as zf:
-        zf.writestr("modelDescription.xml", BALL_DESCRIPTION)
-        zf.write(library, f"binaries/{fmpy.platform}/{library.name}")
-    return path
+    return packaged_fmu(folder, BALL_DESCRIPTION, BALL_SOURCE, "ball")
