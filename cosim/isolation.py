@@ -32,13 +32,13 @@ import sys
 import tempfile
 import time
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from ctypes import c_char, c_char_p, c_double, c_int, c_long, c_longlong, c_size_t, c_void_p
 from pathlib import Path
 from typing import Any
 
 from flexff.cosim import engine, sandbox
-from flexff.cosim.child_output import OutputRelay
+from flexff.cosim.child_output import MessageRelay, OutputRelay, message_writer
 from flexff.cosim.sandbox import Sandbox
 from flexff.fmu import cache
 from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
@@ -146,11 +146,14 @@ def _signal_name(number: int) -> str:
 class IsolatedInstance:
     """An FMU instantiated in a child process, with FmuInstance's interface for the master;
     `timeout` (s, None: STEP_TIMEOUT) bounds every call the child answers, instantiating
-    included (starting Python: START_WAIT); `confined` (None: not) sandboxes the child."""
+    included (starting Python: START_WAIT); `confined` (None: not) sandboxes the child; `log`
+    (None: none) takes its FMU's log messages as they come (cosim.fmu_log)."""
+
+    _messages: MessageRelay | None = None  # the relay of its log messages, where `log` is given
 
     def __init__(self, info: FmuInfo, name: str, timeout: float | None = None,
                  solver: str | None = None, confined: Sandbox | None = sandbox.DEFAULT,
-                 scheduled: bool = False) -> None:
+                 scheduled: bool = False, log: Callable[[str], None] | None = None) -> None:
         self.info, self.name, self.confined = info, name, confined
         self.timeout = STEP_TIMEOUT if timeout is None else timeout
         self.library = info.path
@@ -172,19 +175,24 @@ class IsolatedInstance:
         python_path = os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH")])])
         env = ({**os.environ, "PYTHONPATH": python_path} if confined is None
                else sandbox.environment(self.scratch / "work", python_path))
-        options = {"solver": solver, "scheduled": scheduled,
+        messages, messages_write = os.pipe() if log is not None else (-1, -1)
+        options = {"solver": solver, "scheduled": scheduled, "messages": messages_write,
                    "limits": None if confined is None else sandbox.as_list(confined)}
         output, output_write = os.pipe()
+        passed = (cmd_read, ack_write, self._memory, report_write)
         self._process = subprocess.Popen(
             [sys.executable, "-m", "flexff.cosim.isolation", str(info.path), name,
              str(cmd_read), str(ack_write), str(self._memory), str(self._capacity),
              str(os.getpid()), str(self.scratch), str(report_write), json.dumps(options)],
-            pass_fds=(cmd_read, ack_write, self._memory, report_write), env=env,
+            pass_fds=passed if log is None else (*passed, messages_write), env=env,
             cwd=self.scratch / "work", stdin=subprocess.DEVNULL, stdout=output_write,
             stderr=output_write, start_new_session=True)
-        for fd in (cmd_read, ack_write, report_write, output_write):
-            os.close(fd)
+        for fd in (cmd_read, ack_write, report_write, output_write, messages_write):
+            if fd >= 0:
+                os.close(fd)
         self._output = OutputRelay(output, name)
+        if log is not None:
+            self._messages = MessageRelay(messages, name, log)
         self._proxy = lib.proxy_open(self._ack, ctypes.addressof(self._view), self._capacity,
                                      self.timeout)
         self._timed_out = False
@@ -314,6 +322,8 @@ class IsolatedInstance:
             self._process.kill()
         self._process.wait()
         self._output.join(CLOSE_WAIT)
+        if self._messages is not None:
+            self._messages.join(CLOSE_WAIT)
 
     def _ended(self, what: str) -> FmuError:
         """The error for a child whose pipe closed: waited for, it died (fail names how), or,
@@ -432,7 +442,9 @@ def main(argv: Sequence[str]) -> int:
 
     try:
         instance = FmuInstance(read_fmu(path), name, given["solver"], Path(folder, "fmu"),
-                               None if bounds is None else confine, given["scheduled"])
+                               None if bounds is None else confine, given["scheduled"],
+                               log=None if given["messages"] < 0
+                               else message_writer(given["messages"]))
     except FmuError as error:
         _send(ack_fd, ["error", str(error)])
         return 1

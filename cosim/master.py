@@ -273,7 +273,7 @@ class Master:
             for fmu, info in zip(fmus, infos):
                 self._instances.append(
                     IsolatedInstance(info, fmu.name, step_timeout, fmu.solver, fmu.sandbox,
-                                     fmu.scheduled) if fmu.isolate
+                                     fmu.scheduled, log) if fmu.isolate
                     else FmuInstance(info, fmu.name, fmu.solver, scheduled=fmu.scheduled,
                                      log=log))
             self._layout(infos)

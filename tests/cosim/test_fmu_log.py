@@ -30,10 +30,14 @@ def test_every_message_is_written_and_only_a_tail_is_held(chatty):
     assert lines[-1].startswith(f"chatty: [OK] step {STEPS} at t = 2.999")
 
 
-def test_a_run_streams_its_fmu_log_into_its_folder_and_errors_name_the_last(chatty, tmp_path):
+@pytest.mark.parametrize("isolate", [False, True])
+def test_a_run_streams_its_fmu_log_into_its_folder_and_errors_name_the_last(chatty, tmp_path,
+                                                                            isolate):
+    """In-process or in its own process (the child keeps none: it relays each message)."""
     config = tmp_path / "chatty.toml"
     config.write_text(f'[run]\nstep = 0.001\nstop = {STEPS / 1000}\n'
-                      f'[fmu.chatty]\npath = "{chatty}"\nparameters = {{ fail_at = 2.0 }}\n')
+                      f'[fmu.chatty]\npath = "{chatty}"\nparameters = {{ fail_at = 2.0 }}\n'
+                      f'isolate = {str(isolate).lower()}\n')
     with pytest.raises(CosimError, match=r"^chatty: the step at t = 2 s failed: .*"
                                          r"\[Error\] step 2001 at t = 2 s: failing as asked"):
         run_config(config, tmp_path / "out")
