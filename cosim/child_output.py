@@ -20,80 +20,75 @@ CHUNK = 1 << 16
 MESSAGE_CHARS = 1 << 20  # the most of one log message written to the run's log file
 
 
-class OutputRelay:
-    """Reads the pipe `fd` (and closes it) until its end, in a thread, showing each line on
-    stderr as `NAME| line`."""
+class _PipeLines:
+    """Reads the pipe `fd` (and closes it) until its end, in a thread named `thread`, handing
+    each line (without its newline; one of more than `longest` bytes cut there) to `_line`;
+    once `ignoring`, the rest is read and dropped."""
 
-    def __init__(self, fd: int, name: str) -> None:
-        self.fd, self.name = fd, name
-        self.shown = 0
-        self.dropped = False
-        self.thread = threading.Thread(target=self._relay, name=f"output of {name}", daemon=True)
+    ignoring = False
+
+    def __init__(self, fd: int, thread: str, longest: int) -> None:
+        self.fd, self.longest = fd, longest
+        self.thread = threading.Thread(target=self._relay, name=thread, daemon=True)
         self.thread.start()
+
+    def _line(self, line: bytes) -> None:
+        raise NotImplementedError
 
     def _relay(self) -> None:
         pending = bytearray()
         try:
             while chunk := os.read(self.fd, CHUNK):
-                if self.dropped:
+                if self.ignoring:
                     continue
                 pending += chunk
-                while not self.dropped and ((end := pending.find(b"\n")) >= 0
-                                            or len(pending) > LINE_CHARS):
-                    cut = end if end >= 0 else LINE_CHARS
-                    self._show(bytes(pending[:cut]))
+                while not self.ignoring and ((end := pending.find(b"\n")) >= 0
+                                             or len(pending) > self.longest):
+                    cut = end if end >= 0 else self.longest
+                    self._line(bytes(pending[:cut]))
                     del pending[:cut + (end >= 0)]
-            if pending and not self.dropped:
-                self._show(bytes(pending))
+            if pending and not self.ignoring:
+                self._line(bytes(pending))
         except OSError:
             pass
         finally:
             os.close(self.fd)
-
-    def _show(self, line: bytes) -> None:
-        self.shown += len(line) + 1
-        if self.shown > LIMIT_BYTES:
-            self.dropped = True
-            text = f"{self.name}| (its further output dropped: more than {LIMIT_BYTES} bytes)"
-        else:
-            text = f"{self.name}| {printable(line.decode('utf-8', 'replace'), LINE_CHARS)}"
-        print(text, file=sys.stderr, flush=True)
 
     def join(self, timeout: float) -> None:
         """Wait until the pipe is read to its end (the process and its threads gone)."""
         self.thread.join(timeout)
 
 
-class MessageRelay:
-    """Reads the pipe `fd` (and closes it) until its end, in a thread: each line one log
-    message of the isolated FMU `name`, handed to `log` as `name: message` (the name the
-    master's, not the child's), a line cut at MESSAGE_CHARS; the FMU's log messages reach the
-    run's log file (cosim.fmu_log) as an in-process FMU's do, and the child keeps none."""
+class OutputRelay(_PipeLines):
+    """What the isolated FMU `name`'s process prints, each line shown on stderr as
+    `NAME| line` (module doc)."""
+
+    def __init__(self, fd: int, name: str) -> None:
+        self.name, self.shown = name, 0
+        super().__init__(fd, f"output of {name}", LINE_CHARS)
+
+    def _line(self, line: bytes) -> None:
+        self.shown += len(line) + 1
+        if self.shown > LIMIT_BYTES:
+            self.ignoring = True
+            text = f"{self.name}| (its further output dropped: more than {LIMIT_BYTES} bytes)"
+        else:
+            text = f"{self.name}| {printable(line.decode('utf-8', 'replace'), LINE_CHARS)}"
+        print(text, file=sys.stderr, flush=True)
+
+
+class MessageRelay(_PipeLines):
+    """The isolated FMU `name`'s log messages, one a line, each handed to `log` as
+    `name: message` (the name the master's, not the child's), a line cut at MESSAGE_CHARS:
+    they reach the run's log file (cosim.fmu_log) as an in-process FMU's do, and the child
+    keeps none."""
 
     def __init__(self, fd: int, name: str, log: Callable[[str], None]) -> None:
-        self.fd, self.name, self.log = fd, name, log
-        self.thread = threading.Thread(target=self._relay, name=f"log of {name}", daemon=True)
-        self.thread.start()
+        self.name, self.log = name, log
+        super().__init__(fd, f"log of {name}", MESSAGE_CHARS)
 
-    def _relay(self) -> None:
-        pending = bytearray()
-        try:
-            while chunk := os.read(self.fd, CHUNK):
-                pending += chunk
-                while (end := pending.find(b"\n")) >= 0 or len(pending) > MESSAGE_CHARS:
-                    cut = end if end >= 0 else MESSAGE_CHARS
-                    self.log(f"{self.name}: {pending[:cut].decode('utf-8', 'replace')}")
-                    del pending[:cut + (end >= 0)]
-            if pending:
-                self.log(f"{self.name}: {pending.decode('utf-8', 'replace')}")
-        except OSError:
-            pass
-        finally:
-            os.close(self.fd)
-
-    def join(self, timeout: float) -> None:
-        """Wait until the pipe is read to its end (the process gone)."""
-        self.thread.join(timeout)
+    def _line(self, line: bytes) -> None:
+        self.log(f"{self.name}: {line.decode('utf-8', 'replace')}")
 
 
 def message_writer(fd: int) -> Callable[[str], None]:
