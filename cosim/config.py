@@ -236,7 +236,8 @@ class _Parser(TableChecker):
         if not fmus:
             raise self.error("fmu", "no FMU to run: add an [fmu.NAME] table")
         start_time = self.number(run, "run", "start", next(
-            (read_fmu(f.path).default_start or 0.0 for f in fmus if f.path), 0.0))
+            (read_fmu(f.path, checked=False).default_start or 0.0 for f in fmus if f.path),
+            0.0))
         stop = self.stop(run, signal, fmus, step, start_time)
         tolerance = self.tolerance(run, "run")
         fmus = [replace(f, tolerance=self.fmu_tolerance(f, tolerance),
@@ -276,7 +277,8 @@ class _Parser(TableChecker):
         first FMU's experiment."""
         default = start + signal.duration if signal is not None else None
         if default is None:
-            default = next((read_fmu(f.path).default_stop for f in fmus if f.path), None)
+            default = next((read_fmu(f.path, checked=False).default_stop for f in fmus
+                            if f.path), None)
         stop = self.number(run, "run", "stop", default)
         if not stop > start:
             raise self.error("run.stop", f"the end time {stop!r} s must come after the start "
@@ -420,7 +422,7 @@ class _Parser(TableChecker):
             return f.tolerance
         if run is not None or f.path is None:
             return run
-        return read_fmu(f.path).default_tolerance
+        return read_fmu(f.path, checked=False).default_tolerance  # checked by fmu_info
 
     def order(self, run: Mapping[str, Any], fmus: list[FmuConfig]) -> tuple[FmuConfig, ...]:
         if "order" not in run:

@@ -349,8 +349,8 @@ def _write_run_json(sink: RunSink, scenario: Scenario, out: Path, complete: bool
     `description_faults`, each FMU's faults that the run went on despite
     (fmu.description_faults)."""
     config = scenario.config
-    faults = {f.name: [str(fault) for fault in f.described().faults]
-              for f in scenario.fmus if f.described().faults}
+    faults = {f.name: [str(fault) for fault in f.described().faults] for f in scenario.fmus}
+    faults = {name: found for name, found in faults.items() if found}
     _write_json(out / RUN_JSON_NAME, {**expanded(config), RECORDED: {
         **sink.writer.held(), "every": config.record.every, "complete": complete},
         **({FAULTS: faults} if faults else {})})
