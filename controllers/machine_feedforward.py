@@ -5,7 +5,8 @@ identified linear model, or any CasADi function of that form), or a learned mode
 flexff (`learned_machine_feedforward_system`): its features computed from the reference in
 generated C (controllers.machine_features), its ONNX graph run as the manipulator's learned
 feedforward runs it (controllers.learned_feedforward: step or task mode, extrapolated between
-the model's calls); a physics-guided model's residual only while the reference moves.
+the model's calls); a physics-guided model's residual plus its prior, at rest too (a
+residual switched off there stepped at each start and stop).
 """
 
 from __future__ import annotations
@@ -66,14 +67,6 @@ def reference_motion(machine: Machine, reference: ca.SX) -> tuple[ca.SX, ca.SX, 
                  for d in range(3))
 
 
-def moving(machine: Machine, reference: ca.SX) -> ca.SX:
-    """1 where any axis's reference velocity is non-zero, else 0: outside it a physics-guided
-    model's residual is zero, as it was trained (learning.machine_train.resting), and the prior
-    alone holds the machine."""
-    _, velocity, _ = reference_motion(machine, reference)
-    return ca.sum1(ca.fabs(velocity)) > 0
-
-
 def inverse_model_system(machine: Machine, inverse: ca.Function, step: float,
                          description: str, lead_s: float = 0.0) -> System:
     """The feedforward of `inverse` (positions, velocities, accelerations -> efforts, one
@@ -123,8 +116,7 @@ def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
     if card.prior == "linear":  # a physics-guided model: its residual plus the prior
         assert card.machine_prior is not None  # the card's check
         prior = linear_model_from_dict(card.machine_prior, f"{model}: metadata machine_prior")
-        effort = ca.if_else(moving(machine, reference), result, ca.DM.zeros(result.size1())) \
-            + prior.casadi_function()(*reference_motion(machine, looked_ahead))
+        effort = result + prior.casadi_function()(*reference_motion(machine, looked_ahead))
     mode = "task" if task else "step"
     return feedforward_system(
         "learned_feedforward",

@@ -30,11 +30,15 @@ Batch = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
 
 
 def window_roles(lengths: list[int], window: int, val_fraction: float,
-                 rng: np.random.Generator, edge: int = 0) -> list[np.ndarray]:
+                 rng: np.random.Generator, edge: int = 0,
+                 unlabelled: list[np.ndarray] | None = None) -> list[np.ndarray]:
     """Per trajectory, the role of each sample (TRAIN or VALIDATION), by whole windows; the
-    first and last `edge` samples PAD (see `interior`), and only windows with samples
-    between them drawn for validation."""
+    first and last `edge` samples PAD (see `interior`), and so are those `unlabelled` marks
+    (per trajectory, True where its label is none to learn); only windows with samples
+    left drawn for validation."""
     roles = [interior(n, edge) for n in lengths]
+    for role, marked in zip(roles, unlabelled or []):
+        role[marked] = PAD
     blocks = [(i, start) for i, r in enumerate(roles) for start in range(0, len(r), window)
               if (r[start:start + window] == TRAIN).any()]
     n_val = round(val_fraction * len(blocks))

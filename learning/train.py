@@ -207,14 +207,17 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
                 test_x: list[np.ndarray], test_y: list[np.ndarray], edge: int,
                 rng: np.random.Generator, saver: Checkpoints, checkpoint: dict[str, Any] | None,
                 measure: Callable[[SequenceNetwork, SequenceSet, SequenceSet], dict[str, Any]],
-                progress: bool = True, on_epoch: EpochReport | None = None
+                progress: bool = True, on_epoch: EpochReport | None = None,
+                unlabelled: list[np.ndarray] | None = None
                 ) -> tuple[SequenceNetwork, dict[str, Any], dict[str, Any]]:
     """Train `config`'s network on scaled features and targets (lists of (n, k) arrays, one
-    per trajectory; `edge` samples at each end out of every loss), the training trajectories'
-    windows split into training and validation; return the network (best epoch, on the CPU),
-    its history, and `measure`'s metrics with the timing and device: any machine's training
-    (this module's `fit`, learning.machine_train) runs through here."""
-    roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge)
+    per trajectory; `edge` samples at each end, and those `unlabelled` marks in a training
+    trajectory, out of every loss), the training trajectories' windows split into training
+    and validation; return the network (best epoch, on the CPU), its history, and `measure`'s
+    metrics with the timing and device: any machine's training (this module's `fit`,
+    learning.machine_train) runs through here."""
+    roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge,
+                         unlabelled)
     device = pick_device(config.device)
     with reproducible(config.seed, config.threads):
         network = build_network(config.model, train_x[0].shape[1],

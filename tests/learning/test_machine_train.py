@@ -120,9 +120,9 @@ def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
                            rest[0] - skip[0, 0], rtol=1e-4)  # from zero it would not be
 
 
-def test_the_prior_is_trusted_where_every_reference_rests():
-    """The physics-guided model's residual is trained to zero where every axis's reference
-    rests (the loop settling its last move there), not where one still moves, nor on logs
+def test_the_rest_is_no_label_where_every_reference_rests():
+    """The physics-guided model's residual learns no label where every axis's reference
+    rests (the loop settling its last move there), but where one still moves, and on logs
     without references."""
     from flexff.learning.machine_train import resting
 
