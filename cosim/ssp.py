@@ -3,9 +3,11 @@ FMPy and OMSimulator read.
 
 export_ssp writes one component per FMU, every link of the resolved wiring as a connection
 (with its linear transformation), the start values and the run's times, plus flexff's
-annotation carrying the whole configuration. load_ssp reads such a file back as that
-configuration, or a flat system of FMUs from another tool as a general-form RunConfig. Every
-problem is a ConfigError naming the SSD element at fault. The XML is checked against the SSP
+annotations: the step and algorithm, each component's `feedthrough = false`, and the whole
+configuration. load_ssp reads such a file back as that configuration, or a flat system of FMUs
+(another tool's, or flexff's changed since) as a general-form RunConfig, flexff's step,
+algorithm and feedthrough kept. Every problem is a ConfigError naming the SSD element at
+fault. The XML is checked against the SSP
 1.0 schema that pyssp_standard ships.
 
 What is exported, which connectors and why: "The master algorithm", section SSP
@@ -116,6 +118,7 @@ def _ssd(scenario: Scenario) -> etree._Element:
     enumerations: dict[str, etree._Element] = {}
     links = [k for k in scenario.links if k.producer != SOURCE]
     used = {(k.producer, k.signal) for k in links} | {(k.consumer, k.input) for k in links}
+    stated = {f.name for f in config.fmus if not f.feedthrough}
     for fmu in scenario.fmus:
         info = fmu.described()
         component = _sub(elements, "ssd:Component", name=fmu.name, type=FMU_TYPE,
@@ -130,6 +133,9 @@ def _ssd(scenario: Scenario) -> etree._Element:
         if values:
             binding = _sub(_sub(component, "ssd:ParameterBindings"), "ssd:ParameterBinding")
             _parameter_set(_sub(binding, "ssd:ParameterValues"), fmu.name, info, values)
+        if fmu.name in stated:  # [fmu.NAME] feedthrough = false, flexff's to carry
+            _sub(_sub(_sub(component, "ssd:Annotations"), "ssc:Annotation", type=FLEXFF),
+                 "flexff:Component", feedthrough="false")
     if links:
         connections = _sub(system, "ssd:Connections")
         for k in links:
@@ -273,7 +279,8 @@ def load_ssp(path: str | Path) -> RunConfig:
         except FmuError as exc:
             raise error(key, str(exc)) from None
         fmus.append(FmuConfig(name, path=fmu, unconnected="start",
-                              parameters=_bindings(element, info, folder, key, error)))
+                              parameters=_bindings(element, info, folder, key, error),
+                              feedthrough=_feedthrough(element, key, error)))
     if not fmus:
         raise error("ssd:System/ssd:Elements", "the system has no FMU component")
     step, start, stop, algorithm = _experiment(root, fmus, error)
@@ -384,6 +391,18 @@ def _bindings(element: etree._Element, info: FmuInfo, folder: Path, key: str, er
                 raise error(f"{where}/ssv:Parameter[@name='{name}']",
                             f"{v.type} variable: {exc}") from None
     return values
+
+
+def _feedthrough(element: etree._Element, key: str, error: Fail) -> bool:
+    """A component's `[fmu.NAME] feedthrough`: false where flexff's annotation says so (its
+    outputs depend on no input directly, whatever its model structure says), else true."""
+    ours = element.find(f"ssd:Annotations/ssc:Annotation[@type='{FLEXFF}']/flexff:Component",
+                        NS)
+    value = "true" if ours is None else ours.get("feedthrough", "true")
+    if value not in ("true", "false"):
+        raise error(f"{key}/ssd:Annotations", f"flexff:Component feedthrough must be true or "
+                                              f"false, got {value!r}")
+    return value == "true"
 
 
 def _experiment(root: etree._Element, fmus: list[FmuConfig], error: Fail

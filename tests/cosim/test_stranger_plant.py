@@ -166,3 +166,42 @@ def test_a_mistyped_connection_target_is_named_before_the_input_it_leaves_unconn
                                           r"no input 'force\(1\)' \(did you mean "
                                           r"'force\[1\]'\?\)"):
         run_config(folder / "run.toml", folder / "out")
+
+
+def test_feedthrough_false_round_trips_through_ssp(folder: Path):
+    """`feedthrough = false` travels in the SSP as flexff's component annotation: read back
+    with the configuration, and as a plain system (another tool dropped flexff's copy of
+    it), the plant still steps by Gauss-Seidel; without the annotation the plain system is an
+    algebraic loop."""
+    import warnings
+
+    from flexff.cosim.ssp import SSD, export_ssp, load_ssp
+    (folder / "run.toml").write_text(loop_config(False))
+    ssp = export_ssp(load_config(folder / "run.toml"), folder / "loop.ssp")
+
+    def rewritten(target: Path, edit) -> Path:
+        with zipfile.ZipFile(ssp) as source, zipfile.ZipFile(target, "w") as out:
+            for item in source.infolist():
+                data = source.read(item)
+                out.writestr(item, edit(data.decode()).encode() if item.filename == SSD
+                             else data)
+        return target
+    plain = rewritten(folder / "plain.ssp", lambda text: re.sub(
+        r"\s*<flexff:Configuration>.*</flexff:Configuration>", "", text, flags=re.S))
+    for path in (ssp, plain):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            config = load_ssp(path)
+        assert not next(f for f in config.fmus if f.name == "plant").feedthrough
+        assert next(f for f in config.fmus if f.name == "pid").feedthrough
+        assert config.algorithm == "gauss-seidel"
+    run_config(plain, folder / "plain")
+    assert load_recording(folder / "plain")["plant.pos[2]"][-1] == pytest.approx(TARGETS[1],
+                                                                                 rel=0.1)
+    dropped = rewritten(folder / "dropped.ssp", lambda text: re.sub(
+        r"\s*<flexff:Configuration>.*</flexff:Configuration>", "", re.sub(
+            r"\s*<ssd:Annotations>\s*<ssc:Annotation type=\"org.flexff\">\s*"
+            r"<flexff:Component [^>]*/>\s*</ssc:Annotation>\s*</ssd:Annotations>", "", text),
+        flags=re.S))
+    with pytest.raises(ConfigError, match=r"plant declares no output dependencies"):
+        run_config(dropped, folder / "dropped")
