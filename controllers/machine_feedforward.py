@@ -116,7 +116,7 @@ def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
     if card.prior == "linear":  # a physics-guided model: its residual plus the prior
         assert card.machine_prior is not None  # the card's check
         prior = linear_model_from_dict(card.machine_prior, f"{model}: metadata machine_prior")
-        effort = result + prior.casadi_function()(*reference_motion(machine, looked_ahead))
+        effort = effort + prior.casadi_function()(*reference_motion(machine, looked_ahead))
     mode = "task" if task else "step"
     return feedforward_system(
         "learned_feedforward",

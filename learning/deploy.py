@@ -6,7 +6,8 @@ residual alone). With `inputs="reference"` it computes the features (and a black
 network's force inputs) from the reference in the graph. A machine's linear skip, and that of
 a network with force inputs, is exported beside the graph as `linear_map` (`skip_outside`),
 for the feedforward FMU to add at the loop's rate. The pgnn's residual fades
-to zero beyond the training range (TRUST_FADE), so there the model falls back on its prior.
+to zero beyond the training range (TRUST_FADE), so there the model falls back on its prior;
+a machine's pgnn fades its network so, not the skip beside the graph.
 
 Docs: "The learned feedforward FMU" (docs/explanation/learned-feedforward-fmu.md).
 """
@@ -65,7 +66,7 @@ class SIModel(nn.Module):
         self.network = run.network.eval()
         self.linear_map: tuple[np.ndarray, np.ndarray] | None = None
         if skip_outside and isinstance(self.network, LinearSkip):
-            self.linear_map = _si_skip(self.network, run)
+            self.linear_map = _si_skip(self.network, run, not uses_prior(run.config.model))
             self.network = self.network.network
         self.inputs = inputs
         by_reference = inputs == "reference"
@@ -115,15 +116,16 @@ class SIModel(nn.Module):
         return self.network.state_names()
 
 
-def _si_skip(network: LinearSkip, run: Run) -> tuple[np.ndarray, np.ndarray]:
-    """The skip and the labels' low end as one map of SI features to SI outputs: weights
-    (outputs x features) and bias, y = W x + b."""
+def _si_skip(network: LinearSkip, run: Run, low_end: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The skip, and with `low_end` the labels' low end, as one map of SI features to SI
+    outputs: weights (outputs x features) and bias, y = W x + b. A residual's targets are
+    scaled by the span alone (learning.machine_train): no low end to add."""
     weight = network.linear.weight.detach().cpu().double().numpy()
     bias = network.linear.bias.detach().cpu().double().numpy()
     low, span = np.asarray(run.feature_scaler.low), np.asarray(run.feature_scaler.span)
     label_low, label_span = np.asarray(run.label_scaler.low), np.asarray(run.label_scaler.span)
     return (label_span[:, None] * weight / span[None, :],
-            label_span * (bias - weight @ (low / span)) + label_low)
+            label_span * (bias - weight @ (low / span)) + (label_low if low_end else 0.0))
 
 
 class EnsembleSIModel(nn.Module):

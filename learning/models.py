@@ -298,6 +298,19 @@ def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor,
         nn.init.zeros_(head.bias)
 
 
+def silence_outputs(network: SequenceNetwork, outputs: Sequence[int]) -> None:
+    """Set `outputs` of a network with a linear head (and skip) to zero whatever its input:
+    a residual there leaves the prior alone."""
+    heads = [_head(network.network if isinstance(network, LinearSkip) else network)]
+    if isinstance(network, LinearSkip):
+        heads.append(network.linear)
+    with torch.no_grad():
+        for head in heads:
+            for k in outputs:
+                head.weight[k].zero_()
+                head.bias[k].zero_()
+
+
 # kind -> (class, whether its target is the residual over the rigid-body prior)
 NETWORKS: dict[str, tuple[type[SequenceNetwork], bool]] = {
     "lstm": (LSTMNet, False),

@@ -57,6 +57,7 @@ from flexff.learning.models import (
     build_network,
     fit_linear_skip,
     parameter_count,
+    silence_outputs,
     uses_prior,
 )
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
@@ -231,8 +232,11 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
                         _skip_columns(config))
         history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint,
                             on_epoch)
+        silenced = unhelpful_residuals(network, train_data) if uses_prior(config.model) else []
+        silence_outputs(network, silenced)
         metrics = {
             **measure(network, train_data, test_data),
+            **({"prior_alone": silenced} if uses_prior(config.model) else {}),
             "parameters": parameter_count(network),
             "seconds_per_epoch": float(np.mean(history["seconds"])),
             "epochs": config.epochs, "best_epoch": history["best_epoch"],
@@ -242,6 +246,25 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
         }
     network.cpu()
     return network, history, metrics
+
+
+@torch.no_grad()
+def unhelpful_residuals(network: SequenceNetwork, data: SequenceSet) -> list[int]:
+    """The outputs whose residual does not lower the validation MSE below its prior's (a zero
+    residual's): the prior alone is kept there. The loss sums every output's scaled error, so
+    an output whose prior already holds its axis learns the others' noise: on a 3-axis plant
+    whose linear axis the prior models exactly, its residual raised that axis's error by a
+    third on the training set itself, and its e2 ratio fell from 5660 to 1400."""
+    network.eval()
+    batch = EVALUATION_GROUP["cuda" if data.x.is_cuda else "cpu"]
+    residual = prior = torch.zeros(data.y.shape[-1], dtype=torch.float64)
+    for k in range(0, len(data), batch):
+        pred, _ = network(data.x[k:k + batch])
+        y = data.y[k:k + batch]
+        mask = (data.role[k:k + batch] == VALIDATION).unsqueeze(-1).to(pred.dtype)
+        residual = residual + ((pred - y) ** 2 * mask).sum(dim=(0, 1)).double().cpu()
+        prior = prior + (y ** 2 * mask).sum(dim=(0, 1)).double().cpu()
+    return [k for k in range(len(residual)) if not residual[k] < prior[k]]
 
 
 def _skip_columns(config: TrainConfig) -> slice:

@@ -169,3 +169,29 @@ def test_a_fitted_linear_skip_starts_as_the_least_squares_fit(kind):
     np.testing.assert_allclose(out.reshape(-1, 2).detach().numpy(), expected, atol=1e-10)
     assert net.state_names() == net.network.state_names()
     assert [tuple(s.shape) for s in state] == net.state_shapes(2)
+
+
+def test_a_residual_that_does_not_help_its_output_is_silenced():
+    """A residual net's output whose validation error its skip does not lower below the
+    prior's (the zero residual: its target is noise on the training samples, zero on the
+    validation ones) is set to zero for any input; the
+    output whose residual is linear in the features keeps its fit."""
+    from flexff.learning.batches import TRAIN, VALIDATION, SequenceSet
+    from flexff.learning.models import silence_outputs
+    from flexff.learning.train import unhelpful_residuals
+
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    net = build_network("pgnn", 5, linear_skip=True, **SMALL["pgnn"]).eval()
+    x = rng.standard_normal((4, 60, 5))
+    roles = [np.where(np.arange(60) < 40, TRAIN, VALIDATION) for _ in range(4)]
+    noise = np.where(np.arange(60) < 40, 0.1 * rng.standard_normal((4, 60)), 0.0)
+    y = np.stack([x @ rng.standard_normal(5), noise], axis=-1)  # the second: none to learn
+    data = SequenceSet.build(list(x), list(y), roles, torch.device("cpu"))
+    fitted = data.role == TRAIN
+    fit_linear_skip(net, data.x[fitted], data.y[fitted])
+    assert unhelpful_residuals(net, data) == [1]
+    silence_outputs(net, [1])
+    out, _ = net(torch.randn(2, 30, 5))
+    assert torch.all(out[..., 1] == 0) and torch.any(out[..., 0] != 0)
+    assert unhelpful_residuals(net, data) == [1]  # zero: no lower than the prior, kept so
