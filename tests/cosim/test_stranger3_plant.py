@@ -6,7 +6,7 @@ import pytest
 
 from flexff.cosim.config import load_config
 from flexff.cosim.run import simulate_config
-from tests.stranger3_plant import G, MZ, write_loop
+from tests.stranger3_plant import MZ, G, write_loop
 
 
 def test_the_loop_tracks_and_holds_gravity(tmp_path):
