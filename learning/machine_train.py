@@ -134,7 +134,8 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
         targets(train_f, train_prior), [feature_scaler.transform(x) for x in test_x],
         targets(test_f, test_prior), edge, rng, Checkpoints(out, settings, every), checkpoint,
         measure, progress, on_epoch,
-        None if prior is None else [resting(t, rate_hz, machine, resolved) for t in train_set])
+        None if prior is None else [resting(t, rate_hz, machine, resolved) for t in train_set],
+        select_residuals=True)
     metrics = {**metrics, "seconds": time.perf_counter() - start, "model_rate_hz": model_rate,
                "cutoff_hz": resolved.cutoff_hz,
                "preprocessing": preprocessing(given, resolved, rate_hz)}

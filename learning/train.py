@@ -209,14 +209,15 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
                 rng: np.random.Generator, saver: Checkpoints, checkpoint: dict[str, Any] | None,
                 measure: Callable[[SequenceNetwork, SequenceSet, SequenceSet], dict[str, Any]],
                 progress: bool = True, on_epoch: EpochReport | None = None,
-                unlabelled: list[np.ndarray] | None = None
+                unlabelled: list[np.ndarray] | None = None, select_residuals: bool = False
                 ) -> tuple[SequenceNetwork, dict[str, Any], dict[str, Any]]:
     """Train `config`'s network on scaled features and targets (lists of (n, k) arrays, one
     per trajectory; `edge` samples at each end, and those `unlabelled` marks in a training
     trajectory, out of every loss), the training trajectories' windows split into training
     and validation; return the network (best epoch, on the CPU), its history, and `measure`'s
     metrics with the timing and device: any machine's training (this module's `fit`,
-    learning.machine_train) runs through here."""
+    learning.machine_train) runs through here. With `select_residuals`, a residual output
+    that does not help keeps its prior alone (`unhelpful_residuals`)."""
     roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge,
                          unlabelled)
     device = pick_device(config.device)
@@ -232,11 +233,12 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
                         _skip_columns(config))
         history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint,
                             on_epoch)
-        silenced = unhelpful_residuals(network, train_data) if uses_prior(config.model) else []
+        selected = select_residuals and uses_prior(config.model)
+        silenced = unhelpful_residuals(network, train_data) if selected else []
         silence_outputs(network, silenced)
         metrics = {
             **measure(network, train_data, test_data),
-            **({"prior_alone": silenced} if uses_prior(config.model) else {}),
+            **({"prior_alone": silenced} if selected else {}),
             "parameters": parameter_count(network),
             "seconds_per_epoch": float(np.mean(history["seconds"])),
             "epochs": config.epochs, "best_epoch": history["best_epoch"],
