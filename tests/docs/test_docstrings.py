@@ -13,11 +13,12 @@ def _modules():
     for package in PACKAGES:
         yield from sorted((REPOSITORY / package).rglob("*.py"))
     yield from sorted((REPOSITORY / "flexff").glob("*.py"))
+    yield from sorted((REPOSITORY / "flexff" / "cli").glob("*.py"))
 
 
 def test_the_walk_finds_the_package():
     names = {p.relative_to(REPOSITORY).as_posix() for p in _modules()}
-    assert {"cosim/master.py", "learning/evaluate.py", "flexff/cli.py",
+    assert {"cosim/master.py", "learning/evaluate.py", "flexff/cli/__init__.py",
             "machines/__init__.py"} <= names
 
 

@@ -100,7 +100,7 @@ def test_every_api_object_has_an_entry_on_the_api_page(site):
 
 
 def test_data_collect_help_lists_the_library_s_trajectory_sets():
-    from flexff.cli import TRAJECTORY_SETS
+    from flexff.cli.shared import TRAJECTORY_SETS
     from flexff.learning.dataset import SETS
 
     assert TRAJECTORY_SETS == SETS

@@ -229,6 +229,6 @@ def test_a_move_ends_at_its_end_where_duration_rounds_past_its_segments(monkeypa
 
 
 def test_the_cli_s_classes_are_the_module_s():
-    from flexff import cli
+    from flexff.cli import shared
 
-    assert (cli.EXCITATION, cli.EVERY_EXCITATION) == (CLASSES, EVERY_CLASS)
+    assert (shared.EXCITATION, shared.EVERY_EXCITATION) == (CLASSES, EVERY_CLASS)
