@@ -6,31 +6,24 @@ import argparse
 import sys
 
 from flexff.cli.shared import TRAJECTORY_SETS, Commands, machine_options
-from flexff.fmu.errors import InputError
 
 
 def _data_collect(args: argparse.Namespace) -> int:
-    from flexff.learning.collect import run_collection
-    from flexff.learning.loop import is_manipulator_loop
+    from flexff.learning.collect import CollectionReport
+    from flexff.learning.workflow import collect_data
 
-    config = None
+    loop = None
     if args.config is not None:
         from flexff.cosim.run import load_run_config
 
-        config = load_run_config(args.config)
-        if not is_manipulator_loop(config):
-            from flexff.learning.machine_collect import collect_machine
-
-            train, test = args.trajectories
-            data = collect_machine(config, args.output, train, test, args.duration,
-                                   workers=args.workers, classes=args.classes)
-            print(f"{data.description.name}: {len(data.trajectories)} trajectories -> "
-                  f"{data.path}")
-            return 0
-    if args.set is None:
-        raise InputError("data collect needs --set NAME, or --config LOOP.toml with a [machine]")
-    report = run_collection(args.set, args.output, args.workers, args.scheduler, config=config,
-                            draws=args.draws)
+        loop = load_run_config(args.config)
+    train, test = args.trajectories
+    report = collect_data(args.output, args.set, loop, args.workers, args.scheduler, args.draws,
+                          train, test, args.duration, args.classes)
+    if not isinstance(report, CollectionReport):  # a machine's dataset
+        print(f"{report.description.name}: {len(report.trajectories)} trajectories -> "
+              f"{report.path}")
+        return 0
     for line in report.problems():
         print(line, file=sys.stderr)
     cancelled = f", {len(report.cancelled)} not run" if report.cancelled else ""

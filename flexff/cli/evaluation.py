@@ -4,83 +4,42 @@ alone, a model's predictions on logs, a loop's PID tuning and iterative learning
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
-from typing import Any
 
 from flexff.cli.shared import (
     MODELS,
     PRESETS,
     Commands,
     device_option,
-    epochs,
     ilc_options,
     machine_options,
     output_file,
     tracked_axes,
 )
-from flexff.fmu.errors import InputError
+
+FILES = {  # what `flexff evaluate` says it wrote, by what it evaluated (learning.workflow)
+    "machine": "results in {out}/ (summary.json, table.md, errors.png, identified.json, data/, "
+               "runs/, models/, fmus/, ilc/ for the limit)",
+    "logs": "relative 2-norm of the effort error on the test logs; results in {out}/ "
+            "(summary.json, table.md, identified.json, runs/, models/)",
+    "manipulator": "results in {out}/ (summary.json, table.md, paths.png, errors.png, "
+                   "forces.png, the .onnx models, ilc/ for the limit, held-out/ for the test "
+                   "split's references)",
+}
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from flexff.cosim.run import load_run_config, output_folder
-    from flexff.learning.evaluate import evaluate
-    from flexff.learning.loop import is_manipulator_loop
-    from flexff.learning.machine_dataset import is_machine_dataset
-
-    loop = None if args.config is None else load_run_config(args.config)
-    machine = loop is not None and not is_manipulator_loop(loop)
-    logs = loop is None and args.data is not None and is_machine_dataset(args.data)
-    if logs and any(v is not None for v in (args.ilc_iterations, args.ilc_cutoff,
-                                            args.ilc_gain)):
-        raise InputError("--ilc-iterations, --ilc-cutoff and --ilc-gain set the ILC of a loop: "
-                         "leave them out for imported logs (no loop runs)")
-    if (machine or logs) and (args.currents or args.ilc_labels or args.force_input):
-        raise InputError("--currents, --ilc-labels and --force-input are for the manipulator's "
-                         f"environments: leave them out for "
-                         f"{'a machine' if machine else 'imported logs'}")
-    output_folder(args.output)
-    if machine:
-        return _evaluate_machine(args, loop)
-    if logs:
-        return _evaluate_logs(args)
-    evaluate(args.env, args.output, args.preset, args.models, args.data, args.epochs, loop=loop,
-             scheduler=args.scheduler, currents=args.currents, device=args.device,
-             ilc_labels=None if args.ilc_labels is None else
-             [kind for kind in args.ilc_labels if kind != "none"], force_input=args.force_input,
-             ilc_iterations=args.ilc_iterations, ilc_cutoff_hz=args.ilc_cutoff,
-             ilc_gain=args.ilc_gain)
-    print((Path(args.output) / "table.md").read_text())
-    print(f"results in {args.output}/ (summary.json, table.md, paths.png, errors.png, "
-          f"forces.png, the .onnx models, ilc/ for the limit, held-out/ for the test split's "
-          f"references)")
-    return 0
-
-
-def _evaluate_machine(args: argparse.Namespace, loop: Any) -> int:
-    """evaluate --config LOOP.toml whose loop has a [machine]: the workflow on that machine."""
-    from flexff.learning.machine_evaluate import evaluate_machine
+    from flexff.cosim.run import load_run_config
+    from flexff.learning.workflow import evaluate_any
 
     train, test = args.trajectories
-    evaluate_machine(loop, args.output, args.models, args.preset, train, test, args.duration,
-                     classes=args.classes, ilc_iterations=args.ilc_iterations,
-                     ilc_cutoff_hz=args.ilc_cutoff, ilc_gain=args.ilc_gain, device=args.device,
-                     **epochs(args))
-    print((Path(args.output) / "table.md").read_text())
-    print(f"results in {args.output}/ (summary.json, table.md, errors.png, identified.json, "
-          f"data/, runs/, models/, fmus/, ilc/ for the limit)")
-    return 0
-
-
-def _evaluate_logs(args: argparse.Namespace) -> int:
-    """evaluate --data LOGS, a machine's dataset with no loop: force prediction on its test
-    logs."""
-    from flexff.learning.log_evaluate import evaluate_logs
-
-    evaluate_logs(args.data, args.output, args.models, args.preset, device=args.device,
-                  **epochs(args))
-    print((Path(args.output) / "table.md").read_text())
-    print(f"relative 2-norm of the effort error on the test logs; results in {args.output}/ "
-          f"(summary.json, table.md, identified.json, runs/, models/)")
+    evaluation = evaluate_any(
+        args.output, args.env, None if args.config is None else load_run_config(args.config),
+        args.data, args.models, args.preset, args.epochs, args.device, args.scheduler,
+        args.currents, None if args.ilc_labels is None else
+        [kind for kind in args.ilc_labels if kind != "none"], args.force_input, train, test,
+        args.duration, args.classes, args.ilc_iterations, args.ilc_cutoff, args.ilc_gain)
+    print((evaluation.out / "table.md").read_text())
+    print(FILES[evaluation.kind].format(out=args.output))
     return 0
 
 

@@ -5,67 +5,18 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
-from flexff.cli.shared import MODELS, PRESETS, Commands, device_option, epochs, output_file
-from flexff.fmu.errors import InputError
+from flexff.cli.shared import MODELS, PRESETS, Commands, device_option, output_file
 
 
 def _train(args: argparse.Namespace) -> int:
     """One run into OUTPUT, or with several --seed or a --scheduler one run per seed into
     OUTPUT/seedN, side by side (learning.workers); prints the metrics as JSON."""
-    from flexff.learning.machine_dataset import is_machine_dataset
+    from flexff.learning.workflow import train_model
 
-    if is_machine_dataset(args.data):
-        return _train_machine(args)
-    overrides = {"labels": args.labels, **epochs(args),
-                 **({"force_input": True} if args.force_input else {}),
-                 **({"cuda_graphs": True} if args.cuda_graphs else {})}
-    seeds = args.seed or [0]
-    if len(seeds) == 1 and args.scheduler is None:
-        from flexff.learning.train import train
-
-        metrics = train(args.model, args.preset, args.data, args.output, resume=args.resume,
-                        force=args.force, checkpoint_every=args.checkpoint_every,
-                        **overrides, seed=seeds[0], device=args.device)
-        print(json.dumps(metrics, indent=2, default=str))
-        return 0
-    from flexff.learning.workers import TrainJob, train_parallel
-
-    if args.resume or args.force or args.checkpoint_every is not None:
-        raise InputError("--resume, --force and --checkpoint-every go with one seed trained "
-                         "here; several seeds resume what their folders hold")
-    if len(set(seeds)) != len(seeds):
-        raise InputError(f"--seed: each seed once, got {seeds}")
-    jobs = [TrainJob(args.model, args.preset, Path(args.data), Path(args.output) / f"seed{s}",
-                     {**overrides, "seed": s}, label=f"seed{s}") for s in seeds]
-    results = train_parallel(jobs, scheduler=args.scheduler, device=args.device)
-    print(json.dumps(results, indent=2, default=str))
-    return 0
-
-
-def _train_machine(args: argparse.Namespace) -> int:
-    """train on a machine's dataset: one seed, on features with the friction widths of its
-    prior identified on it (the prior itself for pgnn)."""
-    from flexff.learning.machine_dataset import load_machine_dataset
-    from flexff.learning.machine_evaluate import learned_features
-    from flexff.learning.machine_identify import identify_dataset
-    from flexff.learning.machine_train import fit_machine
-    from flexff.learning.presets import make_config
-
-    if len(args.seed or [0]) > 1 or args.scheduler is not None or args.labels != "forces" \
-            or args.force_input:
-        raise InputError("a machine's dataset trains one seed here, on its efforts, without "
-                         "--force-input (its physics is the pgnn's prior)")
-    data = load_machine_dataset(args.data)
-    config = make_config(args.model, args.preset, seed=(args.seed or [0])[0],
-                         device=args.device, **epochs(args))
-    identified = identify_dataset(data)
-    metrics = fit_machine(config, data.description, data.sample_rate_hz, data.trajectories,
-                          data.digest, Path(args.output), learned_features(identified),
-                          resume=args.resume, force=args.force,
-                          checkpoint_every=args.checkpoint_every,
-                          prior=identified if args.model == "pgnn" else None)
+    metrics = train_model(args.model, args.data, args.output, args.preset, args.seed or [0],
+                          args.epochs, args.labels, args.force_input, args.resume, args.force,
+                          args.checkpoint_every, args.scheduler, args.device, args.cuda_graphs)
     print(json.dumps(metrics, indent=2, default=str))
     return 0
 
@@ -79,27 +30,15 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _identify(args: argparse.Namespace) -> int:
-    from flexff.cosim.run import output_folder
-    from flexff.learning.evaluate import preprocessing
-    from flexff.learning.identify import REPORT, identify, relative_gains, write_identification
-    from flexff.learning.machine_dataset import is_machine_dataset
+    from flexff.learning.identify import Identification, relative_gains
+    from flexff.learning.workflow import identify_prior
 
-    output_folder(args.output)  # a folder, as for every command: made, or refused, first
-    if is_machine_dataset(args.data):
-        from flexff.learning.linear_model import write_linear_model
-        from flexff.learning.machine_dataset import load_machine_dataset
-        from flexff.learning.machine_identify import dataset_features, identify_dataset
-
-        data = load_machine_dataset(args.data)
-        features, settings = dataset_features(data)
-        print(settings)
-        model = identify_dataset(data, features)
-        print(model.summary())
-        print(f"wrote {write_linear_model(model, Path(args.output) / REPORT)}")
+    identified = identify_prior(args.data, args.output, args.env)
+    identification, path = identified.model, identified.path
+    if not isinstance(identification, Identification):  # a machine's linear model
+        print(identification.summary())
+        print(f"wrote {path}")
         return 0
-
-    identification = identify(args.data, preprocessing(args.env))
-    path = write_identification(identification, args.output)
     rows = identification.rows()
     width = max(len(row["base"]) for row in rows)
     print(f"{'base parameter':<{width}} {'value':>12} {'std':>10}  unit")

@@ -30,11 +30,6 @@ def output_file(path: str) -> None:
     output_folder(Path(path).parent)
 
 
-def epochs(args: argparse.Namespace) -> dict[str, Any]:
-    """--epochs as a setting override where given (0 too: the configuration refuses it)."""
-    return {} if args.epochs is None else {"epochs": args.epochs}
-
-
 def machine_options(parser: argparse.ArgumentParser) -> None:
     """The excitation of a loop with a [machine] (learning.excitation)."""
     parser.add_argument("--trajectories", type=int, nargs=2, default=[24, 6],
