@@ -78,7 +78,11 @@ def checked(config: RunConfig) -> RunConfig:
     """`config` as the parser makes it (itself, if the parser made it): after a change in
     code (dataclasses.replace) the same rules hold as for TOML and SSP; a ConfigError names the
     key at fault. Connections keep their keys (an SSP file's `ssd:Connection[k]`) for later
-    errors."""
+    errors.
+
+    >>> import dataclasses
+    >>> api.check(dataclasses.replace(config, stop=2.0)).stop
+    2.0"""
     if config.checked:
         return config
     again = parse_config(expanded(config), name=config.name, origin=config.origin)

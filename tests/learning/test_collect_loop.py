@@ -217,7 +217,7 @@ def test_cli_passes_the_configuration(monkeypatch, tmp_path, capsys):
 
     seen = {}
 
-    def fake(set_name, out, workers, scheduler, config, draws):
+    def fake(set_name, out, workers, scheduler, config, draws, progress):
         seen["config"] = config
         return CollectionReport(Path(out), set_name, (), (), (), 0.0)
 
@@ -235,7 +235,7 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
 
     seen = {}
 
-    def fake(env, out, preset, models, data, epochs, loop, scheduler, currents=(),
+    def fake(env, out, preset, models, data, epochs, say, loop, progress, scheduler, currents=(),
              device="auto", ilc_labels=(), force_input=(), ilc_iterations=None,
              ilc_cutoff_hz=None, ilc_gain=None):
         seen.update(env=env, loop=loop, scheduler=scheduler, device=device,
