@@ -58,8 +58,8 @@ def collect(out: str | Path, loop: Loop | None = None, set_name: str | None = No
 
     >>> data = api.collect("data", "drive.toml", n_train=2, n_test=1, duration=2.0,
     ...                    progress=False)
-    >>> [t.split for t in data.trajectories]
-    ['train', 'train', 'test']
+    >>> len(data.trajectories), len(data.split("test"))
+    (3, 1)
     """
     from flexff.learning.workflow import collect_data
 
@@ -115,8 +115,8 @@ def ilc(loop: Loop, out: str | Path, **options: Any) -> dict[str, Any]:
     >>> short = api.check(dataclasses.replace(api.load("drive.toml"), stop=1.0))
     >>> state = api.ilc(short, "ilc", iterations=1, floor=False, progress=False,
     ...                 say=lambda line: None)
-    >>> [trial["trial"] for trial in state["trials"]]
-    [0, 1]
+    >>> len(state["trials"])  # PID alone, then one learning trial
+    2
     """
     from flexff.learning.ilc import ilc as learn
 
@@ -160,8 +160,9 @@ def write_predictions(predictions: Predictions, out: str | Path,
                       about: dict[str, Any] | None = None) -> list[Path]:
     """`predictions` as `flexff predict` writes them: the CSV `out`, its .json and .png.
 
-    >>> [path.suffix for path in api.write_predictions(predictions, "predictions.csv")]
-    ['.csv', '.json', '.png']
+    >>> written = api.write_predictions(predictions, "predictions.csv")
+    >>> written[2].name
+    'predictions.png'
     """
     from flexff.learning.predict import write_predictions as write
 
