@@ -1,5 +1,4 @@
-"""flexff from Python, for scripts and notebooks: the command line's verbs as functions, over the
-same package functions (`flexff run` and the learning commands alike).
+"""flexff from Python: the command line's verbs as functions, over the same package functions.
 
     from flexff import api
 
@@ -12,9 +11,8 @@ same package functions (`flexff run` and the learning commands alike).
     api.identify("data", "prior"); api.train("tcn", "data", "run"); api.export("run", "m.onnx")
     api.ilc("drive.toml", "ilc"); api.evaluate("eval", loop="drive.toml")
 
-Every function's docstring ends with an example; tests/flexff/test_api_examples.py runs them all
-in turn in one folder (drive.toml: machines/examples). PyTorch loads only in the functions that
-train or run a model. `api.register_builtin` adds a built-in FMU ([fmu.NAME] builtin = ...).
+Each function's docstring ends with an example, run in turn by tests/flexff/test_api_examples.py
+(drive.toml: machines/examples). PyTorch loads only in the functions that train or run a model.
 """
 
 from __future__ import annotations
