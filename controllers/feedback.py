@@ -21,8 +21,9 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
+from flexff.blocks.loop_shaping import PIDDesign, StateSpace, design_pid
 from flexff.controllers.allocation import measured_position, motor_currents
-from flexff.controllers.loop_shaping import PIDDesign, StateSpace, design_pid
+from flexff.controllers.axis_plant import axis_plant
 from flexff.fmu.errors import InputError
 from flexff.fmu.system import Parameter, System, Variable
 from flexff.plant.analysis import plant_info
@@ -83,7 +84,7 @@ def controller_design(variant: str = "nominal", crossover_hz: float | None = Non
         notch_hz = parasitic_mode_hz()
     if crossover_hz is None:
         crossover_hz = defaults.crossover_hz
-    return design_pid(crossover_hz, step, notch_hz)
+    return design_pid(crossover_hz, step, notch_hz, plant=axis_plant())
 
 
 def controller_system(variant: str = "nominal", crossover_hz: float | None = None,

@@ -6,8 +6,8 @@ PyTorch.
 
 from __future__ import annotations
 
-from flexff.controllers.linear_prior import LinearModel
 from flexff.learning.linear_model import identify_linear, parallel_filter
+from flexff.learning.linear_prior import LinearModel
 from flexff.learning.machine_dataset import MachineDataset
 from flexff.learning.machine_features import (
     MachineFeatures,

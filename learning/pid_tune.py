@@ -25,9 +25,9 @@ from typing import Any, cast
 import numpy as np
 import tomli_w
 
-from flexff.controllers.loop_shaping import AxisPlant, Margins, StateSpace, loop_margins
-from flexff.controllers.pid_design import AxisPid, Form, LoopShape
-from flexff.controllers.pid_options import axes_from_options
+from flexff.blocks.loop_shaping import AxisPlant, Margins, StateSpace, loop_margins
+from flexff.blocks.pid_design import AxisPid, Form, LoopShape
+from flexff.blocks.pid_options import axes_from_options
 from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME
 from flexff.cosim.machine import Axis, Machine

@@ -28,7 +28,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from flexff.controllers.linear_prior import LinearModel, linear_model_from_dict
 from flexff.cosim.csv_text import TIME
 from flexff.cosim.machine import Machine
 from flexff.cosim.plots import save_figure
@@ -37,6 +36,7 @@ from flexff.fmu.errors import InputError
 from flexff.learning.dataset_files import Trajectory
 from flexff.learning.deploy import SIModel
 from flexff.learning.linear_model import EDGE_PERIODS, read_linear_model
+from flexff.learning.linear_prior import LinearModel, linear_model_from_dict
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
 from flexff.learning.machine_features import (
     MachineFeatures,

@@ -6,7 +6,7 @@ import ast
 from tests.helpers import REPOSITORY
 
 MAX_LINES = 15
-PACKAGES = ("fmu", "cosim", "learning", "controllers", "plant", "machines")
+PACKAGES = ("fmu", "cosim", "learning", "blocks", "controllers", "plant", "machines")
 
 
 def _modules():

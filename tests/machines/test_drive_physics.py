@@ -14,7 +14,7 @@ from fmpy import simulate_fmu
 from scipy.linalg import expm
 
 from flexff import api
-from flexff.controllers.pid_options import pid_gains_from_options
+from flexff.blocks.pid_options import pid_gains_from_options
 from flexff.fmu.build import build_fmu
 from flexff.machines.drive import DRIVE, drive_system, effort_of
 

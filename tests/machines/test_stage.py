@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from flexff import api
-from flexff.controllers.block_options import OptionError
+from flexff.blocks.options import OptionError
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
 from flexff.machines.stage import stage_from_options, true_parameters
