@@ -18,6 +18,7 @@ from flexff.controllers.feedforward import feedforward_system
 from flexff.controllers.learned_feedforward import linear_skip, model_period
 from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import Machine, parse_machine
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import graph_network, read_graph
@@ -95,7 +96,7 @@ def inverse_model_system(machine: Machine, inverse: ca.Function, step: float,
                               inputs=reference_variables(machine))
 
 
-def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
+def learned_machine_feedforward_system(model: str | Path, step: float = DEFAULT_STEP,
                                        task: bool = False, runtime: str = RUNTIMES[0]
                                        ) -> System:
     """The System of the feedforward FMU running `model`, a machine's exported model; with

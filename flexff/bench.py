@@ -25,6 +25,7 @@ from flexff.cosim.scenario import Scenario, reference_signals, resolve
 from flexff.cosim.schema import RunConfig
 from flexff.cosim.timing import PERCENTILES, US, Pacing, StepTiming
 from flexff.fmu.build import build_fmu
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.network_runtime import RUNTIMES
 from flexff.fmu.onnx_fmu import onnx_system
@@ -371,7 +372,7 @@ def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
-                           step: float = 1e-3) -> dict[str, Any]:
+                           step: float = DEFAULT_STEP) -> dict[str, Any]:
     """A network slower than the period (slow_graph, about 3 ms a call in onnxruntime) in its
     own task every `every` steps of `step` seconds (25 Hz at 1 kHz), paced alone for `seconds`:
     the base task's TET and overruns (which the network must not cause) and the network
@@ -386,7 +387,7 @@ def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
 
 
 def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
-                             step: float = 1e-3) -> dict[str, Any]:
+                             step: float = DEFAULT_STEP) -> dict[str, Any]:
     """The floor of an onnxruntime call in a paced loop: a graph of one Add node as an FMU (its
     network in onnxruntime), called every `every` steps of `step` seconds (the hardware models'
     25 Hz at 1 kHz), paced alone for `seconds`. Its call time is what a network call costs on

@@ -21,6 +21,7 @@ from scipy.signal import savgol_filter
 
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.memory import check_memory
+from flexff.cosim.references import SAVGOL_ORDER, SMOOTHING_WINDOW
 from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
 from flexff.learning.features import decimation
@@ -29,7 +30,6 @@ from flexff.learning.presets import PRESETS, make_config
 RATE_TOLERANCE = 0.01  # largest relative deviation of a sample interval from the median
 UNIFORM = 1e-6  # relative: a grid this close to the rate is kept as it is (learning.dataset)
 ROUNDING = 1e-3  # relative: the logs' rate is rounded to whole Hz within this
-SMOOTHING_S = 0.025  # Savitzky-Golay window of derived reference derivatives (read_csv's)
 
 
 class LogError(InputError):
@@ -236,9 +236,9 @@ def check_length(log: Log, samples: int, rate_hz: float) -> None:
 def reference_derivative(reference: np.ndarray, rate_hz: float, order: int, of: str
                          ) -> tuple[np.ndarray, str]:
     """The `order`-th derivative of the reference position `of` (its name in messages),
-    sampled at `rate_hz`, by a cubic Savitzky-Golay filter over SMOOTHING_S (as
+    sampled at `rate_hz`, by a cubic Savitzky-Golay filter over SMOOTHING_WINDOW (as
     cosim.references.read_csv derives them), and how, for a manifest's `derived`."""
-    window = max(5, 2 * round(SMOOTHING_S * rate_hz / 2) + 1)
-    values = savgol_filter(reference, window, 3, deriv=order, delta=1.0 / rate_hz)
+    window = max(5, 2 * round(SMOOTHING_WINDOW * rate_hz / 2) + 1)
+    values = savgol_filter(reference, window, SAVGOL_ORDER, deriv=order, delta=1.0 / rate_hz)
     return values, (f"{('first', 'second', 'third')[order - 1]} derivative of {of} (cubic "
                     f"Savitzky-Golay filter over {window} samples)")
