@@ -17,7 +17,7 @@ from flexff.cosim.recording import load_recording
 from flexff.cosim.run import run_config
 from flexff.cosim.schema import ConfigError
 
-COSIM = Path(__file__).parents[2] / "cosim"
+COSIM = Path(__file__).parents[2] / "flexff" / "cosim"
 
 
 def test_cosim_imports_no_machine():
