@@ -20,7 +20,7 @@ from flexff.learning.pid_tune import (
 from flexff.machines.drive import DRIVE
 from tests.helpers import REPOSITORY
 
-EXAMPLES = REPOSITORY / "machines" / "examples"
+EXAMPLES = REPOSITORY / "flexff" / "machines" / "examples"
 
 
 def test_the_drive_is_measured_and_its_tuned_loop_keeps_the_margin():
