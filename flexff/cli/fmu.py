@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from flexff.cli.shared import Commands, output_file
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError, RunError
 from flexff.fmu.fmi_version import FMI_VERSIONS
 from flexff.fmu.network_runtime import RUNTIMES
@@ -141,8 +142,9 @@ def add_commands(commands: Commands) -> None:
     build.add_argument("--variant", choices=sorted(VARIANTS), default="nominal",
                        help="plant variant")
     build.add_argument("--model", help="learned-feedforward: the .onnx file (flexff export)")
-    build.add_argument("--step", type=float, default=1e-3,
-                       help="learned-feedforward, onnx: communication step [s] (default 0.001)")
+    build.add_argument("--step", type=float, default=DEFAULT_STEP,
+                       help=f"learned-feedforward, onnx: communication step [s] (default "
+                            f"{DEFAULT_STEP:g})")
     build.add_argument("--every", type=int,
                        help="onnx: communication steps between calls of the graph, its results "
                             "extrapolated linearly in between (default 1)")

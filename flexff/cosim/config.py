@@ -30,6 +30,7 @@ from flexff.cosim.machine import Machine, machine_table, parse_machine
 from flexff.cosim.memory import MemoryNeeded
 from flexff.cosim.plugins import ShortForm, check_workspace, reference_kinds, short_forms
 from flexff.cosim.references import (
+    SMOOTHING_WINDOW,
     Reference,
     Sampled,
     SegmentError,
@@ -51,6 +52,7 @@ from flexff.cosim.schema import (
     SourceConfig,
     whole_steps,
 )
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.description_faults import warn
 from flexff.fmu.errors import not_a_file
 from flexff.fmu.fmi_version import FMI_VERSIONS
@@ -220,7 +222,7 @@ class _Parser(TableChecker):
         self.keys(run, "run", ("step", "start", "stop", "tolerance", "step_timeout", "algorithm",
                                "order", "allow_nonfinite"))
         self.allow_nonfinite = self.flag(run, "run", "allow_nonfinite")
-        step = self.number(run, "run", "step", 1e-3, positive=True)
+        step = self.number(run, "run", "step", DEFAULT_STEP, positive=True)
         machine = self.machine(data, short)  # an axis reference's axes and limits
         reference, signal = None, None
         if "reference" in data:
@@ -622,7 +624,8 @@ class _Parser(TableChecker):
             self.keys(t, r, ("kind", "path", "smoothing_window"))
             return ReferenceConfig(kind, {
                 "path": self.path(t, r, "path"),
-                "smoothing_window": self.number(t, r, "smoothing_window", 0.025, positive=True)})
+                "smoothing_window": self.number(t, r, "smoothing_window", SMOOTHING_WINDOW,
+                                                   positive=True)})
         if kind == "segments":
             self.keys(t, r, ("kind", "start", "segments"))
             start = self.point(t, r, "start", (0.0, 0.0))

@@ -33,6 +33,7 @@ from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import Machine
 from flexff.cosim.memory import check_memory
 from flexff.cosim.plugins import check_workspace, reference_kinds
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.limits import SMOOTHING_SAMPLES
 
@@ -41,6 +42,7 @@ if TYPE_CHECKING:  # SciPy and CasADi load with the references that use them
 
 JOIN_TOLERANCE = 1e-9  # m: largest position jump accepted between chained segments
 SAVGOL_ORDER = 3  # the polynomial a CSV reference's derivatives are fitted with (read_csv)
+SMOOTHING_WINDOW = 0.025  # s: the window they are fitted over, unless a configuration sets it
 SAMPLED_ARRAYS = 7  # float64 arrays a sampled reference holds: t, x, y, vx, vy, ax, ay
 
 
@@ -265,7 +267,7 @@ class Chain(Segment):
         return out
 
 
-def sample(path: Segment, step: float = 1e-3) -> Reference:
+def sample(path: Segment, step: float = DEFAULT_STEP) -> Reference:
     """`path` on the grid 0, step, 2 step, ... up to its duration."""
     _positive("step", step, "s")
     n = _grid_points(path.duration, step, f"sampling the {path.duration:g} s reference every "
@@ -283,7 +285,8 @@ def _grid_points(duration: float, step: float, what: str) -> int:
     return n
 
 
-def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.025) -> Reference:
+def read_csv(path: str | Path, step: float = DEFAULT_STEP,
+             smoothing_window: float = SMOOTHING_WINDOW) -> Reference:
     """A reference from a CSV table with columns time (or t), x_ref, y_ref (and optionally
     vx_ref, vy_ref, ax_ref, ay_ref; cosim.csv_text's time table), resampled onto the grid t0,
     t0 + step, ... by cubic interpolation.

@@ -19,7 +19,7 @@ from flexff.fmu.errors import InputError
 from flexff.learning.excitation import CLASSES
 
 if TYPE_CHECKING:  # numpy, scipy and torch load in the step that needs them
-    from flexff.controllers.linear_prior import LinearModel
+    from flexff.learning.linear_prior import LinearModel
     from flexff.cosim.schema import RunConfig
     from flexff.learning.collect import CollectionReport
     from flexff.learning.identify import Identification

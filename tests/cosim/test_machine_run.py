@@ -13,7 +13,7 @@ from flexff.cosim.recording import load_recording
 from flexff.cosim.run import run_config
 from flexff.cosim.schema import ConfigError
 
-EXAMPLES = Path(__file__).parents[2] / "cosim" / "examples"
+EXAMPLES = Path(__file__).parents[2] / "flexff" / "cosim" / "examples"
 
 CONFIG = """
 [run]

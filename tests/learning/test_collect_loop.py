@@ -379,7 +379,7 @@ def test_the_loops_edits_are_checked_as_a_file_is():
 def test_cli_evaluate_refuses_manipulator_options_for_a_machine(tmp_path, capsys, option):
     from flexff.cli import main
 
-    drive = Path(__file__).parents[2] / "machines" / "examples" / "drive.toml"
+    drive = Path(__file__).parents[2] / "flexff" / "machines" / "examples" / "drive.toml"
     assert main(["evaluate", "--config", str(drive), "-o", str(tmp_path / "eval"),
                  *option]) == 2
     assert "--currents, --ilc-labels and --force-input are for the manipulator's environments: " \

@@ -20,7 +20,7 @@ from flexff.learning import ilc_loops
 from flexff.learning.ilc import DIVERGED, RESULT, ilc
 from flexff.learning.linear_model import IdentificationWarning, identify_linear
 
-EXAMPLE = Path(__file__).parents[2] / "machines" / "examples" / "drive.toml"
+EXAMPLE = Path(__file__).parents[2] / "flexff" / "machines" / "examples" / "drive.toml"
 
 
 def drive_loop(**ilc_settings):

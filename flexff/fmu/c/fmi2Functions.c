@@ -320,9 +320,10 @@ FLEXFF_EXPORT int flexff_network_task(fmi2Component comp, long *period,
  * real-time report and its tests: counts[0] the calls handed over to it (one per call point),
  * counts[1] the results not ready when due (the step waited for the network: an overrun),
  * counts[2] those the step computed itself (under scheduled execution, when the network
- * clock's partition had not run). 0, or -1 as flexff_network_times and for a network that
- * runs in the step (no task). */
-FLEXFF_EXPORT int flexff_network_counts(fmi2Component comp, long counts[3]) {
+ * clock's partition had not run), counts[3] the calls whose hand-over woke the task with a
+ * system call (not released by the clock). 0, or -1 as flexff_network_times and for a
+ * network that runs in the step (no task). */
+FLEXFF_EXPORT int flexff_network_counts(fmi2Component comp, long counts[4]) {
     Instance *c = (Instance *)comp;
     if (registry_find(comp) < 0 || c->magic != INSTANCE_MAGIC || c->net == NULL ||
         counts == NULL)
