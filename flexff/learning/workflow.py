@@ -19,10 +19,10 @@ from flexff.fmu.errors import InputError
 from flexff.learning.excitation import CLASSES
 
 if TYPE_CHECKING:  # numpy, scipy and torch load in the step that needs them
-    from flexff.learning.linear_prior import LinearModel
     from flexff.cosim.schema import RunConfig
     from flexff.learning.collect import CollectionReport
     from flexff.learning.identify import Identification
+    from flexff.learning.linear_prior import LinearModel
     from flexff.learning.machine_dataset import MachineDataset
 
 @dataclass(frozen=True)
