@@ -26,7 +26,7 @@ def test_the_examples_run(tmp_path, monkeypatch, capsys):
     assert main(["config", "example", "third-party-fmus"]) == 0
     (tmp_path / "run.toml").write_text(capsys.readouterr().out)
     for name in ("drive.toml", "drive-reference.csv"):
-        shutil.copy(REPOSITORY / "machines" / "examples" / name, tmp_path)
+        shutil.copy(REPOSITORY / "flexff" / "machines" / "examples" / name, tmp_path)
     parser, runner = doctest.DocTestParser(), doctest.DocTestRunner()
     globs, report = {"api": api}, []
     for name in ORDER:
