@@ -20,9 +20,10 @@ from pathlib import Path
 from typing import Any
 
 from flexff.cosim.config import expanded, parse_config, read_tables
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.executor import execute
 from flexff.cosim.run import run_config
-from flexff.cosim.schema import ConfigError, RunConfig
+from flexff.cosim.schema import RunConfig
 from flexff.fmu.errors import InputError
 
 

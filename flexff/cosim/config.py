@@ -25,10 +25,11 @@ import tomli_w
 from flexff.cosim.axis_references import AXIS_KINDS, AXIS_OPTIONS, REST, SHARE
 from flexff.cosim.builtins import checked_options, registered
 from flexff.cosim.checks import TableChecker
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.example_configs import config_examples as config_examples  # public API
 from flexff.cosim.machine import Machine, machine_table, parse_machine
 from flexff.cosim.memory import MemoryNeeded
-from flexff.cosim.plugins import ShortForm, check_workspace, reference_kinds, short_forms
+from flexff.cosim.plugins import ShortForm, check_workspace, short_forms
 from flexff.cosim.references import (
     SMOOTHING_WINDOW,
     Reference,
@@ -36,6 +37,7 @@ from flexff.cosim.references import (
     SegmentError,
     build_reference,
     reference_kind_names,
+    reference_kinds,
 )
 from flexff.cosim.sandbox import KEYS as SANDBOX_KEYS
 from flexff.cosim.sandbox import MEMORY_MB, SCRATCH_MB, Sandbox
@@ -43,7 +45,6 @@ from flexff.cosim.schema import (
     ALGORITHMS,
     SOURCE_KINDS,
     UNCONNECTED,
-    ConfigError,
     ConnectionConfig,
     FmuConfig,
     RecordConfig,

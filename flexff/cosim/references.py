@@ -21,7 +21,7 @@ import csv
 import json
 import math
 from collections import OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
@@ -32,13 +32,15 @@ from flexff.cosim.axis_references import AXIS_KINDS, build_axis_reference
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import Machine
 from flexff.cosim.memory import check_memory
-from flexff.cosim.plugins import check_workspace, reference_kinds
+from flexff.cosim.plugins import check_workspace, loaded
 from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.limits import SMOOTHING_SAMPLES
 
 if TYPE_CHECKING:  # SciPy and CasADi load with the references that use them
     from scipy.interpolate import CubicSpline
+
+    from flexff.cosim.checks import TableChecker
 
 JOIN_TOLERANCE = 1e-9  # m: largest position jump accepted between chained segments
 SAVGOL_ORDER = 3  # the polynomial a CSV reference's derivatives are fitted with (read_csv)
@@ -347,6 +349,32 @@ def _finite_point(name: str, point: Sequence[float]) -> None:
 
 
 GENERIC_KINDS = ("circle", "line-circle", "spline", "segments", "csv", *AXIS_KINDS)
+
+
+@dataclass(frozen=True)
+class ReferenceKind:
+    """A machine package's [reference] kind: `check` turns its table, keys included, into
+    checked options (None: no keys beside `kind`); `build` samples it (options, step) ->
+    Reference."""
+
+    name: str
+    build: Callable[[Mapping[str, Any], float], Reference]
+    check: Callable[[TableChecker, Mapping[str, Any]], dict[str, Any]] | None = None
+
+
+_REFERENCE_KINDS: dict[str, ReferenceKind] = {}
+
+
+def register_reference_kind(kind: ReferenceKind) -> None:
+    """Make `kind.name` a [reference] kind (a machine package, through its entry point of
+    cosim.plugins.GROUP)."""
+    _REFERENCE_KINDS[kind.name] = kind
+
+
+def reference_kinds() -> dict[str, ReferenceKind]:
+    """The machine packages' [reference] kinds, their entry points loaded."""
+    loaded()
+    return dict(_REFERENCE_KINDS)
 
 
 def reference_kind_names() -> tuple[str, ...]:

@@ -27,6 +27,7 @@ import numpy as np
 from flexff.cosim.axis_references import AXIS_KINDS
 from flexff.cosim.builtins import registered
 from flexff.cosim.config import FAULTS, RECORDED, expanded, load_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.disk import check_disk
 from flexff.cosim.fmu_log import LOG_NAME, FmuLog
 from flexff.cosim.folder_lock import folder_lock
@@ -53,7 +54,7 @@ from flexff.cosim.recording import (
 )
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
-from flexff.cosim.schema import ConfigError, RunConfig
+from flexff.cosim.schema import RunConfig
 from flexff.cosim.timing import OverrunError, Pacing
 from flexff.cosim.watchdog import watchdog
 

@@ -34,17 +34,11 @@ import tomli_w
 from lxml import etree
 
 from flexff.cosim.config import checked, expanded, parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.recording import atomic_write
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
-from flexff.cosim.schema import (
-    ALGORITHMS,
-    ConfigError,
-    ConnectionConfig,
-    FmuConfig,
-    RunConfig,
-    whole_steps,
-)
+from flexff.cosim.schema import ALGORITHMS, ConnectionConfig, FmuConfig, RunConfig, whole_steps
 from flexff.cosim.wiring import SOURCE, Link, carried
 from flexff.fmu.archive import extract_archive
 from flexff.fmu.cache import cache_dir, file_sha256

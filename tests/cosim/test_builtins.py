@@ -10,10 +10,11 @@ import pytest
 from flexff.cosim.batch import run_batch
 from flexff.cosim.builtins import Option, register_builtin, registered
 from flexff.cosim.config import parse_config
-from flexff.cosim.plugins import reference_kinds, short_forms
+from flexff.cosim.config_error import ConfigError
+from flexff.cosim.plugins import short_forms
 from flexff.cosim.recording import load_recording
+from flexff.cosim.references import reference_kinds
 from flexff.cosim.run import run_config
-from flexff.cosim.schema import ConfigError
 
 
 def test_the_manipulator_registers_like_any_machine():

@@ -9,8 +9,8 @@ from flexff.cli import build_parser
 from flexff.cosim import machine
 from flexff.cosim.builtins import registered
 from flexff.cosim.config import parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.config_keys import KEYS, REFERENCE_KINDS, SEGMENT_KINDS, keys_of
-from flexff.cosim.schema import ConfigError
 from tests.helpers import REFERENCE_FMUS
 
 FMU = {"a": {"path": str(REFERENCE_FMUS / "fmi2" / "Feedthrough.fmu"),

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from flexff.cosim.config import parse_config
-from flexff.cosim.schema import ConfigError
+from flexff.cosim.config_error import ConfigError
 from flexff.fmu.build import build_fmu
 from flexff.fmu.cache import file_sha256
 from flexff.learning.collect import PROGRESS, DataFolderError, collect, run_collection
