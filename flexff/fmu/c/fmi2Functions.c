@@ -506,6 +506,7 @@ static int data_problem(const Instance *c, const Data *d, char *why, size_t size
     if (!initialized && d->net_step != 0)
         PROBLEM("network step counter %lld before initialization", d->net_step);
     if (d->net_pending != 0 && d->net_pending != 1) PROBLEM("network flag %d", d->net_pending);
+    if (d->net_slot != 0 && d->net_slot != 1) PROBLEM("network state slot %d", d->net_slot);
     if (d->net_pending && (first_nonfinite(d->net_new, N_R) >= 0 ||
                            first_nonfinite(d->net_u, N_U) >= 0))
         PROBLEM("network result at this point");
