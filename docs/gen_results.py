@@ -200,8 +200,10 @@ def bench_markdown() -> str:
     out += ["", f"### Paced at 1 kHz on one core ({rt['reference']})", "",
             "| loop | 1 kHz task TET p50 / p99 / max [µs] | overruns | network call p50 / p99 "
             "[µs] | feedforward step p50 / p99 [µs], hand-over / none | network computed in "
-            "the 1 kHz task |", "|---|---:|---:|---:|---:|---:|"]
-    loops = [n for n in ("tcn", "tcn_onnxruntime", "lstm", "lstm_onnxruntime") if n in rt]
+            "the 1 kHz task | hand-overs that signalled the task |",
+            "|---|---:|---:|---:|---:|---:|---:|"]
+    loops = [n for n in ("tcn", "tcn_onnxruntime", "lstm", "lstm_onnxruntime",
+                         "no_feedforward") if n in rt]
     for name in (*loops, "idle"):
         r = rt[name]
         base = r["tasks"]["base"] if "tasks" in r else r
@@ -212,7 +214,9 @@ def bench_markdown() -> str:
         split = " / ".join(f"{figure(ff['tet_us'][s]['p50'])}, {figure(ff['tet_us'][s]['p99'])}"
                            for s in ("handover", "no_handover")) if ff else "–"
         inside = f"{ff['computed_in_base_task']} of {ff['handovers']}" if ff else "–"
-        out.append(f"| {name} | {tet} | {r['overruns']} | {call} | {split} | {inside} |")
+        signalled = f"{ff['signalled']} of {ff['handovers']}" if ff and "signalled" in ff else "–"
+        out.append(f"| {name} | {tet} | {r['overruns']} | {call} | {split} | "
+                   f"{inside} | {signalled} |")
     return "\n".join(out) + "\n"
 
 

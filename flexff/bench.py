@@ -25,6 +25,7 @@ from flexff.cosim.scenario import Scenario, reference_signals, resolve
 from flexff.cosim.schema import RunConfig
 from flexff.cosim.timing import PERCENTILES, US, Pacing, StepTiming
 from flexff.fmu.build import build_fmu
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.network_runtime import RUNTIMES
 from flexff.fmu.onnx_fmu import onnx_system
@@ -232,8 +233,10 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
     the others, and the calls handed over, waited for and computed in the base task
     (`feedforward_step`); the tracking (e2) against the single-rate feedforward (mode "step",
     the network inside the 1 kHz step, run unpaced: the same run as paced, bit for bit, and
-    its TET for comparison). As floors, the same paced loop with no FMU for as long (`idle`:
-    the lateness and overruns the machine alone causes), a one-node graph FMU
+    its TET for comparison). As floors, the same paced loop without the feedforward
+    (`no_feedforward`: the TET the loop's other FMUs and the machine's jitter give), with no
+    FMU for as long (`idle`: the lateness and overruns the machine alone causes), a one-node
+    graph FMU
     (`one_node_graph`) and a network made deliberately slower than the period in its own task
     at 25 Hz (`slow_network`), each run as --realtime runs (cosim.realtime: SCHED_FIFO and
     locked memory where permitted), pinned to one CPU (`paced_cpu`) as `flexff run --realtime
@@ -261,6 +264,11 @@ def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | N
                                 "task_over_single_rate": {a: e2_task[a] / e2_step[a]
                                                           for a in e2_task}}}
             paced_s = recording.timing.tet.size * recording.timing.period
+    bare = simulate(resolve(_hardware_loop_config(seconds, "realtime-no-feedforward"), folder),
+                    progress=False, pacing=Pacing(rt_factor=1.0), cpu=cpu)
+    table = bare.timing.table(bare.wall_s)
+    results["no_feedforward"] = {key: table[key] for key in (
+        "period_us", "tasks", "tet_us_per_fmu", "lateness_us", "overruns")}
     with realtime_process(cpu):  # every paced loop here runs as --realtime --cpu runs it
         idle = idle_timing(paced_s)
     table = idle.table(idle.tet.size * idle.period)
@@ -275,9 +283,11 @@ def feedforward_step(timing: StepTiming, fmu: str = "feedforward") -> dict[str, 
     """The share of `fmu` (a network in its own task) in each step's TET [us], split into the
     steps at its call points, which hand a call over to the network's task (and take the last
     one's result), and the others; its p99 over its p50 in all steps; the calls handed over
-    (`handovers`: one per call point), those whose result the base task waited for (not
-    ready when due) and those computed in the base task (by the step itself, or by the
-    network's task preempting it: never, when the task works as it should)."""
+    (`handovers`: one per call point), those whose hand-over woke the task with a system
+    call (`signalled`: where the calls come at a steady rate the clock releases it instead,
+    all but the first three), those whose result the base task waited for (not ready when
+    due) and those computed in the base task (by the step itself, or by the network's task
+    preempting it: never, when the task works as it should)."""
     calls = timing.network_calls[fmu]
     share = timing.fmu_tet[:, timing.names.index(fmu)]
     handover = np.arange(share.size) % int(calls["period_steps"]) == 0
@@ -285,6 +295,7 @@ def feedforward_step(timing: StepTiming, fmu: str = "feedforward") -> dict[str, 
                        "no_handover": _us_stats(share[~handover])},
             "p99_over_p50": float(np.percentile(share, 99) / np.percentile(share, 50)),
             "handovers": int(calls.get("handovers", handover.sum())),
+            "signalled": int(calls.get("signalled", 0)),
             "waited_for": int(calls.get("overruns", 0)),
             "computed_in_base_task": int(calls.get("computed_in_step", 0))}
 
@@ -298,11 +309,12 @@ def _us_stats(seconds: np.ndarray) -> dict[str, float]:
 def realtime_table(figures: dict[str, Any]) -> str:
     """realtime_benchmark's paced loops as text: per loop the 1 kHz task's TET p50 / p99 /
     max and overruns, the feedforward's step p50 / p99 at call points (a hand-over) and
-    between them, its p99 over p50, and the calls handed over, waited for and computed in
-    the base task; the idle loop's TET and overruns."""
+    between them, its p99 over p50, and the calls handed over, signalled, waited for and
+    computed in the base task; the loop without feedforward's and the idle loop's TET and
+    overruns."""
     rows = [["loop", "TET p50 / p99 / max [µs]", "overruns",
              "ff step, hand-over p50 / p99", "ff step, none p50 / p99", "ff p99/p50",
-             "hand-overs / waited / in base task"]]
+             "hand-overs / signalled / waited / in base task"]]
     for name, loop in figures.items():
         if not (isinstance(loop, dict) and "feedforward_step" in loop):
             continue
@@ -313,10 +325,15 @@ def realtime_table(figures: dict[str, Any]) -> str:
                      f"{split['handover']['p50']:.3g} / {split['handover']['p99']:.3g}",
                      f"{split['no_handover']['p50']:.3g} / {split['no_handover']['p99']:.3g}",
                      f"{ff['p99_over_p50']:.3g}",
-                     f"{ff['handovers']} / {ff['waited_for']} / {ff['computed_in_base_task']}"])
-    idle = figures["idle"]["tet_us"]
-    rows.append(["idle", f"{idle['p50']:.3g} / {idle['p99']:.3g} / {idle['max']:.3g}",
-                 str(figures["idle"]["overruns"]), "–", "–", "–", "–"])
+                     f"{ff['handovers']} / {ff['signalled']} / {ff['waited_for']} / "
+                     f"{ff['computed_in_base_task']}"])
+    for name, floor in (("no feedforward", figures.get("no_feedforward")),
+                        ("idle", figures["idle"])):
+        if floor is None:
+            continue
+        tet = floor["tasks"]["base"]["tet_us"] if "tasks" in floor else floor["tet_us"]
+        rows.append([name, f"{tet['p50']:.3g} / {tet['p99']:.3g} / {tet['max']:.3g}",
+                     str(floor["overruns"]), "–", "–", "–", "–"])
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(cell.ljust(w) if i == 0 else cell.rjust(w)
                        for i, (cell, w) in enumerate(zip(row, widths))) for row in rows]
@@ -371,7 +388,7 @@ def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
-                           step: float = 1e-3) -> dict[str, Any]:
+                           step: float = DEFAULT_STEP) -> dict[str, Any]:
     """A network slower than the period (slow_graph, about 3 ms a call in onnxruntime) in its
     own task every `every` steps of `step` seconds (25 Hz at 1 kHz), paced alone for `seconds`:
     the base task's TET and overruns (which the network must not cause) and the network
@@ -386,7 +403,7 @@ def slow_network_benchmark(folder: Path, seconds: float, every: int = 40,
 
 
 def one_node_graph_benchmark(folder: Path, seconds: float, every: int = 40,
-                             step: float = 1e-3) -> dict[str, Any]:
+                             step: float = DEFAULT_STEP) -> dict[str, Any]:
     """The floor of an onnxruntime call in a paced loop: a graph of one Add node as an FMU (its
     network in onnxruntime), called every `every` steps of `step` seconds (the hardware models'
     25 Hz at 1 kHz), paced alone for `seconds`. Its call time is what a network call costs on

@@ -24,6 +24,7 @@ from flexff.cosim.floor import run_c_loop
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.recording import Recording
 from flexff.cosim.sandbox import DEFAULT, Sandbox
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.fmpy_instance import FmpyInstance, bare_calls
 
 
@@ -87,7 +88,7 @@ def master_us_per_step(path: Path, starts: dict[str, float], steps: int, step: f
     return 1e6 * best / steps, recording
 
 
-def bench_fmu(path: str | Path, steps: int = 10000, step: float = 1e-3,
+def bench_fmu(path: str | Path, steps: int = 10000, step: float = DEFAULT_STEP,
               repeats: int = 5) -> dict[str, Any]:
     """Microseconds per co-simulation step through fmpy and in C, their ratio, and a cross-check.
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from flexff.cosim.recording import Recording
 from flexff.cosim.sandbox import DEFAULT, Sandbox
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu_bench import master_us_per_step
 
 ECOS_STEPS = """import ctypes, os, sys, time
@@ -49,8 +50,8 @@ def _ecos_us_per_step(python: str, fmu: Path, steps: int, step: float, proxy: bo
     return float(lines[-1].split()[1])
 
 
-def isolation_benchmark(fmu: Path, steps: int = 20_000, step: float = 1e-3, repeats: int = 5,
-                        ecos_python: str | None = None) -> dict[str, Any]:
+def isolation_benchmark(fmu: Path, steps: int = 20_000, step: float = DEFAULT_STEP,
+                        repeats: int = 5, ecos_python: str | None = None) -> dict[str, Any]:
     """Best µs per step of each variant (module doc), their ratios to Ecos's proxyfmu, and
     whether flexff's three records are equal."""
     best: dict[str, float] = {}

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.isolation_bench import isolation_benchmark
 
@@ -84,7 +85,7 @@ def _median(runs: list[tuple[float, float]]) -> dict[str, float]:
 
 
 def process_benchmark(fmu: Path, steps: Sequence[int] = (200_000, 2_000_000),
-                      step: float = 1e-3, repeats: int = 3,
+                      step: float = DEFAULT_STEP, repeats: int = 3,
                       ecos_python: str | None = None) -> dict[str, Any]:
     """The module doc's figures for `fmu` at each number of `steps`, with each peer's time
     over flexff's (`speedup_vs_*`: how many times faster flexff's whole process is)."""

@@ -45,7 +45,11 @@ class RunResult:
 
 def load(folder: str | Path) -> RunResult:
     """The results of a run in `folder` (a killed run's record up to its last chunk, with
-    empty metrics and configuration where it wrote none)."""
+    empty metrics and configuration where it wrote none).
+
+    >>> result = api.read("out")
+    >>> result.metrics == metrics
+    True"""
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(f"{folder}: no such folder (give the -o folder of flexff run)")

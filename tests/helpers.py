@@ -13,7 +13,7 @@ import psutil
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 # the Modelica Reference-FMUs, kept in the repository (README.md and LICENSE.txt beside them)
-REFERENCE_FMUS = REPOSITORY / "cosim" / "examples" / "reference-fmus"
+REFERENCE_FMUS = REPOSITORY / "flexff" / "cosim" / "examples" / "reference-fmus"
 # a network FMU (its graph as generated C, the default) against onnxruntime's Python API:
 # float32 sums in another order, 3e-7 of the largest force measured on the tiny test models
 NETWORK_RTOL = 1e-6

@@ -21,8 +21,10 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
+from flexff.blocks.loop_shaping import PIDDesign, StateSpace, design_pid
 from flexff.controllers.allocation import measured_position, motor_currents
-from flexff.controllers.loop_shaping import PIDDesign, StateSpace, design_pid
+from flexff.controllers.axis_plant import axis_plant
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.system import Parameter, System, Variable
 from flexff.plant.analysis import plant_info
@@ -72,7 +74,7 @@ def parasitic_mode_hz() -> float:
 
 
 def controller_design(variant: str = "nominal", crossover_hz: float | None = None,
-                      notch_hz: float | None = None, step: float = 1e-3) -> PIDDesign:
+                      notch_hz: float | None = None, step: float = DEFAULT_STEP) -> PIDDesign:
     """The per-axis PID design of a variant; None picks the variant's crossover and notch."""
     try:
         defaults = DEFAULTS[variant]
@@ -83,12 +85,12 @@ def controller_design(variant: str = "nominal", crossover_hz: float | None = Non
         notch_hz = parasitic_mode_hz()
     if crossover_hz is None:
         crossover_hz = defaults.crossover_hz
-    return design_pid(crossover_hz, step, notch_hz)
+    return design_pid(crossover_hz, step, notch_hz, plant=axis_plant())
 
 
 def controller_system(variant: str = "nominal", crossover_hz: float | None = None,
                       notch_hz: float | None = None, encoders: int = 2,
-                      step: float = 1e-3, current_feedforward: bool = False) -> System:
+                      step: float = DEFAULT_STEP, current_feedforward: bool = False) -> System:
     """Discrete feedback controller (sample time `step`) with the signals of plant.signals;
     `current_feedforward` adds the inputs i1_ff..i3_ff [A] to the allocated currents."""
     design = controller_design(variant, crossover_hz, notch_hz, step)

@@ -13,6 +13,7 @@ from typing import Any
 import casadi as ca
 
 from flexff.controllers.features import nominal_model
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.system import System, Variable
 from flexff.plant.signals import FEEDFORWARD_FORCES, REFERENCE, reference_motion
@@ -55,7 +56,7 @@ def feedforward_system(name: str, description: str, reference: ca.SX, force: ca.
     )
 
 
-def rigid_body_feedforward_system(step: float = 1e-3,
+def rigid_body_feedforward_system(step: float = DEFAULT_STEP,
                                   parameters: Mapping[str, float] | None = None) -> System:
     """Discrete, stateless System: reference (position, velocity, acceleration) -> F_ff;
     `parameters` (flat plant parameter names: identified ones, controllers.identified)

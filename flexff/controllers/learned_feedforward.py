@@ -25,6 +25,7 @@ from flexff.controllers.allocation import motor_currents
 from flexff.controllers.features import feature_names, reference_feature_function
 from flexff.controllers.feedforward import feedforward_system, rigid_body_force
 from flexff.controllers.model_card import OUTPUTS, ModelCard, read_card
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import graph_network, read_graph
@@ -34,7 +35,7 @@ from flexff.plant.signals import REFERENCE, names, reference_motion
 REFERENCE_NAMES = list(names(REFERENCE))
 
 
-def learned_feedforward_system(model: str | Path, step: float = 1e-3,
+def learned_feedforward_system(model: str | Path, step: float = DEFAULT_STEP,
                                reference: Mapping[str, np.ndarray] | None = None,
                                task: bool = False, runtime: str = RUNTIMES[0]) -> System:
     """The System of the feedforward FMU running `model`; with `reference` (x_ref ... ay_ref

@@ -3,7 +3,7 @@ position, velocity, acceleration and jerk reference), `<axis>_ff` out. Either th
 inverse model of the axes' motion gives along the reference (`inverse_model_system`: the
 identified linear model, or any CasADi function of that form), or a learned model exported by
 flexff (`learned_machine_feedforward_system`): its features computed from the reference in
-generated C (controllers.machine_features), its ONNX graph run as the manipulator's learned
+generated C (learning.feature_spec), its ONNX graph run as the manipulator's learned
 feedforward runs it (controllers.learned_feedforward: step or task mode, extrapolated between
 the model's calls); a physics-guided model's residual plus its prior, at rest too (a
 residual switched off there stepped at each start and stop).
@@ -17,14 +17,15 @@ import casadi as ca
 
 from flexff.controllers.feedforward import feedforward_system
 from flexff.controllers.learned_feedforward import linear_skip, model_period
-from flexff.controllers.linear_prior import linear_model_from_dict
-from flexff.controllers.machine_features import FeatureInputs, feature_function
 from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import Machine, parse_machine
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System, Variable
+from flexff.learning.feature_spec import FeatureInputs, feature_function
+from flexff.learning.linear_prior import linear_model_from_dict
 
 DERIVATIVES = ("position", "velocity", "acceleration", "jerk")
 
@@ -88,7 +89,7 @@ def inverse_model_system(machine: Machine, inverse: ca.Function, step: float,
                               inputs=reference_variables(machine))
 
 
-def learned_machine_feedforward_system(model: str | Path, step: float = 1e-3,
+def learned_machine_feedforward_system(model: str | Path, step: float = DEFAULT_STEP,
                                        task: bool = False, runtime: str = RUNTIMES[0]
                                        ) -> System:
     """The System of the feedforward FMU running `model`, a machine's exported model; with

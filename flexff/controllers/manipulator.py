@@ -18,15 +18,14 @@ import dataclasses
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
+from flexff.controllers.plant_options import checked_plant_parameters, plant_parameter_names
 from flexff.cosim.builtins import Option, OptionError, register_builtin
 from flexff.cosim.plugins import (
-    ReferenceKind,
-    register_reference_kind,
     register_short_form,
     register_short_names,
     register_workspace_check,
 )
-from flexff.cosim.references import Reference
+from flexff.cosim.references import Reference, ReferenceKind, register_reference_kind
 from flexff.fmu.network_runtime import RUNTIMES
 from flexff.plant.signals import (
     CURRENTS,
@@ -50,8 +49,6 @@ if TYPE_CHECKING:
     from flexff.fmu.system import System
 
 FEEDFORWARD_MODES = ("step", "task", "precomputed")
-PLANT_EXTRA = ("max_substep",)  # plant FMU parameters beyond the System's own
-START_PARAMETERS = ("x_start", "y_start")
 # the manipulator's signals, kept under their short names in recordings (cosim.run)
 SHORT_NAMES = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, FORCES, ENCODERS,
                     TRUE_POSITION, TRUE_VELOCITY, TORQUES)
@@ -121,35 +118,6 @@ def _nominal_workspace(x: Any, y: Any, what: str) -> None:
     from flexff.plant.parameters import NOMINAL
 
     check_workspace(NOMINAL, x, y, what)
-
-
-def plant_parameter_names(variant: str) -> tuple[str, ...]:
-    """The plant FMU's parameters of `variant` a configuration may set."""
-    from flexff.plant.system import plant_parameters  # CasADi: manipulator runs only
-
-    return (*(p.name for p in plant_parameters(variant)), *PLANT_EXTRA)
-
-
-def checked_plant_parameters(checker: TableChecker, t: Mapping[str, Any], variant: str,
-                             where: str, start: tuple[float, float]) -> dict[str, float]:
-    """Plant parameter values, checked physically; x_start, y_start default to `start`."""
-    from flexff.plant.kinematics import check_workspace
-    from flexff.plant.system import plant_parameters
-
-    known = {p.name: p for p in plant_parameters(variant)}
-    values = dict(zip(START_PARAMETERS, start))
-    for key in t:
-        positive = key in PLANT_EXTRA or known[key].positive
-        values[key] = checker.number(t, where, key, None, positive=positive)
-    physical = {k: v for k, v in values.items() if k not in (*START_PARAMETERS, *PLANT_EXTRA)}
-    try:
-        VARIANTS[variant].parameters.with_values(**physical)
-        check_workspace(VARIANTS[variant].parameters, values["x_start"], values["y_start"],
-                        "the start position (x_start, y_start)")
-    except ValueError as error:
-        keys = ", ".join(f"{where}.{k}" for k in t) or where
-        raise checker.error(keys, str(error)) from None
-    return values
 
 
 def _plant_parameters(checker: TableChecker, options: Mapping[str, Any],

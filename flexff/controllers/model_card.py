@@ -59,7 +59,7 @@ class ModelCard:
     none; `feature_range`: {"signals", "low", "high"} of the training
     data, None for a model exported without it. Another machine's model carries its
     description (`machine`, cosim.machine's table) and the settings of its features
-    (`machine_features`: jerk, direction_widths; controllers.machine_features), and outputs
+    (`machine_features`: jerk, direction_widths; learning.feature_spec), and outputs
     each axis's `<axis>_ff`; `linear_inputs` {"weights" (outputs x inputs), "bias"}: a linear
     map of the inputs that the runner adds to the graph's outputs at every one of its own steps
     (a network's linear skip, kept out of the graph so that a model called at its slower rate

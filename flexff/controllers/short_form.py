@@ -17,7 +17,7 @@ import warnings
 from collections.abc import Mapping
 from typing import Any
 
-from flexff.controllers.manipulator import checked_plant_parameters, plant_parameter_names
+from flexff.controllers.plant_options import checked_plant_parameters, plant_parameter_names
 from flexff.cosim.builtins import checked_options, registered
 from flexff.cosim.checks import TableChecker
 from flexff.cosim.schema import FmuConfig, SourceConfig

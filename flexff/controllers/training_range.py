@@ -25,6 +25,7 @@ from flexff.controllers.features import (
 )
 from flexff.controllers.learned_feedforward import model_period
 from flexff.controllers.model_card import ModelCard, read_card
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.plant.signals import REFERENCE, names
 
@@ -51,7 +52,7 @@ class RangeExcess:
 
 
 def training_range_excess(model: str | Path, reference: Mapping[str, np.ndarray],
-                          step: float = 1e-3) -> list[RangeExcess] | None:
+                          step: float = DEFAULT_STEP) -> list[RangeExcess] | None:
     """The features of `model` that `reference` (sampled every `step` s from t = 0) drives more
     than MARGIN spans outside the training range, farthest first; None for a model exported
     without its range."""

@@ -20,9 +20,10 @@ from pathlib import Path
 from typing import Any
 
 from flexff.cosim.config import expanded, parse_config, read_tables
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.executor import execute
 from flexff.cosim.run import run_config
-from flexff.cosim.schema import ConfigError, RunConfig
+from flexff.cosim.schema import RunConfig
 from flexff.fmu.errors import InputError
 
 
@@ -65,6 +66,9 @@ def run_batch(configs: Sequence[RunConfig | str | Path], output_dir: str | Path,
     `workers` caps the local processes (default: one per CPU); `scheduler` is the address of
     a Dask scheduler to run on instead (cosim.executor). A single configuration may write
     straight into output_dir (`subfolders=False`).
+
+    >>> all(outcome.ok for outcome in api.run_many(configs, "sweep", workers=2))
+    True
     """
     if not subfolders and len(configs) != 1:
         raise ValueError("several runs need one subfolder each")
@@ -97,7 +101,11 @@ def sweep(path: str | Path, axes: Mapping[str, Sequence[Any]]) -> list[RunConfig
     <stem>-<key>=<value>-...; each copy is checked like any configuration, its errors naming
     the file and key. A TOML file is edited as written (its short form included), an SSP file
     in the general form it reads as. Names are safe folder names (see _folder_name), made
-    unique by a suffix; a value given twice is an error."""
+    unique by a suffix; a value given twice is an error.
+
+    >>> configs = api.sweep("run.toml", {"fmu.vdp.parameters.mu": [0.5, 1.5]})
+    >>> configs[1].name
+    'run-fmu.vdp.parameters.mu=1.5'"""
     path = Path(path)
     for key, values in axes.items():
         *tables, name = key.split(".")

@@ -107,7 +107,10 @@ def register_builtin(name: str, options: Sequence[str | Option], factory: Factor
                      metrics: RunMetrics | None = None) -> None:
     """Make `name` a built-in FMU of run configurations (an option given by its key alone is
     taken as given; `factory` a function or its "module:function" path). Registering the same
-    built-in again changes nothing; another one under a taken name is a ValueError."""
+    built-in again changes nothing; another one under a taken name is a ValueError.
+
+    >>> api.register_builtin("my-drive", (), "flexff.machines.drive:drive_from_options",
+    ...                      "the drive example's plant, under a name of my own")"""
     builtin = Builtin(name, tuple(o if isinstance(o, Option) else Option(o) for o in options),
                       factory, description, parameters, start_options, reads_sources, metrics)
     if _REGISTRY.get(name, builtin) != builtin:

@@ -25,16 +25,19 @@ import tomli_w
 from flexff.cosim.axis_references import AXIS_KINDS, AXIS_OPTIONS, REST, SHARE
 from flexff.cosim.builtins import checked_options, registered
 from flexff.cosim.checks import TableChecker
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.example_configs import config_examples as config_examples  # public API
 from flexff.cosim.machine import Machine, machine_table, parse_machine
 from flexff.cosim.memory import MemoryNeeded
-from flexff.cosim.plugins import ShortForm, check_workspace, reference_kinds, short_forms
+from flexff.cosim.plugins import ShortForm, check_workspace, short_forms
 from flexff.cosim.references import (
+    SMOOTHING_WINDOW,
     Reference,
     Sampled,
     SegmentError,
     build_reference,
     reference_kind_names,
+    reference_kinds,
 )
 from flexff.cosim.sandbox import KEYS as SANDBOX_KEYS
 from flexff.cosim.sandbox import MEMORY_MB, SCRATCH_MB, Sandbox
@@ -42,7 +45,6 @@ from flexff.cosim.schema import (
     ALGORITHMS,
     SOURCE_KINDS,
     UNCONNECTED,
-    ConfigError,
     ConnectionConfig,
     FmuConfig,
     RecordConfig,
@@ -51,6 +53,7 @@ from flexff.cosim.schema import (
     SourceConfig,
     whole_steps,
 )
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.description_faults import warn
 from flexff.fmu.errors import not_a_file
 from flexff.fmu.fmi_version import FMI_VERSIONS
@@ -78,7 +81,11 @@ def checked(config: RunConfig) -> RunConfig:
     """`config` as the parser makes it (itself, if the parser made it): after a change in
     code (dataclasses.replace) the same rules hold as for TOML and SSP; a ConfigError names the
     key at fault. Connections keep their keys (an SSP file's `ssd:Connection[k]`) for later
-    errors."""
+    errors.
+
+    >>> import dataclasses
+    >>> api.check(dataclasses.replace(config, stop=2.0)).stop
+    2.0"""
     if config.checked:
         return config
     again = parse_config(expanded(config), name=config.name, origin=config.origin)
@@ -216,7 +223,7 @@ class _Parser(TableChecker):
         self.keys(run, "run", ("step", "start", "stop", "tolerance", "step_timeout", "algorithm",
                                "order", "allow_nonfinite"))
         self.allow_nonfinite = self.flag(run, "run", "allow_nonfinite")
-        step = self.number(run, "run", "step", 1e-3, positive=True)
+        step = self.number(run, "run", "step", DEFAULT_STEP, positive=True)
         machine = self.machine(data, short)  # an axis reference's axes and limits
         reference, signal = None, None
         if "reference" in data:
@@ -618,7 +625,8 @@ class _Parser(TableChecker):
             self.keys(t, r, ("kind", "path", "smoothing_window"))
             return ReferenceConfig(kind, {
                 "path": self.path(t, r, "path"),
-                "smoothing_window": self.number(t, r, "smoothing_window", 0.025, positive=True)})
+                "smoothing_window": self.number(t, r, "smoothing_window", SMOOTHING_WINDOW,
+                                                   positive=True)})
         if kind == "segments":
             self.keys(t, r, ("kind", "start", "segments"))
             start = self.point(t, r, "start", (0.0, 0.0))

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from flexff.cosim.axis_references import AXIS_KINDS
+from flexff.cosim.references import SMOOTHING_WINDOW
+from flexff.fmu.defaults import DEFAULT_STEP
 
 
 @dataclass(frozen=True)
@@ -31,7 +33,7 @@ SEGMENT_KINDS = ("line", "hold", "circle", "spline")
 
 KEYS: tuple[Key, ...] = (
     # [run]
-    Key("run", "step", "number", "0.001", "s", "The communication step."),
+    Key("run", "step", "number", f"{DEFAULT_STEP:g}", "s", "The communication step."),
     Key("run", "start", "number", "first FMU's default experiment, else 0", "s",
         "The start time. Point k is at start + k * step."),
     Key("run", "stop", "number", "start + the reference's duration, else the first FMU's "
@@ -90,7 +92,7 @@ KEYS: tuple[Key, ...] = (
         "Segments run in order, each from where the previous one ended.", ("segments",)),
     Key("reference", "path", "string", "required", "",
         "A CSV table, relative to the configuration's folder.", ("csv",)),
-    Key("reference", "smoothing_window", "number", "0.025", "s",
+    Key("reference", "smoothing_window", "number", f"{SMOOTHING_WINDOW:g}", "s",
         "Smoothing of the table's derivatives.", ("csv",)),
     # reference.segments[k]
     Key("reference.segments[k]", "kind", "string", "required", "",

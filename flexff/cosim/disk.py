@@ -6,7 +6,8 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from flexff.cosim.schema import ConfigError, RunConfig
+from flexff.cosim.config_error import ConfigError
+from flexff.cosim.schema import RunConfig
 
 # per value of signals.parquet (plain float64, uncompressed), twice: the chunks and the file
 # they are joined into lie side by side until the join ends

@@ -41,6 +41,7 @@ import numpy as np
 from flexff.cosim.timing import Pacing, StepTiming
 from flexff.fmu import cache
 from flexff.fmu.compile import CFLAGS, compiler_version, run_compiler
+from flexff.fmu.defaults import DEFAULT_STEP
 
 SOURCE = Path(__file__).parent / "c" / "engine.c"
 HEADER = SOURCE.with_suffix(".h")  # its structures, for the programs compiled with it
@@ -199,7 +200,7 @@ def start_schedule(run: EngineRun, lead: float = 1e-3) -> None:
     run.start.tv_sec, run.start.tv_nsec = divmod(ns, 1_000_000_000)
 
 
-def idle_timing(seconds: float, period: float = 1e-3) -> StepTiming:
+def idle_timing(seconds: float, period: float = DEFAULT_STEP) -> StepTiming:
     """The engine's paced loop with no FMU in it for `seconds` at `period`: what the machine
     alone does to the schedule (the lateness an empty loop sees, as cyclictest measures), the
     floor beneath every paced run's lateness and overruns."""

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
-from flexff.cosim.schema import ConfigError
+from flexff.cosim.config_error import ConfigError
 from flexff.fmu.errors import InputError
 from flexff.fmu.expressions import (
     CONSTANTS,

@@ -28,7 +28,7 @@ from flexff.cosim.machine import Machine
 from flexff.cosim.recording import Recording, signal_name
 from flexff.fmu.expressions import Expression, evaluate, parse_expression
 
-AXES = ("x", "y")
+AXES = ("x", "y")  # the manipulator's axes: metrics, plots and the ILC's floor by default
 
 
 @dataclass(frozen=True)

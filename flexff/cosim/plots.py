@@ -24,13 +24,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from flexff.cosim.decimate import Envelope, Strided
+from flexff.cosim.metrics import AXES
 from flexff.cosim.recording import Recording, atomic_write, signal_name
 from flexff.cosim.timing import US, StepTiming, StreamedTiming
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-AXES = ("x", "y")
 # a tracking loop's signals per axis: reference, true position, feedback and feedforward force
 PATH_SIGNALS = (*(f"{a}_ref" for a in AXES), *AXES)
 PLOT_SIGNALS = (*PATH_SIGNALS, *(f"F{a}_fb" for a in AXES), *(f"F{a}_ff" for a in AXES))

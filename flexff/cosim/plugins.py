@@ -3,7 +3,8 @@ the entry points (group `flexff.builtins`) through which they register it all.
 
   short forms       tables of their own (the manipulator's [plant], [controller],
                     [feedforward]) that expand to FMUs and sources of the general form
-  reference kinds   [reference] kinds of a machine (the thesis's evaluation references)
+  reference kinds   [reference] kinds of a machine (the thesis's evaluation references;
+                    cosim.references.register_reference_kind)
   workspace checks  where every reference must stay (refusing a point with ValueError)
   short names       recorded signals a run keeps under their short names too (cosim.run)
 
@@ -20,7 +21,6 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from flexff.cosim.checks import TableChecker
-    from flexff.cosim.references import Reference
     from flexff.cosim.schema import FmuConfig, SourceConfig
 
 GROUP = "flexff.builtins"
@@ -44,18 +44,7 @@ class ShortForm:
     describe: Describer | None = None
 
 
-@dataclass(frozen=True)
-class ReferenceKind:
-    """A [reference] kind: `check` turns its table, keys included, into checked options
-    (None: no keys beside `kind`); `build` samples it (options, step) -> Reference."""
-
-    name: str
-    build: Callable[[Mapping[str, Any], float], Reference]
-    check: Callable[[TableChecker, Mapping[str, Any]], dict[str, Any]] | None = None
-
-
 _SHORT_FORMS: dict[str, ShortForm] = {}
-_REFERENCE_KINDS: dict[str, ReferenceKind] = {}
 _WORKSPACE_CHECKS: list[WorkspaceCheck] = []
 _SHORT_NAMES: dict[str, None] = {}  # ordered, each once
 _LOADED: list[bool] = []
@@ -77,11 +66,6 @@ def register_short_form(name: str, tables: tuple[str, ...], expand: Expander,
     _SHORT_FORMS[name] = ShortForm(name, tables, expand, default, describe)
 
 
-def register_reference_kind(kind: ReferenceKind) -> None:
-    """Make `kind.name` a [reference] kind."""
-    _REFERENCE_KINDS[kind.name] = kind
-
-
 def register_workspace_check(check: WorkspaceCheck) -> None:
     """Make every reference stay where `check` lets it (it raises ValueError otherwise)."""
     if check not in _WORKSPACE_CHECKS:
@@ -96,11 +80,6 @@ def register_short_names(names: tuple[str, ...]) -> None:
 def short_forms() -> tuple[ShortForm, ...]:
     loaded()
     return tuple(_SHORT_FORMS.values())
-
-
-def reference_kinds() -> dict[str, ReferenceKind]:
-    loaded()
-    return dict(_REFERENCE_KINDS)
 
 
 def check_workspace(x: Any, y: Any, what: str) -> None:

@@ -21,7 +21,7 @@ import csv
 import json
 import math
 from collections import OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
@@ -32,15 +32,19 @@ from flexff.cosim.axis_references import AXIS_KINDS, build_axis_reference
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import Machine
 from flexff.cosim.memory import check_memory
-from flexff.cosim.plugins import check_workspace, reference_kinds
+from flexff.cosim.plugins import check_workspace, loaded
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.limits import SMOOTHING_SAMPLES
 
 if TYPE_CHECKING:  # SciPy and CasADi load with the references that use them
     from scipy.interpolate import CubicSpline
 
+    from flexff.cosim.checks import TableChecker
+
 JOIN_TOLERANCE = 1e-9  # m: largest position jump accepted between chained segments
 SAVGOL_ORDER = 3  # the polynomial a CSV reference's derivatives are fitted with (read_csv)
+SMOOTHING_WINDOW = 0.025  # s: the window they are fitted over, unless a configuration sets it
 SAMPLED_ARRAYS = 7  # float64 arrays a sampled reference holds: t, x, y, vx, vy, ax, ay
 
 
@@ -265,7 +269,7 @@ class Chain(Segment):
         return out
 
 
-def sample(path: Segment, step: float = 1e-3) -> Reference:
+def sample(path: Segment, step: float = DEFAULT_STEP) -> Reference:
     """`path` on the grid 0, step, 2 step, ... up to its duration."""
     _positive("step", step, "s")
     n = _grid_points(path.duration, step, f"sampling the {path.duration:g} s reference every "
@@ -283,7 +287,8 @@ def _grid_points(duration: float, step: float, what: str) -> int:
     return n
 
 
-def read_csv(path: str | Path, step: float = 1e-3, smoothing_window: float = 0.025) -> Reference:
+def read_csv(path: str | Path, step: float = DEFAULT_STEP,
+             smoothing_window: float = SMOOTHING_WINDOW) -> Reference:
     """A reference from a CSV table with columns time (or t), x_ref, y_ref (and optionally
     vx_ref, vy_ref, ax_ref, ay_ref; cosim.csv_text's time table), resampled onto the grid t0,
     t0 + step, ... by cubic interpolation.
@@ -344,6 +349,32 @@ def _finite_point(name: str, point: Sequence[float]) -> None:
 
 
 GENERIC_KINDS = ("circle", "line-circle", "spline", "segments", "csv", *AXIS_KINDS)
+
+
+@dataclass(frozen=True)
+class ReferenceKind:
+    """A machine package's [reference] kind: `check` turns its table, keys included, into
+    checked options (None: no keys beside `kind`); `build` samples it (options, step) ->
+    Reference."""
+
+    name: str
+    build: Callable[[Mapping[str, Any], float], Reference]
+    check: Callable[[TableChecker, Mapping[str, Any]], dict[str, Any]] | None = None
+
+
+_REFERENCE_KINDS: dict[str, ReferenceKind] = {}
+
+
+def register_reference_kind(kind: ReferenceKind) -> None:
+    """Make `kind.name` a [reference] kind (a machine package, through its entry point of
+    cosim.plugins.GROUP)."""
+    _REFERENCE_KINDS[kind.name] = kind
+
+
+def reference_kinds() -> dict[str, ReferenceKind]:
+    """The machine packages' [reference] kinds, their entry points loaded."""
+    loaded()
+    return dict(_REFERENCE_KINDS)
 
 
 def reference_kind_names() -> tuple[str, ...]:

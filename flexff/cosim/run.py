@@ -27,6 +27,7 @@ import numpy as np
 from flexff.cosim.axis_references import AXIS_KINDS
 from flexff.cosim.builtins import registered
 from flexff.cosim.config import FAULTS, RECORDED, expanded, load_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.disk import check_disk
 from flexff.cosim.fmu_log import LOG_NAME, FmuLog
 from flexff.cosim.folder_lock import folder_lock
@@ -53,7 +54,7 @@ from flexff.cosim.recording import (
 )
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
-from flexff.cosim.schema import ConfigError, RunConfig
+from flexff.cosim.schema import RunConfig
 from flexff.cosim.timing import OverrunError, Pacing
 from flexff.cosim.watchdog import watchdog
 
@@ -61,7 +62,10 @@ METRICS_NAME, RUN_JSON_NAME = "metrics.json", "run.json"  # in the run's folder
 
 
 def load_run_config(path: str | Path) -> RunConfig:
-    """A run configuration from a TOML file or an SSP file (by its suffix)."""
+    """A run configuration from a TOML file or an SSP file (by its suffix).
+
+    >>> config = api.load("run.toml")  # flexff config example third-party-fmus > run.toml
+    """
     if Path(path).suffix.lower() == ".ssp":
         from flexff.cosim.ssp import load_ssp
         return load_ssp(path)
@@ -211,7 +215,12 @@ def _known(master: Master, name: str) -> bool:
 
 
 def simulate_config(config: RunConfig, progress: bool | None = None) -> Recording:
-    """Resolve a configuration (built-ins into a temporary folder) and run it."""
+    """Resolve a configuration (built-ins into a temporary folder) and run it.
+
+    >>> recording = api.simulate(config, progress=False)
+    >>> len(recording["vdp.x0"]) == len(recording.time)
+    True
+    """
     check_recording_memory(config, _least_signals(config))
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder:
         return simulate(resolve(config, folder), progress)
@@ -276,7 +285,11 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
     is refused). A paced run (`pacing`) also writes tet.png, and one that its overruns
     stopped raises OverrunError after writing what it recorded. A run that fails or is
     interrupted (Ctrl-C, SIGTERM) keeps its record up to its last chunk, joined, and writes
-    run.json, whose `recorded` says what the record holds."""
+    run.json, whose `recorded` says what the record holds.
+
+    >>> metrics = api.run(config, "out", progress=False)
+    >>> metrics["real_time_factor"] > 0
+    True"""
     if not isinstance(config, RunConfig):
         config = load_run_config(config)
     _check_source_memory(config)

@@ -19,11 +19,12 @@ import numpy as np
 
 from flexff.cosim.builtins import OptionError, registered
 from flexff.cosim.config import checked
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import check_signals
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.references import Reference, Sampled, build_reference
-from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig, point_time
+from flexff.cosim.schema import FmuConfig, RunConfig, SourceConfig, point_time
 from flexff.cosim.wiring import Link, Port, WiringError, wire
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import FmuError, read_fmu

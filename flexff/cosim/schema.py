@@ -15,9 +15,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from flexff.cosim.sandbox import DEFAULT, Sandbox
-from flexff.fmu.errors import InputError
 
-if TYPE_CHECKING:  # cosim.machine reads ConfigError from here
+if TYPE_CHECKING:
     from flexff.cosim.machine import Machine
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
@@ -36,14 +35,6 @@ def point_time(start: float, step: float, k: Any) -> Any:
     """The time of communication point(s) k [s]: start + k * step, the one rule for every
     point (master, engine, recording, sources, libcosim)."""
     return start + k * step
-
-
-class ConfigError(InputError):
-    """A configuration problem, naming the file and the `table.key` at fault."""
-
-    def __init__(self, origin: str, key: str, message: str) -> None:
-        super().__init__(f"{origin}: {key}: {message}")
-        self.key = key
 
 
 @dataclass(frozen=True)

@@ -36,20 +36,15 @@ import tomli_w
 from lxml import etree
 
 from flexff.cosim.config import checked, expanded, parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.recording import atomic_write
 from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
-from flexff.cosim.schema import (
-    ALGORITHMS,
-    ConfigError,
-    ConnectionConfig,
-    FmuConfig,
-    RunConfig,
-    whole_steps,
-)
+from flexff.cosim.schema import ALGORITHMS, ConnectionConfig, FmuConfig, RunConfig, whole_steps
 from flexff.cosim.wiring import SOURCE, Link, carried
 from flexff.fmu.archive import extract_archive
 from flexff.fmu.cache import cache_dir, file_sha256
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError, not_a_file
 from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
 
@@ -61,7 +56,6 @@ NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
 SSD = "SystemStructure.ssd"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 OSP, FLEXFF = "com.opensimulationplatform", "org.flexff"
-DEFAULT_STEP = 1e-3
 INTEGERS = ("int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64")
 SSP_TYPES = {"float64": "Real", "float32": "Real", "boolean": "Boolean", "string": "String",
              "enumeration": "Enumeration", "binary": "Binary",

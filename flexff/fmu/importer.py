@@ -519,8 +519,10 @@ class FmuInstance:
     def network_times(self) -> dict[str, float] | None:
         """The call times of a flexff FMU's embedded network so far (calls; p50, p99, max in
         microseconds), its call period in steps and, where it runs in its own task, that
-        task's rate-transition overruns, the calls handed over to it (`handovers`) and those
-        the step computed itself (`computed_in_step`); None for an FMU without one."""
+        task's rate-transition overruns, the calls handed over to it (`handovers`), those the
+        step computed itself (`computed_in_step`) and those whose hand-over woke the task
+        with a system call (`signalled`: not released by the clock); None for an FMU
+        without one."""
         function = getattr(self.fmu.dll, "flexff_network_times", None)
         times = (c_double * 4)()
         if function is None or function(self.component, times) != 0:
@@ -533,10 +535,11 @@ class FmuInstance:
             figures["period_steps"] = period
             if counter:
                 figures["overruns"] = c_long.from_address(counter).value
-        counts = (c_long * 3)()
+        counts = (c_long * 4)()
         function = getattr(self.fmu.dll, "flexff_network_counts", None)
         if function is not None and function(self.component, counts) == 0:
             figures["handovers"], figures["computed_in_step"] = counts[0], counts[2]
+            figures["signalled"] = counts[3]
         return figures
 
     def network_task(self) -> tuple[int, int] | None:

@@ -12,6 +12,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.layout import Layout, ScalarVariable
 from flexff.fmu.system import System
 
@@ -68,8 +69,8 @@ def add_units_logs_experiment(root: ET.Element, system: System, layout: Layout,
 
 
 def default_step(system: System) -> float:
-    """The default experiment's step: the sample time of a discrete system, else 1 ms."""
-    step = system.sample_time if system.kind == "discrete" else 1e-3
+    """The default experiment's step: the sample time of a discrete system, else DEFAULT_STEP."""
+    step = system.sample_time if system.kind == "discrete" else DEFAULT_STEP
     if step is None:
         raise ValueError("a discrete system needs a positive sample_time")
     return float(step)

@@ -18,13 +18,14 @@ from pathlib import Path
 
 import casadi as ca
 
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import Port, graph_network, read_graph
 from flexff.fmu.system import System, Variable
 
 
-def onnx_system(model: str | Path, step: float = 1e-3, every: int = 1,
+def onnx_system(model: str | Path, step: float = DEFAULT_STEP, every: int = 1,
                 task: bool = False, runtime: str = RUNTIMES[0]) -> System:
     """The System of the FMU running the ONNX graph in the file `model` with `runtime` ("c"
     or "onnxruntime"); InputError (what is wrong, what to do) if the graph cannot be one (see

@@ -29,6 +29,7 @@ from typing import Any
 
 from flexff.fmu.child import report_path, run_in_child, under_way
 from flexff.fmu.codegen import NET_TABLE_FILE
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.description_faults import Fault, description_faults
 from flexff.fmu.importer import FmuError, FmuInfo, FmuInstance, read_fmu
 
@@ -94,12 +95,12 @@ def _table_inputs(path: Path) -> list[dict[str, float]]:
 
 def _experiment(info: FmuInfo) -> tuple[float, float]:
     """Start time and communication step: the default experiment's step, else the fixed
-    internal step (FMI 3.0), else a hundredth of the stop time, else 1 ms."""
+    internal step (FMI 3.0), else a hundredth of the stop time, else DEFAULT_STEP."""
     md = info.model_description
     start = md.defaultExperiment.startTime if md.defaultExperiment else None
     fixed = getattr(md.coSimulation, "fixedInternalStepSize", None)
     step = (info.default_step or (float(fixed) if fixed else None)
-            or (info.default_stop / 100 if info.default_stop else 1e-3))
+            or (info.default_stop / 100 if info.default_stop else DEFAULT_STEP))
     return float(start or 0.0), step
 
 

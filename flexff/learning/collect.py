@@ -27,11 +27,12 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.executor import Finished, check_workers, execute
 from flexff.cosim.recording import Recording, atomic_write
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import Scenario, reference_signals, resolve
-from flexff.cosim.schema import ConfigError, RecordConfig, RunConfig
+from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError, RunError
 from flexff.learning.dataset import (

@@ -97,10 +97,10 @@ def load_dataset(path: str | Path) -> Dataset:
                       f"re-run it",
            IMPORTED: "import the logs again (flexff data import)"}.get(
         source, f"write the dataset again, or {RECOLLECT}")
-    rate = float(manifest["sample_rate_hz"])
-    trajectories = tuple(_load_trajectory(path, entry, rate, fix)
+    rate_hz = float(manifest["sample_rate_hz"])
+    trajectories = tuple(_load_trajectory(path, entry, rate_hz, fix)
                          for entry in manifest["trajectories"])
-    return Dataset(path=path, set=manifest["set"], sample_rate_hz=rate,
+    return Dataset(path=path, set=manifest["set"], sample_rate_hz=rate_hz,
                    plant=manifest.get("plant", {}), trajectories=trajectories,
                    digest=digest(manifest, splits=True))
 
@@ -162,9 +162,9 @@ def _check_manifest(manifest: Any, where: Path) -> None:
         raise DatasetError(f"{where}: 'sha256' is missing or not a sha256; {RECOLLECT}")
     if manifest.get("set") not in SETS:
         raise DatasetError(f"{where}: 'set' is {manifest.get('set')!r}, expected one of {SETS}")
-    rate = manifest.get("sample_rate_hz")
-    if not isinstance(rate, (int, float)) or not np.isfinite(rate) or rate <= 0:
-        raise DatasetError(f"{where}: 'sample_rate_hz' must be a positive number, got {rate!r}")
+    rate_hz = manifest.get("sample_rate_hz")
+    if not isinstance(rate_hz, (int, float)) or not np.isfinite(rate_hz) or rate_hz <= 0:
+        raise DatasetError(f"{where}: 'sample_rate_hz' must be a positive number, got {rate_hz!r}")
     check_entries(manifest.get("trajectories"), where, RECOLLECT)
     for entry in manifest["trajectories"]:
         trained = [s for s in TRAINED if s in entry.get("derived", {})]
@@ -174,7 +174,7 @@ def _check_manifest(manifest: Any, where: Path) -> None:
                                f"must come from the logs")
 
 
-def _load_trajectory(folder: Path, entry: Mapping[str, Any], rate: float,
+def _load_trajectory(folder: Path, entry: Mapping[str, Any], rate_hz: float,
                      fix: str) -> Trajectory:
     file = folder / entry["file"]
     signals = read_arrays(folder, entry, (*SIGNALS, *CURRENT_SIGNALS), fix)
@@ -185,7 +185,7 @@ def _load_trajectory(folder: Path, entry: Mapping[str, Any], rate: float,
         _currents(signals, str(file))
     except ValueError as error:
         raise DatasetError(f"{error}; {fix}") from None
-    check_arrays(file, signals, rate, fix)
+    check_arrays(file, signals, rate_hz, fix)
     return Trajectory(name=entry["name"], split=entry["split"], signals=signals,
                       reference=entry.get("reference", {}), seed=int(entry.get("seed", 0)),
                       derived=entry.get("derived", {}))

@@ -145,9 +145,9 @@ def read_arrays(folder: Path, entry: Mapping[str, Any], names: Iterable[str], fi
     return arrays
 
 
-def check_arrays(file: Path, signals: Mapping[str, np.ndarray], rate: float, fix: str) -> None:
+def check_arrays(file: Path, signals: Mapping[str, np.ndarray], rate_hz: float, fix: str) -> None:
     """Refuse signals that are not 1-D arrays of equal length, hold NaN or Inf, or whose
-    `time` is not sampled at `rate` Hz."""
+    `time` is not sampled at `rate_hz` Hz."""
     lengths = {s: a.shape for s, a in signals.items()}
     if any(a.ndim != 1 for a in signals.values()) or len(set(lengths.values())) != 1:
         raise DatasetError(f"{file}: signals must be 1-D arrays of equal length, got {lengths}; "
@@ -158,9 +158,9 @@ def check_arrays(file: Path, signals: Mapping[str, np.ndarray], rate: float, fix
             raise DatasetError(f"{file}: signal {s!r} has {bad.size} NaN/Inf value(s), first at "
                                f"sample {bad[0]}; fix or drop this trajectory, or {fix}")
     steps = np.diff(signals["time"])
-    if steps.size == 0 or not np.allclose(steps, 1.0 / rate, rtol=1e-6, atol=1e-9):
-        raise DatasetError(f"{file}: 'time' must be sampled at the manifest's {rate:g} Hz "
-                           f"(steps of {1.0 / rate:g} s); {fix}")
+    if steps.size == 0 or not np.allclose(steps, 1.0 / rate_hz, rtol=1e-6, atol=1e-9):
+        raise DatasetError(f"{file}: 'time' must be sampled at the manifest's {rate_hz:g} Hz "
+                           f"(steps of {1.0 / rate_hz:g} s); {fix}")
 
 
 def write_folder(out: Path, fill: Callable[[Path], None]) -> None:

@@ -21,10 +21,10 @@ import torch
 from torch import nn
 
 from flexff.controllers.features import feature_units, reference_feature_function
-from flexff.controllers.machine_features import feature_units as machine_feature_units
 from flexff.controllers.model_card import INPUT_KINDS
 from flexff.fmu.errors import InputError
 from flexff.learning.casadi_torch import TorchFunction
+from flexff.learning.feature_spec import feature_units as machine_feature_units
 from flexff.learning.models import LinearSkip, uses_prior
 from flexff.learning.rigid import RigidBodyForce
 from flexff.learning.run_folder import Run

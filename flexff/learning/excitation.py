@@ -30,6 +30,7 @@ from flexff.cosim.axis_references import (
     sine,
     smooth_random,
 )
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.csv_text import TIME
 from flexff.cosim.machine import Limits, Machine
 from flexff.cosim.motion_shapes import (
@@ -43,7 +44,6 @@ from flexff.cosim.motion_shapes import (
     spline_extent,
 )
 from flexff.cosim.recording import atomic_write
-from flexff.cosim.schema import ConfigError
 
 CLASSES = ("moves", "bang-bang", "spline", "multisine")  # the default set's classes, in turn
 EVERY_CLASS = (*CLASSES, "sine", "random", "rest", "solo")

@@ -21,12 +21,13 @@ import casadi as ca
 import numpy as np
 
 from flexff.cosim.config import expanded
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import Machine
 from flexff.cosim.metrics import AXES, error_norms, machine_axes, tracking_metrics
 from flexff.cosim.recording import Recording
 from flexff.cosim.run import simulate
 from flexff.cosim.scenario import resolve, source_signals
-from flexff.cosim.schema import ConfigError, RunConfig
+from flexff.cosim.schema import RunConfig
 from flexff.fmu.errors import InputError
 from flexff.fmu.expressions import evaluate
 from flexff.learning import machine_loop

@@ -1,5 +1,5 @@
 """Identification for any machine: per axis an inverse model linear in its parameters,
-effort = W(x, v, a) theta (controllers.linear_prior's terms), fitted by least squares as robot
+effort = W(x, v, a) theta (learning.linear_prior's terms), fitted by least squares as robot
 identification does (Gautier, Khalil): the regressor's columns filtered and decimated as the
 labels are (`parallel_filter`), parameters with standard deviations sqrt(diag(s^2 (W^T W)^-1)),
 the condition number of the column-scaled regressor and the relative error ||F - W theta|| /
@@ -24,7 +24,11 @@ import numpy as np
 from scipy.linalg import cholesky, solve_triangular
 from scipy.optimize import minimize_scalar
 
-from flexff.controllers.linear_prior import (
+from flexff.cosim.machine import Machine
+from flexff.cosim.recording import atomic_write
+from flexff.fmu.errors import InputError
+from flexff.learning.features import lowpass
+from flexff.learning.linear_prior import (
     AxisFit,
     LinearModel,
     Motion,
@@ -32,10 +36,6 @@ from flexff.controllers.linear_prior import (
     linear_model_from_dict,
     term_names,
 )
-from flexff.cosim.machine import Machine
-from flexff.cosim.recording import atomic_write
-from flexff.fmu.errors import InputError
-from flexff.learning.features import lowpass
 
 WIDTHS = (0.001, 0.003, 0.01, 0.03)  # Coulomb tanh widths to try, fractions of the v limit
 # the width's search between the best of WIDTHS' neighbours ends within this share of it: on the

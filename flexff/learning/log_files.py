@@ -21,6 +21,7 @@ from scipy.signal import savgol_filter
 
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.memory import check_memory
+from flexff.cosim.references import SAVGOL_ORDER, SMOOTHING_WINDOW
 from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
 from flexff.learning.features import decimation
@@ -29,7 +30,6 @@ from flexff.learning.presets import PRESETS, make_config
 RATE_TOLERANCE = 0.01  # largest relative deviation of a sample interval from the median
 UNIFORM = 1e-6  # relative: a grid this close to the rate is kept as it is (learning.dataset)
 ROUNDING = 1e-3  # relative: the logs' rate is rounded to whole Hz within this
-SMOOTHING_S = 0.025  # Savitzky-Golay window of derived reference derivatives (read_csv's)
 
 
 class LogError(InputError):
@@ -189,56 +189,56 @@ def common_rate(logs: list[Log]) -> float:
             raise LogError(f"{log.path}: column time: sampled at {log.rate_hz:.6g} Hz, "
                            f"{first.path} at {first.rate_hz:.6g} Hz: give --rate HZ to "
                            f"resample them to one rate")
-    rate = first.rate_hz
-    return float(round(rate)) if abs(rate - round(rate)) <= ROUNDING * rate else rate
+    rate_hz = first.rate_hz
+    return float(round(rate_hz)) if abs(rate_hz - round(rate_hz)) <= ROUNDING * rate_hz else rate_hz
 
 
-def resampled(log: Log, rate: float) -> tuple[dict[str, np.ndarray], str]:
-    """The log's columns at `rate`, time from 0, and how they got there: kept bit for bit on
-    a grid at `rate`, every n-th sample at a whole multiple, else interpolated linearly."""
+def resampled(log: Log, rate_hz: float) -> tuple[dict[str, np.ndarray], str]:
+    """The log's columns at `rate_hz`, time from 0, and how they got there: kept bit for bit on
+    a grid at `rate_hz`, every n-th sample at a whole multiple, else interpolated linearly."""
     columns = {**log.columns, TIME: log.columns[TIME] - log.columns[TIME][0]}
     time = columns[TIME]
-    if _uniform(time, rate):
+    if _uniform(time, rate_hz):
         return columns, "kept"
-    factor = log.rate_hz / rate
+    factor = log.rate_hz / rate_hz
     n = round(factor)
-    if n >= 2 and abs(factor - n) <= UNIFORM * factor and _uniform(time[::n], rate):
+    if n >= 2 and abs(factor - n) <= UNIFORM * factor and _uniform(time[::n], rate_hz):
         return {k: v[::n] for k, v in columns.items()}, f"every {n}th sample kept"
-    samples = int(np.floor(time[-1] * rate + 1e-9)) + 1
+    samples = int(np.floor(time[-1] * rate_hz + 1e-9)) + 1
     check_memory(samples * (len(columns) + 1),
-                 f"{log.path}: its {time[-1]:.6g} s at {rate:.6g} Hz (--rate)")
-    grid = np.arange(samples) / rate
+                 f"{log.path}: its {time[-1]:.6g} s at {rate_hz:.6g} Hz (--rate)")
+    grid = np.arange(samples) / rate_hz
     return ({k: np.interp(grid, time, v) for k, v in columns.items() if k != TIME}
             | {TIME: grid}), f"interpolated linearly from {log.rate_hz:.6g} Hz"
 
 
-def _uniform(time: np.ndarray, rate: float) -> bool:
-    return bool(np.allclose(np.diff(time), 1.0 / rate, rtol=UNIFORM, atol=1e-9))
+def _uniform(time: np.ndarray, rate_hz: float) -> bool:
+    return bool(np.allclose(np.diff(time), 1.0 / rate_hz, rtol=UNIFORM, atol=1e-9))
 
 
-def check_length(log: Log, samples: int, rate: float) -> None:
-    """At least one training window of every preset whose model rate divides `rate`."""
+def check_length(log: Log, samples: int, rate_hz: float) -> None:
+    """At least one training window of every preset whose model rate divides `rate_hz`."""
     needed = []
     for preset, models in PRESETS.items():
         for kind in models:
             config = make_config(kind, preset)
             try:
-                needed.append(config.window * decimation(rate, config.features.model_rate_hz))
+                needed.append(config.window * decimation(rate_hz, config.features.model_rate_hz))
             except ValueError:  # that preset cannot train at this rate
                 continue
     window = max(needed, default=0)
     if samples < window:
-        raise LogError(f"{log.path}: column time: {samples} samples at {rate:g} Hz, fewer than "
-                       f"one training window ({window} samples, {window / rate:g} s)")
+        raise LogError(f"{log.path}: column time: {samples} samples at {rate_hz:g} Hz, fewer than "
+                       f"one training window ({window} samples, {window / rate_hz:g} s)")
 
 
 # -- derived signals --------------------------------------------------------------------------
-def reference_derivative(reference: np.ndarray, rate: float, order: int, of: str
+def reference_derivative(reference: np.ndarray, rate_hz: float, order: int, of: str
                          ) -> tuple[np.ndarray, str]:
     """The `order`-th derivative of the reference position `of` (its name in messages),
-    sampled at `rate`, by a cubic Savitzky-Golay filter over SMOOTHING_S (as
+    sampled at `rate_hz`, by a cubic Savitzky-Golay filter over SMOOTHING_WINDOW (as
     cosim.references.read_csv derives them), and how, for a manifest's `derived`."""
-    window = max(5, 2 * round(SMOOTHING_S * rate / 2) + 1)
-    values = savgol_filter(reference, window, 3, deriv=order, delta=1.0 / rate)
+    window = max(5, 2 * round(SMOOTHING_WINDOW * rate_hz / 2) + 1)
+    values = savgol_filter(reference, window, SAVGOL_ORDER, deriv=order, delta=1.0 / rate_hz)
     return values, (f"{('first', 'second', 'third')[order - 1]} derivative of {of} (cubic "
                     f"Savitzky-Golay filter over {window} samples)")

@@ -59,14 +59,14 @@ def import_logs(files: Sequence[str | Path], out: str | Path, rate_hz: float | N
     paths = [Path(f) for f in files]
     splits = split_by_file(paths, test)
     logs = [check_log(read_log(p, REQUIRED, REFERENCE_SIGNALS)) for p in paths]
-    rate = rate_hz or common_rate(logs)
-    trajectories = [(log, *resampled(log, rate)) for log in logs]
+    rate_hz = rate_hz or common_rate(logs)
+    trajectories = [(log, *resampled(log, rate_hz)) for log in logs]
     for log, signals, _ in trajectories:
-        check_length(log, len(signals["time"]), rate)
+        check_length(log, len(signals["time"]), rate_hz)
     entries: list[dict[str, Any]] = []
     written = []
     for log, signals, how in trajectories:
-        derived = _derive(log, signals, rate)
+        derived = _derive(log, signals, rate_hz)
         written.append(signals)
         entries.append({"name": log.path.stem, "split": splits[log.path.stem],
                         "file": f"{log.path.stem}.npz", "reference": {}, "seed": 0,
@@ -75,13 +75,13 @@ def import_logs(files: Sequence[str | Path], out: str | Path, rate_hz: float | N
     def fill(folder: Path) -> None:
         for entry, values in zip(entries, written):
             save_signals(folder / entry["file"], values)
-        write_manifest(folder, SET, rate, {"kind": "measured logs"}, entries, IMPORTED)
+        write_manifest(folder, SET, rate_hz, {"kind": "measured logs"}, entries, IMPORTED)
 
     write_folder(out, fill)
     return load_dataset(out)
 
 
-def _derive(log: Log, signals: dict[str, np.ndarray], rate: float) -> dict[str, str]:
+def _derive(log: Log, signals: dict[str, np.ndarray], rate_hz: float) -> dict[str, str]:
     """Add the signals the log lacks to `signals`; return how each was derived."""
     theta = np.column_stack([signals[n] for n in ENCODER_SIGNALS])
     position = encoder_positions(theta, 3)
@@ -103,5 +103,6 @@ def _derive(log: Log, signals: dict[str, np.ndarray], rate: float) -> dict[str, 
             name = f"{prefix}{axis}_ref"
             if name not in signals:
                 signals[name], derived[name] = reference_derivative(
-                    signals[ref], rate, order, f"{'the derived ' if ref in derived else ''}{ref}")
+                    signals[ref], rate_hz, order,
+                    f"{'the derived ' if ref in derived else ''}{ref}")
     return derived

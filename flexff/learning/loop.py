@@ -25,9 +25,10 @@ import numpy as np
 
 from flexff.controllers.model_card import OUTPUTS, read_card
 from flexff.cosim.config import checked, expanded, parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.recording import Recording
 from flexff.cosim.scenario import Scenario
-from flexff.cosim.schema import ConfigError, FmuConfig, RunConfig, SourceConfig
+from flexff.cosim.schema import FmuConfig, RunConfig, SourceConfig
 from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import read_fmu, typed_value

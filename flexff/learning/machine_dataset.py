@@ -154,11 +154,11 @@ def load_machine_dataset(path: str | Path, machine: Machine | None = None) -> Ma
         where = _difference(manifest["machine"], describe(machine), "machine")
         raise DatasetError(f"{manifest_path}: written for another machine description ({where}"
                            f"): use the description it was written for, or {fix} with this one")
-    rate = float(manifest["sample_rate_hz"])
+    rate_hz = float(manifest["sample_rate_hz"])
     signals = ("time", *description_signals(manifest["machine"]))
-    trajectories = tuple(_load_trajectory(path, entry, signals, rate, fix)
+    trajectories = tuple(_load_trajectory(path, entry, signals, rate_hz, fix)
                          for entry in manifest["trajectories"])
-    return MachineDataset(path, manifest["machine"], rate, manifest["source"], trajectories,
+    return MachineDataset(path, manifest["machine"], rate_hz, manifest["source"], trajectories,
                           digest(manifest, splits=True),
                           parse_machine(manifest["description"], str(manifest_path)))
 
@@ -187,10 +187,10 @@ def _check_manifest(manifest: Any, where: Path) -> None:
                            f"datasets of version {VERSION}; {AGAIN}")
     if not is_sha256(manifest.get("sha256")) or not isinstance(manifest.get("source"), str):
         raise DatasetError(f"{where}: 'sha256' or 'source' is missing or wrong; {AGAIN}")
-    rate = manifest.get("sample_rate_hz")
-    if isinstance(rate, bool) or not isinstance(rate, int | float) or not np.isfinite(rate) \
-            or rate <= 0:
-        raise DatasetError(f"{where}: 'sample_rate_hz' must be a positive number, got {rate!r}")
+    rate_hz = manifest.get("sample_rate_hz")
+    if isinstance(rate_hz, bool) or not isinstance(rate_hz, int | float) \
+            or not np.isfinite(rate_hz) or rate_hz <= 0:
+        raise DatasetError(f"{where}: 'sample_rate_hz' must be a positive number, got {rate_hz!r}")
     if not _is_description(manifest.get("machine")) \
             or not isinstance(manifest.get("description"), dict):
         raise DatasetError(f"{where}: 'machine' is not a machine description (name, axes with "
@@ -230,13 +230,13 @@ def _difference(found: Any, given: Any, key: str) -> str:
 
 
 def _load_trajectory(folder: Path, entry: Mapping[str, Any], signals: tuple[str, ...],
-                     rate: float, fix: str) -> Trajectory:
+                     rate_hz: float, fix: str) -> Trajectory:
     file = folder / entry["file"]
     arrays = read_arrays(folder, entry, signals, fix)
     missing = [s for s in signals if s not in arrays]
     if missing:
         raise DatasetError(f"{file} lacks signals {missing}; {fix}")
-    check_arrays(file, arrays, rate, fix)
+    check_arrays(file, arrays, rate_hz, fix)
     return Trajectory(name=entry["name"], split=entry["split"], signals=arrays,
                       reference=entry.get("reference", {}), seed=int(entry.get("seed", 0)),
                       derived=entry.get("derived", {}))

@@ -25,7 +25,6 @@ from typing import Any
 
 from tqdm import tqdm
 
-from flexff.controllers.linear_prior import LinearModel, linear_model_from_dict
 from flexff.controllers.machine_feedforward import (
     inverse_model_system,
     learned_machine_feedforward_system,
@@ -42,6 +41,7 @@ from flexff.learning.excitation import CLASSES
 from flexff.learning.export import export
 from flexff.learning.ilc import DIVERGED, NOISE_FLOOR, divergence_line, ilc
 from flexff.learning.linear_model import write_linear_model
+from flexff.learning.linear_prior import LinearModel, linear_model_from_dict
 from flexff.learning.machine_collect import collect_machine
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
 from flexff.learning.machine_features import MachineFeatures, friction_widths
@@ -208,7 +208,7 @@ class _Training:
     overrides: dict[str, Any]
     data: Path
     out: Path
-    prior: dict[str, Any] | None  # the identified model (controllers.linear_prior), for pgnn
+    prior: dict[str, Any] | None  # the identified model (learning.linear_prior), for pgnn
     features: MachineFeatures
 
 

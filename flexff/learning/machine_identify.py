@@ -6,8 +6,8 @@ PyTorch.
 
 from __future__ import annotations
 
-from flexff.controllers.linear_prior import LinearModel
 from flexff.learning.linear_model import identify_linear, parallel_filter
+from flexff.learning.linear_prior import LinearModel
 from flexff.learning.machine_dataset import MachineDataset
 from flexff.learning.machine_features import (
     MachineFeatures,
@@ -34,16 +34,16 @@ def identify_dataset(data: MachineDataset, features: MachineFeatures | None = No
     two samples a corner period (learning.linear_model.parallel_filter: its standard
     deviations then hold), the filter's ends left out."""
     machine = data.description
-    rate = data.sample_rate_hz
+    rate_hz = data.sample_rate_hz
     train = [t for t in data.trajectories if t.split == "train"]
     resolved = (features or MachineFeatures.of(machine)).resolved(
-        rate, [t.signals for t in train], machine)
+        rate_hz, [t.signals for t in train], machine)
     motions, efforts = [], []
     for trajectory in train:
-        moved, effort = motion(trajectory.signals, rate, machine, resolved)
+        moved, effort = motion(trajectory.signals, rate_hz, machine, resolved)
         motions.append(named_motion(moved, machine))
         efforts.append({a.name: effort[:, k] for k, a in enumerate(machine.axes)})
     assert resolved.cutoff_hz is not None and resolved.lead_s is not None
     return identify_linear(machine, motions, efforts,
-                           parallel_filter(rate, resolved.cutoff_hz, resolved.filter_order),
+                           parallel_filter(rate_hz, resolved.cutoff_hz, resolved.filter_order),
                            resolved.lead_s)

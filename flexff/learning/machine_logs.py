@@ -66,17 +66,17 @@ def import_machine_logs(files: Sequence[str | Path], out: str | Path, machine: M
     splits = split_by_file(paths, test)
     sources = _sources(machine)
     logs = [_mapped(check_log(_read(p, machine, sources)), machine, sources) for p in paths]
-    rate = rate_hz or common_rate(logs)
+    rate_hz = rate_hz or common_rate(logs)
     trajectories, details = {}, {}
     for log in logs:
-        signals, how = resampled(log, rate)
-        check_length(log, len(signals[TIME]), rate)
-        derived = _derive(machine, signals, rate)
+        signals, how = resampled(log, rate_hz)
+        check_length(log, len(signals[TIME]), rate_hz)
+        derived = _derive(machine, signals, rate_hz)
         read = {s.signal: s.expression.text for s in sources if s.signal in log.columns}
         trajectories[log.path.stem] = signals
         details[log.path.stem] = {"derived": derived, "log": {**log_entry(log, how),
                                                                "signals": read}}
-    return write_machine_dataset(out, machine, trajectories, rate, splits, SOURCE, details)
+    return write_machine_dataset(out, machine, trajectories, rate_hz, splits, SOURCE, details)
 
 
 def _sources(machine: Machine) -> list[_Source]:
@@ -129,7 +129,7 @@ def _mapped(log: Log, machine: Machine, sources: list[_Source]) -> Log:
     return Log(log.path, log.format, signals, log.row)
 
 
-def _derive(machine: Machine, signals: dict[str, np.ndarray], rate: float) -> dict[str, str]:
+def _derive(machine: Machine, signals: dict[str, np.ndarray], rate_hz: float) -> dict[str, str]:
     """Add the references the log lacks to `signals`; return how each was derived."""
     derived = {}
     for axis in machine.axes:
@@ -141,6 +141,6 @@ def _derive(machine: Machine, signals: dict[str, np.ndarray], rate: float) -> di
         of = f"{'the derived ' if reference in derived else ''}{reference}"
         for order, name in enumerate(axis.derivatives, start=1):
             if name not in signals:
-                signals[name], derived[name] = reference_derivative(signals[reference], rate,
+                signals[name], derived[name] = reference_derivative(signals[reference], rate_hz,
                                                                     order, of)
     return derived

@@ -21,17 +21,12 @@ import numpy as np
 
 from flexff.cosim.axis_references import AXIS_KINDS
 from flexff.cosim.config import checked
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import Machine
 from flexff.cosim.recording import Recording
 from flexff.cosim.references import Reference
-from flexff.cosim.schema import (
-    ConfigError,
-    ConnectionConfig,
-    FmuConfig,
-    RunConfig,
-    SourceConfig,
-)
+from flexff.cosim.schema import ConnectionConfig, FmuConfig, RunConfig, SourceConfig
 from flexff.fmu.expressions import evaluate
 
 

@@ -19,13 +19,13 @@ from typing import Any
 
 import numpy as np
 
-from flexff.controllers.linear_prior import LinearModel
-from flexff.controllers.machine_features import feature_names
 from flexff.cosim.machine import Machine, machine_table
 from flexff.fmu.errors import InputError
 from flexff.learning.batches import TRAIN, VALIDATION, SequenceSet
 from flexff.learning.dataset_files import Trajectory
 from flexff.learning.devices import pick_device
+from flexff.learning.feature_spec import feature_names
+from flexff.learning.linear_prior import LinearModel
 from flexff.learning.machine_features import (
     MachineFeatures,
     label_filter,

@@ -25,9 +25,9 @@ from typing import Any, cast
 import numpy as np
 import tomli_w
 
-from flexff.controllers.loop_shaping import AxisPlant, Margins, StateSpace, loop_margins
-from flexff.controllers.pid_design import AxisPid, Form, LoopShape
-from flexff.controllers.pid_options import axes_from_options
+from flexff.blocks.loop_shaping import AxisPlant, Margins, StateSpace, loop_margins
+from flexff.blocks.pid_design import AxisPid, Form, LoopShape
+from flexff.blocks.pid_options import axes_from_options
 from flexff.cosim.config import checked
 from flexff.cosim.csv_text import TIME
 from flexff.cosim.machine import Axis, Machine
@@ -105,11 +105,11 @@ def tune_loop(loop: RunConfig, phase_margin_deg: float = PHASE_MARGIN_DEG,
     HIGH_SHARE of the rate), fit its rigid model and propose its crossover for
     `phase_margin_deg`."""
     machine = loop_machine(loop)
-    rate = 1.0 / loop.step
-    high = HIGH_SHARE * rate if high_hz is None else high_hz
-    if not LOW_HZ < high < rate / (2 * FIT_CORNER):
+    rate_hz = 1.0 / loop.step
+    high = HIGH_SHARE * rate_hz if high_hz is None else high_hz
+    if not LOW_HZ < high < rate_hz / (2 * FIT_CORNER):
         raise InputError(f"high_hz {high!r}: the chirp's highest frequency must lie above "
-                         f"{LOW_HZ:g} Hz and below {rate / (2 * FIT_CORNER):g} Hz (the rate "
+                         f"{LOW_HZ:g} Hz and below {rate_hz / (2 * FIT_CORNER):g} Hz (the rate "
                          f"over {2 * FIT_CORNER:g})")
     if not 0 < phase_margin_deg < 90:
         raise InputError(f"phase margin {phase_margin_deg!r}: expected degrees between 0 "
@@ -122,7 +122,7 @@ def tune_loop(loop: RunConfig, phase_margin_deg: float = PHASE_MARGIN_DEG,
     axes = []
     for axis in machine.axes:
         signals = _measure(loop, machine, axis, rest, seconds, high)
-        fit = _fit(signals, axis, rate, high)
+        fit = _fit(signals, axis, rate_hz, high)
         crossover, margins = _proposal(designs[axis.name], fit, loop.step, phase_margin_deg,
                                        high)
         axes.append(AxisTuning(axis.name, names[axis.name], *fit, crossover, margins))
@@ -297,22 +297,22 @@ def _run(loop: RunConfig, machine: Machine, t: np.ndarray, positions: dict[str, 
         return simulate_config(on_references(loop, table, float(t[-1]), name), progress=False)
 
 
-def _fit(signals: dict[str, np.ndarray], axis: Axis, rate: float, high: float
+def _fit(signals: dict[str, np.ndarray], axis: Axis, rate_hz: float, high: float
          ) -> tuple[float, float, float, float, float, float]:
     """mass, damping, Coulomb, offset, delay [s] and relative residual of the axis's rigid
     model on the chirp's samples (4 significant digits), the effort's lead searched."""
     corner = FIT_CORNER * high
-    position = lowpass(np.asarray(signals[axis.measured_signal]), rate, corner)
-    velocity, acceleration = differentiate(position, rate)
+    position = lowpass(np.asarray(signals[axis.measured_signal]), rate_hz, corner)
+    velocity, acceleration = differentiate(position, rate_hz)
     effort = np.asarray(signals[axis.effort_signal], dtype=float)
     width = 0.01 * axis.limits.velocity
     columns = np.column_stack([acceleration, velocity, np.tanh(velocity / width),
                                np.ones_like(velocity)])
-    edge = math.ceil(2 * rate / corner)
-    kept = slice(int(SETTLE_S * rate) + edge, len(effort) - edge)
+    edge = math.ceil(2 * rate_hz / corner)
+    kept = slice(int(SETTLE_S * rate_hz) + edge, len(effort) - edge)
     best: tuple[float, np.ndarray, float] | None = None
     for lead in np.arange(0.0, MAX_LEAD + 0.125, 0.25):
-        labels = lowpass(lagged(effort, rate, lead / rate), rate, corner)[kept]
+        labels = lowpass(lagged(effort, rate_hz, lead / rate_hz), rate_hz, corner)[kept]
         theta, *_ = np.linalg.lstsq(columns[kept], labels, rcond=None)
         error = float(np.linalg.norm(labels - columns[kept] @ theta) / np.linalg.norm(labels))
         if best is None or error < best[0]:
@@ -327,7 +327,7 @@ def _fit(signals: dict[str, np.ndarray], axis: Axis, rate: float, high: float
     def rounded(value: float) -> float:  # 4 significant digits: what the proposal is for
         return float(f"{value:.4g}")
     return (rounded(mass), rounded(max(damping, 0.0)), rounded(coulomb), rounded(offset),
-            max(lead - 0.5, 0.0) / rate, rounded(error))
+            max(lead - 0.5, 0.0) / rate_hz, rounded(error))
 
 
 def _proposal(design: AxisPid, fit: tuple[float, ...], step: float, phase_margin_deg: float,

@@ -28,7 +28,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from flexff.controllers.linear_prior import LinearModel, linear_model_from_dict
 from flexff.cosim.csv_text import TIME
 from flexff.cosim.machine import Machine
 from flexff.cosim.plots import save_figure
@@ -37,6 +36,7 @@ from flexff.fmu.errors import InputError
 from flexff.learning.dataset_files import Trajectory
 from flexff.learning.deploy import SIModel
 from flexff.learning.linear_model import EDGE_PERIODS, read_linear_model
+from flexff.learning.linear_prior import LinearModel, linear_model_from_dict
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
 from flexff.learning.machine_features import (
     MachineFeatures,
@@ -115,23 +115,23 @@ def predict(models: TrainedModels, dataset: MachineDataset, split: str = "all") 
     chosen = [t for t in dataset.trajectories if split == "all" or t.split == split]
     if not chosen:
         raise InputError(f"{dataset.path}: no trajectory in the split {split!r}")
-    rate = dataset.sample_rate_hz
+    rate_hz = dataset.sample_rate_hz
     machine = dataset.description
     features, derived = _label_settings(models, dataset)
     predicted: dict[str, list[np.ndarray]] = {}
     if models.identified is not None:
         _check_axes(models.identified.machine, machine, "identified.json")
-        predicted[IDENTIFIED] = _prior(models.identified, chosen, rate, machine, features)
+        predicted[IDENTIFIED] = _prior(models.identified, chosen, rate_hz, machine, features)
     with torch.no_grad(), torch_threads():
         for name, folder in models.runs.items():
             predicted[name] = _network(folder, chosen, dataset)
-    decimation = features.decimation(rate)
+    decimation = features.decimation(rate_hz)
     assert features.cutoff_hz is not None and features.model_rate_hz is not None
     edge = math.ceil(EDGE_PERIODS / features.cutoff_hz * features.model_rate_hz)
     trajectories = []
     for k, trajectory in enumerate(chosen):
         signals = trajectory.signals
-        filtered = label_filter(motion(signals, rate, machine, features)[1], rate, features)
+        filtered = label_filter(motion(signals, rate_hz, machine, features)[1], rate_hz, features)
         n = len(filtered)
         scored = np.zeros(n, dtype=bool)
         scored[edge:n - edge] = True
@@ -143,7 +143,7 @@ def predict(models: TrainedModels, dataset: MachineDataset, split: str = "all") 
     errors = {name: relative_errors([t.filtered[t.scored] for t in trajectories],
                                     [t.models[name][t.scored] for t in trajectories], machine)
               for name in predicted}
-    record = {**preprocessing(features, features, rate), "derived": derived}
+    record = {**preprocessing(features, features, rate_hz), "derived": derived}
     return Predictions(machine, trajectories, record, errors)
 
 
@@ -267,9 +267,9 @@ def _check_axes(trained: Machine, machine: Machine, where: str) -> None:
                          f"data's machine has {', '.join(a.name for a in machine.axes)}")
 
 
-def _prior(model: LinearModel, trajectories: list[Trajectory], rate: float, machine: Machine,
+def _prior(model: LinearModel, trajectories: list[Trajectory], rate_hz: float, machine: Machine,
            features: MachineFeatures) -> list[np.ndarray]:
-    efforts = prior_efforts(model, trajectories, rate, machine, features)
+    efforts = prior_efforts(model, trajectories, rate_hz, machine, features)
     assert efforts is not None
     return efforts
 

@@ -28,11 +28,11 @@ from typing import Any
 
 import torch
 
-from flexff.controllers.machine_features import FeatureInputs
 from flexff.cosim.machine import Machine, parse_machine
 from flexff.cosim.recording import atomic_write
 from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
+from flexff.learning.feature_spec import FeatureInputs
 from flexff.learning.models import SequenceNetwork, build_network
 from flexff.learning.presets import TrainConfig
 from flexff.learning.scaling import MinMaxScaler

@@ -26,6 +26,7 @@ from scipy.interpolate import CubicSpline
 
 from flexff.controllers.allocation import motor_currents
 from flexff.controllers.features import nominal_model
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.learning.dataset import (
     CURRENT_SIGNALS,
     ENCODER_SIGNALS,
@@ -123,7 +124,7 @@ def motion_trajectory(name: str, split: str, seed: int, t: np.ndarray, motion: n
 
 
 def synthetic_trajectory(name: str, split: str, seed: int, duration: float = 15.0,
-                         rate_hz: float = 1000.0, friction: bool = True,
+                         rate_hz: float = 1 / DEFAULT_STEP, friction: bool = True,
                          force_noise: float = 0.02) -> Trajectory:
     """One random trajectory with all signals of the dataset format."""
     t = np.arange(round(duration * rate_hz)) / rate_hz
@@ -132,7 +133,7 @@ def synthetic_trajectory(name: str, split: str, seed: int, duration: float = 15.
 
 
 def synthetic_dataset(path: str | Path, n_train: int = 8, n_test: int = 2, duration: float = 15.0,
-                      rate_hz: float = 1000.0, seed: int = 0, friction: bool = True,
+                      rate_hz: float = 1 / DEFAULT_STEP, seed: int = 0, friction: bool = True,
                       force_noise: float = 0.02) -> Path:
     """Write a random synthetic 'sim' dataset folder; trajectory k uses seed `seed + k`."""
     trajectories = [

@@ -123,11 +123,11 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
     settings = _settings(config, dataset)
     checkpoint = start_run(out, settings, resume, force)
     train_set, test_set = _splits(dataset)
-    rate = dataset.sample_rate_hz
-    model_rate = rate / decimation(rate, config.features.model_rate_hz)
+    rate_hz = dataset.sample_rate_hz
+    model_rate = rate_hz / decimation(rate_hz, config.features.model_rate_hz)
     rng = np.random.default_rng(config.seed)
-    train_x, train_f = _prepare(train_set, rate, config.features, rng)
-    test_x, test_f = _prepare(test_set, rate, config.features, None)
+    train_x, train_f = _prepare(train_set, rate_hz, config.features, rng)
+    test_x, test_f = _prepare(test_set, rate_hz, config.features, None)
     feature_set = config.features.feature_set
     identified = _identified_parameters(config, dataset, model_rate)
     prior = identified if uses_prior(config.model) else None
@@ -171,7 +171,7 @@ def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
     save_run(out, config, network, feature_scaler, label_scaler,
              feature_names(feature_set, force_inputs is not None), list(LABELS[labels]), model_rate,
              {"data": {"path": str(Path(dataset.path).resolve()), "set": dataset.set,
-                       "sha256": dataset.digest, "sample_rate_hz": rate,
+                       "sha256": dataset.digest, "sample_rate_hz": rate_hz,
                        "plant": dict(dataset.plant), "train": [t.name for t in train_set],
                        "test": [t.name for t in test_set]},
               "parameters": metrics["parameters"],
@@ -198,9 +198,9 @@ def _splits(dataset: Dataset) -> tuple[list[Trajectory], list[Trajectory]]:
     return train_set, test_set
 
 
-def _prepare(trajectories: list[Trajectory], rate: float, features: FeatureConfig,
+def _prepare(trajectories: list[Trajectory], rate_hz: float, features: FeatureConfig,
              rng: np.random.Generator | None) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    pairs = [prepare_trajectory(t, rate, features, rng) for t in trajectories]
+    pairs = [prepare_trajectory(t, rate_hz, features, rng) for t in trajectories]
     return [x for x, _ in pairs], [f for _, f in pairs]
 
 

@@ -20,10 +20,10 @@ from typing import Any
 import numpy as np
 
 from flexff.cosim.references import Spline
+from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.learning.dataset import SETS
 
-STEP = 1e-3  # s: the co-simulation step of every run
 R_MIN = 0.007  # m: smallest circle radius (seed)
 R_MAX = 0.045  # m: largest radius any training trajectory reaches (docs: Learning, The data)
 SPLINE_POINT_RADIUS = 0.04  # m: spline points are drawn inside this disc
@@ -70,7 +70,7 @@ class TrajectorySet:
     duration: float
     decimation: int
     trajectories: tuple[TrajectorySpec, ...]
-    step: float = STEP
+    step: float = DEFAULT_STEP
 
     @property
     def sample_rate_hz(self) -> int:

@@ -17,7 +17,7 @@ from typing import Any
 
 import casadi as ca
 
-from flexff.controllers import block_options as opt
+from flexff.blocks import options as opt
 from flexff.fmu.system import Parameter, System, Variable
 from flexff.machines.builtins import STAGE_OPTIONS
 from flexff.machines.effects import coulomb_friction, encoder, saturated

@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from flexff.cosim.references import Chain, Circle, Hold, Line, Reference, sample
+from flexff.fmu.defaults import DEFAULT_STEP
 
 # evaluation reference of the thesis (section 5.7)
 THESIS_LINE_END = (0.0098, -0.0098)
@@ -39,7 +40,7 @@ def thesis_evaluation_path() -> Chain:
                          THESIS_CIRCLE_TIME)))
 
 
-def thesis_evaluation(step: float = 1e-3) -> Reference:
+def thesis_evaluation(step: float = DEFAULT_STEP) -> Reference:
     """The thesis's evaluation reference sampled at `step`."""
     return sample(thesis_evaluation_path(), step)
 
@@ -58,6 +59,6 @@ def thesis_hardware_evaluation_path() -> Chain:
                   Hold(end, THESIS_HW_END)))
 
 
-def thesis_hardware_evaluation(step: float = 1e-3) -> Reference:
+def thesis_hardware_evaluation(step: float = DEFAULT_STEP) -> Reference:
     """The thesis's evaluation reference on the real machine sampled at `step`."""
     return sample(thesis_hardware_evaluation_path(), step)

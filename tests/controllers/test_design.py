@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from flexff.blocks.loop_shaping import design_pid, loop_margins
+from flexff.controllers.axis_plant import axis_plant
 from flexff.controllers.feedback import controller_design, controller_system, parasitic_mode_hz
-from flexff.controllers.loop_shaping import axis_plant, design_pid, loop_margins
 from flexff.plant.analysis import FRICTION_FREE, linearization
 from flexff.plant.model import PlantModel
 
@@ -120,7 +121,7 @@ def test_discrete_controller_matches_the_continuous_one(designs, variant):
         depth = abs(design.discrete.response(wn)[0] / design.continuous.response(wn)[0])
         assert depth == pytest.approx(1.0, rel=1e-3)
         z1, z2 = design.notch_zeta
-        pid_only = design_pid(design.crossover_hz, STEP)
+        pid_only = design_pid(design.crossover_hz, STEP, plant=design.plant)
         ratio = design.discrete.response(wn)[0] / pid_only.discrete.response(wn)[0]
         assert abs(ratio) * pid_only.kp / design.kp == pytest.approx(z1 / z2, rel=1e-9)
     # step responses agree once the first (derivative) transient is over
@@ -135,14 +136,15 @@ def test_discrete_controller_matches_the_continuous_one(designs, variant):
 
 def test_design_numbers_and_arguments():
     assert parasitic_mode_hz() == pytest.approx(40.0, abs=0.1)
+    plant = axis_plant()
     with pytest.raises(ValueError, match="Nyquist"):
-        design_pid(2.0, STEP, notch_hz=600.0)
+        design_pid(2.0, STEP, notch_hz=600.0, plant=plant)
     with pytest.raises(ValueError, match="positive"):
-        design_pid(-1.0, STEP)
+        design_pid(-1.0, STEP, plant=plant)
     with pytest.raises(ValueError, match="unknown controller variant"):
         controller_design("prototype")
     with pytest.raises(ValueError, match="z1 < z2"):
-        design_pid(2.0, STEP, notch_hz=40.0, notch_zeta=(0.5, 0.02))
+        design_pid(2.0, STEP, notch_hz=40.0, notch_zeta=(0.5, 0.02), plant=plant)
 
 
 def linearized_plant(variant):

@@ -9,10 +9,10 @@ import pytest
 
 from flexff.cosim.axis_references import AXIS_KINDS, build_axis_reference
 from flexff.cosim.config import parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import parse_machine
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import source_signals
-from flexff.cosim.schema import ConfigError
 from tests.learning.test_excitation import assert_integrates
 
 AXES = [  # name, unit, range, velocity, acceleration, jerk

@@ -37,5 +37,5 @@ def test_third_party_example_runs_from_any_folder(tmp_path, monkeypatch, capsys)
 
 
 def test_readme_shows_the_example_as_shipped():
-    shipped = (REPOSITORY / "cosim" / "examples" / "third-party-fmus.toml").read_text()
-    assert readme_block("cosim/examples/third-party-fmus.toml") == shipped
+    shipped = (REPOSITORY / "flexff" / "cosim" / "examples" / "third-party-fmus.toml").read_text()
+    assert readme_block("flexff/cosim/examples/third-party-fmus.toml") == shipped

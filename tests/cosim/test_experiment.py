@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from flexff.cosim.config import expanded, parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.libcosim import run_libcosim
 from flexff.cosim.run import run_config, simulate_config
 from flexff.cosim.scenario import resolve
-from flexff.cosim.schema import ConfigError
 from flexff.cosim.ssp import export_ssp, load_ssp
 from tests.helpers import REFERENCE_FMUS
 from tests.probe_fmu import build_probe

@@ -33,10 +33,10 @@ import tomli_w
 
 from flexff.cli import main
 from flexff.cosim.config import config_examples, expanded, expanded_text, load_config, parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.recording import PARQUET_NAME, PARTS_NAME, load_recording
 from flexff.cosim.run import run_config, simulate_config
 from flexff.cosim.scenario import resolve
-from flexff.cosim.schema import ConfigError
 from tests.helpers import REFERENCE_FMUS
 
 VDP_REFERENCE_CSV = "extra/org.fmi-standard.fmi-ls-ref/VanDerPol_out.csv"

@@ -20,9 +20,9 @@ import pytest
 
 from flexff.cli import main
 from flexff.cosim.config import parse_config, with_isolation
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.recording import load_recording
 from flexff.cosim.run import simulate_config
-from flexff.cosim.schema import ConfigError
 from tests.helpers import REFERENCE_FMUS
 from tests.probe_fmu import build_probe
 

@@ -2,8 +2,8 @@
 
 import pytest
 
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import check_signals, load_machine, parse_machine
-from flexff.cosim.schema import ConfigError
 
 AXIS = {"name": "x", "measured": "plant.x", "feedforward": "pid.x_ff",
         "effort": "pid.x_effort", "range": [-0.05, 0.05], "velocity": 0.2, "acceleration": 2.0}

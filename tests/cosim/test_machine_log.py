@@ -3,8 +3,8 @@ expression of the log's columns, checked when the description is read."""
 
 import pytest
 
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import LogMap, parse_machine
-from flexff.cosim.schema import ConfigError
 
 AXIS = {"name": "x", "measured": "plant.x", "feedforward": "pid.x_ff", "effort": "pid.x_effort",
         "range": [-0.05, 0.05], "velocity": 0.2, "acceleration": 2.0}

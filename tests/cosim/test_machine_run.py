@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from flexff.cosim.config import checked, expanded, load_config, parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.metrics import error_norms
 from flexff.cosim.recording import load_recording
 from flexff.cosim.run import run_config
-from flexff.cosim.schema import ConfigError
 
-EXAMPLES = Path(__file__).parents[2] / "cosim" / "examples"
+EXAMPLES = Path(__file__).parents[2] / "flexff" / "cosim" / "examples"
 
 CONFIG = """
 [run]

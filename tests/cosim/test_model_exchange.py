@@ -21,8 +21,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from flexff.cosim.config import parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.run import run_config, simulate_config
-from flexff.cosim.schema import ConfigError
 from tests.helpers import REFERENCE_FMUS
 from tests.probe_fmu import build_ball, build_probe
 

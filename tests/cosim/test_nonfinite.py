@@ -10,8 +10,8 @@ import pytest
 
 from flexff.cli import main
 from flexff.cosim.config import expanded, parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.recording import load_recording
-from flexff.cosim.schema import ConfigError
 from tests.helpers import REFERENCE_FMUS
 
 VDP = REFERENCE_FMUS / "fmi2" / "VanDerPol.fmu"  # mu = 1e6 sends x1 to -inf at t = 0.09 s

@@ -7,8 +7,8 @@ import pytest
 
 from flexff.cli import main
 from flexff.cosim.config import parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.run import run_config
-from flexff.cosim.schema import ConfigError
 from tests.cosim.test_streaming import VDP, vdp_config
 
 

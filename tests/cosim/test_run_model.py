@@ -19,11 +19,11 @@ import flexff.cosim.master
 import flexff.cosim.references
 import flexff.fmu.importer
 from flexff.cosim.config import checked, load_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.master import Master, ResolvedFmu
 from flexff.cosim.references import build_reference
 from flexff.cosim.run import simulate
 from flexff.cosim.scenario import resolve
-from flexff.cosim.schema import ConfigError
 from flexff.cosim.ssp import export_ssp, load_ssp
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import SETTABLE, read_fmu

@@ -23,12 +23,12 @@ import pytest
 from flexff.cli import main
 from flexff.cosim.child_output import OutputRelay
 from flexff.cosim.config import parse_config, with_isolation
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.isolation import LENGTH, MESSAGE_LIMIT, IsolatedInstance
 from flexff.cosim.master import CosimError
 from flexff.cosim.recording import load_recording
 from flexff.cosim.run import simulate_config
 from flexff.cosim.sandbox import LAYERS, Sandbox
-from flexff.cosim.schema import ConfigError
 from flexff.fmu.importer import FmuError, read_fmu
 from tests.helpers import REFERENCE_FMUS
 from tests.probe_fmu import ATTEMPTS, ESCAPE, build_probe

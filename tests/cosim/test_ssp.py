@@ -17,9 +17,9 @@ import tomli_w
 from lxml import etree
 
 from flexff.cosim.config import expanded, load_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.recording import load_recording
 from flexff.cosim.run import run_config, simulate_config
-from flexff.cosim.schema import ConfigError
 from flexff.cosim.ssp import NS, SSD, export_ssp, load_ssp
 from flexff.fmu.importer import read_fmu
 from flexff.plant.references import thesis_evaluation

@@ -10,11 +10,11 @@ from pathlib import Path
 import pytest
 
 from flexff.cosim.config import expanded, load_config, parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import machine_table, parse_machine
 from flexff.cosim.metrics import error_norms
 from flexff.cosim.recording import load_recording
 from flexff.cosim.run import run_config
-from flexff.cosim.schema import ConfigError
 from flexff.fmu.errors import InputError
 from flexff.fmu.importer import read_fmu
 from tests.array_plant import AXES, build_array_plant

@@ -23,9 +23,10 @@ import tomli_w
 
 from flexff.cli import main
 from flexff.cosim.config import load_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.recording import PARQUET_NAME, load_recording
 from flexff.cosim.run import simulate_config
-from flexff.cosim.schema import ConfigError, RunConfig
+from flexff.cosim.schema import RunConfig
 from flexff.cosim.ssp import NS, export_ssp, load_ssp
 from tests.cosim.test_ssp import assert_valid_ssp_1_0, rewritten, ssd_of, without_configuration
 from tests.helpers import REFERENCE_FMUS

@@ -9,8 +9,8 @@ from flexff.cli import build_parser
 from flexff.cosim import machine
 from flexff.cosim.builtins import registered
 from flexff.cosim.config import parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.config_keys import KEYS, REFERENCE_KINDS, SEGMENT_KINDS, keys_of
-from flexff.cosim.schema import ConfigError
 from tests.helpers import REFERENCE_FMUS
 
 FMU = {"a": {"path": str(REFERENCE_FMUS / "fmi2" / "Feedthrough.fmu"),
@@ -100,7 +100,7 @@ def test_every_api_object_has_an_entry_on_the_api_page(site):
 
 
 def test_data_collect_help_lists_the_library_s_trajectory_sets():
-    from flexff.cli import TRAJECTORY_SETS
+    from flexff.cli.shared import TRAJECTORY_SETS
     from flexff.learning.dataset import SETS
 
     assert TRAJECTORY_SETS == SETS

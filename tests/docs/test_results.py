@@ -197,7 +197,7 @@ def test_the_readme_machines_table_is_generated_from_the_summaries():
         summary = json.loads((RESULTS / "machines" / folder / "summary.json").read_text())
         for axis in summary["axes"]:
             row = next(line for line in table.splitlines()
-                       if f"machines/examples/{folder}.toml`, {axis} |" in line)
+                       if f"flexff/machines/examples/{folder}.toml`, {axis} |" in line)
             shown = _numbers(row.split("|", 2)[2])
             expected = [s[axis]["e2_ratio"] for name, s in summary["scenarios"].items()
                         if name != "pid"]

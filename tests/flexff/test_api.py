@@ -8,7 +8,7 @@ import pytest
 
 from flexff import api
 from flexff.cli import main
-from flexff.cosim.schema import ConfigError
+from flexff.cosim.config_error import ConfigError
 from tests.helpers import run_readme_snippet
 
 

@@ -55,7 +55,7 @@ def _timing(period: int = 10, steps: int = 100) -> StepTiming:
     fmu_tet = np.column_stack([share, np.full(steps, 10e-6)])
     calls = {"calls": steps // period, "p50": 30.0, "p99": 40.0, "max": 50.0,
              "period_steps": period, "overruns": 1, "handovers": steps // period,
-             "computed_in_step": 0}
+             "computed_in_step": 0, "signalled": 3}
     return StepTiming(1e-3, ("feedforward", "plant"), fmu_tet.sum(axis=1), fmu_tet,
                       np.zeros(steps), Pacing(), 0, 1, (), None,
                       network_calls={"feedforward": calls})
@@ -69,22 +69,23 @@ def test_the_feedforward_step_splits_at_the_hand_overs():
     assert figures["tet_us"]["handover"]["max"] == pytest.approx(20.0)
     assert figures["tet_us"]["no_handover"]["p99"] == pytest.approx(2.0)
     assert figures["p99_over_p50"] == pytest.approx(10.0)  # 10 % of the steps hand over
-    assert (figures["handovers"], figures["waited_for"], figures["computed_in_base_task"]) == (
-        10, 1, 0)
+    assert (figures["handovers"], figures["signalled"], figures["waited_for"],
+            figures["computed_in_base_task"]) == (10, 3, 1, 0)
 
 
 def test_the_realtime_table_lines_up_each_loop():
-    """The bench's text summary of its paced loops: a row per loop and runtime, the idle loop
-    last, columns aligned."""
+    """The bench's text summary of its paced loops: a row per loop and runtime, the loop
+    without feedforward and the idle loop last, columns aligned."""
     timing = _timing()
     table = timing.table(0.1)
     loop = {"tasks": table["tasks"], "overruns": 3, "feedforward_step": feedforward_step(timing)}
     figures = {"reference": "thesis-hardware-eval", "cpu": 1, "tcn": loop,
-               "tcn_onnxruntime": loop, "idle": {"tet_us": table["tet_us"], "overruns": 2}}
+               "tcn_onnxruntime": loop, "no_feedforward": {"tasks": table["tasks"], "overruns": 1},
+               "idle": {"tet_us": table["tet_us"], "overruns": 2}}
     title, head, *rows = realtime_table(figures).splitlines()
     assert title.startswith("paced at 1 kHz on CPU 1 (thesis-hardware-eval)")
     assert len({len(line) for line in (head, *rows)}) == 1  # columns aligned
-    assert [row.split()[0] for row in rows] == ["tcn", "tcn_onnxruntime", "idle"]
+    assert [row.split()[0] for row in rows] == ["tcn", "tcn_onnxruntime", "no", "idle"]
     cells = rows[0].split()
     assert cells[6] == "3"  # the overruns, after TET p50 / p99 / max
-    assert cells[-6:] == ["10", "10", "/", "1", "/", "0"]  # p99/p50, then the counts
+    assert cells[-8:] == ["10", "10", "/", "3", "/", "1", "/", "0"]  # p99/p50, the counts

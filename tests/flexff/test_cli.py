@@ -204,7 +204,7 @@ def test_train_refuses_a_folder_that_is_not_a_dataset(tmp_path):
 
 
 def test_cli_model_names_are_the_library_s():
-    from flexff.cli import MODELS, PRESETS
+    from flexff.cli.shared import MODELS, PRESETS
     from flexff.learning.models import check_kind
     from flexff.learning.presets import PRESETS as LIBRARY_PRESETS
 

@@ -6,7 +6,7 @@ import pytest
 
 import flexff.cli
 from flexff.cli import main
-from flexff.cosim.schema import ConfigError
+from flexff.cosim.config_error import ConfigError
 from flexff.fmu.errors import InputError, MissingPackage, RunError
 from flexff.fmu.importer import FmuError
 from flexff.learning.collect import CollectionError

@@ -36,8 +36,9 @@ from tests.helpers import REPOSITORY
 
 WARNINGS = ("-Wall", "-Wextra", "-pedantic", "-Werror")
 GENERATED = ("-Wno-unused-parameter",)  # CasADi's calling convention, see above
-FMU_C = REPOSITORY / "fmu" / "c"
-ENGINE_C = REPOSITORY / "cosim" / "c"  # the engine, the floor and the proxy (cosim.isolation)
+FMU_C = REPOSITORY / "flexff" / "fmu" / "c"
+# the engine, the floor and the proxy (cosim.isolation)
+ENGINE_C = REPOSITORY / "flexff" / "cosim" / "c"
 
 
 def compile_warnings(source: Path, include_dirs: list[Path], extra: tuple[str, ...] = ()) -> str:

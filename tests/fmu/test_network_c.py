@@ -42,7 +42,7 @@ TINY = {"lstm": {"hidden": 12, "layers": 2},
 # the graph of each kind that computes its own features from the reference, for one kind:
 # the features' operators (Atan, Sqrt, Where, ...) besides the network's
 GRAPHS = [*TINY, "tcn-reference"]
-KERNELS = REPOSITORY / "fmu" / "c"
+KERNELS = REPOSITORY / "flexff" / "fmu" / "c"
 
 
 @pytest.fixture(scope="module")

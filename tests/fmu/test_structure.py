@@ -18,8 +18,8 @@ import pytest
 
 from flexff.cli import main
 from flexff.cosim.config import load_config, parse_config, with_strict
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.run import run_config, simulate_config
-from flexff.cosim.schema import ConfigError
 from flexff.cosim.ssp import export_ssp
 from flexff.fmu.description_faults import DescriptionWarning
 from flexff.fmu.importer import FmuError, read_fmu

@@ -6,6 +6,8 @@ exactly."""
 
 import ctypes
 import os
+import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -104,8 +106,9 @@ def _settle(s: LoggedSlave) -> None:
 
 
 def _counts(s: LoggedSlave) -> list[int]:
-    """The task's calls handed over, results not ready when due, results the step computed."""
-    counts = (ctypes.c_long * 3)()
+    """The task's calls handed over, results not ready when due, results the step computed,
+    hand-overs that signalled the worker."""
+    counts = (ctypes.c_long * 4)()
     assert s.slave.dll.flexff_network_counts(ctypes.c_void_p(s.slave.component), counts) == 0
     return list(counts)
 
@@ -176,9 +179,43 @@ def test_the_step_never_computes_a_result_that_was_ready_in_time(task_fmu):
             s.set(u1=INPUTS[k, 0], u2=INPUTS[k, 1])
             s.get("y1", "y2")
             s.slave.doStep(k * H, H)
-        assert _counts(s) == [len(range(0, STEPS, PERIOD)), 0, 0]
+        assert _counts(s)[:3] == [len(range(0, STEPS, PERIOD)), 0, 0]
     finally:
         s.free()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the clock release is Linux's")
+def test_calls_at_a_steady_rate_are_handed_over_without_waking_the_task(task_fmu):
+    """A paced loop's call points come at a steady rate: from the fourth call on (two
+    intervals seen alike), the clock releases the worker at the next call's time, and the
+    step's hand-over signals nothing; a call point before its release still gets its result
+    (the step waits for the job, signalling it), and so does one far later (the release came
+    first: the worker waits for the signal). Outputs as ever, bit for bit."""
+    interval = 0.02  # s between call points: Python's sleep is regular enough at this scale
+    calls = 10
+    s = LoggedSlave(task_fmu)
+    outputs = []
+    try:
+        s.initialize()
+        for k in range(calls * PERIOD):
+            if k % PERIOD == 0:
+                time.sleep(interval)
+            s.set(u1=INPUTS[k, 0], u2=INPUTS[k, 1])
+            outputs.append(s.get("y1", "y2"))
+            s.slave.doStep(k * H, H)
+        handovers, waited, in_step, signalled = _counts(s)
+        assert (handovers, waited, in_step) == (calls, 0, 0)
+        assert signalled <= 3 + 2  # the first three, and at most two a busy machine delayed
+        for k in range(calls * PERIOD, (calls + 2) * PERIOD):  # at once, then late: still right
+            if k == (calls + 1) * PERIOD:
+                time.sleep(3 * interval)
+            s.set(u1=INPUTS[k, 0], u2=INPUTS[k, 1])
+            outputs.append(s.get("y1", "y2"))
+            s.slave.doStep(k * H, H)
+    finally:
+        s.free()
+    steps = (calls + 2) * PERIOD
+    assert np.array_equal(np.array(outputs), task_outputs(INPUTS[:steps]))
 
 
 def test_a_network_input_that_is_not_finite_is_named_when_its_result_is_due(task_fmu):

@@ -18,8 +18,8 @@ from tests.fuzz.harness import check, fast, fuzz_seconds, run_for, slow
 from tests.fuzz.mutations import garbage, mutated_bytes, odd_values
 from tests.helpers import REPOSITORY
 
-FILES = sorted([*(REPOSITORY / "cosim" / "examples").glob("*.toml"),
-                *(REPOSITORY / "machines" / "examples").glob("*.toml")])
+FILES = sorted([*(REPOSITORY / "flexff" / "cosim" / "examples").glob("*.toml"),
+                *(REPOSITORY / "flexff" / "machines" / "examples").glob("*.toml")])
 EXAMPLES = [(read_tables(path), path.read_text(), path.parent) for path in FILES]
 
 

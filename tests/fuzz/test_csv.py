@@ -21,8 +21,8 @@ from tests.fuzz.harness import check, fast, fuzz_seconds, run_for, slow
 from tests.fuzz.mutations import ODD_TEXTS, garbage, mutated_bytes
 from tests.helpers import REPOSITORY
 
-EXAMPLES = [REPOSITORY / "cosim" / "examples" / "third-party-fmus.csv",
-            REPOSITORY / "machines" / "examples" / "drive-reference.csv"]
+EXAMPLES = [REPOSITORY / "flexff" / "cosim" / "examples" / "third-party-fmus.csv",
+            REPOSITORY / "flexff" / "machines" / "examples" / "drive-reference.csv"]
 REFERENCE = b"time,x_ref,y_ref\n" + b"".join(
     f"{k * 0.01:.2f},{0.001 * k:.4f},{-0.0005 * k:.4f}\n".encode() for k in range(40))
 VALID = [*(p.read_bytes()[:4000] for p in EXAMPLES), REFERENCE]  # a head: small examples

@@ -350,9 +350,9 @@ def test_hardware_files_keep_every_tenth_sample(tmp_path):
 def test_cli_prints_a_summary_and_the_status(monkeypatch, tmp_path, capsys):
     from flexff.cli import main
 
-    def fake(set_name, out, workers, scheduler, config, draws):
-        assert (set_name, workers, scheduler, config, draws) == \
-            ("hardware", 3, "tcp://h:8786", None, 2)
+    def fake(set_name, out, workers, scheduler, config, draws, progress):
+        assert (set_name, workers, scheduler, config, draws, progress) == \
+            ("hardware", 3, "tcp://h:8786", None, 2, True)
         return CollectionReport(Path(out), set_name, (Outcome("circle-01", 1.0, 7.25),),
                                 ("circle-00",), (Outcome("circle-02", error="boom"),), 4.0)
 

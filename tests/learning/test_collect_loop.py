@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from flexff.cosim.config import parse_config
-from flexff.cosim.schema import ConfigError
+from flexff.cosim.config_error import ConfigError
 from flexff.fmu.build import build_fmu
 from flexff.fmu.cache import file_sha256
 from flexff.learning.collect import PROGRESS, DataFolderError, collect, run_collection
@@ -217,7 +217,7 @@ def test_cli_passes_the_configuration(monkeypatch, tmp_path, capsys):
 
     seen = {}
 
-    def fake(set_name, out, workers, scheduler, config, draws):
+    def fake(set_name, out, workers, scheduler, config, draws, progress):
         seen["config"] = config
         return CollectionReport(Path(out), set_name, (), (), (), 0.0)
 
@@ -235,7 +235,7 @@ def test_cli_evaluate_passes_the_configuration(monkeypatch, tmp_path, capsys):
 
     seen = {}
 
-    def fake(env, out, preset, models, data, epochs, loop, scheduler, currents=(),
+    def fake(env, out, preset, models, data, epochs, say, loop, progress, scheduler, currents=(),
              device="auto", ilc_labels=(), force_input=(), ilc_iterations=None,
              ilc_cutoff_hz=None, ilc_gain=None):
         seen.update(env=env, loop=loop, scheduler=scheduler, device=device,
@@ -379,7 +379,7 @@ def test_the_loops_edits_are_checked_as_a_file_is():
 def test_cli_evaluate_refuses_manipulator_options_for_a_machine(tmp_path, capsys, option):
     from flexff.cli import main
 
-    drive = Path(__file__).parents[2] / "machines" / "examples" / "drive.toml"
+    drive = Path(__file__).parents[2] / "flexff" / "machines" / "examples" / "drive.toml"
     assert main(["evaluate", "--config", str(drive), "-o", str(tmp_path / "eval"),
                  *option]) == 2
     assert "--currents, --ilc-labels and --force-input are for the manipulator's environments: " \

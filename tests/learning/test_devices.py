@@ -161,7 +161,7 @@ def test_a_checkpoint_of_replayed_steps_resumes_anywhere(data, tmp_path, monkeyp
 
 
 def test_the_command_lines_devices_are_the_librarys():
-    from flexff.cli import DEVICES as OFFERED
+    from flexff.cli.shared import DEVICES as OFFERED
     from flexff.learning.devices import DEVICES
 
     assert OFFERED == DEVICES

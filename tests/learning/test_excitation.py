@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from flexff.cosim.config import load_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import parse_machine
 from flexff.cosim.motion_shapes import PiecewiseJerk
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import source_signals
-from flexff.cosim.schema import ConfigError, RunConfig, SourceConfig
+from flexff.cosim.schema import RunConfig, SourceConfig
 from flexff.learning.excitation import CLASSES, EVERY_CLASS, excitation_set, write_table
 from flexff.learning.excitation_plot import plot_excitation
 from flexff.learning.machine_loop import loop_machine, on_references, record_signals
@@ -229,6 +230,6 @@ def test_a_move_ends_at_its_end_where_duration_rounds_past_its_segments(monkeypa
 
 
 def test_the_cli_s_classes_are_the_module_s():
-    from flexff import cli
+    from flexff.cli import shared
 
-    assert (cli.EXCITATION, cli.EVERY_EXCITATION) == (CLASSES, EVERY_CLASS)
+    assert (shared.EXCITATION, shared.EVERY_EXCITATION) == (CLASSES, EVERY_CLASS)

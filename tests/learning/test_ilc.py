@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from flexff import cli
+from flexff.cli import shared
 from flexff.cosim.config import parse_config
 from flexff.cosim.csv_text import read_time_table
 from flexff.cosim.metrics import tracking_metrics
@@ -246,5 +247,5 @@ def test_the_cli_runs_and_reports_each_trial(tmp_path, capsys):
 
 
 def test_the_cli_defaults_are_the_module_defaults():
-    assert (cli.ITERATIONS, cli.CUTOFF_HZ, cli.GAIN) == (ilc_module.ITERATIONS, CUTOFF_HZ,
-                                                         ilc_module.GAIN)
+    assert (shared.ITERATIONS, shared.CUTOFF_HZ, shared.GAIN) == (
+        ilc_module.ITERATIONS, CUTOFF_HZ, ilc_module.GAIN)

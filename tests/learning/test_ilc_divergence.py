@@ -13,14 +13,14 @@ import pytest
 
 from flexff import cli
 from flexff.cosim.config import load_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import IlcSettings, parse_machine
 from flexff.cosim.master import NonFinite
-from flexff.cosim.schema import ConfigError
 from flexff.learning import ilc_loops
 from flexff.learning.ilc import DIVERGED, RESULT, ilc
 from flexff.learning.linear_model import IdentificationWarning, identify_linear
 
-EXAMPLE = Path(__file__).parents[2] / "machines" / "examples" / "drive.toml"
+EXAMPLE = Path(__file__).parents[2] / "flexff" / "machines" / "examples" / "drive.toml"
 
 
 def drive_loop(**ilc_settings):

@@ -5,7 +5,6 @@ refusals naming the term, and the same model in NumPy, CasADi and JSON."""
 import numpy as np
 import pytest
 
-from flexff.controllers.linear_prior import term_names
 from flexff.cosim.machine import parse_machine
 from flexff.fmu.errors import InputError
 from flexff.learning.linear_model import (
@@ -17,6 +16,7 @@ from flexff.learning.linear_model import (
     regressor,
     write_linear_model,
 )
+from flexff.learning.linear_prior import term_names
 from flexff.learning.machine_features import MachineFeatures, motion, named_motion
 
 PITCH = 0.016  # the drive's cogging period [m]

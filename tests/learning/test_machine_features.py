@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from flexff.controllers.features import evaluate_samples
-from flexff.controllers.machine_features import feature_function, feature_names
 from flexff.cosim.machine import parse_machine
 from flexff.fmu.errors import InputError
+from flexff.learning.feature_spec import feature_function, feature_names
 from flexff.learning.machine_features import MachineFeatures, data_cutoff, prepare
 
 RATE = 1000.0
@@ -103,8 +103,8 @@ def test_the_direction_widths_are_the_identified_friction_widths():
     widths for a prior without Coulomb friction."""
     from dataclasses import replace
 
-    from flexff.controllers.linear_prior import AxisFit, LinearModel
-    from flexff.controllers.machine_features import DIRECTION_WIDTHS
+    from flexff.learning.feature_spec import DIRECTION_WIDTHS
+    from flexff.learning.linear_prior import AxisFit, LinearModel
     from flexff.learning.machine_features import friction_widths
 
     two = machine(("x", "y"))  # velocity limits 0.5 (default prior: Coulomb friction)

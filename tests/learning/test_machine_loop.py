@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from flexff.cosim.config import load_config, parse_config
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.run import simulate_config
-from flexff.cosim.schema import ConfigError
 from flexff.learning.machine_loop import loop_machine, on_references, record_signals
 
-EXAMPLES = Path(__file__).parents[2] / "cosim" / "examples"
+EXAMPLES = Path(__file__).parents[2] / "flexff" / "cosim" / "examples"
 LOOP = """
 [run]
 step = 0.01

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from flexff.cosim.config import load_config
-from flexff.cosim.schema import ConfigError
+from flexff.cosim.config_error import ConfigError
 from flexff.learning.ilc_loops import MachineLoop, identified_on_trial
 from flexff.learning.machine_loop import with_feedforward, with_start_values
 
-EXAMPLE = Path(__file__).parents[2] / "machines" / "examples" / "drive.toml"
+EXAMPLE = Path(__file__).parents[2] / "flexff" / "machines" / "examples" / "drive.toml"
 
 
 def drive_loop(**machine_changes):

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from flexff.controllers.features import evaluate_samples
-from flexff.controllers.machine_features import feature_function
 from flexff.controllers.machine_feedforward import ahead, learned_machine_feedforward_system
 from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import parse_machine
@@ -16,6 +15,7 @@ from flexff.fmu.errors import InputError
 from flexff.fmu.validation import validate_fmu
 from flexff.learning.dataset_files import Trajectory as MachineTrajectory
 from flexff.learning.export import export, run_steps, session
+from flexff.learning.feature_spec import feature_function
 from flexff.learning.machine_features import MachineFeatures
 from flexff.learning.machine_train import fit_machine
 from flexff.learning.presets import make_config

@@ -15,7 +15,7 @@ from flexff.cosim.machine import parse_machine
 from flexff.learning.excitation import excitation_set, write_table
 from flexff.learning.machine_evaluate import evaluate_machine
 
-EXAMPLE = Path(__file__).parents[2] / "machines" / "examples" / "drive.toml"
+EXAMPLE = Path(__file__).parents[2] / "flexff" / "machines" / "examples" / "drive.toml"
 AXES = ("x", "y", "z")
 
 

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 import torch
 
-from flexff.controllers.linear_prior import AxisFit, LinearModel
 from flexff.controllers.machine_feedforward import learned_machine_feedforward_system
 from flexff.cosim.machine import parse_machine
 from flexff.fmu.build import build_fmu
 from flexff.learning.dataset_files import Trajectory
 from flexff.learning.deploy import SIModel
 from flexff.learning.export import export
+from flexff.learning.linear_prior import AxisFit, LinearModel
 from flexff.learning.machine_features import MachineFeatures, prepare
 from flexff.learning.machine_train import features_from_dict, fit_machine
 from flexff.learning.presets import make_config

@@ -20,7 +20,7 @@ from flexff.learning.pid_tune import (
 from flexff.machines.drive import DRIVE
 from tests.helpers import REPOSITORY
 
-EXAMPLES = REPOSITORY / "machines" / "examples"
+EXAMPLES = REPOSITORY / "flexff" / "machines" / "examples"
 
 
 def test_the_drive_is_measured_and_its_tuned_loop_keeps_the_margin():
@@ -33,7 +33,7 @@ def test_the_drive_is_measured_and_its_tuned_loop_keeps_the_margin():
     # the margin asked for, around the identified model, with the block's own design
     design = tuning.block
     assert design is not None and design.name == "pid"
-    from flexff.controllers.pid_options import axes_from_options
+    from flexff.blocks.pid_options import axes_from_options
 
     pid = axes_from_options(design.options, loop.step, "series", "pid")["x"]
     margins = margins_of(pid, axis.mass, axis.damping, axis.crossover_hz, axis.delay_s,

@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
+from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import machine_table, parse_machine
-from flexff.cosim.schema import ConfigError
 from flexff.fmu.errors import InputError
 from flexff.learning.features import lowpass
 from flexff.learning.linear_model import write_linear_model

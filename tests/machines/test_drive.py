@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from flexff.controllers.blocks_pid import pid_system
-from flexff.controllers.pid_design import AxisPid, LoopShape
+from flexff.blocks.pid import pid_system
+from flexff.blocks.pid_design import AxisPid, LoopShape
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
 from flexff.machines.drive import DRIVE, drive_system

@@ -14,7 +14,7 @@ from fmpy import simulate_fmu
 from scipy.linalg import expm
 
 from flexff import api
-from flexff.controllers.pid_options import pid_gains_from_options
+from flexff.blocks.pid_options import pid_gains_from_options
 from flexff.fmu.build import build_fmu
 from flexff.machines.drive import DRIVE, drive_system, effort_of
 
@@ -82,7 +82,7 @@ def test_coulomb_friction_is_asymmetric_and_the_force_saturates(fmus, force, spe
 
 ROUGH = {"stribeck": 1.0, "stribeck_velocity": 0.01, "friction_ripple": 0.8,
          "friction_period": 0.037, "force_ripple": 0.05, "ripple_pitch": 0.023, "spring": 40.0,
-         "spring_cubic": 2e4}  # machines/examples/drive-rough.toml's, but the current lag
+         "spring_cubic": 2e4}  # flexff/machines/examples/drive-rough.toml's, but the current lag
 
 
 def test_the_rough_effects_are_the_inverse_dynamics_they_name(fmus):

@@ -1,4 +1,4 @@
-"""The rough drive example (machines/examples/drive-rough.toml): the drive with effects its
+"""The rough drive example (flexff/machines/examples/drive-rough.toml): the drive with effects its
 description's default prior does not hold, so that its identified model leaves what a learned
 model may add; the drive example's prior holds its plant whole."""
 
@@ -10,7 +10,7 @@ from flexff.cosim.run import load_run_config
 from flexff.learning.machine_collect import collect_machine
 from flexff.learning.machine_identify import identify_dataset
 
-EXAMPLES = Path(__file__).parents[2] / "machines" / "examples"
+EXAMPLES = Path(__file__).parents[2] / "flexff" / "machines" / "examples"
 
 
 def _identified_error(name: str, folder: Path) -> float:

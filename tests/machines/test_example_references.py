@@ -11,7 +11,7 @@ from flexff.cosim.config import load_config
 from flexff.learning.excitation import excitation_set
 from flexff.learning.machine_loop import loop_machine
 
-EXAMPLES = Path(__file__).parents[2] / "machines" / "examples"
+EXAMPLES = Path(__file__).parents[2] / "flexff" / "machines" / "examples"
 
 
 @pytest.mark.parametrize("name", ["drive", "stage"])

@@ -1,6 +1,6 @@
 """The gantry stage (machines.stage) as an FMU: validated, its coupled physics checked against an
 energy computed here, run the same by FMPy and libcosim, and its example loop
-(machines/examples/stage.toml: built-in stage and PID) run by `flexff run`."""
+(flexff/machines/examples/stage.toml: built-in stage and PID) run by `flexff run`."""
 
 import json
 import subprocess
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from flexff import api
-from flexff.controllers.block_options import OptionError
+from flexff.blocks.options import OptionError
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
 from flexff.machines.stage import stage_from_options, true_parameters
@@ -19,7 +19,7 @@ from tests.runners import run_fmu, run_fmu_libcosim, simulate_with_fmpy
 
 STEP = 1e-3
 ROOT = Path(__file__).parents[2]
-EXAMPLE = ROOT / "machines" / "examples" / "stage.toml"
+EXAMPLE = ROOT / "flexff" / "machines" / "examples" / "stage.toml"
 
 
 @pytest.fixture(scope="module")

@@ -320,9 +320,10 @@ FLEXFF_EXPORT int flexff_network_task(fmi2Component comp, long *period,
  * real-time report and its tests: counts[0] the calls handed over to it (one per call point),
  * counts[1] the results not ready when due (the step waited for the network: an overrun),
  * counts[2] those the step computed itself (under scheduled execution, when the network
- * clock's partition had not run). 0, or -1 as flexff_network_times and for a network that
- * runs in the step (no task). */
-FLEXFF_EXPORT int flexff_network_counts(fmi2Component comp, long counts[3]) {
+ * clock's partition had not run), counts[3] the calls whose hand-over woke the task with a
+ * system call (not released by the clock). 0, or -1 as flexff_network_times and for a
+ * network that runs in the step (no task). */
+FLEXFF_EXPORT int flexff_network_counts(fmi2Component comp, long counts[4]) {
     Instance *c = (Instance *)comp;
     if (registry_find(comp) < 0 || c->magic != INSTANCE_MAGIC || c->net == NULL ||
         counts == NULL)
@@ -505,6 +506,7 @@ static int data_problem(const Instance *c, const Data *d, char *why, size_t size
     if (!initialized && d->net_step != 0)
         PROBLEM("network step counter %lld before initialization", d->net_step);
     if (d->net_pending != 0 && d->net_pending != 1) PROBLEM("network flag %d", d->net_pending);
+    if (d->net_slot != 0 && d->net_slot != 1) PROBLEM("network state slot %d", d->net_slot);
     if (d->net_pending && (first_nonfinite(d->net_new, N_R) >= 0 ||
                            first_nonfinite(d->net_u, N_U) >= 0))
         PROBLEM("network result at this point");

@@ -136,14 +136,21 @@ typedef struct {
     fmi2Real net_new[N_R];        /* its result at this call point */
     fmi2Real net_last[N_R];       /* results of the last two committed calls */
     fmi2Real net_before[N_R];
-    float net_state[DIM(NET_STATE_SIZE)];     /* recurrent state after the last committed call */
-    float net_state_new[DIM(NET_STATE_SIZE)]; /* ... and after the call at this point */
+    float net_states[2][DIM(NET_STATE_SIZE)]; /* recurrent states: after the last committed
+                                   * call (NET_STATE) and after the call at this point, or
+                                   * with NET_TASK the job's, written by the job itself
+                                   * (NET_STATE_NEXT); a commit swaps them, copying nothing */
+    int net_slot;                 /* which of net_states is NET_STATE */
     int net_job;                  /* NET_TASK: a call started at the last call point, its result
                                    * due at this one (in net_job_r once the task has settled) */
     fmi2Real net_job_r[N_R];
-    float net_job_state[DIM(NET_STATE_SIZE)];
 #endif
 } Data;
+
+#if HAS_NETWORK
+#define NET_STATE(c) ((c)->d.net_states[(c)->d.net_slot])
+#define NET_STATE_NEXT(c) ((c)->d.net_states[1 - (c)->d.net_slot])
+#endif
 
 typedef struct {
     uint32_t magic;
@@ -280,12 +287,11 @@ typedef struct {
  * the evaluation failed. */
 int eval_network_input_with(CasadiWork *work, int mem, const fmi2Real *x, const fmi2Real *u,
                             const fmi2Real *p, fmi2Real *features);
-void task_post(Instance *c, const fmi2Real *x, const fmi2Real *u, const fmi2Real *p,
-               const float *state);
+void task_post(Instance *c, const fmi2Real *x, const fmi2Real *u, const fmi2Real *p);
 fmi2Status task_settle(Instance *c, int due);
 long task_overruns(const Instance *c);
 const long *task_overruns_counter(const Instance *c);
-void task_counts(const Instance *c, long counts[3]);
+void task_counts(const Instance *c, long counts[4]);
 #endif
 #endif
 

@@ -250,8 +250,8 @@ static int net_prime(Instance *c, const double *features, float *state, char *er
 /* The state of the first call: zero, or primed on its inputs (c->features). */
 static fmi2Status net_start(Instance *c) {
     char error[1024];
-    memset(c->d.net_state, 0, sizeof c->d.net_state);
-    if (net_prime(c, c->features, c->d.net_state, error, sizeof error) != 0)
+    memset(NET_STATE(c), 0, sizeof NET_STATE(c));
+    if (net_prime(c, c->features, NET_STATE(c), error, sizeof error) != 0)
         return fail(c, "%s", error);
     return fmi2OK;
 }
@@ -348,7 +348,7 @@ static fmi2Status net_call(Instance *c) {
             return fail(c, "Evaluating the network's inputs failed.");
         if (check_network_inputs(c, c->features, c->d.u, c->d.time) != fmi2OK) return fmi2Error;
         if (c->d.net_step == 0 && net_start(c) != fmi2OK) return fmi2Error;
-        if (net_run(c->net, c->features, 1, c->d.net_state, c->d.net_new, c->d.net_state_new,
+        if (net_run(c->net, c->features, 1, NET_STATE(c), c->d.net_new, NET_STATE_NEXT(c),
                     error, sizeof error) != 0)
             return fail(c, "%s", error);
     }
@@ -380,7 +380,7 @@ static fmi2Status task_prepare(Instance *c, long phase) {
             memcpy(c->d.net_before, c->d.net_step == NET_PERIOD ? c->d.net_job_r : c->d.net_last,
                    sizeof c->d.net_before);
             memcpy(c->d.net_last, c->d.net_job_r, sizeof c->d.net_last);
-            memcpy(c->d.net_state, c->d.net_job_state, sizeof c->d.net_state);
+            c->d.net_slot = 1 - c->d.net_slot; /* the job's state, committed */
             c->d.net_job = 0;
         }
         if (c->d.net_step == 0 && !features_current(c)) {
@@ -435,7 +435,7 @@ fmi2Status net_prepare(Instance *c) {
 void net_commit(Instance *c) {
 #if NET_TASK
     if (c->d.net_step % NET_PERIOD == 0) /* the point's x, u and p, kept by task_prepare */
-        task_post(c, c->features_x, c->features_u, c->features_p, c->d.net_state);
+        task_post(c, c->features_x, c->features_u, c->features_p);
     c->d.net_step++;
     return;
 #endif
@@ -443,7 +443,7 @@ void net_commit(Instance *c) {
         memcpy(c->d.net_before, c->d.net_step == 0 ? c->d.net_new : c->d.net_last,
                sizeof c->d.net_before);
         memcpy(c->d.net_last, c->d.net_new, sizeof c->d.net_last);
-        memcpy(c->d.net_state, c->d.net_state_new, sizeof c->d.net_state);
+        c->d.net_slot = 1 - c->d.net_slot;
         c->d.net_pending = 0;
     }
     c->d.net_step++;
@@ -467,6 +467,6 @@ void net_restart(Instance *c) {
 #endif
     c->d.net_step = 0;
     c->d.net_pending = 0;
-    memset(c->d.net_state, 0, sizeof c->d.net_state);
+    memset(NET_STATE(c), 0, sizeof NET_STATE(c));
 }
 #endif

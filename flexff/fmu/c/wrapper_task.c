@@ -23,18 +23,25 @@
  * time, as Simulink Real-Time's multitasking does on one core. Measured on the 2-core VM
  * (LSTM, 30 s paced at 1 kHz, 2026-11-26): the 1 kHz task's TET p99 11 us on one core, 25 to
  * 27 us with the worker on the other core or unpinned, where each hand-over wakes a second
- * CPU; on 2026-11-28, 29 to 37 us on one core (TCN and LSTM, both runtimes): a hand-over step
- * still costs the feedforward about 10 us more than the others (p50 12 against 1.7 us).
- * The worker follows a new caller's scheduling and CPUs when it posts its first job, then
- * takes any change itself as each job starts: read and set by the calling thread at every
- * hand-over, those system calls cost the 1 kHz task about 3 us at each call point (of 13 us the
- * hand-over took it; measured on the 2-core VM, TCN paced at 1 kHz on one core). The counts (task_counts) say what the task did: calls handed over,
- * results not ready when due, and results computed in the step (by the calling thread when due,
- * or by the worker before the step went on, the two pinned to one CPU).
+ * CPU. The worker follows a new caller's scheduling and CPUs when it posts its first job,
+ * then takes any change itself as each job starts: read and set by the calling thread at every
+ * hand-over, those system calls cost the 1 kHz task about 3 us at each call point.
  *
- * One mutex guards the hand-over; the worker touches only the job buffers below and the network
- * (whose call times it records), never the instance's Data, which the calling thread alone
- * reads and writes.
+ * A hand-over costs the step no system call and no copy of the recurrent state where the
+ * calls come at a steady rate (a paced loop): the worker is released by the clock at the
+ * time the next job is due, as a real-time kernel releases a slower task (await_job), and
+ * reads and writes the state in the Data. On the 2-core VM (TCN, C, paced at 1 kHz on one
+ * core, 2026-11-28) the hand-over step cost the feedforward 7 us more than the others with a
+ * signal and three copies of the 7.7 KB state, 2 us more without.
+ *
+ * The counts (task_counts) say what the task did: calls handed over, results not ready when
+ * due, results computed in the step (by the calling thread when due, or by the worker before
+ * the step went on, the two pinned to one CPU), and hand-overs that woke the worker with a
+ * signal.
+ *
+ * One mutex guards the hand-over; the worker touches only the job buffers below, the network
+ * (whose call times it records) and, of the instance's Data, the committed recurrent state
+ * (read) and the job's (written), which the calling thread leaves alone while a job is out.
  *
  * On Windows (mingw-w64's winpthreads) the worker is an ordinary thread of the caller's
  * priority, on any CPU: the priority and CPUs above are Linux's.
@@ -69,19 +76,29 @@ struct Task {
     int policy, priority; /* the caller's scheduling the worker's was last set from */
     cpu_set_t cpus;       /* the caller's CPUs the worker's were last set from */
     int started, started_cpu; /* the posted job started, on this CPU */
+    int waiting;          /* the worker waits for a signal (not for its release time) */
+    struct timespec posted_at[2]; /* when the last two jobs were posted */
+    struct timespec release; /* when the worker looks for its next job, or tv_sec < 0: never
+                              * (it waits for a signal) */
 #endif
     long overruns;       /* results not ready when due (calling thread only) */
     long handovers;      /* jobs posted (calling thread only) */
     long in_step;        /* jobs computed in the step that needed or posted them: run by the
                           * calling thread when due, or by the worker before the step went on,
                           * both pinned to one CPU (calling thread only) */
+    long signalled;      /* posts that woke the worker with a system call (it had no release
+                          * time, or it came before the post; calling thread only) */
     fmi2Real x[DIM(N_X)], u[DIM(N_U)], p[DIM(N_P)], time; /* the job: its call point's */
-    float state_in[DIM(NET_STATE_SIZE)];
+    float *state_in;       /* the Data's committed state, read by the job ... */
     fmi2Real in[NET_N_IN]; /* the network's inputs, evaluated from x, u and p by the job */
     CasadiWork work;
     int mem;               /* the instance's CasADi memory of network_input */
     fmi2Real r[N_R];
-    float state_out[DIM(NET_STATE_SIZE)];
+    float *state_out;      /* ... and the next (NET_STATE_NEXT), written by it: the calling thread
+                            * touches neither while a job is out (every call that reads or
+                            * replaces the Data whole settles the job first), so that the
+                            * hand-over copies no state (7.7 KB for the TCN: each copy cost the
+                            * 1 kHz task 0.5 to 1 us at a call point, its cache cold) */
     int failed;
     char error[512];
 };
@@ -141,16 +158,68 @@ static void follow_caller(Task *t) {
 #endif
 }
 
+#if defined(__linux__)
+static double seconds_between(const struct timespec *a, const struct timespec *b) {
+    return (double)(b->tv_sec - a->tv_sec) + 1e-9 * (double)(b->tv_nsec - a->tv_nsec);
+}
+
+/* The time the job after the one just started is due to be posted, plus a sixteenth of the
+ * interval (after the poster's step, where its loop is paced), when the last two jobs were
+ * posted RELEASE_MIN_INTERVAL_S or more apart, and that interval is its predecessor's within
+ * RELEASE_TOLERANCE; otherwise never (tv_sec -1). */
+#define RELEASE_MIN_INTERVAL_S 200e-6
+#define RELEASE_TOLERANCE 0.125
+static void plan_release(Task *t, double *last_interval) {
+    const double interval = seconds_between(&t->posted_at[0], &t->posted_at[1]);
+    const int regular = interval >= RELEASE_MIN_INTERVAL_S &&
+                        fabs(interval - *last_interval) <= RELEASE_TOLERANCE * interval;
+    *last_interval = interval;
+    t->release.tv_sec = -1;
+    if (!regular) return;
+    const long long ns = (long long)t->posted_at[1].tv_nsec +
+                         (long long)(1e9 * interval * (1.0 + 1.0 / 16.0));
+    t->release.tv_sec = t->posted_at[1].tv_sec + (time_t)(ns / 1000000000LL);
+    t->release.tv_nsec = (long)(ns % 1000000000LL);
+}
+#endif
+
+/* Wait, with the lock held, until a job is posted or quit is set. The poster signals only a
+ * worker that waits for a signal; a worker with a release time looks at that time instead,
+ * so that in a paced loop the poster's step hands a job over without a system call (waking
+ * the worker cost the 1 kHz task 3 us at each call point on the 2-core VM), as a real-time
+ * kernel releases a slower task by the clock, not from the base task. A release that comes
+ * too early (the poster late) falls back to waiting for the signal. */
+static void await_job(Task *t) {
+    while (!t->posted && !t->quit) {
+#if defined(__linux__)
+        if (t->release.tv_sec >= 0) {
+            pthread_cond_timedwait(&t->wake, &t->lock, &t->release);
+            t->release.tv_sec = -1; /* once: then the signal */
+            continue;
+        }
+        t->waiting = 1;
+#endif
+        pthread_cond_wait(&t->wake, &t->lock);
+#if defined(__linux__)
+        t->waiting = 0;
+#endif
+    }
+}
+
 static void *work(void *arg) {
     Task *t = (Task *)arg;
+#if defined(__linux__)
+    double last_interval = 0.0;
+#endif
     pthread_mutex_lock(&t->lock);
     for (;;) {
-        while (!t->posted && !t->quit) pthread_cond_wait(&t->wake, &t->lock);
+        await_job(t);
         if (!t->posted) break; /* quit, with nothing left to run */
         follow_caller(t);
 #if defined(__linux__)
         t->started = 1;
         t->started_cpu = sched_getcpu();
+        plan_release(t, &last_interval);
 #endif
         run_posted(t);
     }
@@ -179,9 +248,18 @@ int task_start(Instance *c, char *error, size_t size) {
 #if defined(__linux__)
     t->policy = -1; /* none yet: the first job sets the worker's */
     pthread_getaffinity_np(pthread_self(), sizeof t->cpus, &t->cpus); /* inherited */
+    t->release.tv_sec = -1;
 #endif
     pthread_mutex_init(&t->lock, NULL);
+#if defined(__linux__)
+    pthread_condattr_t monotonic; /* release times are CLOCK_MONOTONIC's, as the posts' */
+    pthread_condattr_init(&monotonic);
+    pthread_condattr_setclock(&monotonic, CLOCK_MONOTONIC);
+    pthread_cond_init(&t->wake, &monotonic);
+    pthread_condattr_destroy(&monotonic);
+#else
     pthread_cond_init(&t->wake, NULL);
+#endif
     pthread_cond_init(&t->done, NULL);
     if (c->scheduled) { /* no worker: the importer runs each job (task_run) */
         c->task = t;
@@ -220,10 +298,9 @@ void task_stop(Instance *c) {
 }
 
 /* Start the call of the current point, on the network's inputs from its x, u and p, from the
- * recurrent state `state` (the worker is idle: every job is settled before the next is
+ * committed recurrent state (the worker is idle: every job is settled before the next is
  * posted). */
-void task_post(Instance *c, const fmi2Real *x, const fmi2Real *u, const fmi2Real *p,
-               const float *state) {
+void task_post(Instance *c, const fmi2Real *x, const fmi2Real *u, const fmi2Real *p) {
     Task *t = c->task;
     pthread_mutex_lock(&t->lock);
 #if defined(__linux__)
@@ -237,17 +314,23 @@ void task_post(Instance *c, const fmi2Real *x, const fmi2Real *u, const fmi2Real
     memcpy(t->u, u, sizeof t->u);
     memcpy(t->p, p, sizeof t->p);
     t->time = c->d.time;
-    memcpy(t->state_in, state, sizeof t->state_in);
+    t->state_in = NET_STATE(c);
+    t->state_out = NET_STATE_NEXT(c);
     t->posted = 1;
     t->finished = 0;
+    int signal = 1;
 #if defined(__linux__)
     t->started = 0;
+    t->posted_at[0] = t->posted_at[1];
+    clock_gettime(CLOCK_MONOTONIC, &t->posted_at[1]);
+    signal = t->waiting; /* else the worker comes at its release time */
 #endif
     pthread_mutex_unlock(&t->lock);
-    pthread_cond_signal(&t->wake); /* after the unlock: a worker woken on another CPU takes
-                                    * the lock at once */
+    if (signal) pthread_cond_signal(&t->wake); /* after the unlock: a worker woken on another
+                                                * CPU takes the lock at once */
     t->busy = 1;
     t->handovers++;
+    t->signalled += signal;
     c->d.net_job = 1;
 #if defined(__linux__)
     if (!c->scheduled) { /* both on one CPU, and the worker already started: it ran in the
@@ -259,7 +342,7 @@ void task_post(Instance *c, const fmi2Real *x, const fmi2Real *u, const fmi2Real
 #endif
 }
 
-/* Bring the job out for the current Data into it (net_job_r, net_job_state), waiting for the
+/* Bring the job out for the current Data into it (net_job_r, NET_STATE_NEXT), waiting for the
  * worker if it is still running; `due`: the result is needed now, so a wait is an overrun. */
 fmi2Status task_settle(Instance *c, int due) {
     Task *t = c->task;
@@ -270,6 +353,7 @@ fmi2Status task_settle(Instance *c, int due) {
         if (due) t->in_step++;
         run_posted(t);
     }
+    if (t->posted) pthread_cond_signal(&t->wake); /* its release time not yet come */
     while (!t->finished) pthread_cond_wait(&t->done, &t->lock);
     pthread_mutex_unlock(&t->lock);
     t->busy = 0;
@@ -278,17 +362,17 @@ fmi2Status task_settle(Instance *c, int due) {
         return fail(c, "%s", t->error);
     }
     memcpy(c->d.net_job_r, t->r, sizeof c->d.net_job_r);
-    memcpy(c->d.net_job_state, t->state_out, sizeof c->d.net_job_state);
     return fmi2OK;
 }
 
 long task_overruns(const Instance *c) { return c->task ? c->task->overruns : 0; }
 
-void task_counts(const Instance *c, long counts[3]) {
+void task_counts(const Instance *c, long counts[4]) {
     const Task *t = c->task;
     counts[0] = t ? t->handovers : 0;
     counts[1] = t ? t->overruns : 0;
     counts[2] = t ? t->in_step : 0;
+    counts[3] = t ? t->signalled : 0;
 }
 
 const long *task_overruns_counter(const Instance *c) {

@@ -1,5 +1,5 @@
-"""The PID block: a discrete PID per axis (controllers.pid_design) in one System, free of any
-machine; built-ins "pid" and "pid-gains" (controllers.pid_options).
+"""The PID block: a discrete PID per axis (blocks.pid_design) in one System, free of any
+machine; built-ins "pid" and "pid-gains" (blocks.pid_options).
 
 Signals per axis `a`: inputs a_ref (reference), a (measured position) [position_unit], a_ff
 (feedforward) [effort_unit]; outputs a_effort = limit(a_fb + a_ff), the commanded effort (the
@@ -23,9 +23,9 @@ from typing import Any
 
 import casadi as ca
 
-from flexff.controllers.block_filters import step_symbolic
-from flexff.controllers.block_options import OptionError
-from flexff.controllers.pid_design import AxisPid
+from flexff.blocks.filters import step_symbolic
+from flexff.blocks.options import OptionError
+from flexff.blocks.pid_design import AxisPid
 from flexff.fmu.system import Parameter, System, Variable
 
 Symbol = Callable[[str], ca.SX]

@@ -1,4 +1,4 @@
-"""The one PID block (controllers.blocks_pid) under its two built-in names: "pid-gains" is
+"""The one PID block (blocks.pid) under its two built-in names: "pid-gains" is
 "pid" in the parallel form, axis tables are the per-axis options by name, and the options the
 forms cannot run are refused naming the key. Evaluated through CasADi (no FMU build)."""
 
@@ -8,9 +8,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from flexff.controllers.block_filters import lowpass
-from flexff.controllers.block_options import OptionError
-from flexff.controllers.pid_options import pid_from_options, pid_gains_from_options
+from flexff.blocks.filters import lowpass
+from flexff.blocks.options import OptionError
+from flexff.blocks.pid_options import pid_from_options, pid_gains_from_options
 from flexff.cosim.builtins import registered
 
 STEP = 1e-3

@@ -1,6 +1,6 @@
 """Discrete filters of the loop blocks: notch and low-pass (first or second order).
 
-The continuous prototype is mapped by controllers.loop_shaping's Tustin with prewarping at its
+The continuous prototype is mapped by blocks.loop_shaping's Tustin with prewarping at its
 centre frequency (exact response there), as that module does for the manipulator's notch; the
 result is a discrete StateSpace of one or two states, stepped symbolically in the block's FMU.
 """
@@ -12,8 +12,8 @@ import math
 import casadi as ca
 import numpy as np
 
-from flexff.controllers.block_options import OptionError
-from flexff.controllers.loop_shaping import StateSpace, from_polynomials, tustin
+from flexff.blocks.loop_shaping import StateSpace, from_polynomials, tustin
+from flexff.blocks.options import OptionError
 
 BUTTERWORTH_ZETA = 1 / math.sqrt(2)
 

@@ -4,7 +4,7 @@ machine: the small blocks that wire a user's loop together.
   sum:  output = sum_k signs[k] * inputs[k]      (options: inputs, output, signs)
   gain: output = gain * input, `gain` tunable    (options: input, output, gain)
 
-They run at the run's step (a discrete system's sample time must equal it); controllers.builtins
+They run at the run's step (a discrete system's sample time must equal it); blocks.builtins
 registers them as the built-ins "sum" and "gain".
 """
 
@@ -15,7 +15,7 @@ from typing import Any
 
 import casadi as ca
 
-from flexff.controllers import block_options as opt
+from flexff.blocks import options as opt
 from flexff.fmu.system import Parameter, System, Variable
 
 
@@ -63,7 +63,7 @@ def gain_system(input: str, output: str, step: float, gain: float = 1.0, unit: s
 
 
 def sum_from_options(options: Mapping[str, Any], step: float) -> System:
-    """The `sum` block from a configuration's options (block_options.SUM_OPTIONS)."""
+    """The `sum` block from a configuration's options (blocks.options.SUM_OPTIONS)."""
     opt.check_keys(options, opt.SUM_OPTIONS, "sum")
     inputs = opt.names(options, "inputs")
     signs = options.get("signs")
@@ -77,7 +77,7 @@ def sum_from_options(options: Mapping[str, Any], step: float) -> System:
 
 
 def gain_from_options(options: Mapping[str, Any], step: float) -> System:
-    """The `gain` block from a configuration's options (block_options.GAIN_OPTIONS)."""
+    """The `gain` block from a configuration's options (blocks.options.GAIN_OPTIONS)."""
     opt.check_keys(options, opt.GAIN_OPTIONS, "gain")
     return gain_system(opt.name(options, "input"), opt.name(options, "output"), step,
                        opt.number(options, "gain", 1.0) or 0.0, opt.unit(options, "unit", ""))

@@ -22,9 +22,9 @@ PID_FORMS = ("series", "parallel")
 PID_ANTI_WINDUP = ("conditional", "back-calculation", "clamp")
 PID_LOWPASS_ORDERS = (1, 2)
 PID_OPTIONS = ("axes", *PID_PER_AXIS_OPTIONS, "form", "anti_windup", "notch_zeta",
-               "lowpass_order", "lowpass_zeta", "effort_unit", "position_unit")  # blocks_pid
-SUM_OPTIONS = ("inputs", "output", "signs", "unit")  # controllers.blocks_signal
-GAIN_OPTIONS = ("input", "output", "gain", "unit")  # controllers.blocks_signal
+               "lowpass_order", "lowpass_zeta", "effort_unit", "position_unit")  # blocks.pid
+SUM_OPTIONS = ("inputs", "output", "signs", "unit")  # blocks.sum_gain
+GAIN_OPTIONS = ("input", "output", "gain", "unit")  # blocks.sum_gain
 
 
 class OptionError(InputError):

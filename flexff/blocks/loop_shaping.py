@@ -1,8 +1,8 @@
 """PID (+ notch) design for one axis by loop shaping, and the margins of the resulting loop.
 
-At the workspace centre the nominal plant splits into two equal mass-spring-damper axes
-P(s) = 1 / (m s^2 + d s + k) from end-effector force to position (M, K and D are multiples of
-the identity by the three-fold symmetry). Each axis gets the usual mechatronic PID
+The axis is a mass-spring-damper P(s) = 1 / (m s^2 + d s + k) from force to position (a
+machine gives its own: the manipulator's at its workspace centre, controllers.axis_plant). It
+gets the usual mechatronic PID
 
     C(s) = kp (1 + s/wd) / (1 + s/wt) (1 + wi/s),   wd = wc/3, wt = 3 wc, wi = wc/10,
 
@@ -24,8 +24,6 @@ from scipy.optimize import brentq
 from scipy.signal import cont2discrete, tf2ss
 
 from flexff.fmu.errors import InputError
-from flexff.plant.analysis import linearization
-from flexff.plant.model import PlantModel
 
 # notch damping ratios (numerator, denominator): -28 dB deep, a few Hz wide at 40 Hz
 NOTCH_ZETA = (0.02, 0.5)
@@ -123,24 +121,6 @@ class PIDDesign:
         }
 
 
-def axis_plant(model: PlantModel | None = None, tolerance: float = 1e-9) -> AxisPlant:
-    """Per-axis mass, damping and stiffness of the (nominal) plant at rest at the centre.
-
-    Raises ValueError if M, K or D are not multiples of the identity there (relative tolerance).
-    """
-    model = model or PlantModel("nominal")
-    p = model.parameter_values()
-    mass = np.array(model.terms([0.0, 0.0], [0.0, 0.0], p)[0])
-    state_matrix = linearization(model, p)[2:4, :4]
-    stiffness, damping = -mass @ state_matrix[:, :2], -mass @ state_matrix[:, 2:4]
-    for name, matrix in (("mass", mass), ("stiffness", stiffness), ("damping", damping)):
-        if not np.allclose(matrix, matrix[0, 0] * np.eye(2), rtol=0,
-                           atol=tolerance * abs(matrix[0, 0])):
-            raise ValueError(f"the {name} matrix at the centre is not a multiple of the "
-                             f"identity, so the axes do not decouple: {matrix.tolist()}")
-    return AxisPlant(float(mass[0, 0]), float(damping[0, 0]), float(stiffness[0, 0]))
-
-
 def series(first: StateSpace, second: StateSpace) -> StateSpace:
     """`first` followed by `second` (same time domain); states of `first` come first."""
     a = np.block([[first.A, np.zeros((first.A.shape[0], second.A.shape[0]))],
@@ -178,10 +158,11 @@ def _notch(wn: float, zeta: tuple[float, float]) -> StateSpace:
     return from_polynomials(np.array([1, 2 * z1 * wn, wn**2]), np.array([1, 2 * z2 * wn, wn**2]))
 
 
-def design_pid(crossover_hz: float = 2.66, step: float = 1e-3, notch_hz: float | None = None,
-               notch_zeta: tuple[float, float] = NOTCH_ZETA,
-               plant: AxisPlant | None = None) -> PIDDesign:
-    """Loop-shaped PID (and notch) for one axis with crossover `crossover_hz`, sampled at `step`."""
+def design_pid(crossover_hz: float, step: float, notch_hz: float | None = None,
+               notch_zeta: tuple[float, float] = NOTCH_ZETA, *,
+               plant: AxisPlant) -> PIDDesign:
+    """Loop-shaped PID (and notch) for the axis `plant` with crossover `crossover_hz`, sampled
+    at `step`."""
     if not (crossover_hz > 0 and step > 0 and math.isfinite(crossover_hz + step)):
         raise InputError(f"crossover ({crossover_hz} Hz) and step ({step} s) must be positive")
     nyquist_hz = 0.5 / step
@@ -189,7 +170,6 @@ def design_pid(crossover_hz: float = 2.66, step: float = 1e-3, notch_hz: float |
         if f is not None and not 0 < f < nyquist_hz:
             raise InputError(f"{what} frequency {f} Hz must lie in (0, {nyquist_hz:g}) Hz, "
                              f"below the Nyquist frequency of the {step} s step")
-    plant = plant or axis_plant()
     wc = 2 * math.pi * crossover_hz
     wd, wt, wi = wc / 3, 3 * wc, wc / 10
     notch = _notch(2 * math.pi * notch_hz, notch_zeta) if notch_hz is not None else None

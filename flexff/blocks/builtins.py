@@ -3,7 +3,7 @@ name and path, imported only when a run builds one."""
 
 from __future__ import annotations
 
-from flexff.controllers.block_options import (
+from flexff.blocks.options import (
     GAIN_OPTIONS,
     PID_ANTI_WINDUP,
     PID_FORMS,
@@ -36,12 +36,12 @@ def _pid_options(form: str) -> tuple[str | Option, ...]:
 
 def register() -> None:
     register_builtin("pid", _pid_options("series"),
-                     "flexff.controllers.pid_options:pid_from_options", PID)
+                     "flexff.blocks.pid_options:pid_from_options", PID)
     register_builtin("pid-gains", _pid_options("parallel"),
-                     "flexff.controllers.pid_options:pid_gains_from_options",
+                     "flexff.blocks.pid_options:pid_gains_from_options",
                      "the PID block of \"pid\" with form = \"parallel\" unless given: "
                      "tunable gains kp_a, ki_a, kd_a, explicit or loop-shaped")
-    register_builtin("sum", SUM_OPTIONS, "flexff.controllers.blocks_signal:sum_from_options",
+    register_builtin("sum", SUM_OPTIONS, "flexff.blocks.sum_gain:sum_from_options",
                      "output = sum of signs[k] * inputs[k]")
-    register_builtin("gain", GAIN_OPTIONS, "flexff.controllers.blocks_signal:gain_from_options",
+    register_builtin("gain", GAIN_OPTIONS, "flexff.blocks.sum_gain:gain_from_options",
                      "output = gain * input (gain tunable)")

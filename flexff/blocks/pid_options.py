@@ -1,14 +1,14 @@
 """The PID block from a run configuration's options: built-ins "pid" (form "series" unless
-given) and "pid-gains" (form "parallel" unless given), one block (controllers.blocks_pid).
+given) and "pid-gains" (form "parallel" unless given), one block (blocks.pid).
 
-`axes` lists the axes' names, with each per-axis option (block_options.PID_PER_AXIS_OPTIONS) a
+`axes` lists the axes' names, with each per-axis option (blocks.options.PID_PER_AXIS_OPTIONS) a
 number for every axis or a table {axis = number}; or it lists one table per axis, {name, unit,
 effort_unit, and any per-axis option}. Per axis: crossover_hz with mass (damping, stiffness:
 default 0) loop-shape the gains, or kp (ki, kd: default 0; derivative_filter_hz) give them;
 notch_hz, lowpass_hz switch the filters on; effort_limit the limit, tracking_gain [1/s] the
 back-calculation's gain (default ki / kp). For the block: form, anti_windup (default: by form),
 notch_zeta = [z1, z2], lowpass_order (1 | 2, default: by form), lowpass_zeta, position_unit
-("m"), effort_unit ("N"); see controllers.pid_design.
+("m"), effort_unit ("N"); see blocks.pid_design.
 """
 
 from __future__ import annotations
@@ -16,10 +16,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any, cast
 
-from flexff.controllers import block_options as opt
-from flexff.controllers.blocks_pid import pid_system
-from flexff.controllers.loop_shaping import NOTCH_ZETA
-from flexff.controllers.pid_design import AntiWindup, AxisPid, Form, Gains, LoopShape
+from flexff.blocks import options as opt
+from flexff.blocks.loop_shaping import NOTCH_ZETA
+from flexff.blocks.pid import pid_system
+from flexff.blocks.pid_design import AntiWindup, AxisPid, Form, Gains, LoopShape
 from flexff.fmu.errors import InputError
 from flexff.fmu.system import System
 

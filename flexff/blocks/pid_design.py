@@ -5,7 +5,7 @@ crossover around the rigid axis 1 / (mass s^2 + damping s + stiffness)). Two dis
   parallel  kp e + I + kd r (I by forward Euler, r the error rate through a first-order filter by
             backward Euler), then the notch and the low-pass; loop-shaped gains are converted to
             this form and scaled so the discrete loop crosses 1 at the crossover;
-  series    loop-shaped gains only: controllers.loop_shaping's design_pid (series form, notch
+  series    loop-shaped gains only: blocks.loop_shaping's design_pid (series form, notch
             included, Tustin at the crossover), then the low-pass, one state space.
 The form sets the defaults: anti-windup conditional integration (series) or back-calculation
 (parallel), a first-order (series) or second-order Butterworth (parallel) low-pass.
@@ -20,9 +20,8 @@ from typing import Literal
 
 import numpy as np
 
-from flexff.controllers.block_filters import lowpass, notch
-from flexff.controllers.block_options import OptionError
-from flexff.controllers.loop_shaping import (
+from flexff.blocks.filters import lowpass, notch
+from flexff.blocks.loop_shaping import (
     NOTCH_ZETA,
     AxisPlant,
     Margins,
@@ -32,6 +31,7 @@ from flexff.controllers.loop_shaping import (
     loop_margins,
     series,
 )
+from flexff.blocks.options import OptionError
 
 Form = Literal["series", "parallel"]
 AntiWindup = Literal["conditional", "back-calculation", "clamp"]

@@ -1,5 +1,5 @@
-"""The PID block in its parallel form (built-in "pid-gains": controllers.blocks_pid), sum and
-gain (blocks_signal) as FMUs: validated, run by FMPy, their discrete responses checked against
+"""The PID block in its parallel form (built-in "pid-gains": blocks.pid), sum and
+gain (blocks.sum_gain) as FMUs: validated, run by FMPy, their discrete responses checked against
 hand computations."""
 
 import math
@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from flexff import api
-from flexff.controllers.block_options import OptionError
-from flexff.controllers.blocks_pid import pid_system
-from flexff.controllers.blocks_signal import gain_from_options, sum_from_options
-from flexff.controllers.pid_design import AxisPid, Gains, LoopShape
-from flexff.controllers.pid_options import pid_gains_from_options as pid_from_options
+from flexff.blocks.options import OptionError
+from flexff.blocks.pid import pid_system
+from flexff.blocks.pid_design import AxisPid, Gains, LoopShape
+from flexff.blocks.pid_options import pid_gains_from_options as pid_from_options
+from flexff.blocks.sum_gain import gain_from_options, sum_from_options
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu
 from tests.runners import run_fmu, simulate_with_fmpy
