@@ -53,6 +53,7 @@
  */
 
 #include "wrapper.h"
+#include "net_times.h" /* net_clock: CLOCK_MONOTONIC, the release times' clock */
 
 #if HAS_NETWORK
 #if NET_TASK
@@ -77,7 +78,7 @@ struct Task {
     cpu_set_t cpus;       /* the caller's CPUs the worker's were last set from */
     int started, started_cpu; /* the posted job started, on this CPU */
     int waiting;          /* the worker waits for a signal (not for its release time) */
-    struct timespec posted_at[2]; /* when the last two jobs were posted */
+    double posted_at[2];  /* when the last two jobs were posted (net_clock) */
     struct timespec release; /* when the worker looks for its next job, or tv_sec < 0: never
                               * (it waits for a signal) */
 #endif
@@ -89,16 +90,16 @@ struct Task {
     long signalled;      /* posts that woke the worker with a system call (it had no release
                           * time, or it came before the post; calling thread only) */
     fmi2Real x[DIM(N_X)], u[DIM(N_U)], p[DIM(N_P)], time; /* the job: its call point's */
-    float *state_in;       /* the Data's committed state, read by the job ... */
-    fmi2Real in[NET_N_IN]; /* the network's inputs, evaluated from x, u and p by the job */
-    CasadiWork work;
-    int mem;               /* the instance's CasADi memory of network_input */
-    fmi2Real r[N_R];
-    float *state_out;      /* ... and the next (NET_STATE_NEXT), written by it: the calling thread
+    float *state_in;       /* the Data's committed state (NET_STATE), read by the job, and */
+    float *state_out;      /* the next (NET_STATE_NEXT), written by it: the calling thread
                             * touches neither while a job is out (every call that reads or
                             * replaces the Data whole settles the job first), so that the
                             * hand-over copies no state (7.7 KB for the TCN: each copy cost the
                             * 1 kHz task 0.5 to 1 us at a call point, its cache cold) */
+    fmi2Real in[NET_N_IN]; /* the network's inputs, evaluated from x, u and p by the job */
+    CasadiWork work;
+    int mem;               /* the instance's CasADi memory of network_input */
+    fmi2Real r[N_R];
     int failed;
     char error[512];
 };
@@ -159,10 +160,6 @@ static void follow_caller(Task *t) {
 }
 
 #if defined(__linux__)
-static double seconds_between(const struct timespec *a, const struct timespec *b) {
-    return (double)(b->tv_sec - a->tv_sec) + 1e-9 * (double)(b->tv_nsec - a->tv_nsec);
-}
-
 /* The time the job after the one just started is due to be posted, plus a sixteenth of the
  * interval (after the poster's step, where its loop is paced), when the last two jobs were
  * posted RELEASE_MIN_INTERVAL_S or more apart, and that interval is its predecessor's within
@@ -170,16 +167,15 @@ static double seconds_between(const struct timespec *a, const struct timespec *b
 #define RELEASE_MIN_INTERVAL_S 200e-6
 #define RELEASE_TOLERANCE 0.125
 static void plan_release(Task *t, double *last_interval) {
-    const double interval = seconds_between(&t->posted_at[0], &t->posted_at[1]);
+    const double interval = t->posted_at[1] - t->posted_at[0];
     const int regular = interval >= RELEASE_MIN_INTERVAL_S &&
                         fabs(interval - *last_interval) <= RELEASE_TOLERANCE * interval;
     *last_interval = interval;
     t->release.tv_sec = -1;
     if (!regular) return;
-    const long long ns = (long long)t->posted_at[1].tv_nsec +
-                         (long long)(1e9 * interval * (1.0 + 1.0 / 16.0));
-    t->release.tv_sec = t->posted_at[1].tv_sec + (time_t)(ns / 1000000000LL);
-    t->release.tv_nsec = (long)(ns % 1000000000LL);
+    const double at = t->posted_at[1] + interval * (1.0 + 1.0 / 16.0);
+    t->release.tv_sec = (time_t)at;
+    t->release.tv_nsec = (long)(1e9 * (at - (double)t->release.tv_sec));
 }
 #endif
 
@@ -322,7 +318,7 @@ void task_post(Instance *c, const fmi2Real *x, const fmi2Real *u, const fmi2Real
 #if defined(__linux__)
     t->started = 0;
     t->posted_at[0] = t->posted_at[1];
-    clock_gettime(CLOCK_MONOTONIC, &t->posted_at[1]);
+    t->posted_at[1] = net_clock();
     signal = t->waiting; /* else the worker comes at its release time */
 #endif
     pthread_mutex_unlock(&t->lock);
