@@ -1,8 +1,10 @@
 /*
  * fmi2_unsupported.c -- the FMI 2.0 functions the tests' tiny FMUs (tests/probe_fmu.c,
- * tests/bouncing_ball.c) share: the version calls, debug logging (accepted, ignored), and what
- * neither supports: no Integer, Boolean or String variables, no FMU state, no directional
- * derivatives. Compiled beside each of them by tests/probe_fmu.py.
+ * tests/chatty_fmu.c, tests/bouncing_ball.c) share: the version calls, debug logging (accepted,
+ * ignored), and what none supports: no Integer, Boolean or String variables, no FMU state, no directional
+ * derivatives, no asynchronous co-simulation step (its cancel and status calls; the
+ * model-exchange ball exports them unused). Compiled beside each of them by
+ * tests/probe_fmu.py.
  */
 
 #include <stddef.h>
@@ -69,5 +71,27 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
                                         const fmi2ValueReference z[], size_t nz,
                                         const fmi2Real du[], fmi2Real dz[]) {
     (void)c; (void)u; (void)nu; (void)z; (void)nz; (void)du; (void)dz;
+    return fmi2Error;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c) { (void)c; return fmi2Error; }
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Error;
+}
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Error;
+}
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Error;
+}
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Error;
+}
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v) {
+    (void)c; (void)k; (void)v;
     return fmi2Error;
 }

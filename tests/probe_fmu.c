@@ -127,7 +127,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     return fmi2OK;
 }
 
-/* the version, logging, Integer, Boolean, String, state and derivative calls:
+/* the version, logging, Integer, Boolean, String, state, derivative and step-status calls:
    tests/fmi2_unsupported.c */
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                                        const fmi2Integer order[], const fmi2Real value[]) {
@@ -307,24 +307,3 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_pr
     return fmi2OK;
 }
 
-fmi2Status fmi2CancelStep(fmi2Component c) { (void)c; return fmi2Error; }
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) {
-    (void)c; (void)k; (void)v;
-    return fmi2Error;
-}
-fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v) {
-    (void)c; (void)k; (void)v;
-    return fmi2Error;
-}
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v) {
-    (void)c; (void)k; (void)v;
-    return fmi2Error;
-}
-fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v) {
-    (void)c; (void)k; (void)v;
-    return fmi2Error;
-}
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v) {
-    (void)c; (void)k; (void)v;
-    return fmi2Error;
-}
