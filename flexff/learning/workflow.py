@@ -25,6 +25,7 @@ if TYPE_CHECKING:  # numpy, scipy and torch load in the step that needs them
     from flexff.learning.linear_prior import LinearModel
     from flexff.learning.machine_dataset import MachineDataset
 
+
 @dataclass(frozen=True)
 class Identified:
     """What `identify_prior` found and wrote: the manipulator's rigid-body Identification or a
