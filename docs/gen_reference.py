@@ -17,7 +17,7 @@ from pathlib import Path
 
 from flexff.cli import build_parser
 from flexff.cosim.builtins import registered
-from flexff.cosim.config_keys import KEYS, TABLES
+from flexff.cosim.config_keys import all_keys, tables
 
 
 def cell(text: object) -> str:
@@ -87,9 +87,9 @@ def cli_markdown() -> str:
 
 def config_markdown() -> str:
     """One table per table of the general form: key, type, default, unit, meaning."""
-    out = []
-    for table in TABLES:
-        keys = [k for k in KEYS if k.table == table]
+    out, every = [], all_keys()
+    for table in tables():
+        keys = [k for k in every if k.table == table]
         anchor = table.replace(".", "-").replace("[k]", "")
         bracket = f"[[{table}]]" if table in ("source", "connection", "machine.axis") \
             else f"[{table}]"

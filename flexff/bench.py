@@ -17,7 +17,7 @@ from flexff.cosim.engine import idle_timing
 from flexff.cosim.floor import run_c_loop
 from flexff.cosim.libcosim import run_libcosim, time_libcosim_engine
 from flexff.cosim.master import Master, ResolvedFmu
-from flexff.cosim.metrics import tracking_metrics
+from flexff.cosim.metrics import named_axes, tracking_metrics
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import Recording
 from flexff.cosim.run import run_config, simulate
@@ -30,6 +30,7 @@ from flexff.fmu.errors import InputError
 from flexff.fmu.network_runtime import RUNTIMES
 from flexff.fmu.onnx_fmu import onnx_system
 from flexff.fmu_bench import bench_fmu
+from flexff.plant.signals import AXES
 from flexff.plant.system import plant_system
 
 CLOSED_LOOP_REFERENCE = "thesis-eval"  # the thesis's evaluation reference, 15 s at 1 ms
@@ -218,7 +219,7 @@ def _hardware_loop(folder: Path, model: Path, mode: str, seconds: float | None,
 
 def _e2(recording: Recording) -> dict[str, float]:
     """The thesis's average 2-norm of the tracking error per axis [m/sqrt(s)]."""
-    return {axis: m["e2"] for axis, m in tracking_metrics(recording).items()}
+    return {axis: m["e2"] for axis, m in tracking_metrics(recording, named_axes(AXES)).items()}
 
 
 def realtime_benchmark(folder: Path, models: dict[str, Path], seconds: float | None = None,

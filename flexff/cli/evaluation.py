@@ -13,7 +13,6 @@ from flexff.cli.shared import (
     ilc_options,
     machine_options,
     output_file,
-    tracked_axes,
 )
 
 FILES = {  # what `flexff evaluate` says it wrote, by what it evaluated (learning.workflow)
@@ -75,13 +74,14 @@ def _tune(args: argparse.Namespace) -> int:
 
 
 def _ilc(args: argparse.Namespace) -> int:
+    from flexff.cosim.metrics import metrics_axes
     from flexff.cosim.run import load_run_config
     from flexff.learning.ilc import NOISE_FLOOR, RESULT, ilc
 
     state = ilc(load_run_config(args.config), args.output, args.iterations, args.cutoff,
                 gain=args.gain)
     for trial in state["trials"]:
-        axes = tracked_axes(trial)
+        axes = metrics_axes(trial)
         e2 = ", ".join(f"{trial[a]['e2']:.4g}" for a in axes)
         ratio = ", ".join(f"{trial[a]['e2_ratio']:.4g}" for a in axes)
         unit = " m/sqrt(s)" if axes == ["x", "y"] else f" ({', '.join(axes)})"

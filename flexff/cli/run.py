@@ -8,7 +8,7 @@ import sys
 import warnings
 from typing import TYPE_CHECKING, Any
 
-from flexff.cli.shared import Commands, output_file, tracked_axes
+from flexff.cli.shared import Commands, output_file
 from flexff.fmu.errors import InputError
 
 if TYPE_CHECKING:
@@ -93,10 +93,11 @@ def _sweep_values(text: str) -> tuple[str, list[Any]]:
 
 def _print_result(name: object, metrics: dict[str, Any], output: object) -> None:
     """One line per run, and a second where its learned feedforward extrapolates."""
-    from flexff.cosim.run import range_warning
+    from flexff.cosim.metrics import metrics_axes
+    from flexff.cosim.plugins import metrics_warnings
 
     tracking = ""
-    axes = tracked_axes(metrics)
+    axes = metrics_axes(metrics)
     if axes:  # the manipulator's x, y or a machine description's axes
         e2 = ", ".join(f"{metrics[a]['e2']:.4g}" for a in axes)
         einf = ", ".join(f"{metrics[a]['einf']:.4g}" for a in axes)
@@ -112,7 +113,7 @@ def _print_result(name: object, metrics: dict[str, Any], output: object) -> None
               f"{timing['period_us']:.0f} us period, {timing['overruns']} overruns")
         for warning in (timing.get("process") or {}).get("warnings", []):
             print(f"  {name}: warning: {warning}")
-    if warning := range_warning(metrics):
+    for warning in metrics_warnings(metrics):
         print(f"  {name}: {warning}")
 
 

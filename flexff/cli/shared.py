@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any, TypeAlias
+from typing import TypeAlias
 
 from flexff.fmu.errors import InputError
 
@@ -41,11 +41,6 @@ def machine_options(parser: argparse.ArgumentParser) -> None:
                         choices=EVERY_EXCITATION,
                         help=f"a [machine] loop: the excitation's classes, in turn (default "
                              f"{' '.join(EXCITATION)}; also {', '.join(EVERY_EXCITATION[4:])})")
-
-
-def tracked_axes(metrics: dict[str, Any]) -> list[str]:
-    """The axes a run's or trial's metrics hold: the manipulator's x, y or a machine's."""
-    return [a for a, m in metrics.items() if isinstance(m, dict) and "e2" in m]
 
 
 def ilc_options(command: argparse.ArgumentParser, prefix: str) -> None:

@@ -4,9 +4,10 @@
 It registers the built-in FMUs plant, controller, rigid-body-feedforward and
 learned-feedforward with their options, its short form (controllers.short_form) with its
 machine description (controllers.manipulator_machine), the
-reference kinds thesis-eval and thesis-hardware-eval (plant.references), the nominal
-workspace and its signals' short names. CasADi and onnx load only where a plant, controller
-or model is checked or built.
+reference kinds of the plane (plant.reference_kinds) and thesis-eval and thesis-hardware-eval
+(plant.references), its signals' short names and the warning that a learned feedforward
+extrapolates. CasADi and onnx load only where a plant, controller or model is checked or
+built.
 
 Every option: "Run configuration", section Built-in FMUs (docs/reference/configuration.md,
 generated from the registry).
@@ -21,11 +22,11 @@ from typing import TYPE_CHECKING, Any
 from flexff.controllers.plant_options import checked_plant_parameters, plant_parameter_names
 from flexff.cosim.builtins import Option, OptionError, register_builtin
 from flexff.cosim.plugins import (
+    register_metrics_warning,
     register_short_form,
     register_short_names,
-    register_workspace_check,
 )
-from flexff.cosim.references import Reference, ReferenceKind, register_reference_kind
+from flexff.cosim.references import ReferenceKind, register_reference_kind
 from flexff.fmu.network_runtime import RUNTIMES
 from flexff.plant.signals import (
     CURRENTS,
@@ -55,10 +56,11 @@ SHORT_NAMES = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, FO
 
 
 def register() -> None:
-    """Register the manipulator's built-ins, short form, reference kinds, workspace and
-    signals (cosim.builtins, cosim.plugins)."""
+    """Register the manipulator's built-ins, short form, reference kinds, signals and
+    metrics warning (cosim.builtins, cosim.references, cosim.plugins)."""
     from flexff.controllers.manipulator_machine import manipulator_description
     from flexff.controllers.short_form import SHORT_FORM_TABLES, expand
+    from flexff.plant.reference_kinds import plane_kinds
     from flexff.plant.references import thesis_evaluation, thesis_hardware_evaluation
 
     variant = Option("variant", "choice", "nominal", choices=tuple(VARIANTS))
@@ -84,8 +86,10 @@ def register() -> None:
     register_reference_kind(ReferenceKind("thesis-eval", lambda _, step: thesis_evaluation(step)))
     register_reference_kind(ReferenceKind(
         "thesis-hardware-eval", lambda _, step: thesis_hardware_evaluation(step)))
-    register_workspace_check(_nominal_workspace)
+    for kind in plane_kinds():
+        register_reference_kind(kind)
     register_short_names(SHORT_NAMES)
+    register_metrics_warning(range_warning)
 
 
 # -- checks --------------------------------------------------------------------------------
@@ -113,16 +117,9 @@ def _model_card(path: Any) -> None:
     read_card(path)
 
 
-def _nominal_workspace(x: Any, y: Any, what: str) -> None:
-    from flexff.plant.kinematics import check_workspace  # CasADi
-    from flexff.plant.parameters import NOMINAL
-
-    check_workspace(NOMINAL, x, y, what)
-
-
 def _plant_parameters(checker: TableChecker, options: Mapping[str, Any],
                       parameters: Mapping[str, Any], where: str,
-                      start: tuple[float, float] | None) -> dict[str, Any]:
+                      start: tuple[float, ...] | None) -> dict[str, Any]:
     known = plant_parameter_names(options["variant"])
     for key in parameters:
         if key not in known:
@@ -167,8 +164,8 @@ def _learned(options: Mapping[str, Any], step: float, sources: Mapping[str, Any]
 
     reference = None
     if options["mode"] == "precomputed":
-        reference = {n: sources[n] for n in Reference.SIGNALS if n in sources}
-        if len(reference) != len(Reference.SIGNALS):
+        reference = {n: sources[n] for n in names(REFERENCE) if n in sources}
+        if len(reference) != len(REFERENCE):
             raise OptionError("mode", "the precomputed mode needs a [reference] to precompute "
                                       "the feedforward over")
     return learned_feedforward_system(options["model"], step, reference,
@@ -188,3 +185,15 @@ def feedforward_range(fmu: FmuConfig, reference: Mapping[str, np.ndarray], step:
         return {"feedforward_range": None}
     return {"feedforward_range": {"margin": MARGIN,
                                   "outside": [dataclasses.asdict(e) for e in excess]}}
+
+
+def range_warning(metrics: Mapping[str, Any]) -> str | None:
+    """A line saying the learned feedforward extrapolates in this run (its metrics'
+    `feedforward_range`), or None."""
+    outside = (metrics.get("feedforward_range") or {}).get("outside")
+    if not outside:
+        return None
+    worst = outside[0]
+    return (f"warning: the reference leaves the learned model's training range in "
+            f"{len(outside)} features (worst: {worst['signal']}, {worst['spans']:.2g} spans "
+            f"beyond): the feedforward extrapolates; train on motion like this reference")

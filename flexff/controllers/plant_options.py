@@ -23,7 +23,7 @@ def plant_parameter_names(variant: str) -> tuple[str, ...]:
 
 
 def checked_plant_parameters(checker: TableChecker, t: Mapping[str, Any], variant: str,
-                             where: str, start: tuple[float, float]) -> dict[str, float]:
+                             where: str, start: tuple[float, ...]) -> dict[str, float]:
     """Plant parameter values, checked physically; x_start, y_start default to `start`."""
     from flexff.plant.kinematics import check_workspace
     from flexff.plant.system import plant_parameters

@@ -29,7 +29,7 @@ FEEDFORWARD_KINDS = ("none", "rigid-body", "learned")  # kind K is the built-in 
 RENAMED_KINDS = {"model": "rigid-body", "onnx": "learned"}  # old [feedforward] kind -> now
 
 
-def expand(checker: TableChecker, data: Mapping[str, Any], start: tuple[float, float] | None
+def expand(checker: TableChecker, data: Mapping[str, Any], start: tuple[float, ...] | None
            ) -> tuple[list[FmuConfig], list[SourceConfig]]:
     """[feedforward], [controller], [plant] as built-in FMUs in that order; without a
     feedforward, its forces are constant zero sources."""

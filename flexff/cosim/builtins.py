@@ -34,7 +34,7 @@ Factory = Callable[..., "System"]  # (options, step), and the sources where read
 # (checker, options, parameters, `fmu.NAME`, the reference's first point or None) -> the
 # checked start values
 ParameterCheck = Callable[["TableChecker", Mapping[str, Any], Mapping[str, Any], str,
-                           "tuple[float, float] | None"], dict[str, Any]]
+                           "tuple[float, ...] | None"], dict[str, Any]]
 # (the FMU's configuration, the sampled reference signals, step) -> entries of metrics.json
 RunMetrics = Callable[["FmuConfig", Mapping[str, "np.ndarray"], float], Mapping[str, Any]]
 

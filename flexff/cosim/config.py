@@ -4,7 +4,7 @@ anything is built or run, and written back out in the general form (`flexff conf
 Short forms, built-in FMUs and reference kinds that machine packages register (cosim.plugins,
 cosim.builtins) are expanded and checked here too. Any problem (unknown table or key, wrong
 type, missing file, an FMU variable that does not exist or has another type, a reference
-outside the workspace, ...) raises ConfigError naming `table.key`; the wiring (cosim.wiring)
+its kind refuses, ...) raises ConfigError naming `table.key`; the wiring (cosim.wiring)
 is checked when the FMUs are resolved, before anything runs.
 
 Every key and reference kind: "Run configuration" (docs/reference/configuration.md, generated
@@ -29,12 +29,10 @@ from flexff.cosim.config_error import ConfigError
 from flexff.cosim.example_configs import config_examples as config_examples  # public API
 from flexff.cosim.machine import Machine, machine_table, parse_machine
 from flexff.cosim.memory import MemoryNeeded
-from flexff.cosim.plugins import ShortForm, check_workspace, short_forms
+from flexff.cosim.plugins import ShortForm, short_forms
 from flexff.cosim.references import (
-    SMOOTHING_WINDOW,
-    Reference,
+    ReferenceKeyError,
     Sampled,
-    SegmentError,
     build_reference,
     reference_kind_names,
     reference_kinds,
@@ -60,9 +58,6 @@ from flexff.fmu.fmi_version import FMI_VERSIONS
 from flexff.fmu.importer import FmuError, FmuInfo, read_fmu, typed_value
 from flexff.fmu.model_exchange import SOLVERS
 
-SEGMENT_KEYS = {"line": ("kind", "to", "duration"), "hold": ("kind", "duration"),
-                "circle": ("kind", "centre", "turns", "duration"),
-                "spline": ("kind", "points", "duration")}
 TABLES = ("run", "reference", "source", "fmu", "connection", "record", "machine")
 RECORDED = "recorded"  # what a run's record holds, in its run.json: read back, it is ignored
 FAULTS = "description_faults"  # its FMUs' description warnings, in its run.json: likewise
@@ -196,6 +191,13 @@ def expanded_text(config: RunConfig) -> str:
     return f"# {config.origin}, in the general form\n" + tomli_w.dumps(expanded(config))
 
 
+def _start(reference: Sampled) -> tuple[float, ...]:
+    """A machine package's reference's first point, handed to its short form and built-ins
+    (the point their plant starts at)."""
+    signals = reference.signals()
+    return tuple(float(signals[p][0]) for p in reference.positions)
+
+
 def _plain(value: Any) -> Any:
     """Tuples as lists and paths as strings, for TOML."""
     if isinstance(value, Mapping):
@@ -231,8 +233,8 @@ class _Parser(TableChecker):
             signal = self.sampled(reference, self.table(data, "reference"), step, machine)
         fmus: list[FmuConfig] = []
         sources: list[SourceConfig] = []
-        start = ((float(signal.x[0]), float(signal.y[0])) if isinstance(signal, Reference)
-                 else None)
+        start = _start(signal) if signal is not None and reference is not None \
+            and reference.kind not in AXIS_KINDS else None
         if short is not None:
             fmus, sources = short.expand(self, data, start)
         for fmu_name, table in self.table(data, "fmu").items():
@@ -269,8 +271,8 @@ class _Parser(TableChecker):
                 machine: Machine | None) -> Sampled:
         try:
             return build_reference(reference.kind, reference.options, step, machine)
-        except SegmentError as error:
-            raise self.error(f"reference.segments[{error.index}]", str(error)) from None
+        except ReferenceKeyError as error:
+            raise self.error(f"reference.{error.key}", str(error)) from None
         except MemoryNeeded as error:
             raise self.error("run.step", f"{error}: a larger run.step or a shorter "
                                          f"reference") from None
@@ -463,7 +465,7 @@ class _Parser(TableChecker):
         return next((f for f in forms if f.default), None)
 
     # -- [fmu.NAME] ---------------------------------------------------------------------
-    def fmu(self, name: str, t: Any, start: tuple[float, float] | None) -> FmuConfig:
+    def fmu(self, name: str, t: Any, start: tuple[float, ...] | None) -> FmuConfig:
         where = f"fmu.{name}"
         if not isinstance(t, dict):
             raise self.error(where, f"expected a table [fmu.{name}], got {t!r}")
@@ -612,46 +614,13 @@ class _Parser(TableChecker):
     # -- [reference] ----------------------------------------------------------------------
     def reference(self, t: Mapping[str, Any]) -> ReferenceConfig:
         kind = self.choice(t, "reference", "kind", reference_kind_names(), None)
-        r = "reference"
         machine_kind = reference_kinds().get(kind)
-        if machine_kind is not None:  # a machine package's (cosim.plugins)
-            if machine_kind.check is None:
-                self.keys(t, r, ("kind",))
-                return ReferenceConfig(kind)
-            return ReferenceConfig(kind, machine_kind.check(self, t))
-        if kind in AXIS_KINDS:
+        if machine_kind is None:
             return ReferenceConfig(kind, self.axis_reference(t, kind))
-        if kind == "csv":
-            self.keys(t, r, ("kind", "path", "smoothing_window"))
-            return ReferenceConfig(kind, {
-                "path": self.path(t, r, "path"),
-                "smoothing_window": self.number(t, r, "smoothing_window", SMOOTHING_WINDOW,
-                                                   positive=True)})
-        if kind == "segments":
-            self.keys(t, r, ("kind", "start", "segments"))
-            start = self.point(t, r, "start", (0.0, 0.0))
-            try:
-                check_workspace(*start, "the start point")
-            except ValueError as error:
-                raise self.error("reference.start", str(error)) from None
-            return ReferenceConfig(kind, {"start": start, "segments": self.segments(t)})
-        if kind == "spline":
-            self.keys(t, r, ("kind", "points", "duration"))
-            return ReferenceConfig(kind, {"points": self.points(t, r, "points"),
-                                          "duration": self.number(t, r, "duration", None, True)})
-        circle = {"centre": self.point(t, r, "centre", (0.0, 0.0)),
-                  "radius": self.number(t, r, "radius", None, positive=True),
-                  "turns": self.number(t, r, "turns", 1.0),
-                  "start_angle": self.number(t, r, "start_angle", 0.0)}
-        if kind == "circle":
-            self.keys(t, r, ("kind", *circle, "duration"))
-            return ReferenceConfig(kind, {**circle, "duration": self.number(t, r, "duration",
-                                                                            None, True)})
-        self.keys(t, r, ("kind", *circle, "start", "line_duration", "circle_duration"))
-        return ReferenceConfig(kind, {
-            **circle, "start": self.point(t, r, "start", (0.0, 0.0)),
-            "line_duration": self.number(t, r, "line_duration", None, True),
-            "circle_duration": self.number(t, r, "circle_duration", None, True)})
+        if machine_kind.check is None:  # a machine package's (cosim.plugins)
+            self.keys(t, "reference", ("kind",))
+            return ReferenceConfig(kind)
+        return ReferenceConfig(kind, machine_kind.check(self, t))
 
     def axis_reference(self, t: Mapping[str, Any], kind: str) -> dict[str, Any]:
         """The options of a reference of a machine's axes (cosim.axis_references); the axes
@@ -698,30 +667,3 @@ class _Parser(TableChecker):
                              f"{table!r}")
         return {axis: self.number(table, f"reference.{key}", axis, None, positive)
                 for axis in table}
-
-    def segments(self, t: Mapping[str, Any]) -> tuple[dict[str, Any], ...]:
-        """The checked tables of reference.segments (geometry is checked when built)."""
-        specs = t.get("segments")
-        if not isinstance(specs, list) or not specs:
-            raise self.error("reference.segments", f"expected a list of segment tables, got "
-                                                   f"{specs!r}")
-        checked = []
-        for k, spec in enumerate(specs):
-            where = f"reference.segments[{k}]"
-            if not isinstance(spec, dict):
-                raise self.error(where, f"expected a table {{kind = ..., ...}}, got {spec!r}")
-            kind = self.choice(spec, where, "kind", tuple(SEGMENT_KEYS), None)
-            self.keys(spec, where, SEGMENT_KEYS[kind])
-            values: dict[str, Any] = {"kind": kind}
-            if kind == "line":
-                values["to"] = self.point(spec, where, "to", None)
-            elif kind == "circle":
-                values["centre"] = self.point(spec, where, "centre", (0.0, 0.0))
-                values["turns"] = self.number(spec, where, "turns", 1.0)
-                if values["turns"] == 0:
-                    raise self.error(f"{where}.turns", "must not be zero")
-            elif kind == "spline":
-                values["points"] = self.points(spec, where, "points", minimum=2)
-            values["duration"] = self.number(spec, where, "duration", None, positive=True)
-            checked.append(values)
-        return tuple(checked)

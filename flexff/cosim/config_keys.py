@@ -1,6 +1,7 @@
 """Every key of a run configuration's general form, as data: name, type, default, unit, meaning.
 
-The documentation's configuration reference is rendered from `KEYS`, and a test checks it
+The documentation's configuration reference is rendered from `all_keys()` (KEYS and the keys
+of the [reference] kinds machine packages register, cosim.references), and a test checks it
 against the keys that cosim.config's parser and cosim.machine accept. Built-in FMUs' options
 come from their registry (cosim.builtins), not from here.
 """
@@ -10,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from flexff.cosim.axis_references import AXIS_KINDS
-from flexff.cosim.references import SMOOTHING_WINDOW
 from flexff.fmu.defaults import DEFAULT_STEP
 
 
@@ -26,10 +26,6 @@ class Key:
     meaning: str
     kinds: tuple[str, ...] = ()
 
-
-REFERENCE_KINDS = ("circle", "line-circle", "spline", "segments", "csv", *AXIS_KINDS)
-CIRCLE = ("circle", "line-circle")
-SEGMENT_KINDS = ("line", "hold", "circle", "spline")
 
 KEYS: tuple[Key, ...] = (
     # [run]
@@ -52,16 +48,10 @@ KEYS: tuple[Key, ...] = (
         "Let every FMU's NaN or infinite outputs and parameters through."),
     # [reference]
     Key("reference", "kind", "string", "required", "",
-        "circle, line-circle, spline, segments, csv (the plane's x, y); point-to-point, sine, "
-        "multisine, random (every axis of the [machine]); or a kind a machine package "
-        "registers.", REFERENCE_KINDS),
-    Key("reference", "radius", "number", "required", "m", "The circle's radius.", CIRCLE),
-    Key("reference", "centre", "[x, y]", "[0, 0]", "m", "The circle's centre.", CIRCLE),
-    Key("reference", "turns", "number", "1", "1", "Turns; negative runs clockwise.", CIRCLE),
-    Key("reference", "start_angle", "number", "0", "rad", "Where on the circle it starts.",
-        CIRCLE),
+        "point-to-point, sine, multisine, random (every axis of the [machine]), or a kind a "
+        "machine package registers (its keys below, by kind)."),
     Key("reference", "duration", "number", "required", "s", "How long the path takes.",
-        ("circle", "spline", *AXIS_KINDS)),
+        AXIS_KINDS),
     Key("reference", "seed", "integer", "0", "", "The random draws' seed (each axis its own).",
         AXIS_KINDS),
     Key("reference", "share", "number", "0.8", "1",
@@ -80,34 +70,6 @@ KEYS: tuple[Key, ...] = (
     Key("reference", "bandwidth_hz", "number, or table: axis = number",
         "where the range's amplitude meets the limits", "Hz",
         "The random path's points per second.", ("random",)),
-    Key("reference", "start", "[x, y]", "[0, 0]", "m", "The starting point.",
-        ("line-circle", "segments")),
-    Key("reference", "line_duration", "number", "required", "s",
-        "The skew-sine line to the circle's start point.", ("line-circle",)),
-    Key("reference", "circle_duration", "number", "required", "s", "The circle after the line.",
-        ("line-circle",)),
-    Key("reference", "points", "list of [x, y]", "required", "m",
-        "The closed periodic spline's points.", ("spline",)),
-    Key("reference", "segments", "list of tables", "required", "",
-        "Segments run in order, each from where the previous one ended.", ("segments",)),
-    Key("reference", "path", "string", "required", "",
-        "A CSV table, relative to the configuration's folder.", ("csv",)),
-    Key("reference", "smoothing_window", "number", f"{SMOOTHING_WINDOW:g}", "s",
-        "Smoothing of the table's derivatives.", ("csv",)),
-    # reference.segments[k]
-    Key("reference.segments[k]", "kind", "string", "required", "",
-        "line, hold, circle or spline.", SEGMENT_KINDS),
-    Key("reference.segments[k]", "to", "[x, y]", "required", "m", "The line's end point.",
-        ("line",)),
-    Key("reference.segments[k]", "centre", "[x, y]", "[0, 0]", "m",
-        "The circle's centre; radius and start angle follow from the current point.",
-        ("circle",)),
-    Key("reference.segments[k]", "turns", "number", "1", "1",
-        "Turns, not zero; negative runs clockwise.", ("circle",)),
-    Key("reference.segments[k]", "points", "list of [x, y]", "required", "m",
-        "A closed spline through the current point, then these.", ("spline",)),
-    Key("reference.segments[k]", "duration", "number", "required", "s",
-        "How long the segment takes.", SEGMENT_KINDS),
     # [[source]]
     Key("source", "kind", "string", "required", "", '"constant" or "csv".',
         ("constant", "csv")),
@@ -170,7 +132,8 @@ KEYS: tuple[Key, ...] = (
     # [record]
     Key("record", "signals", "list of strings", "all", "", "The signals to record."),
     Key("record", "csv", "boolean", "false", "", "Also write signals.csv."),
-    Key("record", "plot", "boolean", "true in a manipulator run", "", "Draw the plots."),
+    Key("record", "plot", "boolean", "true where the run tracks an axis", "",
+        "Draw the plots (signals.png for a run that tracks none)."),
     Key("record", "every", "integer", "1", "", "Keep every N-th point (metrics see them all)."),
     # [machine]
     Key("machine", "name", "string", "required", "", "The machine's name."),
@@ -239,12 +202,32 @@ KEYS: tuple[Key, ...] = (
         "The rate the labels are decimated to and the models run at."),
 )
 
-TABLES = ("run", "reference", "reference.segments[k]", "source", "fmu.NAME", "connection",
-          "record", "machine", "machine.axis", "machine.prior", "machine.log", "machine.ilc",
-          "machine.learning")
+TABLES = ("run", "reference", "source", "fmu.NAME", "connection", "record", "machine",
+          "machine.axis", "machine.prior", "machine.log", "machine.ilc", "machine.learning")
+
+
+def all_keys() -> tuple[Key, ...]:
+    """KEYS and, after [reference]'s, the keys of the registered [reference] kinds, each
+    once."""
+    from flexff.cosim.references import reference_kinds  # loads the machine packages
+
+    registered = tuple(dict.fromkeys(k for kind in reference_kinds().values()
+                                     for k in kind.keys))
+    last = max(i for i, k in enumerate(KEYS) if k.table == "reference")
+    return (*KEYS[:last + 1], *registered, *KEYS[last + 1:])
+
+
+def tables() -> tuple[str, ...]:
+    """The tables of all_keys(), in order (TABLES and the registered kinds' lists of tables,
+    `reference.LIST[k]`, after [reference])."""
+    found = tuple(dict.fromkeys(k.table for k in all_keys()))
+    extra = tuple(t for t in found if t not in TABLES)
+    at = TABLES.index("reference") + 1
+    return (*TABLES[:at], *extra, *TABLES[at:])
 
 
 def keys_of(table: str, kind: str | None = None) -> tuple[str, ...]:
-    """The names of `table`'s keys (for `kind`, if given), in the order of KEYS."""
-    return tuple(k.name for k in KEYS
-                 if k.table == table and (kind is None or not k.kinds or kind in k.kinds))
+    """The names of `table`'s keys (for `kind`, if given), in the order of all_keys(), each
+    once."""
+    return tuple(dict.fromkeys(k.name for k in all_keys() if k.table == table and (
+        kind is None or not k.kinds or kind in k.kinds)))

@@ -114,8 +114,8 @@ def run_libcosim(fmus: Sequence[ResolvedFmu], sources: Mapping[str, np.ndarray |
     build their ctypes prototypes on every call: see `time_libcosim_engine` for the rest.
     """
     ex = _Execution(fmus, sources, step, links, start)
-    manipulator, observer = CosimManipulator.create_override(), CosimObserver.create_last_value()
-    ex.execution.add_manipulator(manipulator)
+    override, observer = CosimManipulator.create_override(), CosimObserver.create_last_value()
+    ex.execution.add_manipulator(override)
     ex.execution.add_observer(observer)
     by_fmu = {p.name: [n for n in p.info.outputs if record is None or n in record
                          or f"{p.name}.{n}" in record] for p in ex.ports}
@@ -127,8 +127,8 @@ def run_libcosim(fmus: Sequence[ResolvedFmu], sources: Mapping[str, np.ndarray |
     began = time.perf_counter()
     for k in range(steps):
         for fmu, inputs in ex.varying.items():
-            if not manipulator.slave_real_values(ex.index[fmu], [r for r, _ in inputs],
-                                                 [float(table[n][k]) for _, n in inputs]):
+            if not override.slave_real_values(ex.index[fmu], [r for r, _ in inputs],
+                                              [float(table[n][k]) for _, n in inputs]):
                 raise RunError(f"libcosim rejected the inputs of {fmu} at step {k}")
         if not ex.execution.step(1):
             raise RunError(f"libcosim failed in the step from t = "

@@ -6,8 +6,8 @@
 
 over every communication point k = 0 .. N of a run of length T = N dt. The axes are a machine
 description's (`machine_axes`: `<axis>_ref` against the true position where the loop gives
-one, else the measured one, each an expression of recorded signals) or, by default, the
-manipulator's x and y (`x_ref` against the plant's true `x`). A streamed run sums the squares
+one, else the measured one, each an expression of recorded signals) or named ones
+(`named_axes`: `<axis>_ref` against the recorded `<axis>`). A streamed run sums the squares
 and keeps the largest error chunk by chunk (Tracking), so it never holds the whole record.
 
 An axis's e2 over a loop whose measurement adds a noise floor (an e2 that no feedforward
@@ -28,39 +28,51 @@ from flexff.cosim.machine import Machine
 from flexff.cosim.recording import Recording, signal_name
 from flexff.fmu.expressions import Expression, evaluate, parse_expression
 
-AXES = ("x", "y")  # the manipulator's axes: metrics, plots and the ILC's floor by default
-
 
 @dataclass(frozen=True)
 class TrackedAxis:
     """One axis's error e = reference - position, each an expression of recorded signals
-    (a short name `x` stands for the one recorded `fmu.x`, as signal_name finds it)."""
+    (a short name `x` stands for the one recorded `fmu.x`, as signal_name finds it), in
+    `unit`; a loop's axis also names its feedforward input and commanded effort (the
+    plots' efforts, in `effort_unit`)."""
 
     name: str
     reference: Expression
     position: Expression
+    unit: str = ""
+    feedforward: str | None = None
+    effort: str | None = None
+    effort_unit: str = ""
 
     def columns(self, names: Collection[str]) -> dict[str, str]:
         """Each name the expressions read -> its recorded column (KeyError if missing)."""
         return {n: signal_name(names, n) for n in self.reference.names | self.position.names}
 
-    def error(self, columns: Mapping[str, np.ndarray], found: Mapping[str, str]) -> np.ndarray:
+    def values(self, columns: Mapping[str, np.ndarray], found: Mapping[str, str]
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The reference and the position, from the recorded `columns` (`found`: columns)."""
         values = {n: columns[c] for n, c in found.items()}
         key = f"axis {self.name}"
-        return np.asarray(evaluate(self.reference, values, key)
-                          - evaluate(self.position, values, key), dtype=float)
+        return (np.asarray(evaluate(self.reference, values, key), dtype=float),
+                np.asarray(evaluate(self.position, values, key), dtype=float))
+
+    def error(self, columns: Mapping[str, np.ndarray], found: Mapping[str, str]) -> np.ndarray:
+        reference, position = self.values(columns, found)
+        error: np.ndarray = reference - position
+        return error
 
 
-def _tracked(name: str, reference: str, position: Expression) -> TrackedAxis:
-    return TrackedAxis(name, parse_expression(reference, name), position)
-
-
-MANIPULATOR_AXES = tuple(_tracked(a, f"{a}_ref", parse_expression(a, a)) for a in AXES)
+def named_axes(names: Sequence[str]) -> tuple[TrackedAxis, ...]:
+    """Axes by name alone: `<axis>_ref` against the recorded `<axis>`."""
+    return tuple(TrackedAxis(a, parse_expression(f"{a}_ref", a), parse_expression(a, a))
+                 for a in names)
 
 
 def machine_axes(machine: Machine) -> tuple[TrackedAxis, ...]:
     """The tracked axes of a machine description."""
-    return tuple(_tracked(a.name, a.reference, a.evaluated) for a in machine.axes)
+    return tuple(TrackedAxis(a.name, parse_expression(a.reference, a.name), a.evaluated,
+                             a.unit, a.loop_feedforward, a.loop_effort, a.effort_unit)
+                 for a in machine.axes)
 
 
 def error_norms(error: np.ndarray, step: float) -> dict[str, float]:
@@ -82,7 +94,7 @@ def own_share(e2: float, floor: float) -> float:
     return math.sqrt((e2 - floor) * (e2 + floor)) if e2 > floor else 0.0
 
 
-def tracking_metrics(recording: Recording, axes: Sequence[TrackedAxis] = MANIPULATOR_AXES
+def tracking_metrics(recording: Recording, axes: Sequence[TrackedAxis]
                      ) -> dict[str, dict[str, float]]:
     """{axis: {e2, einf, rms}} from the recorded references and positions."""
     return {a.name: error_norms(a.error(recording.signals, a.columns(recording.signals)),
@@ -93,8 +105,7 @@ class Tracking:
     """The tracking metrics of a run fed chunk by chunk (`add`): per axis the sum of e^2, the
     largest |e| and the count, over the recorded columns `names`."""
 
-    def __init__(self, names: Sequence[str], step: float,
-                 axes: Sequence[TrackedAxis] = MANIPULATOR_AXES) -> None:
+    def __init__(self, names: Sequence[str], step: float, axes: Sequence[TrackedAxis]) -> None:
         self.step = step
         self.axes = {a.name: (a, a.columns(names)) for a in axes}
         self.squares = dict.fromkeys(self.axes, 0.0)
@@ -102,7 +113,7 @@ class Tracking:
         self.count = 0
 
     @staticmethod
-    def tracks(names: Sequence[str], axes: Sequence[TrackedAxis] = MANIPULATOR_AXES) -> bool:
+    def tracks(names: Sequence[str], axes: Sequence[TrackedAxis]) -> bool:
         """Whether `names` holds what every axis's reference and position read."""
         try:
             for a in axes:
@@ -129,13 +140,17 @@ class Tracking:
                 for a in self.axes}
 
 
-def run_metrics(recording: Recording, axes: Sequence[TrackedAxis] = MANIPULATOR_AXES
-                ) -> dict[str, Any]:
+def run_metrics(recording: Recording, axes: Sequence[TrackedAxis]) -> dict[str, Any]:
     """The content of metrics.json of a recording held in memory (summary_metrics)."""
     tracked = Tracking.tracks(tuple(recording.signals), axes)
     return summary_metrics(tracking_metrics(recording, axes) if tracked else {},
                            float(recording.time[-1] - recording.time[0]), recording.wall_s,
                            recording.timing)
+
+
+def metrics_axes(metrics: Mapping[str, Any]) -> list[str]:
+    """The axes a run's (or a trial's) metrics hold: its entries with an e2."""
+    return [a for a, m in metrics.items() if isinstance(m, Mapping) and "e2" in m]
 
 
 def summary_metrics(tracking: Mapping[str, Any], duration: float, wall_s: float,

@@ -1,14 +1,16 @@
 """Plots of a run, as PNG files (matplotlib's Agg backend, no display needed).
 
-  path.png    the true x-y path against the reference
-  error.png   tracking error e = reference - true position over time, per axis
-  forces.png  feedback, feedforward and total end-effector force over time, per axis
-  signals.png every recorded float signal over time, for a run without those signals
-              (PLOT_SIGNALS: per axis x, y the reference, the true position, the feedback and
-              the feedforward force; at most MAX_PANELS of them)
+  path.png    the path of the positions against the reference's, for two tracked axes
+  error.png   tracking error e = reference - position over time, per tracked axis
+  forces.png  feedback, feedforward and total effort over time, per tracked axis of a loop
+              (its description names the feedforward input and the commanded effort:
+              feedback = effort - feedforward)
+  signals.png every recorded float signal over time, for a run that tracks no axis (at most
+              MAX_PANELS of them)
   tet.png     a paced run's task execution time per step, each FMU's share, the period and
               the overruns (drawn from a bounded trace, cosim.timing.TetTrace)
 
+The tracked axes are the run's (cosim.metrics.TrackedAxis); positions in m are drawn in mm.
 A run feeds RunPlots chunk by chunk while it runs; long series are drawn decimated
 (cosim.decimate: min and max per pixel column, so a one-sample spike stays visible), so a plot
 takes bounded time and memory whatever the run's length. matplotlib loads only when a plot is
@@ -24,18 +26,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from flexff.cosim.decimate import Envelope, Strided
-from flexff.cosim.metrics import AXES
+from flexff.cosim.metrics import TrackedAxis, Tracking
 from flexff.cosim.recording import Recording, atomic_write, signal_name
 from flexff.cosim.timing import US, StepTiming, StreamedTiming
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-# a tracking loop's signals per axis: reference, true position, feedback and feedforward force
-PATH_SIGNALS = (*(f"{a}_ref" for a in AXES), *AXES)
-PLOT_SIGNALS = (*PATH_SIGNALS, *(f"F{a}_fb" for a in AXES), *(f"F{a}_ff" for a in AXES))
 MAX_PANELS = 8
 MM = 1e3
+PATH_AXES = 2  # the tracked axes a path plot draws one against the other
 
 
 def _figure(**options: Any) -> Figure:
@@ -51,20 +51,32 @@ def save_figure(figure: Figure, path: Path) -> Path:
     return path
 
 
+def _drawn(unit: str) -> tuple[float, str]:
+    """The scale and unit a value in `unit` is drawn in: m as mm, the rest as it is."""
+    return (MM, "mm") if unit == "m" else (1.0, unit)
+
+
 class RunPlots:
     """The plots of one run of `points` points `step` apart, fed chunk by chunk (`add`) with
-    the recorded columns by name: path, error and forces where `recorded` has
-    PLOT_SIGNALS, else one panel per float signal."""
+    the recorded columns by name: path, error and forces of the tracked `axes` where
+    `recorded` holds them, else one panel per float signal."""
 
-    def __init__(self, recorded: Sequence[str], points: int, step: float) -> None:
+    def __init__(self, recorded: Sequence[str], points: int, step: float,
+                 axes: Sequence[TrackedAxis] = ()) -> None:
         self.points, self.step = points, step
+        self.axes = {a.name: (a, a.columns(recorded)) for a in axes} \
+            if axes and Tracking.tracks(recorded, axes) else {}
         try:
-            self.columns = {s: signal_name(recorded, s) for s in PLOT_SIGNALS}
+            self.efforts = {a.name: (signal_name(recorded, a.feedforward),
+                                     signal_name(recorded, a.effort))
+                            for a, _ in self.axes.values()
+                            if a.feedforward is not None and a.effort is not None}
         except KeyError:
-            self.columns = {}
-        self.path = {s: Strided(points) for s in PATH_SIGNALS} if self.columns else {}
+            self.efforts = {}
+        self.path = {f"{name}{part}": Strided(points) for name in self.axes
+                     for part in ("_ref", "")} if len(self.axes) == PATH_AXES else {}
         self.series: dict[str, Envelope] = {}
-        self.panels: list[str] | None = None if not self.columns else []
+        self.panels: list[str] | None = None if not self.axes else []
 
     def _envelope(self, name: str, k0: int, values: np.ndarray) -> None:
         if name not in self.series:
@@ -73,30 +85,33 @@ class RunPlots:
 
     def add(self, k0: int, columns: Mapping[str, np.ndarray]) -> None:
         """The values of points k0, k0 + 1, ... of every recorded signal."""
-        if not self.columns:
+        if not self.axes:
             if self.panels is None:
                 self.panels = [n for n, v in columns.items() if v.dtype.kind == "f"][:MAX_PANELS]
             for name in self.panels:
                 self._envelope(name, k0, columns[name])
             return
-        c = {s: columns[n] for s, n in self.columns.items()}
-        for name, strided in self.path.items():
-            strided.add(k0, c[name])
-        for axis in AXES:
-            fb, ff = c[f"F{axis}_fb"], c[f"F{axis}_ff"]
-            self._envelope(f"e_{axis}", k0, c[f"{axis}_ref"] - c[axis])
-            self._envelope(f"F{axis}_fb", k0, fb)
-            self._envelope(f"F{axis}_ff", k0, ff)
-            self._envelope(f"F{axis}", k0, fb + ff)
+        for name, (axis, found) in self.axes.items():
+            reference, position = axis.values(columns, found)
+            if self.path:
+                self.path[f"{name}_ref"].add(k0, reference)
+                self.path[name].add(k0, position)
+            self._envelope(f"e_{name}", k0, reference - position)
+        for name, (feedforward, effort) in self.efforts.items():
+            ff, total = columns[feedforward], columns[effort]
+            self._envelope(f"{name}_feedback", k0, total - ff)
+            self._envelope(f"{name}_feedforward", k0, ff)
+            self._envelope(f"{name}_effort", k0, total)
 
     def write(self, folder: str | Path) -> list[Path]:
-        """Write path.png, error.png and forces.png into `folder` (signals.png for a run
-        without PLOT_SIGNALS); return their paths."""
+        """Write path.png (two tracked axes), error.png and forces.png (a loop's axes) into
+        `folder` (signals.png for a run that tracks no axis); return their paths."""
         folder = Path(folder)
-        if not self.columns:
+        if not self.axes:
             return [self._signals(folder / "signals.png")]
-        return [self._path(folder / "path.png"), self._error(folder / "error.png"),
-                self._forces(folder / "forces.png")]
+        return [*([self._path(folder / "path.png")] if self.path else []),
+                self._error(folder / "error.png"),
+                *([self._forces(folder / "forces.png")] if self.efforts else [])]
 
     def _line(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         return self.series[name].line(self.step) if name in self.series else (
@@ -105,37 +120,44 @@ class RunPlots:
     def _path(self, path: Path) -> Path:
         figure = _figure(figsize=(5.5, 5.5))
         ax = figure.subplots()
-        p = {name: strided.values() * MM for name, strided in self.path.items()}
-        ax.plot(p["x_ref"], p["y_ref"], "k--", lw=1, label="reference")
-        ax.plot(p["x"], p["y"], lw=1, label="end effector")
-        ax.set(xlabel="x [mm]", ylabel="y [mm]", aspect="equal", title="x-y path")
+        (first, (a, _)), (second, (b, _)) = self.axes.items()
+        (scale_a, unit_a), (scale_b, unit_b) = _drawn(a.unit), _drawn(b.unit)
+        p = {name: strided.values() for name, strided in self.path.items()}
+        ax.plot(p[f"{first}_ref"] * scale_a, p[f"{second}_ref"] * scale_b, "k--", lw=1,
+                label="reference")
+        ax.plot(p[first] * scale_a, p[second] * scale_b, lw=1, label="position")
+        ax.set(xlabel=f"{first} [{unit_a}]", ylabel=f"{second} [{unit_b}]",
+               title=f"{first}-{second} path")
+        if unit_a == unit_b:
+            ax.set_aspect("equal")
         ax.legend(loc="best")
         return save_figure(figure, path)
 
     def _error(self, path: Path) -> Path:
-        figure = _figure(figsize=(8, 5))
-        axes = figure.subplots(2, 1, sharex=True)
-        for ax, axis in zip(axes, AXES):
-            t, e = self._line(f"e_{axis}")
-            ax.plot(t, e * MM, lw=0.8)
-            ax.set(ylabel=f"e_{axis} [mm]")
+        figure = _figure(figsize=(8, 1.5 + 1.75 * len(self.axes)))
+        axes = figure.subplots(len(self.axes), 1, sharex=True, squeeze=False)[:, 0]
+        for ax, (name, (axis, _)) in zip(axes, self.axes.items()):
+            scale, unit = _drawn(axis.unit)
+            t, e = self._line(f"e_{name}")
+            ax.plot(t, e * scale, lw=0.8)
+            ax.set(ylabel=f"e_{name} [{unit}]")
             ax.grid(True, alpha=0.3)
-        axes[0].set_title("tracking error (reference - true position)")
+        axes[0].set_title("tracking error (reference - position)")
         axes[-1].set_xlabel("time [s]")
         return save_figure(figure, path)
 
     def _forces(self, path: Path) -> Path:
-        figure = _figure(figsize=(8, 5))
-        axes = figure.subplots(2, 1, sharex=True)
-        for ax, axis in zip(axes, AXES):
-            for name, style, label in ((f"F{axis}_fb", {"lw": 0.8}, "feedback"),
-                                       (f"F{axis}_ff", {"lw": 0.8}, "feedforward"),
-                                       (f"F{axis}", {"color": "k", "lw": 0.6}, "total")):
-                ax.plot(*self._line(name), label=label, **style)
-            ax.set(ylabel=f"F_{axis} [N]")
+        figure = _figure(figsize=(8, 1.5 + 1.75 * len(self.efforts)))
+        axes = figure.subplots(len(self.efforts), 1, sharex=True, squeeze=False)[:, 0]
+        for ax, name in zip(axes, self.efforts):
+            for part, style in (("feedback", {"lw": 0.8}), ("feedforward", {"lw": 0.8}),
+                                ("effort", {"color": "k", "lw": 0.6})):
+                ax.plot(*self._line(f"{name}_{part}"),
+                        label="total" if part == "effort" else part, **style)
+            ax.set(ylabel=f"{name} [{self.axes[name][0].effort_unit}]")
             ax.grid(True, alpha=0.3)
         axes[0].legend(loc="upper right", ncol=3, fontsize="small")
-        axes[0].set_title("end-effector force")
+        axes[0].set_title("effort per axis")
         axes[-1].set_xlabel("time [s]")
         return save_figure(figure, path)
 
@@ -182,8 +204,9 @@ def plot_tet(timing: StepTiming | StreamedTiming, path: Path) -> Path:
     return save_figure(figure, path)
 
 
-def write_plots(rec: Recording, folder: str | Path) -> list[Path]:
+def write_plots(rec: Recording, folder: str | Path, axes: Sequence[TrackedAxis] = ()
+                ) -> list[Path]:
     """The plots of a recording held in memory (RunPlots, fed at once) into `folder`."""
-    plots = RunPlots(list(rec.signals), rec.time.size, rec.step)
+    plots = RunPlots(list(rec.signals), rec.time.size, rec.step, axes)
     plots.add(0, rec.signals)
     return plots.write(folder)

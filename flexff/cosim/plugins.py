@@ -1,12 +1,13 @@
 """What machine packages add to cosim beside built-in FMUs (cosim.builtins), and the loading of
 the entry points (group `flexff.builtins`) through which they register it all.
 
-  short forms       tables of their own (the manipulator's [plant], [controller],
-                    [feedforward]) that expand to FMUs and sources of the general form
-  reference kinds   [reference] kinds of a machine (the thesis's evaluation references;
-                    cosim.references.register_reference_kind)
-  workspace checks  where every reference must stay (refusing a point with ValueError)
+  short forms       tables of their own (e.g. a [plant], [controller], [feedforward]) that
+                    expand to FMUs and sources of the general form
+  reference kinds   [reference] kinds of a machine, their keys checked and documented
+                    (cosim.references.register_reference_kind)
   short names       recorded signals a run keeps under their short names too (cosim.run)
+  metrics warnings  a line on a run's metrics.json to show beside its result (a learned
+                    feedforward that extrapolates), or None
 
 Each entry point names a function without arguments that calls the `register_*` functions;
 they are loaded once, the first time anything registered is looked up.
@@ -25,10 +26,10 @@ if TYPE_CHECKING:
 
 GROUP = "flexff.builtins"
 # (checker, the configuration's tables, the reference's first point or None) -> FMUs, sources
-Expander = Callable[["TableChecker", Mapping[str, Any], "tuple[float, float] | None"],
+Expander = Callable[["TableChecker", Mapping[str, Any], "tuple[float, ...] | None"],
                     "tuple[list[FmuConfig], list[SourceConfig]]"]
 Describer = Callable[[], dict[str, Any]]  # -> the machine's [machine] table (cosim.machine)
-WorkspaceCheck = Callable[[Any, Any, str], None]  # (x, y, what the points are)
+MetricsWarning = Callable[[Mapping[str, Any]], "str | None"]  # metrics.json -> a line or None
 
 
 @dataclass(frozen=True)
@@ -45,8 +46,8 @@ class ShortForm:
 
 
 _SHORT_FORMS: dict[str, ShortForm] = {}
-_WORKSPACE_CHECKS: list[WorkspaceCheck] = []
 _SHORT_NAMES: dict[str, None] = {}  # ordered, each once
+_METRICS_WARNINGS: list[MetricsWarning] = []
 _LOADED: list[bool] = []
 
 
@@ -66,15 +67,15 @@ def register_short_form(name: str, tables: tuple[str, ...], expand: Expander,
     _SHORT_FORMS[name] = ShortForm(name, tables, expand, default, describe)
 
 
-def register_workspace_check(check: WorkspaceCheck) -> None:
-    """Make every reference stay where `check` lets it (it raises ValueError otherwise)."""
-    if check not in _WORKSPACE_CHECKS:
-        _WORKSPACE_CHECKS.append(check)
-
-
 def register_short_names(names: tuple[str, ...]) -> None:
     """Keep the recorded signals `names` under their short names too (cosim.run)."""
     _SHORT_NAMES.update(dict.fromkeys(names))
+
+
+def register_metrics_warning(warning: MetricsWarning) -> None:
+    """Show the line `warning` makes of a run's metrics beside its result (metrics_warnings)."""
+    if warning not in _METRICS_WARNINGS:
+        _METRICS_WARNINGS.append(warning)
 
 
 def short_forms() -> tuple[ShortForm, ...]:
@@ -82,13 +83,12 @@ def short_forms() -> tuple[ShortForm, ...]:
     return tuple(_SHORT_FORMS.values())
 
 
-def check_workspace(x: Any, y: Any, what: str) -> None:
-    """Points (x, y) [m] through every registered workspace check."""
-    loaded()
-    for check in _WORKSPACE_CHECKS:
-        check(x, y, what)
-
-
 def short_names() -> tuple[str, ...]:
     loaded()
     return tuple(_SHORT_NAMES)
+
+
+def metrics_warnings(metrics: Mapping[str, Any]) -> list[str]:
+    """The lines the registered metrics warnings make of a run's metrics.json content."""
+    loaded()
+    return [line for warning in _METRICS_WARNINGS if (line := warning(metrics))]

@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 
-from flexff.cosim.axis_references import AXIS_KINDS
 from flexff.cosim.builtins import registered
 from flexff.cosim.config import FAULTS, RECORDED, expanded, load_config
 from flexff.cosim.config_error import ConfigError
@@ -35,13 +34,13 @@ from flexff.cosim.handover import Worker
 from flexff.cosim.master import CosimError, Master, Streamed
 from flexff.cosim.memory import MemoryNeeded, check_memory
 from flexff.cosim.metrics import (
-    MANIPULATOR_AXES,
     TrackedAxis,
     Tracking,
     machine_axes,
+    named_axes,
     summary_metrics,
 )
-from flexff.cosim.plots import PLOT_SIGNALS, RunPlots, plot_tet
+from flexff.cosim.plots import RunPlots, plot_tet
 from flexff.cosim.plugins import short_names
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import (
@@ -52,8 +51,7 @@ from flexff.cosim.recording import (
     atomic_write,
     signal_name,
 )
-from flexff.cosim.references import Reference
-from flexff.cosim.scenario import Scenario, resolve
+from flexff.cosim.scenario import Scenario, resolve, sampled_reference
 from flexff.cosim.schema import RunConfig
 from flexff.cosim.timing import OverrunError, Pacing
 from flexff.cosim.watchdog import watchdog
@@ -122,16 +120,14 @@ def _least_signals(config: RunConfig) -> int:
 
 
 def _reference_count(config: RunConfig) -> int:
-    """The signals a run's [reference] gives: the plane's six, or four per machine axis."""
-    if config.reference is not None and config.reference.kind in AXIS_KINDS \
-            and config.machine is not None:
-        return len(config.machine.reference_signals)
-    return len(Reference.SIGNALS)
+    """The signals a run's [reference] gives (none without one)."""
+    reference = sampled_reference(config)
+    return 0 if reference is None else len(reference.signals())
 
 
-def _wanted(scenario: Scenario, master: Master) -> list[str]:
+def _wanted(scenario: Scenario, master: Master, axes: Sequence[TrackedAxis]) -> list[str]:
     """The signals a run records: its [record] signals (all by default) plus those the
-    metrics (its tracked axes), the plots and a [machine]'s dataset need."""
+    metrics and plots of its tracked `axes` and a [machine]'s dataset need."""
     wanted = scenario.config.record.signals
     if wanted is None:
         return [*master.signals, *master.typed_signals]
@@ -140,20 +136,19 @@ def _wanted(scenario: Scenario, master: Master) -> list[str]:
             master.resolve(name)
         except ValueError as error:
             raise ConfigError(scenario.config.origin, "record.signals", str(error)) from None
-    tracked = sorted({n for a in tracked_axes(scenario.config)
-                      for n in a.reference.names | a.position.names})
-    return [*wanted, *(n for n in dict.fromkeys((*PLOT_SIGNALS, *tracked,
-                                                 *_machine_signals(scenario.config)))
+    tracked = sorted({n for a in axes for n in a.reference.names | a.position.names})
+    return [*wanted, *(n for n in dict.fromkeys((*tracked, *_machine_signals(scenario.config)))
                        if n not in wanted and _known(master, n))]
 
 
 def _machine_signals(config: RunConfig) -> tuple[str, ...]:
-    """What a dataset, ILC and the evaluation read of a run of a loop with a [machine]: each
-    axis's reference derivatives, measured position's signals and effort."""
+    """What a dataset, ILC, the evaluation and the plots read of a run of a loop with a
+    [machine]: each axis's reference derivatives, measured position's signals, feedforward
+    input and effort."""
     if config.machine is None:
         return ()
     return tuple(n for a in config.machine.axes
-                 for n in (*a.derivatives, *sorted(a.measured.names), a.effort))
+                 for n in (*a.derivatives, *sorted(a.measured.names), a.feedforward, a.effort))
 
 
 def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | None = None,
@@ -164,7 +159,7 @@ def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | 
     process set up for real time (cosim.realtime: pinned to `cpu`, SCHED_FIFO, locked memory
     where permitted); the recording's timing then carries that setup's report."""
     with scenario.master() as master:
-        wanted = _wanted(scenario, master)
+        wanted = _wanted(scenario, master, tracked_axes(scenario, master))
         check_recording_memory(scenario.config, 1 + len(wanted))
         if pacing is None:
             return master.run(scenario.sources, scenario.steps, wanted, progress)
@@ -178,15 +173,15 @@ class RunSink:
     """Where run_config's run hands its record, chunk by chunk: the record's file
     (RecordWriter) under the names `kept` gives (file name -> recorded name), every `every`-th
     point (k = 0, every, 2 every, ...), the tracking
-    metrics where the run has a reference and a true position, and the plots if `plot`."""
+    metrics of the tracked `axes` where the record holds them, and the plots if `plot`."""
 
     def __init__(self, folder: Path, recorded: Sequence[str], kept: dict[str, str],
                  points: int, step: float, plot: bool, every: int = 1,
-                 axes: Sequence[TrackedAxis] = MANIPULATOR_AXES) -> None:
+                 axes: Sequence[TrackedAxis] = ()) -> None:
         self.writer, self.kept, self.every = RecordWriter(folder), kept, every
-        self.tracking = Tracking(recorded, step, axes) if Tracking.tracks(recorded, axes) \
-            else None
-        self.plots = RunPlots(recorded, points, step) if plot else None
+        self.tracking = Tracking(recorded, step, axes) \
+            if axes and Tracking.tracks(recorded, axes) else None
+        self.plots = RunPlots(recorded, points, step, axes) if plot else None
         self.last_time: float | None = None  # of the last point handed over
 
     def write(self, k0: int, time: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
@@ -201,9 +196,20 @@ class RunSink:
             self.plots.add(k0, columns)
 
 
-def tracked_axes(config: RunConfig) -> tuple[TrackedAxis, ...]:
-    """The axes a run's metrics track: its machine description's, else the manipulator's."""
-    return MANIPULATOR_AXES if config.machine is None else machine_axes(config.machine)
+def tracked_axes(scenario: Scenario, master: Master) -> tuple[TrackedAxis, ...]:
+    """The axes a run's metrics and plots track: its machine description's (a short form's
+    included); without one, each reference position `<axis>_ref` (of its [reference], or a
+    [[source]] signal of that name) whose `<axis>` the run has (named_axes)."""
+    config = scenario.config
+    if config.machine is not None:
+        return machine_axes(config.machine)
+    reference = sampled_reference(config)
+    signals = {} if reference is None else reference.signals()
+    positions = (*(() if reference is None else reference.positions),
+                 *(n for n in scenario.sources if n not in signals))
+    return named_axes(tuple(axis for axis in (p.removesuffix("_ref") for p in positions
+                                              if p.endswith("_ref"))
+                            if axis and _known(master, axis)))
 
 
 def _known(master: Master, name: str) -> bool:
@@ -239,17 +245,6 @@ def builtin_metrics(scenario: Scenario) -> dict[str, Any]:
     return metrics
 
 
-def range_warning(metrics: dict[str, Any]) -> str | None:
-    """A line saying the learned feedforward extrapolates in this run, or None."""
-    outside = (metrics.get("feedforward_range") or {}).get("outside")
-    if not outside:
-        return None
-    worst = outside[0]
-    return (f"warning: the reference leaves the learned model's training range in "
-            f"{len(outside)} features (worst: {worst['signal']}, {worst['spans']:.2g} spans "
-            f"beyond): the feedforward extrapolates; train on motion like this reference")
-
-
 def _write_json(path: Path, data: dict[str, Any]) -> None:
     text = json.dumps(data, indent=2, default=str) + "\n"
     atomic_write(path, lambda tmp: tmp.write_text(text))
@@ -257,11 +252,12 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
 
 def _kept(recorded: Sequence[str], config: RunConfig) -> dict[str, str]:
     """The record's columns, file name -> recorded name: the signals the configuration asked
-    for, and in a manipulator run (one with a reference or a built-in FMU) the short names the
-    machine packages name (cosim.plugins.short_names) beside their full ones."""
+    for, and in a run of the machine packages (one with a [reference] or a built-in FMU) the
+    short names they register (cosim.plugins.short_names) beside their full ones."""
     names = config.record.signals
     kept = {n: n for n in (recorded if names is None else names)}
-    for short in short_names() if _manipulator(config) else ():
+    packaged = config.reference is not None or any(f.builtin for f in config.fmus)
+    for short in short_names() if packaged else ():
         if short in kept or (names is not None and not any(
                 n.partition(".")[2] == short for n in names)):
             continue
@@ -270,10 +266,6 @@ def _kept(recorded: Sequence[str], config: RunConfig) -> dict[str, str]:
         except KeyError:
             pass
     return kept
-
-
-def _manipulator(config: RunConfig) -> bool:
-    return config.reference is not None or any(f.builtin for f in config.fmus)
 
 
 def run_config(config: RunConfig | str | Path, output_dir: str | Path,
@@ -300,16 +292,18 @@ def run_config(config: RunConfig | str | Path, output_dir: str | Path,
 
 def _run_locked(config: RunConfig, out: Path, progress: bool | None, pacing: Pacing | None,
                 cpu: int | None) -> dict[str, Any]:
-    """run_config's run, in the folder `out` it holds the lock of."""
-    plot = _manipulator(config) if config.record.plot is None else config.record.plot
+    """run_config's run, in the folder `out` it holds the lock of; it plots by default where
+    it tracks an axis."""
     with tempfile.TemporaryDirectory(prefix="flexff-fmus-") as folder, \
             FmuLog(out / LOG_NAME) as log:
         scenario = resolve(config, folder)
         with scenario.master(log.write) as master:
-            recorded = _wanted(scenario, master)
+            axes = tracked_axes(scenario, master)
+            recorded = _wanted(scenario, master, axes)
+            plot = bool(axes) if config.record.plot is None else config.record.plot
             check_disk(out, config, len(_kept(recorded, config)))
             sink = RunSink(out, recorded, _kept(recorded, config), config.steps + 1,
-                           config.step, plot, config.record.every, tracked_axes(config))
+                           config.step, plot, config.record.every, axes)
             (out / METRICS_NAME).unlink(missing_ok=True)  # an earlier run's
             log.forget_earlier()
             _write_run_json(sink, scenario, out, complete=False)  # until the run has ended

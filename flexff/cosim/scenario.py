@@ -23,7 +23,7 @@ from flexff.cosim.config_error import ConfigError
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import check_signals
 from flexff.cosim.master import Master, ResolvedFmu
-from flexff.cosim.references import Reference, Sampled, build_reference
+from flexff.cosim.references import Sampled, build_reference
 from flexff.cosim.schema import FmuConfig, RunConfig, SourceConfig, point_time
 from flexff.cosim.wiring import Link, Port, WiringError, wire
 from flexff.fmu.errors import InputError
@@ -58,7 +58,9 @@ class Scenario:
 
     def reference(self) -> dict[str, np.ndarray]:
         """The sampled reference signals (empty without a [reference])."""
-        return {n: np.asarray(self.sources[n]) for n in Reference.SIGNALS if n in self.sources}
+        reference = sampled_reference(self.config)
+        return {} if reference is None else {n: np.asarray(self.sources[n])
+                                             for n in reference.signals()}
 
 
 def resolve(config: RunConfig, folder: str | Path) -> Scenario:
@@ -105,13 +107,19 @@ def source_signals(config: RunConfig) -> dict[str, np.ndarray | float]:
     return out
 
 
+def sampled_reference(config: RunConfig) -> Sampled | None:
+    """The run's [reference] sampled every step from t = 0 (None without one)."""
+    if config.reference is None:
+        return None
+    return build_reference(config.reference.kind, config.reference.options, config.step,
+                           config.machine)
+
+
 def reference_signals(config: RunConfig) -> dict[str, np.ndarray]:
     """The run's reference signals at points 0 .. steps (none without a [reference]): the
     reference plays from the run's start."""
-    if config.reference is None:
-        return {}
-    return reference_samples(build_reference(config.reference.kind, config.reference.options,
-                                             config.step, config.machine), config.steps)
+    reference = sampled_reference(config)
+    return {} if reference is None else reference_samples(reference, config.steps)
 
 
 def reference_samples(reference: Sampled, steps: int) -> dict[str, np.ndarray]:

@@ -90,7 +90,7 @@ class ConnectionConfig:
 class RecordConfig:
     signals: tuple[str, ...] | None = None  # None: every signal
     csv: bool = False
-    plot: bool | None = None  # None: in a manipulator run (cosim.run)
+    plot: bool | None = None  # None: where the run tracks an axis (cosim.run)
     every: int = 1  # keep every N-th point in the record (metrics and plots see them all)
 
 

@@ -38,7 +38,6 @@ from lxml import etree
 from flexff.cosim.config import checked, expanded, parse_config
 from flexff.cosim.config_error import ConfigError
 from flexff.cosim.recording import atomic_write
-from flexff.cosim.references import Reference
 from flexff.cosim.scenario import Scenario, resolve
 from flexff.cosim.schema import ALGORITHMS, ConnectionConfig, FmuConfig, RunConfig, whole_steps
 from flexff.cosim.wiring import SOURCE, Link, carried
@@ -83,9 +82,10 @@ def export_ssp(config: RunConfig, path: str | Path) -> Path:
     time-varying source signals other than the reference feeding FMU inputs."""
     with tempfile.TemporaryDirectory(prefix="flexff-ssp-") as folder:
         scenario = resolve(config, folder)
+        reference = scenario.reference()
         varying = sorted({k.signal for k in scenario.links if k.producer == SOURCE
                           and np.ndim(scenario.sources[k.signal])
-                          and k.signal not in Reference.SIGNALS})
+                          and k.signal not in reference})
         if varying:
             raise InputError(f"{config.origin}: SSP 1.0 cannot carry time-varying source "
                              f"signals, and {', '.join(varying)} feed FMU inputs: an SSP system "

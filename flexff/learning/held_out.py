@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from flexff.cosim.config import parse_config
 from flexff.cosim.executor import execute
-from flexff.cosim.metrics import AXES
+from flexff.cosim.metrics import metrics_axes
 from flexff.cosim.run import run_config
 from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.errors import InputError, RunError
@@ -38,7 +38,7 @@ def _e2_of_run(job: tuple[RunConfig, Path]) -> dict[str, float]:
     """e2 per axis of one run (in a worker process)."""
     config, folder = job
     metrics = run_config(config, folder, progress=False)
-    return {axis: metrics[axis]["e2"] for axis in AXES}
+    return {axis: metrics[axis]["e2"] for axis in metrics_axes(metrics)}
 
 
 def references_held_out(dataset: Dataset) -> tuple[dict[str, Mapping[str, Any]], list[str]]:
@@ -78,7 +78,7 @@ def run_held_out(configs: Mapping[str, Mapping[str, RunConfig]], out: Path,
     references = list(configs)
     names = [n for n in (configs[references[0]] if references else {}) if n != BASE]
     ratios = {name: {axis: [e2[r][BASE][axis] / e2[r][name][axis] for r in references]
-                     for axis in AXES} for name in names}
+                     for axis in e2[references[0]][BASE]} for name in names}
     return {"references": references, "e2_ratio": ratios,
             "geometric_mean": {name: {axis: geometric_mean(values) for axis, values
                                       in by_axis.items()} for name, by_axis in ratios.items()},

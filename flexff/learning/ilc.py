@@ -29,7 +29,6 @@ from tqdm import tqdm
 
 from flexff.cosim.csv_text import TIME
 from flexff.cosim.master import CosimError
-from flexff.cosim.metrics import AXES
 from flexff.cosim.plots import save_figure
 from flexff.cosim.recording import atomic_write
 from flexff.cosim.run import output_folder
@@ -233,7 +232,7 @@ def _write_table(path: Path, step: float, force: np.ndarray, columns: tuple[str,
 
 
 def plot_trials(trials: list[dict[str, Any]], path: Path,
-                floor: dict[str, float] | None = None, axes: tuple[str, ...] = AXES,
+                floor: dict[str, float] | None, axes: tuple[str, ...],
                 unit: str = "m") -> Path:
     """e2 per axis against trial (log scale), trial 0 being PID alone, and the noise `floor`
     per axis (dashed) where there is one."""

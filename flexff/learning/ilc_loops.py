@@ -23,7 +23,7 @@ import numpy as np
 from flexff.cosim.config import expanded
 from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import Machine
-from flexff.cosim.metrics import AXES, error_norms, machine_axes, tracking_metrics
+from flexff.cosim.metrics import error_norms, machine_axes, named_axes, tracking_metrics
 from flexff.cosim.recording import Recording
 from flexff.cosim.run import simulate
 from flexff.cosim.scenario import resolve, source_signals
@@ -35,7 +35,7 @@ from flexff.learning.ilc_filter import LearningFilter, filter_along, learning_fi
 from flexff.learning.linear_model import identify_linear
 from flexff.learning.loop import dataset_taps, with_feedforward, with_feedforward_table
 from flexff.plant.parameters import NOMINAL, PlantParameters
-from flexff.plant.signals import FEEDBACK_FORCES, FEEDFORWARD_FORCES, TRUE_POSITION, names
+from flexff.plant.signals import AXES, FEEDBACK_FORCES, FEEDFORWARD_FORCES, TRUE_POSITION, names
 from flexff.plant.variants import VARIANTS
 
 EXACT_ENCODERS = {"noise_std": 0.0, "encoder_quantization": 0.0}  # a plant measuring exactly
@@ -120,7 +120,7 @@ class ManipulatorLoop:
                                cutoff_hz)
 
     def metrics(self, recording: Recording) -> dict[str, dict[str, float]]:
-        return tracking_metrics(recording)
+        return tracking_metrics(recording, named_axes(self.axes))
 
     def noise_floor(self, table: Path) -> dict[str, float] | None:
         """The e2 per axis that the built-in plant's encoder noise and quantization cause

@@ -19,13 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from flexff.cosim.axis_references import AXIS_KINDS
 from flexff.cosim.config import checked
 from flexff.cosim.config_error import ConfigError
 from flexff.cosim.csv_text import TIME, read_time_table
 from flexff.cosim.machine import Machine
 from flexff.cosim.recording import Recording
-from flexff.cosim.references import Reference
+from flexff.cosim.scenario import sampled_reference
 from flexff.cosim.schema import ConnectionConfig, FmuConfig, RunConfig, SourceConfig
 from flexff.fmu.expressions import evaluate
 
@@ -50,8 +49,9 @@ def on_references(loop: RunConfig, table: Path, stop: float, name: str,
     axis's feedforward from the CSV table `feedforward` (columns `<axis>_ff`) or zero."""
     machine = loop_machine(loop)
     given = set(machine.reference_signals)
-    reference = (loop.reference if given.isdisjoint(Reference.SIGNALS)
-                 and not (loop.reference and loop.reference.kind in AXIS_KINDS) else None)
+    own = sampled_reference(loop)  # kept where it gives none of the table's signals
+    reference = loop.reference if own is not None and given.isdisjoint(own.signals()) \
+        else None
     sources = (*_other_sources(loop, given), SourceConfig("csv", path=Path(table)))
     return with_feedforward(replace(loop, name=name, start=0.0, stop=stop, reference=reference,
                                     sources=sources), feedforward)

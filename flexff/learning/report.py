@@ -22,12 +22,13 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from flexff.cosim.metrics import AXES, own_share, tracking_metrics
+from flexff.cosim.metrics import named_axes, own_share, tracking_metrics
 from flexff.cosim.plots import MM, save_figure
 from flexff.cosim.recording import Recording, atomic_write
 from flexff.fmu.errors import InputError
 from flexff.learning.force_gap import band_names, force_gap
 from flexff.plant.signals import (
+    AXES,
     FEEDBACK_FORCES,
     FEEDFORWARD_FORCES,
     POSITION_REFERENCE,
@@ -477,7 +478,8 @@ def write_report(recordings: dict[str, Recording], env: str, out: str | Path,
     _check_env(env)
     _check_recordings(recordings)
     ordered = {name: recordings[name] for name in _pid_first(recordings)}
-    summary = summarize({name: tracking_metrics(rec) for name, rec in ordered.items()},
+    summary = summarize({name: tracking_metrics(rec, named_axes(AXES))
+                         for name, rec in ordered.items()},
                         noise_floor)
     content = {"env": env, "scenarios": summary, "thesis": copy.deepcopy(THESIS_TABLES[env]),
                "units": dict(UNITS)}

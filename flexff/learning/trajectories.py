@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from flexff.cosim.references import Spline
 from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.learning.dataset import SETS
+from flexff.plant.paths import Spline
 
 R_MIN = 0.007  # m: smallest circle radius (seed)
 R_MAX = 0.045  # m: largest radius any training trajectory reaches (docs: Learning, The data)

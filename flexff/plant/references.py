@@ -1,5 +1,5 @@
 """The thesis's evaluation references of the manipulator: in simulation (sec. 5.7, 15 s) and on
-the real machine (sec. 6.6, 100 s), built from cosim.references' segments; the [reference]
+the real machine (sec. 6.6, 100 s), built from plant.paths' segments; the [reference]
 kinds `thesis-eval` and `thesis-hardware-eval` (registered by controllers.manipulator).
 """
 
@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from flexff.cosim.references import Chain, Circle, Hold, Line, Reference, sample
 from flexff.fmu.defaults import DEFAULT_STEP
+from flexff.plant.paths import Chain, Circle, Hold, Line, Reference, sample
 
 # evaluation reference of the thesis (section 5.7)
 THESIS_LINE_END = (0.0098, -0.0098)

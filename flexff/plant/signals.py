@@ -49,6 +49,9 @@ def names(*groups: Sequence[Variable]) -> tuple[str, ...]:
     return tuple(v.name for group in groups for v in group)
 
 
+AXES = names(TRUE_POSITION)  # the manipulator's tracked axes, x and y (against x_ref, y_ref)
+
+
 def units(*groups: Sequence[Variable]) -> tuple[str, ...]:
     """The units of the signals of `groups`, in order."""
     return tuple(v.unit for group in groups for v in group)

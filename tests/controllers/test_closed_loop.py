@@ -9,7 +9,7 @@ import pytest
 from scipy import signal
 
 from flexff.controllers.feedback import controller_design
-from flexff.cosim.references import Chain, Circle, Line, sample
+from flexff.plant.paths import Chain, Circle, Line, sample
 from flexff.plant.references import thesis_evaluation
 from tests.loops import STEP, loop_systems, monolithic
 

@@ -15,9 +15,10 @@ from fmpy.fmi2 import fmi2Error
 
 from flexff.controllers.features import feature_names, reference_features
 from flexff.controllers.learned_feedforward import learned_feedforward_system
+from flexff.controllers.manipulator import range_warning
 from flexff.controllers.training_range import MARGIN, RangeExcess
 from flexff.cosim.config import config_examples, parse_config
-from flexff.cosim.run import range_warning, run_config, simulate
+from flexff.cosim.run import run_config, simulate
 from flexff.cosim.scenario import resolve
 from flexff.fmu.build import build_fmu
 from flexff.fmu.validation import validate_fmu

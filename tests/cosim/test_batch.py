@@ -78,7 +78,7 @@ def test_sweep(tmp_path):
 def test_sweep_folder_names_are_safe_and_unique(tmp_path):
     """Values with separators and `..` stay inside the output folder, values that clean up to
     the same name get a suffix, and a value given twice is refused."""
-    from flexff.cosim.references import Line, sample
+    from flexff.plant.paths import Line, sample
 
     for name in ("ref.csv", "a b.csv", "a_b.csv"):
         sample(Line((0.0, 0.0), (0.005, 0.0), 0.5), 0.01).to_csv(tmp_path / name)

@@ -4,11 +4,12 @@ import math
 import os
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from flexff.cosim.metrics import error_norms, run_metrics, tracking_metrics
+from flexff.cosim.metrics import error_norms, named_axes, run_metrics, tracking_metrics
 from flexff.cosim.plots import write_plots
 from flexff.cosim.recording import (
     CSV_NAME,
@@ -22,6 +23,8 @@ from flexff.cosim.recording import (
 )
 from flexff.fmu.errors import InputError
 
+XY = named_axes(("x", "y"))
+
 
 def synthetic():
     """Four points 0.5 s apart: e_x = (0, 1, -2, 2) mm, e_y = (3, 3, 3, 3) mm."""
@@ -34,7 +37,7 @@ def synthetic():
 
 
 def test_metrics_by_hand():
-    m = tracking_metrics(synthetic())
+    m = tracking_metrics(synthetic(), XY)
     # e_x: sum e^2 = (0 + 1 + 4 + 4) mm^2 = 9e-6 m^2, dt = 0.5 s, T = 1.5 s
     assert m["x"]["e2"] == pytest.approx(math.sqrt(9e-6 * 0.5) / 1.5, rel=1e-12)
     assert m["x"]["einf"] == pytest.approx(2e-3, rel=1e-12)
@@ -43,7 +46,7 @@ def test_metrics_by_hand():
     assert m["y"]["e2"] == pytest.approx(math.sqrt(4 * 9e-6 * 0.5) / 1.5, rel=1e-12)
     assert m["y"]["einf"] == pytest.approx(3e-3, rel=1e-12)
     assert m["y"]["rms"] == pytest.approx(3e-3, rel=1e-12)
-    full = run_metrics(synthetic())
+    full = run_metrics(synthetic(), XY)
     assert list(full) == ["x", "y", "wall_s", "real_time_factor"]
     assert full["real_time_factor"] == pytest.approx(1.5 / 0.25)
     with pytest.raises(ValueError, match="two samples"):
@@ -122,10 +125,16 @@ def test_plots_are_written(tmp_path):
     angle = 2 * np.pi * t / 2.0
     signals = {"x_ref": 0.01 * np.cos(angle), "y_ref": 0.01 * np.sin(angle),
                "x": 0.009 * np.cos(angle - 0.1), "y": 0.009 * np.sin(angle - 0.1),
-               "Fx_fb": np.sin(angle), "Fy_fb": np.cos(angle),
+               "Fx": np.sin(angle), "Fy": np.cos(angle),
                "Fx_ff": 0.5 * np.sin(3 * angle), "Fy_ff": np.zeros_like(t)}
-    paths = write_plots(Recording(t, signals), tmp_path)
+    assert [p.name for p in write_plots(Recording(t, signals), tmp_path, XY)] == [
+        "path.png", "error.png"]  # no efforts named: no forces.png
+    loop = [replace(a, unit="m", feedforward=f"F{a.name}_ff", effort=f"F{a.name}",
+                    effort_unit="N") for a in XY]
+    paths = write_plots(Recording(t, signals), tmp_path, loop)
     assert [p.name for p in paths] == ["path.png", "error.png", "forces.png"]
+    assert [p.name for p in write_plots(Recording(t, signals), tmp_path / "one", loop[:1])] \
+        == ["error.png", "forces.png"]  # a path needs two axes
     for path in paths:
         data = path.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000

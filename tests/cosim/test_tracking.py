@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from flexff.cosim.config import config_examples, parse_config
-from flexff.cosim.metrics import error_norms, run_metrics
+from flexff.cosim.metrics import error_norms, named_axes, run_metrics
 from flexff.cosim.run import simulate_config
+from flexff.plant.signals import AXES
 
 THESIS_E2 = (42.93e-4, 42.94e-4)
 THESIS_EINF = (142.23e-4, 140.00e-4)
@@ -22,7 +23,7 @@ def metrics(name, plant="", controller=""):
                                            f'variant = "nominal"\n{plant}')
     if controller:
         text += f"\n[controller]\n{controller}\n"
-    return run_metrics(simulate_config(parse_config(text, name=name)))
+    return run_metrics(simulate_config(parse_config(text, name=name)), named_axes(AXES))
 
 
 def e2(m):
@@ -94,6 +95,6 @@ def test_metrics_of_the_run_match_the_recording():
     config = parse_config(config_examples()["thesis-eval-pid"].replace("stop = 15.0",
                                                                        "stop = 2.0"))
     rec = simulate_config(config)
-    m = run_metrics(rec)
+    m = run_metrics(rec, named_axes(AXES))
     assert m["x"] == error_norms(rec["x_ref"] - rec["x"], 1e-3)
     assert m["real_time_factor"] == pytest.approx(2.0 / m["wall_s"])

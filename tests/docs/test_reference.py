@@ -10,7 +10,9 @@ from flexff.cosim import machine
 from flexff.cosim.builtins import registered
 from flexff.cosim.config import parse_config
 from flexff.cosim.config_error import ConfigError
-from flexff.cosim.config_keys import KEYS, REFERENCE_KINDS, SEGMENT_KINDS, keys_of
+from flexff.cosim.config_keys import all_keys, keys_of
+from flexff.cosim.references import reference_kind_names
+from flexff.plant.reference_kinds import SEGMENT_KINDS
 from tests.helpers import REFERENCE_FMUS
 
 FMU = {"a": {"path": str(REFERENCE_FMUS / "fmi2" / "Feedthrough.fmu"),
@@ -28,7 +30,7 @@ def _accepted(data: dict) -> set[str]:
 
 def _cases():
     yield "run", None, {"run": {"zz": 1}, "fmu": FMU}
-    for kind in REFERENCE_KINDS:
+    for kind in reference_kind_names():
         yield "reference", kind, {"reference": {"kind": kind, "radius": 0.01, "zz": 1},
                                   "fmu": FMU}
     for kind in SEGMENT_KINDS:
@@ -62,7 +64,7 @@ def test_the_key_table_lists_the_machine_description():
 
 def test_every_key_and_builtin_has_an_entry_on_the_page(site):
     page = (site / "reference" / "configuration" / "index.html").read_text()
-    for key in KEYS:
+    for key in all_keys():
         assert f"<code>{key.name}</code>" in page, key
     for name, builtin in registered().items():
         assert f'builtin = "{name}"' in page.replace("&quot;", '"'), name

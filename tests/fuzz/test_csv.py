@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 
 from flexff.cosim import csv_text
 from flexff.cosim.csv_text import TimeTable, read_time_table
-from flexff.cosim.references import read_csv
 from flexff.fmu.errors import InputError
+from flexff.plant.paths import read_csv
 from tests.fuzz.harness import check, fast, fuzz_seconds, run_for, slow
 from tests.fuzz.mutations import ODD_TEXTS, garbage, mutated_bytes
 from tests.helpers import REPOSITORY

@@ -19,8 +19,9 @@ from onnx import helper as oh
 from flexff.controllers.features import feature_names
 from flexff.controllers.model_card import ModelCard, read_card
 from flexff.controllers.training_range import training_range_excess
-from flexff.cosim.references import Reference, build_reference
+from flexff.cosim.references import build_reference
 from flexff.fmu.errors import InputError
+from flexff.plant.paths import Reference
 from tests.fuzz.harness import check, fast, fuzz_seconds, run_for, slow
 from tests.fuzz.mutations import mutated_bytes, odd_values
 

@@ -12,7 +12,7 @@ from flexff import cli
 from flexff.cli import shared
 from flexff.cosim.config import parse_config
 from flexff.cosim.csv_text import read_time_table
-from flexff.cosim.metrics import tracking_metrics
+from flexff.cosim.metrics import named_axes, tracking_metrics
 from flexff.cosim.references import build_reference
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import reference_samples
@@ -29,6 +29,7 @@ from flexff.learning.ilc_filter import (
 from flexff.learning.ilc_loops import EXACT_ENCODERS
 from flexff.learning.loop import with_feedforward_table
 from flexff.plant.parameters import NOMINAL
+from flexff.plant.signals import AXES
 from flexff.plant.system import plant_system
 
 STEP = 1e-3
@@ -106,7 +107,7 @@ def test_the_noise_floor_and_the_noiseless_error_add_in_squares(hardware_iterati
         replace(f, parameters={**f.parameters, **EXACT_ENCODERS}) if f.builtin == "plant"
         else f for f in loop.fmus))
     noisy, clean = (tracking_metrics(simulate_config(with_feedforward_table(
-        c, out / "feedforward.csv"), progress=False)) for c in (loop, exact))
+        c, out / "feedforward.csv"), progress=False), named_axes(AXES)) for c in (loop, exact))
     for axis in ("x", "y"):
         assert clean[axis]["e2"] < 0.3 * floor[axis]
         assert np.hypot(clean[axis]["e2"], floor[axis]) == pytest.approx(noisy[axis]["e2"],
@@ -143,7 +144,7 @@ def test_the_table_fed_back_as_a_source_reproduces_the_best_trial(iteration):
     assert table.time.size == loop.steps + 1
     assert np.array_equal(table.time, np.arange(loop.steps + 1) * STEP)
     run = with_feedforward_table(loop, out / "feedforward.csv")
-    metrics = tracking_metrics(simulate_config(run, progress=False))
+    metrics = tracking_metrics(simulate_config(run, progress=False), named_axes(AXES))
     for axis in ("x", "y"):
         assert metrics[axis]["e2"] == pytest.approx(best[axis]["e2"], rel=1e-9)
 

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from flexff.cosim.metrics import tracking_metrics
+from flexff.cosim.metrics import named_axes, tracking_metrics
 from flexff.cosim.recording import Recording
 from flexff.learning.report import (
     NO_FLOOR,
@@ -28,12 +28,14 @@ from flexff.learning.report import (
     summarize,
     write_report,
 )
+from flexff.plant.signals import AXES
 
 STEP, N = 1e-3, 2000
 T = N * STEP
 PID_X, PID_Y = 2e-3, 1e-3          # amplitudes of PID alone's errors [m]
 RIGID_C = 1e-4                     # the rigid-body run's constant error [m], both axes
 FIVE = ["summary.json", "table.md", "paths.png", "errors.png", "forces.png"]
+XY = named_axes(AXES)  # the manipulator's tracked axes
 
 
 def run(error_x, error_y, ff_gain: float = 1.0, step: float = STEP, n: int = N) -> Recording:
@@ -65,7 +67,7 @@ def sine_norms(a: float) -> dict[str, float]:
 
 def test_summarize_against_closed_forms():
     recs = scenarios()
-    summary = summarize({name: tracking_metrics(rec) for name, rec in recs.items()})
+    summary = summarize({name: tracking_metrics(rec, XY) for name, rec in recs.items()})
     assert list(summary) == ["pid", "lstm", "tcn", "rigid-body"]
     for name, scale in (("pid", 1.0), ("lstm", 1 / 50), ("tcn", 1 / 8)):
         for axis, a in (("x", PID_X), ("y", PID_Y)):
@@ -112,7 +114,7 @@ def test_thesis_tables_in_si_units():
 
 
 def test_markdown_table_sim_and_hardware():
-    summary = summarize({name: tracking_metrics(rec) for name, rec in scenarios().items()})
+    summary = summarize({name: tracking_metrics(rec, XY) for name, rec in scenarios().items()})
     sim = markdown_table(summary, "sim")
     lines = sim.splitlines()
     assert "x 1e-4" in lines[0] and "e2 in m/√s" in lines[0]
@@ -215,7 +217,7 @@ def test_every_scenario_as_a_multiple_of_the_ilc_limit():
     """With a "limit" scenario (1/200 of PID alone's error), each scenario's e2 is also given
     as a multiple of the limit's: 200x for PID alone, 4x for the LSTM (1/50), 1x for itself."""
     recordings = {**scenarios(), "limit": sines(1 / 200)}
-    summary = summarize({name: tracking_metrics(rec) for name, rec in recordings.items()})
+    summary = summarize({name: tracking_metrics(rec, XY) for name, rec in recordings.items()})
     for axis in ("x", "y"):
         assert summary["pid"][axis]["e2_per_limit"] == pytest.approx(200, rel=1e-9)
         assert summary["lstm"][axis]["e2_per_limit"] == pytest.approx(4, rel=1e-9)
@@ -224,7 +226,7 @@ def test_every_scenario_as_a_multiple_of_the_ilc_limit():
     assert "| e2 x / ILC limit | 200x | 4x | 25x | " in table
     assert "| e2 y / ILC limit | 200x | 4x | 25x | " in table
     assert "ILC limit" in table.splitlines()[2] and "1x | – | – | – | – |" in table
-    without = summarize({name: tracking_metrics(rec) for name, rec in scenarios().items()})
+    without = summarize({name: tracking_metrics(rec, XY) for name, rec in scenarios().items()})
     assert "e2_per_limit" not in without["lstm"]["x"]
     assert "ILC limit" not in markdown_table(without, "sim")
 
@@ -233,7 +235,7 @@ def test_the_noise_floor_goes_into_the_summary_and_under_the_table(tmp_path):
     """Given the floor (half the limit's e2 on each axis), summary.json keeps it and table.md
     says it with the limit as a multiple of it; without a limit the multiple is left out."""
     recordings = {**scenarios(), "limit": sines(1 / 200)}
-    limit = tracking_metrics(recordings["limit"])
+    limit = tracking_metrics(recordings["limit"], XY)
     floor = {axis: limit[axis]["e2"] / 2 for axis in ("x", "y")}
     content = write_report(recordings, "hardware", tmp_path, noise_floor=floor)
     assert json.loads((tmp_path / "summary.json").read_text())["noise_floor"] == floor
@@ -265,7 +267,7 @@ def test_each_scenarios_own_share_of_e2_over_the_floor(tmp_path):
     sqrt(e2^2 - floor^2): the limit's sqrt(3)/2 of its e2; summary.json and table.md give it
     beside e2 and its ratio, each own-share column headed with its floor."""
     recordings = {**scenarios(), "limit": sines(1 / 200)}
-    limit = tracking_metrics(recordings["limit"])
+    limit = tracking_metrics(recordings["limit"], XY)
     floor = {axis: limit[axis]["e2"] / 2 for axis in ("x", "y")}
     write_report(recordings, "hardware", tmp_path, noise_floor=floor)
     written = json.loads((tmp_path / "summary.json").read_text())

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from flexff.cosim.memory import MemoryNeeded, available_memory
-from flexff.cosim.references import (
+from flexff.plant.paths import (
     Chain,
     Circle,
     Hold,
