@@ -94,7 +94,7 @@ def _sweep_values(text: str) -> tuple[str, list[Any]]:
 def _print_result(name: object, metrics: dict[str, Any], output: object) -> None:
     """One line per run, and a second where its learned feedforward extrapolates."""
     from flexff.cosim.metrics import metrics_axes
-    from flexff.cosim.plugins import metrics_warnings
+    from flexff.cosim.run import run_warnings
 
     tracking = ""
     axes = metrics_axes(metrics)
@@ -113,7 +113,7 @@ def _print_result(name: object, metrics: dict[str, Any], output: object) -> None
               f"{timing['period_us']:.0f} us period, {timing['overruns']} overruns")
         for warning in (timing.get("process") or {}).get("warnings", []):
             print(f"  {name}: warning: {warning}")
-    for warning in metrics_warnings(metrics):
+    for warning in run_warnings(metrics):
         print(f"  {name}: {warning}")
 
 

@@ -153,6 +153,9 @@ def metrics_axes(metrics: Mapping[str, Any]) -> list[str]:
     return [a for a, m in metrics.items() if isinstance(m, Mapping) and "e2" in m]
 
 
+SUMMARY = ("wall_s", "real_time_factor", "realtime")  # summary_metrics' entries beside the axes
+
+
 def summary_metrics(tracking: Mapping[str, Any], duration: float, wall_s: float,
                     timing: Any) -> dict[str, Any]:
     """The content of metrics.json: tracking metrics (where the run records a reference and a

@@ -88,7 +88,6 @@ def short_names() -> tuple[str, ...]:
     return tuple(_SHORT_NAMES)
 
 
-def metrics_warnings(metrics: Mapping[str, Any]) -> list[str]:
-    """The lines the registered metrics warnings make of a run's metrics.json content."""
+def metrics_warnings() -> tuple[MetricsWarning, ...]:
     loaded()
-    return [line for warning in _METRICS_WARNINGS if (line := warning(metrics))]
+    return tuple(_METRICS_WARNINGS)

@@ -34,14 +34,16 @@ from flexff.cosim.handover import Worker
 from flexff.cosim.master import CosimError, Master, Streamed
 from flexff.cosim.memory import MemoryNeeded, check_memory
 from flexff.cosim.metrics import (
+    SUMMARY,
     TrackedAxis,
     Tracking,
     machine_axes,
+    metrics_axes,
     named_axes,
     summary_metrics,
 )
 from flexff.cosim.plots import RunPlots, plot_tet
-from flexff.cosim.plugins import short_names
+from flexff.cosim.plugins import metrics_warnings, short_names
 from flexff.cosim.realtime import realtime_process
 from flexff.cosim.recording import (
     PARQUET_NAME,
@@ -136,19 +138,19 @@ def _wanted(scenario: Scenario, master: Master, axes: Sequence[TrackedAxis]) -> 
             master.resolve(name)
         except ValueError as error:
             raise ConfigError(scenario.config.origin, "record.signals", str(error)) from None
-    tracked = sorted({n for a in axes for n in a.reference.names | a.position.names})
+    tracked = sorted({n for a in axes for n in (*a.reference.names, *a.position.names,
+                                                *(e for e in (a.feedforward, a.effort) if e))})
     return [*wanted, *(n for n in dict.fromkeys((*tracked, *_machine_signals(scenario.config)))
                        if n not in wanted and _known(master, n))]
 
 
 def _machine_signals(config: RunConfig) -> tuple[str, ...]:
-    """What a dataset, ILC, the evaluation and the plots read of a run of a loop with a
-    [machine]: each axis's reference derivatives, measured position's signals, feedforward
-    input and effort."""
+    """What a dataset, ILC and the evaluation read of a run of a loop with a [machine]: each
+    axis's reference derivatives, measured position's signals and effort."""
     if config.machine is None:
         return ()
     return tuple(n for a in config.machine.axes
-                 for n in (*a.derivatives, *sorted(a.measured.names), a.feedforward, a.effort))
+                 for n in (*a.derivatives, *sorted(a.measured.names), a.effort))
 
 
 def simulate(scenario: Scenario, progress: bool | None = None, pacing: Pacing | None = None,
@@ -198,11 +200,14 @@ class RunSink:
 
 def tracked_axes(scenario: Scenario, master: Master) -> tuple[TrackedAxis, ...]:
     """The axes a run's metrics and plots track: its machine description's (a short form's
-    included); without one, each reference position `<axis>_ref` (of its [reference], or a
-    [[source]] signal of that name) whose `<axis>` the run has (named_axes)."""
+    included; each feedforward input as the signal that feeds it, for the plots); without
+    one, each reference position `<axis>_ref` (of its [reference], or a [[source]] signal of
+    that name) whose `<axis>` the run has (named_axes)."""
     config = scenario.config
     if config.machine is not None:
-        return machine_axes(config.machine)
+        fed = {f"{k.consumer}.{k.input}": k.from_name for k in scenario.links if not k.affine}
+        return tuple(dataclasses.replace(a, feedforward=fed.get(a.feedforward or ""))
+                     for a in machine_axes(config.machine))
     reference = sampled_reference(config)
     signals = {} if reference is None else reference.signals()
     positions = (*(() if reference is None else reference.positions),
@@ -243,6 +248,15 @@ def builtin_metrics(scenario: Scenario) -> dict[str, Any]:
             for key, value in hook(f, scenario.reference(), scenario.step).items():
                 metrics.setdefault(key, value)
     return metrics
+
+
+def run_warnings(metrics: Mapping[str, Any]) -> list[str]:
+    """The lines the machine packages' metrics warnings (cosim.plugins) make of a run's
+    metrics; none where they hold no entry of a built-in (builtin_metrics), whose packages a
+    plain run does not load."""
+    if all(k in SUMMARY for k in set(metrics) - set(metrics_axes(metrics))):
+        return []
+    return [line for warning in metrics_warnings() if (line := warning(metrics))]
 
 
 def _write_json(path: Path, data: dict[str, Any]) -> None:

@@ -22,9 +22,8 @@ from typing import Any
 import numpy as np
 
 from flexff.controllers.features import feature_names
-from flexff.cosim.plugins import metrics_warnings
 from flexff.cosim.recording import Recording, load_recording
-from flexff.cosim.run import run_config
+from flexff.cosim.run import run_config, run_warnings
 from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.errors import InputError
 from flexff.learning.collect import collect
@@ -282,7 +281,7 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         recordings[name] = load_recording(folder)
         say(f"{name}: e2 = ({metrics['x']['e2']:.3g}, {metrics['y']['e2']:.3g}) m/sqrt(s), "
             f"real-time factor {metrics['real_time_factor']:.0f}")
-        for warning in metrics_warnings(metrics):
+        for warning in run_warnings(metrics):
             say(f"{name}: {warning}")
     held_out = _held_out(env, Path(data), feedforwards, files, loop, out, say, progress)
     return write_report(recordings, env, out, model_training, limit[NOISE_FLOOR], held_out)

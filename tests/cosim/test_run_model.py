@@ -103,13 +103,13 @@ def test_a_reference_is_sampled_once_per_process(monkeypatch):
     """Two runs on the same reference share one sampling (read-only arrays); another step
     samples anew."""
     calls = []
-    built = flexff.cosim.references._built
+    registered = flexff.cosim.references._registered
 
-    def counted(*args):
-        calls.append(args)
-        return built(*args)
+    def counted(kind):
+        found = registered(kind)
+        return replace(found, build=lambda *args: calls.append(args) or found.build(*args))
 
-    monkeypatch.setattr(flexff.cosim.references, "_built", counted)
+    monkeypatch.setattr(flexff.cosim.references, "_registered", counted)
     monkeypatch.setattr(flexff.cosim.references, "_SAMPLED", type(
         flexff.cosim.references._SAMPLED)())
     first = build_reference("thesis-eval", {}, 1e-3)
