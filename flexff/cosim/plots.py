@@ -1,20 +1,17 @@
 """Plots of a run, as PNG files (matplotlib's Agg backend, no display needed).
 
-  path.png    the path of the positions against the reference's, for two tracked axes
+  path.png    the positions against the reference, one tracked axis against the other of two
   error.png   tracking error e = reference - position over time, per tracked axis
-  forces.png  feedback, feedforward and total effort over time, per tracked axis of a loop
-              (its description names the feedforward input and the commanded effort:
-              feedback = effort - feedforward)
-  signals.png every recorded float signal over time, for a run that tracks no axis (at most
-              MAX_PANELS of them)
+  forces.png  per tracked axis of a loop: its feedforward, its effort and their difference,
+              the feedback
+  signals.png every recorded float signal (at most MAX_PANELS), for a run tracking no axis
   tet.png     a paced run's task execution time per step, each FMU's share, the period and
               the overruns (drawn from a bounded trace, cosim.timing.TetTrace)
 
 The tracked axes are the run's (cosim.metrics.TrackedAxis); positions in m are drawn in mm.
-A run feeds RunPlots chunk by chunk while it runs; long series are drawn decimated
-(cosim.decimate: min and max per pixel column, so a one-sample spike stays visible), so a plot
-takes bounded time and memory whatever the run's length. matplotlib loads only when a plot is
-drawn.
+A run feeds RunPlots chunk by chunk; long series are drawn decimated (cosim.decimate: min and
+max per pixel column, so a one-sample spike stays visible), in bounded time and memory.
+matplotlib loads only when a plot is drawn.
 """
 
 from __future__ import annotations
