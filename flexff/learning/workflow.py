@@ -21,6 +21,7 @@ from flexff.learning.excitation import CLASSES
 if TYPE_CHECKING:  # numpy, scipy and torch load in the step that needs them
     from flexff.cosim.schema import RunConfig
     from flexff.learning.collect import CollectionReport
+    from flexff.learning.dataset import Dataset
     from flexff.learning.identify import Identification
     from flexff.learning.linear_prior import LinearModel
     from flexff.learning.machine_dataset import MachineDataset
@@ -68,6 +69,23 @@ def collect_data(out: str | Path, set_name: str | None = None, loop: RunConfig |
         raise InputError("data collect needs --set NAME, or --config LOOP.toml with a [machine]")
     return run_collection(set_name, out, workers, scheduler, progress=progress, config=loop,
                           draws=draws)
+
+
+def import_data(files: Sequence[str | Path], out: str | Path, machine: str | Path | None = None,
+                rate_hz: float | None = None, test: Sequence[str] | None = None
+                ) -> Dataset | MachineDataset:
+    """Import log `files` into the new dataset folder `out`, resampled to `rate_hz` (default:
+    the logs' own), the logs named in `test` (default: the last one) forming the test split: a
+    machine's through the [machine.log] map of the description file `machine`
+    (learning.machine_logs), without one the manipulator's columns (learning.logs)."""
+    if machine is None:
+        from flexff.learning.logs import import_logs
+
+        return import_logs(files, out, rate_hz, test)
+    from flexff.cosim.machine import load_machine
+    from flexff.learning.machine_logs import import_machine_logs
+
+    return import_machine_logs(files, out, load_machine(machine), rate_hz, test)
 
 
 def identify_prior(data: str | Path, out: str | Path, env: str = "hardware",
