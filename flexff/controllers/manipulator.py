@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from flexff.controllers.plant_options import checked_plant_parameters, plant_parameter_names
 from flexff.cosim.builtins import Option, OptionError, register_builtin
+from flexff.cosim.inverse_models import register_inverse_model
 from flexff.cosim.plugins import (
     register_short_form,
     register_short_names,
@@ -57,7 +58,7 @@ SHORT_NAMES = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, FO
 def register() -> None:
     """Register the manipulator's built-ins, short form, reference kinds, workspace and
     signals (cosim.builtins, cosim.plugins)."""
-    from flexff.controllers.manipulator_machine import manipulator_description
+    from flexff.controllers.manipulator_machine import ILC_MODEL, manipulator_description
     from flexff.controllers.short_form import SHORT_FORM_TABLES, expand
     from flexff.plant.references import thesis_evaluation, thesis_hardware_evaluation
 
@@ -85,6 +86,8 @@ def register() -> None:
     register_reference_kind(ReferenceKind(
         "thesis-hardware-eval", lambda _, step: thesis_hardware_evaluation(step)))
     register_workspace_check(_nominal_workspace)
+    register_inverse_model(ILC_MODEL, "flexff.controllers.ilc_model:plant_inverse_model",
+                           "the loop's plant's rigid-body inverse dynamics")
     register_short_names(SHORT_NAMES)
 
 

@@ -7,6 +7,8 @@ the entry points (group `flexff.builtins`) through which they register it all.
                     cosim.references.register_reference_kind)
   workspace checks  where every reference must stay (refusing a point with ValueError)
   short names       recorded signals a run keeps under their short names too (cosim.run)
+  inverse models    models for ILC's learning filter that a description names
+                    (cosim.inverse_models.register_inverse_model)
 
 Each entry point names a function without arguments that calls the `register_*` functions;
 they are loaded once, the first time anything registered is looked up.

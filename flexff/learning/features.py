@@ -25,12 +25,7 @@ import casadi as ca
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from flexff.controllers.features import (
-    FEATURE_SETS,
-    evaluate_samples,
-    motion_features,
-    nominal_model,
-)
+from flexff.controllers.features import FEATURE_SETS, motion_features, nominal_model
 from flexff.fmu.errors import InputError
 from flexff.learning.dataset import (
     CURRENT_SIGNALS,
@@ -39,6 +34,7 @@ from flexff.learning.dataset import (
     DatasetError,
     Trajectory,
 )
+from flexff.learning.samples import evaluate_samples
 from flexff.plant.kinematics import SHOULDER_INDEX
 
 # a model's labels (controllers.model_card.OUTPUTS): the force the controller applied to the

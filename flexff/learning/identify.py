@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from flexff.controllers.features import evaluate_samples, motion_columns, nominal_model
+from flexff.controllers.features import motion_columns, nominal_model
 from flexff.controllers.identified import (
     FRICTION_FIELDS,
     RIGID_BODY_FIELDS,
@@ -41,6 +41,7 @@ from flexff.learning.features import (
     filter_labels,
     prepare_trajectory,
 )
+from flexff.learning.samples import evaluate_samples
 from flexff.plant.parameters import NOMINAL
 
 STRUCTURE_SAMPLES = 500  # random workspace samples that reveal the base parameters

@@ -22,7 +22,6 @@ from typing import Any
 
 import numpy as np
 
-from flexff.controllers.features import evaluate_samples
 from flexff.cosim.machine import Machine
 from flexff.fmu.errors import InputError
 from flexff.learning.feature_spec import (
@@ -33,6 +32,7 @@ from flexff.learning.feature_spec import (
 from flexff.learning.features import differentiate, lowpass
 from flexff.learning.linear_model import EDGE_PERIODS
 from flexff.learning.linear_prior import LinearModel
+from flexff.learning.samples import evaluate_samples
 
 ENERGY_SHARE = 0.99  # of the references' velocity energy under the band's edge
 CUTOFF_PER_BAND = 4.0  # the default corner: this many times the band's edge (identification

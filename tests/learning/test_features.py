@@ -7,7 +7,6 @@ from flexff.controllers.features import (
     DIRECTION_WIDTHS,
     FEATURE_SETS,
     MAP_CHUNK,
-    evaluate_samples,
     feature_names,
     feature_units,
     motion_columns,
@@ -25,6 +24,7 @@ from flexff.learning.features import (
     prepare_trajectory,
     quantize_encoders,
 )
+from flexff.learning.samples import evaluate_samples
 from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.synthetic import skew_sine_circle, synthetic_trajectory
 from flexff.plant.kinematics import COORDINATE_NAMES, SHOULDER_INDEX

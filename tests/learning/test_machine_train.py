@@ -6,7 +6,6 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from flexff.controllers.features import evaluate_samples
 from flexff.controllers.machine_feedforward import ahead, learned_machine_feedforward_system
 from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import parse_machine
@@ -20,6 +19,7 @@ from flexff.learning.machine_features import MachineFeatures
 from flexff.learning.machine_train import fit_machine
 from flexff.learning.presets import make_config
 from flexff.learning.run_folder import load_run
+from flexff.learning.samples import evaluate_samples
 from tests.runners import run_fmu
 
 RATE = 1000.0
