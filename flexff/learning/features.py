@@ -69,9 +69,9 @@ class FeatureConfig:
     edge_periods: float = 0.0  # filter corner periods at each end of a trajectory left out
     # of every loss (`edge_samples`); 0 as in the thesis
     # the rigid-body model's forces pass the labels' filter (`filter_labels`) before they are
-    # compared with the labels: the pgnn's prior in its residual labels (learning.train), the
-    # regressor in the identification (learning.identify), a black-box network's force inputs
-    # in training (learning.train.with_force_inputs)
+    # compared with the labels: the pgnn's prior in its residual labels
+    # (learning.manipulator_data), the regressor in the identification (learning.identify), a
+    # black-box network's force inputs in training (learning.manipulator_data.with_force_inputs)
     filtered_prior: bool = True
     # the rigid-body model identified on the training split (learning.identify, without the
     # training noise) gives its force along the motion as two more inputs

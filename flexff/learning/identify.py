@@ -511,7 +511,7 @@ def identify_samples(features: list[np.ndarray], forces: list[np.ndarray],
     """Identify on trajectories prepared with `config` at `rate_hz`: features (n, n_features)
     of its feature set and forces (n, 2) in SI units, the first and last edge samples of each
     (config.edge_samples) left out, at most MAX_SAMPLES of them, evenly spaced (what
-    `identify` and the physics-guided model's prior in learning.train share).
+    `identify` and the physics-guided model's prior in learning.manipulator_data share).
 
     The regressor passes through the labels' filter (learning.features.filter_labels),
     trajectory by trajectory, before the samples are taken (unless `config.filtered_prior`

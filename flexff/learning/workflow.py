@@ -163,20 +163,22 @@ def _train_machine(model: str, data: str | Path, out: str | Path, preset: str, s
                    resume: bool, force: bool, checkpoint_every: int | None, device: str,
                    progress: bool, overrides: dict[str, Any]) -> dict[str, Any]:
     """train_model on a machine's dataset (see there)."""
+    from flexff.learning.description_data import DescriptionData
     from flexff.learning.machine_dataset import load_machine_dataset
     from flexff.learning.machine_evaluate import learned_features
     from flexff.learning.machine_identify import identify_dataset
-    from flexff.learning.machine_train import fit_machine
     from flexff.learning.presets import make_config
+    from flexff.learning.train import fit
 
     dataset = load_machine_dataset(data)
     config = make_config(model, preset, seed=seed, device=device, **overrides)
     identified = identify_dataset(dataset)
-    return fit_machine(config, dataset.description, dataset.sample_rate_hz,
-                       dataset.trajectories, dataset.digest, Path(out),
-                       learned_features(identified), progress, resume=resume, force=force,
-                       checkpoint_every=checkpoint_every,
-                       prior=identified if model == "pgnn" else None)
+    source = DescriptionData.of(config, dataset.description, dataset.sample_rate_hz,
+                                dataset.trajectories, dataset.digest,
+                                learned_features(identified),
+                                identified if model == "pgnn" else None)
+    return fit(config, source, Path(out), progress, resume=resume, force=force,
+               checkpoint_every=checkpoint_every)
 
 
 def evaluate_any(out: str | Path, env: str = "sim", loop: RunConfig | None = None,
