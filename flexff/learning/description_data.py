@@ -127,8 +127,8 @@ class DescriptionData:
     def prepare(self, rng: np.random.Generator) -> TrainingData:
         """Features and efforts of both splits at the model rate; the prior's efforts and,
         where the labels are its residual, the resting samples."""
-        config, machine, rate_hz, features = self.config, self.machine, self.rate_hz, \
-            self.features
+        config, machine, rate_hz = self.config, self.machine, self.rate_hz
+        features = self.features
         assert features.model_rate_hz is not None and features.cutoff_hz is not None
         train_x, train_f = _prepared(self.train_set, rate_hz, machine, features, rng)
         test_x, test_f = _prepared(self.test_set, rate_hz, machine, features, None)

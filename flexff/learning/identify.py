@@ -35,13 +35,9 @@ from flexff.controllers.identified import (
 from flexff.fmu.errors import InputError
 from flexff.learning.batches import TRAIN, interior
 from flexff.learning.dataset import Dataset, load_dataset
-from flexff.learning.features import (
-    FeatureConfig,
-    decimation,
-    filter_labels,
-    prepare_trajectory,
-)
+from flexff.learning.features import FeatureConfig, filter_labels, prepare_trajectory
 from flexff.learning.samples import evaluate_samples
+from flexff.learning.signal_processing import decimation
 from flexff.plant.parameters import NOMINAL
 
 STRUCTURE_SAMPLES = 500  # random workspace samples that reveal the base parameters

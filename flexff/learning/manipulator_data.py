@@ -15,17 +15,12 @@ import numpy as np
 
 from flexff.controllers.features import FORCE_INPUTS, feature_names
 from flexff.learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
-from flexff.learning.features import (
-    LABELS,
-    FeatureConfig,
-    decimation,
-    filter_labels,
-    prepare_trajectory,
-)
+from flexff.learning.features import LABELS, FeatureConfig, filter_labels, prepare_trajectory
 from flexff.learning.identify import identify_samples
 from flexff.learning.models import uses_prior
 from flexff.learning.presets import TrainConfig
 from flexff.learning.rigid import rigid_forces
+from flexff.learning.signal_processing import decimation
 from flexff.learning.training_data import TrainingData
 
 MSE_UNITS = ("MSE of min-max scaled labels, Fx, Fy or i1..i3 (run.json label_names; the "

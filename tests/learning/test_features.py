@@ -17,15 +17,13 @@ from flexff.controllers.features import (
 from flexff.learning.dataset import REFERENCE_SIGNALS
 from flexff.learning.features import (
     FeatureConfig,
-    decimation,
-    differentiate,
     encoder_positions,
-    lowpass,
     prepare_trajectory,
     quantize_encoders,
 )
 from flexff.learning.samples import evaluate_samples
 from flexff.learning.scaling import MinMaxScaler
+from flexff.learning.signal_processing import decimation, differentiate, lowpass
 from flexff.learning.synthetic import skew_sine_circle, synthetic_trajectory
 from flexff.plant.kinematics import COORDINATE_NAMES, SHOULDER_INDEX
 

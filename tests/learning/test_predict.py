@@ -12,13 +12,13 @@ from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import machine_table, parse_machine
 from flexff.fmu.errors import InputError
 from flexff.learning.description_data import DescriptionData
-from flexff.learning.features import lowpass
 from flexff.learning.linear_model import write_linear_model
 from flexff.learning.machine_dataset import load_machine_dataset, write_machine_dataset
 from flexff.learning.machine_features import ERROR, MachineFeatures, lagged
 from flexff.learning.machine_identify import dataset_features, identify_dataset
 from flexff.learning.predict import predict_logs, write_predictions
 from flexff.learning.presets import make_config
+from flexff.learning.signal_processing import lowpass
 from flexff.learning.train import fit
 from tests.learning.test_description_data import RATE, machine, trajectory
 

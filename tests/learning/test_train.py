@@ -16,12 +16,13 @@ from flexff.learning import synthetic
 from flexff.learning.batches import PAD, TRAIN, VALIDATION, window_roles
 from flexff.learning.dataset import DatasetError, load_dataset
 from flexff.learning.deploy import predict
-from flexff.learning.features import FeatureConfig, decimation, prepare_trajectory
+from flexff.learning.features import FeatureConfig, prepare_trajectory
 from flexff.learning.identify import identify_samples
 from flexff.learning.manipulator_data import prior_labels
 from flexff.learning.presets import make_config
 from flexff.learning.rigid import rigid_forces
 from flexff.learning.run_folder import load_run
+from flexff.learning.signal_processing import decimation
 from flexff.learning.synthetic import motion_trajectory, skew_sine_circle, synthetic_dataset
 from flexff.learning.threads import cpu_threads, torch_threads
 from flexff.learning.train import learning_rate, train
