@@ -6,7 +6,6 @@ import pytest
 from flexff.controllers.features import (
     DIRECTION_WIDTHS,
     FEATURE_SETS,
-    MAP_CHUNK,
     feature_names,
     feature_units,
     motion_columns,
@@ -21,7 +20,7 @@ from flexff.learning.features import (
     prepare_trajectory,
     quantize_encoders,
 )
-from flexff.learning.samples import evaluate_samples
+from flexff.learning.samples import MAP_CHUNK, evaluate_samples
 from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.signal_processing import decimation, differentiate, lowpass
 from flexff.learning.synthetic import skew_sine_circle, synthetic_trajectory
