@@ -40,14 +40,10 @@ def _data_collect(args: argparse.Namespace) -> int:
 
 
 def _data_import(args: argparse.Namespace) -> int:
-    from flexff.cosim.machine import load_machine
-    from flexff.learning.logs import import_logs
-    from flexff.learning.machine_logs import import_machine_logs
+    from flexff.learning.workflow import import_data
 
     test = None if args.test is None else [n.strip() for n in args.test.split(",") if n.strip()]
-    dataset = (import_logs(args.files, args.output, args.rate, test) if args.machine is None
-               else import_machine_logs(args.files, args.output, load_machine(args.machine),
-                                        args.rate, test))
+    dataset = import_data(args.files, args.output, args.machine, args.rate, test)
     for t in dataset.trajectories:
         print(f"{t.name} ({t.split}): {len(t)} samples; derived, not measured: "
               f"{', '.join(t.derived) or 'nothing'}")

@@ -16,7 +16,7 @@ if TYPE_CHECKING:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from flexff.cosim.batch import run_batch, sweep
+    from flexff.cosim.batch import run_batch, sweep, sweep_axes
     from flexff.cosim.config import with_isolation, with_strict
     from flexff.cosim.executor import check_workers
     from flexff.cosim.run import load_run_config, output_folder, run_config
@@ -29,13 +29,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.sweep:
         if len(configs) != 1:
             raise InputError("--sweep takes exactly one configuration")
-        axes: dict[str, list[Any]] = {}
-        for text in args.sweep:
-            key, values = _sweep_values(text)
-            if key in axes:
-                raise InputError(f"--sweep {key} is given twice: list its values once")
-            axes[key] = values
-        configs = sweep(configs[0], axes)
+        configs = sweep(configs[0], sweep_axes(args.sweep))
     if args.strict:  # its refusals say what the warnings would have said
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", DescriptionWarning)
@@ -75,20 +69,6 @@ def _pacing(args: argparse.Namespace) -> Pacing | None:
 
     return Pacing(rt_factor=1.0 if args.rt_factor is None else args.rt_factor,
                   max_overruns=args.max_overruns or 0, grace=args.grace or 0.0)
-
-
-def _sweep_values(text: str) -> tuple[str, list[Any]]:
-    """`table.key=v1,v2,...` -> (table.key, [values]), the values read as TOML."""
-    import tomllib
-
-    key, sep, values = text.partition("=")
-    if not sep or not values:
-        raise InputError(f"--sweep expects TABLE.KEY=V1,V2,..., got {text!r}")
-    try:
-        return key.strip(), tomllib.loads(f"v = [{values}]")["v"]
-    except tomllib.TOMLDecodeError:
-        raise InputError(f"--sweep values must be TOML values (strings quoted): {values!r}") \
-            from None
 
 
 def _print_result(name: object, metrics: dict[str, Any], output: object) -> None:

@@ -18,7 +18,7 @@ TRAJECTORY_SETS = ("sim", "hardware")  # learning.dataset.SETS, named here to ke
 DEVICES = ("auto", "cpu", "cuda")  # learning.devices', named here to keep torch unloaded
 EXCITATION = ("moves", "bang-bang", "spline", "multisine")  # learning.excitation's CLASSES,
 EVERY_EXCITATION = (*EXCITATION, "sine", "random", "rest", "solo")  # and EVERY_CLASS
-ITERATIONS, CUTOFF_HZ, GAIN = 10, 20.0, 1.0  # learning.ilc's defaults (keeps scipy unloaded)
+ITERATIONS, CUTOFF_SHARE, GAIN = 10, 0.15, 1.0  # learning.ilc's defaults (keeps scipy unloaded)
 
 
 def output_file(path: str) -> None:
@@ -51,9 +51,9 @@ def ilc_options(command: argparse.ArgumentParser, prefix: str) -> None:
                               f"iterations, else {ITERATIONS})")
     command.add_argument(f"{prefix}cutoff", type=float, metavar="HZ",
                          help=f"ILC: corner of the learning filter's zero-phase low-pass Q "
-                              f"(default: [machine.ilc] cutoff_hz, else {CUTOFF_HZ:g} on "
-                              f"the manipulator, 0.15 times the rate on a loop with a "
-                              f"[machine])")
+                              f"(default: [machine.ilc] cutoff_hz, else {CUTOFF_SHARE:g} "
+                              f"times the loop's rate; the manipulator's description says "
+                              f"20 Hz)")
     command.add_argument(f"{prefix}gain", type=float, metavar="G",
                          help=f"ILC: learning gain on the model's correction (default: "
                               f"[machine.ilc] gain, else {GAIN:g}; lower it where the "

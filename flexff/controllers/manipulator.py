@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from flexff.controllers.plant_options import checked_plant_parameters, plant_parameter_names
 from flexff.cosim.builtins import Option, OptionError, register_builtin
+from flexff.cosim.inverse_models import register_inverse_model
 from flexff.cosim.plugins import (
     register_metrics_warning,
     register_short_form,
@@ -58,7 +59,7 @@ SHORT_NAMES = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, FO
 def register() -> None:
     """Register the manipulator's built-ins, short form, reference kinds, signals and
     metrics warning (cosim.builtins, cosim.references, cosim.plugins)."""
-    from flexff.controllers.manipulator_machine import manipulator_description
+    from flexff.controllers.manipulator_machine import ILC_MODEL, manipulator_description
     from flexff.controllers.short_form import SHORT_FORM_TABLES, expand
     from flexff.plant.reference_kinds import plane_kinds
     from flexff.plant.references import thesis_evaluation, thesis_hardware_evaluation
@@ -88,6 +89,8 @@ def register() -> None:
         "thesis-hardware-eval", lambda _, step: thesis_hardware_evaluation(step)))
     for kind in plane_kinds():
         register_reference_kind(kind)
+    register_inverse_model(ILC_MODEL, "flexff.controllers.ilc_model:plant_inverse_model",
+                           "the loop's plant's rigid-body inverse dynamics")
     register_short_names(SHORT_NAMES)
     register_metrics_warning(range_warning)
 

@@ -7,7 +7,8 @@ position the plant's; its feedforward input the controller's F<axis>_ff and its 
 force the controller commands, F<axis> (feedback plus feedforward: the learned models' labels).
 The excitation limits are the square inside the workspace disc and the thesis's fastest
 training circle (radius R_MAX, one turn a second); the physics prior the default terms and the
-flexures' stiffness. `flexff config expand` writes it out.
+flexures' stiffness; ILC learns through the plant's own rigid-body model (controllers.ilc_model),
+reseeding its noise each trial. `flexff config expand` writes it out.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ from flexff.plant.signals import ENCODERS, FEEDFORWARD_FORCES, FORCES, TRUE_POSI
 PLANT, CONTROLLER = "plant", "controller"  # the short form's instance names
 CIRCLE_RADIUS = 0.045  # m: learning.trajectories.R_MAX, the largest training circle
 CIRCLE_HZ = 1.0  # the fastest training circle's turns per second (learning.trajectories)
+ILC_MODEL = "manipulator"  # the registered inverse model of ILC's learning filter
+ILC_CUTOFF_HZ = 20.0  # Q's corner: half the hardware tool mode's frequency
 
 
 def manipulator_description() -> dict[str, Any]:
@@ -42,4 +45,8 @@ def manipulator_description() -> dict[str, Any]:
     # the default terms (without it a linear model explains almost none of the commanded force)
     prior = {"terms": list(DEFAULT_PRIOR_TERMS), "extra": {axis: {"stiffness": axis}
                                                           for axis in "xy"}}
-    return {"name": "manipulator", "axis": axes, "prior": prior}
+    # ILC's learning filter on the plant's own rigid-body model, its noise drawn anew each
+    # trial; the noise floor against the plant measuring exactly
+    ilc = {"model": ILC_MODEL, "cutoff_hz": ILC_CUTOFF_HZ, "seed": f"{PLANT}.seed"}
+    exact = {f"{PLANT}.noise_std": 0.0, f"{PLANT}.encoder_quantization": 0.0}
+    return {"name": "manipulator", "axis": axes, "prior": prior, "ilc": ilc, "exact": exact}

@@ -93,6 +93,30 @@ def _run_job(job: tuple[RunConfig | str | Path, Path, bool]) -> BatchResult:
     return _run_one(*job)
 
 
+def sweep_axes(texts: Sequence[str]) -> dict[str, list[Any]]:
+    """The sweep's axes from `TABLE.KEY=V1,V2,...` texts (`flexff run --sweep`), the values
+    read as TOML; a key given twice is an error.
+
+    >>> sweep_axes(["plant.m_up1=0.1,0.2", 'plant.variant="nominal"'])
+    {'plant.m_up1': [0.1, 0.2], 'plant.variant': ['nominal']}"""
+    import tomllib
+
+    axes: dict[str, list[Any]] = {}
+    for text in texts:
+        key, sep, values = text.partition("=")
+        if not sep or not values:
+            raise InputError(f"--sweep expects TABLE.KEY=V1,V2,..., got {text!r}")
+        try:
+            parsed = tomllib.loads(f"v = [{values}]")["v"]
+        except tomllib.TOMLDecodeError:
+            raise InputError(f"--sweep values must be TOML values (strings quoted): "
+                             f"{values!r}") from None
+        if key.strip() in axes:
+            raise InputError(f"--sweep {key.strip()} is given twice: list its values once")
+        axes[key.strip()] = parsed
+    return axes
+
+
 def sweep(path: str | Path, axes: Mapping[str, Sequence[Any]]) -> list[RunConfig]:
     """Copies of the run configuration at `path` (TOML or SSP) with each key of `axes`
     (dotted: `plant.m_up1`, `fmu.vdp.parameters.mu`, `run.step`; a table in a list by its

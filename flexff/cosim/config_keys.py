@@ -190,6 +190,13 @@ KEYS: tuple[Key, ...] = (
     Key("machine.ilc", "gain", "number", "1", "",
         "The learning gain on the model's correction P^-1 e; below 1 learns more slowly but "
         "tolerates a worse model (--gain, --ilc-gain)."),
+    Key("machine.ilc", "model", "string", "identified on trial 0", "",
+        "The learning filter's inverse model: a name a machine package registers "
+        "(the manipulator's \"manipulator\": its plant's rigid-body model); by default the "
+        "prior's linear model identified on PID alone."),
+    Key("machine.ilc", "seed", "string", "none", "",
+        "\"instance.name\": the option or parameter that seeds the loop's noise, set anew "
+        "each trial so that the iteration learns what repeats, not one noise sequence."),
     Key("machine.learning", "cutoff_hz", "number",
         "4x the band of 99 % of the references' velocity energy, at most 5 % of the rate", "Hz",
         "The labels' zero-phase Butterworth low-pass corner (the measured motion's: 8x it)."),

@@ -50,7 +50,7 @@ KEYS = {
              "range", "velocity", "acceleration", "jerk"),
     "prior": ("terms", "extra", "coulomb_width"),
     "log": ("time", "scalars", "columns"),
-    "ilc": ("iterations", "cutoff_hz", "gain"),
+    "ilc": ("iterations", "cutoff_hz", "gain", "model", "seed"),
     "learning": ("cutoff_hz", "filter_order", "lead_s", "model_rate_hz"),
 }
 
@@ -169,18 +169,21 @@ class LogMap:
 @dataclass(frozen=True)
 class IlcSettings:
     """Iterative learning control on this machine's loop (learning.ilc): learning trials after
-    PID alone, the corner of its zero-phase low-pass Q [Hz] and the gain on the model's
-    correction; None: ILC's own default."""
+    PID alone, the corner of its zero-phase low-pass Q [Hz], the gain on the model's
+    correction, the learning filter's model (a name registered by a machine package,
+    cosim.inverse_models) and the "instance.name" option or parameter that seeds the loop's
+    noise, drawn anew each trial; None: ILC's own default (the model identified on trial 0,
+    the noise as the loop has it)."""
 
     iterations: int | None = None
     cutoff_hz: float | None = None
     gain: float | None = None
+    model: str | None = None
+    seed: str | None = None
 
-    def table(self) -> dict[str, float]:
+    def table(self) -> dict[str, float | str]:
         """The settings given, as the TOML table `[machine.ilc]`."""
-        return {k: v for k, v in (("iterations", self.iterations),
-                                  ("cutoff_hz", self.cutoff_hz), ("gain", self.gain))
-                if v is not None}
+        return {k: v for k, v in vars(self).items() if v is not None}
 
 
 @dataclass(frozen=True)
@@ -437,8 +440,22 @@ class _Check:
                                        or not isinstance(iterations, int) or iterations < 1):
             raise self.error("machine.ilc.iterations", f"expected a whole number of learning "
                              f"trials, at least 1, got {iterations!r}")
+        model = table.get("model")
+        if model is not None:
+            from flexff.cosim.inverse_models import inverse_model_names
+
+            known = inverse_model_names()
+            if model not in known:
+                raise self.error("machine.ilc.model", f"expected the name of a registered "
+                                 f"inverse model ({', '.join(known) or 'none registered'}), "
+                                 f"got {model!r}")
+        seed = table.get("seed")
+        if seed is not None and not (isinstance(seed, str) and "." in seed.strip(".")):
+            raise self.error("machine.ilc.seed", f"expected 'instance.name': the option or "
+                             f"parameter that seeds the loop's noise, got {seed!r}")
         return IlcSettings(iterations, self.number(table, "machine.ilc", "cutoff_hz"),
-                           self.number(table, "machine.ilc", "gain"))
+                           self.number(table, "machine.ilc", "gain"), model, seed)
+
     def learning(self, table: Any) -> Learning:
         self.table(table, "machine.learning", "learning")
         key = "machine.learning"

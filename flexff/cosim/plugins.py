@@ -6,6 +6,8 @@ the entry points (group `flexff.builtins`) through which they register it all.
   reference kinds   [reference] kinds of a machine, their keys checked and documented
                     (cosim.references.register_reference_kind)
   short names       recorded signals a run keeps under their short names too (cosim.run)
+  inverse models    models for ILC's learning filter that a description names
+                    (cosim.inverse_models.register_inverse_model)
   metrics warnings  a line on a run's metrics.json to show beside its result (a learned
                     feedforward that extrapolates), or None
 

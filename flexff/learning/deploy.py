@@ -119,7 +119,7 @@ class SIModel(nn.Module):
 def _si_skip(network: LinearSkip, run: Run, low_end: bool) -> tuple[np.ndarray, np.ndarray]:
     """The skip, and with `low_end` the labels' low end, as one map of SI features to SI
     outputs: weights (outputs x features) and bias, y = W x + b. A residual's targets are
-    scaled by the span alone (learning.machine_train): no low end to add."""
+    scaled by the span alone (learning.train): no low end to add."""
     weight = network.linear.weight.detach().cpu().double().numpy()
     bias = network.linear.bias.detach().cpu().double().numpy()
     low, span = np.asarray(run.feature_scaler.low), np.asarray(run.feature_scaler.span)

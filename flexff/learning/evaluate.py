@@ -26,6 +26,7 @@ from flexff.cosim.recording import Recording, load_recording
 from flexff.cosim.run import run_config, run_warnings
 from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.errors import InputError
+from flexff.learning import machine_loop
 from flexff.learning.collect import collect
 from flexff.learning.dataset import load_dataset
 from flexff.learning.devices import pick_device, training_gpus
@@ -41,7 +42,6 @@ from flexff.learning.loop import (
     default_loop,
     on_reference,
     with_feedforward,
-    with_feedforward_table,
 )
 from flexff.learning.models import (
     NETWORKS,
@@ -169,7 +169,7 @@ def scenario_config(env: str, name: str, model: Path | None = None, mode: str = 
     if name == LIMIT:
         if table is None:
             raise InputError(f"scenario {name!r} needs the force table of an ILC run")
-        looped = with_feedforward_table(base, table)
+        looped = machine_loop.with_feedforward(base, table)
     else:
         builtin, options = None, dict[str, Any]()
         if name == "rigid-body":

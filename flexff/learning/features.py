@@ -23,14 +23,8 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
-from flexff.controllers.features import (
-    FEATURE_SETS,
-    evaluate_samples,
-    motion_features,
-    nominal_model,
-)
+from flexff.controllers.features import FEATURE_SETS, motion_features, nominal_model
 from flexff.fmu.errors import InputError
 from flexff.learning.dataset import (
     CURRENT_SIGNALS,
@@ -39,6 +33,8 @@ from flexff.learning.dataset import (
     DatasetError,
     Trajectory,
 )
+from flexff.learning.samples import evaluate_samples
+from flexff.learning.signal_processing import decimation, differentiate, lowpass
 from flexff.plant.kinematics import SHOULDER_INDEX
 
 # a model's labels (controllers.model_card.OUTPUTS): the force the controller applied to the
@@ -73,9 +69,9 @@ class FeatureConfig:
     edge_periods: float = 0.0  # filter corner periods at each end of a trajectory left out
     # of every loss (`edge_samples`); 0 as in the thesis
     # the rigid-body model's forces pass the labels' filter (`filter_labels`) before they are
-    # compared with the labels: the pgnn's prior in its residual labels (learning.train), the
-    # regressor in the identification (learning.identify), a black-box network's force inputs
-    # in training (learning.train.with_force_inputs)
+    # compared with the labels: the pgnn's prior in its residual labels
+    # (learning.manipulator_data), the regressor in the identification (learning.identify), a
+    # black-box network's force inputs in training (learning.manipulator_data.with_force_inputs)
     filtered_prior: bool = True
     # the rigid-body model identified on the training split (learning.identify, without the
     # training noise) gives its force along the motion as two more inputs
@@ -135,41 +131,6 @@ def _forward_kinematics(encoders: int) -> ca.Function:
     fk = model.fk2 if encoders == 2 else model.fk3
     symbol = ca.SX.sym("theta", encoders)
     return ca.Function(f"fk{encoders}", [symbol], [fk(symbol, model.parameter_values())])
-
-
-def lowpass(signal: np.ndarray, rate_hz: float, cutoff_hz: float = 1.8,
-            order: int = 4) -> np.ndarray:
-    """Zero-phase Butterworth low-pass of `signal` along axis 0 (forwards and backwards)."""
-    if cutoff_hz >= rate_hz / 2:
-        raise InputError(f"cutoff {cutoff_hz} Hz must lie below the Nyquist frequency "
-                         f"{rate_hz / 2} Hz")
-    return sosfiltfilt(_butterworth(order, cutoff_hz, rate_hz), signal, axis=0)
-
-
-@functools.cache
-def _butterworth(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
-    """The low-pass's second-order sections, designed once (a physics-guided run filters
-    480 times in its identification alone; each design took 2 ms)."""
-    sos: np.ndarray = butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
-    return sos
-
-
-def differentiate(pos: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """Velocity and acceleration by second-order central differences (np.gradient)."""
-    dt = 1.0 / rate_hz
-    vel = np.gradient(pos, dt, axis=0)
-    return vel, np.gradient(vel, dt, axis=0)
-
-
-def decimation(rate_hz: float, model_rate_hz: float | None) -> int:
-    """Integer down-sampling factor from the data rate to the model rate."""
-    if model_rate_hz is None:
-        return 1
-    factor = rate_hz / model_rate_hz
-    if model_rate_hz <= 0 or factor < 1 or abs(factor - round(factor)) > 1e-9:
-        raise InputError(f"model_rate_hz {model_rate_hz} must divide the data rate {rate_hz} Hz "
-                         f"by a whole number")
-    return round(factor)
 
 
 def prepare_trajectory(traj: Trajectory, rate_hz: float, config: FeatureConfig,

@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from flexff.controllers.features import evaluate_samples, motion_columns, nominal_model
+from flexff.controllers.features import motion_columns, nominal_model
 from flexff.controllers.identified import (
     FRICTION_FIELDS,
     RIGID_BODY_FIELDS,
@@ -35,12 +35,9 @@ from flexff.controllers.identified import (
 from flexff.fmu.errors import InputError
 from flexff.learning.batches import TRAIN, interior
 from flexff.learning.dataset import Dataset, load_dataset
-from flexff.learning.features import (
-    FeatureConfig,
-    decimation,
-    filter_labels,
-    prepare_trajectory,
-)
+from flexff.learning.features import FeatureConfig, filter_labels, prepare_trajectory
+from flexff.learning.samples import evaluate_samples
+from flexff.learning.signal_processing import decimation
 from flexff.plant.parameters import NOMINAL
 
 STRUCTURE_SAMPLES = 500  # random workspace samples that reveal the base parameters
@@ -510,7 +507,7 @@ def identify_samples(features: list[np.ndarray], forces: list[np.ndarray],
     """Identify on trajectories prepared with `config` at `rate_hz`: features (n, n_features)
     of its feature set and forces (n, 2) in SI units, the first and last edge samples of each
     (config.edge_samples) left out, at most MAX_SAMPLES of them, evenly spaced (what
-    `identify` and the physics-guided model's prior in learning.train share).
+    `identify` and the physics-guided model's prior in learning.manipulator_data share).
 
     The regressor passes through the labels' filter (learning.features.filter_labels),
     trajectory by trajectory, before the samples are taken (unless `config.filtered_prior`

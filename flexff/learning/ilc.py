@@ -34,22 +34,14 @@ from flexff.cosim.recording import atomic_write
 from flexff.cosim.run import output_folder
 from flexff.cosim.schema import RecordConfig, RunConfig
 from flexff.fmu.errors import InputError, RunError
-from flexff.learning.ilc_filter import CUTOFF_HZ, GAIN, LearningFilter, check_cutoff, check_gain
-from flexff.learning.ilc_loops import (
-    IlcLoop,
-    InverseModel,
-    MachineLoop,
-    ManipulatorLoop,
-    Trial,
-    identified_on_trial,
-)
-from flexff.learning.loop import is_manipulator_loop
+from flexff.learning.ilc_filter import GAIN, LearningFilter, check_cutoff, check_gain
+from flexff.learning.ilc_loops import IlcLoop, InverseModel, MachineLoop, Trial
 
 ITERATIONS = 10  # learning trials after PID alone
 RESULT = "feedforward.csv"
 STATE = "ilc.json"
 NOISE_FLOOR = "noise_floor"  # ilc.json's key: e2 per axis of the measurement noise's share
-MACHINE_CUTOFF = 0.15  # Q's default corner on a machine's loop, a share of the rate
+CUTOFF_SHARE = 0.15  # Q's default corner, a share of the loop's rate
 # a trial whose e2 on an axis exceeds this many times that axis's best so far has diverged: a
 # converging iteration's e2 wanders near its floor by a few per cent from trial to trial (the
 # drive's and the manipulator's, 10 trials), a diverging one grows geometrically
@@ -66,13 +58,12 @@ def ilc(config: RunConfig, out: str | Path, iterations: int | None = None,
     ilc.json. `iterations`, `cutoff_hz` and the learning `gain` default to the loop's
     `[machine.ilc]` settings, else ITERATIONS, the cutoff below and GAIN. A diverging
     iteration stops (DIVERGENCE), keeps its best trial and says so in one line.
-    A loop with a [machine] description learns each of its axes' feedforward inputs
-    (learning.ilc_loops.MachineLoop; the filter's model is `model`, by default the linear
-    model identified on trial 0), the manipulator's (learning.loop.is_manipulator_loop) is
-    its own (ManipulatorLoop). Q's corner `cutoff_hz` defaults to CUTOFF_HZ on the
-    manipulator, to MACHINE_CUTOFF of the rate on a machine (measured on the drive example,
-    12 trials: 35x PID alone at 20 Hz, 48x at 60 Hz, 163x at 150 Hz, where the rigid model
-    still holds below its 250 Hz mount). `floor` measures the noise floor after the last
+    The loop's [machine] description says what it learns: each axis's feedforward input
+    (learning.ilc_loops.MachineLoop), through the learning filter of `model` (by default the
+    model its `[machine.ilc] model` names, else the linear model identified on trial 0).
+    Q's corner `cutoff_hz` defaults to CUTOFF_SHARE of the rate (measured on the drive
+    example, 12 trials: 35x PID alone at 20 Hz, 48x at 60 Hz, 163x at 150 Hz, where the rigid
+    model still holds below its 250 Hz mount). `floor` measures the noise floor after the last
     trial (two more runs; learning.ilc_labels, which wants only the force, leaves it out)."""
     settings = config.machine.ilc if config.machine is not None else None
     if iterations is None:
@@ -82,12 +73,9 @@ def ilc(config: RunConfig, out: str | Path, iterations: int | None = None,
     gain = gain if gain is not None else (settings and settings.gain) or GAIN
     check_gain(gain)
     plain = replace(config, record=RecordConfig(csv=False))
-    manipulator = is_manipulator_loop(config)
-    loop: IlcLoop = (ManipulatorLoop(plain) if manipulator
-                     else MachineLoop(plain, model or identified_on_trial))
+    loop: IlcLoop = MachineLoop(plain, model)
     if cutoff_hz is None:
-        cutoff_hz = (settings and settings.cutoff_hz) or (
-            CUTOFF_HZ if manipulator else MACHINE_CUTOFF / config.step)
+        cutoff_hz = (settings and settings.cutoff_hz) or CUTOFF_SHARE / config.step
     check_cutoff(cutoff_hz, config.step)
     out = output_folder(out)
     (out / "tables").mkdir(exist_ok=True)
@@ -232,8 +220,7 @@ def _write_table(path: Path, step: float, force: np.ndarray, columns: tuple[str,
 
 
 def plot_trials(trials: list[dict[str, Any]], path: Path,
-                floor: dict[str, float] | None, axes: tuple[str, ...],
-                unit: str = "m") -> Path:
+                floor: dict[str, float] | None, axes: tuple[str, ...], unit: str) -> Path:
     """e2 per axis against trial (log scale), trial 0 being PID alone, and the noise `floor`
     per axis (dashed) where there is one."""
     figure = Figure(figsize=(6.5, 4))

@@ -16,18 +16,15 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from flexff.controllers.features import evaluate_samples, nominal_model
 from flexff.fmu.errors import InputError
-from flexff.plant.parameters import PlantParameters
+from flexff.learning.samples import evaluate_samples
 
-CUTOFF_HZ = 20.0  # Q's corner: half the hardware tool mode's frequency
 ORDER = 4  # Q's Butterworth order, run twice: 8th-order roll-off, zero phase
 GAIN = 1.0  # the learning gain g on the model's correction P^-1 e
 
@@ -35,13 +32,13 @@ GAIN = 1.0  # the learning gain g on the model's correction P^-1 e
 @dataclass(frozen=True)
 class LearningFilter:
     """L and Q along one reference: the model's inverse dynamics with its parameters built in,
-    the reference's motion (each (n, 2): position, velocity, acceleration) and the force the
-    model needs along it."""
+    the reference's motion (each (n, axes): position, velocity, acceleration), Q's corner
+    [Hz], the learning gain, and the effort the model needs along it."""
 
     step: float
-    inverse_dynamics: ca.Function  # (pos, vel, acc) -> F [N] of one sample
+    inverse_dynamics: ca.Function  # (pos, vel, acc) -> effort of one sample
     reference: tuple[np.ndarray, np.ndarray, np.ndarray]
-    cutoff_hz: float = CUTOFF_HZ
+    cutoff_hz: float
     gain: float = GAIN
 
     @functools.cached_property
@@ -74,21 +71,9 @@ class LearningFilter:
         return self.q(applied + self.gain * self.model_force(error))
 
 
-def learning_filter(reference: Mapping[str, np.ndarray], step: float,
-                    parameters: PlantParameters, cutoff_hz: float = CUTOFF_HZ,
-                    gain: float = GAIN) -> LearningFilter:
-    """The learning filter of a loop whose plant has `parameters`, along `reference` (x_ref ..
-    ay_ref, sampled every `step` seconds); InputError for a cutoff at or above the Nyquist
-    frequency or a reference too short to filter."""
-    motion = tuple(np.column_stack([reference[f"{d}x_ref"], reference[f"{d}y_ref"]])
-                   for d in ("", "v", "a"))
-    return filter_along((motion[0], motion[1], motion[2]), step,
-                        model_inverse_dynamics(parameters), cutoff_hz, gain)
-
-
 def filter_along(motion: tuple[np.ndarray, np.ndarray, np.ndarray], step: float,
-                 inverse_dynamics: ca.Function, cutoff_hz: float = CUTOFF_HZ,
-                 gain: float = GAIN) -> LearningFilter:
+                 inverse_dynamics: ca.Function, cutoff_hz: float, gain: float = GAIN
+                 ) -> LearningFilter:
     """The learning filter of the model `inverse_dynamics` (pos, vel, acc) -> effort of one
     sample along the reference `motion` (position, velocity, acceleration, each (n, axes));
     InputError for a cutoff at or above the Nyquist frequency, a gain that is not positive or
@@ -115,12 +100,3 @@ def check_cutoff(cutoff_hz: float, step: float) -> None:
     if not 0 < cutoff_hz < nyquist:
         raise InputError(f"the learning filter's cutoff {cutoff_hz:g} Hz must lie between 0 "
                          f"and the Nyquist frequency {nyquist:g} Hz of the {step:g} s step")
-
-
-def model_inverse_dynamics(parameters: PlantParameters) -> ca.Function:
-    """(pos, vel, acc) -> F [N]: the rigid-body inverse dynamics, with motor friction, of a
-    plant with `parameters`."""
-    function = nominal_model().inverse_dynamics
-    pos, vel, acc = ca.SX.sym("pos", 2), ca.SX.sym("vel", 2), ca.SX.sym("acc", 2)
-    return ca.Function("model_inverse_dynamics", [pos, vel, acc],
-                       [function(pos, vel, acc, ca.DM(parameters.vector()))])

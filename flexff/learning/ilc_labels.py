@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 from tqdm import tqdm
 
-from flexff.controllers.features import evaluate_samples, nominal_model
+from flexff.controllers.features import nominal_model
 from flexff.cosim.csv_text import read_time_table
 from flexff.cosim.executor import execute
 from flexff.cosim.schema import RunConfig
@@ -42,8 +42,9 @@ from flexff.learning.dataset import (
 )
 from flexff.learning.ilc import RESULT, ilc
 from flexff.learning.loop import on_reference
+from flexff.learning.machine_loop import feedforward_signal
+from flexff.learning.samples import evaluate_samples
 from flexff.plant.kinematics import SHOULDER_INDEX
-from flexff.plant.signals import FEEDFORWARD_FORCES, names
 
 ITERATIONS = 2  # learning trials per reference: the evaluation reference's ILC reaches the
 # noise floor at its second (e2 x / y 1.17e-5 / 1.70e-5 m/sqrt(s) after one, 1.00e-6 /
@@ -114,7 +115,8 @@ def _labelled(trajectory: Trajectory, table: Path) -> Trajectory:
     reference as its motion: positions, and encoder angles by inverse kinematics."""
     signals = trajectory.signals
     time = signals["time"]
-    learned = read_time_table(table, names(FEEDFORWARD_FORCES))
+    columns = tuple(feedforward_signal(a) for a in POSITION_SIGNALS)  # x_ff, y_ff
+    learned = read_time_table(table, columns)
     reference = {name: signals[name] for name in REFERENCE_SIGNALS}
     position = np.column_stack([reference["x_ref"], reference["y_ref"]])
     angles = evaluate_samples(_inverse_kinematics(), position)
@@ -122,7 +124,7 @@ def _labelled(trajectory: Trajectory, table: Path) -> Trajectory:
                 **dict(zip(ENCODER_SIGNALS, angles.T)),
                 **dict(zip(POSITION_SIGNALS, position.T)),
                 **{label: np.interp(time, learned.time, learned.columns[applied])
-                   for label, applied in zip(LABEL_SIGNALS, names(FEEDFORWARD_FORCES))}}
+                   for label, applied in zip(LABEL_SIGNALS, columns)}}
     return replace(trajectory, signals=labelled)
 
 

@@ -1,11 +1,12 @@
-"""The loops iterative learning control (learning.ilc) runs: what a trial is on each kind.
+"""The loop iterative learning control (learning.ilc) runs: what a trial is.
 
 An IlcLoop runs one trial with its feedforward from a table and says what the plant received,
-how far it missed the reference and what the learning filter's model is. ManipulatorLoop is
-flexff's manipulator (built-in controller's Fx_ff, Fy_ff; its built-in plant's noise seeded
-per trial and its noise floor measured); MachineLoop any loop with a [machine] description,
-on the references its sources give, each axis's feedforward input learned, the filter's model
-`model(machine, trial 0's recording)` (an inverse model of the axes' motion).
+how far it missed the reference and what the learning filter's model is. MachineLoop is any
+loop with a [machine] description (the manipulator's short form gives its own), on the
+references its sources give, each axis's feedforward input learned; the filter's model is
+`model(loop, trial 0's recording)`, an inverse model of the axes' motion: the one its
+`[machine.ilc] model` names (registered by a machine package, cosim.inverse_models), else the
+linear model identified on trial 0. `[machine.ilc] seed` draws the loop's noise anew each trial.
 """
 
 from __future__ import annotations
@@ -20,25 +21,20 @@ from typing import Any, Protocol
 import casadi as ca
 import numpy as np
 
+from flexff.cosim.builtins import registered
 from flexff.cosim.config import expanded
 from flexff.cosim.config_error import ConfigError
-from flexff.cosim.machine import Machine
-from flexff.cosim.metrics import error_norms, machine_axes, named_axes, tracking_metrics
+from flexff.cosim.inverse_models import inverse_model
+from flexff.cosim.metrics import error_norms, machine_axes, tracking_metrics
 from flexff.cosim.recording import Recording
 from flexff.cosim.run import simulate
 from flexff.cosim.scenario import resolve, source_signals
-from flexff.cosim.schema import RunConfig
-from flexff.fmu.errors import InputError
+from flexff.cosim.schema import FmuConfig, RunConfig
 from flexff.fmu.expressions import evaluate
+from flexff.fmu.importer import read_fmu
 from flexff.learning import machine_loop
-from flexff.learning.ilc_filter import LearningFilter, filter_along, learning_filter
+from flexff.learning.ilc_filter import LearningFilter, filter_along
 from flexff.learning.linear_model import identify_linear
-from flexff.learning.loop import dataset_taps, with_feedforward, with_feedforward_table
-from flexff.plant.parameters import NOMINAL, PlantParameters
-from flexff.plant.signals import AXES, FEEDBACK_FORCES, FEEDFORWARD_FORCES, TRUE_POSITION, names
-from flexff.plant.variants import VARIANTS
-
-EXACT_ENCODERS = {"noise_std": 0.0, "encoder_quantization": 0.0}  # a plant measuring exactly
 
 
 @dataclass(frozen=True)
@@ -82,103 +78,13 @@ def run_trial(config: RunConfig) -> tuple[Recording, Any]:
         return simulate(scenario, progress=False), scenario
 
 
-class ManipulatorLoop:
-    """flexff's manipulator loop (its built-in controller, a [reference])."""
-
-    axes: tuple[str, ...] = AXES
-    columns: tuple[str, ...] = names(FEEDFORWARD_FORCES)
-    unit = "m"
-
-    def __init__(self, config: RunConfig) -> None:
-        if config.reference is None:
-            raise InputError(f"{config.origin}: the loop has no [reference]: iterative learning "
-                             f"repeats one reference; add a [reference] table")
-        self.config = config
-
-    def identity(self) -> Any:
-        return json.loads(json.dumps(expanded(with_feedforward(self.config)), default=str))
-
-    def trial(self, table: Path, trial: int) -> Trial:
-        seed = self.seed(trial)
-        recording, applied, error = self._run(with_feedforward_table(self._seeded(seed), table))
-        return Trial(recording, applied, error, seed)
-
-    def _run(self, config: RunConfig) -> tuple[Recording, np.ndarray, np.ndarray]:
-        """The recording, the force the plant received (feedforward as the controller read it
-        plus feedback, (n, 2) [N]) and the tracking error (n, 2) [m]."""
-        recording, scenario = run_trial(config)
-        taps = dataset_taps(scenario)
-        applied = np.column_stack([taps[ff].read(recording) + taps[fb].read(recording)
-                                   for ff, fb in zip(names(FEEDFORWARD_FORCES),
-                                                     names(FEEDBACK_FORCES))])
-        error = np.column_stack([recording[f"{a}_ref"] - taps[a].read(recording)
-                                 for a in names(TRUE_POSITION)])
-        return recording, applied, error
-
-    def learning_filter(self, recording: Recording, cutoff_hz: float) -> LearningFilter:
-        return learning_filter(recording.signals, self.config.step, self._plant_model(),
-                               cutoff_hz)
-
-    def metrics(self, recording: Recording) -> dict[str, dict[str, float]]:
-        return tracking_metrics(recording, named_axes(self.axes))
-
-    def noise_floor(self, table: Path) -> dict[str, float] | None:
-        """The e2 per axis that the built-in plant's encoder noise and quantization cause
-        with the force table `table`: the e2 of the difference of its tracking errors with them
-        (the loop's own seed) and without. None for a loop without a built-in plant (an FMU's
-        noise cannot be switched off) or whose plant measures exactly."""
-        loop = self.config
-        if loop.builtin("plant") is None:
-            return None
-        measured = self._plant_parameters()
-        if measured.noise_std == 0.0 and measured.encoder_quantization <= 0.5:
-            return None
-        exact = replace(loop, fmus=tuple(replace(f, parameters={**f.parameters,
-                                                                **EXACT_ENCODERS})
-                                         if f.builtin == "plant" else f for f in loop.fmus))
-        noisy, clean = (self._run(with_feedforward_table(c, table))[2] for c in (loop, exact))
-        return {a: error_norms(noisy[:, k] - clean[:, k], loop.step)["e2"]
-                for k, a in enumerate(AXES)}
-
-    def seed(self, trial: int) -> int | None:
-        """Trial `trial`'s noise seed of the built-in plant (None without one): a fresh one
-        each trial, so that the iteration learns what repeats, not one noise sequence."""
-        plant = self.config.builtin("plant")
-        return None if plant is None else int(plant.options.get("seed", 0)) + 1 + trial
-
-    def _seeded(self, seed: int | None) -> RunConfig:
-        if seed is None:
-            return self.config
-        return replace(self.config, fmus=tuple(
-            replace(f, options={**f.options, "seed": seed}) if f.builtin == "plant" else f
-            for f in self.config.fmus))
-
-    def _plant_parameters(self) -> PlantParameters:
-        """The true parameters of the loop's built-in plant: its variant's with the loop's
-        values (the nominal ones for a plant FMU by path)."""
-        plant = self.config.builtin("plant")
-        if plant is None:
-            return NOMINAL
-        known = set(PlantParameters.names())
-        return VARIANTS[plant.options["variant"]].parameters.with_values(
-            **{k: float(v) for k, v in plant.parameters.items() if k in known})
-
-    def _plant_model(self) -> PlantParameters:
-        """The parameters of the loop's plant model (_plant_parameters), its tool (where it
-        has one) counted at the wrist, for below its mount's mode it moves with the wrist."""
-        parameters = self._plant_parameters()
-        plant = self.config.builtin("plant")
-        if plant is None or not VARIANTS[plant.options["variant"]].parasitic_mode:
-            return parameters
-        return parameters.with_values(m_ee=parameters.m_ee + parameters.m_tool)
+InverseModel = Callable[[RunConfig, Recording], ca.Function]  # -> (pos, vel, acc) -> effort
 
 
-InverseModel = Callable[[Machine, Recording], ca.Function]  # -> (pos, vel, acc) -> effort
-
-
-def identified_on_trial(machine: Machine, recording: Recording) -> ca.Function:
+def identified_on_trial(loop: RunConfig, recording: Recording) -> ca.Function:
     """The linear model of the machine's prior identified on one trial: the effort the loop
     commanded against the reference's motion (learning.linear_model)."""
+    machine = machine_loop.loop_machine(loop)
     motion: dict[str, np.ndarray] = {}
     for axis in machine.axes:
         motion.update(zip(axis.motion, (recording[n] for n in (axis.reference,
@@ -187,12 +93,19 @@ def identified_on_trial(machine: Machine, recording: Recording) -> ca.Function:
     return identify_linear(machine, motion, efforts).casadi_function()
 
 
+def described_model(loop: RunConfig) -> InverseModel:
+    """The model the loop's description names (`[machine.ilc] model`), else identified_on_trial."""
+    name = machine_loop.loop_machine(loop).ilc.model
+    return identified_on_trial if name is None else inverse_model(name)
+
+
 class MachineLoop:
     """A loop with a [machine] description: each axis's feedforward input learned on the
     references the loop's sources give (`<axis>_ref`, `v<axis>_ref`, `a<axis>_ref`)."""
 
-    def __init__(self, config: RunConfig, model: InverseModel) -> None:
-        self.config, self.model = config, model
+    def __init__(self, config: RunConfig, model: InverseModel | None = None) -> None:
+        self.config = config
+        self.model = model or described_model(config)
         self.machine = machine_loop.loop_machine(config)
         given = set(source_signals(config))
         for k, axis in enumerate(self.machine.axes):
@@ -212,8 +125,47 @@ class MachineLoop:
                                      default=str))
 
     def trial(self, table: Path, trial: int) -> Trial:
-        recording, applied, error = self._run(machine_loop.with_feedforward(self.config, table))
-        return Trial(recording, applied, error, None)
+        seed = self.seed(trial)
+        recording, applied, error = self._run(machine_loop.with_feedforward(
+            self._seeded(seed), table))
+        return Trial(recording, applied, error, seed)
+
+    def seed(self, trial: int) -> int | None:
+        """Trial `trial`'s noise seed: the loop's own (0 where it gives none) + 1 + `trial`,
+        a fresh one each trial so that the iteration learns what repeats, not one noise
+        sequence; None where the description names no seed or the loop's FMU lacks it."""
+        target = self._seed_target()
+        if target is None:
+            return None
+        fmu, name, option = target
+        own = (fmu.options if option else fmu.parameters).get(name, 0)
+        return int(own) + 1 + trial
+
+    def _seed_target(self) -> tuple[FmuConfig, str, bool] | None:
+        """(the FMU, the seed's name, whether it is a built-in's option), or None."""
+        given = self.machine.ilc.seed
+        if given is None:
+            return None
+        instance, name = given.split(".", 1)
+        fmu = next((f for f in self.config.fmus if f.name == instance), None)
+        if fmu is None:
+            return None
+        if fmu.builtin is not None:
+            options = {o.key for o in registered()[fmu.builtin].options}
+            return (fmu, name, True) if name in options else None
+        assert fmu.path is not None  # an FMU is built in or has a path
+        variable = read_fmu(fmu.path).variables.get(name)
+        return (fmu, name, False) if variable is not None and variable.settable else None
+
+    def _seeded(self, seed: int | None) -> RunConfig:
+        target = self._seed_target()
+        if seed is None or target is None:
+            return self.config
+        fmu, name, option = target
+        seeded = (replace(fmu, options={**fmu.options, name: seed}) if option
+                  else replace(fmu, parameters={**fmu.parameters, name: seed}))
+        return replace(self.config, fmus=tuple(seeded if f is fmu else f
+                                               for f in self.config.fmus))
 
     def _run(self, config: RunConfig) -> tuple[Recording, np.ndarray, np.ndarray]:
         """The recording, the efforts (n, axes) and the tracking errors (n, axes)."""
@@ -230,7 +182,7 @@ class MachineLoop:
                        for names in zip(*((a.reference, *a.derivatives[:2])
                                           for a in self.machine.axes)))
         return filter_along((motion[0], motion[1], motion[2]), self.config.step,
-                            self.model(self.machine, recording), cutoff_hz)
+                            self.model(self.config, recording), cutoff_hz)
 
     def metrics(self, recording: Recording) -> dict[str, dict[str, float]]:
         return tracking_metrics(recording, machine_axes(self.machine))
@@ -238,11 +190,14 @@ class MachineLoop:
     def noise_floor(self, table: Path) -> dict[str, float] | None:
         """The e2 per axis that the loop's measurement causes with the feedforward `table`:
         the e2 of the difference of its tracking errors as it is and with the description's
-        `exact` start values. None where the description gives none (unknown)."""
+        `exact` start values. None where the description gives none (unknown) or where the
+        loop measures exactly already (both runs alike)."""
         if not self.machine.exact:
             return None
         exact = machine_loop.with_start_values(self.config, self.machine.exact, "machine.exact")
         noisy, clean = (self._run(machine_loop.with_feedforward(c, table))[2]
                         for c in (self.config, exact))
+        if np.array_equal(noisy, clean):
+            return None
         return {a: error_norms(noisy[:, k] - clean[:, k], self.config.step)["e2"]
                 for k, a in enumerate(self.axes)}

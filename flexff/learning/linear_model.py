@@ -27,7 +27,6 @@ from scipy.optimize import minimize_scalar
 from flexff.cosim.machine import Machine
 from flexff.cosim.recording import atomic_write
 from flexff.fmu.errors import InputError
-from flexff.learning.features import lowpass
 from flexff.learning.linear_prior import (
     AxisFit,
     LinearModel,
@@ -36,6 +35,7 @@ from flexff.learning.linear_prior import (
     linear_model_from_dict,
     term_names,
 )
+from flexff.learning.signal_processing import lowpass
 
 WIDTHS = (0.001, 0.003, 0.01, 0.03)  # Coulomb tanh widths to try, fractions of the v limit
 # the width's search between the best of WIDTHS' neighbours ends within this share of it: on the

@@ -24,8 +24,8 @@ from flexff.cosim.memory import check_memory
 from flexff.cosim.references import SAVGOL_ORDER, SMOOTHING_WINDOW
 from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
-from flexff.learning.features import decimation
 from flexff.learning.presets import PRESETS, make_config
+from flexff.learning.signal_processing import decimation
 
 RATE_TOLERANCE = 0.01  # largest relative deviation of a sample interval from the median
 UNIFORM = 1e-6  # relative: a grid this close to the rate is kept as it is (learning.dataset)

@@ -6,11 +6,12 @@ A loop is changed with dataclasses.replace, never by editing its text, and every
 checked again as a file is (cosim.config.checked): `on_reference` sets the reference, run.stop
 and the start values (x_start, y_start of the built-in plant, and of an FMU by path that has
 such parameters) and the built-in plant's noise seed; `with_feedforward` replaces whatever feeds
-the controller's Fx_ff, Fy_ff and i1_ff..i3_ff (`with_feedforward_table`: the forces from a
-CSV time table, as learning.ilc writes). `dataset_taps` finds, in a resolved loop, where each
-signal of the dataset is read: the encoders and the feedforward force as the controller
-receives them (through the wiring's gain and offset), its feedback force and currents, and the
-true position `x`, `y` by name; a loop that lacks one is refused before anything runs.
+the controller's Fx_ff, Fy_ff and i1_ff..i3_ff (a force table, as learning.ilc writes it,
+feeds them through learning.machine_loop.with_feedforward). `dataset_taps` finds, in a
+resolved loop, where each signal of the dataset is read: the encoders and the feedforward
+force as the controller receives them (through the wiring's gain and offset), its feedback
+force and currents, and the true position `x`, `y` by name; a loop that lacks one is refused
+before anything runs.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -161,15 +161,6 @@ def _produced(builtin: str | None, options: Mapping[str, Any]) -> tuple[str, ...
         return names(OUTPUTS[read_card(options["model"]).labels])
     except (InputError, KeyError):  # no model: the parser's check (checked) names what to do
         return names(FEEDFORWARD_FORCES)
-
-
-def with_feedforward_table(loop: RunConfig, table: Path) -> RunConfig:
-    """`loop` with its feedforward forces read from `table`, a CSV time table with columns
-    time, Fx_ff, Fy_ff (a [[source]] of kind "csv"), and no feedforward FMU."""
-    pid = with_feedforward(loop)
-    zero = SourceConfig("constant", dict.fromkeys(names(FEEDFORWARD_FORCES), 0.0))
-    return checked(replace(pid, sources=tuple(SourceConfig("csv", path=Path(table).resolve())
-                                              if s == zero else s for s in pid.sources)))
 
 
 def _controller(loop: RunConfig) -> FmuConfig:

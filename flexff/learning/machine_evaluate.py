@@ -3,7 +3,7 @@ comparison an engineer would make, per axis.
 
 The loop's dataset is collected (learning.machine_collect), its prior's linear model identified
 (learning.linear_model), each model trained with the identified friction widths side by side
-in worker processes (learning.machine_train), exported and built into its feedforward FMU; then,
+in worker processes (learning.train), exported and built into its feedforward FMU; then,
 on the loop's own reference, the loop runs under PID alone, with the identified feedforward and
 each learned one, and ILC finds the limit (learning.ilc; its settings from the arguments, else
 [machine.ilc]; a diverged iteration keeps its best trial, a failed one leaves its column out,
@@ -36,6 +36,7 @@ from flexff.cosim.run import simulate_config
 from flexff.cosim.schema import RunConfig
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError, RunError
+from flexff.learning.description_data import DescriptionData
 from flexff.learning.devices import pick_device, training_gpus
 from flexff.learning.excitation import CLASSES
 from flexff.learning.export import export
@@ -47,10 +48,10 @@ from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
 from flexff.learning.machine_features import MachineFeatures, friction_widths
 from flexff.learning.machine_identify import dataset_features, identify_dataset
 from flexff.learning.machine_loop import loop_machine, with_feedforward, with_feedforward_fmu
-from flexff.learning.machine_train import fit_machine
 from flexff.learning.models import uses_prior
 from flexff.learning.presets import make_config
 from flexff.learning.report import own_fields, plot_tracking_errors, ratio_table
+from flexff.learning.train import fit
 from flexff.learning.workers import worker_count
 
 MODELS = ("lstm", "cnn-lstm", "tcn", "pgnn")
@@ -216,9 +217,12 @@ def _train(job: _Training) -> dict[str, Any]:
     """Train `job`'s model on the dataset, export it; its metrics."""
     data = load_machine_dataset(job.data)
     prior = None if job.prior is None else linear_model_from_dict(job.prior, "the prior")
-    metrics = fit_machine(make_config(job.kind, job.preset, **job.overrides), data.description,
-                          data.sample_rate_hz, data.trajectories, data.digest,
-                          job.out / "runs" / job.kind, job.features, progress=False,
-                          prior=prior, reuse=True)
-    export(job.out / "runs" / job.kind, job.out / "models" / f"{job.kind}.onnx")
+    config = make_config(job.kind, job.preset, **job.overrides)
+    source = DescriptionData.of(config, data.description, data.sample_rate_hz, data.trajectories,
+                                data.digest, job.features, prior)
+    run = job.out / "runs" / job.kind
+    metrics = source.finished(run)  # an interrupted evaluation keeps what it trained
+    if metrics is None:
+        metrics = fit(config, source, run, progress=False)
+    export(run, job.out / "models" / f"{job.kind}.onnx")
     return metrics

@@ -22,7 +22,6 @@ from typing import Any
 
 import numpy as np
 
-from flexff.controllers.features import evaluate_samples
 from flexff.cosim.machine import Machine
 from flexff.fmu.errors import InputError
 from flexff.learning.feature_spec import (
@@ -30,9 +29,10 @@ from flexff.learning.feature_spec import (
     FeatureInputs,
     feature_function,
 )
-from flexff.learning.features import differentiate, lowpass
 from flexff.learning.linear_model import EDGE_PERIODS
 from flexff.learning.linear_prior import LinearModel
+from flexff.learning.samples import evaluate_samples
+from flexff.learning.signal_processing import decimation, differentiate, lowpass
 
 ENERGY_SHARE = 0.99  # of the references' velocity energy under the band's edge
 CUTOFF_PER_BAND = 4.0  # the default corner: this many times the band's edge (identification
@@ -110,11 +110,7 @@ class MachineFeatures:
 
     def decimation(self, rate_hz: float) -> int:
         assert self.model_rate_hz is not None, "resolved() first"
-        factor = rate_hz / self.model_rate_hz
-        if factor < 1 or abs(factor - round(factor)) > 1e-9:
-            raise InputError(f"model_rate_hz {self.model_rate_hz:g} must divide the data rate "
-                             f"{rate_hz:g} Hz by a whole number")
-        return round(factor)
+        return decimation(rate_hz, self.model_rate_hz)
 
 
 def preprocessing(given: MachineFeatures, resolved: MachineFeatures, rate_hz: float

@@ -35,9 +35,9 @@ from flexff.cosim.recording import Recording, atomic_write
 from flexff.cosim.run import simulate_config
 from flexff.cosim.schema import FmuConfig, RunConfig
 from flexff.fmu.errors import InputError, RunError
-from flexff.learning.features import differentiate, lowpass
 from flexff.learning.machine_features import lagged
 from flexff.learning.machine_loop import loop_machine, on_references, record_signals
+from flexff.learning.signal_processing import differentiate, lowpass
 
 PHASE_MARGIN_DEG = 40.0  # the default margin asked for
 GAIN_MARGIN_DB = 6.0  # the least gain margin a proposal keeps

@@ -35,6 +35,7 @@ from flexff.cosim.recording import atomic_write
 from flexff.fmu.errors import InputError
 from flexff.learning.dataset_files import Trajectory
 from flexff.learning.deploy import SIModel
+from flexff.learning.description_data import features_from_dict, prior_efforts
 from flexff.learning.linear_model import EDGE_PERIODS, read_linear_model
 from flexff.learning.linear_prior import LinearModel, linear_model_from_dict
 from flexff.learning.machine_dataset import MachineDataset, load_machine_dataset
@@ -45,7 +46,6 @@ from flexff.learning.machine_features import (
     prepare,
     preprocessing,
 )
-from flexff.learning.machine_train import features_from_dict, prior_efforts
 from flexff.learning.run_folder import RUN_FILE, load_run
 from flexff.learning.threads import torch_threads
 
@@ -121,7 +121,8 @@ def predict(models: TrainedModels, dataset: MachineDataset, split: str = "all") 
     predicted: dict[str, list[np.ndarray]] = {}
     if models.identified is not None:
         _check_axes(models.identified.machine, machine, "identified.json")
-        predicted[IDENTIFIED] = _prior(models.identified, chosen, rate_hz, machine, features)
+        predicted[IDENTIFIED] = prior_efforts(models.identified, chosen, rate_hz, machine,
+                                              features)
     with torch.no_grad(), torch_threads():
         for name, folder in models.runs.items():
             predicted[name] = _network(folder, chosen, dataset)
@@ -267,13 +268,6 @@ def _check_axes(trained: Machine, machine: Machine, where: str) -> None:
                          f"data's machine has {', '.join(a.name for a in machine.axes)}")
 
 
-def _prior(model: LinearModel, trajectories: list[Trajectory], rate_hz: float, machine: Machine,
-           features: MachineFeatures) -> list[np.ndarray]:
-    efforts = prior_efforts(model, trajectories, rate_hz, machine, features)
-    assert efforts is not None
-    return efforts
-
-
 def _network(folder: Path, trajectories: list[Trajectory], data: MachineDataset
              ) -> list[np.ndarray]:
     """A network's efforts on each trajectory's features, over its own prior if it has one."""
@@ -291,7 +285,8 @@ def _network(folder: Path, trajectories: list[Trajectory], data: MachineDataset
         out.append(y.numpy())
     if model.residual:
         prior = linear_model_from_dict(run.info["machine_prior"], str(folder / RUN_FILE))
-        out = [p + q for p, q in zip(out, _prior(prior, trajectories, data.sample_rate_hz,
-                                                 data.description, features))]
+        out = [p + q for p, q in zip(out, prior_efforts(prior, trajectories,
+                                                        data.sample_rate_hz, data.description,
+                                                        features))]
     return out
 

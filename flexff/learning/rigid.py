@@ -22,8 +22,9 @@ import torch
 from torch import nn
 
 from flexff.controllers.allocation import motor_currents
-from flexff.controllers.features import evaluate_samples, motion_columns, nominal_model
+from flexff.controllers.features import motion_columns, nominal_model
 from flexff.learning.casadi_torch import TorchFunction, frozen
+from flexff.learning.samples import evaluate_samples
 
 Parameters = Mapping[str, float]  # flat nominal-model parameters replaced in the prior
 

@@ -76,7 +76,7 @@ class Run:
 
     @property
     def machine(self) -> Machine | None:
-        """The description of the machine a run of learning.machine_train learned (None: the
+        """The description of the machine a run of learning.description_data learned (None: the
         manipulator's run)."""
         table = self.info.get("machine")
         return None if table is None else parse_machine(table, str(self.path / RUN_FILE))
@@ -135,7 +135,7 @@ def save_run(out: Path, config: TrainConfig, network: SequenceNetwork,
 
 
 def load_run(path: str | Path) -> Run:
-    """Rebuild a run folder written by `learning.train.train`."""
+    """Rebuild a run folder written by `learning.train.fit`."""
     path = Path(path)
     for name in (RUN_FILE, WEIGHTS_FILE):
         if not (path / name).is_file():

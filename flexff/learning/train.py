@@ -1,8 +1,11 @@
-"""Training: a dataset folder in, a run folder out (weights, run.json, metrics.json, loss.png).
+"""Training: any machine's data in, a run folder out (weights, run.json, metrics.json,
+loss.png).
 
-Adam on the MSE of min-max-scaled labels (the thesis's normalized units; for the pgnn the
-residual F - F_rigid divided by the same label span, which gives the same MSE, F_rigid through
-the labels' filter: `prior_labels`), truncated
+`fit` takes a TrainingSource (learning.training_data: a [machine] description's data,
+learning.description_data, or the manipulator's dataset folder, learning.manipulator_data,
+which `train` loads) and does the rest alike for every machine: Adam on the MSE of
+min-max-scaled labels (the thesis's normalized units; for the pgnn the residual over its prior,
+F - F_prior, divided by the same label span, which gives the same MSE), truncated
 backpropagation through time for the recurrent networks, random windows for the convolutional
 ones (`learning.batches`), the epoch with the lowest validation loss kept. Seeded: the same
 configuration, data, device and thread count give the same weights.
@@ -16,14 +19,12 @@ to the same weights as one never interrupted.
 from __future__ import annotations
 
 import copy
-import functools
 import json
 import math
 import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,6 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from flexff.controllers.features import FORCE_INPUTS, feature_names
 from flexff.fmu.errors import InputError, RunError
 from flexff.learning.batches import (
     TRAIN,
@@ -41,16 +41,9 @@ from flexff.learning.batches import (
     interior,
     window_roles,
 )
-from flexff.learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
+from flexff.learning.dataset import load_dataset
 from flexff.learning.devices import pick_device
-from flexff.learning.features import (
-    LABELS,
-    FeatureConfig,
-    decimation,
-    filter_labels,
-    prepare_trajectory,
-)
-from flexff.learning.identify import identify_samples
+from flexff.learning.manipulator_data import ManipulatorData
 from flexff.learning.models import (
     RECURRENT,
     SequenceNetwork,
@@ -61,7 +54,6 @@ from flexff.learning.models import (
     uses_prior,
 )
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
-from flexff.learning.rigid import rigid_forces
 from flexff.learning.run_folder import (
     CHECKPOINT_FILE,
     RunFolderError,
@@ -72,6 +64,7 @@ from flexff.learning.run_folder import (
 )
 from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.threads import torch_threads
+from flexff.learning.training_data import TrainingSource
 from flexff.learning.training_step import (
     CudaGraphs,
     TrainingStep,
@@ -86,8 +79,6 @@ EpochReport = Callable[[dict[str, Any]], None]
 # as long as the trajectory, so on a GPU, where a wider pass costs about the same, the
 # validation of every epoch runs the training trajectories in one pass instead of eight
 EVALUATION_GROUP = {"cpu": 8, "cuda": 64}
-MSE_UNITS = ("MSE of min-max scaled labels, Fx, Fy or i1..i3 (run.json label_names; the "
-             "thesis's normalized units)")
 
 
 def train(model: str, preset: str, data: str | Path, out: str | Path, progress: bool = True,
@@ -107,101 +98,68 @@ def train(model: str, preset: str, data: str | Path, out: str | Path, progress: 
     """
     config = make_config(model, preset, **overrides)
     pick_device(config.device)  # a device that is not there fails before the data loads
-    return fit(config, load_dataset(data), Path(out), progress, resume, force, checkpoint_every,
-               on_epoch)
+    return fit(config, ManipulatorData(config, load_dataset(data)), Path(out), progress, resume,
+               force, checkpoint_every, on_epoch)
 
 
-def fit(config: TrainConfig, dataset: Dataset, out: Path, progress: bool = True,
+def fit(config: TrainConfig, source: TrainingSource, out: Path, progress: bool = True,
         resume: bool | None = None, force: bool = True, checkpoint_every: int | None = None,
         on_epoch: EpochReport | None = None) -> dict[str, Any]:
-    """Train with a ready configuration on a loaded dataset; see `train`."""
+    """Train with a ready configuration on any machine's data `source` (its settings checked
+    against the run folder `out` before it prepares the data); see `train` for the rest."""
     start = time.perf_counter()
     pick_device(config.device)  # before any work: a device that is not there fails now
     every = CHECKPOINT_EVERY[config.preset] if checkpoint_every is None else checkpoint_every
     if every < 1:
         raise InputError(f"checkpoint_every must be at least 1 epoch, got {every}")
-    settings = _settings(config, dataset)
+    settings = source.settings
     checkpoint = start_run(out, settings, resume, force)
-    train_set, test_set = _splits(dataset)
-    rate_hz = dataset.sample_rate_hz
-    model_rate = rate_hz / decimation(rate_hz, config.features.model_rate_hz)
     rng = np.random.default_rng(config.seed)
-    train_x, train_f = _prepare(train_set, rate_hz, config.features, rng)
-    test_x, test_f = _prepare(test_set, rate_hz, config.features, None)
-    feature_set = config.features.feature_set
-    identified = _identified_parameters(config, dataset, model_rate)
-    prior = identified if uses_prior(config.model) else None
-    force_inputs = identified if config.features.force_input else None
-    if force_inputs is not None:  # the identified force as the last inputs
-        train_x, test_x = ([with_force_inputs(x, force_inputs, config.features, model_rate)
-                            for x in xs] for xs in (train_x, test_x))
-    feature_scaler, label_scaler = MinMaxScaler.fit(train_x), MinMaxScaler.fit(train_f)
-    edge = config.features.edge_samples(model_rate)
-    labels = config.features.labels
+    data = source.prepare(rng)
+    feature_scaler = MinMaxScaler.fit(data.train_x)
+    label_scaler = MinMaxScaler.fit(data.train_labels)
+    train_prior, test_prior = (None, None) if data.prior is None else data.prior
 
-    def targets(xs: list[np.ndarray], fs: list[np.ndarray]) -> list[np.ndarray]:
-        if prior is not None:  # the residual over the prior, in label spans
-            return [(f - prior_labels(x, prior, config.features, model_rate)) / label_scaler.span
-                    for x, f in zip(xs, fs)]
-        return [label_scaler.transform(f) for f in fs]
+    def targets(fs: list[np.ndarray], priors: list[np.ndarray] | None) -> list[np.ndarray]:
+        if priors is None:
+            return [label_scaler.transform(f) for f in fs]
+        return [(f - p) / label_scaler.span for f, p in zip(fs, priors)]  # in label spans
+
+    def test_mse(efforts: list[np.ndarray]) -> float:
+        """A baseline's test MSE in the network's units, on its samples (the edges out; a
+        mask, not a slice: the same order of summation whatever the arrays' layout)."""
+        errors = [((f - e) / label_scaler.span)[interior(len(f), data.edge) == TRAIN]
+                  for f, e in zip(data.test_labels, efforts)]
+        return float(np.mean(np.concatenate(errors) ** 2))
 
     def measure(network: SequenceNetwork, train_data: SequenceSet, test_data: SequenceSet
                 ) -> dict[str, Any]:
         return {
-            "model": config.model, "preset": config.preset, "units": MSE_UNITS,
+            "model": config.model, "preset": config.preset, "units": data.units,
             "train_mse": role_mse(network, train_data, TRAIN),
             "val_mse": role_mse(network, train_data, VALIDATION),
             "test_mse": role_mse(network, test_data, TRAIN),
             "test_mse_per_trajectory": {
-                t.name: role_mse(network, test_data, TRAIN, only=[i])
-                for i, t in enumerate(test_set)},
-            "rigid_body_test_mse": _rigid_mse(test_x, test_f, label_scaler, feature_set, edge,
-                                              labels=labels),
-            **({} if prior is None else {
-                "prior_parameters": prior,
-                "prior_test_mse": _prior_mse(test_x, test_f, label_scaler, edge, prior,
-                                             config.features, model_rate)})}
+                name: role_mse(network, test_data, TRAIN, only=[i])
+                for i, name in enumerate(data.test_names)},
+            **{name: test_mse(efforts) for name, efforts in data.baselines.items()},
+            **data.metrics,
+            **({} if test_prior is None else {"prior_test_mse": test_mse(test_prior)})}
 
     network, history, metrics = fit_network(
-        config, [feature_scaler.transform(x) for x in train_x], targets(train_x, train_f),
-        [feature_scaler.transform(x) for x in test_x], targets(test_x, test_f), edge, rng,
-        Checkpoints(out, settings, every), checkpoint, measure, progress, on_epoch)
+        config, [feature_scaler.transform(x) for x in data.train_x],
+        targets(data.train_labels, train_prior), [feature_scaler.transform(x) for x in data.test_x],
+        targets(data.test_labels, test_prior), data.edge, rng, Checkpoints(out, settings, every),
+        checkpoint, measure, progress, on_epoch, data.resting, data.select_residuals, data.skip)
     metrics = {**metrics, "seconds": time.perf_counter() - start,  # data preparation in
-               "model_rate_hz": model_rate}
-    save_run(out, config, network, feature_scaler, label_scaler,
-             feature_names(feature_set, force_inputs is not None), list(LABELS[labels]), model_rate,
-             {"data": {"path": str(Path(dataset.path).resolve()), "set": dataset.set,
-                       "sha256": dataset.digest, "sample_rate_hz": rate_hz,
-                       "plant": dict(dataset.plant), "train": [t.name for t in train_set],
-                       "test": [t.name for t in test_set]},
-              "parameters": metrics["parameters"],
-              **({} if prior is None else {"prior_parameters": prior}),
-              **({} if force_inputs is None else {"force_input": force_inputs})},
+               "model_rate_hz": data.model_rate_hz, **data.preprocessing}
+    save_run(out, config, network, feature_scaler, label_scaler, data.feature_names,
+             data.label_names, data.model_rate_hz,
+             {**data.run_info, "parameters": metrics["parameters"]},
              {"metrics.json": lambda path: path.write_text(json.dumps(metrics, indent=2) + "\n"),
-              "loss.png": lambda path: plot_losses(history, path,
-                                                   f"{config.model} ({config.preset})")})
+              "loss.png": lambda path: plot_losses(history, path, data.title)},
+             data.config_record)
     return {**metrics, "run": str(out)}
-
-
-def _settings(config: TrainConfig, dataset: Dataset) -> dict[str, Any]:
-    """What a checkpoint must share to be resumed: the configuration (where it runs aside)
-    and the data."""
-    return {"config": config.learned_settings(), "data": dataset.digest}
-
-
-def _splits(dataset: Dataset) -> tuple[list[Trajectory], list[Trajectory]]:
-    train_set, test_set = dataset.split("train"), dataset.split("test")
-    for name, split in (("train", train_set), ("test", test_set)):
-        if not split:
-            raise DatasetError(f"{dataset.path}: the '{name}' split is empty; mark some "
-                               f"trajectories '{name}' in manifest.json or collect more data")
-    return train_set, test_set
-
-
-def _prepare(trajectories: list[Trajectory], rate_hz: float, features: FeatureConfig,
-             rng: np.random.Generator | None) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    pairs = [prepare_trajectory(t, rate_hz, features, rng) for t in trajectories]
-    return [x for x, _ in pairs], [f for _, f in pairs]
 
 
 def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np.ndarray],
@@ -209,15 +167,16 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
                 rng: np.random.Generator, saver: Checkpoints, checkpoint: dict[str, Any] | None,
                 measure: Callable[[SequenceNetwork, SequenceSet, SequenceSet], dict[str, Any]],
                 progress: bool = True, on_epoch: EpochReport | None = None,
-                unlabelled: list[np.ndarray] | None = None, select_residuals: bool = False
+                unlabelled: list[np.ndarray] | None = None, select_residuals: bool = False,
+                skip: slice = slice(None)
                 ) -> tuple[SequenceNetwork, dict[str, Any], dict[str, Any]]:
     """Train `config`'s network on scaled features and targets (lists of (n, k) arrays, one
     per trajectory; `edge` samples at each end, and those `unlabelled` marks in a training
     trajectory, out of every loss), the training trajectories' windows split into training
     and validation; return the network (best epoch, on the CPU), its history, and `measure`'s
-    metrics with the timing and device: any machine's training (this module's `fit`,
-    learning.machine_train) runs through here. With `select_residuals`, a residual output
-    that does not help keeps its prior alone (`unhelpful_residuals`)."""
+    metrics with the timing and device. With `select_residuals`, a residual output that does
+    not help keeps its prior alone (`unhelpful_residuals`); `skip`: the features the linear
+    skip is fitted on."""
     roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge,
                          unlabelled)
     device = pick_device(config.device)
@@ -229,8 +188,7 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
         test_data = SequenceSet.build(test_x, test_y, [interior(len(x), edge) for x in test_x],
                                       device)
         fitted = train_data.role == TRAIN
-        fit_linear_skip(network, train_data.x[fitted], train_data.y[fitted],
-                        _skip_columns(config))
+        fit_linear_skip(network, train_data.x[fitted], train_data.y[fitted], skip)
         history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint,
                             on_epoch)
         selected = select_residuals and uses_prior(config.model)
@@ -267,97 +225,6 @@ def unhelpful_residuals(network: SequenceNetwork, data: SequenceSet) -> list[int
         residual = residual + ((pred - y) ** 2 * mask).sum(dim=(0, 1)).double().cpu()
         prior = prior + (y ** 2 * mask).sum(dim=(0, 1)).double().cpu()
     return [k for k in range(len(residual)) if not residual[k] < prior[k]]
-
-
-def _skip_columns(config: TrainConfig) -> slice:
-    """The features a linear skip is fitted on: with force inputs those alone, so that the
-    physics enters linearly through them and no least-squares weight on the collinear motion
-    features, fitted to the labels' noise, extrapolates beyond the training range (hardware
-    stand-in, the test split's geometric-mean e2 ratio x / y: TCN 233 / 201 and LSTM
-    207 / 246 with the skip on the force inputs, 53 / 73 and 53 / 71 on every feature)."""
-    return slice(-len(FORCE_INPUTS), None) if config.features.force_input else slice(None)
-
-
-def _identified_parameters(config: TrainConfig, dataset: Dataset, model_rate: float
-                           ) -> dict[str, float] | None:
-    """The physics-guided model's prior, or a black-box network's force inputs: the
-    deployable parameters of the rigid-body model identified from the training trajectories
-    (learning.identify: inertias, flexures, motor friction and torque constants), without the
-    added training noise, so that runs of other seeds share it; None for a model with neither.
-    It needs the motion alone: the compact features hold it, bit for bit as every other set
-    does, and cost a fraction of the work."""
-    if not (uses_prior(config.model) or config.features.force_input):
-        return None
-    motion = replace(config.features, labels="forces", feature_set="compact")
-    return dict(_identified_prior(str(Path(dataset.path).resolve()), dataset.digest, motion,
-                                  model_rate))
-
-
-@functools.lru_cache(maxsize=2)
-def _identified_prior(path: str, digest: str, features: FeatureConfig, model_rate: float
-                      ) -> tuple[tuple[str, float], ...]:
-    """_identified_parameters of the dataset folder `path` (whose content `digest` names), once per
-    process: an ensemble's members, trained one after another in a worker, share it (22 s of
-    a physics-guided run's 55 s of data preparation on the hardware set)."""
-    dataset = load_dataset(path)
-    if dataset.digest != digest:
-        raise DatasetError(f"{path} changed while training on it")
-    identification = identify_samples(*_prepare(dataset.split("train"),
-                                                dataset.sample_rate_hz, features, None),
-                                      features, model_rate)
-    return tuple(identification.parameters().items())
-
-
-def _rigid_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler,
-               feature_set: str, edge: int, labels: str = "forces") -> float:
-    """The test MSE of the nominal rigid-body model (as motor currents for current `labels`)
-    in the same units and on the same samples (the `edge` samples at each end left out):
-    the baseline to beat."""
-    errors = [((f - rigid_forces(x, feature_set, None, labels)) / scaler.span)[
-        interior(len(x), edge) == TRAIN] for x, f in zip(xs, fs)]
-    return float(np.mean(np.concatenate(errors) ** 2))
-
-
-def with_force_inputs(features: np.ndarray, parameters: dict[str, float], config: FeatureConfig,
-                      rate_hz: float) -> np.ndarray:
-    """A network's training inputs with force_input: the features (n, k) of one trajectory at
-    `rate_hz` and, after them, the force of the rigid-body model of `parameters` along their
-    motion (n, k + 2), through the labels' filter where `config.filtered_prior` says so.
-
-    Filtered, the force input steps at a motor reversal as the labels do, smoothed, and the
-    network learns to pass it on (its linear skip, fitted first, takes it about 1:1); the
-    deployed feedforward computes it from the reference, unfiltered, and so passes the sharp
-    step on, as the physics-guided model's prior does (prior_labels)."""
-    force = prior_labels(features, parameters, replace(config, labels="forces"), rate_hz)
-    return np.hstack([features, force])
-
-
-def prior_labels(features: np.ndarray, parameters: dict[str, float], config: FeatureConfig,
-                 rate_hz: float) -> np.ndarray:
-    """What the physics-guided network's labels subtract: the prior's force (or currents)
-    along the features of one trajectory at `rate_hz`, through the labels' own filter where
-    `config.filtered_prior` says so (the default).
-
-    The labels are the applied force low-passed; the prior is evaluated on the low-passed
-    motion. Those differ where the force is not smooth: at each motor reversal the Coulomb
-    friction steps, and the labels hold the step smoothed over a second while the prior
-    steps within milliseconds. Their difference taught the network a wiggle at every reversal
-    that the deployed prior, stepping at 1 kHz, does not need (hardware stand-in, evaluation
-    reference: 4 mN peaks at the three motors' reversals, the closed loop ringing after each
-    at 1.2 Hz, e2 x 118 against 158 for the prior alone). Filtered alike, the steps cancel
-    and the residual holds what the prior lacks: e2 237 / 135 against 118 / 107 (3 seeds,
-    flexff evaluate --env hardware)."""
-    prior = rigid_forces(features, config.feature_set, parameters, config.labels)
-    return filter_labels(prior, rate_hz, config) if config.filtered_prior else prior
-
-
-def _prior_mse(xs: list[np.ndarray], fs: list[np.ndarray], scaler: MinMaxScaler, edge: int,
-               parameters: dict[str, float], config: FeatureConfig, rate_hz: float) -> float:
-    """The test MSE of the prior alone in the units and on the samples of the residual's
-    (prior_labels), the `edge` samples at each end left out: the baseline to beat."""
-    errors = [((f - prior_labels(x, parameters, config, rate_hz)) / scaler.span)[
-        interior(len(x), edge) == TRAIN] for x, f in zip(xs, fs)]
-    return float(np.mean(np.concatenate(errors) ** 2))
 
 
 class Checkpoints:

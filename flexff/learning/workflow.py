@@ -21,6 +21,7 @@ from flexff.learning.excitation import CLASSES
 if TYPE_CHECKING:  # numpy, scipy and torch load in the step that needs them
     from flexff.cosim.schema import RunConfig
     from flexff.learning.collect import CollectionReport
+    from flexff.learning.dataset import Dataset
     from flexff.learning.identify import Identification
     from flexff.learning.linear_prior import LinearModel
     from flexff.learning.machine_dataset import MachineDataset
@@ -68,6 +69,23 @@ def collect_data(out: str | Path, set_name: str | None = None, loop: RunConfig |
         raise InputError("data collect needs --set NAME, or --config LOOP.toml with a [machine]")
     return run_collection(set_name, out, workers, scheduler, progress=progress, config=loop,
                           draws=draws)
+
+
+def import_data(files: Sequence[str | Path], out: str | Path, machine: str | Path | None = None,
+                rate_hz: float | None = None, test: Sequence[str] | None = None
+                ) -> Dataset | MachineDataset:
+    """Import log `files` into the new dataset folder `out`, resampled to `rate_hz` (default:
+    the logs' own), the logs named in `test` (default: the last one) forming the test split: a
+    machine's through the [machine.log] map of the description file `machine`
+    (learning.machine_logs), without one the manipulator's columns (learning.logs)."""
+    if machine is None:
+        from flexff.learning.logs import import_logs
+
+        return import_logs(files, out, rate_hz, test)
+    from flexff.cosim.machine import load_machine
+    from flexff.learning.machine_logs import import_machine_logs
+
+    return import_machine_logs(files, out, load_machine(machine), rate_hz, test)
 
 
 def identify_prior(data: str | Path, out: str | Path, env: str = "hardware",
@@ -145,20 +163,22 @@ def _train_machine(model: str, data: str | Path, out: str | Path, preset: str, s
                    resume: bool, force: bool, checkpoint_every: int | None, device: str,
                    progress: bool, overrides: dict[str, Any]) -> dict[str, Any]:
     """train_model on a machine's dataset (see there)."""
+    from flexff.learning.description_data import DescriptionData
     from flexff.learning.machine_dataset import load_machine_dataset
     from flexff.learning.machine_evaluate import learned_features
     from flexff.learning.machine_identify import identify_dataset
-    from flexff.learning.machine_train import fit_machine
     from flexff.learning.presets import make_config
+    from flexff.learning.train import fit
 
     dataset = load_machine_dataset(data)
     config = make_config(model, preset, seed=seed, device=device, **overrides)
     identified = identify_dataset(dataset)
-    return fit_machine(config, dataset.description, dataset.sample_rate_hz,
-                       dataset.trajectories, dataset.digest, Path(out),
-                       learned_features(identified), progress, resume=resume, force=force,
-                       checkpoint_every=checkpoint_every,
-                       prior=identified if model == "pgnn" else None)
+    source = DescriptionData.of(config, dataset.description, dataset.sample_rate_hz,
+                                dataset.trajectories, dataset.digest,
+                                learned_features(identified),
+                                identified if model == "pgnn" else None)
+    return fit(config, source, Path(out), progress, resume=resume, force=force,
+               checkpoint_every=checkpoint_every)
 
 
 def evaluate_any(out: str | Path, env: str = "sim", loop: RunConfig | None = None,

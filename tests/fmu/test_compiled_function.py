@@ -7,11 +7,11 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from flexff.controllers import features
-from flexff.controllers.features import COMPILED_FROM, evaluate_samples
+from flexff.controllers.ilc_model import model_inverse_dynamics
 from flexff.fmu import compiled_function
 from flexff.fmu.compiled_function import compiled
-from flexff.learning.ilc_filter import model_inverse_dynamics
+from flexff.learning import samples
+from flexff.learning.samples import COMPILED_FROM, evaluate_samples
 from flexff.plant.parameters import HARDWARE
 
 
@@ -37,7 +37,7 @@ def test_a_compiled_function_gives_the_interpreted_results_bit_for_bit(inverse_d
 def test_a_function_runs_compiled_once_it_has_seen_enough_samples(monkeypatch):
     function = model_inverse_dynamics(HARDWARE)  # a new Function: no samples counted yet
     made = []
-    monkeypatch.setattr(features, "compiled", lambda f: made.append(f.name()) or compiled(f))
+    monkeypatch.setattr(samples, "compiled", lambda f: made.append(f.name()) or compiled(f))
     columns = motion(COMPILED_FROM, seed=1)
     interpreted = np.asarray(function.map(COMPILED_FROM)(*(c.T for c in columns))).T
     first = evaluate_samples(function, *(c[:100] for c in columns))

@@ -6,8 +6,6 @@ import pytest
 from flexff.controllers.features import (
     DIRECTION_WIDTHS,
     FEATURE_SETS,
-    MAP_CHUNK,
-    evaluate_samples,
     feature_names,
     feature_units,
     motion_columns,
@@ -18,14 +16,13 @@ from flexff.controllers.features import (
 from flexff.learning.dataset import REFERENCE_SIGNALS
 from flexff.learning.features import (
     FeatureConfig,
-    decimation,
-    differentiate,
     encoder_positions,
-    lowpass,
     prepare_trajectory,
     quantize_encoders,
 )
+from flexff.learning.samples import MAP_CHUNK, evaluate_samples
 from flexff.learning.scaling import MinMaxScaler
+from flexff.learning.signal_processing import decimation, differentiate, lowpass
 from flexff.learning.synthetic import skew_sine_circle, synthetic_trajectory
 from flexff.plant.kinematics import COORDINATE_NAMES, SHOULDER_INDEX
 

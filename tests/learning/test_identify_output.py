@@ -8,7 +8,7 @@ import pytest
 
 from flexff.cli import main
 from flexff.learning.machine_dataset import write_machine_dataset
-from tests.learning.test_machine_train import machine, trajectory
+from tests.learning.test_description_data import machine, trajectory
 
 pytestmark = pytest.mark.learn
 

@@ -10,6 +10,8 @@ import pytest
 
 from flexff import cli
 from flexff.cli import shared
+from flexff.controllers.ilc_model import model_inverse_dynamics
+from flexff.controllers.manipulator_machine import ILC_CUTOFF_HZ, manipulator_description
 from flexff.cosim.config import parse_config
 from flexff.cosim.csv_text import read_time_table
 from flexff.cosim.metrics import named_axes, tracking_metrics
@@ -20,14 +22,8 @@ from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
 from flexff.learning import ilc as ilc_module
 from flexff.learning.ilc import NOISE_FLOOR, ilc
-from flexff.learning.ilc_filter import (
-    CUTOFF_HZ,
-    LearningFilter,
-    learning_filter,
-    model_inverse_dynamics,
-)
-from flexff.learning.ilc_loops import EXACT_ENCODERS
-from flexff.learning.loop import with_feedforward_table
+from flexff.learning.ilc_filter import LearningFilter, filter_along
+from flexff.learning.machine_loop import with_feedforward, with_start_values
 from flexff.plant.parameters import NOMINAL
 from flexff.plant.signals import AXES
 from flexff.plant.system import plant_system
@@ -103,10 +99,8 @@ def test_the_noise_floor_and_the_noiseless_error_add_in_squares(hardware_iterati
     loop, out, state = hardware_iteration
     floor = state[NOISE_FLOOR]
     assert json.loads((out / "ilc.json").read_text())[NOISE_FLOOR] == floor
-    exact = replace(loop, fmus=tuple(
-        replace(f, parameters={**f.parameters, **EXACT_ENCODERS}) if f.builtin == "plant"
-        else f for f in loop.fmus))
-    noisy, clean = (tracking_metrics(simulate_config(with_feedforward_table(
+    exact = with_start_values(loop, loop.machine.exact, "machine.exact")
+    noisy, clean = (tracking_metrics(simulate_config(with_feedforward(
         c, out / "feedforward.csv"), progress=False), named_axes(AXES)) for c in (loop, exact))
     for axis in ("x", "y"):
         assert clean[axis]["e2"] < 0.3 * floor[axis]
@@ -114,36 +108,35 @@ def test_the_noise_floor_and_the_noiseless_error_add_in_squares(hardware_iterati
                                                                          rel=0.05)
 
 
-def test_ilc_on_a_plant_fmu_by_path_uses_the_nominal_model(tmp_path):
-    """A loop of flexff's controller and a plant FMU by path (its x, y found by name)."""
-    machine = build_fmu(plant_system("nominal"), tmp_path / "machine.fmu")
-    loop = parse_config(f"""
-[reference]
-kind = "circle"
-radius = 0.02
-duration = 2.0
-[fmu.controller]
-builtin = "controller"
-[fmu.machine]
-path = "{machine}"
-parameters = {{ x_start = 0.02, y_start = 0.0 }}
-[[source]]
-kind = "constant"
-values = {{ Fx_ff = 0.0, Fy_ff = 0.0 }}
-""", name="machine")
-    state = ilc(loop, tmp_path / "out", iterations=1, progress=False, say=lambda _: None)
-    assert state["trials"][1]["seed"] is None
+def test_ilc_on_a_plant_fmu_by_path_takes_the_description_of_the_loop(tmp_path):
+    """A loop of flexff's controller and a plant FMU by path, described as the short form
+    describes its own (the manipulator's [machine]): the same iteration, its noise seed an
+    FMU parameter drawn anew each trial."""
+    machine = build_fmu(plant_system("nominal"), tmp_path / "plant.fmu")
+    tables = {"reference": {"kind": "circle", "radius": 0.02, "duration": 2.0},
+              "fmu": {"controller": {"builtin": "controller"},
+                      "plant": {"path": str(machine),
+                                "parameters": {"x_start": 0.02, "y_start": 0.0}}},
+              "source": [{"kind": "constant", "values": {"Fx_ff": 0.0, "Fy_ff": 0.0}}],
+              "machine": manipulator_description()}
+    state = ilc(parse_config(tables, name="plant"), tmp_path / "out", iterations=1,
+                progress=False, say=lambda _: None)
+    assert [t["seed"] for t in state["trials"]] == [1, 2]
     assert np.all(e2(state["trials"][1]) < 0.01 * e2(state["trials"][0]))
+    del tables["machine"]
+    with pytest.raises(InputError, match=r"\[machine\]"):
+        ilc(parse_config(tables, name="plant"), tmp_path / "bare", iterations=1,
+            progress=False, say=lambda _: None)
 
 
 def test_the_table_fed_back_as_a_source_reproduces_the_best_trial(iteration):
     loop, out, state = iteration
     best = state["trials"][state["best"]]
     assert state["best"] == 3
-    table = read_time_table(out / "feedforward.csv", ("Fx_ff", "Fy_ff"))
+    table = read_time_table(out / "feedforward.csv", ("x_ff", "y_ff"))
     assert table.time.size == loop.steps + 1
     assert np.array_equal(table.time, np.arange(loop.steps + 1) * STEP)
-    run = with_feedforward_table(loop, out / "feedforward.csv")
+    run = with_feedforward(loop, out / "feedforward.csv")
     metrics = tracking_metrics(simulate_config(run, progress=False), named_axes(AXES))
     for axis in ("x", "y"):
         assert metrics[axis]["e2"] == pytest.approx(best[axis]["e2"], rel=1e-9)
@@ -152,10 +145,10 @@ def test_the_table_fed_back_as_a_source_reproduces_the_best_trial(iteration):
 def test_every_trial_is_written(iteration):
     _, out, state = iteration
     assert json.loads((out / "ilc.json").read_text()) == state
-    assert state["cutoff_hz"] == CUTOFF_HZ
+    assert state["cutoff_hz"] == ILC_CUTOFF_HZ
     assert sorted(p.name for p in (out / "tables").iterdir()) == [
         f"trial-{k:03d}.csv" for k in range(5)]
-    assert not read_time_table(out / "tables" / "trial-000.csv").columns["Fx_ff"].any()
+    assert not read_time_table(out / "tables" / "trial-000.csv").columns["x_ff"].any()
     assert (out / "e2.png").stat().st_size > 0
     assert [t["seed"] for t in state["trials"]] == [1, 2, 3, 4]
     assert state[NOISE_FLOOR] is None  # the nominal plant measures exactly
@@ -203,7 +196,10 @@ def test_the_model_force_of_a_small_error_is_the_linearised_inverse_dynamics():
     reference = reference_samples(build_reference("circle", {
         "centre": (0.01, 0.01), "radius": 0.02, "turns": 1.0, "start_angle": 0.0,
         "duration": 2.0}, STEP), n - 1)
-    model = learning_filter(reference, STEP, NOMINAL)
+    motion = [np.column_stack([reference[f"{d}x_ref"], reference[f"{d}y_ref"]])
+              for d in ("", "v", "a")]
+    model = filter_along((motion[0], motion[1], motion[2]), STEP,
+                         model_inverse_dynamics(NOMINAL), ILC_CUTOFF_HZ)
     w = 2 * np.pi * 3.0
     error = 1e-6 * np.column_stack([np.sin(w * t), np.zeros(n)])
     rate = 1e-6 * np.column_stack([w * np.cos(w * t), np.zeros(n)])
@@ -212,8 +208,6 @@ def test_the_model_force_of_a_small_error_is_the_linearised_inverse_dynamics():
     force = model_inverse_dynamics(NOMINAL)(pos, vel, acc)
     derivatives = ca.Function("d", [pos, vel, acc], [ca.jacobian(force, v)
                                                       for v in (pos, vel, acc)])
-    motion = [np.column_stack([reference[f"{d}x_ref"], reference[f"{d}y_ref"]])
-              for d in ("", "v", "a")]
     expected = np.empty((n, 2))
     for k in range(n):
         stiffness, damping, mass = (np.asarray(m) for m in derivatives(*(c[k] for c in motion)))
@@ -228,7 +222,8 @@ def test_q_passes_the_reference_band_without_lag_and_cuts_the_tool_mode():
     n = 4001
     t = np.arange(n) * STEP
     still = np.zeros((n, 2))
-    model = LearningFilter(STEP, model_inverse_dynamics(NOMINAL), (still, still, still))
+    model = LearningFilter(STEP, model_inverse_dynamics(NOMINAL), (still, still, still),
+                           ILC_CUTOFF_HZ)
     slow = np.column_stack([np.sin(2 * np.pi * 2.0 * t), np.cos(2 * np.pi * 2.0 * t)])
     fast = np.sin(2 * np.pi * 40.0 * t)[:, None] * np.ones((1, 2))
     inner = slice(500, -500)
@@ -248,5 +243,5 @@ def test_the_cli_runs_and_reports_each_trial(tmp_path, capsys):
 
 
 def test_the_cli_defaults_are_the_module_defaults():
-    assert (shared.ITERATIONS, shared.CUTOFF_HZ, shared.GAIN) == (
-        ilc_module.ITERATIONS, CUTOFF_HZ, ilc_module.GAIN)
+    assert (shared.ITERATIONS, shared.CUTOFF_SHARE, shared.GAIN) == (
+        ilc_module.ITERATIONS, ilc_module.CUTOFF_SHARE, ilc_module.GAIN)

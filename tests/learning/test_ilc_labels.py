@@ -4,7 +4,7 @@ force ILC converged to there, its motion the reference's; the test split stays a
 import numpy as np
 import pytest
 
-from flexff.controllers.features import evaluate_samples
+from flexff.controllers.ilc_model import model_inverse_dynamics
 from flexff.cosim.config import parse_config
 from flexff.cosim.csv_text import read_time_table
 from flexff.cosim.references import build_reference
@@ -21,9 +21,9 @@ from flexff.learning.dataset import (
 )
 from flexff.learning.features import encoder_positions
 from flexff.learning.ilc import RESULT
-from flexff.learning.ilc_filter import model_inverse_dynamics
 from flexff.learning.ilc_labels import FOLDER, ilc_labelled_set
 from flexff.learning.loop import default_loop
+from flexff.learning.samples import evaluate_samples
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.plant.parameters import NOMINAL
 
@@ -61,7 +61,7 @@ def test_the_labels_are_the_force_ilc_learned_on_the_reference(labelled):
     _, after, out = labelled
     trajectory = after.split("train")[0]
     table = read_time_table(out / FOLDER / trajectory.name / RESULT)
-    for label, column in zip(LABEL_SIGNALS, ("Fx_ff", "Fy_ff")):
+    for label, column in zip(LABEL_SIGNALS, ("x_ff", "y_ff")):
         assert np.array_equal(trajectory.signals[label],
                               np.interp(trajectory.signals["time"], table.time,
                                         table.columns[column]))

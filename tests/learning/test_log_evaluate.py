@@ -7,7 +7,7 @@ import pytest
 
 from flexff.learning.log_evaluate import evaluate_logs
 from flexff.learning.machine_dataset import write_machine_dataset
-from tests.learning.test_machine_train import machine, trajectory
+from tests.learning.test_description_data import machine, trajectory
 
 
 def test_each_model_predicts_the_test_logs(tmp_path, capsys):

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from flexff.controllers.features import evaluate_samples
 from flexff.cosim.machine import parse_machine
 from flexff.fmu.errors import InputError
 from flexff.learning.feature_spec import feature_function, feature_names
 from flexff.learning.machine_features import MachineFeatures, data_cutoff, prepare
+from flexff.learning.samples import evaluate_samples
 
 RATE = 1000.0
 

@@ -12,12 +12,13 @@ from flexff.cosim.machine import parse_machine
 from flexff.fmu.build import build_fmu
 from flexff.learning.dataset_files import Trajectory
 from flexff.learning.deploy import SIModel
+from flexff.learning.description_data import DescriptionData, features_from_dict
 from flexff.learning.export import export
 from flexff.learning.linear_prior import AxisFit, LinearModel
 from flexff.learning.machine_features import MachineFeatures, prepare
-from flexff.learning.machine_train import features_from_dict, fit_machine
 from flexff.learning.presets import make_config
 from flexff.learning.run_folder import load_run
+from flexff.learning.train import fit
 from tests.runners import run_fmu
 
 RATE = 1000.0
@@ -65,8 +66,10 @@ def trained(tmp_path_factory):
     and its folder."""
     folder = tmp_path_factory.mktemp("pgnn")
     data = [moves(k, "train") for k in range(6)] + [moves(10 + k, "test") for k in range(2)]
-    metrics = fit_machine(make_config("pgnn", "fast", epochs=40), MACHINE, RATE, data, "digest",
-                          folder / "run", MachineFeatures(), progress=False, prior=prior())
+    config = make_config("pgnn", "fast", epochs=40)
+    metrics = fit(config, DescriptionData.of(config, MACHINE, RATE, data, "digest",
+                                             MachineFeatures(), prior()),
+                  folder / "run", progress=False)
     return metrics, folder
 
 

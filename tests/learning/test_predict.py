@@ -11,15 +11,16 @@ import pytest
 from flexff.cosim.config_error import ConfigError
 from flexff.cosim.machine import machine_table, parse_machine
 from flexff.fmu.errors import InputError
-from flexff.learning.features import lowpass
+from flexff.learning.description_data import DescriptionData
 from flexff.learning.linear_model import write_linear_model
 from flexff.learning.machine_dataset import load_machine_dataset, write_machine_dataset
 from flexff.learning.machine_features import ERROR, MachineFeatures, lagged
 from flexff.learning.machine_identify import dataset_features, identify_dataset
-from flexff.learning.machine_train import fit_machine
 from flexff.learning.predict import predict_logs, write_predictions
 from flexff.learning.presets import make_config
-from tests.learning.test_machine_train import RATE, machine, trajectory
+from flexff.learning.signal_processing import lowpass
+from flexff.learning.train import fit
+from tests.learning.test_description_data import RATE, machine, trajectory
 
 
 def _dataset(folder, names=("x",), learning=None):
@@ -88,9 +89,10 @@ def test_a_bad_learning_setting_names_its_key(learning, key):
 
 def test_a_network_run_predicts_and_writes_csv_json_and_png(tmp_path):
     data = _dataset(tmp_path / "data", ("a", "b"))
-    metrics = fit_machine(make_config("tcn", "fast", epochs=1), data.description, RATE,
-                          data.trajectories, data.digest, tmp_path / "run",
-                          MachineFeatures(), progress=False)
+    config = make_config("tcn", "fast", epochs=1)
+    metrics = fit(config, DescriptionData.of(config, data.description, RATE, data.trajectories,
+                                             data.digest, MachineFeatures()),
+                  tmp_path / "run", progress=False)
     assert metrics["preprocessing"]["error"] == ERROR  # metrics.json holds the scoring
     assert json.loads((tmp_path / "run" / "metrics.json").read_text())["preprocessing"][
         "cutoff_hz"] == metrics["cutoff_hz"]

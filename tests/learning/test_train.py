@@ -9,20 +9,23 @@ import numpy as np
 import pytest
 import torch
 
+import flexff.learning.manipulator_data as manipulator_data
 import flexff.learning.train as training
 from flexff.controllers.features import FORCE_INPUTS, feature_names
 from flexff.learning import synthetic
 from flexff.learning.batches import PAD, TRAIN, VALIDATION, window_roles
 from flexff.learning.dataset import DatasetError, load_dataset
 from flexff.learning.deploy import predict
-from flexff.learning.features import FeatureConfig, decimation, prepare_trajectory
+from flexff.learning.features import FeatureConfig, prepare_trajectory
 from flexff.learning.identify import identify_samples
+from flexff.learning.manipulator_data import prior_labels
 from flexff.learning.presets import make_config
 from flexff.learning.rigid import rigid_forces
 from flexff.learning.run_folder import load_run
+from flexff.learning.signal_processing import decimation
 from flexff.learning.synthetic import motion_trajectory, skew_sine_circle, synthetic_dataset
 from flexff.learning.threads import cpu_threads, torch_threads
-from flexff.learning.train import learning_rate, prior_labels, train
+from flexff.learning.train import learning_rate, train
 from flexff.plant.parameters import HARDWARE, MOTOR_FRICTION
 
 TINY = {"lstm": {"hidden": 16, "layers": 2, "linear_skip": False},
@@ -76,14 +79,14 @@ def test_training_is_reproducible(data, tmp_path):
 def test_an_ensembles_members_share_one_identification_of_the_prior(data, tmp_path):
     """Seeds differ, the prior does not: a process identifies it once per data set and
     preprocessing, and a run of other preprocessing identifies its own."""
-    training._identified_prior.cache_clear()
+    manipulator_data._identified_prior.cache_clear()
     runs = [train("pgnn", "fast", data, tmp_path / f"seed{seed}", progress=False, epochs=1,
                   seed=seed, **TINY["pgnn"]) for seed in (0, 1)]
     assert runs[0]["prior_parameters"] == runs[1]["prior_parameters"]
-    assert training._identified_prior.cache_info()[:2] == (1, 1)  # hits, misses
+    assert manipulator_data._identified_prior.cache_info()[:2] == (1, 1)  # hits, misses
     train("pgnn", "fast", data, tmp_path / "other", progress=False, epochs=1, cutoff_hz=5.0,
           **TINY["pgnn"])
-    assert training._identified_prior.cache_info()[:2] == (1, 2)
+    assert manipulator_data._identified_prior.cache_info()[:2] == (1, 2)
 
 
 @pytest.mark.parametrize("kind", ["lstm", "pgnn"])
@@ -153,7 +156,8 @@ def test_the_residual_labels_filter_the_prior_as_the_labels_are_filtered():
     """A slow circle (motor reversals every few seconds) whose force is exactly the prior's,
     friction included: the labels hold its friction steps low-passed, so the prior through
     the same filter leaves no residual, the prior as it is a wiggle at every reversal (what
-    the pgnn learned and deployed on the hardware stand-in, learning.train.prior_labels)."""
+    the pgnn learned and deployed on the hardware stand-in,
+    learning.manipulator_data.prior_labels)."""
     rate = 100.0
     t = np.arange(2000) / rate
     motion = skew_sine_circle(t, duration=20.0, radius=0.03, turns=3.0, start_angle=0.0)

@@ -1,10 +1,11 @@
-"""controllers.features.evaluate_samples: CasADi's map in numpy's memory gives what the
+"""learning.samples.evaluate_samples: CasADi's map in numpy's memory gives what the
 Function gives sample by sample."""
 
 import casadi as ca
 import numpy as np
 
-from flexff.controllers.features import MAP_CHUNK, evaluate_samples, motion_function
+from flexff.controllers.features import motion_function
+from flexff.learning.samples import MAP_CHUNK, evaluate_samples
 
 
 def test_chunks_and_the_padded_last_one_equal_the_function_sample_by_sample():

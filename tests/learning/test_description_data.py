@@ -1,4 +1,5 @@
-"""Training for any machine: a 1-axis and a 3-axis machine's trajectories to a run folder."""
+"""Training on a [machine] description's data: a 1-axis and a 3-axis machine's trajectories to a
+run folder."""
 
 import json
 
@@ -6,7 +7,6 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from flexff.controllers.features import evaluate_samples
 from flexff.controllers.machine_feedforward import ahead, learned_machine_feedforward_system
 from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import parse_machine
@@ -14,12 +14,14 @@ from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
 from flexff.fmu.validation import validate_fmu
 from flexff.learning.dataset_files import Trajectory as MachineTrajectory
+from flexff.learning.description_data import DescriptionData, resting
 from flexff.learning.export import export, run_steps, session
 from flexff.learning.feature_spec import feature_function
 from flexff.learning.machine_features import MachineFeatures
-from flexff.learning.machine_train import fit_machine
 from flexff.learning.presets import make_config
 from flexff.learning.run_folder import load_run
+from flexff.learning.samples import evaluate_samples
+from flexff.learning.train import fit
 from tests.runners import run_fmu
 
 RATE = 1000.0
@@ -55,8 +57,8 @@ def test_a_machine_trains_into_a_run_folder(names, tmp_path):
     data = [trajectory(names, k, "train") for k in range(6)] + [
         trajectory(names, 10 + k, "test") for k in range(2)]
     config = make_config("tcn", "fast", epochs=2)
-    metrics = fit_machine(config, machine(names), RATE, data, "digest", tmp_path / "run",
-                          MachineFeatures(), progress=False)
+    metrics = fit(config, DescriptionData.of(config, machine(names), RATE, data, "digest",
+                                             MachineFeatures()), tmp_path / "run", progress=False)
     run = load_run(tmp_path / "run")
     info = json.loads((tmp_path / "run" / "run.json").read_text())
     assert info["label_names"] == [f"{n}_effort" for n in names]
@@ -73,10 +75,10 @@ def test_a_machine_trains_into_a_run_folder(names, tmp_path):
     assert (tmp_path / "run" / "loss.png").is_file()
 
 
-def test_the_physics_guided_model_asks_for_its_prior(tmp_path):
+def test_the_physics_guided_model_asks_for_its_prior():
     with pytest.raises(InputError, match=r"pgnn.* and only it learns over an identified prior"):
-        fit_machine(make_config("pgnn", "fast", epochs=1), machine(("x",)), RATE,
-                    [trajectory(("x",), 0, "train")], "d", tmp_path / "run")
+        DescriptionData.of(make_config("pgnn", "fast", epochs=1), machine(("x",)), RATE,
+                           [trajectory(("x",), 0, "train")], "d")
 
 
 def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
@@ -85,8 +87,9 @@ def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
     lead), from the state at rest on the first ones, plus the linear skip the card holds."""
     names = ("x",)
     data = [trajectory(names, k, "train") for k in range(4)] + [trajectory(names, 9, "test")]
-    fit_machine(make_config("lstm", "fast", epochs=1), machine(names), RATE, data, "d",
-                tmp_path / "run", progress=False)
+    config = make_config("lstm", "fast", epochs=1)
+    fit(config, DescriptionData.of(config, machine(names), RATE, data, "d"), tmp_path / "run",
+        progress=False)
     model = export(tmp_path / "run", tmp_path / "model.onnx")
     card = read_card(model)
     assert (card.labels, card.output_signals, card.output_units) == ("efforts", ["x_ff"], ["N"])
@@ -124,8 +127,6 @@ def test_the_rest_is_no_label_where_every_reference_rests():
     """The physics-guided model's residual learns no label where every axis's reference
     rests (the loop settling its last move there), but where one still moves, and on logs
     without references."""
-    from flexff.learning.machine_train import resting
-
     two = machine(("x", "y"))
     still = trajectory(("x", "y"), 0, "train", seconds=3.0)
     signals = dict(still.signals)
