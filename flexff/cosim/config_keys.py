@@ -191,9 +191,9 @@ KEYS: tuple[Key, ...] = (
         "The learning gain on the model's correction P^-1 e; below 1 learns more slowly but "
         "tolerates a worse model (--gain, --ilc-gain)."),
     Key("machine.ilc", "model", "string", "identified on trial 0", "",
-        "The learning filter's inverse model: a name a machine package registers "
-        "(the manipulator's \"manipulator\": its plant's rigid-body model); by default the "
-        "prior's linear model identified on PID alone."),
+        "The learning filter's inverse model: a name a machine package registers (a short "
+        "form's own, `flexff config expand` shows it); by default the prior's linear model "
+        "identified on PID alone."),
     Key("machine.ilc", "seed", "string", "none", "",
         "\"instance.name\": the option or parameter that seeds the loop's noise, set anew "
         "each trial so that the iteration learns what repeats, not one noise sequence."),
