@@ -1,5 +1,4 @@
-"""Training: any machine's data in, a run folder out (weights, run.json, metrics.json,
-loss.png).
+"""Training: any machine's data in, a run folder out (weights, run.json, metrics.json, loss.png).
 
 `fit` takes a TrainingSource (learning.training_data: a [machine] description's data,
 learning.description_data, or the manipulator's dataset folder, learning.manipulator_data,
