@@ -36,7 +36,7 @@ def _fmu_build(args: argparse.Namespace) -> int:
         system = onnx_system(args.graph, args.step, 1 if args.every is None else args.every,
                              args.task, runtime)
     elif args.kind in ("learned-feedforward", "feedforward"):
-        from flexff.controllers.exported_feedforward import exported_feedforward_system
+        from flexff.controllers.learned_feedforward import learned_feedforward_system
 
         if args.kind == "feedforward":
             print("flexff: warning: 'fmu build feedforward' is now 'fmu build "
@@ -45,7 +45,8 @@ def _fmu_build(args: argparse.Namespace) -> int:
         if args.model is None:
             raise InputError("fmu build learned-feedforward needs --model M.onnx (flexff "
                              "export)")
-        system = exported_feedforward_system(args.model, args.step, args.task, runtime)
+        system = learned_feedforward_system(args.model, args.step, task=args.task,
+                                            runtime=runtime)
     else:
         from flexff.plant.system import plant_system
 

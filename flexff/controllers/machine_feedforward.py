@@ -1,12 +1,11 @@
 """Any machine's feedforward as a System: the machine's reference signals in (each axis's
 position, velocity, acceleration and jerk reference), `<axis>_ff` out. Either the effort an
 inverse model of the axes' motion gives along the reference (`inverse_model_system`: the
-identified linear model, or any CasADi function of that form), or a learned model exported by
-flexff (`learned_machine_feedforward_system`): its features computed from the reference in
-generated C (learning.feature_spec), its ONNX graph run as the manipulator's learned
-feedforward runs it (controllers.learned_feedforward: step or task mode, extrapolated between
-the model's calls); a physics-guided model's residual plus its prior, at rest too (a
-residual switched off there stepped at each start and stop).
+identified linear model, or any CasADi function of that form), or the ports of a learned model
+exported by flexff (`machine_model_ports`, which controllers.learned_feedforward builds the FMU
+around): its features computed from the reference in generated C (learning.feature_spec), a
+physics-guided model's prior added, at rest too (a residual switched off there stepped at each
+start and stop).
 """
 
 from __future__ import annotations
@@ -16,13 +15,10 @@ from pathlib import Path
 import casadi as ca
 
 from flexff.controllers.feedforward import feedforward_system
-from flexff.controllers.learned_feedforward import linear_skip, model_period
-from flexff.controllers.model_card import read_card
+from flexff.controllers.model_card import ModelCard
+from flexff.controllers.model_ports import ModelPorts
 from flexff.cosim.machine import Machine, parse_machine
-from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
-from flexff.fmu.network_runtime import RUNTIMES, runtime_label
-from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System, Variable
 from flexff.learning.feature_spec import FeatureInputs, feature_function
 from flexff.learning.linear_prior import linear_model_from_dict
@@ -89,43 +85,27 @@ def inverse_model_system(machine: Machine, inverse: ca.Function, step: float,
                               inputs=reference_variables(machine))
 
 
-def learned_machine_feedforward_system(model: str | Path, step: float = DEFAULT_STEP,
-                                       task: bool = False, runtime: str = RUNTIMES[0]
-                                       ) -> System:
-    """The System of the feedforward FMU running `model`, a machine's exported model; with
-    `task` its network runs in its own task; `runtime` computes the graph ("c" or
-    "onnxruntime")."""
-    card = read_card(model)
+def machine_model_ports(card: ModelCard, model: str | Path) -> ModelPorts:
+    """The ports of a machine's exported model (controllers.learned_feedforward builds the
+    FMU around them): the machine's reference signals in, its features of the reference the
+    card's lead ahead as the network's inputs, a physics-guided model's linear prior there,
+    each axis's `<axis>_ff` out."""
     if card.machine is None or card.machine_features is None:
-        raise InputError(f"{model} is a model of the manipulator: build it with `flexff fmu "
-                         f"build learned-feedforward`")
+        raise InputError(f"{model}: its card describes no machine (metadata machine, "
+                         f"machine_features): export it again with flexff export")
     machine = parse_machine(card.machine, f"{model}: metadata machine")
     inputs = FeatureInputs.from_settings(card.machine_features)
     reference = ca.SX.sym("u", 4 * len(machine.axes))
     looked_ahead = ahead(reference, float(card.machine_features.get("lead_s") or 0.0))
-    x, p = ca.SX.sym("x", 0), ca.SX.sym("p", 0)
-    features = feature_function(machine, inputs)(looked_ahead)
-    network = graph_network(read_graph(model, time_axis=True),
-                            ca.Function("network_input", [x, reference, p], [features]),
-                            model_period(card, step, model), None, task, runtime,
-                            primed=True)
-    if network.n_outputs != len(machine.axes):
-        raise InputError(f"{model}: the graph returns {network.n_outputs} values per step, the "
-                         f"machine {machine.name!r} has {len(machine.axes)} axes")
-    result = ca.SX.sym("r", network.n_outputs)
-    effort = result + linear_skip(card, features)
+    prior = None
     if card.prior == "linear":  # a physics-guided model: its residual plus the prior
         assert card.machine_prior is not None  # the card's check
-        prior = linear_model_from_dict(card.machine_prior, f"{model}: metadata machine_prior")
-        effort = effort + prior.casadi_function()(*reference_motion(machine, looked_ahead))
-    mode = "task" if task else "step"
-    return feedforward_system(
-        "learned_feedforward",
-        f"learned feedforward of {machine.name}: {card.model_kind} model at "
-        f"{card.sample_rate_hz:g} Hz in {runtime_label(runtime)}, {mode} mode",
-        reference, effort, step, result, outputs=feedforward_variables(machine),
-        inputs=reference_variables(machine),
-        extra={"flexff.feedforward.mode": mode, "flexff.feedforward.prior": card.prior,
-               "flexff.network.runtime": runtime, "flexff.model.model_kind": card.model_kind,
-               "flexff.model.sample_rate_hz": str(card.sample_rate_hz)},
-        network=network)
+        linear = linear_model_from_dict(card.machine_prior, f"{model}: metadata machine_prior")
+        prior = linear.casadi_function()(*reference_motion(machine, looked_ahead))
+    return ModelPorts(
+        reference, reference_variables(machine),
+        feature_function(machine, inputs)(looked_ahead), prior,
+        feedforward_variables(machine), of=f" of {machine.name}",
+        metadata={"flexff.model.model_kind": card.model_kind,
+                  "flexff.model.sample_rate_hz": str(card.sample_rate_hz)},
+        primed=True)

@@ -25,10 +25,8 @@ from typing import Any
 
 from tqdm import tqdm
 
-from flexff.controllers.machine_feedforward import (
-    inverse_model_system,
-    learned_machine_feedforward_system,
-)
+from flexff.controllers.learned_feedforward import learned_feedforward_system
+from flexff.controllers.machine_feedforward import inverse_model_system
 from flexff.cosim.executor import execute
 from flexff.cosim.metrics import machine_axes, tracking_metrics
 from flexff.cosim.recording import atomic_write
@@ -93,7 +91,7 @@ def evaluate_machine(loop: RunConfig, out: str | Path, models: Sequence[str] = M
     training = train_models(data, identified, out, models, preset, workers, progress,
                             learned_features(identified), **overrides)
     for kind in models:
-        fmus[kind] = build_fmu(learned_machine_feedforward_system(
+        fmus[kind] = build_fmu(learned_feedforward_system(
             out / "models" / f"{kind}.onnx", loop.step), out / "fmus" / f"{kind}.fmu")
     axes = machine_axes(machine)
     runs = {"pid": with_feedforward(loop),

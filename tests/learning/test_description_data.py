@@ -7,7 +7,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from flexff.controllers.machine_feedforward import ahead, learned_machine_feedforward_system
+from flexff.controllers.learned_feedforward import learned_feedforward_system
+from flexff.controllers.machine_feedforward import ahead
 from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import parse_machine
 from flexff.fmu.build import build_fmu
@@ -93,7 +94,7 @@ def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
     model = export(tmp_path / "run", tmp_path / "model.onnx")
     card = read_card(model)
     assert (card.labels, card.output_signals, card.output_units) == ("efforts", ["x_ff"], ["N"])
-    fmu = build_fmu(learned_machine_feedforward_system(model, 1e-3), tmp_path / "ff.fmu")
+    fmu = build_fmu(learned_feedforward_system(model, 1e-3), tmp_path / "ff.fmu")
     assert validate_fmu(fmu) == []
     reference = trajectory(names, 20, "test", seconds=1.0).signals
     inputs = ["x_ref", "vx_ref", "ax_ref", "jx_ref"]
@@ -114,7 +115,7 @@ def test_a_machine_model_exports_and_runs_as_its_feedforward_fmu(tmp_path):
     rest = run_fmu(fmu, 200, 1e-3, {n: np.full(200, reference[n][0]) for n in inputs},
                    record=["x_ff"])["x_ff"]
     np.testing.assert_allclose(rest, rest[0], rtol=1e-6, atol=1e-9)
-    task = build_fmu(learned_machine_feedforward_system(model, 1e-3, task=True),
+    task = build_fmu(learned_feedforward_system(model, 1e-3, task=True),
                      tmp_path / "task.fmu")  # primed too: its first result, a period late
     late = run_fmu(task, 200, 1e-3, {n: np.full(200, reference[n][0]) for n in inputs},
                    record=["x_ff"])["x_ff"]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from flexff.controllers.machine_feedforward import learned_machine_feedforward_system
+from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.cosim.machine import parse_machine
 from flexff.fmu.build import build_fmu
 from flexff.learning.dataset_files import Trajectory
@@ -102,7 +102,7 @@ def test_its_feedforward_adds_the_residual_at_rest(trained, tmp_path):
     prior alone (offset zero, at rest) gives nothing."""
     _, folder = trained
     model = export(folder / "run", tmp_path / "pgnn.onnx")
-    fmu = build_fmu(learned_machine_feedforward_system(model, 1e-3), tmp_path / "pgnn.fmu")
+    fmu = build_fmu(learned_feedforward_system(model, 1e-3), tmp_path / "pgnn.fmu")
     at = 0.04
     held = run_fmu(fmu, 300, 1e-3, {"x_ref": np.full(300, at), "vx_ref": np.zeros(300),
                                     "ax_ref": np.zeros(300), "jx_ref": np.zeros(300)},
