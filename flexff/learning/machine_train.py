@@ -36,6 +36,7 @@ from flexff.learning.machine_features import (
 )
 from flexff.learning.models import SequenceNetwork, uses_prior
 from flexff.learning.presets import CHECKPOINT_EVERY, PLACEMENT, TrainConfig
+from flexff.learning.rest_anchor import rest_anchor
 from flexff.learning.run_folder import RUN_FILE, save_run, start_run
 from flexff.learning.scaling import MinMaxScaler
 from flexff.learning.train import (
@@ -135,7 +136,10 @@ def fit_machine(config: TrainConfig, machine: Machine, rate_hz: float,
         targets(test_f, test_prior), edge, rng, Checkpoints(out, settings, every), checkpoint,
         measure, progress, on_epoch,
         None if prior is None else [resting(t, rate_hz, machine, resolved) for t in train_set],
-        select_residuals=True)
+        select_residuals=True,
+        anchor=rest_anchor(machine, resolved.inputs, feature_scaler.transform,
+                           lambda efforts: targets([efforts], None if prior is None
+                                                   else [np.zeros_like(efforts)])[0]))
     metrics = {**metrics, "seconds": time.perf_counter() - start, "model_rate_hz": model_rate,
                "cutoff_hz": resolved.cutoff_hz,
                "preprocessing": preprocessing(given, resolved, rate_hz)}

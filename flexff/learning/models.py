@@ -19,6 +19,7 @@ import torch
 from torch import nn
 
 from flexff.fmu.errors import InputError
+from flexff.learning.rest_anchor import RestAnchor, fit_through
 
 State = tuple[torch.Tensor, ...]
 N_OUTPUTS = 2  # the forces Fx, Fy; a current-level model has 3
@@ -275,19 +276,18 @@ class LinearSkip(SequenceNetwork):
 
 
 def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor,
-                    columns: slice = slice(None)) -> None:
+                    columns: slice = slice(None), anchor: RestAnchor | None = None) -> None:
     """Set the skip of a LinearSkip network to the least-squares fit y ~ x W + b over the
     samples (n, n_features), (n, n_outputs), on the features `columns` alone (the others'
-    weights zero), and zero the inner network's head, so that training starts from the
-    linear fit.
+    weights zero), its pinned outputs through their `anchor` (learning.rest_anchor), and
+    zero the inner network's head, so that training starts from the linear fit.
 
     The fit is solved on the CPU whatever device the samples and the network are on: the
     nearly collinear features need the SVD-based driver (gelsd), which CUDA lacks."""
     if not isinstance(network, LinearSkip):
         return
     x, y = x.detach().cpu().double()[:, columns], y.detach().cpu().double()
-    design = torch.cat([x, torch.ones(len(x), 1, dtype=torch.float64)], dim=1)
-    solution = torch.linalg.lstsq(design, y, driver="gelsd").solution
+    solution = fit_through(x, y, anchor, columns)
     weight = torch.zeros(network.linear.weight.shape, dtype=torch.float64)
     weight[:, columns] = solution[:-1].T
     with torch.no_grad():
@@ -337,6 +337,11 @@ def build_network(kind: str, n_features: int, linear_skip: bool = False,
     if prior:  # a zero head: training starts from the rigid-body model itself
         nn.init.zeros_(_head(network).weight)
     return LinearSkip(network, n_features) if linear_skip else network
+
+
+def output_bias(network: SequenceNetwork) -> torch.Tensor:
+    """The bias added last to a network's outputs: its linear skip's, else its head's."""
+    return network.linear.bias if isinstance(network, LinearSkip) else _head(network).bias
 
 
 def _head(network: SequenceNetwork) -> nn.Linear:

@@ -56,11 +56,13 @@ from flexff.learning.models import (
     SequenceNetwork,
     build_network,
     fit_linear_skip,
+    output_bias,
     parameter_count,
     silence_outputs,
     uses_prior,
 )
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
+from flexff.learning.rest_anchor import RestAnchor, pin_at_rest
 from flexff.learning.rigid import rigid_forces
 from flexff.learning.run_folder import (
     CHECKPOINT_FILE,
@@ -209,7 +211,8 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
                 rng: np.random.Generator, saver: Checkpoints, checkpoint: dict[str, Any] | None,
                 measure: Callable[[SequenceNetwork, SequenceSet, SequenceSet], dict[str, Any]],
                 progress: bool = True, on_epoch: EpochReport | None = None,
-                unlabelled: list[np.ndarray] | None = None, select_residuals: bool = False
+                unlabelled: list[np.ndarray] | None = None, select_residuals: bool = False,
+                anchor: RestAnchor | None = None
                 ) -> tuple[SequenceNetwork, dict[str, Any], dict[str, Any]]:
     """Train `config`'s network on scaled features and targets (lists of (n, k) arrays, one
     per trajectory; `edge` samples at each end, and those `unlabelled` marks in a training
@@ -217,7 +220,8 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
     and validation; return the network (best epoch, on the CPU), its history, and `measure`'s
     metrics with the timing and device: any machine's training (this module's `fit`,
     learning.machine_train) runs through here. With `select_residuals`, a residual output
-    that does not help keeps its prior alone (`unhelpful_residuals`)."""
+    that does not help keeps its prior alone (`unhelpful_residuals`); with `anchor`, its
+    pinned outputs are held to it at rest (learning.rest_anchor)."""
     roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge,
                          unlabelled)
     device = pick_device(config.device)
@@ -230,9 +234,10 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
                                       device)
         fitted = train_data.role == TRAIN
         fit_linear_skip(network, train_data.x[fitted], train_data.y[fitted],
-                        _skip_columns(config))
+                        _skip_columns(config), anchor)
         history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint,
                             on_epoch)
+        pin_at_rest(network, output_bias(network), anchor)
         selected = select_residuals and uses_prior(config.model)
         silenced = unhelpful_residuals(network, train_data) if selected else []
         silence_outputs(network, silenced)
