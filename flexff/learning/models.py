@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from flexff.fmu.errors import InputError
-from flexff.learning.rest_anchor import RestAnchor, fit_through
+from flexff.learning.rest_anchor import REST_SAMPLES, RestAnchor, fit_through
 
 State = tuple[torch.Tensor, ...]
 N_OUTPUTS = 2  # the forces Fx, Fy; a current-level model has 3
@@ -339,9 +339,28 @@ def build_network(kind: str, n_features: int, linear_skip: bool = False,
     return LinearSkip(network, n_features) if linear_skip else network
 
 
-def output_bias(network: SequenceNetwork) -> torch.Tensor:
-    """The bias added last to a network's outputs: its linear skip's, else its head's."""
-    return network.linear.bias if isinstance(network, LinearSkip) else _head(network).bias
+@torch.no_grad()
+def pin_at_rest(network: SequenceNetwork, anchor: RestAnchor | None) -> None:
+    """Hold each of the anchor's pinned outputs at rest (learning.rest_anchor): a linear
+    skip's bias shifted so that the skip alone gives the anchor's output on its inputs, and
+    the head's bias of the network inside (or of the network, without a skip) so that,
+    having rested on those inputs (REST_SAMPLES of them), it adds nothing beside the skip."""
+    if anchor is None:
+        return
+    network.eval()
+    inner, target = network, torch.as_tensor(anchor.outputs)
+    if isinstance(network, LinearSkip):
+        skip = network.linear
+        given = skip(torch.as_tensor(anchor.inputs, dtype=skip.weight.dtype,
+                                     device=skip.weight.device)).cpu()
+        for k in anchor.pinned:
+            skip.bias[k] += float(target[k] - given[k])
+        inner, target = network.network, torch.zeros_like(target)
+    head = _head(inner)
+    x = torch.as_tensor(anchor.inputs, dtype=head.weight.dtype, device=head.weight.device)
+    out, _ = inner(x.expand(1, REST_SAMPLES, -1))
+    for k in anchor.pinned:
+        head.bias[k] += float(target[k] - out[0, -1, k])
 
 
 def _head(network: SequenceNetwork) -> nn.Linear:

@@ -9,9 +9,11 @@ feedforward gave it as a force that crept the stage off its position (e2 ratio 6
 identified model's 75 on x, 231 against 340 on y). Where an axis's prior holds no effort at rest
 (no `offset` term, no extra terms), the identified model gives none there, and a learned model
 is held to the same: its linear skip fitted through zero effort at rest at the origin
-(`fit_through`), and once trained its skip's bias shifted so that the whole network, resting
-there, gives exactly that (`pin_at_rest`). A physics-guided model's residual is pinned at zero
-there, its prior giving the rest.
+(`fit_through`), and once trained the skip's bias shifted back onto it and the inner network's
+head bias shifted so that, resting there, it adds nothing (learning.models.pin_at_rest; each
+part on its own: the exported physics-guided model fades its inner network's output where a
+feature leaves the training range, as the rest's exact zeros may). A physics-guided model's
+residual is pinned at zero there, its prior giving the rest.
 """
 
 from __future__ import annotations
@@ -62,7 +64,7 @@ def fit_through(x: torch.Tensor, y: torch.Tensor, anchor: RestAnchor | None,
     (n, n_features) of the anchor's `columns`, (n, n_outputs); the last row b), each pinned
     output's through its anchor: (x - x0) W = y - y0, b = y0 - x0 W."""
     design = torch.cat([x, torch.ones(len(x), 1, dtype=x.dtype)], dim=1)
-    solution = torch.linalg.lstsq(design, y, driver="gelsd").solution
+    solution: torch.Tensor = torch.linalg.lstsq(design, y, driver="gelsd").solution
     if anchor is None:
         return solution
     x0 = torch.as_tensor(anchor.inputs, dtype=x.dtype)[columns]
@@ -72,18 +74,3 @@ def fit_through(x: torch.Tensor, y: torch.Tensor, anchor: RestAnchor | None,
     solution[:-1, pinned] = weights
     solution[-1, pinned] = y0[pinned] - x0 @ weights
     return solution
-
-
-@torch.no_grad()
-def pin_at_rest(network: torch.nn.Module, bias: torch.Tensor, anchor: RestAnchor | None
-                ) -> None:
-    """Shift `bias` (the network's skip or head bias) so that `network`, having rested on the
-    anchor's inputs (REST_SAMPLES of them), gives each pinned output's anchor exactly."""
-    if anchor is None:
-        return
-    network.eval()
-    parameter = next(network.parameters())
-    x = torch.as_tensor(anchor.inputs, dtype=torch.float32, device=parameter.device)
-    out, _ = network(x.expand(1, REST_SAMPLES, -1))
-    for k in anchor.pinned:
-        bias[k] += float(anchor.outputs[k]) - float(out[0, -1, k])

@@ -56,13 +56,13 @@ from flexff.learning.models import (
     SequenceNetwork,
     build_network,
     fit_linear_skip,
-    output_bias,
     parameter_count,
+    pin_at_rest,
     silence_outputs,
     uses_prior,
 )
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
-from flexff.learning.rest_anchor import RestAnchor, pin_at_rest
+from flexff.learning.rest_anchor import RestAnchor
 from flexff.learning.rigid import rigid_forces
 from flexff.learning.run_folder import (
     CHECKPOINT_FILE,
@@ -237,7 +237,7 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
                         _skip_columns(config), anchor)
         history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint,
                             on_epoch)
-        pin_at_rest(network, output_bias(network), anchor)
+        pin_at_rest(network, anchor)
         selected = select_residuals and uses_prior(config.model)
         silenced = unhelpful_residuals(network, train_data) if selected else []
         silence_outputs(network, silenced)
