@@ -341,25 +341,27 @@ def build_network(kind: str, n_features: int, linear_skip: bool = False,
 
 @torch.no_grad()
 def pin_at_rest(network: SequenceNetwork, anchor: RestAnchor | None) -> None:
-    """Hold each of the anchor's pinned outputs at rest (learning.rest_anchor): a linear
-    skip's bias shifted so that the skip alone gives the anchor's output on its inputs, and
-    the head's bias of the network inside (or of the network, without a skip) so that,
-    having rested on those inputs (REST_SAMPLES of them), it adds nothing beside the skip."""
+    """Hold a trained network to its anchor (learning.rest_anchor): a linear skip's bias set
+    so that the skip gives each pinned output's zero effort at zero features, and the head's
+    bias of the network inside so that, having rested at the origin (REST_SAMPLES model
+    samples), it adds nothing there; a network without a skip held to zero effort at rest at
+    the origin on its still outputs."""
     if anchor is None:
         return
     network.eval()
-    inner, target = network, torch.as_tensor(anchor.outputs)
+    target = torch.as_tensor(anchor.outputs)
+    inner, pinned = network, anchor.still
     if isinstance(network, LinearSkip):
         skip = network.linear
-        given = skip(torch.as_tensor(anchor.inputs, dtype=skip.weight.dtype,
+        given = skip(torch.as_tensor(anchor.zero, dtype=skip.weight.dtype,
                                      device=skip.weight.device)).cpu()
         for k in anchor.pinned:
             skip.bias[k] += float(target[k] - given[k])
-        inner, target = network.network, torch.zeros_like(target)
+        inner, target, pinned = network.network, torch.zeros_like(target), anchor.pinned
     head = _head(inner)
-    x = torch.as_tensor(anchor.inputs, dtype=head.weight.dtype, device=head.weight.device)
+    x = torch.as_tensor(anchor.resting, dtype=head.weight.dtype, device=head.weight.device)
     out, _ = inner(x.expand(1, REST_SAMPLES, -1))
-    for k in anchor.pinned:
+    for k in pinned:
         head.bias[k] += float(target[k] - out[0, -1, k])
 
 

@@ -1,4 +1,4 @@
-"""A learned model's effort at rest, pinned where the machine's description says what it is.
+"""A learned model's constant effort, held where the machine's description says there is none.
 
 A one-sided friction feature (tanh(v / w)^2, learning.feature_spec) is 1 while an axis moves,
 as a constant is: the data tell a constant effort from one-sided friction only at rest, where
@@ -6,14 +6,15 @@ the features of the measured motion are the encoder's noise and the labels the c
 settling. Fitted freely, the constant came out at 9 mN on both axes of the stage example in
 every learned model alike, and at rest, where the reference's features are exactly zero, the
 feedforward gave it as a force that crept the stage off its position (e2 ratio 62 against the
-identified model's 75 on x, 231 against 340 on y). Where an axis's prior holds no effort at rest
-(no `offset` term, no extra terms), the identified model gives none there, and a learned model
-is held to the same: its linear skip fitted through zero effort at rest at the origin
-(`fit_through`), and once trained the skip's bias shifted back onto it and the inner network's
-head bias shifted so that, resting there, it adds nothing (learning.models.pin_at_rest; each
-part on its own: the exported physics-guided model fades its inner network's output where a
-feature leaves the training range, as the rest's exact zeros may). A physics-guided model's
-residual is pinned at zero there, its prior giving the rest.
+identified model's 75 on x, 231 against 340 on y). Where an axis's prior has no `offset` term,
+its identified model has no constant, and a learned model is held to the same: its linear skip
+is fitted with none (through zero effort at zero features, `fit_through`; the description's
+extra terms are features, the skip weighs them as the identified model does), and once trained
+the skip's constant is set back to none and the inner network's head bias shifted so that,
+resting at the origin, it adds nothing (learning.models.pin_at_rest; each part on its own: the
+exported physics-guided model fades its inner network's output where a feature leaves the
+training range, as the rest's exact zeros may). A network without a skip is held at rest at
+the origin to zero effort where its axis has no extra terms either.
 """
 
 from __future__ import annotations
@@ -33,12 +34,15 @@ REST_SAMPLES = 2000  # model-rate samples a network rests on its inputs before i
 
 @dataclass(frozen=True)
 class RestAnchor:
-    """Where a model is pinned: the scaled features of every axis at rest at the origin,
-    the scaled targets of its outputs there, and which outputs are pinned."""
+    """Where a model is held, in its scaled features and targets: zero features, the
+    features of every axis at rest at the origin, zero effort; the outputs without a constant
+    (`pinned`) and, of those, the ones whose effort at rest at the origin is zero (`still`)."""
 
-    inputs: np.ndarray  # (n_features,)
+    zero: np.ndarray  # (n_features,)
+    resting: np.ndarray  # (n_features,)
     outputs: np.ndarray  # (n_outputs,)
     pinned: tuple[int, ...]
+    still: tuple[int, ...]
 
 
 def rest_anchor(machine: Machine, inputs: FeatureInputs,
@@ -46,28 +50,29 @@ def rest_anchor(machine: Machine, inputs: FeatureInputs,
                 scale_targets: Callable[[np.ndarray], np.ndarray]) -> RestAnchor | None:
     """The anchor of a model of `machine` whose features `inputs` describes (scaled by
     `scale_features`; zero effort on every axis scaled to its targets by `scale_targets`):
-    the axes whose prior has no offset and no extra terms pinned; None where none is."""
-    pinned = tuple(k for k, axis in enumerate(machine.axes)
-                   if "offset" not in machine.prior.terms
-                   and not machine.prior.extra.get(axis.name))
-    if not pinned:
+    without an `offset` term in the prior every axis pinned, those without extra terms still;
+    None with one."""
+    if "offset" in machine.prior.terms:
         return None
-    at_rest = evaluate_samples(feature_function(machine, inputs),
-                               np.zeros((1, 4 * len(machine.axes))))
+    function = feature_function(machine, inputs)
+    at_rest = evaluate_samples(function, np.zeros((1, 4 * len(machine.axes))))
     zero_effort = np.zeros((1, len(machine.axes)))
-    return RestAnchor(scale_features(at_rest)[0], scale_targets(zero_effort)[0], pinned)
+    return RestAnchor(scale_features(np.zeros_like(at_rest))[0], scale_features(at_rest)[0],
+                      scale_targets(zero_effort)[0], tuple(range(len(machine.axes))),
+                      tuple(k for k, axis in enumerate(machine.axes)
+                            if not machine.prior.extra.get(axis.name)))
 
 
 def fit_through(x: torch.Tensor, y: torch.Tensor, anchor: RestAnchor | None,
                 columns: slice = slice(None)) -> torch.Tensor:
     """The least-squares solution (n_features + 1, n_outputs) of y ~ x W + b (float64 samples
     (n, n_features) of the anchor's `columns`, (n, n_outputs); the last row b), each pinned
-    output's through its anchor: (x - x0) W = y - y0, b = y0 - x0 W."""
+    output's through the anchor's zero: (x - x0) W = y - y0, b = y0 - x0 W."""
     design = torch.cat([x, torch.ones(len(x), 1, dtype=x.dtype)], dim=1)
     solution: torch.Tensor = torch.linalg.lstsq(design, y, driver="gelsd").solution
     if anchor is None:
         return solution
-    x0 = torch.as_tensor(anchor.inputs, dtype=x.dtype)[columns]
+    x0 = torch.as_tensor(anchor.zero, dtype=x.dtype)[columns]
     y0 = torch.as_tensor(anchor.outputs, dtype=y.dtype)
     pinned = list(anchor.pinned)
     weights = torch.linalg.lstsq(x - x0, y[:, pinned] - y0[pinned], driver="gelsd").solution

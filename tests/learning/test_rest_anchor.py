@@ -19,7 +19,7 @@ from flexff.learning.linear_prior import AxisFit, LinearModel
 from flexff.learning.machine_features import MachineFeatures
 from flexff.learning.machine_train import fit_machine
 from flexff.learning.presets import make_config
-from flexff.learning.rest_anchor import RestAnchor, fit_through
+from flexff.learning.rest_anchor import RestAnchor, fit_through, rest_anchor
 from tests.runners import run_fmu
 
 RATE = 1000.0
@@ -98,16 +98,32 @@ def test_the_residual_still_helps(trained):
 
 
 def test_a_pinned_output_is_fitted_through_its_anchor():
-    """fit_through: a pinned output's fit passes through its anchor exactly, and matches the
-    data as well as the anchor allows; an output not pinned is the plain least-squares fit."""
+    """fit_through: a pinned output's fit passes through the anchor's zero exactly, and matches
+    the data as well as that allows; an output not pinned is the plain least-squares fit."""
     rng = np.random.default_rng(0)
     x = torch.as_tensor(rng.normal(size=(400, 3)))
     y = x @ torch.as_tensor([[1.0, 2.0], [0.5, -1.0], [0.0, 3.0]], dtype=x.dtype) + 0.2 \
         + 0.01 * torch.as_tensor(rng.normal(size=(400, 2)))
-    anchor = RestAnchor(np.array([0.1, -0.2, 0.3]), np.array([0.0, 5.0]), (1,))
+    anchor = RestAnchor(np.array([0.1, -0.2, 0.3]), np.zeros(3), np.array([0.0, 5.0]), (1,), ())
     solution = fit_through(x, y, anchor)
     plain = fit_through(x, y, None)
     assert torch.allclose(solution[:, 0], plain[:, 0])
-    at_anchor = torch.as_tensor(anchor.inputs) @ solution[:-1, 1] + solution[-1, 1]
+    at_anchor = torch.as_tensor(anchor.zero) @ solution[:-1, 1] + solution[-1, 1]
     assert float(at_anchor) == pytest.approx(5.0, abs=1e-12)
     assert not torch.allclose(solution[:, 1], plain[:, 1])
+
+
+def test_which_axes_are_held():
+    """Without an offset in the prior every axis is held to no constant, and those without
+    extra terms to no effort at rest at the origin; with an offset none is held."""
+    axes = [{"name": n, "measured": f"p.{n}", "feedforward": f"c.{n}_ff", "effort": f"c.{n}_u",
+             "range": [-0.05, 0.05], "velocity": 0.25, "acceleration": 2.5} for n in "xy"]
+    cogged = parse_machine({"name": "cogged", "axis": axes, "prior": {
+        "terms": ["inertia", "viscous", "coulomb"],
+        "extra": {"y": {"cogging": "cos(y / 0.01)"}}}}, "m")
+    anchor = rest_anchor(cogged, MachineFeatures().inputs, lambda f: f, lambda e: e)
+    assert anchor is not None
+    assert anchor.pinned == (0, 1) and anchor.still == (0,)
+    assert np.all(anchor.zero == 0) and anchor.resting[-1] == 1.0  # cos(0): the extra at rest
+    offset = parse_machine({"name": "offset", "axis": axes}, "m")  # the default terms
+    assert rest_anchor(offset, MachineFeatures().inputs, lambda f: f, lambda e: e) is None
