@@ -34,6 +34,7 @@ from flexff.learning.machine_features import (
 )
 from flexff.learning.models import uses_prior
 from flexff.learning.presets import PLACEMENT, TrainConfig
+from flexff.learning.rest_anchor import rest_anchor
 from flexff.learning.run_folder import RUN_FILE
 from flexff.learning.training_data import TrainingData
 
@@ -141,7 +142,7 @@ class DescriptionData:
             train_x, train_f, test_x, test_f, [t.name for t in self.test_set], priors,
             None if prior is None else [resting(t, rate_hz, machine, features)
                                         for t in self.train_set],
-            select_residuals=True,
+            select_residuals=True, anchor=rest_anchor(machine, features.inputs),
             edge=math.ceil(config.features.edge_periods / features.cutoff_hz * model_rate),
             skip=slice(None), model_rate_hz=model_rate,
             feature_names=feature_names(machine, features.inputs),

@@ -62,7 +62,8 @@ def with_feedforward(loop: RunConfig, feedforward: Path | None = None) -> RunCon
     (columns `<axis>_ff`), or zero for None; whatever fed those inputs before goes."""
     machine = loop_machine(loop)
     fed = {feedforward_signal(a.name) for a in machine.axes}
-    sources = _other_sources(loop, fed)
+    # a source signal named as an input feeds it by name: it goes too
+    sources = _other_sources(loop, fed | {a.feedforward.split(".", 1)[1] for a in machine.axes})
     if feedforward is not None:
         sources.append(SourceConfig("csv", path=Path(feedforward)))
     else:

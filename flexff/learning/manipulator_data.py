@@ -61,7 +61,8 @@ class ManipulatorData:
             [prior_labels(x, prior, features, model_rate) for x in test_x])
         return TrainingData(
             train_x, train_f, test_x, test_f, [t.name for t in test_set], priors,
-            resting=None, select_residuals=False, edge=features.edge_samples(model_rate),
+            resting=None, select_residuals=False, anchor=None,
+            edge=features.edge_samples(model_rate),
             skip=_skip_columns(features), model_rate_hz=model_rate,
             feature_names=feature_names(features.feature_set, force_inputs is not None),
             label_names=list(LABELS[features.labels]), units=MSE_UNITS,

@@ -19,6 +19,7 @@ import torch
 from torch import nn
 
 from flexff.fmu.errors import InputError
+from flexff.learning.rest_anchor import REST_SAMPLES, RestAnchor, fit_through
 
 State = tuple[torch.Tensor, ...]
 N_OUTPUTS = 2  # the forces Fx, Fy; a current-level model has 3
@@ -275,19 +276,18 @@ class LinearSkip(SequenceNetwork):
 
 
 def fit_linear_skip(network: SequenceNetwork, x: torch.Tensor, y: torch.Tensor,
-                    columns: slice = slice(None)) -> None:
+                    columns: slice = slice(None), anchor: RestAnchor | None = None) -> None:
     """Set the skip of a LinearSkip network to the least-squares fit y ~ x W + b over the
     samples (n, n_features), (n, n_outputs), on the features `columns` alone (the others'
-    weights zero), and zero the inner network's head, so that training starts from the
-    linear fit.
+    weights zero), its pinned outputs through their `anchor` (learning.rest_anchor), and
+    zero the inner network's head, so that training starts from the linear fit.
 
     The fit is solved on the CPU whatever device the samples and the network are on: the
     nearly collinear features need the SVD-based driver (gelsd), which CUDA lacks."""
     if not isinstance(network, LinearSkip):
         return
     x, y = x.detach().cpu().double()[:, columns], y.detach().cpu().double()
-    design = torch.cat([x, torch.ones(len(x), 1, dtype=torch.float64)], dim=1)
-    solution = torch.linalg.lstsq(design, y, driver="gelsd").solution
+    solution = fit_through(x, y, anchor, columns)
     weight = torch.zeros(network.linear.weight.shape, dtype=torch.float64)
     weight[:, columns] = solution[:-1].T
     with torch.no_grad():
@@ -337,6 +337,32 @@ def build_network(kind: str, n_features: int, linear_skip: bool = False,
     if prior:  # a zero head: training starts from the rigid-body model itself
         nn.init.zeros_(_head(network).weight)
     return LinearSkip(network, n_features) if linear_skip else network
+
+
+@torch.no_grad()
+def pin_at_rest(network: SequenceNetwork, anchor: RestAnchor | None) -> None:
+    """Hold a trained network to its anchor (learning.rest_anchor): a linear skip's bias set
+    so that the skip gives each pinned output's zero effort at zero features, and the head's
+    bias of the network inside so that, having rested at the origin (REST_SAMPLES model
+    samples), it adds nothing there; a network without a skip held to zero effort at rest at
+    the origin on its still outputs."""
+    if anchor is None:
+        return
+    network.eval()
+    target = torch.as_tensor(anchor.outputs)
+    inner, pinned = network, anchor.still
+    if isinstance(network, LinearSkip):
+        skip = network.linear
+        given = skip(torch.as_tensor(anchor.zero, dtype=skip.weight.dtype,
+                                     device=skip.weight.device)).cpu()
+        for k in anchor.pinned:
+            skip.bias[k] += float(target[k] - given[k])
+        inner, target, pinned = network.network, torch.zeros_like(target), anchor.pinned
+    head = _head(inner)
+    x = torch.as_tensor(anchor.resting, dtype=head.weight.dtype, device=head.weight.device)
+    out, _ = inner(x.expand(1, REST_SAMPLES, -1))
+    for k in pinned:
+        head.bias[k] += float(target[k] - out[0, -1, k])
 
 
 def _head(network: SequenceNetwork) -> nn.Linear:

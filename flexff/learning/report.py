@@ -27,6 +27,7 @@ from flexff.cosim.plots import MM, save_figure
 from flexff.cosim.recording import Recording, atomic_write
 from flexff.fmu.errors import InputError
 from flexff.learning.force_gap import band_names, force_gap
+from flexff.learning.machine_loop import feedforward_signal
 from flexff.plant.signals import (
     AXES,
     FEEDBACK_FORCES,
@@ -110,7 +111,15 @@ UNITS = {"rms": "m", "e2": "m/sqrt(s)", "einf": "m",
          AT_FLOOR: "e2 <= noise_floor",
          "force_gap": "N and s: the ILC limit's force minus the scenario's (learning.force_gap)"}
 TRACKING = names(POSITION_REFERENCE, TRUE_POSITION)
-FORCES = names(FEEDBACK_FORCES, FEEDFORWARD_FORCES)
+FEEDBACK = names(FEEDBACK_FORCES)
+
+
+def feedforward_of(rec: Recording, axis: int) -> np.ndarray:
+    """The feedforward force on `axis` (0: x, 1: y) as the controller received it: the force
+    table's `<axis>_ff` where one fed it (learning.machine_loop, as the LIMIT scenario and
+    ILC's trials run), else the feedforward's Fx_ff, Fy_ff; KeyError where neither."""
+    table = feedforward_signal(AXES[axis])
+    return rec.signals[table if table in rec.signals else names(FEEDFORWARD_FORCES)[axis]]
 
 
 def _check_env(env: str) -> None:
@@ -295,8 +304,11 @@ def held_out_table(held_out: Mapping[str, Any]) -> str:
 def _check_recordings(recordings: Mapping[str, Recording]) -> None:
     _check_pid(recordings, "recordings")
     for name, rec in recordings.items():
-        needed = TRACKING if name == "pid" else TRACKING + FORCES
+        needed = TRACKING if name == "pid" else TRACKING + FEEDBACK
         missing = [s for s in needed if s not in rec.signals]
+        if name != "pid":
+            missing += [ff for k, ff in enumerate(names(FEEDFORWARD_FORCES))
+                        if not _has_feedforward(rec, k)]
         if missing:
             raise InputError(f"recording {name!r} lacks {missing} (it has "
                              f"{sorted(rec.signals)}): record {list(needed)} in its run")
@@ -416,9 +428,17 @@ def force_gaps(recordings: Mapping[str, Recording]) -> dict[str, dict[str, Any]]
     if LIMIT not in recordings:
         return {}
     ideal = recordings[LIMIT]
-    return {name: {axis: force_gap(rec.signals[signal], ideal.signals[signal], rec.step)
-                   for axis, signal in zip(AXES, names(FEEDFORWARD_FORCES))}
+    return {name: {axis: force_gap(feedforward_of(rec, k), feedforward_of(ideal, k), rec.step)
+                   for k, axis in enumerate(AXES)}
             for name, rec in recordings.items() if name not in ("pid", LIMIT)}
+
+
+def _has_feedforward(rec: Recording, axis: int) -> bool:
+    try:
+        feedforward_of(rec, axis)
+    except KeyError:
+        return False
+    return True
 
 
 def force_gap_table(gaps: Mapping[str, Mapping[str, Any]]) -> str:

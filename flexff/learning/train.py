@@ -49,10 +49,12 @@ from flexff.learning.models import (
     build_network,
     fit_linear_skip,
     parameter_count,
+    pin_at_rest,
     silence_outputs,
     uses_prior,
 )
 from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
+from flexff.learning.rest_anchor import RestAnchor
 from flexff.learning.run_folder import (
     CHECKPOINT_FILE,
     RunFolderError,
@@ -145,11 +147,16 @@ def fit(config: TrainConfig, source: TrainingSource, out: Path, progress: bool =
             **data.metrics,
             **({} if test_prior is None else {"prior_test_mse": test_mse(test_prior)})}
 
+    anchor = None if data.anchor is None else data.anchor.scaled(
+        feature_scaler.transform,
+        lambda efforts: targets([efforts], None if train_prior is None
+                                else [np.zeros_like(efforts)])[0])
     network, history, metrics = fit_network(
         config, [feature_scaler.transform(x) for x in data.train_x],
         targets(data.train_labels, train_prior), [feature_scaler.transform(x) for x in data.test_x],
         targets(data.test_labels, test_prior), data.edge, rng, Checkpoints(out, settings, every),
-        checkpoint, measure, progress, on_epoch, data.resting, data.select_residuals, data.skip)
+        checkpoint, measure, progress, on_epoch, data.resting, data.select_residuals, data.skip,
+        anchor)
     metrics = {**metrics, "seconds": time.perf_counter() - start,  # data preparation in
                "model_rate_hz": data.model_rate_hz, **data.preprocessing}
     save_run(out, config, network, feature_scaler, label_scaler, data.feature_names,
@@ -167,7 +174,7 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
                 measure: Callable[[SequenceNetwork, SequenceSet, SequenceSet], dict[str, Any]],
                 progress: bool = True, on_epoch: EpochReport | None = None,
                 unlabelled: list[np.ndarray] | None = None, select_residuals: bool = False,
-                skip: slice = slice(None)
+                skip: slice = slice(None), anchor: RestAnchor | None = None
                 ) -> tuple[SequenceNetwork, dict[str, Any], dict[str, Any]]:
     """Train `config`'s network on scaled features and targets (lists of (n, k) arrays, one
     per trajectory; `edge` samples at each end, and those `unlabelled` marks in a training
@@ -175,7 +182,8 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
     and validation; return the network (best epoch, on the CPU), its history, and `measure`'s
     metrics with the timing and device. With `select_residuals`, a residual output that does
     not help keeps its prior alone (`unhelpful_residuals`); `skip`: the features the linear
-    skip is fitted on."""
+    skip is fitted on; with `anchor`, its pinned outputs are held to it at rest
+    (learning.rest_anchor)."""
     roles = window_roles([len(x) for x in train_x], config.window, config.val_fraction, rng, edge,
                          unlabelled)
     device = pick_device(config.device)
@@ -187,9 +195,10 @@ def fit_network(config: TrainConfig, train_x: list[np.ndarray], train_y: list[np
         test_data = SequenceSet.build(test_x, test_y, [interior(len(x), edge) for x in test_x],
                                       device)
         fitted = train_data.role == TRAIN
-        fit_linear_skip(network, train_data.x[fitted], train_data.y[fitted], skip)
+        fit_linear_skip(network, train_data.x[fitted], train_data.y[fitted], skip, anchor)
         history = _fit_loop(network, config, train_data, rng, progress, saver, checkpoint,
                             on_epoch)
+        pin_at_rest(network, anchor)
         selected = select_residuals and uses_prior(config.model)
         silenced = unhelpful_residuals(network, train_data) if selected else []
         silence_outputs(network, silenced)

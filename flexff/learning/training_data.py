@@ -12,6 +12,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from flexff.learning.rest_anchor import RestAnchor
+
 
 @dataclass(frozen=True)
 class TrainingData:
@@ -28,6 +30,7 @@ class TrainingData:
     # per training trajectory, the samples whose residual is no label (learning.batches)
     resting: list[np.ndarray] | None
     select_residuals: bool  # an output whose residual does not help keeps its prior alone
+    anchor: RestAnchor | None  # where the model is held at rest (learning.rest_anchor), unscaled
     edge: int  # samples at each end of a trajectory out of every loss
     skip: slice  # the inputs a linear skip is fitted on (learning.models.fit_linear_skip)
     model_rate_hz: float
