@@ -25,13 +25,14 @@ from flexff.controllers.allocation import motor_currents
 from flexff.controllers.features import feature_names, reference_feature_function
 from flexff.controllers.feedforward import feedforward_system, rigid_body_force
 from flexff.controllers.machine_feedforward import machine_model_ports
-from flexff.controllers.model_card import OUTPUTS, ModelCard, read_card
+from flexff.controllers.manipulator import MODEL_OUTPUTS
 from flexff.controllers.model_ports import ModelPorts
 from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
 from flexff.fmu.network_runtime import RUNTIMES, runtime_label
 from flexff.fmu.onnx_graph import graph_network, read_graph
 from flexff.fmu.system import System
+from flexff.learning.model_card import ModelCard, read_card
 from flexff.plant.signals import REFERENCE, names, reference_motion
 
 REFERENCE_NAMES = list(names(REFERENCE))
@@ -100,7 +101,7 @@ def _manipulator_ports(card: ModelCard, model: str | Path) -> ModelPorts:
             if card.prior_parameters else "")
     return ModelPorts(
         u, tuple(REFERENCE), inputs, _prior(u, card) if with_prior else None,
-        tuple(OUTPUTS[card.labels]), added=added,
+        tuple(MODEL_OUTPUTS[card.labels]), added=added,
         metadata={"flexff.feedforward.prior_parameters": json.dumps(card.prior_parameters),
                   "flexff.feedforward.force_input": json.dumps(card.force_input),
                   **{f"flexff.model.{k}": str(getattr(card, k))

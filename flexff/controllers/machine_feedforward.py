@@ -15,13 +15,13 @@ from pathlib import Path
 import casadi as ca
 
 from flexff.controllers.feedforward import feedforward_system
-from flexff.controllers.model_card import ModelCard
 from flexff.controllers.model_ports import ModelPorts
 from flexff.cosim.machine import Machine, parse_machine
 from flexff.fmu.errors import InputError
 from flexff.fmu.system import System, Variable
 from flexff.learning.feature_spec import FeatureInputs, feature_function
 from flexff.learning.linear_prior import linear_model_from_dict
+from flexff.learning.model_card import ModelCard
 
 DERIVATIVES = ("position", "velocity", "acceleration", "jerk")
 

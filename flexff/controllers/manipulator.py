@@ -5,9 +5,10 @@ It registers the built-in FMUs plant, controller, rigid-body-feedforward and
 learned-feedforward with their options, its short form (controllers.short_form) with its
 machine description (controllers.manipulator_machine), the
 reference kinds of the plane (plant.reference_kinds) and thesis-eval and thesis-hardware-eval
-(plant.references), its signals' short names and the warning that a learned feedforward
-extrapolates. CasADi and onnx load only where a plant, controller or model is checked or
-built.
+(plant.references), its signals' short names, the warning that a learned feedforward
+extrapolates, and itself as the machine of exported models without a machine description
+(learning.implicit_machine: their outputs, parameters and features). CasADi and onnx load
+only where a plant, controller or model is checked or built.
 
 Every option: "Run configuration", section Built-in FMUs (docs/reference/configuration.md,
 generated from the registry).
@@ -29,7 +30,10 @@ from flexff.cosim.plugins import (
 )
 from flexff.cosim.references import ReferenceKind, register_reference_kind
 from flexff.fmu.network_runtime import RUNTIMES
+from flexff.learning.implicit_machine import ImplicitMachine, register_implicit_machine
+from flexff.plant.parameters import NOMINAL
 from flexff.plant.signals import (
+    CURRENT_FEEDFORWARD,
     CURRENTS,
     ENCODERS,
     FEEDBACK_FORCES,
@@ -44,6 +48,7 @@ from flexff.plant.signals import (
 from flexff.plant.variants import VARIANTS
 
 if TYPE_CHECKING:
+    import casadi as ca
     import numpy as np
 
     from flexff.cosim.checks import TableChecker
@@ -54,6 +59,14 @@ FEEDFORWARD_MODES = ("step", "task", "precomputed")
 # the manipulator's signals, kept under their short names in recordings (cosim.run)
 SHORT_NAMES = names(REFERENCE, FEEDFORWARD_FORCES, CURRENTS, FEEDBACK_FORCES, FORCES, ENCODERS,
                     TRUE_POSITION, TRUE_VELOCITY, TORQUES)
+# what a learned model outputs (learning.features' label levels): forces before the control
+# allocation, or the motor currents after it (the controller's current feedforward)
+MODEL_OUTPUTS = {"forces": FEEDFORWARD_FORCES, "currents": CURRENT_FEEDFORWARD}
+# its part of a model card's usage text (learning.model_card.USAGE)
+MODEL_USAGE = (": forces [N] or motor currents [A] (plus the nominal inverse dynamics, "
+               "prior_parameters in place, when prior = rigid-body; for currents allocated at "
+               "x_ref, y_ref as the controller allocates); with force_input, the last two inputs "
+               "are that force with force_input's parameters (Fx_id, Fy_id)")
 
 
 def register() -> None:
@@ -93,6 +106,9 @@ def register() -> None:
                            "the loop's plant's rigid-body inverse dynamics")
     register_short_names(SHORT_NAMES)
     register_metrics_warning(range_warning)
+    register_implicit_machine(ImplicitMachine(
+        MODEL_OUTPUTS, MODEL_USAGE, _model_parameters, REFERENCE, _feature_units,
+        _reference_features))
 
 
 # -- checks --------------------------------------------------------------------------------
@@ -115,9 +131,28 @@ def _identified(path: Any) -> None:
 
 
 def _model_card(path: Any) -> None:
-    from flexff.controllers.model_card import read_card  # onnx: learned runs only
+    from flexff.learning.model_card import read_card  # onnx: learned runs only
 
     read_card(path)
+
+
+def _model_parameters(parameters: Mapping[str, float]) -> None:
+    """A model card's prior_parameters or force_input: nominal plant parameters by name."""
+    NOMINAL.with_values(**parameters)
+
+
+# -- a learned model's features ------------------------------------------------------------
+def _feature_units(feature_set: str, force_input: bool) -> list[str]:
+    from flexff.controllers.features import feature_units  # CasADi
+
+    return feature_units(feature_set, force_input)
+
+
+def _reference_features(feature_set: str, force_input: Mapping[str, float] | None
+                        ) -> ca.Function:
+    from flexff.controllers.features import reference_feature_function  # CasADi
+
+    return reference_feature_function(feature_set, force_input)
 
 
 def _plant_parameters(checker: TableChecker, options: Mapping[str, Any],

@@ -57,7 +57,7 @@ def expand(checker: TableChecker, data: Mapping[str, Any], start: tuple[float, .
                               fmi=checker.fmi_version(ff, "feedforward")))
         given = names(FEEDFORWARD_FORCES)
         if "model" in options:  # a learned model's card says what it feeds
-            from flexff.controllers.model_card import read_card  # onnx: learned runs only
+            from flexff.learning.model_card import read_card  # onnx: learned runs only
 
             given = tuple(read_card(options["model"]).output_signals)
     else:

@@ -24,9 +24,9 @@ from flexff.controllers.features import (
     reference_features,
 )
 from flexff.controllers.learned_feedforward import model_period
-from flexff.controllers.model_card import ModelCard, read_card
 from flexff.fmu.defaults import DEFAULT_STEP
 from flexff.fmu.errors import InputError
+from flexff.learning.model_card import ModelCard, read_card
 from flexff.plant.signals import REFERENCE, names
 
 MARGIN = 0.1  # of a feature's training span: how far beyond it counts as extrapolating

@@ -20,16 +20,15 @@ import numpy as np
 import torch
 from torch import nn
 
-from flexff.controllers.features import feature_units, reference_feature_function
-from flexff.controllers.model_card import INPUT_KINDS
 from flexff.fmu.errors import InputError
 from flexff.learning.casadi_torch import TorchFunction
 from flexff.learning.feature_spec import feature_units as machine_feature_units
+from flexff.learning.implicit_machine import implicit_machine
+from flexff.learning.model_card import INPUT_KINDS
 from flexff.learning.models import LinearSkip, uses_prior
 from flexff.learning.rigid import RigidBodyForce
 from flexff.learning.run_folder import Run
 from flexff.learning.threads import torch_threads
-from flexff.plant.signals import REFERENCE, names, units
 
 TRUST_FADE = 0.5  # training spans beyond the range over which the pgnn's residual fades out
 
@@ -75,13 +74,18 @@ class SIModel(nn.Module):
             raise InputError(f"{run.path}: a machine's model takes its features; the "
                              f"feedforward FMU computes them from the reference")
         self.force_input = run.force_input
-        self.input_names = list(names(REFERENCE)) if by_reference else run.feature_names
-        self.input_units = (list(units(REFERENCE)) if by_reference else
-                            feature_units(feature_set, self.force_input is not None)
-                            if machine is None else
-                            machine_feature_units(machine, run.feature_inputs))
-        self.reference = (TorchFunction(reference_feature_function(feature_set, self.force_input))
-                          if by_reference else None)
+        self.input_names: list[str] = run.feature_names
+        self.reference: TorchFunction | None = None
+        if machine is not None:
+            self.input_units = machine_feature_units(machine, run.feature_inputs)
+        else:  # a run without a machine description: the implicit machine's signals
+            implicit = implicit_machine()
+            self.input_units = implicit.feature_units(feature_set, self.force_input is not None)
+            if by_reference:
+                self.input_names = [v.name for v in implicit.reference]
+                self.input_units = [v.unit for v in implicit.reference]
+                self.reference = TorchFunction(implicit.reference_features(feature_set,
+                                                                           self.force_input))
         self.residual = uses_prior(run.config.model)
         # what it outputs: forces or currents, or another machine's efforts
         self.labels = run.config.features.labels if machine is None else "efforts"

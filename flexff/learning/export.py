@@ -5,7 +5,9 @@ One graph serves the sequence form (the whole input, state at zero) and the sing
 (one row per call, each fed the previous call's state outputs). The model runs at its own
 rate (`sample_rate_hz`); a faster runner extrapolates between calls. The pgnn is exported as
 its residual over the identified rigid-body feedforward. The metadata is the model card
-(controllers.model_card). The graph is checked against the network and written atomically.
+(learning.model_card); a run without a machine description outputs the signals of its label
+level that the implicit machine names (learning.implicit_machine). The graph is checked
+against the network and written atomically.
 
 Docs: "File formats", section An exported model (docs/reference/file-formats.md), and "The
 learned feedforward FMU" (docs/explanation/learned-feedforward-fmu.md).
@@ -24,13 +26,13 @@ import onnx
 import onnxruntime as ort
 import torch
 
-from flexff.controllers.model_card import OUTPUTS, ModelCard
 from flexff.cosim.recording import atomic_write
 from flexff.fmu.errors import InputError, RunError
 from flexff.learning.deploy import EnsembleSIModel, SIModel
+from flexff.learning.implicit_machine import implicit_machine
+from flexff.learning.model_card import ModelCard
 from flexff.learning.run_folder import Run, flexff_version, load_run
 from flexff.learning.threads import torch_threads
-from flexff.plant.signals import names, units
 
 OPSET = 17
 TOLERANCE = 1e-5  # largest |onnxruntime - torch| relative to the largest |force|
@@ -108,7 +110,8 @@ def _write_graph(runs: list[Run], model: SIModel | EnsembleSIModel, inputs: str,
     graph = onnx.load(str(path))
     machine = loaded.machine
     if machine is None:
-        outputs = list(names(OUTPUTS[model.labels])), list(units(OUTPUTS[model.labels]))
+        signals = implicit_machine().outputs[model.labels]
+        outputs = [v.name for v in signals], [v.unit for v in signals]
     else:
         outputs = [f"{a.name}_ff" for a in machine.axes], [a.effort_unit for a in machine.axes]
     low = np.min([r.feature_scaler.low for r in runs], axis=0)

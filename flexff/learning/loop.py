@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from flexff.controllers.model_card import OUTPUTS, read_card
 from flexff.cosim.config import checked, expanded, parse_config
 from flexff.cosim.config_error import ConfigError
 from flexff.cosim.recording import Recording
@@ -37,6 +36,7 @@ from flexff.learning.dataset import (
     POSITION_SIGNALS,
     REFERENCE_SIGNALS,
 )
+from flexff.learning.model_card import read_card
 from flexff.plant.signals import (
     CURRENT_FEEDFORWARD,
     CURRENTS,
@@ -158,9 +158,10 @@ def _produced(builtin: str | None, options: Mapping[str, Any]) -> tuple[str, ...
     if builtin != "learned-feedforward":
         return names(FEEDFORWARD_FORCES) if builtin is not None else ()
     try:
-        return names(OUTPUTS[read_card(options["model"]).labels])
+        card = read_card(options["model"])
     except (InputError, KeyError):  # no model: the parser's check (checked) names what to do
         return names(FEEDFORWARD_FORCES)
+    return tuple(card.output_signals) if card.machine is None else names(FEEDFORWARD_FORCES)
 
 
 def _controller(loop: RunConfig) -> FmuConfig:

@@ -13,7 +13,6 @@ import pytest
 from flexff.cli import main
 from flexff.controllers.feedback import HOME_ANGLES, INPUTS, controller_system
 from flexff.controllers.learned_feedforward import learned_feedforward_system
-from flexff.controllers.model_card import ModelCard, read_card
 from flexff.cosim.config import parse_config
 from flexff.cosim.run import simulate_config
 from flexff.cosim.scenario import resolve
@@ -29,6 +28,7 @@ from flexff.learning.dataset import (
 from flexff.learning.export import export
 from flexff.learning.features import FeatureConfig, prepare_trajectory
 from flexff.learning.loop import default_loop, with_feedforward
+from flexff.learning.model_card import ModelCard, read_card
 from flexff.learning.synthetic import synthetic_dataset
 from flexff.learning.threads import torch_threads
 from flexff.learning.train import train

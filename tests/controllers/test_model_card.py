@@ -5,7 +5,7 @@ import pytest
 from onnx import TensorProto
 from onnx import helper as oh
 
-from flexff.controllers.model_card import FORMAT, ModelCard, read_card
+from flexff.learning.model_card import FORMAT, ModelCard, read_card
 
 CARD = ModelCard(feature_set="compact", input_kind="features",
                  input_signals=["x", "y", "vx", "vy", "ax", "ay"], sample_rate_hz=100.0,

@@ -1,4 +1,4 @@
-"""Fuzzing the card of an exported feedforward model (controllers.model_card.read_card, which
+"""Fuzzing the card of an exported feedforward model (learning.model_card.read_card, which
 `flexff fmu build learned-feedforward` and a run's learned feedforward read, and the training
 range check of a run on it, controllers.training_range): a valid card's metadata with values
 replaced by odd JSON and text, keys removed, and the graph's bytes mutated
@@ -17,10 +17,10 @@ from onnx import TensorProto
 from onnx import helper as oh
 
 from flexff.controllers.features import feature_names
-from flexff.controllers.model_card import ModelCard, read_card
 from flexff.controllers.training_range import training_range_excess
 from flexff.cosim.references import build_reference
 from flexff.fmu.errors import InputError
+from flexff.learning.model_card import ModelCard, read_card
 from flexff.plant.paths import Reference
 from tests.fuzz.harness import check, fast, fuzz_seconds, run_for, slow
 from tests.fuzz.mutations import mutated_bytes, odd_values

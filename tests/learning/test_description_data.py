@@ -9,7 +9,6 @@ import pytest
 
 from flexff.controllers.learned_feedforward import learned_feedforward_system
 from flexff.controllers.machine_feedforward import ahead
-from flexff.controllers.model_card import read_card
 from flexff.cosim.machine import parse_machine
 from flexff.fmu.build import build_fmu
 from flexff.fmu.errors import InputError
@@ -19,6 +18,7 @@ from flexff.learning.description_data import DescriptionData, resting
 from flexff.learning.export import export, run_steps, session
 from flexff.learning.feature_spec import feature_function
 from flexff.learning.machine_features import MachineFeatures
+from flexff.learning.model_card import read_card
 from flexff.learning.presets import make_config
 from flexff.learning.run_folder import load_run
 from flexff.learning.samples import evaluate_samples

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from flexff.controllers.identified import read_identified
-from flexff.controllers.model_card import read_card
 from flexff.cosim.recording import load_recording
 from flexff.cosim.references import build_reference
 from flexff.learning.dataset import load_dataset
 from flexff.learning.evaluate import ENVIRONMENTS, evaluate, preprocessing, scenario_config
 from flexff.learning.ilc import NOISE_FLOOR, ilc
+from flexff.learning.model_card import read_card
 from flexff.learning.presets import make_config
 from flexff.learning.report import NO_FLOOR
 from flexff.learning.synthetic import synthetic_dataset

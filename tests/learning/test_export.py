@@ -10,11 +10,11 @@ import pytest
 import torch
 
 from flexff.controllers.features import reference_features
-from flexff.controllers.model_card import ModelCard, read_card
 from flexff.learning.dataset import REFERENCE_SIGNALS, load_dataset
 from flexff.learning.deploy import TRUST_FADE, SIModel, predict, trust
 from flexff.learning.export import TOLERANCE, export, run_sequence, run_steps, session
 from flexff.learning.features import prepare_trajectory
+from flexff.learning.model_card import ModelCard, read_card
 from flexff.learning.rigid import rigid_forces
 from flexff.learning.run_folder import load_run
 from flexff.learning.synthetic import synthetic_dataset

@@ -2,7 +2,9 @@
 
 learning.export writes it (`ModelCard.metadata`), the feedforward FMU builder
 (controllers.learned_feedforward), the training-range check and the run configurations read
-it (`read_card`): the contract between them is written here once. In the graph it is a set of
+it (`read_card`): the contract between them is written here once, for every machine. What a
+card without a machine description means beyond it (its outputs, their units, its parameters)
+is the registered machine's (learning.implicit_machine). In the graph it is a set of
 string properties (onnx metadata_props; lists and objects as JSON), so any ONNX reader can see
 what the model needs and gives: input and output signals with units, the state tensors, the
 sample rate, the prior, the model kind and feature set, the range of every feature in the
@@ -21,26 +23,21 @@ import numpy as np
 import onnx
 
 from flexff.fmu.errors import InputError
-from flexff.plant.parameters import NOMINAL
-from flexff.plant.signals import CURRENT_FEEDFORWARD, FEEDFORWARD_FORCES, names, units
+from flexff.fmu.system import Variable
+from flexff.learning.implicit_machine import implicit_machine
 
 FORMAT = "flexff-feedforward"
 VERSION = 1
 INPUT_KINDS = ("features", "reference")
 PRIORS = ("none", "rigid-body", "linear")  # linear: a machine's identified model
-# what a model outputs (learning.features' label levels): forces before the control allocation,
-# or the motor currents after it (the controller's current feedforward)
-OUTPUTS = {"forces": FEEDFORWARD_FORCES, "currents": CURRENT_FEEDFORWARD}
 REQUIRED = ("input_kind", "feature_set", "input_signals", "sample_rate_hz")
+# the usage text of the metadata, the implicit machine's (its outputs, inputs and prior) between
 USAGE = ("inputs (T, n_inputs) float64 in SI units -> outputs (T, n_outputs) float64, the "
-         "output_signals in output_units: forces [N] or motor currents [A] (plus the "
-         "nominal inverse dynamics, prior_parameters in place, when prior = rigid-body; for "
-         "currents allocated at x_ref, y_ref as the controller allocates); with force_input, "
-         "the last two inputs are that force with force_input's parameters (Fx_id, Fy_id); "
-         "with linear_inputs, plus weights @ inputs + bias at every step of the runner; state "
-         "tensors float32. Whole sequence: T samples, state inputs zero. Step by step: T = 1 "
-         "every 1/sample_rate_hz s, state inputs = previous state outputs (zeros first); "
-         "extrapolate the outputs from the last two calls when the host runs faster.")
+         "output_signals in output_units{}; with linear_inputs, plus weights @ inputs + bias "
+         "at every step of the runner; state tensors float32. Whole sequence: T samples, state "
+         "inputs zero. Step by step: T = 1 every 1/sample_rate_hz s, state inputs = previous "
+         "state outputs (zeros first); extrapolate the outputs from the last two calls when "
+         "the host runs faster.")
 _JSON = ("input_signals", "input_units", "output_signals", "output_units", "state",
          "prior_parameters", "force_input", "feature_range", "machine", "machine_features",
          "machine_prior", "linear_inputs")
@@ -52,11 +49,12 @@ _NUMBERS = {"sample_rate_hz": float, "history_samples": int, "ensemble_members":
 class ModelCard:
     """What an exported feedforward model is and how to run it.
 
-    `state`: one {"input", "output", "shape", "initial"} per state tensor (fmu.onnx_graph reads
-    the pairs); `prior_parameters`: the nominal-model parameters the prior replaces (flat plant
-    parameter names, SI values); `force_input`: those of the rigid-body model whose force along
-    the reference a black-box network takes as its last two inputs (Fx_id, Fy_id), None for
-    none; `feature_range`: {"signals", "low", "high"} of the training
+    `output_signals`, `output_units`: by default the first outputs of the implicit machine
+    (learning.implicit_machine); `state`: one {"input", "output", "shape", "initial"} per state
+    tensor (fmu.onnx_graph reads the pairs); `prior_parameters`: the nominal-model parameters
+    the prior replaces (the implicit machine's names, SI values); `force_input`: those of the
+    rigid-body model whose force along the reference a black-box network takes as its last
+    inputs, None for none; `feature_range`: {"signals", "low", "high"} of the training
     data, None for a model exported without it. Another machine's model carries its
     description (`machine`, cosim.machine's table) and the settings of its features
     (`machine_features`: jerk, direction_widths; learning.feature_spec), and outputs
@@ -73,8 +71,8 @@ class ModelCard:
     model_kind: str = "ONNX"
     preset: str = ""
     input_units: list[str] = field(default_factory=list)
-    output_signals: list[str] = field(default_factory=lambda: list(names(FEEDFORWARD_FORCES)))
-    output_units: list[str] = field(default_factory=lambda: list(units(FEEDFORWARD_FORCES)))
+    output_signals: list[str] = field(default_factory=lambda: [v.name for v in _default()])
+    output_units: list[str] = field(default_factory=lambda: [v.unit for v in _default()])
     state: list[dict[str, Any]] = field(default_factory=list)
     history_samples: int = 0
     prior: str = "none"
@@ -90,7 +88,8 @@ class ModelCard:
 
     def metadata(self) -> dict[str, str]:
         """The card as onnx metadata_props (strings; lists and objects as JSON)."""
-        props = {"format": FORMAT, "format_version": str(VERSION), "usage": USAGE}
+        props = {"format": FORMAT, "format_version": str(VERSION),
+                 "usage": USAGE.format(implicit_machine().usage)}
         for key, value in self.__dict__.items():
             if value is None:
                 continue
@@ -130,18 +129,22 @@ class ModelCard:
 
     @property
     def labels(self) -> str:
-        """What the model outputs: "forces" (Fx_ff, Fy_ff) or "currents" (i1_ff..i3_ff); another
-        machine's model "efforts" (its axes' <axis>_ff)."""
+        """What the model outputs: the implicit machine's label level of its outputs (the
+        manipulator's "forces" or "currents"); a described machine's model "efforts" (its
+        axes' <axis>_ff)."""
         if self.machine is not None:
             return "efforts"
-        return next(k for k, v in OUTPUTS.items() if list(names(v)) == self.output_signals)
+        level = implicit_machine().output_level(self.output_signals)
+        assert level is not None  # the card's check
+        return level
 
     def _check(self, where: str | Path) -> None:
         if self.machine is not None:
             self._check_machine(where)
             return
-        known = {k: list(names(v)) for k, v in OUTPUTS.items()}
-        if self.output_signals not in known.values():
+        implicit = implicit_machine()
+        known = {k: [v.name for v in outputs] for k, outputs in implicit.outputs.items()}
+        if implicit.output_level(self.output_signals) is None:
             raise InputError(f"{where}: output signals {self.output_signals} are neither "
                              + " nor ".join(f"the {k} {v}" for k, v in known.items())
                              + "; export the model again with `flexff export`")
@@ -153,7 +156,7 @@ class ModelCard:
         for key in ("prior_parameters", "force_input"):
             parameters = getattr(self, key)
             try:
-                NOMINAL.with_values(**(parameters or {}))  # names and values
+                implicit.check_parameters(parameters or {})  # names and values
             except (TypeError, ValueError) as error:
                 raise InputError(f"{where}: metadata {key} {json.dumps(parameters)} are not "
                                  f"nominal-model parameters ({error}); export the model again "
@@ -187,6 +190,11 @@ class ModelCard:
                              f"identified model (machine_prior), and any linear map of its "
                              f"inputs (linear_inputs) of its sizes; export it again with "
                              f"`flexff export`")
+
+
+def _default() -> tuple[Variable, ...]:
+    """The outputs of a card that names none: the implicit machine's first."""
+    return next(iter(implicit_machine().outputs.values()))
 
 
 def _linear_map_fits(linear: Any, n_out: int, n_in: int) -> bool:
