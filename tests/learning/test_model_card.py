@@ -1,11 +1,17 @@
-"""The exported model's card: its metadata round trip and every bad field named."""
+"""The exported model's card: its metadata round trip, every bad field named, and the
+manipulator's part of it given by its registration (learning.implicit_machine)."""
+
+from dataclasses import replace
 
 import onnx
 import pytest
 from onnx import TensorProto
 from onnx import helper as oh
 
+from flexff.learning.implicit_machine import implicit_machine, register_implicit_machine
 from flexff.learning.model_card import FORMAT, ModelCard, read_card
+from tests.flexff.test_generic_floors import offences
+from tests.helpers import REPOSITORY
 
 CARD = ModelCard(feature_set="compact", input_kind="features",
                  input_signals=["x", "y", "vx", "vy", "ax", "ay"], sample_rate_hz=100.0,
@@ -57,6 +63,8 @@ def test_an_older_export_reads_with_defaults():
     ({"prior": "friction"}, "unknown prior 'friction'"),
     ({"prior_parameters": '{"tau_coulomb9": 1}'}, "prior_parameters .* are not nominal-model"),
     ({"prior_parameters": '{"tau_coulomb1": -1}'}, "must not be negative"),
+    ({"force_input": '{"m_ee9": 1}'}, "force_input .* are not nominal-model"),
+    ({"output_signals": '["x_ff"]'}, "are neither the forces .* nor the currents"),
 ])
 def test_every_bad_field_is_named(change, message):
     props = {k: v for k, v in {**CARD.metadata(), **change}.items() if v is not None}
@@ -70,3 +78,29 @@ def test_a_file_that_is_no_model_is_named(tmp_path):
     (tmp_path / "junk.onnx").write_bytes(b"junk")
     with pytest.raises(ValueError, match="not a readable ONNX model"):
         read_card(tmp_path / "junk.onnx")
+
+
+CARD_MODULES = ("model_card", "implicit_machine", "export", "deploy")
+
+
+def test_the_card_export_and_deploy_name_no_machine():
+    """What they need of the manipulator reaches them from its registration."""
+    found = [o for module in CARD_MODULES
+             for o in offences((REPOSITORY / "flexff" / "learning" / f"{module}.py").read_text(),
+                               module)]
+    assert not found, "\n".join(found)
+
+
+def test_the_manipulator_is_the_implicit_machine():
+    """Its registration gives the card's default outputs, its label levels and its part of the
+    usage text."""
+    implicit = implicit_machine()
+    assert {k: [v.name for v in o] for k, o in implicit.outputs.items()} == {
+        "forces": ["Fx_ff", "Fy_ff"], "currents": ["i1_ff", "i2_ff", "i3_ff"]}
+    assert implicit.output_level(["i1_ff", "i2_ff", "i3_ff"]) == "currents"
+    assert implicit.output_level(["x_ff"]) is None
+    assert "(Fx_id, Fy_id); with linear_inputs" in CARD.metadata()["usage"]
+    with pytest.raises(ValueError, match="already registered"):
+        register_implicit_machine(replace(implicit, usage=""))
+    assert implicit_machine() is implicit
+
