@@ -57,6 +57,25 @@ def workspace_points(rng: np.random.Generator, n: int, radius: float = 0.05) -> 
     return np.vstack([r * np.cos(a), r * np.sin(a)])
 
 
+def rest_to_rest_moves(seed: int, seconds: float, rate: float
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Minimum-jerk moves between random positions in +-0.045, each 0.3 to 0.8 s long and
+    followed by a rest of 0.2 to 0.6 s, sampled at `rate`: time, position, velocity (exactly 0
+    at rest) and acceleration."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 1 / rate)
+    x = np.zeros_like(t)
+    start, here = 0.3, 0.0
+    while start < seconds:
+        to, span = rng.uniform(-0.045, 0.045), rng.uniform(0.3, 0.8)
+        s = np.clip((t - start) / span, 0.0, 1.0)
+        x = np.where(t >= start, here + (to - here) * (10 * s**3 - 15 * s**4 + 6 * s**5), x)
+        start, here = start + span + rng.uniform(0.2, 0.6), to
+    v, a = np.gradient(x, 1 / rate), np.gradient(np.gradient(x, 1 / rate), 1 / rate)
+    v[np.abs(v) < 1e-12] = 0.0  # exactly at rest between the moves
+    return t, x, v, a
+
+
 def simulate(model, x0, params, times, current=(0.0, 0.0, 0.0), rtol=1e-12, atol=1e-14):
     """Tight-tolerance reference solution (CVODES, BDF/Newton) of the plant ODE at `times`."""
     import casadi as ca

@@ -19,6 +19,7 @@ from flexff.learning.machine_features import MachineFeatures, prepare
 from flexff.learning.presets import make_config
 from flexff.learning.run_folder import load_run
 from flexff.learning.train import fit
+from tests.helpers import rest_to_rest_moves
 from tests.runners import run_fmu
 
 RATE = 1000.0
@@ -43,17 +44,7 @@ def prior() -> LinearModel:
 def moves(seed: int, split: str, seconds: float = 10.0) -> Trajectory:
     """Minimum-jerk moves between random positions, each followed by a rest of 0.2 to 0.6 s;
     the effort of the sprung mass (at rest: the spring's pull)."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(0.0, seconds, 1 / RATE)
-    x = np.zeros_like(t)
-    start, here = 0.3, 0.0
-    while start < seconds:
-        to, span = rng.uniform(-0.045, 0.045), rng.uniform(0.3, 0.8)
-        s = np.clip((t - start) / span, 0.0, 1.0)
-        x = np.where(t >= start, here + (to - here) * (10 * s**3 - 15 * s**4 + 6 * s**5), x)
-        start, here = start + span + rng.uniform(0.2, 0.6), to
-    v, a = np.gradient(x, 1 / RATE), np.gradient(np.gradient(x, 1 / RATE), 1 / RATE)
-    v[np.abs(v) < 1e-12] = 0.0  # exactly at rest between the moves
+    t, x, v, a = rest_to_rest_moves(seed, seconds, RATE)
     signals = {"time": t, "x_ref": x, "vx_ref": v, "ax_ref": a,
                "jx_ref": np.gradient(a, 1 / RATE), "x_measured": x,
                "x_effort": MASS * a + DAMPING * v + COULOMB * np.tanh(v / WIDTH) + spring(x)}
