@@ -405,8 +405,8 @@ def plot_force_split(recordings: Mapping[str, Recording], path: Path) -> Path:
     figure = Figure(figsize=(11, 2.6 * len(recordings) + 0.6))
     axes = figure.subplots(len(recordings), 2, sharex=True, squeeze=False)
     for row, (name, rec) in zip(axes, recordings.items()):
-        for ax, axis in zip(row, AXES):
-            fb, ff = rec[f"F{axis}_fb"], rec[f"F{axis}_ff"]
+        for k, (ax, axis) in enumerate(zip(row, AXES)):
+            fb, ff = rec[f"F{axis}_fb"], feedforward_of(rec, k)
             ax.plot(rec.time, fb + ff, "k", lw=0.6, label="total")
             ax.plot(rec.time, ff, "C1--", lw=1.0, label="feedforward")
             ax.plot(rec.time, fb, "C0", lw=0.6, label="feedback")

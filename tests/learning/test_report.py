@@ -305,3 +305,17 @@ def test_at_or_below_the_floor_the_own_share_is_zero_and_said_so():
         own_share_table(summary, floor)
     assert summarize({"pid": pid, "limit": near}, {"x": 2e-6, "y": 0.0})["limit"]["x"][
         "own_e2"] == 0.0  # e2 exactly on the floor
+
+
+def test_the_limit_fed_by_its_force_table_is_compared_as_the_controller_received_it(tmp_path):
+    """The LIMIT scenario's force comes from ILC's table (x_ff, y_ff feed the controller, no
+    Fx_ff is recorded): the force gap and the force plot read it there. A scenario whose
+    feedforward is the limit's own force has no gap."""
+    limit = sines(1 / 200)
+    signals = dict(limit.signals)
+    signals["x_ff"], signals["y_ff"] = signals.pop("Fx_ff"), signals.pop("Fy_ff")
+    recordings = {**scenarios(), "limit": Recording(limit.time, signals)}
+    summary = write_report(recordings, "sim", tmp_path)
+    assert summary["force_gap"]["lstm"]["x"]["rms_n"] == 0.0
+    assert summary["force_gap"]["rigid-body"]["y"]["rms_n"] > 0.0
+    assert (tmp_path / "forces.png").stat().st_size > 0
