@@ -151,9 +151,10 @@ def _timed_as(preset: str, scenarios: list[TrainedScenario]) -> dict[str, str]:
 def _work(scenario: TrainedScenario, preset: str) -> str:
     """What sets the work of an epoch of `scenario`'s training: its settings but for the
     data's values (VALUE_SETTINGS), its seed and its epochs."""
-    from flexff.learning.presets import make_config
+    from flexff.learning.manipulator_settings import config_record, manipulator_settings
 
-    settings = make_config(scenario.kind, preset, **scenario.overrides).learned_settings()
+    settings = config_record(*manipulator_settings(scenario.kind, preset, **scenario.overrides),
+                             learned=True)
     settings["features"] = {key: value for key, value in settings["features"].items()
                             if key not in VALUE_SETTINGS}
     return json.dumps({k: v for k, v in settings.items() if k not in ("seed", "epochs")},
@@ -163,10 +164,10 @@ def _work(scenario: TrainedScenario, preset: str) -> str:
 def _entry(scenario: TrainedScenario, preset: str, timed_as: dict[str, str]) -> dict[str, Any]:
     """A scenario's figures before its runs: its epochs and networks, and the scenario it
     takes its figures from where that is another."""
-    from flexff.learning.presets import make_config
+    from flexff.learning.manipulator_settings import manipulator_settings
 
-    entry = {"kind": scenario.kind,
-             "epochs": make_config(scenario.kind, preset, **scenario.overrides).epochs,
+    config, _ = manipulator_settings(scenario.kind, preset, **scenario.overrides)
+    entry = {"kind": scenario.kind, "epochs": config.epochs,
              "members": scenario.members}
     if timed_as[scenario.name] != scenario.name:
         entry["timed_as"] = timed_as[scenario.name]

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,17 +38,12 @@ from flexff.learning.run_folder import RUN_FILE
 from flexff.learning.training_data import TrainingData
 
 MSE_UNITS = "MSE of min-max scaled efforts, axis by axis (run.json label_names)"
-# the FeatureConfig settings a machine's run reads; its features are MachineFeatures'
-MACHINE_FEATURE_KEYS = ("edge_periods",)
 
 
 def machine_config(config: TrainConfig, learned: bool = False) -> dict[str, Any]:
-    """The training configuration as a machine's run.json holds it: its feature settings
-    only those that apply (the manipulator's encoders, corner and noise do not), the
-    PLACEMENT settings left out where `learned`."""
-    data = config.learned_settings() if learned else json.loads(json.dumps(config.to_dict()))
-    data["features"] = {k: data["features"][k] for k in MACHINE_FEATURE_KEYS}
-    return data
+    """The training configuration as a machine's run.json holds it (TrainConfig.record): of
+    feature settings edge_periods alone, the others are run.json's machine_features."""
+    return config.record({"edge_periods": config.edge_periods}, learned)
 
 
 def features_to_dict(features: MachineFeatures) -> dict[str, Any]:
@@ -143,7 +137,7 @@ class DescriptionData:
             None if prior is None else [resting(t, rate_hz, machine, features)
                                         for t in self.train_set],
             select_residuals=True, anchor=rest_anchor(machine, features.inputs),
-            edge=math.ceil(config.features.edge_periods / features.cutoff_hz * model_rate),
+            edge=config.edge_samples(features.cutoff_hz, model_rate),
             skip=slice(None), model_rate_hz=model_rate,
             feature_names=feature_names(machine, features.inputs),
             label_names=[a.effort_signal for a in machine.axes], units=MSE_UNITS,

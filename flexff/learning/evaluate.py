@@ -43,6 +43,7 @@ from flexff.learning.loop import (
     on_reference,
     with_feedforward,
 )
+from flexff.learning.manipulator_settings import config_record, manipulator_settings
 from flexff.learning.models import (
     NETWORKS,
     build_network,
@@ -50,7 +51,7 @@ from flexff.learning.models import (
     parameter_count,
     uses_prior,
 )
-from flexff.learning.presets import TrainConfig, make_config
+from flexff.learning.presets import TrainConfig
 from flexff.learning.report import LIMIT, write_report
 from flexff.learning.workers import TRAININGS_PER_GPU, TrainJob, train_parallel
 
@@ -226,10 +227,10 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
     scenarios = trained_scenarios(environment, preset, models, currents, ilc_labels,
                                   force_input, {} if epochs is None else {"epochs": epochs})
     for scenario in scenarios:  # every setting checked before any work
-        make_config(scenario.kind, preset, **scenario.overrides)
+        manipulator_settings(scenario.kind, preset, **scenario.overrides)
     out = Path(out)
     set_name = environment.trajectory_set
-    features = preprocessing(env, preset)
+    features, edge_periods = preprocessing(env, preset)
     if loop is not None:
         warn_ideal_preprocessing(features, loop_encoders(loop), f"the loop {loop.origin}")
     if data is not None:
@@ -263,11 +264,12 @@ def evaluate(env: str, out: str | Path, preset: str = "fast", models: Sequence[s
         say(f"{kind}: test MSE {metrics['test_mse']:.3g} ({metrics['parameters']} parameters, "
             f"{metrics['epochs']} epochs in {metrics['seconds']:.0f} s) -> {onnx_files[kind]}")
     files: dict[str, Path] = {**onnx_files,
-                              IDENTIFIED: _identified(Path(data), features, out / IDENTIFIED, say)}
+                              IDENTIFIED: _identified(Path(data), features, edge_periods,
+                                                      out / IDENTIFIED, say)}
     if True in trained_on:  # the identified model too, on the ILC labels
         files[IDENTIFIED_ILC] = _identified(trained_on[True],
                                             replace(features, **ILC_PREPROCESSING),
-                                            out / IDENTIFIED_ILC, say)
+                                            edge_periods, out / IDENTIFIED_ILC, say)
     say(f"iterative learning control on the evaluation reference into {out / 'ilc'} (the limit)")
     limit = ilc(scenario_config(env, "pid", loop=loop), out / "ilc", ilc_iterations,
                 ilc_cutoff_hz, progress=progress, say=say, gain=ilc_gain)
@@ -339,27 +341,30 @@ def _held_out(env: str, data: Path, scenarios: Sequence[str], files: Mapping[str
                          for name, reference in references.items()}, out / FOLDER, progress)
 
 
-def preprocessing(env: str, preset: str = "fast") -> FeatureConfig:
-    """The preprocessing the physics-guided model of `env` trains with under `preset`: the
-    identified rigid-body model (its prior) is identified with it. The other networks share
-    it but for the fast preset's per-model settings (the hardware environment's corner)."""
-    return make_config("pgnn", preset, **ENVIRONMENTS[env].overrides(preset, "pgnn")).features
+def preprocessing(env: str, preset: str = "fast") -> tuple[FeatureConfig, float]:
+    """The preprocessing and edge_periods (learning.presets.TrainConfig) the physics-guided
+    model of `env` trains with under `preset`: the identified rigid-body model (its prior) is
+    identified with them. The other networks share them but for the fast preset's per-model
+    settings (the hardware environment's corner)."""
+    config, features = manipulator_settings("pgnn", preset,
+                                            **ENVIRONMENTS[env].overrides(preset, "pgnn"))
+    return features, config.edge_periods
 
 
-def _identified(data: Path, features: FeatureConfig, folder: Path,
+def _identified(data: Path, features: FeatureConfig, edge_periods: float, folder: Path,
                 say: Callable[[str], None]) -> Path:
     """The rigid-body parameters identified on the training set `data`, preprocessed by
-    `features` as the networks are, in folder/identified.json (an identification of the same
-    data and preprocessing there is reused)."""
+    `features` with `edge_periods` left out as the networks are, in folder/identified.json
+    (an identification of the same data and preprocessing there is reused)."""
     path = folder / REPORT
-    wanted = identified_on(load_dataset(data), features)
+    wanted = identified_on(load_dataset(data), features, edge_periods)
     try:
         if json.loads(path.read_text())["data"] == wanted:
             return path
     except (OSError, ValueError, KeyError):
         pass
     say(f"identifying the rigid-body parameters on {data}")
-    identification = identify(data, features)
+    identification = identify(data, features, edge_periods)
     rms = identification.residual_rms
     say(f"{folder.name}: residual ({rms[0]:.3g}, {rms[1]:.3g}) N rms -> {path}")
     return write_identification(identification, folder)
@@ -369,7 +374,7 @@ def _member_jobs(kind: str, preset: str, overrides: dict[str, Any], members: int
                  runs: Path, name: str) -> list[TrainJob]:
     """The training runs of model `kind` for scenario `name`: one in runs/NAME, or an
     ensemble's members, seeds 0, 1, ..., in runs/NAME/seedN."""
-    cost = _cost(make_config(kind, preset, **overrides))
+    cost = _cost(*manipulator_settings(kind, preset, **overrides))
     if members == 1:
         return [TrainJob(kind, preset, data, runs / name, overrides, cost, name)]
     return [TrainJob(kind, preset, data, runs / name / f"seed{seed}", {**overrides, "seed": seed},
@@ -389,13 +394,13 @@ def _ensemble_metrics(members: list[dict[str, Any]]) -> dict[str, Any]:
             "best_epoch": max(m["best_epoch"] for m in members)}
 
 
-def _cost(config: TrainConfig) -> float:
+def _cost(config: TrainConfig, features: FeatureConfig) -> float:
     """A training run's expected cost, to start the largest first: epochs times parameters
     times the model rate (each parameter is used about once per sample and epoch, in every
     kind of network; the data rate when the model keeps it)."""
-    n_features = len(feature_names(config.features.feature_set, config.features.force_input))
+    n_features = len(feature_names(features.feature_set, features.force_input))
     network = build_network(config.model, n_features, **config.architecture)
-    return config.epochs * parameter_count(network) * (config.features.model_rate_hz or 1.0)
+    return config.epochs * parameter_count(network) * (features.model_rate_hz or 1.0)
 
 
 def _finished(job: TrainJob) -> dict[str, Any] | None:
@@ -406,6 +411,7 @@ def _finished(job: TrainJob) -> dict[str, Any] | None:
         metrics = json.loads((job.run / "metrics.json").read_text())
     except (OSError, ValueError, KeyError):
         return None
-    wanted = make_config(job.model, job.preset, **job.overrides).learned_settings()
+    wanted = config_record(*manipulator_settings(job.model, job.preset, **job.overrides),
+                           learned=True)
     same = all(config.get(key) == value for key, value in wanted.items())
     return metrics if same else None

@@ -17,9 +17,10 @@ controllers.features, which the feedforward FMU generates into C.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
-import math
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -66,8 +67,6 @@ class FeatureConfig:
     # of |i| / |F| on the sim set
     current_noise_a: float = 0.068
     model_rate_hz: float | None = None  # down-sample to this rate; None keeps the data rate
-    edge_periods: float = 0.0  # filter corner periods at each end of a trajectory left out
-    # of every loss (`edge_samples`); 0 as in the thesis
     # the rigid-body model's forces pass the labels' filter (`filter_labels`) before they are
     # compared with the labels: the pgnn's prior in its residual labels
     # (learning.manipulator_data), the regressor in the identification (learning.identify), a
@@ -80,17 +79,6 @@ class FeatureConfig:
     # feedforward from the reference
     force_input: bool = False
 
-    def edge_samples(self, rate_hz: float) -> int:
-        """Samples at `rate_hz` at each end of a trajectory where the zero-phase filter's
-        transients make motion and force disagree: `edge_periods` periods of the corner.
-
-        Measured on the sim set (5 Hz corner), the force not explained by the rigid-body model
-        of the filtered motion is 0.44 N rms at the first sample, 0.012 N after 0.2 s, 4e-4 N
-        after 0.4 s and about 1e-4 N after that; the last 0.2 s rise to 5e-3 N again. Those
-        few samples dominated the training loss.
-        """
-        return math.ceil(self.edge_periods / self.cutoff_hz * rate_hz)
-
     def __post_init__(self) -> None:
         if self.feature_set not in FEATURE_SETS:
             raise InputError(f"unknown feature set {self.feature_set!r}: choose one of "
@@ -102,9 +90,23 @@ class FeatureConfig:
         if self.labels not in LABELS:
             raise InputError(f"unknown labels {self.labels!r}: choose one of "
                              f"{', '.join(LABELS)}")
-        if min(self.position_noise_m, self.force_noise_n, self.current_noise_a,
-               self.edge_periods) < 0:
-            raise InputError("noise levels and edge_periods must not be negative")
+        if min(self.position_noise_m, self.force_noise_n, self.current_noise_a) < 0:
+            raise InputError("noise levels must not be negative")
+
+
+def feature_record(config: FeatureConfig, edge_periods: float) -> dict[str, Any]:
+    """The preprocessing `config` with the training's `edge_periods` (learning.presets) as
+    run.json's config and identified.json record them: edge_periods after model_rate_hz."""
+    settings = dataclasses.asdict(config)
+    names = list(settings)
+    place = names.index("model_rate_hz") + 1
+    return {**{name: settings[name] for name in names[:place]}, "edge_periods": edge_periods,
+            **{name: settings[name] for name in names[place:]}}
+
+
+# each training preset's preprocessing (learning.presets.PRESETS): the fast one's networks
+# run at 100 Hz
+PRESET_FEATURES = {"thesis": FeatureConfig(), "fast": FeatureConfig(model_rate_hz=100.0)}
 
 
 def quantize_encoders(theta: np.ndarray) -> np.ndarray:

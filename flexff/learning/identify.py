@@ -18,7 +18,7 @@ from __future__ import annotations
 import functools
 import json
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +35,13 @@ from flexff.controllers.identified import (
 from flexff.fmu.errors import InputError
 from flexff.learning.batches import TRAIN, interior
 from flexff.learning.dataset import Dataset, load_dataset
-from flexff.learning.features import FeatureConfig, filter_labels, prepare_trajectory
+from flexff.learning.features import (
+    FeatureConfig,
+    feature_record,
+    filter_labels,
+    prepare_trajectory,
+)
+from flexff.learning.presets import edge_samples
 from flexff.learning.samples import evaluate_samples
 from flexff.learning.signal_processing import decimation
 from flexff.plant.parameters import NOMINAL
@@ -484,10 +490,12 @@ def _axis_rms(rows: np.ndarray) -> tuple[float, float]:
     return float(x), float(y)
 
 
-def identify(data: str | Path, features: FeatureConfig | None = None) -> Identification:
+def identify(data: str | Path, features: FeatureConfig | None = None,
+             edge_periods: float = 0.0) -> Identification:
     """Identify the base parameters on the training split of the dataset folder `data`,
     preprocessed as `features` says (default: the thesis's preprocessing), without the
-    training noise, the filter's edges left out, at most MAX_SAMPLES samples evenly spaced."""
+    training noise, `edge_periods` of the filter's corner at each end left out (as training
+    does, learning.presets.TrainConfig), at most MAX_SAMPLES samples evenly spaced."""
     features = features or FeatureConfig()
     dataset = load_dataset(data)
     trajectories = dataset.split("train")
@@ -498,15 +506,17 @@ def identify(data: str | Path, features: FeatureConfig | None = None) -> Identif
     model_rate = rate / decimation(rate, features.model_rate_hz)
     compact = replace(features, feature_set="compact")
     pairs = [prepare_trajectory(t, rate, compact) for t in trajectories]
+    edge = edge_samples(edge_periods, features.cutoff_hz, model_rate)
     return replace(identify_samples([x for x, _ in pairs], [f for _, f in pairs], compact,
-                                    model_rate), data=identified_on(dataset, features))
+                                    model_rate, edge),
+                   data=identified_on(dataset, features, edge_periods))
 
 
 def identify_samples(features: list[np.ndarray], forces: list[np.ndarray],
-                     config: FeatureConfig, rate_hz: float) -> Identification:
+                     config: FeatureConfig, rate_hz: float, edge: int) -> Identification:
     """Identify on trajectories prepared with `config` at `rate_hz`: features (n, n_features)
-    of its feature set and forces (n, 2) in SI units, the first and last edge samples of each
-    (config.edge_samples) left out, at most MAX_SAMPLES of them, evenly spaced (what
+    of its feature set and forces (n, 2) in SI units, the first and last `edge` samples of
+    each (learning.presets.edge_samples) left out, at most MAX_SAMPLES of them, evenly spaced (what
     `identify` and the physics-guided model's prior in learning.manipulator_data share).
 
     The regressor passes through the labels' filter (learning.features.filter_labels),
@@ -516,7 +526,6 @@ def identify_samples(features: list[np.ndarray], forces: list[np.ndarray],
     regressor of the filtered motion steps with the Coulomb friction at each motor reversal
     and the filtered force does not (hardware stand-in: residual 4.1 / 6.6 mN against 4.6 /
     7.2 mN, identified feedforward e2 192 / 98 against 158 / 77)."""
-    edge = config.edge_samples(rate_hz)
     keep = [interior(len(x), edge) == TRAIN for x in features]
     count = sum(int(k.sum()) for k in keep)
     if count < len(linear_names()):
@@ -542,13 +551,14 @@ def identify_samples(features: list[np.ndarray], forces: list[np.ndarray],
                           lambda force: gain_columns(positions, force))
 
 
-def identified_on(dataset: Dataset, features: FeatureConfig) -> dict[str, Any]:
-    """What an identification on `dataset` with `features` records of its data: a file
-    with the same record need not be identified again."""
+def identified_on(dataset: Dataset, features: FeatureConfig, edge_periods: float
+                  ) -> dict[str, Any]:
+    """What an identification on `dataset` with `features` and `edge_periods` records of its
+    data: a file with the same record need not be identified again."""
     plain: dict[str, Any] = json.loads(json.dumps({
         "path": str(Path(dataset.path).resolve()), "set": dataset.set,
-        "sha256": dataset.digest, "features": asdict(replace(features,
-                                                             feature_set="compact"))}))
+        "sha256": dataset.digest,
+        "features": feature_record(replace(features, feature_set="compact"), edge_periods)}))
     return plain
 
 

@@ -24,7 +24,8 @@ from flexff.cosim.memory import check_memory
 from flexff.cosim.references import SAVGOL_ORDER, SMOOTHING_WINDOW
 from flexff.fmu.cache import file_sha256
 from flexff.fmu.errors import InputError
-from flexff.learning.presets import PRESETS, make_config
+from flexff.learning.manipulator_settings import manipulator_settings
+from flexff.learning.presets import PRESETS
 from flexff.learning.signal_processing import decimation
 
 RATE_TOLERANCE = 0.01  # largest relative deviation of a sample interval from the median
@@ -221,9 +222,9 @@ def check_length(log: Log, samples: int, rate_hz: float) -> None:
     needed = []
     for preset, models in PRESETS.items():
         for kind in models:
-            config = make_config(kind, preset)
+            config, features = manipulator_settings(kind, preset)
             try:
-                needed.append(config.window * decimation(rate_hz, config.features.model_rate_hz))
+                needed.append(config.window * decimation(rate_hz, features.model_rate_hz))
             except ValueError:  # that preset cannot train at this rate
                 continue
     window = max(needed, default=0)

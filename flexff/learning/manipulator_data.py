@@ -17,6 +17,7 @@ from flexff.controllers.features import FORCE_INPUTS, feature_names
 from flexff.learning.dataset import Dataset, DatasetError, Trajectory, load_dataset
 from flexff.learning.features import LABELS, FeatureConfig, filter_labels, prepare_trajectory
 from flexff.learning.identify import identify_samples
+from flexff.learning.manipulator_settings import config_record
 from flexff.learning.models import uses_prior
 from flexff.learning.presets import TrainConfig
 from flexff.learning.rigid import rigid_forces
@@ -29,28 +30,30 @@ MSE_UNITS = ("MSE of min-max scaled labels, Fx, Fy or i1..i3 (run.json label_nam
 
 @dataclass(frozen=True)
 class ManipulatorData:
-    """The TrainingSource of the manipulator's dataset for `config`."""
+    """The TrainingSource of the manipulator's dataset for `config`, preprocessed by
+    `features`."""
 
     config: TrainConfig
+    features: FeatureConfig
     dataset: Dataset
 
     @property
     def settings(self) -> dict[str, Any]:
-        """The configuration (where it runs aside) and the data."""
-        return {"config": self.config.learned_settings(), "data": self.dataset.digest}
+        """The configuration and preprocessing (where it runs aside) and the data."""
+        return {"config": config_record(self.config, self.features, learned=True),
+                "data": self.dataset.digest}
 
     def prepare(self, rng: np.random.Generator) -> TrainingData:
         """Features and labels of both splits at the model rate, the prior's force (pgnn),
         the force inputs (force_input) and the nominal rigid-body model's force (the
         baseline)."""
-        config, dataset = self.config, self.dataset
-        features = config.features
+        config, features, dataset = self.config, self.features, self.dataset
         train_set, test_set = _splits(dataset)
         rate_hz = dataset.sample_rate_hz
         model_rate = rate_hz / decimation(rate_hz, features.model_rate_hz)
         train_x, train_f = _prepare(train_set, rate_hz, features, rng)
         test_x, test_f = _prepare(test_set, rate_hz, features, None)
-        identified = _identified_parameters(config, dataset, model_rate)
+        identified = _identified_parameters(config, features, dataset, model_rate)
         prior = identified if uses_prior(config.model) else None
         force_inputs = identified if features.force_input else None
         if force_inputs is not None:  # the identified force as the last inputs
@@ -62,7 +65,7 @@ class ManipulatorData:
         return TrainingData(
             train_x, train_f, test_x, test_f, [t.name for t in test_set], priors,
             resting=None, select_residuals=False, anchor=None,
-            edge=features.edge_samples(model_rate),
+            edge=config.edge_samples(features.cutoff_hz, model_rate),
             skip=_skip_columns(features), model_rate_hz=model_rate,
             feature_names=feature_names(features.feature_set, force_inputs is not None),
             label_names=list(LABELS[features.labels]), units=MSE_UNITS,
@@ -77,7 +80,8 @@ class ManipulatorData:
                                "test": [t.name for t in test_set]},
                       **({} if prior is None else {"prior_parameters": prior}),
                       **({} if force_inputs is None else {"force_input": force_inputs})},
-            config_record=None, title=f"{config.model} ({config.preset})")
+            config_record=config_record(config, features),
+            title=f"{config.model} ({config.preset})")
 
 
 def _splits(dataset: Dataset) -> tuple[list[Trajectory], list[Trajectory]]:
@@ -104,33 +108,34 @@ def _skip_columns(features: FeatureConfig) -> slice:
     return slice(-len(FORCE_INPUTS), None) if features.force_input else slice(None)
 
 
-def _identified_parameters(config: TrainConfig, dataset: Dataset, model_rate: float
-                           ) -> dict[str, float] | None:
+def _identified_parameters(config: TrainConfig, features: FeatureConfig, dataset: Dataset,
+                           model_rate: float) -> dict[str, float] | None:
     """The physics-guided model's prior, or a black-box network's force inputs: the
     deployable parameters of the rigid-body model identified from the training trajectories
     (learning.identify: inertias, flexures, motor friction and torque constants), without the
     added training noise, so that runs of other seeds share it; None for a model with neither.
     It needs the motion alone: the compact features hold it, bit for bit as every other set
     does, and cost a fraction of the work."""
-    if not (uses_prior(config.model) or config.features.force_input):
+    if not (uses_prior(config.model) or features.force_input):
         return None
-    motion = replace(config.features, labels="forces", feature_set="compact")
+    motion = replace(features, labels="forces", feature_set="compact")
     return dict(_identified_prior(str(Path(dataset.path).resolve()), dataset.digest, motion,
-                                  model_rate))
+                                  model_rate, config.edge_samples(features.cutoff_hz, model_rate)))
 
 
 @functools.lru_cache(maxsize=2)
-def _identified_prior(path: str, digest: str, features: FeatureConfig, model_rate: float
-                      ) -> tuple[tuple[str, float], ...]:
-    """_identified_parameters of the dataset folder `path` (whose content `digest` names), once per
-    process: an ensemble's members, trained one after another in a worker, share it (22 s of
-    a physics-guided run's 55 s of data preparation on the hardware set)."""
+def _identified_prior(path: str, digest: str, features: FeatureConfig, model_rate: float,
+                      edge: int) -> tuple[tuple[str, float], ...]:
+    """_identified_parameters of the dataset folder `path` (whose content `digest` names), the
+    `edge` samples at each end left out, once per process: an ensemble's members, trained one
+    after another in a worker, share it (22 s of a physics-guided run's 55 s of data
+    preparation on the hardware set)."""
     dataset = load_dataset(path)
     if dataset.digest != digest:
         raise DatasetError(f"{path} changed while training on it")
     identification = identify_samples(*_prepare(dataset.split("train"),
                                                 dataset.sample_rate_hz, features, None),
-                                      features, model_rate)
+                                      features, model_rate, edge)
     return tuple(identification.parameters().items())
 
 

@@ -2,9 +2,10 @@
 
 `thesis` takes the thesis's sizes, learning rates and epoch counts (sections 5.3-5.5), with
 Keras's default batch size; it is meant for a GPU. `fast` trains the same kinds of network on
-a 2-core CPU in one to two minutes each: a 100 Hz model rate, filter edges left out of the
-loss, a linear skip started at least squares, smaller networks, and Adam on a one-cycle
-schedule with early stopping. The slow demo test checks the outcome.
+a 2-core CPU in one to two minutes each: filter edges left out of the loss (and the
+manipulator's 100 Hz model rate, learning.features.PRESET_FEATURES), a linear skip started
+at least squares, smaller networks, and Adam on a one-cycle schedule with early stopping.
+The slow demo test checks the outcome.
 
 Why each choice: "Learning", section The fast preset (docs/explanation/learning.md).
 """
@@ -13,12 +14,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from dataclasses import dataclass, field, replace
+import math
+from collections.abc import Collection, Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 from flexff.fmu.errors import InputError
-from flexff.learning.features import FeatureConfig
-from flexff.learning.models import check_kind, uses_prior
+from flexff.learning.models import check_kind
 
 SCHEDULES = ("constant", "onecycle", "cosine")
 # architecture entries that count (units, layers, channels, kernel taps): each at least 1
@@ -31,11 +33,12 @@ PLACEMENT = ("device", "threads", "cuda_graphs")
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Everything a training run needs besides the data; stored in run.json."""
+    """Everything a training run needs besides the data and its preprocessing (the data
+    source's own settings: learning.features.FeatureConfig, learning.machine_features);
+    stored in run.json (`record`)."""
 
     model: str
     preset: str
-    features: FeatureConfig = field(default_factory=FeatureConfig)
     architecture: dict[str, Any] = field(default_factory=dict)
     epochs: int = 50
     learning_rate: float = 1e-3  # constant rate, or the peak of a schedule
@@ -50,6 +53,9 @@ class TrainConfig:
     # on CUDA, each training step replayed from a CUDA graph (learning.training_step); off
     # by default: on an H200 its TCN trained otherwise than eager steps (docs/how-to/gpu.md)
     cuda_graphs: bool = False
+    # periods of the data's low-pass corner at each end of a trajectory left out of every
+    # loss (`edge_samples`); 0 as in the thesis
+    edge_periods: float = 0.0
 
     def __post_init__(self) -> None:
         check_kind(self.model)
@@ -62,6 +68,8 @@ class TrainConfig:
             raise InputError(f"val_fraction must lie between 0 and 1, got {self.val_fraction}")
         if not self.learning_rate > 0 or self.grad_clip < 0 or self.threads < 0:
             raise InputError("learning_rate must be positive, grad_clip and threads not negative")
+        if self.edge_periods < 0:
+            raise InputError(f"edge_periods must not be negative, got {self.edge_periods}")
         if not _whole(self.seed) or not 0 <= self.seed < SEED_LIMIT:
             raise InputError(f"seed must be a whole number from 0 to 2**63 - 1, got {self.seed!r}")
         for name in SIZES:
@@ -73,20 +81,28 @@ class TrainConfig:
             raise InputError(f"dropout must lie from 0 up to 1, got "
                              f"{self.architecture['dropout']!r}")
 
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+    def edge_samples(self, cutoff_hz: float, rate_hz: float) -> int:
+        """The module's `edge_samples` of `edge_periods`."""
+        return edge_samples(self.edge_periods, cutoff_hz, rate_hz)
 
-    def learned_settings(self) -> dict[str, Any]:
-        """`to_dict` without the PLACEMENT settings, as JSON holds it."""
-        settings = {k: v for k, v in self.to_dict().items() if k not in PLACEMENT}
-        plain: dict[str, Any] = json.loads(json.dumps(settings))
+    def record(self, features: Mapping[str, Any], learned: bool = False) -> dict[str, Any]:
+        """The configuration as run.json's `config` holds it, as JSON data: `features` (the
+        data source's preprocessing settings, edge_periods among them) after model and
+        preset, then the other settings; the PLACEMENT settings left out where `learned`."""
+        settings = dataclasses.asdict(self)
+        del settings["edge_periods"]
+        record = {"model": settings.pop("model"), "preset": settings.pop("preset"),
+                  "features": dict(features), **settings}
+        plain: dict[str, Any] = json.loads(json.dumps(
+            {k: v for k, v in record.items() if not (learned and k in PLACEMENT)}))
         return plain
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
-        data = dict(data)
-        data["features"] = FeatureConfig(**data["features"])
-        return cls(**data)
+    def from_record(cls, record: Mapping[str, Any]) -> TrainConfig:
+        """The configuration of run.json's `config` record (its feature settings but
+        edge_periods are the data source's)."""
+        settings = {k: v for k, v in record.items() if k != "features"}
+        return cls(**settings, edge_periods=record["features"]["edge_periods"])
 
 
 _LSTM = {"hidden": 100, "layers": 2, "dropout": 0.05}
@@ -120,45 +136,51 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                  "learning_rate": 3e-3, "batch_size": 16},
     },
 }
-_PRESET_FEATURES = {"thesis": FeatureConfig(),
-                    "fast": FeatureConfig(model_rate_hz=100.0, edge_periods=2.0)}
+# filter edges left out of the loss (TrainConfig.edge_periods); the data source's own
+# preprocessing has presets of its own (learning.features.PRESET_FEATURES)
+_PRESET_EDGES = {"thesis": 0.0, "fast": 2.0}
 # epochs between training checkpoints (learning.train): about a minute of work on the machine
 # each preset is meant for; not a TrainConfig field, as it does not change the result
 CHECKPOINT_EVERY = {"thesis": 10, "fast": 5}
+
+
+def edge_samples(edge_periods: float, cutoff_hz: float, rate_hz: float) -> int:
+    """Samples at `rate_hz` at each end of a trajectory where the zero-phase low-pass of
+    corner `cutoff_hz` makes motion and force disagree: `edge_periods` periods of it.
+
+    Measured on the manipulator's sim set (5 Hz corner), the force not explained by the
+    rigid-body model of the filtered motion is 0.44 N rms at the first sample, 0.012 N after
+    0.2 s, 4e-4 N after 0.4 s and about 1e-4 N after that; the last 0.2 s rise to 5e-3 N
+    again. Those few samples dominated the training loss.
+    """
+    return math.ceil(edge_periods / cutoff_hz * rate_hz)
 
 
 def _whole(value: object) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def make_config(model: str, preset: str, **overrides: Any) -> TrainConfig:
+def make_config(model: str, preset: str, source_settings: Collection[str] = (),
+                **overrides: Any) -> TrainConfig:
     """The preset's configuration for `model`, with overrides by field name.
 
-    An override may name a TrainConfig field (`epochs=5`), a FeatureConfig field
-    (`feature_set="compact"`, `model_rate_hz=200`) or an architecture entry (`hidden=50`).
+    An override may name a TrainConfig field (`epochs=5`) or an architecture entry
+    (`hidden=50`); `source_settings`, the names of the data source's own settings (taken
+    from the overrides before), are named among the known ones when an override is neither.
     """
     check_kind(model)
     if preset not in PRESETS:
         raise InputError(f"unknown preset {preset!r}: choose one of {', '.join(PRESETS)}")
-    settings = dict(PRESETS[preset][model])
+    settings = {"edge_periods": _PRESET_EDGES[preset], **PRESETS[preset][model]}
     settings["architecture"] = dict(settings["architecture"])
-    features = _PRESET_FEATURES[preset]
-    top = {f.name for f in dataclasses.fields(TrainConfig)} - {"model", "preset", "features",
+    top = {f.name for f in dataclasses.fields(TrainConfig)} - {"model", "preset",
                                                                "architecture"}
-    feature_fields = {f.name for f in dataclasses.fields(FeatureConfig)}
-    feature_overrides = {}
     for key, value in overrides.items():
         if key in top:
             settings[key] = value
-        elif key in feature_fields:
-            feature_overrides[key] = value
         elif key in settings["architecture"]:
             settings["architecture"][key] = value
         else:
-            known = sorted(top | feature_fields | set(settings["architecture"]))
+            known = sorted(top | set(source_settings) | set(settings["architecture"]))
             raise InputError(f"unknown setting {key!r} for a {model} run; known: {known}")
-    if uses_prior(model) and feature_overrides.get("force_input"):
-        raise InputError(f"force_input is for the black-box networks: the {model} model has the "
-                         f"identified rigid-body force as its prior already")
-    return TrainConfig(model=model, preset=preset, features=replace(features, **feature_overrides),
-                       **settings)
+    return TrainConfig(model=model, preset=preset, **settings)

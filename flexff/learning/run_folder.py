@@ -21,10 +21,10 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
@@ -36,6 +36,9 @@ from flexff.learning.feature_spec import FeatureInputs
 from flexff.learning.models import SequenceNetwork, build_network
 from flexff.learning.presets import TrainConfig
 from flexff.learning.scaling import MinMaxScaler
+
+if TYPE_CHECKING:
+    from flexff.learning.features import FeatureConfig
 
 FORMAT = "flexff-run"
 VERSION = 1
@@ -62,11 +65,34 @@ def flexff_version() -> str:
 
 
 @dataclass(frozen=True)
+class RunConfig(TrainConfig):
+    """A finished run's training configuration with the feature settings its run.json
+    records beside it (TrainConfig.record): the data source's."""
+
+    feature_record: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def read(cls, record: Mapping[str, Any]) -> RunConfig:
+        """The configuration of run.json's `config` record."""
+        return cls(**vars(TrainConfig.from_record(record)),
+                   feature_record=dict(record["features"]))
+
+    @property
+    def features(self) -> FeatureConfig:
+        """The feature settings as the manipulator's preprocessing (learning.features) reads
+        them: a machine's run, which records edge_periods alone, reads the defaults."""
+        from flexff.learning.features import FeatureConfig
+
+        return FeatureConfig(**{k: v for k, v in self.feature_record.items()
+                                if k != "edge_periods"})
+
+
+@dataclass(frozen=True)
 class Run:
     """A rebuilt training run: configuration, trained network (eval mode, CPU) and scalers."""
 
     path: Path
-    config: TrainConfig
+    config: RunConfig
     network: SequenceNetwork
     feature_scaler: MinMaxScaler
     label_scaler: MinMaxScaler
@@ -100,22 +126,20 @@ class Run:
         return None if parameters is None else dict(parameters)
 
 
-def save_run(out: Path, config: TrainConfig, network: SequenceNetwork,
+def save_run(out: Path, config_record: dict[str, Any], network: SequenceNetwork,
              feature_scaler: MinMaxScaler, label_scaler: MinMaxScaler, feature_names: list[str],
              label_names: list[str], model_rate_hz: float, extra: dict[str, Any],
-             files: Mapping[str, Callable[[Path], object]],
-             config_record: dict[str, Any] | None = None) -> None:
+             files: Mapping[str, Callable[[Path], object]]) -> None:
     """Write model.pt, run.json and `files` (name -> writer of that file) into `out`, then
     delete the checkpoints; a finished run's files there change only once all new ones are
-    complete. run.json's `config` is `config_record` where given (the settings that apply to
-    the run), else the whole configuration."""
+    complete. run.json's `config` is `config_record` (learning.presets.TrainConfig.record)."""
     out.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(dir=out, prefix=STAGING))
     try:
         torch.save({k: v.detach().cpu() for k, v in network.state_dict().items()},
                    staging / WEIGHTS_FILE)
         info = {"format": FORMAT, "version": VERSION, "flexff_version": flexff_version(),
-                "config": config_record or config.to_dict(), "feature_names": feature_names,
+                "config": config_record, "feature_names": feature_names,
                 "label_names": label_names, "model_rate_hz": model_rate_hz,
                 "scalers": {"features": feature_scaler.to_dict(),
                             "labels": label_scaler.to_dict()},
@@ -156,7 +180,7 @@ def load_run(path: str | Path) -> Run:
         raise RunFolderError(f"{path / RUN_FILE}: format and version {found}, expected "
                              f"{FORMAT!r} version {VERSION}: {again}")
     try:
-        config = TrainConfig.from_dict(info["config"])
+        config = RunConfig.read(info["config"])
         network = build_network(config.model, len(info["feature_names"]),
                                 n_outputs=len(info.get("label_names", ["Fx", "Fy"])),
                                 **config.architecture)

@@ -43,6 +43,7 @@ from flexff.learning.batches import (
 from flexff.learning.dataset import load_dataset
 from flexff.learning.devices import pick_device
 from flexff.learning.manipulator_data import ManipulatorData
+from flexff.learning.manipulator_settings import manipulator_settings
 from flexff.learning.models import (
     RECURRENT,
     SequenceNetwork,
@@ -53,7 +54,7 @@ from flexff.learning.models import (
     silence_outputs,
     uses_prior,
 )
-from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig, make_config
+from flexff.learning.presets import CHECKPOINT_EVERY, TrainConfig
 from flexff.learning.rest_anchor import RestAnchor
 from flexff.learning.run_folder import (
     CHECKPOINT_FILE,
@@ -88,7 +89,8 @@ def train(model: str, preset: str, data: str | Path, out: str | Path, progress: 
     """Train `model` ('lstm', 'cnn-lstm', 'tcn', 'pgnn') with `preset` ('thesis', 'fast') on the
     dataset folder `data`; write the run folder `out`; return the metrics.
 
-    `overrides` replace preset settings by name (see `learning.presets.make_config`), e.g.
+    `overrides` replace preset settings by name (see
+    `learning.manipulator_settings.manipulator_settings`), e.g.
     `epochs=5`, `feature_set="compact"`, `model_rate_hz=200`, `hidden=50`. `resume` and
     `force` say what to do with what `out` holds (`learning.run_folder.start_run`): by default
     a checkpoint of the same settings and data is resumed and anything else replaced, a
@@ -97,10 +99,10 @@ def train(model: str, preset: str, data: str | Path, out: str | Path, progress: 
     `on_epoch` is called after every epoch with {"epoch", "epochs", "train", "val",
     "best_epoch"} (learning.workers draws bars from it).
     """
-    config = make_config(model, preset, **overrides)
+    config, features = manipulator_settings(model, preset, **overrides)
     pick_device(config.device)  # a device that is not there fails before the data loads
-    return fit(config, ManipulatorData(config, load_dataset(data)), Path(out), progress, resume,
-               force, checkpoint_every, on_epoch)
+    return fit(config, ManipulatorData(config, features, load_dataset(data)), Path(out),
+               progress, resume, force, checkpoint_every, on_epoch)
 
 
 def fit(config: TrainConfig, source: TrainingSource, out: Path, progress: bool = True,
@@ -159,12 +161,11 @@ def fit(config: TrainConfig, source: TrainingSource, out: Path, progress: bool =
         anchor)
     metrics = {**metrics, "seconds": time.perf_counter() - start,  # data preparation in
                "model_rate_hz": data.model_rate_hz, **data.preprocessing}
-    save_run(out, config, network, feature_scaler, label_scaler, data.feature_names,
+    save_run(out, data.config_record, network, feature_scaler, label_scaler, data.feature_names,
              data.label_names, data.model_rate_hz,
              {**data.run_info, "parameters": metrics["parameters"]},
              {"metrics.json": lambda path: path.write_text(json.dumps(metrics, indent=2) + "\n"),
-              "loss.png": lambda path: plot_losses(history, path, data.title)},
-             data.config_record)
+              "loss.png": lambda path: plot_losses(history, path, data.title)})
     return {**metrics, "run": str(out)}
 
 

@@ -42,7 +42,7 @@ class TrainingData:
     metrics: dict[str, Any]  # more of metrics.json, after the baselines
     preprocessing: dict[str, Any]  # metrics.json's last entries: how the data was prepared
     run_info: dict[str, Any]  # run.json's entries about the data and the machine
-    config_record: dict[str, Any] | None  # run.json's config (None: the whole configuration)
+    config_record: dict[str, Any]  # run.json's config (learning.presets.TrainConfig.record)
     title: str  # loss.png's
 
 

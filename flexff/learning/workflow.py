@@ -113,7 +113,7 @@ def identify_prior(data: str | Path, out: str | Path, env: str = "hardware",
     from flexff.learning.evaluate import preprocessing
     from flexff.learning.identify import identify, write_identification
 
-    identification = identify(data, preprocessing(env))
+    identification = identify(data, *preprocessing(env))
     return Identified(identification, write_identification(identification, out))
 
 

@@ -43,11 +43,11 @@ def test_only_ideal_preprocessing_on_a_noisy_loop_is_warned_of():
     with pytest.warns(EncoderWarning, match=r"the loop x has encoders that count or are noisy "
                                             r"\(encoder_quantization = 1, noise_std = 0.001\)"
                                             r".*a 5 Hz low-pass.*--env hardware"):
-        warn_ideal_preprocessing(preprocessing("sim"), noisy, "the loop x")
+        warn_ideal_preprocessing(preprocessing("sim")[0], noisy, "the loop x")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert warn_ideal_preprocessing(preprocessing("hardware"), noisy, "x") is None
-        assert warn_ideal_preprocessing(preprocessing("sim"), {}, "x") is None
+        assert warn_ideal_preprocessing(preprocessing("hardware")[0], noisy, "x") is None
+        assert warn_ideal_preprocessing(preprocessing("sim")[0], {}, "x") is None
 
 
 class Stop(Exception):

@@ -14,8 +14,8 @@ from flexff.cosim.references import build_reference
 from flexff.learning.dataset import load_dataset
 from flexff.learning.evaluate import ENVIRONMENTS, evaluate, preprocessing, scenario_config
 from flexff.learning.ilc import NOISE_FLOOR, ilc
+from flexff.learning.manipulator_settings import manipulator_settings
 from flexff.learning.model_card import read_card
-from flexff.learning.presets import make_config
 from flexff.learning.report import NO_FLOOR
 from flexff.learning.synthetic import synthetic_dataset
 
@@ -203,13 +203,14 @@ def test_the_identified_model_is_preprocessed_as_the_physics_guided_prior():
     black-box networks also see the motors' directions, and the wrist position from all three
     encoders (learning.evaluate.ENVIRONMENTS: each measured the better for its models)."""
     hardware = ENVIRONMENTS["hardware"]
-    pgnn = make_config("pgnn", "fast", **hardware.overrides("fast", "pgnn")).features
-    assert preprocessing("hardware") == pgnn and pgnn.feature_set == "full"
+    config, pgnn = manipulator_settings("pgnn", "fast", **hardware.overrides("fast", "pgnn"))
+    assert preprocessing("hardware") == (pgnn, config.edge_periods) == (pgnn, 2.0)
+    assert pgnn.feature_set == "full"
     for kind in ("lstm", "cnn-lstm", "tcn"):
-        features = make_config(kind, "fast", **hardware.overrides("fast", kind)).features
+        features = manipulator_settings(kind, "fast", **hardware.overrides("fast", kind))[1]
         assert features == replace(pgnn, feature_set="directions", encoders=3,
                                    model_rate_hz=25.0)
-    assert pgnn.cutoff_hz == 1.0 and preprocessing("sim").cutoff_hz == 5.0
+    assert pgnn.cutoff_hz == 1.0 and preprocessing("sim")[0].cutoff_hz == 5.0
 
 
 @pytest.mark.slow

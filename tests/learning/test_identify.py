@@ -34,6 +34,7 @@ from flexff.learning.identify import (
     width_columns,
     write_identification,
 )
+from flexff.learning.presets import edge_samples
 from flexff.learning.synthetic import motion_trajectory, skew_sine_circle, synthetic_dataset
 from flexff.plant.parameters import HARDWARE, NOMINAL
 from flexff.plant.references import thesis_evaluation
@@ -239,7 +240,7 @@ def test_a_dataset_is_identified_and_written(tmp_path):
     """On a synthetic set (nominal inverse dynamics plus the hardware variant's friction,
     filtered as training filters it): the nominal stiffnesses and the friction come back."""
     data = synthetic_dataset(tmp_path / "data", n_train=4, n_test=1)
-    found = identify(data, preprocessing("sim"))
+    found = identify(data, *preprocessing("sim"))
     rows = {row["name"]: row for row in found.rows()}
     for chain in (1, 2, 3):
         assert rows[f"tau_coulomb{chain}"]["value"] == pytest.approx(7e-3, rel=0.2)
@@ -266,12 +267,13 @@ def test_the_regressor_is_filtered_as_the_labels():
                                       skew_sine_circle(t, 30.0, *circle), {}, force_noise=0.0)
                     for k, circle in enumerate(circles)]
     config = FeatureConfig(feature_set="compact", quantize_encoders=False, position_noise_m=0.0,
-                           force_noise_n=0.0, edge_periods=2.0)
+                           force_noise_n=0.0)
     pairs = [prepare_trajectory(trajectory, rate, config) for trajectory in trajectories]
 
     def identified(filtered: bool):
         return identify_samples([x for x, _ in pairs], [f for _, f in pairs],
-                                replace(config, filtered_prior=filtered), rate)
+                                replace(config, filtered_prior=filtered), rate,
+                                edge_samples(2.0, config.cutoff_hz, rate))
 
     filtered, plain = identified(True), identified(False)
     assert max(filtered.residual_rms) < 1e-5 and sum(filtered.estimated) >= 27
@@ -397,7 +399,7 @@ def test_on_the_hardware_set(tmp_path):
     out 12 % strong); the identified feedforward's e2 ratio 218 / 163 against the nominal
     one's 7.0 / 7.9 with nominal dampings."""
     data = collect("hardware", tmp_path / "data", progress=False)
-    found = identify(data, preprocessing("hardware"))
+    found = identify(data, *preprocessing("hardware"))
     rows = {row["name"]: row for row in found.rows()}
     true = dict(zip(HARDWARE.names(), HARDWARE.vector()))
     for name, row in rows.items():

@@ -25,7 +25,7 @@ from flexff.learning.dataset import (
 )
 from flexff.learning.features import prepare_trajectory
 from flexff.learning.logs import FK, import_logs
-from flexff.learning.presets import make_config
+from flexff.learning.manipulator_settings import manipulator_settings
 from flexff.learning.train import train
 from tests.helpers import matlab_v73_header
 
@@ -100,7 +100,7 @@ def test_training_reads_no_derived_signal(imported):
     signals replaced by NaN; and a manifest that marks a trained signal derived is refused."""
     dataset = load_dataset(imported)
     for preset in ("fast", "thesis"):
-        features = make_config("pgnn", preset).features
+        features = manipulator_settings("pgnn", preset)[1]
         for traj in dataset.trajectories:
             blind = Trajectory(traj.name, traj.split, {
                 n: np.full_like(v, np.nan) if n in traj.derived else v

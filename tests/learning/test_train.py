@@ -19,7 +19,8 @@ from flexff.learning.deploy import predict
 from flexff.learning.features import FeatureConfig, prepare_trajectory
 from flexff.learning.identify import identify_samples
 from flexff.learning.manipulator_data import prior_labels
-from flexff.learning.presets import make_config
+from flexff.learning.manipulator_settings import manipulator_settings
+from flexff.learning.presets import edge_samples, make_config
 from flexff.learning.rigid import rigid_forces
 from flexff.learning.run_folder import load_run
 from flexff.learning.signal_processing import decimation
@@ -104,7 +105,7 @@ def test_reported_test_mse_is_that_of_the_si_model(data, tmp_path, kind):
         prior = run.prior_parameters
         predicted += (prior_labels(features, prior, run.config.features, run.model_rate_hz)
                       - rigid_forces(features, run.config.features.feature_set, prior))
-    edge = run.config.features.edge_samples(run.model_rate_hz)
+    edge = run.config.edge_samples(run.config.features.cutoff_hz, run.model_rate_hz)
     assert edge > 0
     scaled = ((predicted - forces) / run.label_scaler.span)[edge:-edge]
     assert np.mean(scaled**2) == pytest.approx(metrics["test_mse"], rel=1e-4)
@@ -137,7 +138,8 @@ def test_the_prior_and_force_inputs_are_the_model_identified_on_the_training_set
     model_rate = rate / decimation(rate, features.model_rate_hz)
     pairs = [prepare_trajectory(t, rate, features) for t in dataset.split("train")]
     expected = identify_samples([x for x, _ in pairs], [f for _, f in pairs], features,
-                                model_rate)
+                                model_rate,
+                                run.config.edge_samples(features.cutoff_hz, model_rate))
     assert run.prior_parameters == pytest.approx(expected.parameters(), rel=1e-9)
     assert metrics["prior_parameters"] == run.prior_parameters
     assert run.prior_parameters["tau_coulomb1"] == pytest.approx(2 * 7e-3, rel=0.2)
@@ -163,10 +165,10 @@ def test_the_residual_labels_filter_the_prior_as_the_labels_are_filtered():
     motion = skew_sine_circle(t, duration=20.0, radius=0.03, turns=3.0, start_angle=0.0)
     trajectory = motion_trajectory("circle", "train", 0, t, motion, {}, force_noise=0.0)
     config = FeatureConfig(feature_set="compact", quantize_encoders=False, position_noise_m=0.0,
-                           force_noise_n=0.0, edge_periods=2.0)
+                           force_noise_n=0.0)
     features, forces = prepare_trajectory(trajectory, rate, config)
     friction = {k: float(v) for k, v in HARDWARE.flat_values(*MOTOR_FRICTION).items()}
-    edge = config.edge_samples(rate)
+    edge = edge_samples(2.0, config.cutoff_hz, rate)
 
     def residual(filtered: bool) -> float:
         prior = prior_labels(features, friction, replace(config, filtered_prior=filtered), rate)
@@ -194,8 +196,9 @@ def test_the_filter_edges_enter_no_loss():
     for a, b in zip(plain, edged):
         assert np.all(b[:20] == PAD) and np.all(b[-20:] == PAD)
         assert np.array_equal(a[20:-20], b[20:-20])
-    assert FeatureConfig(cutoff_hz=5.0, edge_periods=2.0).edge_samples(100.0) == 40
-    assert FeatureConfig().edge_samples(100.0) == 0  # the thesis's preprocessing keeps them
+    assert edge_samples(2.0, 5.0, 100.0) == 40
+    assert make_config("tcn", "fast").edge_samples(5.0, 100.0) == 40
+    assert make_config("tcn", "thesis").edge_samples(5.0, 100.0) == 0  # the thesis keeps them
 
 
 def test_learning_rate_schedules():
@@ -219,7 +222,8 @@ def test_thesis_preset_follows_the_seed():
                                                                                  0.125)
     assert lstm.architecture == {"hidden": 100, "layers": 2, "dropout": 0.05}
     assert (tcn.epochs, tcn.learning_rate, tcn.architecture["channels"]) == (1500, 2e-4, 200)
-    assert lstm.features.model_rate_hz is None and lstm.features.cutoff_hz == 1.8
+    features = manipulator_settings("lstm", "thesis")[1]
+    assert features.model_rate_hz is None and features.cutoff_hz == 1.8
 
 
 @pytest.mark.parametrize("args,overrides,message", [
