@@ -38,7 +38,7 @@ from flexff.learning.samples import evaluate_samples
 from flexff.learning.signal_processing import decimation, differentiate, lowpass
 from flexff.plant.kinematics import SHOULDER_INDEX
 
-# a model's labels (controllers.model_card.OUTPUTS): the force the controller applied to the
+# a model's labels (controllers.manipulator.MODEL_OUTPUTS): the force the controller applied to the
 # wrist, or the motor currents it commanded (after the control allocation). Measured with
 # flexff evaluate --currents (fast preset, e2 ratio PID alone / feedforward, x / y, forces
 # against currents): sim TCN 207 / 246 against 276 / 335, pgnn 304 / 362 against 386 / 468;
