@@ -1,20 +1,17 @@
 """A learned model's constant effort, held where the machine's description says there is none.
 
 A one-sided friction feature (tanh(v / w)^2, learning.feature_spec) is 1 while an axis moves,
-as a constant is: the data tell a constant effort from one-sided friction only at rest, where
-the features of the measured motion are the encoder's noise and the labels the controller's
-settling. Fitted freely, the constant came out at 9 mN on both axes of the stage example in
-every learned model alike, and at rest, where the reference's features are exactly zero, the
-feedforward gave it as a force that crept the stage off its position (e2 ratio 62 against the
-identified model's 75 on x, 231 against 340 on y). Where an axis's prior has no `offset` term,
-its identified model has no constant, and a learned model is held to the same: its linear skip
-is fitted with none (through zero effort at zero features, `fit_through`; the description's
-extra terms are features, the skip weighs them as the identified model does), and once trained
-the skip's constant is set back to none and the inner network's head bias shifted so that,
-resting at the origin, it adds nothing (learning.models.pin_at_rest; each part on its own: the
-exported physics-guided model fades its inner network's output where a feature leaves the
-training range, as the rest's exact zeros may). A network without a skip is held at rest at
-the origin to zero effort where its axis has no extra terms either.
+as a constant is: only the rests tell them apart, where the measured motion is encoder noise
+and the labels the controller's settling. Fitted freely, the constant came out at 9 mN on both
+axes of the stage example in every learned model, and the feedforward gave it at rest, where
+it crept the stage off its position (e2 ratio 62 against the identified model's 75 on x, 231
+against 340 on y). Where an axis's prior has no `offset` term, a learned model is held to none
+either: its linear skip is fitted through zero effort at zero features (`fit_through`; the
+description's extra terms are features the skip weighs), and once trained the skip's constant
+is set back to none and the inner network's head bias shifted so that, resting at the origin,
+it adds nothing (learning.models.pin_at_rest; each part on its own, as the exported
+physics-guided model fades its inner network where a feature leaves the training range). A
+network without a skip is held to zero effort there where its axis has no extra terms either.
 """
 
 from __future__ import annotations

@@ -192,7 +192,7 @@ def test_calls_at_a_steady_rate_are_handed_over_without_waking_the_task(task_fmu
     (the step waits for the job, signalling it), and so does one far later (the release came
     first: the worker waits for the signal). Outputs as ever, bit for bit."""
     interval = 0.02  # s between call points: Python's sleep is regular enough at this scale
-    calls = 10
+    calls = 11  # (calls + 2) PERIOD inputs: all of INPUTS
     s = LoggedSlave(task_fmu)
     outputs = []
     try:
@@ -205,7 +205,9 @@ def test_calls_at_a_steady_rate_are_handed_over_without_waking_the_task(task_fmu
             s.slave.doStep(k * H, H)
         handovers, waited, in_step, signalled = _counts(s)
         assert (handovers, waited, in_step) == (calls, 0, 0)
-        assert signalled <= 3 + 2  # the first three, and at most two a busy machine delayed
+        # the first three, and of the steady ones at most half that a busy machine delayed
+        # (always signalling gives all of them)
+        assert signalled <= 3 + (calls - 3) // 2
         for k in range(calls * PERIOD, (calls + 2) * PERIOD):  # at once, then late: still right
             if k == (calls + 1) * PERIOD:
                 time.sleep(3 * interval)
