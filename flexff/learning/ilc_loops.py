@@ -107,6 +107,7 @@ class MachineLoop:
         self.config = config
         self.model = model or described_model(config)
         self.machine = machine_loop.loop_machine(config)
+        self.seed_target = self._seed_target()
         given = set(source_signals(config))
         for k, axis in enumerate(self.machine.axes):
             missing = [n for n in (axis.reference, *axis.derivatives[:2]) if n not in given]
@@ -134,7 +135,7 @@ class MachineLoop:
         """Trial `trial`'s noise seed: the loop's own (0 where it gives none) + 1 + `trial`,
         a fresh one each trial so that the iteration learns what repeats, not one noise
         sequence; None where the description names no seed or the loop's FMU lacks it."""
-        target = self._seed_target()
+        target = self.seed_target
         if target is None:
             return None
         fmu, name, option = target
@@ -158,7 +159,7 @@ class MachineLoop:
         return (fmu, name, False) if variable is not None and variable.settable else None
 
     def _seeded(self, seed: int | None) -> RunConfig:
-        target = self._seed_target()
+        target = self.seed_target
         if seed is None or target is None:
             return self.config
         fmu, name, option = target
