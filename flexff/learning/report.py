@@ -114,12 +114,17 @@ TRACKING = names(POSITION_REFERENCE, TRUE_POSITION)
 FEEDBACK = names(FEEDBACK_FORCES)
 
 
-def feedforward_of(rec: Recording, axis: int) -> np.ndarray:
-    """The feedforward force on `axis` (0: x, 1: y) as the controller received it: the force
-    table's `<axis>_ff` where one fed it (learning.machine_loop, as the LIMIT scenario and
-    ILC's trials run), else the feedforward's Fx_ff, Fy_ff; KeyError where neither."""
+def feedforward_name(rec: Recording, axis: int) -> str:
+    """The signal of the feedforward force on `axis` (0: x, 1: y) as the controller received
+    it: the force table's `<axis>_ff` where one fed it (learning.machine_loop, as the LIMIT
+    scenario and ILC's trials run), else the feedforward's Fx_ff, Fy_ff."""
     table = feedforward_signal(AXES[axis])
-    return rec.signals[table if table in rec.signals else names(FEEDFORWARD_FORCES)[axis]]
+    return table if table in rec.signals else names(FEEDFORWARD_FORCES)[axis]
+
+
+def feedforward_of(rec: Recording, axis: int) -> np.ndarray:
+    """The feedforward force on `axis` (feedforward_name); KeyError where the run has none."""
+    return rec.signals[feedforward_name(rec, axis)]
 
 
 def _check_env(env: str) -> None:
@@ -307,8 +312,8 @@ def _check_recordings(recordings: Mapping[str, Recording]) -> None:
         needed = TRACKING if name == "pid" else TRACKING + FEEDBACK
         missing = [s for s in needed if s not in rec.signals]
         if name != "pid":
-            missing += [ff for k, ff in enumerate(names(FEEDFORWARD_FORCES))
-                        if not _has_feedforward(rec, k)]
+            missing += [n for n in (feedforward_name(rec, k) for k in range(len(AXES)))
+                        if n not in rec.signals]
         if missing:
             raise InputError(f"recording {name!r} lacks {missing} (it has "
                              f"{sorted(rec.signals)}): record {list(needed)} in its run")
@@ -431,14 +436,6 @@ def force_gaps(recordings: Mapping[str, Recording]) -> dict[str, dict[str, Any]]
     return {name: {axis: force_gap(feedforward_of(rec, k), feedforward_of(ideal, k), rec.step)
                    for k, axis in enumerate(AXES)}
             for name, rec in recordings.items() if name not in ("pid", LIMIT)}
-
-
-def _has_feedforward(rec: Recording, axis: int) -> bool:
-    try:
-        feedforward_of(rec, axis)
-    except KeyError:
-        return False
-    return True
 
 
 def force_gap_table(gaps: Mapping[str, Mapping[str, Any]]) -> str:
